@@ -1,0 +1,26 @@
+"""Birth models: the S-OA model here, the four baselines in the top-level ``baselines`` package.
+
+One registry maps the CLI/config names to classes; a new model is one file plus one line here.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from soabench.errors import require
+
+#: name -> "module:Class" (imported lazily so baselines may import soabench.birth.base)
+REGISTRY: dict[str, str] = {
+    "soa": "soabench.birth.soa:SOABirth",
+    "pubm": "baselines.partially_uniform:PartiallyUniformBirth",
+    "ubm": "baselines.uniform:UniformBirth",
+    "atbm": "baselines.adaptive:AdaptiveBirth",
+    "gmbm": "baselines.standard_gm:StandardGMBirth",
+}
+
+
+def get_birth_model(name: str) -> type:
+    """The class registered under ``name`` (one of REGISTRY)."""
+    require(name in REGISTRY, f"birth model {name!r} is unknown; choose one of {', '.join(REGISTRY)}")
+    module, cls = REGISTRY[name].split(":")
+    return getattr(importlib.import_module(module), cls)

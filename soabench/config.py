@@ -1,0 +1,369 @@
+"""Every tunable parameter with its default (ALGORITHMS.md §1.2 and the decision register §7).
+
+Defaults are the register's bold options. A TOML file may set any of them, section by section::
+
+    [sensor]
+    lambda_c = 5.0
+    [birth]
+    sem_mode = "dbscan"
+
+Unknown sections or keys and out-of-range values raise :class:`~soabench.errors.SoabenchError` naming the value
+and what is allowed. The scenario itself (network, vehicles, pedestrians) is configured by the network's
+``scenario.toml`` (see :mod:`soabench.scenario`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from soabench.errors import SoabenchError, require
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "atbm", "gmbm")
+PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
+
+
+def _one_of(name: str, value: Any, allowed: tuple) -> None:
+    require(value in allowed, f"{name} = {value!r} is not allowed; choose one of {', '.join(map(repr, allowed))}")
+
+
+def _in_range(name: str, value: float, lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if ok:
+        ok = (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
+    lb = "(" if lo_open else "["
+    rb = ")" if hi_open else "]"
+    require(ok, f"{name} = {value!r} is out of range; allowed: {lb}{lo}, {hi}{rb}")
+
+
+def _positive(name: str, value: float) -> None:
+    _in_range(name, value, 0.0, math.inf, lo_open=True, hi_open=True)
+
+
+def _non_negative(name: str, value: float) -> None:
+    _in_range(name, value, 0.0, math.inf, hi_open=True)
+
+
+@dataclass
+class SensorConfig:
+    """Synthetic range-bearing sensor (ALGORITHMS.md §2.3; register rows 3, 4, 7)."""
+
+    dt: float = 1.0  #: sensor/filter period (s), a multiple of the SUMO step
+    r_min: float = 0.5  #: minimum range (m)
+    r_max: float = 50.0  #: maximum range (m)
+    fov_deg: float = 360.0  #: angular sector Theta (deg), centred on the ego heading
+    p_D: float = 0.98  #: detection probability of a visible target [P]
+    sigma_r: float = 1.0  #: range noise std (m) [P]
+    sigma_b_deg: float = 5.0  #: bearing noise std (deg) [P]
+    lambda_c: float = 3.0  #: mean clutter count per scan
+    clutter_space: str = "polar"  #: "polar" (uniform in (r, b)) or "cartesian" (uniform in area, kappa ~ r)
+    visibility_points: int = 1  #: 1 (centre) or 3 (centre and +-offset across the line of sight)
+    visibility_offset: float = 0.3  #: lateral offset (m) of the extra sight points
+
+    @property
+    def fov(self) -> float:
+        """Theta in radians."""
+        return math.radians(self.fov_deg)
+
+    @property
+    def sigma_b(self) -> float:
+        """Bearing noise std in radians."""
+        return math.radians(self.sigma_b_deg)
+
+    def validate(self, sumo_step: float | None = None) -> None:
+        _positive("sensor.dt", self.dt)
+        if sumo_step is not None:
+            ratio = self.dt / sumo_step
+            require(
+                abs(ratio - round(ratio)) < 1e-9 and round(ratio) >= 1,
+                f"sensor.dt = {self.dt!r} must be a positive multiple of the SUMO step {sumo_step!r} s",
+            )
+        _non_negative("sensor.r_min", self.r_min)
+        require(
+            isinstance(self.r_max, (int, float)) and self.r_max > self.r_min,
+            f"sensor.r_max = {self.r_max!r} must exceed r_min = {self.r_min!r} (need 0 <= r_min < r_max)",
+        )
+        _in_range("sensor.fov_deg", self.fov_deg, 0.0, 360.0, lo_open=True)
+        _in_range("sensor.p_D", self.p_D, 0.0, 1.0)
+        _positive("sensor.sigma_r", self.sigma_r)
+        _positive("sensor.sigma_b_deg", self.sigma_b_deg)
+        _non_negative("sensor.lambda_c", self.lambda_c)
+        _one_of("sensor.clutter_space", self.clutter_space, ("polar", "cartesian"))
+        _one_of("sensor.visibility_points", self.visibility_points, (1, 3))
+        _non_negative("sensor.visibility_offset", self.visibility_offset)
+
+
+@dataclass
+class FilterConfig:
+    """GM-PHD filter (ALGORITHMS.md §2, §4; register rows 1, 4, 20, 21, 25)."""
+
+    form: str = "ekf"  #: "ekf" or "ukf" (equal-weight cubature points, §2.7)
+    sigma_a: float = 0.5  #: CV process noise (m/s^2); 0.5 for SUMO pedestrians (§1.2)
+    p_S: float = 0.99  #: survival probability [P]
+    p_D: float = 0.98  #: detection probability inside the FOV [P]
+    prune_T: float = 1e-5  #: pruning threshold T [P]
+    merge_U: float = 4.0  #: merging threshold U (squared Mahalanobis) [P]
+    J_max: int = 1000  #: component cap
+    gate: bool = True  #: chi-square gating of q (never of clutter)
+    gate_prob: float = 0.999  #: gate probability (chi2_2(0.999) = 13.8155)
+    extract_thr: float = 0.5  #: extraction threshold
+    extraction: str = "vo_ma"  #: "vo_ma" (w > 0.5, floor(w + 0.5) copies) or "top_n" (ablation)
+    occlusion_pd: bool = False  #: line-of-sight gate in p_D (§4.4); set by the "dynamic+occ" mode
+    max_undetected_birth_age: int | None = None  #: prune n_det = 0 components older than this (§4.4)
+    # dynamic probabilities (§4.2-4.5)
+    beta_factor: float = 1.1  #: mean-preserving variance inflation f
+    theta_min: float = 2.0  #: inflation guard
+    n_D: float = 10.0  #: Beta p_D prior strength s + t
+    mu_D0: float = 0.98  #: Beta p_D prior mean
+    n_S: float = 20.0  #: Beta p_S prior strength
+    mu_S0: float = 0.99  #: Beta p_S prior mean
+    p_S_max: float = 0.999  #: cap of the Beta p_S mean
+
+    def validate(self) -> None:
+        _one_of("filter.form", self.form, ("ekf", "ukf"))
+        _non_negative("filter.sigma_a", self.sigma_a)
+        _in_range("filter.p_S", self.p_S, 0.0, 1.0)
+        _in_range("filter.p_D", self.p_D, 0.0, 1.0)
+        _in_range("filter.prune_T", self.prune_T, 0.0, 1.0, hi_open=True)
+        _positive("filter.merge_U", self.merge_U)
+        require(
+            isinstance(self.J_max, int) and not isinstance(self.J_max, bool) and self.J_max >= 1,
+            f"filter.J_max = {self.J_max!r} must be an integer >= 1",
+        )
+        _in_range("filter.gate_prob", self.gate_prob, 0.0, 1.0, lo_open=True, hi_open=True)
+        _non_negative("filter.extract_thr", self.extract_thr)
+        _one_of("filter.extraction", self.extraction, ("vo_ma", "top_n"))
+        if self.max_undetected_birth_age is not None:
+            require(
+                isinstance(self.max_undetected_birth_age, int) and self.max_undetected_birth_age >= 0,
+                f"filter.max_undetected_birth_age = {self.max_undetected_birth_age!r} must be an integer >= 0",
+            )
+        _in_range("filter.beta_factor", self.beta_factor, 1.0, math.inf, hi_open=True)
+        _positive("filter.theta_min", self.theta_min)
+        _positive("filter.n_D", self.n_D)
+        _in_range("filter.mu_D0", self.mu_D0, 0.0, 1.0, lo_open=True, hi_open=True)
+        _positive("filter.n_S", self.n_S)
+        _in_range("filter.mu_S0", self.mu_S0, 0.0, 1.0, lo_open=True, hi_open=True)
+        _in_range("filter.p_S_max", self.p_S_max, 0.0, 1.0, lo_open=True, hi_open=True)
+
+
+@dataclass
+class BirthConfig:
+    """Birth models (ALGORITHMS.md §3; register rows 9-19, 24, 26)."""
+
+    N_hat: float = 0.06  #: expected births per step [P]
+    sigma_v_birth: float = 1.0  #: velocity prior std per axis (m/s), §3.0
+    delta_in: float = 0.5  #: inset of birth means from the range limits (m), §3.0
+    # S-OA occlusion terms (§3.1.1-3.1.3)
+    delta_r: float = 2.0  #: layer spacing (m)
+    L: int = 3  #: layers per tangent ray
+    sigma_par: float = 2.0  #: std along the ray (m)
+    sigma_perp: float = 0.75  #: std across the ray (m)
+    ray_start: str = "tangent"  #: "tangent" (tangent-point range) or "centroid"
+    occl_velocity_prior: bool = False  #: velocity mean 0.8 m/s out of the cone (not in the paper)
+    occluders_from_detections: bool = False  #: only occluders whose footprint is itself visible
+    # S-OA semantic terms (§3.1.4)
+    sem_mode: str = "poisson"  #: "poisson", "hex", "dbscan" or "uniform"
+    sem_resample: str = "trial"  #: "trial" (sample once, clip per step) or "step"
+    sem_include_crossings: bool = False  #: add crossings (and walking areas) to Omega
+    d_min: float = 5.0  #: Poisson-disk distance (m)
+    sigma_sem: float = 2.0  #: semantic position std (m)
+    poisson_k: int = 30  #: Bridson candidates per active point
+    dbscan_eps: float = 1.0  #: DBSCAN eps (m)
+    dbscan_min_samples: int = 5  #: DBSCAN min_samples
+    dbscan_split: bool = False  #: split clusters with k-means into ceil(area/d_min^2) parts
+    # S-OA FOV boundary terms (§3.1.5)
+    d_fov: float = 5.0  #: spacing along the FOV boundary (m)
+    sigma_fov: float = 2.0  #: FOV boundary std (m); the inset delta_fov equals it
+    fov_boundary: str = "range"  #: "range" (unclipped) or "visible" (ray-cast, 1 deg bins)
+    # S-OA weights (§3.1.6)
+    rho: tuple[float, float, float] = (1.0, 1.0, 1.0)  #: source confidences (occl, sem, fov)
+    rho_norm: str = "component"  #: "component" (paper) or "source"
+    # PUBM (§3.2)
+    pubm_space: str = "meas"  #: "meas" or "cart"
+    pubm_hybrid: float = 0.0  #: eta, share of GMBM components
+    # UBM (§3.3)
+    d_u: float = 5.0  #: grid spacing (m)
+    sigma_u: float = 2.5  #: grid std (m)
+    ubm_extent: str = "fov"  #: "fov" (clipped to the FOV) or "workspace"
+    # ATBM (§3.4)
+    atbm: str = "same_scan"  #: "same_scan" or "prev_scan"
+    atbm_alloc: str = "uniform"  #: "uniform" or "unexplained"
+    atbm_raw_mass: bool = False  #: SMC-literal raw newborn mass in L(z)
+    # GMBM (§3.5)
+    sigma_gm: float = 3.0  #: GMBM std (m)
+
+    def validate(self) -> None:
+        _non_negative("birth.N_hat", self.N_hat)
+        _positive("birth.sigma_v_birth", self.sigma_v_birth)
+        _non_negative("birth.delta_in", self.delta_in)
+        _positive("birth.delta_r", self.delta_r)
+        require(isinstance(self.L, int) and self.L >= 0, f"birth.L = {self.L!r} must be an integer >= 0")
+        _positive("birth.sigma_par", self.sigma_par)
+        _positive("birth.sigma_perp", self.sigma_perp)
+        _one_of("birth.ray_start", self.ray_start, ("tangent", "centroid"))
+        _one_of("birth.sem_mode", self.sem_mode, ("poisson", "hex", "dbscan", "uniform"))
+        _one_of("birth.sem_resample", self.sem_resample, ("trial", "step"))
+        _positive("birth.d_min", self.d_min)
+        _positive("birth.sigma_sem", self.sigma_sem)
+        require(isinstance(self.poisson_k, int) and self.poisson_k >= 1, f"birth.poisson_k = {self.poisson_k!r} must be >= 1")
+        _positive("birth.dbscan_eps", self.dbscan_eps)
+        require(
+            isinstance(self.dbscan_min_samples, int) and self.dbscan_min_samples >= 1,
+            f"birth.dbscan_min_samples = {self.dbscan_min_samples!r} must be an integer >= 1",
+        )
+        _positive("birth.d_fov", self.d_fov)
+        _positive("birth.sigma_fov", self.sigma_fov)
+        _one_of("birth.fov_boundary", self.fov_boundary, ("range", "visible"))
+        require(
+            len(self.rho) == 3 and all(isinstance(r, (int, float)) and r >= 0 for r in self.rho) and sum(self.rho) > 0,
+            f"birth.rho = {list(self.rho)!r} must be three non-negative numbers (occl, sem, fov), not all zero",
+        )
+        _one_of("birth.rho_norm", self.rho_norm, ("component", "source"))
+        _one_of("birth.pubm_space", self.pubm_space, ("meas", "cart"))
+        _in_range("birth.pubm_hybrid", self.pubm_hybrid, 0.0, 1.0)
+        _positive("birth.d_u", self.d_u)
+        _positive("birth.sigma_u", self.sigma_u)
+        _one_of("birth.ubm_extent", self.ubm_extent, ("fov", "workspace"))
+        _one_of("birth.atbm", self.atbm, ("same_scan", "prev_scan"))
+        _one_of("birth.atbm_alloc", self.atbm_alloc, ("uniform", "unexplained"))
+        _positive("birth.sigma_gm", self.sigma_gm)
+
+
+@dataclass
+class MetricsConfig:
+    """Evaluation (ALGORITHMS.md §5; register rows 5, 6, 22, 23)."""
+
+    ospa_c: float = 100.0  #: OSPA cut-off c [P]
+    ospa_p: float = 1.0  #: OSPA order p [P]
+    gospa_c: float = 5.0  #: GOSPA cut-off (extra metric)
+    gospa_p: float = 1.0  #: GOSPA order
+    gt_set: str = "fov"  #: "fov" (present and in the FOV), "visible", or "scene"
+    d_gate: float = 5.0  #: association gate of the delay and precision metrics (m)
+    g_min: int = 1  #: episode gap
+    confirm_n: int = 1  #: consecutive associated steps needed for initiation
+    censored: str = "exclude"  #: "exclude" (count separately) or "lower_bound"
+    ddof: int = 0  #: per-trial sigma convention
+
+    def validate(self) -> None:
+        _positive("metrics.ospa_c", self.ospa_c)
+        _in_range("metrics.ospa_p", self.ospa_p, 1.0, math.inf, hi_open=True)
+        _positive("metrics.gospa_c", self.gospa_c)
+        _in_range("metrics.gospa_p", self.gospa_p, 1.0, math.inf, hi_open=True)
+        _one_of("metrics.gt_set", self.gt_set, ("fov", "visible", "scene"))
+        _positive("metrics.d_gate", self.d_gate)
+        require(isinstance(self.g_min, int) and self.g_min >= 1, f"metrics.g_min = {self.g_min!r} must be an integer >= 1")
+        require(
+            isinstance(self.confirm_n, int) and self.confirm_n >= 1,
+            f"metrics.confirm_n = {self.confirm_n!r} must be an integer >= 1",
+        )
+        _one_of("metrics.censored", self.censored, ("exclude", "lower_bound"))
+        _one_of("metrics.ddof", self.ddof, (0, 1))
+
+
+@dataclass
+class ExperimentConfig:
+    """The Monte Carlo protocol (ALGORITHMS.md §5.8)."""
+
+    trials: int = 100  #: Monte Carlo trials
+    duration: float = 100.0  #: seconds simulated per trial
+    models: tuple[str, ...] = BIRTH_MODEL_NAMES  #: birth models to run
+    probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run
+    clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda (each gets every model x mode)
+    seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
+
+    def validate(self) -> None:
+        require(
+            isinstance(self.trials, int) and not isinstance(self.trials, bool) and self.trials >= 1,
+            f"trials = {self.trials!r} must be an integer >= 1",
+        )
+        _positive("duration", self.duration)
+        require(len(self.models) >= 1, "models must name at least one birth model")
+        for m in self.models:
+            _one_of("model", m, BIRTH_MODEL_NAMES)
+        require(len(set(self.models)) == len(self.models), f"models = {list(self.models)!r} has duplicates")
+        require(len(self.probabilities) >= 1, "probabilities must name at least one mode")
+        for p in self.probabilities:
+            _one_of("probability mode", p, PROBABILITY_MODES)
+        require(len(self.clutter) >= 1, "clutter must give at least one rate")
+        for lam in self.clutter:
+            _non_negative("clutter", lam)
+        require(
+            isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0,
+            f"seed = {self.seed!r} must be an integer >= 0",
+        )
+
+
+@dataclass
+class Config:
+    """The full resolved configuration of a run."""
+
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    birth: BirthConfig = field(default_factory=BirthConfig)
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
+    experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
+
+    def validate(self, sumo_step: float | None = None) -> Config:
+        self.sensor.validate(sumo_step)
+        self.filter.validate()
+        self.birth.validate()
+        self.metrics.validate()
+        self.experiment.validate()
+        return self
+
+    def to_dict(self) -> dict[str, dict[str, Any]]:
+        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``."""
+        out = dataclasses.asdict(self)
+        return {sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()} for sec, d in out.items()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], base: Config | None = None) -> Config:
+        """Overlay ``data`` (sections of key = value) on ``base`` (defaults if None); unknown keys are errors."""
+        cfg = dataclasses.replace(base) if base is not None else cls()
+        cfg = cls(**{f.name: dataclasses.replace(getattr(cfg, f.name)) for f in dataclasses.fields(cls)})
+        sections = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cls)}
+        require(isinstance(data, dict), "a configuration must be a table of sections")
+        for sec, values in data.items():
+            require(sec in sections, f"unknown config section [{sec}]; allowed: {', '.join(sections)}")
+            require(isinstance(values, dict), f"config section [{sec}] must be a table of key = value")
+            obj = sections[sec]
+            fields = {f.name: f for f in dataclasses.fields(obj)}
+            for key, value in values.items():
+                require(
+                    key in fields,
+                    f"unknown config key {sec}.{key}; allowed: {', '.join(sorted(fields))}",
+                )
+                default = getattr(obj, key)
+                if isinstance(default, tuple):
+                    require(
+                        isinstance(value, (list, tuple)),
+                        f"{sec}.{key} = {value!r} must be a list",
+                    )
+                    value = tuple(value)
+                elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+                    value = float(value)
+                setattr(obj, key, value)
+        return cfg
+
+
+def load_config(path: str | Path | None, base: Config | None = None) -> Config:
+    """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
+    if path is None:
+        return (base or Config()).validate()
+    p = Path(path)
+    require(p.is_file(), f"config file {str(p)!r} does not exist")
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise SoabenchError(f"config file {str(p)!r} is not valid TOML: {exc}") from None
+    return Config.from_dict(data, base).validate()
