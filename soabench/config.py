@@ -215,7 +215,10 @@ class BirthConfig:
         _one_of("birth.sem_resample", self.sem_resample, ("trial", "step"))
         _positive("birth.d_min", self.d_min)
         _positive("birth.sigma_sem", self.sigma_sem)
-        require(isinstance(self.poisson_k, int) and self.poisson_k >= 1, f"birth.poisson_k = {self.poisson_k!r} must be >= 1")
+        require(
+            isinstance(self.poisson_k, int) and self.poisson_k >= 1,
+            f"birth.poisson_k = {self.poisson_k!r} must be >= 1",
+        )
         _positive("birth.dbscan_eps", self.dbscan_eps)
         require(
             isinstance(self.dbscan_min_samples, int) and self.dbscan_min_samples >= 1,
@@ -261,7 +264,9 @@ class MetricsConfig:
         _in_range("metrics.gospa_p", self.gospa_p, 1.0, math.inf, hi_open=True)
         _one_of("metrics.gt_set", self.gt_set, ("fov", "visible", "scene"))
         _positive("metrics.d_gate", self.d_gate)
-        require(isinstance(self.g_min, int) and self.g_min >= 1, f"metrics.g_min = {self.g_min!r} must be an integer >= 1")
+        require(
+            isinstance(self.g_min, int) and self.g_min >= 1, f"metrics.g_min = {self.g_min!r} must be an integer >= 1"
+        )
         require(
             isinstance(self.confirm_n, int) and self.confirm_n >= 1,
             f"metrics.confirm_n = {self.confirm_n!r} must be an integer >= 1",

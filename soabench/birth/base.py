@@ -77,8 +77,6 @@ class BirthModel(Protocol):
 
     name: str
 
-    def __init__(
-        self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator
-    ) -> None: ...
+    def __init__(self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator) -> None: ...
 
     def __call__(self, ctx: BirthContext) -> Births: ...
