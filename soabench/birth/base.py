@@ -70,6 +70,7 @@ class BirthContext:
 
     scan: Scan  #: ego pose, Z_k, obstacles O_k, occluders, visible semantic region at k
     prev: StepResult | None  #: the filter's result at k-1 (None at k = 0); ATBM prev-scan reads it
+    p_D_b: float = 0.98  #: detection probability of a newborn (filter p_D; Beta prior mean in dynamic mode)
 
 
 class BirthModel(Protocol):
