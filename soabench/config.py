@@ -361,6 +361,21 @@ class Config:
         return cfg
 
 
+def filter_config_for_mode(cfg: FilterConfig, mode: str) -> tuple[FilterConfig, str, float]:
+    """Filter settings of a probability mode (ALGORITHMS.md §4.6): ``(filter_cfg, filter_mode, p_D_b)``.
+
+    ``static`` and ``dynamic`` use ``cfg`` as given; ``dynamic+occ`` is ``dynamic`` with the line-of-sight gate
+    (``occlusion_pd``). ``p_D_b`` is the detection probability of a newborn term: p_D in static mode, the Beta prior
+    mean mu_D0 in the dynamic modes (§4.2).
+    """
+    _one_of("probability mode", mode, PROBABILITY_MODES)
+    if mode == "static":
+        return cfg, "static", cfg.p_D
+    if mode == "dynamic+occ":
+        return dataclasses.replace(cfg, occlusion_pd=True), "dynamic", cfg.mu_D0
+    return cfg, "dynamic", cfg.mu_D0
+
+
 def load_config(path: str | Path | None, base: Config | None = None) -> Config:
     """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
     if path is None:
