@@ -170,12 +170,12 @@ def _load_scene(args: argparse.Namespace):
 
 def _snapshot(args: argparse.Namespace, duration: float | None):
     """Scene, scenario, config, trial seeds and the recording up to ``duration`` seconds (None: the scenario's)."""
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
-
     require(args.seed >= 0, f"--seed {args.seed} must be >= 0")
     require(args.trial >= 0, f"--trial {args.trial} must be >= 0")
     cfg = load_config(args.config)
+    from soabench.scenario import simulate
+    from soabench.seeding import trial_seeds
+
     scene, scenario = _load_scene(args)
     duration = float(scenario.duration) if duration is None else duration
     require(duration > 0, f"--time/--duration {duration!r} must be > 0")
@@ -295,14 +295,17 @@ def _executor_kwargs(args: argparse.Namespace) -> dict:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from soabench.experiment.runner import run_experiment
-
     kwargs = _executor_kwargs(args)
     if args.resume is not None:
         require(args.resume.is_dir(), f"--resume {str(args.resume)!r} is not a run folder")
-        outcome = run_experiment(None, args.net, tuple(args.poly), args.scenario, resume=args.resume, **kwargs)
+        cfg = None
     else:
         cfg = _config_from_args(args)
+    from soabench.experiment.runner import run_experiment
+
+    if cfg is None:
+        outcome = run_experiment(None, args.net, tuple(args.poly), args.scenario, resume=args.resume, **kwargs)
+    else:
         outcome = run_experiment(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, **kwargs)
     return _report_outcome(outcome)
 
@@ -322,8 +325,6 @@ def _report_outcome(outcome) -> int:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from soabench.experiment.sweep import run_sweep
-
     kwargs = _executor_kwargs(args)
     if args.kind == "clutter":
         require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep clutter`")
@@ -332,6 +333,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         require(args.values is None, "--values belongs to `sweep clutter`; use --offsets for `sweep births`")
         values = args.offsets if args.offsets is not None else tuple(range(-10, 11))
     cfg = _config_from_args(args)
+    from soabench.experiment.sweep import run_sweep
+
     outcome = run_sweep(args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out, **kwargs)
     return _report_outcome(outcome)
 
