@@ -168,8 +168,12 @@ def _load_scene(args: argparse.Namespace):
     return load(args.net, tuple(args.poly), args.scenario)
 
 
-def _snapshot(args: argparse.Namespace, duration: float | None):
-    """Scene, scenario, config, trial seeds and the recording up to ``duration`` seconds (None: the scenario's)."""
+def _snapshot(args: argparse.Namespace, duration: float | None, include_end: bool = False):
+    """Scene, scenario, config, trial seeds and the recording up to ``duration`` seconds (None: the scenario's).
+
+    ``include_end``: simulate one SUMO step more so that a sample (and a scan, when ``duration`` is a multiple of
+    the sensor period) lies exactly at ``duration``: a snapshot at ``--time 50`` shows the scan at t = 50 s.
+    """
     require(args.seed >= 0, f"--seed {args.seed} must be >= 0")
     require(args.trial >= 0, f"--trial {args.trial} must be >= 0")
     cfg = load_config(args.config)
@@ -181,6 +185,8 @@ def _snapshot(args: argparse.Namespace, duration: float | None):
     require(duration > 0, f"--time/--duration {duration!r} must be > 0")
     cfg.sensor.validate(scenario.step_length)
     seeds = trial_seeds(args.seed, args.trial)
+    if include_end:
+        duration = duration + scenario.step_length
     recording = simulate(scene, scenario, seeds, duration=duration)
     return scene, scenario, cfg, seeds, recording
 
@@ -215,14 +221,16 @@ def cmd_scene(args: argparse.Namespace) -> int:
     from soabench.scenario.plots import plot_scene
 
     out = _prepare_out(args.out)
-    scene, _, cfg, seeds, recording = _snapshot(args, args.time)
+    scene, _, cfg, seeds, recording = _snapshot(args, args.time, include_end=True)
     fig, ax = plt.subplots(figsize=(11, 6.8))
-    plot_scene(scene, recording, time=args.time, ax=ax)
     if args.sensor:
         from soabench.sensor_plot import draw_sensor_overlay
 
         scans = _observe(recording, scene, cfg, seeds)
+        plot_scene(scene, recording, time=scans.scans[-1].t, ax=ax)  # the scene at the overlaid scan's time
         draw_sensor_overlay(ax, scans, len(scans) - 1, cfg.sensor)
+    else:
+        plot_scene(scene, recording, time=args.time, ax=ax)
     _save_figure(fig, out)
     plt.close(fig)
     print(f"wrote {out}")
@@ -258,7 +266,7 @@ def cmd_birth(args: argparse.Namespace) -> int:
     from soabench.scenario.plots import plot_scene
 
     out = _prepare_out(args.out)
-    scene, _, cfg, seeds, recording = _snapshot(args, args.time)
+    scene, _, cfg, seeds, recording = _snapshot(args, args.time, include_end=True)
     scans = _observe(recording, scene, cfg, seeds)
     model = get_birth_model(args.model)(cfg.birth, cfg.sensor, scene, seeds.placement_rng())
     filter_cfg, mode, p_D_b = filter_config_for_mode(cfg.filter, args.probability)
@@ -269,7 +277,7 @@ def cmd_birth(args: argparse.Namespace) -> int:
         births = model(BirthContext(scan, prev, p_D_b))
         prev = filt.step(scan, births)
     fig, ax = plt.subplots(figsize=(11, 6.8))
-    plot_scene(scene, recording, time=args.time, ax=ax)
+    plot_scene(scene, recording, time=scans.scans[-1].t, ax=ax)
     draw_births(ax, births, scans.scans[-1])
     n_new = 0 if births.newborn is None else len(births.newborn.m)
     ax.set_title(f"{args.model}: {len(births)} birth components, {n_new} newborn terms, t = {scans.scans[-1].t:g} s")

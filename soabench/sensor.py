@@ -1,16 +1,46 @@
-"""Synthetic range-bearing sensor: Recording -> Scans (ALGORITHMS.md §2.3, §3.1.1-3.1.2, §5.1).
+"""Synthetic range-bearing sensor: Recording -> Scans (ALGORITHMS.md §2.3, §3.1.1-3.1.2, §3.1.4, §5.1, §5.4).
 
-CONTRACT (data classes below are fixed; the implementation is filled in by the sensor owner).
+The data classes at the top are the stage contract. Below them:
+
+* geometry of one scan: :func:`circle_tangents`, :func:`compute_obstacles` (O_k with tangent rays, T12-T15),
+  :func:`line_of_sight` (strict: merely touching an occluder is visible), :func:`fov_polygon`,
+  :func:`shadow_polygons` and :func:`visible_region` (Omega_k, §3.1.4);
+* the occluders present at a recording step: :func:`occluders_at`;
+* the sensor itself: :func:`observe` (detections with p_D, Gaussian noise, Poisson clutter, source ids, flags).
+
+Random streams: ``observe`` takes ``(detection_rng, clutter_rng)`` from ``TrialSeeds.sensor_rngs()``. Every
+detection draw and noise draw of the run is taken from ``detection_rng`` up front, one per (scan, pedestrian), before
+anything that depends on the clutter, so runs that differ only in ``lambda_c`` get identical target-originated
+measurements (same values, same sources) and differ only in their clutter and in the order within a scan.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+import shapely
+from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
+from soabench.config import SensorConfig
+from soabench.errors import SoabenchError, require
+from soabench.geometry import fov_mask, range_bearing, wrap
+
+if TYPE_CHECKING:
+    from soabench.scenario.recording import Recording
+    from soabench.scenario.scene import SceneMap
+
 CLUTTER = -1  #: source id of a clutter measurement
+
+OCCLUDER_KINDS = ("building", "parked", "vehicle")  #: values of ``Obstacles.kind``
+SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (docs/scans_format.md)
+_FOV_ARC_STEP = np.radians(1.0)  #: vertex spacing of the FOV polygon arcs (chord error 2 mm at 50 m)
+_SHADOW_ARC_POINTS = 16  #: far-arc vertices of each shadow polygon
 
 
 @dataclass
@@ -39,6 +69,12 @@ class Obstacles:
     def __len__(self) -> int:
         return len(self.polygons)
 
+    @classmethod
+    def empty(cls) -> Obstacles:
+        """No obstacles."""
+        z = np.zeros(0)
+        return cls([], np.zeros(0, dtype="<U8"), z, z.copy(), z.copy(), z.copy(), z.copy(), z.copy())
+
 
 @dataclass
 class Scan:
@@ -50,7 +86,8 @@ class Scan:
         Z: (M, 2) measurements (range m, bearing rad relative to the ego heading, wrapped to (-pi, pi]).
         obstacles: O_k.
         occluders: shapely polygons of every occluder at k (buildings, parked cars, other vehicles) for
-            line-of-sight tests (the ``occlusion_pd`` option).
+            line-of-sight tests (the ``occlusion_pd`` option). Exact shapes (not hulls); only those within r_max
+            of the sensor, since no segment to a point in the FOV can meet any other.
         visible_region: Omega_k = sidewalk within the FOV minus occluders and their shadows (shapely).
     """
 
@@ -88,3 +125,554 @@ class Scans:
 
     def __len__(self) -> int:
         return len(self.scans)
+
+    def save_npz(self, path: str | Path) -> None:
+        """Write the Scans as a compressed .npz without pickles (format: docs/scans_format.md)."""
+        np.savez_compressed(Path(path), **_scans_to_arrays(self))
+
+    @classmethod
+    def load_npz(cls, path: str | Path) -> Scans:
+        """Read Scans written by :meth:`save_npz`."""
+        p = Path(path)
+        require(p.is_file(), f"scans file {str(p)!r} does not exist")
+        with np.load(p, allow_pickle=False) as data:
+            arrays = {name: data[name] for name in data.files}
+        return _scans_from_arrays(arrays, str(p))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Tangent rays and obstacles O_k (§3.1.1, §3.1.2; T12-T15)
+
+
+def circle_tangents(
+    center: np.ndarray | Sequence[float], radius: float, ego_xy: np.ndarray | Sequence[float]
+) -> tuple[float, float, float] | None:
+    """Tangent rays of a circle seen from ``ego_xy`` (§3.1.2, circle form, T12).
+
+    Returns ``(theta_min, theta_max, r_b)``: world-frame ray directions alpha_c -+ asin(rho/d), wrapped to
+    (-pi, pi], and the tangent-point range sqrt(d^2 - rho^2); ``None`` when the sensor is inside or on the circle.
+    """
+    d_vec = np.asarray(center, dtype=float)[:2] - np.asarray(ego_xy, dtype=float)[:2]
+    d = float(np.hypot(d_vec[0], d_vec[1]))
+    if d <= radius:
+        return None
+    alpha_c = np.arctan2(d_vec[1], d_vec[0])
+    half = np.arcsin(radius / d)
+    return float(wrap(alpha_c - half)), float(wrap(alpha_c + half)), float(np.sqrt(d * d - radius * radius))
+
+
+def compute_obstacles(polygons: list[np.ndarray], kinds: Sequence[str], ego_xy: np.ndarray, r_max: float) -> Obstacles:
+    """O_k from occluder vertex arrays (§3.1.1-3.1.2): convex hull, centroid, tangent bearings and ranges.
+
+    Occluders whose hull contains or touches the sensor are skipped, so are those farther than ``r_max`` (T15).
+    """
+    require(len(polygons) == len(kinds), f"got {len(polygons)} polygons but {len(kinds)} kinds")
+    return obstacles_from_geoms(_polygons_from_arrays(polygons), np.asarray(kinds, dtype=str), ego_xy, r_max)
+
+
+def obstacles_from_geoms(geoms: np.ndarray, kinds: np.ndarray, ego_xy: np.ndarray, r_max: float) -> Obstacles:
+    """:func:`compute_obstacles` for an object array of shapely geometries (the fast path of :func:`observe`)."""
+    ego_xy = np.asarray(ego_xy, dtype=float)[:2]
+    if len(geoms) == 0:
+        return Obstacles.empty()
+    ego_pt = shapely.points(ego_xy)
+    hulls = shapely.orient_polygons(shapely.convex_hull(np.asarray(geoms, dtype=object)))  # counter-clockwise
+    keep = ~shapely.is_empty(hulls) & shapely.dwithin(hulls, ego_pt, r_max) & ~shapely.intersects(hulls, ego_pt)
+    hulls, kinds = hulls[keep], np.asarray(kinds, dtype=str)[keep]
+    if len(hulls) == 0:
+        return Obstacles.empty()
+    verts, owner = _hull_vertices(hulls)
+    centroid = shapely.get_coordinates(shapely.centroid(hulls))
+    d_c = centroid - ego_xy
+    alpha_c = np.arctan2(d_c[:, 1], d_c[:, 0])
+    d_v = verts - ego_xy
+    r_v = np.hypot(d_v[:, 0], d_v[:, 1])
+    delta = wrap(np.arctan2(d_v[:, 1], d_v[:, 0]) - alpha_c[owner])
+    i_min = _group_first(owner, delta, r_v, len(hulls))
+    i_max = _group_first(owner, -delta, r_v, len(hulls))
+    return Obstacles(
+        polygons=np.split(verts, np.flatnonzero(np.diff(owner)) + 1),
+        kind=kinds.astype("<U8"),
+        centroid_range=np.hypot(d_c[:, 0], d_c[:, 1]),
+        centroid_bearing=alpha_c,
+        theta_min=wrap(alpha_c + delta[i_min]),
+        theta_max=wrap(alpha_c + delta[i_max]),
+        r_min=r_v[i_min],
+        r_max=r_v[i_max],
+    )
+
+
+def _hull_vertices(hulls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 2) of each hull without the closing repeat, and the owning hull index (V,) (sorted)."""
+    coords, owner = shapely.get_coordinates(hulls, return_index=True)
+    is_last = np.r_[owner[1:] != owner[:-1], True]
+    is_first = np.r_[True, owner[1:] != owner[:-1]]
+    first_of = np.maximum.accumulate(np.where(is_first, np.arange(len(owner)), 0))
+    closing = is_last & ~is_first & np.all(coords == coords[first_of], axis=1)
+    return coords[~closing], owner[~closing]
+
+
+def _group_first(owner: np.ndarray, key: np.ndarray, tie: np.ndarray, n: int) -> np.ndarray:
+    """Index of the element with the smallest ``key`` (ties: smallest ``tie``) within each group of ``owner``."""
+    order = np.lexsort((tie, key, owner))
+    starts = np.searchsorted(owner[order], np.arange(n), side="left")
+    return order[starts]
+
+
+def _polygons_from_arrays(polygons: Sequence[np.ndarray]) -> np.ndarray:
+    """Object array of shapely Polygons from (n_i, 2) vertex arrays (n_i >= 3), built in one vectorised call."""
+    if len(polygons) == 0:
+        return np.zeros(0, dtype=object)
+    arrays = [np.asarray(p, dtype=float).reshape(-1, 2) for p in polygons]
+    for i, a in enumerate(arrays):
+        require(len(a) >= 3 and np.isfinite(a).all(), f"occluder polygon {i} needs >= 3 finite vertices, got {a!r}")
+    owner = np.repeat(np.arange(len(arrays)), [len(a) for a in arrays])
+    return shapely.polygons(shapely.linearrings(np.concatenate(arrays), indices=owner))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Line of sight (§2.3 simulator-side detection, §4.4 occlusion_pd)
+
+
+def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[BaseGeometry]) -> np.ndarray:
+    """(N,) bool: the segment sensor -> target meets no occluder interior (§2.3, §4.4).
+
+    Strict: a segment that merely touches an occluder (grazes a vertex, runs along an edge) is visible. Occluders
+    that contain the sensor in their interior are ignored (the sensor cannot be occluded by what it sits in).
+    One vectorised shapely call over all (target, occluder) pairs.
+    """
+    ego_xy = np.asarray(ego_xy, dtype=float)[:2]
+    targets = np.asarray(targets, dtype=float).reshape(-1, 2)
+    occ = np.asarray(list(occluders), dtype=object).reshape(-1)
+    if len(targets) == 0 or len(occ) == 0:
+        return np.ones(len(targets), dtype=bool)
+    occ = occ[~shapely.contains(occ, shapely.points(ego_xy))]
+    if len(occ) == 0:
+        return np.ones(len(targets), dtype=bool)
+    shapely.prepare(occ)
+    lines = shapely.linestrings(np.stack([np.broadcast_to(ego_xy, targets.shape), targets], axis=1))
+    return ~_blocked_pairs(lines, occ).any(axis=1)
+
+
+def _blocked_pairs(lines: np.ndarray, occ: np.ndarray) -> np.ndarray:
+    """(N, O) bool: line i and occluder j share interior points (intersects and not merely touches)."""
+    hit = shapely.intersects(lines[:, None], occ[None, :])
+    ii, jj = np.nonzero(hit)
+    if len(ii):
+        hit[ii, jj] = ~shapely.touches(lines[ii], occ[jj])
+    return hit
+
+
+def target_visibility(
+    ego_xy: np.ndarray,
+    targets: np.ndarray,
+    occluders: Sequence[BaseGeometry],
+    visibility_points: int = 1,
+    visibility_offset: float = 0.3,
+) -> np.ndarray:
+    """(N,) bool visibility of targets (§2.3): centre only, or any of centre and +-offset across the sight line."""
+    targets = np.asarray(targets, dtype=float).reshape(-1, 2)
+    if visibility_points == 1 or len(targets) == 0:
+        return line_of_sight(ego_xy, targets, occluders)
+    d = targets - np.asarray(ego_xy, dtype=float)[:2]
+    norm = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)[:, None]
+    side = visibility_offset * np.column_stack([-d[:, 1], d[:, 0]]) / norm
+    points = np.concatenate([targets, targets + side, targets - side])
+    return line_of_sight(ego_xy, points, occluders).reshape(3, -1).any(axis=0)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Field of view, shadows and the visible semantic region Omega_k (§2.3, §3.1.4)
+
+
+def fov_polygon(ego: np.ndarray, cfg: SensorConfig) -> Polygon:
+    """FOV_k as a polygon (§2.3): annulus [r_min, r_max] (360 deg) or annular sector centred on the ego heading."""
+    x, y, theta = (float(v) for v in np.asarray(ego, dtype=float)[:3])
+    shell, hole = _fov_template(float(cfg.r_min), float(cfg.r_max), float(cfg.fov_deg))
+    if cfg.fov_deg < 360.0:
+        c, s = np.cos(theta), np.sin(theta)
+        shell = shell @ np.array([[c, s], [-s, c]])
+    return Polygon(shell + (x, y), [hole + (x, y)] if hole is not None else None)
+
+
+@lru_cache(maxsize=16)
+def _fov_template(r_min: float, r_max: float, fov_deg: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """FOV outline about the origin with heading 0: (shell, hole or None); arcs sampled every _FOV_ARC_STEP."""
+    full = fov_deg >= 360.0
+    span = 2.0 * np.pi if full else np.radians(fov_deg)
+    n = max(2, int(np.ceil(span / _FOV_ARC_STEP)) + 1)
+    phi = np.linspace(-0.5 * span, 0.5 * span, n)
+    if full:
+        phi = phi[:-1]
+    arc = np.column_stack([np.cos(phi), np.sin(phi)])
+    if full:
+        return r_max * arc, (r_min * arc[::-1] if r_min > 0 else None)
+    inner = r_min * arc[::-1] if r_min > 0 else np.zeros((1, 2))
+    return np.concatenate([r_max * arc, inner]), None
+
+
+def shadow_polygons(ego_xy: np.ndarray, obstacles: Obstacles, r_far: float) -> np.ndarray:
+    """(N,) object array: each obstacle together with its shadow (the region behind it between its tangent rays),
+    reaching at least ``r_far`` from the sensor (§3.1.2 cone C_j, §3.1.4).
+
+    For a convex obstacle not containing the sensor, obstacle plus shadow is convex, so it is the convex hull of the
+    obstacle's vertices and far points on the arc between theta_min and theta_max (radius chosen so the sampled arc
+    encloses the r_far circle).
+    """
+    n_obs = len(obstacles)
+    if n_obs == 0:
+        return np.zeros(0, dtype=object)
+    ego_xy = np.asarray(ego_xy, dtype=float)[:2]
+    width = np.mod(obstacles.theta_max - obstacles.theta_min, 2.0 * np.pi)
+    s = np.linspace(0.0, 1.0, _SHADOW_ARC_POINTS)
+    phi = obstacles.theta_min[:, None] + width[:, None] * s[None, :]
+    radius = (r_far * (1.0 + 1e-9) + 1e-6) / np.cos(0.5 * width / (_SHADOW_ARC_POINTS - 1))
+    far = ego_xy + radius[:, None, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    return shapely.convex_hull(shapely.multipoints(np.concatenate([_padded(obstacles.polygons), far], axis=1)))
+
+
+def _padded(polygons: Sequence[np.ndarray]) -> np.ndarray:
+    """(N, n_max, 2) vertex array, each polygon padded by repeating its first vertex (harmless for hulls)."""
+    n_max = max(len(p) for p in polygons)
+    return np.stack([np.concatenate([p, np.repeat(p[:1], n_max - len(p), axis=0)]) for p in polygons])
+
+
+def visible_region(
+    scene: SceneMap,
+    ego: np.ndarray,
+    obstacles: Obstacles,
+    cfg: SensorConfig,
+    region: BaseGeometry | None = None,
+    occluders: Sequence[BaseGeometry] = (),
+) -> BaseGeometry:
+    """Omega_k (§3.1.4): the semantic region within FOV_k minus every obstacle and its shadow out to r_max.
+
+    Args:
+        region: the semantic region; ``scene.sidewalk`` when None (pass the union with crossings for
+            ``birth.sem_include_crossings``).
+        occluders: extra polygons to remove without a shadow (e.g. an occluder containing the sensor, which has no
+            cone and is not in ``obstacles``).
+    """
+    return _omega(scene.sidewalk if region is None else region, ego, obstacles, cfg, occluders)
+
+
+def _omega(
+    region: BaseGeometry, ego: np.ndarray, obstacles: Obstacles, cfg: SensorConfig, occluders: Sequence[BaseGeometry]
+) -> BaseGeometry:
+    """(region within FOV_k) minus (obstacles with their shadows, and ``occluders``)."""
+    fov = fov_polygon(ego, cfg)
+    base = shapely.clip_by_rect(region, *fov.bounds).intersection(fov)
+    if base.is_empty:
+        return base
+    cut = np.concatenate([shadow_polygons(ego, obstacles, cfg.r_max), np.asarray(list(occluders), dtype=object)])
+    cut = cut[shapely.intersects(cut, base)] if len(cut) else cut
+    return base.difference(shapely.union_all(cut)) if len(cut) else base
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Occluders of a recording step (§3.1.1)
+
+
+def occluders_at(recording: Recording, scene: SceneMap, step_index: int) -> tuple[list[np.ndarray], list[str]]:
+    """Occluder vertex arrays and kinds at one recording step (§3.1.1): buildings, parked cars, other vehicles.
+
+    Parked cars are the union of ``recording.static_occluders`` and ``scene.static_occluders`` with exact
+    duplicates dropped. The ego's own footprint and pedestrians are never occluders.
+    """
+    polys, kinds = _static_occluder_arrays(recording, scene)
+    vehicles = _vehicle_arrays(recording, step_index)
+    return polys + list(vehicles), kinds + ["vehicle"] * len(vehicles)
+
+
+def _static_occluder_arrays(recording: Recording, scene: SceneMap) -> tuple[list[np.ndarray], list[str]]:
+    """Buildings (exterior rings of every part) and de-duplicated parked cars, as (n_i, 2) arrays."""
+    polys: list[np.ndarray] = []
+    kinds: list[str] = []
+    for geom in scene.buildings:
+        for part in shapely.get_parts(np.asarray([geom], dtype=object)):
+            if isinstance(part, Polygon) and not part.is_empty:
+                polys.append(np.asarray(part.exterior.coords)[:-1])
+                kinds.append("building")
+    seen: set[bytes] = set()
+    parked = [np.asarray(p, dtype=float) for p in recording.static_occluders]
+    parked += [np.asarray(p.exterior.coords)[:-1] for p in scene.static_occluders if not p.is_empty]
+    for p in parked:
+        key = shapely.normalize(shapely.polygons(p)).wkb
+        if key not in seen:
+            seen.add(key)
+            polys.append(p)
+            kinds.append("parked")
+    return polys, kinds
+
+
+def _vehicle_arrays(recording: Recording, step_index: int) -> np.ndarray:
+    """(V_k, 4, 2) footprints of the other vehicles present (and finite) at ``step_index``."""
+    foot = np.asarray(recording.veh_footprint, dtype=float).reshape(len(recording.t), -1, 4, 2)[step_index]
+    present = np.asarray(recording.veh_present, dtype=bool).reshape(len(recording.t), -1)[step_index]
+    return foot[present & np.isfinite(foot).all(axis=(1, 2))]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The sensor (§2.3, §5.1, §5.4)
+
+
+def scan_steps(t: np.ndarray, step_length: float, dt: float) -> np.ndarray:
+    """Recording step index of each scan k = 0, 1, ... at time k*dt (scans start at t = 0, end at the recording's
+    last sample). Each scan time must have a recording sample within half a SUMO step."""
+    t = np.asarray(t, dtype=float)
+    require(t.ndim == 1 and len(t) >= 1, "the recording has no time steps")
+    tol = 0.5 * step_length + 1e-9
+    require(abs(t[0]) <= tol, f"recording starts at t = {float(t[0])!r} s; the sensor samples k*dt from t = 0")
+    n_scans = int(np.floor((t[-1] + tol) / dt)) + 1
+    times = np.arange(n_scans) * dt
+    idx = np.clip(np.searchsorted(t, times), 1, len(t) - 1) if len(t) > 1 else np.zeros(n_scans, dtype=int)
+    if len(t) > 1:
+        idx = np.where(np.abs(t[idx - 1] - times) <= np.abs(t[idx] - times), idx - 1, idx)
+    bad = np.abs(t[idx] - times) > tol
+    if bad.any():
+        raise SoabenchError(f"the recording has no sample at scan time t = {float(times[bad][0])!r} s (dt = {dt!r} s)")
+    return idx
+
+
+def draw_clutter(rng: np.random.Generator, cfg: SensorConfig, n_scans: int) -> list[np.ndarray]:
+    """Poisson clutter for ``n_scans`` scans (§2.3): (M_k, 2) (range, bearing) arrays, uniform over
+    [r_min, r_max] x [-Theta/2, Theta/2] (``polar``) or uniform in area over the FOV (``cartesian``)."""
+    counts = rng.poisson(cfg.lambda_c, n_scans)
+    u = rng.random((int(counts.sum()), 2))
+    if cfg.clutter_space == "polar":
+        r = cfg.r_min + (cfg.r_max - cfg.r_min) * u[:, 0]
+    else:
+        r = np.sqrt(cfg.r_min**2 + (cfg.r_max**2 - cfg.r_min**2) * u[:, 0])
+    b = wrap(cfg.fov * (u[:, 1] - 0.5))
+    return np.split(np.column_stack([r, b]), np.cumsum(counts)[:-1])
+
+
+@dataclass
+class _Draws:
+    """Every random number of one run, drawn before any scan is built (lambda-independent detections)."""
+
+    u_detect: np.ndarray  #: (K, P) uniforms, detected iff u < p_D
+    noise: np.ndarray  #: (K, P, 2) N(0, R) samples (range m, bearing rad)
+    clutter: list[np.ndarray]  #: K (M_k, 2) clutter measurements
+
+
+def _draw(
+    rngs: tuple[np.random.Generator, np.random.Generator], cfg: SensorConfig, n_scans: int, n_peds: int
+) -> _Draws:
+    """Detection uniforms and noise (detection rng, fixed shape) and clutter (clutter rng)."""
+    det_rng, clutter_rng = rngs
+    u_detect = det_rng.random((n_scans, n_peds))
+    noise = det_rng.standard_normal((n_scans, n_peds, 2)) * np.array([cfg.sigma_r, cfg.sigma_b])
+    return _Draws(u_detect, noise, draw_clutter(clutter_rng, cfg, n_scans))
+
+
+def observe(
+    recording: Recording,
+    scene: SceneMap,
+    cfg: SensorConfig,
+    rngs: tuple[np.random.Generator, np.random.Generator],
+) -> Scans:
+    """Recording -> Scans (§2.3): one scan every ``cfg.dt`` from t = 0, at the recording step with that time.
+
+    Per scan: FOV test, line of sight through buildings, parked cars and other vehicles, detection with p_D,
+    (range, bearing) + N(0, R) with the bearing relative to the ego heading and wrapped, Poisson clutter, source
+    ids, a shuffle of the measurement order (detection rng), O_k and Omega_k. Pure given ``rngs``.
+    """
+    cfg.validate(recording.step_length)
+    steps = scan_steps(recording.t, recording.step_length, cfg.dt)
+    n_peds = len(recording.ped_ids)
+    draws = _draw(rngs, cfg, len(steps), n_peds)
+    static_geoms, static_kinds = _prepared(*_static_occluder_arrays(recording, scene))
+    region = scene.sidewalk
+    shapely.prepare(region)
+    out = _empty_truth(len(steps), n_peds)
+    scans: list[Scan] = []
+    sources: list[np.ndarray] = []
+    for k, idx in enumerate(steps):
+        scan, source = _observe_step(
+            recording, int(idx), k, cfg, draws, static_geoms, static_kinds, region, rngs[0], out
+        )
+        scans.append(scan)
+        sources.append(source)
+    return Scans(
+        scans=scans,
+        dt=float(cfg.dt),
+        source=sources,
+        truth_xy=out["truth_xy"],
+        present=out["present"],
+        in_fov=out["in_fov"],
+        visible=out["visible"],
+        detected=out["detected"],
+        ped_ids=np.asarray(recording.ped_ids, dtype=str),
+    )
+
+
+def _prepared(polys: list[np.ndarray], kinds: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    geoms = _polygons_from_arrays(polys)
+    shapely.prepare(geoms)
+    return geoms, np.asarray(kinds, dtype="<U8")
+
+
+def _empty_truth(n_scans: int, n_peds: int) -> dict[str, np.ndarray]:
+    flags = {name: np.zeros((n_scans, n_peds), dtype=bool) for name in ("present", "in_fov", "visible", "detected")}
+    return {"truth_xy": np.full((n_scans, n_peds, 2), np.nan), **flags}
+
+
+def _observe_step(
+    recording: Recording,
+    idx: int,
+    k: int,
+    cfg: SensorConfig,
+    draws: _Draws,
+    static_geoms: np.ndarray,
+    static_kinds: np.ndarray,
+    region: BaseGeometry,
+    det_rng: np.random.Generator,
+    out: dict[str, np.ndarray],
+) -> tuple[Scan, np.ndarray]:
+    """One scan k at recording step ``idx``; fills row k of the truth arrays in ``out``."""
+    ego = np.asarray(recording.ego_pose[idx], dtype=float)
+    xy = np.asarray(recording.ped_xy[idx], dtype=float).reshape(-1, 2)
+    present = np.asarray(recording.ped_present[idx], dtype=bool) & np.isfinite(xy).all(axis=1)
+    xy = np.where(present[:, None], xy, np.nan)
+    in_fov = present & fov_mask(xy, ego, cfg)
+
+    vehicles = _vehicle_arrays(recording, idx)
+    geoms = np.concatenate([static_geoms, shapely.polygons(vehicles) if len(vehicles) else static_geoms[:0]])
+    kinds = np.concatenate([static_kinds, np.full(len(vehicles), "vehicle", dtype="<U8")])
+    ego_pt = shapely.points(ego[:2])
+    near = shapely.dwithin(geoms, ego_pt, cfg.r_max)
+    occ, occ_kinds = geoms[near], kinds[near]
+
+    visible = in_fov.copy()
+    visible[in_fov] = target_visibility(ego, xy[in_fov], occ, cfg.visibility_points, cfg.visibility_offset)
+    detected = visible & (draws.u_detect[k] < cfg.p_D)
+
+    r, b = range_bearing(xy[detected], ego)
+    z_targets = np.column_stack([r, b]) + draws.noise[k, detected]
+    z_targets[:, 1] = wrap(z_targets[:, 1])
+    Z = np.concatenate([z_targets, draws.clutter[k]]).reshape(-1, 2)
+    source = np.concatenate([np.flatnonzero(detected), np.full(len(draws.clutter[k]), CLUTTER)]).astype(np.int64)
+    perm = det_rng.permutation(len(Z))
+
+    obstacles = obstacles_from_geoms(occ, occ_kinds, ego[:2], cfg.r_max)
+    inside = occ[shapely.intersects(shapely.convex_hull(occ), ego_pt)] if len(occ) else occ  # no cone: cut as is
+    omega = _omega(region, ego, obstacles, cfg, list(inside))
+
+    for name, value in (("truth_xy", xy), ("present", present), ("in_fov", in_fov), ("visible", visible)):
+        out[name][k] = value
+    out["detected"][k] = detected
+    scan = Scan(k, k * float(cfg.dt), ego, Z[perm], obstacles, list(occ), omega)
+    return scan, source[perm]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# .npz round trip (docs/scans_format.md)
+
+
+def _offsets(counts: Sequence[int]) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(np.asarray(counts, dtype=np.int64))]).astype(np.int64)
+
+
+def _wkb_pack(geoms: Sequence[BaseGeometry]) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenated WKB bytes (uint8) and (n+1,) byte offsets."""
+    blobs = [shapely.to_wkb(g) for g in geoms]
+    data = np.frombuffer(b"".join(blobs), dtype=np.uint8) if blobs else np.zeros(0, dtype=np.uint8)
+    return data.copy(), _offsets([len(b) for b in blobs])
+
+
+def _wkb_unpack(data: np.ndarray, offsets: np.ndarray) -> list[BaseGeometry]:
+    raw = data.tobytes()
+    return [shapely.from_wkb(raw[a:b]) for a, b in zip(offsets[:-1], offsets[1:], strict=True)]
+
+
+def _scans_to_arrays(scans: Scans) -> dict[str, np.ndarray]:
+    s = scans.scans
+    obstacles = [sc.obstacles for sc in s]
+    all_polys = [p for o in obstacles for p in o.polygons]
+    occluders = [g for sc in s for g in sc.occluders]
+    occ_wkb, occ_wkb_off = _wkb_pack(occluders)
+    reg_wkb, reg_wkb_off = _wkb_pack([sc.visible_region for sc in s])
+
+    def cat(name: str) -> np.ndarray:
+        parts = [getattr(o, name) for o in obstacles]
+        return np.concatenate(parts).astype(float) if parts else np.zeros(0)
+
+    return {
+        "format_version": np.int64(SCANS_FORMAT_VERSION),
+        "dt": np.float64(scans.dt),
+        "k": np.array([sc.k for sc in s], dtype=np.int64),
+        "t": np.array([sc.t for sc in s], dtype=float),
+        "ego": np.array([sc.ego for sc in s], dtype=float).reshape(-1, 3),
+        "z_offsets": _offsets([len(sc.Z) for sc in s]),
+        "Z": np.concatenate([sc.Z for sc in s]).reshape(-1, 2) if s else np.zeros((0, 2)),
+        "source": np.concatenate(scans.source).astype(np.int64) if s else np.zeros(0, dtype=np.int64),
+        "ped_ids": np.asarray(scans.ped_ids, dtype=str),
+        "truth_xy": np.asarray(scans.truth_xy, dtype=float),
+        "present": np.asarray(scans.present, dtype=bool),
+        "in_fov": np.asarray(scans.in_fov, dtype=bool),
+        "visible": np.asarray(scans.visible, dtype=bool),
+        "detected": np.asarray(scans.detected, dtype=bool),
+        "obst_offsets": _offsets([len(o) for o in obstacles]),
+        "obst_kind": np.concatenate([o.kind for o in obstacles]).astype("<U8") if s else np.zeros(0, "<U8"),
+        "obst_centroid_range": cat("centroid_range"),
+        "obst_centroid_bearing": cat("centroid_bearing"),
+        "obst_theta_min": cat("theta_min"),
+        "obst_theta_max": cat("theta_max"),
+        "obst_r_min": cat("r_min"),
+        "obst_r_max": cat("r_max"),
+        "obst_vertex_offsets": _offsets([len(p) for p in all_polys]),
+        "obst_vertices": np.concatenate(all_polys).reshape(-1, 2) if all_polys else np.zeros((0, 2)),
+        "occluder_offsets": _offsets([len(sc.occluders) for sc in s]),
+        "occluder_wkb": occ_wkb,
+        "occluder_wkb_offsets": occ_wkb_off,
+        "region_wkb": reg_wkb,
+        "region_wkb_offsets": reg_wkb_off,
+    }
+
+
+def _scans_from_arrays(a: dict[str, np.ndarray], where: str) -> Scans:
+    require(
+        "format_version" in a and int(a["format_version"]) == SCANS_FORMAT_VERSION,
+        f"{where} is not a soabench Scans file of format version {SCANS_FORMAT_VERSION}",
+    )
+    zo, oo, vo, co = a["z_offsets"], a["obst_offsets"], a["obst_vertex_offsets"], a["occluder_offsets"]
+    verts = [a["obst_vertices"][p:q] for p, q in zip(vo[:-1], vo[1:], strict=True)]
+    occluders = _wkb_unpack(a["occluder_wkb"], a["occluder_wkb_offsets"])
+    regions = _wkb_unpack(a["region_wkb"], a["region_wkb_offsets"])
+    scans, sources = [], []
+    for i in range(len(a["k"])):
+        sl = slice(oo[i], oo[i + 1])
+        obstacles = Obstacles(
+            polygons=verts[sl],
+            kind=a["obst_kind"][sl],
+            centroid_range=a["obst_centroid_range"][sl],
+            centroid_bearing=a["obst_centroid_bearing"][sl],
+            theta_min=a["obst_theta_min"][sl],
+            theta_max=a["obst_theta_max"][sl],
+            r_min=a["obst_r_min"][sl],
+            r_max=a["obst_r_max"][sl],
+        )
+        z_sl = slice(zo[i], zo[i + 1])
+        scan = Scan(
+            int(a["k"][i]),
+            float(a["t"][i]),
+            a["ego"][i],
+            a["Z"][z_sl],
+            obstacles,
+            occluders[co[i] : co[i + 1]],
+            regions[i],
+        )
+        scans.append(scan)
+        sources.append(a["source"][z_sl])
+    return Scans(
+        scans=scans,
+        dt=float(a["dt"]),
+        source=sources,
+        truth_xy=a["truth_xy"],
+        present=a["present"],
+        in_fov=a["in_fov"],
+        visible=a["visible"],
+        detected=a["detected"],
+        ped_ids=a["ped_ids"],
+    )

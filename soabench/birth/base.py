@@ -11,11 +11,16 @@ inside each measurement's normaliser with no missed-detection term (PUBM, ATBM s
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+import shapely
+from shapely import STRtree
+from shapely.geometry.base import BaseGeometry
+
+from soabench.geometry import fov_mask
 
 if TYPE_CHECKING:
     from soabench.config import BirthConfig, SensorConfig
@@ -81,3 +86,116 @@ class BirthModel(Protocol):
     def __init__(self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator) -> None: ...
 
     def __call__(self, ctx: BirthContext) -> Births: ...
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Shared builder and FOV-only rule (ALGORITHMS.md §3.0). Everything below is array code over all candidate means.
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+def build_components(
+    p: np.ndarray, P_p: np.ndarray, sigma_v: float, v: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Birth components from position means and covariances (§3.0, register row 26).
+
+    ``m = [p; v]`` (``v`` = 0 unless given) and ``P = blkdiag(P_p, sigma_v^2 I_2)``: position and velocity get
+    separate blocks instead of the paper's sigma^2 I over the whole state.
+
+    Args:
+        p: (J, 2) position means.
+        P_p: (J, 2, 2) position covariances, or one (2, 2) covariance shared by all J.
+        sigma_v: velocity prior std per axis (m/s).
+        v: optional (J, 2) velocity means.
+
+    Returns:
+        ``(m, P)`` with shapes (J, 4) and (J, 4, 4).
+    """
+    p = np.asarray(p, dtype=float).reshape(-1, 2)
+    J = len(p)
+    m = np.zeros((J, 4))
+    m[:, :2] = p
+    if v is not None:
+        m[:, 2:] = np.asarray(v, dtype=float).reshape(-1, 2)
+    P = np.zeros((J, 4, 4))
+    P[:, :2, :2] = P_p
+    P[:, 2, 2] = P[:, 3, 3] = sigma_v**2
+    return m, P
+
+
+def births_from(
+    p: np.ndarray, P_p: np.ndarray, w: np.ndarray, source: np.ndarray, sigma_v: float, v: np.ndarray | None = None
+) -> Births:
+    """:class:`Births` of J appended components built with :func:`build_components`."""
+    m, P = build_components(p, P_p, sigma_v, v)
+    return Births(np.asarray(w, dtype=float).reshape(-1), m, P, np.asarray(source, dtype=np.int8).reshape(-1))
+
+
+def isotropic(sigma: float | np.ndarray, n: int) -> np.ndarray:
+    """(n, 2, 2) covariances sigma^2 I_2 (``sigma`` scalar or (n,))."""
+    s2 = np.broadcast_to(np.asarray(sigma, dtype=float) ** 2, (n,))
+    return s2[:, None, None] * np.eye(2)[None]
+
+
+def inside_any(geoms: Sequence[BaseGeometry] | STRtree | None, xy: np.ndarray) -> np.ndarray:
+    """(J,) True where a point of ``xy`` (J, 2) lies in the interior of any geometry (one vectorised tree query)."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    out = np.zeros(len(xy), dtype=bool)
+    if geoms is None or len(xy) == 0:
+        return out
+    tree = geoms if isinstance(geoms, STRtree) else STRtree(list(geoms))
+    if len(tree.geometries) == 0:
+        return out
+    hit = tree.query(shapely.points(xy), predicate="within")[0]
+    out[hit] = True
+    return out
+
+
+class FOVRule:
+    """The FOV-only rule of §3.0 (pitfall 7 of §2.12): which candidate birth means may be instantiated at scan k.
+
+    A mean passes if it is in FOV_k inset by ``delta_in`` from the range limits (:func:`soabench.geometry.fov_mask`),
+    inside the workspace (closed world box), and not inside a building, a static occluder (both fixed per scene,
+    indexed once) or any occluder of the scan (``scan.occluders``).
+    """
+
+    def __init__(self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap) -> None:
+        self.sensor = sensor
+        self.delta_in = float(cfg.delta_in)
+        self.box = np.asarray(scene.bounds, dtype=float)
+        self.static_tree = STRtree(list(scene.buildings) + list(scene.static_occluders))
+
+    def in_workspace(self, xy: np.ndarray) -> np.ndarray:
+        """(J,) inside the closed world box."""
+        x0, y0, x1, y1 = self.box
+        return (xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)
+
+    def in_static(self, xy: np.ndarray) -> np.ndarray:
+        """(J,) inside a building or static occluder of the scene."""
+        return inside_any(self.static_tree, xy)
+
+    def in_occluder(self, xy: np.ndarray, scan: Scan) -> np.ndarray:
+        """(J,) inside an occluder of scan k (vehicles, parked cars, buildings as the sensor lists them)."""
+        return inside_any(scan.occluders, xy)
+
+    def in_fov(self, xy: np.ndarray, scan: Scan) -> np.ndarray:
+        """(J,) in FOV_k inset by delta_in."""
+        return fov_mask(xy, scan.ego, self.sensor, inset=self.delta_in)
+
+    def mask(self, xy: np.ndarray, scan: Scan, static_ok: np.ndarray | None = None) -> np.ndarray:
+        """(J,) the full rule. ``static_ok`` may carry a precomputed workspace-and-not-in-building mask."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        ok = self.in_fov(xy, scan)
+        if static_ok is None:
+            ok &= self.in_workspace(xy)
+            ok[ok] &= ~self.in_static(xy[ok])
+        else:
+            ok &= static_ok
+        ok[ok] &= ~self.in_occluder(xy[ok], scan)
+        return ok
+
+    def static_mask(self, xy: np.ndarray) -> np.ndarray:
+        """(J,) the time-invariant part of the rule, for point sets fixed per trial (grid, Poisson-disk, GMBM)."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        ok = self.in_workspace(xy)
+        ok[ok] &= ~self.in_static(xy[ok])
+        return ok

@@ -1,0 +1,54 @@
+"""Uniform Birth Model (UBM): Gaussians spread uniformly across the workspace (ALGORITHMS.md §3.3, register row 16).
+
+A regular grid of spacing d_u over the world box, node centres at (x_min + (i + 1/2) d_u, y_min + (j + 1/2) d_u),
+built once per trial with its time-invariant part of the FOV-only rule (§3.0). Each scan instantiates the nodes in
+FOV_k (one :func:`~soabench.geometry.fov_mask`) that are not inside an occluder of the scan (one tree query), with
+w = N_hat / J_u,k and P_p = sigma_u^2 I, so the birth mass is exactly N_hat.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from soabench.birth.base import SOURCE_GRID, BirthContext, Births, FOVRule, build_components, inside_any
+from soabench.config import BirthConfig, SensorConfig
+from soabench.scenario.scene import SceneMap
+
+
+def grid_nodes(bounds: tuple[float, float, float, float], d_u: float) -> np.ndarray:
+    """(n_x n_y, 2) cell centres of a d_u grid over the box ``(x_min, y_min, x_max, y_max)`` (§3.3)."""
+    x0, y0, x1, y1 = bounds
+    nx, ny = int(np.floor((x1 - x0) / d_u + 1e-9)), int(np.floor((y1 - y0) / d_u + 1e-9))
+    X, Y = np.meshgrid(x0 + (np.arange(nx) + 0.5) * d_u, y0 + (np.arange(ny) + 0.5) * d_u, indexing="ij")
+    return np.column_stack([X.ravel(), Y.ravel()])
+
+
+class UniformBirth:
+    """UBM (§3.3). ``UniformBirth(cfg, sensor, scene, rng)(ctx) -> Births``; ``rng`` is unused (deterministic)."""
+
+    name = "ubm"
+
+    def __init__(self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator) -> None:
+        cfg.validate()
+        self.cfg, self.sensor = cfg, sensor
+        self.rule = FOVRule(cfg, sensor, scene)
+        nodes = grid_nodes(scene.bounds, cfg.d_u)
+        self.nodes = nodes[self.rule.static_mask(nodes)]  # in the workspace, not inside a building
+        self.m_all, self.P_all = build_components(
+            self.nodes, cfg.sigma_u**2 * np.eye(2), cfg.sigma_v_birth
+        )  # components built once, selected per scan
+
+    def __call__(self, ctx: BirthContext) -> Births:
+        """Grid nodes passing the FOV-only rule (``ubm_extent = fov``; ``workspace`` skips the FOV test)."""
+        scan = ctx.scan
+        if self.cfg.ubm_extent == "fov":
+            ok = self.rule.in_fov(self.nodes, scan)
+        else:
+            ok = np.ones(len(self.nodes), dtype=bool)
+        idx = np.flatnonzero(ok)
+        idx = idx[~inside_any(scan.occluders, self.nodes[idx])]
+        J = len(idx)
+        if J == 0:
+            return Births.empty()
+        w = np.full(J, self.cfg.N_hat / J)
+        return Births(w, self.m_all[idx], self.P_all[idx], np.full(J, SOURCE_GRID, dtype=np.int8))

@@ -1,0 +1,313 @@
+"""One Monte Carlo trial: seed -> Recording -> Scans -> every (birth model x probability mode) filter -> metrics.
+
+Common random numbers (ALGORITHMS.md §5.8, DESIGN.md): one SUMO run per trial; per clutter rate lambda one
+:class:`~soabench.sensor.Scans`, observed with freshly created sensor generators so detections and noise are identical
+across lambda; every filter run of that lambda consumes the very same Scans, and every filter run re-creates the
+placement generator, so all runs see the same birth-placement stream.
+
+The result is a :class:`TrialResult` of plain Python scalars (cheap to pickle, ready to be written as CSV rows).
+Its schemas are the module constants :data:`ROW_KEYS`, :data:`EPISODE_KEYS`, :data:`STEP_KEYS`,
+:data:`ESTIMATE_KEYS` and :data:`TIMING_KEYS`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from soabench.birth.base import BirthContext
+from soabench.errors import require
+from soabench.metrics import SUMMARY_KEYS, TrialMetrics, evaluate
+from soabench.seeding import TrialSeeds, trial_seeds
+
+if TYPE_CHECKING:
+    from soabench.config import Config, FilterConfig, SensorConfig
+    from soabench.gmphd.filter import StepResult
+    from soabench.scenario.config import ScenarioConfig
+    from soabench.scenario.recording import Recording
+    from soabench.scenario.scene import SceneMap
+    from soabench.sensor import Scans
+
+#: identifying columns of a row
+ROW_ID_KEYS = ("trial", "seed", "sumo_seed", "clutter", "N_hat", "model", "mode")
+#: wall-clock columns of a row (seconds per filter run; the filter stages are sums over the K steps)
+ROW_TIME_KEYS = ("t_birth", "t_predict", "t_update", "t_reduce", "t_metrics", "t_filter_total")
+#: every column of a row, in order: ids, the metrics of :data:`soabench.metrics.SUMMARY_KEYS`, wall-clock times
+ROW_KEYS = ROW_ID_KEYS + tuple(k for k in SUMMARY_KEYS if k not in ROW_TIME_KEYS) + ROW_TIME_KEYS
+#: columns of an episode row (§5.4); k_t = -1 and delay = NaN when censored
+EPISODE_KEYS = (
+    "trial",
+    "clutter",
+    "model",
+    "mode",
+    "target",
+    "k0",
+    "k_end",
+    "k_d",
+    "k_t",
+    "delay",
+    "delay_lb",
+    "censored",
+)
+#: columns of a step row (one per filter run and scan k)
+STEP_KEYS = (
+    "trial",
+    "clutter",
+    "model",
+    "mode",
+    "k",
+    "n_gt",
+    "n_est",
+    "tp",
+    "fp",
+    "fn",
+    "ospa",
+    "gospa",
+    "card_err",
+    "sum_w",
+    "n_components",
+)
+#: columns of an estimate row (``save_estimates``): one per extracted estimate (with multiplicity)
+ESTIMATE_KEYS = ("trial", "clutter", "model", "mode", "k", "x", "y", "w")
+#: keys of :attr:`TrialResult.timing` (seconds per trial; "sensor" sums every clutter rate)
+TIMING_KEYS = ("sumo", "sensor")
+
+_INT_STEP_KEYS = frozenset({"n_gt", "n_est", "tp", "fp", "fn", "card_err", "n_components"})
+
+
+@dataclass
+class TrialResult:
+    """Everything one trial produced, as lists of dicts of Python scalars (schemas: module constants)."""
+
+    trial: int
+    seed: int
+    sumo_seed: int
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    episodes: list[dict[str, Any]] = field(default_factory=list)
+    steps: list[dict[str, Any]] = field(default_factory=list)
+    timing: dict[str, float] = field(default_factory=dict)
+    estimates: list[dict[str, Any]] | None = None
+
+
+@dataclass(frozen=True)
+class RunKey:
+    """Identity of one filter run inside a trial."""
+
+    trial: int
+    clutter: float
+    model: str
+    mode: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"trial": self.trial, "clutter": self.clutter, "model": self.model, "mode": self.mode}
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# probability modes (§4.6)
+
+
+def mode_setup(mode: str, filter_cfg: FilterConfig) -> tuple[str, FilterConfig, float]:
+    """Filter mode, filter config and newborn p_D of a probability mode (§4.1, §4.2, §4.4).
+
+    "static": the config as given, p_D_b = p_D; "dynamic": Beta p_D/p_S, p_D_b = mu_D0; "dynamic+occ": dynamic
+    with ``occlusion_pd = True``.
+    """
+    if mode == "static":
+        return "static", filter_cfg, filter_cfg.p_D
+    if mode == "dynamic":
+        return "dynamic", filter_cfg, filter_cfg.mu_D0
+    require(mode == "dynamic+occ", f"probability mode {mode!r}; choose 'static', 'dynamic' or 'dynamic+occ'")
+    return "dynamic", dataclasses.replace(filter_cfg, occlusion_pd=True), filter_cfg.mu_D0
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# one filter run
+
+
+@dataclass
+class FilterRun:
+    """The step results of one filter run and its wall-clock birth and total times (s)."""
+
+    results: list[StepResult]
+    t_birth: float
+    t_total: float
+
+
+def run_filter(
+    scans: Scans,
+    birth_model: Callable[[BirthContext], Any],
+    filt: Any,
+    p_D_b: float,
+) -> FilterRun:
+    """Run the filter cycle (§2.11) over every scan: birth from the context at k, then ``filt.step``."""
+    results: list[StepResult] = []
+    t_birth = 0.0
+    t0 = time.perf_counter()
+    prev = None
+    for scan in scans.scans:
+        tb = time.perf_counter()
+        births = birth_model(BirthContext(scan, prev, p_D_b))
+        t_birth += time.perf_counter() - tb
+        prev = filt.step(scan, births)
+        results.append(prev)
+    return FilterRun(results, t_birth, time.perf_counter() - t0)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# rows
+
+
+def _scalar(v: Any) -> Any:
+    """A Python scalar (numpy ints, floats and bools converted)."""
+    return v.item() if hasattr(v, "item") else v
+
+
+def make_row(
+    key: RunKey, seeds: TrialSeeds, N_hat: float, metrics: TrialMetrics, run: FilterRun, t_metrics: float
+) -> dict[str, Any]:
+    """One row of :data:`ROW_KEYS` for a filter run."""
+    row: dict[str, Any] = {
+        "trial": key.trial,
+        "seed": seeds.base_seed,
+        "sumo_seed": seeds.sumo_seed,
+        "clutter": key.clutter,
+        "N_hat": float(N_hat),
+        "model": key.model,
+        "mode": key.mode,
+    }
+    row.update({k: _scalar(v) for k, v in metrics.summary.items()})
+    row.update({"t_birth": run.t_birth, "t_metrics": t_metrics, "t_filter_total": run.t_total})
+    return {k: row[k] for k in ROW_KEYS}
+
+
+def episode_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
+    """One row of :data:`EPISODE_KEYS` per delay episode."""
+    base = key.as_dict()
+    rows = [{**base, **dataclasses.asdict(e)} for e in metrics.episodes]
+    return [{k: _scalar(r[k]) for k in EPISODE_KEYS} for r in rows]
+
+
+def step_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
+    """One row of :data:`STEP_KEYS` per scan k."""
+    base = key.as_dict()
+    K = len(metrics.series["n_gt"]) if metrics.series else 0
+    cols = {k: metrics.series[k].tolist() for k in STEP_KEYS[5:]}
+    rows = []
+    for k in range(K):
+        row = {**base, "k": k}
+        row.update({c: int(v[k]) if c in _INT_STEP_KEYS else float(v[k]) for c, v in cols.items()})
+        rows.append(row)
+    return rows
+
+
+def estimate_rows(key: RunKey, results: Sequence[StepResult]) -> list[dict[str, Any]]:
+    """One row of :data:`ESTIMATE_KEYS` per extracted estimate (unrestricted, with multiplicity)."""
+    base = key.as_dict()
+    rows = []
+    for k, res in enumerate(results):
+        w = list(res.X_w) if len(res.X_w) == len(res.X) else [float("nan")] * len(res.X)
+        for (x, y), wi in zip(res.X[:, :2].tolist(), w, strict=True):
+            rows.append({**base, "k": k, "x": x, "y": y, "w": float(wi)})
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the trial
+
+
+def _default_simulate() -> Callable[..., Recording]:
+    from soabench.scenario import simulate
+
+    return simulate
+
+
+def _default_observe() -> Callable[..., Scans]:
+    from soabench.sensor import observe
+
+    return observe
+
+
+def _default_filter_cls() -> type:
+    from soabench.gmphd.filter import GMPHDFilter
+
+    return GMPHDFilter
+
+
+def _default_birth_factory() -> Callable[[str], type]:
+    from soabench.birth import get_birth_model
+
+    return get_birth_model
+
+
+def run_trial(
+    trial: int,
+    config: Config,
+    scene: SceneMap,
+    scenario: ScenarioConfig,
+    *,
+    save_estimates: bool = False,
+    simulate_fn: Callable[..., Recording] | None = None,
+    observe_fn: Callable[..., Scans] | None = None,
+    filter_cls: type | None = None,
+    birth_factory: Callable[[str], type] | None = None,
+) -> TrialResult:
+    """Trial ``trial`` of the protocol (§5.8) with ``config.experiment`` models, probabilities, clutter, seed, duration.
+
+    One SUMO run (``simulate_fn(scene, scenario, seeds, duration=...)``); per clutter rate one
+    ``observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs())``; per (model, mode) a fresh birth model
+    ``birth_factory(model)(birth_cfg, sensor_cfg, scene, seeds.placement_rng())`` and a fresh
+    ``filter_cls(filter_cfg, sensor_cfg, mode)``, then :func:`soabench.metrics.evaluate`. The keyword-only
+    callables default to the real pipeline; tests inject fakes through them.
+    """
+    require(isinstance(trial, int) and trial >= 0, f"trial = {trial!r} must be an integer >= 0")
+    simulate_fn = simulate_fn or _default_simulate()
+    observe_fn = observe_fn or _default_observe()
+    filter_cls = filter_cls or _default_filter_cls()
+    birth_factory = birth_factory or _default_birth_factory()
+    exp = config.experiment
+    seeds = trial_seeds(exp.seed, trial)
+    out = TrialResult(trial, seeds.base_seed, seeds.sumo_seed, estimates=[] if save_estimates else None)
+
+    t0 = time.perf_counter()
+    recording = simulate_fn(scene, scenario, seeds, duration=exp.duration)
+    out.timing["sumo"] = time.perf_counter() - t0
+    out.timing["sensor"] = 0.0
+    for lam in exp.clutter:
+        sensor_cfg = dataclasses.replace(config.sensor, lambda_c=float(lam))
+        t0 = time.perf_counter()
+        scans = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs())
+        out.timing["sensor"] += time.perf_counter() - t0
+        for model in exp.models:
+            for mode in exp.probabilities:
+                key = RunKey(trial, float(lam), model, mode)
+                _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out)
+    return out
+
+
+def _run_one(
+    key: RunKey,
+    config: Config,
+    sensor_cfg: SensorConfig,
+    scene: SceneMap,
+    scans: Scans,
+    seeds: TrialSeeds,
+    filter_cls: type,
+    birth_factory: Callable[[str], type],
+    out: TrialResult,
+) -> None:
+    """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``."""
+    filter_mode, filter_cfg, p_D_b = mode_setup(key.mode, config.filter)
+    birth_model = birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
+    filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
+    run = run_filter(scans, birth_model, filt, p_D_b)
+    t0 = time.perf_counter()
+    metrics = evaluate(scans, run.results, config.metrics, sensor_cfg)
+    t_metrics = time.perf_counter() - t0
+    out.rows.append(make_row(key, seeds, config.birth.N_hat, metrics, run, t_metrics))
+    out.episodes.extend(episode_rows(key, metrics))
+    out.steps.extend(step_rows(key, metrics))
+    if out.estimates is not None:
+        out.estimates.extend(estimate_rows(key, run.results))

@@ -1,0 +1,420 @@
+"""Evaluation of one filter run against the truth (ALGORITHMS.md §5; register rows 5, 6, 20, 22, 23).
+
+Building blocks (pure functions of point sets, all distances 2-D Euclidean in metres):
+
+* :func:`ospa` (§5.2) and :func:`gospa` (§5.6, alpha = 2) with their decompositions;
+* :func:`gated_assignment` (§5.4 step 1), shared by the delay metric and precision/recall (§5.5);
+* :func:`delay_episodes` and :func:`delay_summary` (§5.4): visibility episodes, first detection k_d, first gated
+  association k_t, censoring, the lower-bound variant;
+* :func:`evaluate`: every metric of one filter run (one birth model x probability mode x clutter rate of a trial).
+
+Metrics never touch SUMO or the filter: they read :class:`~soabench.sensor.Scans` (truth flags) and the filter's
+:class:`~soabench.gmphd.filter.StepResult` list.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from soabench.errors import require
+from soabench.geometry import fov_mask
+
+if TYPE_CHECKING:
+    from soabench.config import MetricsConfig, SensorConfig
+    from soabench.gmphd.filter import StepResult
+    from soabench.sensor import Scans
+
+#: cost of a pair beyond the gate in the gated Hungarian assignment (§5.4 step 1)
+GATE_COST = 1e6
+
+#: keys of :attr:`TrialMetrics.summary` (per-trial scalars of one filter run)
+SUMMARY_KEYS = (
+    "delay_mean",
+    "delay_std",
+    "delay_mean_lb",
+    "delay_std_lb",
+    "n_episodes",
+    "n_censored",
+    "card_err",
+    "card_err_sumw",
+    "ospa",
+    "ospa_loc",
+    "ospa_card",
+    "gospa",
+    "gospa_loc",
+    "gospa_missed",
+    "gospa_false",
+    "precision",
+    "recall",
+    "tp",
+    "fp",
+    "fn",
+    "mean_components",
+    "max_components",
+    "mean_predicted",
+    "mean_updated",
+    "cap_hits",
+    "mean_pD",
+    "t_predict",
+    "t_update",
+    "t_reduce",
+)
+
+#: keys of :attr:`TrialMetrics.series` (one value per scan k)
+SERIES_KEYS = (
+    "n_gt",
+    "n_est",
+    "tp",
+    "fp",
+    "fn",
+    "ospa",
+    "gospa",
+    "card_err",
+    "sum_w",
+    "n_components",
+)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# point-set distances
+
+
+def _points(X: np.ndarray | Sequence) -> np.ndarray:
+    """(n, 2) float array of the (x, y) of ``X`` (rows may carry more columns, e.g. velocities)."""
+    A = np.asarray(X, dtype=float)
+    if A.size == 0:
+        return np.zeros((0, 2))
+    return A.reshape(len(A), -1)[:, :2]
+
+
+def pairwise_distances(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """(m, n) Euclidean distances between the rows of ``X`` (m, 2) and ``Y`` (n, 2)."""
+    return np.linalg.norm(X[:, None, :] - Y[None, :, :], axis=-1)
+
+
+def ospa(X: np.ndarray, Y: np.ndarray, c: float = 100.0, p: float = 1.0) -> tuple[float, float, float]:
+    """OSPA_p^(c)(X, Y) and its localisation and cardinality parts (§5.2, Schuhmacher, Vo & Vo 2008).
+
+    The assignment is solved with ``linear_sum_assignment`` on the m x n matrix min(c, D)^p (m <= n). With
+    ``loc = (sum assigned d^p / n)^(1/p)`` and ``card = (c^p (n - m) / n)^(1/p)``, ``total^p = loc^p + card^p``.
+    OSPA(empty, empty) = 0; OSPA(empty, Y) = c.
+
+    Returns:
+        ``(total, loc, card)``.
+    """
+    X, Y = _points(X), _points(Y)
+    if len(X) > len(Y):
+        X, Y = Y, X
+    m, n = len(X), len(Y)
+    if n == 0:
+        return 0.0, 0.0, 0.0
+    card_p = c**p * (n - m) / n
+    loc_p = 0.0
+    if m > 0:
+        C = np.minimum(pairwise_distances(X, Y), c) ** p
+        rows, cols = linear_sum_assignment(C)
+        loc_p = float(C[rows, cols].sum()) / n
+    return (loc_p + card_p) ** (1.0 / p), loc_p ** (1.0 / p), card_p ** (1.0 / p)
+
+
+def gospa(X: np.ndarray, Y: np.ndarray, c: float = 5.0, p: float = 1.0) -> tuple[float, float, float, float]:
+    """GOSPA with alpha = 2 (§5.6, Rahmathullah, García-Fernández & Svensson 2017) and its decomposition.
+
+    ``X`` is the ground truth, ``Y`` the estimates. The assignment is solved on min(D, c)^p; only assigned pairs
+    with d < c count as assigned (a pair at d >= c costs c^p = c^p/2 + c^p/2 either way). The parts are in p-th
+    power units and add up: ``total^p = loc + missed + false`` with
+
+    * loc = sum of d^p over assigned pairs with d < c,
+    * missed = (c^p / 2) x (truths not assigned below c),
+    * false = (c^p / 2) x (estimates not assigned below c).
+
+    GOSPA(empty, empty) = 0 and GOSPA(empty, n points) = (n c^p / 2)^(1/p); it is not normalised by max(m, n).
+
+    Returns:
+        ``(total, loc, missed, false)``.
+    """
+    X, Y = _points(X), _points(Y)
+    n_assigned, loc = 0, 0.0
+    if len(X) and len(Y):
+        D = pairwise_distances(X, Y)
+        rows, cols = linear_sum_assignment(np.minimum(D, c) ** p)
+        d = D[rows, cols]
+        kept = d < c
+        n_assigned = int(kept.sum())
+        loc = float((d[kept] ** p).sum())
+    half = 0.5 * c**p
+    missed = half * (len(X) - n_assigned)
+    false = half * (len(Y) - n_assigned)
+    return (loc + missed + false) ** (1.0 / p), loc, missed, false
+
+
+def gated_assignment(est: np.ndarray, gt: np.ndarray, d_gate: float) -> np.ndarray:
+    """Gated Hungarian matching of estimates to ground truth (§5.4 step 1, §5.5).
+
+    Cost = Euclidean distance, with entries > ``d_gate`` set to :data:`GATE_COST`; only assigned pairs with
+    distance <= ``d_gate`` are kept.
+
+    Returns:
+        (n_pairs, 2) int array of (estimate index, ground-truth index) rows, sorted by estimate index.
+    """
+    est, gt = _points(est), _points(gt)
+    if len(est) == 0 or len(gt) == 0:
+        return np.zeros((0, 2), dtype=int)
+    D = pairwise_distances(est, gt)
+    rows, cols = linear_sum_assignment(np.where(D > d_gate, GATE_COST, D))
+    kept = D[rows, cols] <= d_gate
+    return np.column_stack([rows[kept], cols[kept]]).astype(int)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# tracking delay (§5.4)
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One visibility episode of a target that was detected in it (§5.4).
+
+    Attributes:
+        target: pedestrian index (column of the (K, P) flags).
+        k0: first step of the episode; k_end: its last step (inclusive).
+        k_d: first detection in the episode.
+        k_t: first step >= k_d starting ``confirm_n`` consecutive associated steps inside the episode; -1 if censored.
+        delay: (k_t - k_d) dt in seconds; NaN if censored.
+        delay_lb: ``delay``, or the lower bound (k_end - k_d + 1) dt if censored.
+        censored: no initiation inside the episode.
+    """
+
+    target: int
+    k0: int
+    k_end: int
+    k_d: int
+    k_t: int
+    delay: float
+    delay_lb: float
+    censored: bool
+
+
+def visibility_runs(vis: np.ndarray, g_min: int = 1) -> list[tuple[int, int]]:
+    """Episodes of one target: maximal runs of ``vis`` (K,), joined when fewer than ``g_min`` steps apart (§5.4.2).
+
+    Returns:
+        ``[(k0, k_end), ...]`` with inclusive ends; a joined episode spans its inner invisible gap.
+    """
+    v = np.concatenate([[False], np.asarray(vis, dtype=bool), [False]])
+    edges = np.flatnonzero(np.diff(v.astype(np.int8)))
+    starts, ends = edges[0::2], edges[1::2] - 1
+    runs: list[tuple[int, int]] = []
+    for k0, k1 in zip(starts.tolist(), ends.tolist(), strict=True):
+        if runs and k0 - runs[-1][1] - 1 < g_min:
+            runs[-1] = (runs[-1][0], k1)
+        else:
+            runs.append((k0, k1))
+    return runs
+
+
+def first_confirmed(assoc: np.ndarray, start: int, end: int, confirm_n: int = 1) -> int:
+    """First k in [start, end] with ``assoc`` true on k .. k + confirm_n - 1, all <= end (§5.4 steps 4, 6).
+
+    Returns -1 when there is none (a censored episode).
+    """
+    if end - start + 1 < confirm_n:
+        return -1
+    a = np.asarray(assoc[start : end + 1], dtype=np.int64)
+    window = np.convolve(a, np.ones(confirm_n, dtype=np.int64), mode="valid")
+    hits = np.flatnonzero(window == confirm_n)
+    return int(start + hits[0]) if len(hits) else -1
+
+
+def delay_episodes(
+    vis: np.ndarray,
+    det: np.ndarray,
+    assoc: np.ndarray,
+    dt: float,
+    g_min: int = 1,
+    confirm_n: int = 1,
+) -> list[Episode]:
+    """Tracking-delay episodes k_delay = k_t - k_d (§5.4) from (K, P) boolean flags.
+
+    ``vis``: present, in the FOV and line-of-sight visible; ``det``: a measurement originated from the target;
+    ``assoc``: the target has a gated partner among the estimates (:func:`gated_assignment`). Episodes without a
+    detection are not counted and not returned; episodes with a detection but no initiation are censored.
+    """
+    vis, det, assoc = (np.asarray(a, dtype=bool) for a in (vis, det, assoc))
+    require(vis.shape == det.shape == assoc.shape, "vis, det and assoc must have the same (K, P) shape")
+    episodes: list[Episode] = []
+    for i in range(vis.shape[1]):
+        for k0, k_end in visibility_runs(vis[:, i], g_min):
+            detected = np.flatnonzero(det[k0 : k_end + 1, i])
+            if len(detected) == 0:
+                continue
+            k_d = k0 + int(detected[0])
+            k_t = first_confirmed(assoc[:, i], k_d, k_end, confirm_n)
+            censored = k_t < 0
+            delay = math.nan if censored else (k_t - k_d) * dt
+            delay_lb = (k_end - k_d + 1) * dt if censored else delay
+            episodes.append(Episode(i, k0, k_end, k_d, k_t, delay, delay_lb, censored))
+    return episodes
+
+
+def _mean_std(x: np.ndarray, ddof: int) -> tuple[float, float]:
+    """Mean and std (NaN when there are too few values for ``ddof``)."""
+    mean = float(np.mean(x)) if len(x) else math.nan
+    std = float(np.std(x, ddof=ddof)) if len(x) > ddof else math.nan
+    return mean, std
+
+
+def delay_summary(episodes: Sequence[Episode], ddof: int = 0, censored: str = "exclude") -> dict[str, float | int]:
+    """Per-trial k̄_delay and σ_k_delay (§5.4 step 7).
+
+    ``delay_mean``/``delay_std`` follow ``censored``: "exclude" (censored episodes left out, the default) or
+    "lower_bound" (censored episodes enter with their lower bound). ``delay_mean_lb``/``delay_std_lb`` always use
+    the lower-bound variant. Means are NaN when no episode counts. ``n_episodes`` counts every detected episode,
+    censored ones included.
+    """
+    require(censored in ("exclude", "lower_bound"), f"censored = {censored!r}; choose 'exclude' or 'lower_bound'")
+    counted = np.array([e.delay for e in episodes if not e.censored], dtype=float)
+    lower = np.array([e.delay_lb for e in episodes], dtype=float)
+    mean_lb, std_lb = _mean_std(lower, ddof)
+    mean, std = _mean_std(counted, ddof) if censored == "exclude" else (mean_lb, std_lb)
+    return {
+        "delay_mean": mean,
+        "delay_std": std,
+        "delay_mean_lb": mean_lb,
+        "delay_std_lb": std_lb,
+        "n_episodes": len(episodes),
+        "n_censored": sum(e.censored for e in episodes),
+    }
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# evaluation sets (§5.1)
+
+
+def gt_mask(scans: Scans, gt_set: str = "fov") -> np.ndarray:
+    """(K, P) membership of GT_k (§5.1).
+
+    "fov": present and in FOV_k (occluded targets count); "visible": line-of-sight visible; "scene": present.
+    """
+    present = np.asarray(scans.present, dtype=bool) & np.isfinite(scans.truth_xy).all(axis=-1)
+    if gt_set == "fov":
+        return present & np.asarray(scans.in_fov, dtype=bool)
+    if gt_set == "visible":
+        return present & np.asarray(scans.visible, dtype=bool)
+    require(gt_set == "scene", f"gt_set = {gt_set!r}; choose 'fov', 'visible' or 'scene'")
+    return present
+
+
+def estimate_positions(X: np.ndarray, ego: np.ndarray, sensor_cfg: SensorConfig, gt_set: str = "fov") -> np.ndarray:
+    """Est_k (§5.1): extracted positions (with multiplicity), restricted to FOV_k unless ``gt_set`` is "scene"."""
+    E = _points(X)
+    if gt_set == "scene" or len(E) == 0:
+        return E
+    return E[fov_mask(E, ego, sensor_cfg)]
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# one filter run
+
+
+@dataclass
+class TrialMetrics:
+    """Every metric of one filter run (§5).
+
+    Attributes:
+        summary: per-trial scalars, keys :data:`SUMMARY_KEYS` (Python floats/ints; NaN where undefined).
+        episodes: the delay episodes (§5.4).
+        series: per-step arrays, keys :data:`SERIES_KEYS`, each of length K.
+    """
+
+    summary: dict[str, float | int]
+    episodes: list[Episode] = field(default_factory=list)
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def _mean(a: np.ndarray) -> float:
+    """Mean over all steps (NaN for an empty run)."""
+    return float(np.mean(a)) if len(a) else math.nan
+
+
+def _ratio(num: float, den: float) -> float:
+    return num / den if den > 0 else math.nan
+
+
+def _step_costs(results: Sequence[StepResult]) -> dict[str, float | int]:
+    """Component counts and stage times of the filter (§5.7); times are totals over the run (s)."""
+    n_red = np.array([r.n_reduced for r in results], dtype=float)
+    return {
+        "mean_components": float(n_red.mean()) if len(n_red) else math.nan,
+        "max_components": int(n_red.max()) if len(n_red) else 0,
+        "mean_predicted": float(np.mean([r.n_predicted for r in results])) if results else math.nan,
+        "mean_updated": float(np.mean([r.n_updated for r in results])) if results else math.nan,
+        "cap_hits": int(sum(bool(r.cap_hit) for r in results)),
+        "mean_pD": float(np.mean([r.mean_pD for r in results])) if results else math.nan,
+        "t_predict": float(sum(r.t_predict for r in results)),
+        "t_update": float(sum(r.t_update for r in results)),
+        "t_reduce": float(sum(r.t_reduce for r in results)),
+    }
+
+
+def evaluate(
+    scans: Scans,
+    results: Sequence[StepResult],
+    cfg: MetricsConfig,
+    sensor_cfg: SensorConfig,
+) -> TrialMetrics:
+    """All metrics of one filter run: ``results[k]`` is the filter output at ``scans.scans[k]`` (§5.1-5.7).
+
+    Per step: GT_k and Est_k (§5.1), the gated matching (TP/FP/FN and ``assoc``), OSPA (c, p from ``cfg``), GOSPA,
+    the cardinality error and its Σw variant (Σw = ``sum_w``, the posterior mass after the update). Per trial:
+    means over all K steps (both-empty steps contribute 0), precision/recall from the summed counts, and the delay
+    episodes built from ``scans.visible``, ``scans.detected`` and ``assoc``.
+    """
+    K = len(scans.scans)
+    require(len(results) == K, f"{len(results)} filter results for {K} scans")
+    gt = gt_mask(scans, cfg.gt_set)
+    assoc = np.zeros_like(gt)
+    s = {key: np.zeros(K) for key in SERIES_KEYS}
+    ospa_parts = np.zeros((K, 3))
+    gospa_parts = np.zeros((K, 4))
+    for k, (scan, res) in enumerate(zip(scans.scans, results, strict=True)):
+        gt_idx = np.flatnonzero(gt[k])
+        G = scans.truth_xy[k, gt_idx]
+        E = estimate_positions(res.X, scan.ego, sensor_cfg, cfg.gt_set)
+        pairs = gated_assignment(E, G, cfg.d_gate)
+        assoc[k, gt_idx[pairs[:, 1]]] = True
+        ospa_parts[k] = ospa(E, G, cfg.ospa_c, cfg.ospa_p)
+        gospa_parts[k] = gospa(G, E, cfg.gospa_c, cfg.gospa_p)
+        s["n_gt"][k], s["n_est"][k], s["tp"][k] = len(G), len(E), len(pairs)
+        s["sum_w"][k], s["n_components"][k] = res.sum_w, res.n_reduced
+    s["fp"] = s["n_est"] - s["tp"]
+    s["fn"] = s["n_gt"] - s["tp"]
+    s["ospa"], s["gospa"] = ospa_parts[:, 0], gospa_parts[:, 0]
+    s["card_err"] = np.abs(s["n_est"] - s["n_gt"])
+    episodes = delay_episodes(scans.visible, scans.detected, assoc, scans.dt, cfg.g_min, cfg.confirm_n)
+    tp, fp, fn = (int(s[key].sum()) for key in ("tp", "fp", "fn"))
+    summary: dict[str, float | int] = {
+        **delay_summary(episodes, cfg.ddof, cfg.censored),
+        "card_err": _mean(s["card_err"]),
+        "card_err_sumw": _mean(np.abs(s["sum_w"] - s["n_gt"])),
+        "ospa": _mean(ospa_parts[:, 0]),
+        "ospa_loc": _mean(ospa_parts[:, 1]),
+        "ospa_card": _mean(ospa_parts[:, 2]),
+        "gospa": _mean(gospa_parts[:, 0]),
+        "gospa_loc": _mean(gospa_parts[:, 1]),
+        "gospa_missed": _mean(gospa_parts[:, 2]),
+        "gospa_false": _mean(gospa_parts[:, 3]),
+        "precision": _ratio(tp, tp + fp),
+        "recall": _ratio(tp, tp + fn),
+        "tp": tp,
+        "fp": fp,
+        "fn": fn,
+        **_step_costs(results),
+    }
+    series = {key: s[key].astype(float if key in ("ospa", "gospa", "sum_w") else int) for key in SERIES_KEYS}
+    return TrialMetrics({key: summary[key] for key in SUMMARY_KEYS}, episodes, series)
