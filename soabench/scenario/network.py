@@ -1,0 +1,300 @@
+"""SUMO network + polygon files -> :class:`SceneMap` (ALGORITHMS.md §2.1(c), SUMO_NOTES.md "Semantic regions").
+
+Every region is shapely geometry in world (= SUMO network) coordinates, clipped to the world box W:
+
+* sidewalk: normal-edge lanes that allow pedestrians but not passenger cars, centre line buffered by width/2
+  (flat caps, mitre joins) -- the semantic birth region Omega_sidewalk;
+* crossings: crossing lanes buffered the same way; walking areas: their lane shapes (already outlines);
+* roads: every lane that allows some non-pedestrian class (driving and parking lanes, normal and internal), plus
+  junction shapes, minus walking areas;
+* buildings: polygons whose ``type`` contains "building"; static occluders: polygons whose ``type`` contains one
+  of :data:`OCCLUDER_TYPES` (other polygon types, e.g. OSM land use, are ignored);
+* doors: door points projected onto the nearest sidewalk centre line (where SUMO persons arrive and depart).
+"""
+
+from __future__ import annotations
+
+import os
+import xml.sax
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import shapely
+from shapely.geometry import LineString, MultiLineString, Point, Polygon, box
+from shapely.geometry.base import BaseGeometry
+
+from soabench.errors import SoabenchError, require
+from soabench.scenario.scene import SceneMap
+
+#: polygon ``type`` substrings (case-insensitive) that make a polygon a static occluder.
+OCCLUDER_TYPES = ("parked", "car", "vehicle", "obstacle", "occluder", "wall")
+
+_MITRE = {"cap_style": "flat", "join_style": "mitre", "mitre_limit": 3.0}
+
+
+def _check_file(path: str | os.PathLike, what: str, suffix: str = ".xml") -> Path:
+    p = Path(path)
+    require(p.is_file(), f"{what} {str(path)!r} does not exist; give the path of an existing {suffix} file")
+    return p
+
+
+def _require_well_formed(p: Path, what: str) -> None:
+    """Raise a one-line SoabenchError if ``p`` is not well-formed XML (sumolib may fail earlier, less clearly)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        ET.parse(p)
+    except ET.ParseError as exc:
+        raise SoabenchError(f"{what} {str(p)!r} is not valid XML ({exc})") from None
+
+
+def read_net(net_file: str | os.PathLike):  # -> sumolib.net.Net
+    """Read a SUMO network with internal edges, crossings and walking areas; SoabenchError on a bad file."""
+    import sumolib
+
+    p = _check_file(net_file, "network file", ".net.xml")
+    try:
+        net = sumolib.net.readNet(str(p), withInternal=True, withPedestrianConnections=True)
+    except xml.sax.SAXParseException as exc:
+        raise SoabenchError(
+            f"network file {str(p)!r} is not valid XML ({exc.getMessage()} at line {exc.getLineNumber()})"
+        ) from None
+    except Exception as exc:  # sumolib raises assorted errors on non-network XML
+        _require_well_formed(p, "network file")
+        raise SoabenchError(f"network file {str(p)!r} is not a SUMO network ({type(exc).__name__}: {exc})") from None
+    require(
+        len(net.getEdges()) > 0, f"network file {str(p)!r} holds no edges; give a SUMO .net.xml built by netconvert"
+    )
+    return net
+
+
+def read_polygons(poly_files: Sequence[str | os.PathLike]) -> tuple[list[Polygon], list[Polygon]]:
+    """Buildings and static occluders from SUMO polygon files (``<poly type=.. shape=..>``), in file order."""
+    import sumolib
+
+    buildings: list[Polygon] = []
+    occluders: list[Polygon] = []
+    for f in poly_files:
+        p = _check_file(f, "polygon file")
+        try:
+            polys = sumolib.shapes.polygon.read(str(p), includeTaz=False)
+        except xml.sax.SAXParseException as exc:
+            raise SoabenchError(
+                f"polygon file {str(p)!r} is not valid XML ({exc.getMessage()} at line {exc.getLineNumber()})"
+            ) from None
+        except Exception as exc:
+            _require_well_formed(p, "polygon file")
+            raise SoabenchError(
+                f"polygon file {str(p)!r} could not be read as SUMO polygons ({type(exc).__name__}: {exc})"
+            ) from None
+        for poly in polys:
+            kind = (poly.type or "").lower()
+            if len(poly.shape) < 3:
+                continue
+            geom = shapely.make_valid(Polygon([(float(x), float(y)) for x, y in poly.shape]))
+            if geom.is_empty or geom.area <= 0:
+                continue
+            if geom.geom_type != "Polygon":  # keep the largest piece of a self-intersecting outline
+                geom = max(getattr(geom, "geoms", [geom]), key=lambda g: g.area)
+            if "building" in kind:
+                buildings.append(geom)
+            elif any(k in kind for k in OCCLUDER_TYPES):
+                occluders.append(geom)
+    return buildings, occluders
+
+
+def _lane_line(lane) -> LineString | None:
+    shape = lane.getShape()
+    return LineString(shape) if len(shape) >= 2 else None
+
+
+def _is_sidewalk(lane) -> bool:
+    return lane.allows("pedestrian") and not lane.allows("passenger")
+
+
+def _carries_vehicles(lane) -> bool:
+    return len(set(lane.getPermissions()) - {"pedestrian"}) > 0
+
+
+def net_regions(net) -> dict[str, BaseGeometry | list[LineString]]:
+    """Unclipped semantic regions of a sumolib network (see the module docstring)."""
+    sidewalk, crossings, walking, road, lines = [], [], [], [], []
+    for edge in net.getEdges(withInternal=True):
+        func = edge.getFunction()
+        for lane in edge.getLanes():
+            if func == "walkingarea":
+                shape = lane.getShape()
+                if len(shape) >= 3:
+                    walking.append(shapely.make_valid(Polygon(shape)))
+                continue
+            line = _lane_line(lane)
+            if line is None or line.length <= 0:
+                continue
+            area = line.buffer(lane.getWidth() / 2.0, **_MITRE)
+            if func == "crossing":
+                crossings.append(area)
+                lines.append(line)
+            elif func == "" and _is_sidewalk(lane):
+                sidewalk.append(area)
+                lines.append(line)
+            elif _carries_vehicles(lane):
+                road.append(area)
+    for node in net.getNodes():
+        shape = node.getShape()
+        if len(shape) >= 3:
+            road.append(shapely.make_valid(Polygon(shape)))
+    walking_u = shapely.union_all(walking) if walking else Polygon()
+    road_u = shapely.union_all(road).difference(walking_u) if road else Polygon()
+    return {
+        "sidewalk": shapely.union_all(sidewalk) if sidewalk else Polygon(),
+        "crossings": shapely.union_all(crossings) if crossings else Polygon(),
+        "walking_areas": walking_u,
+        "roads": road_u,
+        "lines": lines,
+    }
+
+
+def sidewalk_lanes(net) -> list:
+    """Normal-edge sidewalk lanes (pedestrians allowed, passenger cars not), sorted by id."""
+    lanes = [ln for e in net.getEdges(withInternal=False) for ln in e.getLanes() if _is_sidewalk(ln)]
+    return sorted(lanes, key=lambda ln: ln.getID())
+
+
+def default_doors(buildings: Sequence[Polygon], sidewalk: BaseGeometry, max_dist: float = 30.0) -> np.ndarray:
+    """One door per building: the point of its outline nearest the sidewalk region (buildings farther away than
+    ``max_dist`` metres get none). Used for user networks whose scenario gives no doors."""
+    doors = []
+    if sidewalk.is_empty:
+        return np.zeros((0, 2))
+    for b in buildings:
+        if b.distance(sidewalk) <= max_dist:
+            p, _ = shapely.ops.nearest_points(b.exterior, sidewalk)
+            doors.append((p.x, p.y))
+    return np.asarray(doors, dtype=float).reshape(-1, 2)
+
+
+def project_doors(points: np.ndarray, lines: Sequence[LineString]) -> np.ndarray:
+    """Each door point moved onto the nearest sidewalk centre line (where SUMO persons depart and arrive)."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(pts) == 0 or not lines:
+        return pts.copy()
+    ml = MultiLineString(list(lines))
+    out = []
+    for x, y in pts:
+        q, _ = shapely.ops.nearest_points(ml, Point(x, y))
+        out.append((q.x, q.y))
+    return np.asarray(out, dtype=float)
+
+
+def _clip(geom: BaseGeometry, world: Polygon) -> BaseGeometry:
+    return geom.intersection(world) if not geom.is_empty else geom
+
+
+def load_scene(
+    net_file: str | os.PathLike,
+    poly_files: Sequence[str | os.PathLike] = (),
+    world_box: Sequence[float] | None = None,
+    doors: np.ndarray | None = None,
+    name: str | None = None,
+    net=None,
+) -> SceneMap:
+    """Build the :class:`SceneMap` of a network (ALGORITHMS.md §2.1(c)).
+
+    Args:
+        net_file: SUMO ``.net.xml``.
+        poly_files: SUMO polygon files (buildings, parked cars, obstacles).
+        world_box: (x_min, y_min, x_max, y_max); default: the network's boundary.
+        doors: (D, 2) door points; default: one per building (:func:`default_doors`). Stored projected onto the
+            nearest sidewalk centre line.
+        name: map name; default: the file stem.
+        net: an already read sumolib network (skips re-reading ``net_file``).
+    """
+    import shapely.ops  # noqa: F401  (nearest_points)
+
+    net = net if net is not None else read_net(net_file)
+    regions = net_regions(net)
+    require(
+        not regions["sidewalk"].is_empty,
+        f"network {str(net_file)!r} has no pedestrian lanes (sidewalks); it needs normal-edge lanes with "
+        'allow="pedestrian" (e.g. netconvert --sidewalks.guess)',
+    )
+    if world_box is None:
+        world_box = tuple(float(v) for v in net.getBoundary())
+    x0, y0, x1, y1 = (float(v) for v in world_box)
+    require(x1 > x0 and y1 > y0, f"world_box = {list(world_box)!r} must be [x_min, y_min, x_max, y_max] with min < max")
+    world = box(x0, y0, x1, y1)
+    buildings, occluders = read_polygons(poly_files)
+    sidewalk = _clip(regions["sidewalk"], world)
+    require(
+        not sidewalk.is_empty,
+        f"world_box = {[x0, y0, x1, y1]!r} contains no sidewalk of network {str(net_file)!r}; "
+        "choose a box over the net",
+    )
+    lines = [g for ln in regions["lines"] for g in _parts(ln.intersection(world))]
+    if doors is None:
+        doors = default_doors(buildings, sidewalk)
+    doors = project_doors(np.asarray(doors, dtype=float).reshape(-1, 2), _sidewalk_only_lines(net, world))
+    return SceneMap(
+        name=name or Path(net_file).name.removesuffix(".xml").removesuffix(".net"),
+        world_box=world,
+        sidewalk=sidewalk,
+        crossings=_clip(regions["crossings"], world),
+        walking_areas=_clip(regions["walking_areas"], world),
+        roads=_clip(regions["roads"], world),
+        buildings=buildings,
+        static_occluders=occluders,
+        doors=doors,
+        sidewalk_lines=MultiLineString(lines),
+        net_file=str(net_file),
+        poly_files=[str(p) for p in poly_files],
+    )
+
+
+def _parts(geom: BaseGeometry) -> list[LineString]:
+    if geom.is_empty:
+        return []
+    if isinstance(geom, LineString):
+        return [geom]
+    return [g for g in getattr(geom, "geoms", []) if isinstance(g, LineString) and g.length > 0]
+
+
+def _sidewalk_only_lines(net, world: Polygon) -> list[LineString]:
+    """Sidewalk centre lines inside the world box (doors must lie on a normal edge, never on a crossing)."""
+    out = []
+    for lane in sidewalk_lanes(net):
+        line = _lane_line(lane)
+        if line is not None:
+            out += _parts(line.intersection(world))
+    return out
+
+
+def fringe_edges(net, vclass: str = "passenger") -> tuple[list[str], list[str]]:
+    """(sources, sinks): edges allowing ``vclass`` with no incoming / no outgoing ``vclass`` edge, sorted by id."""
+    sources, sinks = [], []
+    for e in net.getEdges(withInternal=False):
+        if not e.allows(vclass):
+            continue
+        inc = [i for i in e.getIncoming() if i.allows(vclass)]
+        out = [o for o in e.getOutgoing() if o.allows(vclass)]
+        if not inc:
+            sources.append(e.getID())
+        if not out:
+            sinks.append(e.getID())
+    return sorted(sources), sorted(sinks)
+
+
+def default_ego_route(net, max_fringe: int = 40) -> list[str]:
+    """The longest shortest route between a source and a sink fringe edge (user networks without a scenario)."""
+    sources, sinks = fringe_edges(net)
+    require(bool(sources) and bool(sinks), "network has no fringe edges for passenger cars; give an ego route")
+    best: tuple[float, list[str]] = (-1.0, [])
+    for s in sources[:max_fringe]:
+        for t in sinks[:max_fringe]:
+            if s == t:
+                continue
+            path, cost = net.getShortestPath(net.getEdge(s), net.getEdge(t), vClass="passenger")
+            if path and cost is not None and cost > best[0]:
+                best = (cost, [e.getID() for e in path])
+    require(bool(best[1]), "no route for passenger cars connects two fringe edges of the network; give an ego route")
+    return best[1]
