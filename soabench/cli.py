@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -142,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--values", type=_float_list, help="clutter rates for `sweep clutter` (default 0.5,3,5)")
     p.add_argument("--offsets", type=_offsets, help="N_tot offsets for `sweep births` (default -10:10)")
     p.add_argument("--clutter", type=_float_list, help="clutter rate for `sweep births` (default 3)")
+    p.add_argument("--resume", type=Path, metavar="SWEEP_DIR", help="finish the missing trials of an earlier sweep")
     return parser
 
 
@@ -334,6 +336,12 @@ def _report_outcome(outcome) -> int:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
+    if args.resume is not None:
+        require(args.resume.is_dir(), f"--resume {str(args.resume)!r} is not a sweep folder")
+        from soabench.experiment.sweep import run_sweep
+
+        outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, **kwargs)
+        return _report_outcome(outcome)
     if args.kind == "clutter":
         require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep clutter`")
         values = args.values or (0.5, 3.0, 5.0)
@@ -350,12 +358,38 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 COMMANDS = {"scene": cmd_scene, "record": cmd_record, "birth": cmd_birth, "run": cmd_run, "sweep": cmd_sweep}
 
 
+def _join_negative_values(argv: Sequence[str]) -> list[str]:
+    """``--offsets -10:10`` -> ``--offsets=-10:10``: argparse would read a value starting with '-' as an option."""
+    out: list[str] = []
+    it = iter(argv)
+    for token in it:
+        if token in ("--offsets", "--values", "--clutter"):
+            value = next(it, None)
+            if (
+                value is not None
+                and value.startswith("-")
+                and len(value) > 1
+                and (value[1].isdigit() or value[1] == ".")
+            ):
+                out.append(f"{token}={value}")
+                continue
+            out.append(token)
+            if value is not None:
+                out.append(value)
+            continue
+        out.append(token)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``soabench`` console script."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
     try:
         return COMMANDS[args.command](args)
+    except BrokenPipeError:  # e.g. `soabench run | head`: the reader left; say nothing more
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except SoabenchError as exc:
         print(f"soabench: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -1,0 +1,603 @@
+"""The Monte Carlo harness: trials on process workers or Dask, persisted per trial, resumable (ALGORITHMS.md §5.8).
+
+``run_experiment`` runs trials ``0 .. trials-1`` of a config; trial n's seeds depend only on ``(seed, n)``
+(:mod:`soabench.seeding`), never on the worker or the order, so serial, process-pool and Dask runs write
+bit-identical ``trials.csv``/``episodes.csv``/``steps.csv``. libsumo is a process singleton (SUMO_NOTES.md): every
+executor runs one trial at a time per process (a lock guards a worker that was started with several threads).
+
+Executors: ``workers=1`` runs in this process; ``workers=N`` a ``ProcessPoolExecutor`` of N processes; ``scheduler``
+an existing Dask scheduler; ``dask_local`` a Dask ``LocalCluster(processes=True, threads_per_worker=1)``.
+Each worker process loads the scene once (a per-process cache). Results are written by this (driver) process, one
+atomic file per finished trial (:mod:`soabench.experiment.store`), so workers need no shared file system.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import os
+import platform
+import socket
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from soabench.config import Config
+from soabench.errors import SoabenchError, require
+from soabench.experiment.store import (
+    EPISODE_COLUMNS,
+    STEP_COLUMNS,
+    TIMING_COLUMNS,
+    TRIAL_COLUMNS,
+    RunStore,
+    pack_table,
+    to_jsonable,
+)
+from soabench.seeding import trial_seeds
+
+TrialFn = Callable[..., Any]
+LoadFn = Callable[..., Any]
+
+
+# ------------------------------------------------------------------------------------------------ outcome
+@dataclass
+class RunOutcome:
+    """What a run (or a resumed run) ended with.
+
+    ``complete`` is True when every trial has a result. When every trial was attempted but some failed, the
+    CSV files, summary and figures cover the successful trials and list the failures, ``complete`` is False and
+    ``n_missing`` counts the failed trials (``--resume`` retries them). When trials were never attempted
+    (``--fail-fast``) no CSV or summary is written. Ctrl-C re-raises ``KeyboardInterrupt`` after saying how to
+    resume; the trials finished so far stay on disk.
+    """
+
+    run_dir: Path
+    complete: bool
+    n_done: int
+    n_missing: int
+    failures: list[dict] = field(default_factory=list)
+    summary_markdown: str = ""
+
+
+# ------------------------------------------------------------------------------------------------ one trial
+@dataclass(frozen=True)
+class TaskSpec:
+    """Everything a worker needs to run any trial of a run (small and picklable)."""
+
+    config: dict
+    net: str
+    polys: tuple[str, ...]
+    scenario: str | None
+    save_estimates: bool
+    trial_fn: TrialFn | None = None
+    load_fn: LoadFn | None = None
+
+
+_SCENES: dict[tuple, tuple[Any, Any]] = {}
+_SUMO_LOCK = threading.Lock()
+
+
+def _default_trial_fn() -> TrialFn:
+    from soabench.experiment.trial import run_trial
+
+    return run_trial
+
+
+def _default_load_fn() -> LoadFn:
+    from soabench.scenario import load
+
+    return load
+
+
+def load_scene_cached(net: str, polys: Sequence[str], scenario: str | None, load_fn: LoadFn | None = None):
+    """``(SceneMap, ScenarioConfig)`` of a network, loaded once per process."""
+    fn = load_fn or _default_load_fn()
+    key = (fn.__module__, fn.__qualname__, str(net), tuple(str(p) for p in polys), scenario)
+    if key not in _SCENES:
+        _SCENES[key] = fn(net, tuple(polys), scenario)
+    return _SCENES[key]
+
+
+def _where() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def failure_record(trial: int, base_seed: int, error: str, tb: str = "") -> dict:
+    """A failed trial: its seeds (to reproduce it with ``--seed S --trial N``) and the error."""
+    seeds = trial_seeds(base_seed, trial)
+    return {
+        "trial": int(trial),
+        "status": "failed",
+        "seed": int(base_seed),
+        "sumo_seed": int(seeds.sumo_seed),
+        "error": error,
+        "traceback": tb,
+    }
+
+
+def run_trial_task(trial: int, spec: TaskSpec) -> dict:
+    """Run one trial in this process and return its record; an exception becomes a failure record."""
+    base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+    t0 = time.perf_counter()
+    try:
+        with _SUMO_LOCK:
+            config = Config.from_dict(spec.config)
+            scene, scenario = load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
+            fn = spec.trial_fn or _default_trial_fn()
+            result = fn(trial, config, scene, scenario, save_estimates=spec.save_estimates)
+    except Exception as exc:  # a failed trial must not stop the run (issue 7)
+        rec = failure_record(trial, base_seed, f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        rec["worker"] = _where()
+        return rec
+    seeds = trial_seeds(base_seed, trial)
+    record = {
+        "trial": int(trial),
+        "status": "ok",
+        "seed": base_seed,
+        "sumo_seed": int(seeds.sumo_seed),
+        "rows": pack_table(result.rows, TRIAL_COLUMNS + TIMING_COLUMNS),
+        "episodes": pack_table(result.episodes, EPISODE_COLUMNS),
+        "steps": pack_table(result.steps, STEP_COLUMNS),
+        "timing": to_jsonable(dict(getattr(result, "timing", {}) or {})),
+        "worker": _where(),
+        "elapsed": time.perf_counter() - t0,
+    }
+    est = getattr(result, "estimates", None)
+    if spec.save_estimates and est is not None:
+        record["estimates"] = to_jsonable(est)
+    return record
+
+
+# ------------------------------------------------------------------------------------------------ executors
+class SerialExecutor:
+    """Trials one after another in this process."""
+
+    name = "serial"
+    n_workers = 1
+
+    def results(self, spec: TaskSpec, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
+        for t in trials:
+            yield t, run_trial_task(t, spec)
+
+    def close(self, abort: bool = False) -> None:
+        pass
+
+
+class PoolExecutor:
+    """A ``ProcessPoolExecutor`` of one-thread processes; at most ``2 * workers`` trials in flight."""
+
+    name = "process-pool"
+
+    def __init__(self, workers: int):
+        self.n_workers = int(workers)
+        self._pool: ProcessPoolExecutor | None = None
+        self._generation = 0  # incremented whenever a broken pool is replaced
+
+    def _get_pool(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=self.n_workers)
+        return self._pool
+
+    def results(self, spec: TaskSpec, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
+        base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+        queue = list(trials)[::-1]
+        pending: dict = {}  # future -> (trial, pool generation)
+        lost = "worker process died (BrokenProcessPool)"
+        try:
+            while queue or pending:
+                while queue and len(pending) < 2 * self.n_workers:
+                    t = queue.pop()
+                    try:
+                        fut = self._get_pool().submit(run_trial_task, t, spec)
+                    except BrokenProcessPool:  # the pool broke since the last submit: start a fresh one
+                        self.close(abort=True)
+                        fut = self._get_pool().submit(run_trial_task, t, spec)
+                    pending[fut] = (t, self._generation)
+                done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+                for fut in sorted(done, key=lambda f: pending[f][0]):
+                    t, gen = pending.pop(fut)
+                    try:
+                        rec = fut.result()
+                    except BrokenProcessPool:  # a worker died: every trial in flight on that pool is lost
+                        rec = failure_record(t, base_seed, lost)
+                        if gen == self._generation:
+                            self.close(abort=True)
+                    except Exception as exc:
+                        rec = failure_record(t, base_seed, f"{type(exc).__name__}: {exc}", traceback.format_exc())
+                    yield t, rec
+        finally:
+            for fut in pending:
+                fut.cancel()
+
+    def close(self, abort: bool = False) -> None:
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        self._generation += 1
+        if abort:
+            procs = list(getattr(pool, "_processes", {}).values())  # the pool's own children, by process object
+            pool.shutdown(wait=False, cancel_futures=True)
+            for p in procs:
+                if p.is_alive():
+                    p.terminate()
+            for p in procs:
+                p.join(timeout=5)
+        else:
+            pool.shutdown(wait=True)
+
+
+class DaskExecutor:
+    """Trials as Dask futures on a distributed cluster (existing scheduler or a LocalCluster we start)."""
+
+    name = "dask"
+
+    def __init__(self, scheduler: str | None = None, local_workers: int | None = None):
+        try:
+            import distributed
+        except ImportError:
+            raise SoabenchError(
+                "--scheduler/--dask need Dask distributed, which is not installed: pip install soabench[dask]"
+            ) from None
+        self._distributed = distributed
+        self._cluster = None
+        if scheduler is None:
+            import logging
+
+            n = int(local_workers or os.cpu_count() or 1)
+            self._cluster = distributed.LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
+            self.address = self._cluster.scheduler_address
+            self.name = f"dask-local({n})"
+        else:
+            self.address = scheduler
+            self.name = f"dask({scheduler})"
+        try:
+            self.client = distributed.Client(self.address, timeout="30s", set_as_default=False)
+        except OSError as exc:
+            self.close()
+            raise SoabenchError(f"cannot connect to the Dask scheduler {self.address!r}: {exc}") from None
+        self.n_workers = max(1, len(self.client.scheduler_info().get("workers", {})))
+
+    def results(self, spec: TaskSpec, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
+        base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+        token = f"{os.getpid()}-{time.time_ns()}"
+        futures = {}
+        for t in trials:
+            f = self.client.submit(run_trial_task, t, spec, key=f"soabench-trial-{t:05d}-{token}", pure=False)
+            futures[f.key] = (f, t)
+        try:
+            for fut in self._distributed.as_completed([f for f, _ in futures.values()], loop=self.client.loop):
+                _, t = futures.pop(fut.key)
+                try:
+                    rec = fut.result()
+                except Exception as exc:  # KilledWorker, lost connection, ...
+                    rec = failure_record(t, base_seed, f"{type(exc).__name__}: {exc}")
+                yield t, rec
+        finally:
+            left = [f for f, _ in futures.values()]
+            if left:
+                try:
+                    self.client.cancel(left)
+                except Exception:  # pragma: no cover - best effort on shutdown
+                    pass
+
+    def close(self, abort: bool = False) -> None:
+        client = getattr(self, "client", None)
+        if client is not None:
+            client.close()
+            self.client = None
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None
+
+
+def open_executor(workers: int | None = None, scheduler: str | None = None, dask_local: bool = False, n_trials=None):
+    """The executor for the given options (see the module docstring); the caller must ``close()`` it."""
+    require(not (scheduler and dask_local), "--scheduler and --dask local are alternatives; give one of them")
+    require(workers is None or (isinstance(workers, int) and workers >= 1), f"workers = {workers!r} must be >= 1")
+    if scheduler or dask_local:
+        return DaskExecutor(scheduler=scheduler, local_workers=workers)
+    n = workers or os.cpu_count() or 1
+    if n_trials is not None:
+        n = min(n, max(1, n_trials))
+    return SerialExecutor() if n == 1 else PoolExecutor(n)
+
+
+# ------------------------------------------------------------------------------------------------ progress
+class Progress:
+    """A one-line progress bar on stderr, drawn only on a terminal."""
+
+    def __init__(self, total: int, done: int, enabled: bool):
+        self.total, self.done, self.failed = total, done, 0
+        self.enabled = enabled and sys.stderr.isatty()
+        self._start_done = done
+        self._t0 = time.monotonic()
+        self.draw()
+
+    def update(self, ok: bool) -> None:
+        self.done += 1
+        self.failed += 0 if ok else 1
+        self.draw()
+
+    def draw(self) -> None:
+        if not self.enabled:
+            return
+        frac = self.done / self.total if self.total else 1.0
+        width = 30
+        bar = "#" * int(frac * width) + "." * (width - int(frac * width))
+        ran = self.done - self._start_done
+        eta = ""
+        if ran > 0 and self.done < self.total:
+            rem = (time.monotonic() - self._t0) / ran * (self.total - self.done)
+            eta = f" ETA {int(rem // 60)}m{int(rem % 60):02d}s"
+        fail = f", {self.failed} failed" if self.failed else ""
+        sys.stderr.write(f"\r[{bar}] {self.done}/{self.total} trials{fail}{eta}   ")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+# ------------------------------------------------------------------------------------------------ metadata
+def package_versions() -> dict[str, str]:
+    """Versions of the packages that shape the results (summary.json)."""
+    from importlib import metadata
+
+    out = {"python": platform.python_version()}
+    for label, dist in (
+        ("numpy", "numpy"),
+        ("scipy", "scipy"),
+        ("shapely", "shapely"),
+        ("sumo", "eclipse-sumo"),
+        ("libsumo", "libsumo"),
+        ("soabench", "soabench"),
+    ):
+        try:
+            out[label] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[label] = "not installed"
+    return out
+
+
+def _fn_name(fn: Callable | None) -> str | None:
+    return None if fn is None else f"{fn.__module__}:{fn.__qualname__}"
+
+
+def resolve_fn(name: str | None) -> Callable | None:
+    """Import ``module:qualname`` (as stored in run.json)."""
+    if not name:
+        return None
+    mod, _, qual = name.partition(":")
+    try:
+        obj: Any = importlib.import_module(mod)
+        for part in qual.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise SoabenchError(f"cannot import the run's function {name!r}: {exc}") from None
+    return obj
+
+
+def _utc_stamp() -> str:
+    return datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+
+
+def net_name(net: str) -> str:
+    """``intersection`` for a shipped name, the file stem (without .net.xml) for a path."""
+    name = Path(str(net)).name
+    for suffix in (".net.xml.gz", ".net.xml", ".xml"):
+        if name.endswith(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def default_run_dir(net: str, root: Path = Path("results")) -> Path:
+    """``results/<net>/<UTC timestamp>/`` (a suffix keeps it unique)."""
+    base = root / net_name(net) / _utc_stamp()
+    path, i = base, 1
+    while path.exists():
+        path = base.with_name(f"{base.name}-{i}")
+        i += 1
+    return path
+
+
+def _scenario_info(scenario_cfg: Any) -> Any:
+    if dataclasses.is_dataclass(scenario_cfg) and not isinstance(scenario_cfg, type):
+        try:
+            return to_jsonable(dataclasses.asdict(scenario_cfg))
+        except Exception:  # pragma: no cover - exotic fields
+            return repr(scenario_cfg)
+    return None if scenario_cfg is None else repr(scenario_cfg)
+
+
+# ------------------------------------------------------------------------------------------------ the run
+def run_experiment(
+    config: Config | None,
+    net: str,
+    polys: Sequence[str] = (),
+    scenario: str | None = None,
+    *,
+    out: Path | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    dask_local: bool = False,
+    resume: Path | None = None,
+    fail_fast: bool = False,
+    save_estimates: bool = False,
+    progress: bool = True,
+    trial_fn: TrialFn | None = None,
+    load_fn: LoadFn | None = None,
+    executor: Any = None,
+    figures: bool = True,
+) -> RunOutcome:
+    """Run (or finish, with ``resume``) the Monte Carlo protocol of ``config`` on ``net``.
+
+    Args:
+        config: the resolved configuration; ignored (may be None) with ``resume``, which reads the run's own.
+        net, polys, scenario: passed to :func:`soabench.scenario.load` (ignored with ``resume``).
+        out: run folder (default ``results/<net>/<UTC timestamp>/``).
+        workers: process workers (default: every core; 1 runs in this process); with ``dask_local`` the number
+            of LocalCluster workers.
+        scheduler: address of an existing Dask scheduler (``tcp://HOST:PORT``).
+        dask_local: start a Dask LocalCluster (processes, one thread per worker).
+        resume: an earlier run folder: run only its trials without a result, with its stored config.
+        fail_fast: stop at the first failed trial (trials in flight are still recorded).
+        save_estimates: also store the per-scan estimates (``estimates/``, format in :mod:`.store`).
+        progress: draw a progress bar on stderr when it is a terminal.
+        trial_fn: ``run_trial(trial, config, scene, scenario, *, save_estimates)``; must be importable by
+            worker processes (a module-level function). Default :func:`soabench.experiment.trial.run_trial`.
+        load_fn: ``load(net, polys, scenario) -> (SceneMap, ScenarioConfig)``; default :func:`soabench.scenario.load`.
+        executor: an open executor (from :func:`open_executor`) to reuse, e.g. across the points of a sweep.
+        figures: draw the figures (``write_report`` can draw them later from the CSV files).
+
+    Returns:
+        A :class:`RunOutcome`. The summary (Markdown) is written and returned only once every trial was attempted.
+    """
+    if resume is not None:
+        store = RunStore(Path(resume))
+        meta = store.meta()
+        config = Config.from_dict(meta["config"]).validate()
+        net, polys, scenario = meta["net"], tuple(meta.get("polys", ())), meta.get("scenario")
+        save_estimates = bool(meta.get("save_estimates", False))
+        if trial_fn is None and meta.get("trial_fn"):
+            trial_fn = resolve_fn(meta["trial_fn"])
+        if load_fn is None and meta.get("load_fn"):
+            load_fn = resolve_fn(meta.get("load_fn"))
+    else:
+        require(config is not None, "run_experiment needs a config (or resume=RUN_DIR)")
+        config = Config.from_dict(config.to_dict()).validate()
+        store = RunStore(Path(out) if out is not None else default_run_dir(net))
+        if store.exists():
+            raise SoabenchError(f"{str(store.run_dir)!r} already holds a run; use --resume {store.run_dir}")
+    n_trials = config.experiment.trials
+    polys = tuple(str(p) for p in polys)
+
+    # validate the network before starting workers (a bad path is a user error, not 100 failed trials)
+    _, scenario_cfg = load_scene_cached(net, polys, scenario, load_fn)
+    done = set(store.done_trials()) if resume is not None else set()
+    todo = [t for t in range(n_trials) if t not in done]
+    # connect to the executor before creating the run folder (an unreachable scheduler leaves nothing behind)
+    own_executor = executor is None and bool(todo)
+    exe = open_executor(workers, scheduler, dask_local, n_trials=len(todo)) if own_executor else executor
+    interrupted = stopped = False
+    try:
+        if resume is None:
+            store.create(
+                {
+                    "created": _utc_stamp(),
+                    "net": str(net),
+                    "net_name": net_name(net),
+                    "polys": list(polys),
+                    "scenario": scenario,
+                    "scenario_config": _scenario_info(scenario_cfg),
+                    "trials": n_trials,
+                    "save_estimates": bool(save_estimates),
+                    "trial_fn": _fn_name(trial_fn),
+                    "load_fn": _fn_name(load_fn),
+                    "config": config.to_dict(),
+                    "versions": package_versions(),
+                }
+            )
+        if todo:
+            spec = TaskSpec(config.to_dict(), str(net), polys, scenario, bool(save_estimates), trial_fn, load_fn)
+            interrupted, stopped, times = _run_trials(store, exe, spec, todo, n_trials, len(done), fail_fast, progress)
+            store.write_session(
+                f"{_utc_stamp()}-{os.getpid()}",
+                {
+                    "executor": exe.name,
+                    "n_workers": getattr(exe, "n_workers", 1),
+                    "trials_run": len(todo),
+                    "resumed": resume is not None,
+                    "interrupted": interrupted,
+                    "stopped_fail_fast": stopped,
+                    "versions": package_versions(),
+                    **times,
+                },
+            )
+    finally:
+        if own_executor:
+            exe.close(abort=interrupted or stopped)
+
+    done = set(store.done_trials())
+    failures = store.failures()
+    failed_set = {int(f["trial"]) for f in failures}
+    unattempted = [t for t in range(n_trials) if t not in done and t not in failed_set]
+    n_missing = n_trials - len(done)
+    outcome = RunOutcome(store.run_dir, n_missing == 0, len(done), n_missing, failures, "")
+    if unattempted or interrupted or stopped:
+        if interrupted:
+            print(
+                f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; "
+                f"finish with: soabench run --resume {store.run_dir}",
+                file=sys.stderr,
+            )
+            raise KeyboardInterrupt
+        return outcome
+    from soabench.experiment.report import write_report
+
+    store.merge(config.experiment.models, config.experiment.probabilities)
+    outcome.summary_markdown = write_report(store.run_dir, figures=figures)
+    return outcome
+
+
+def _run_trials(
+    store: RunStore,
+    exe: Any,
+    spec: TaskSpec,
+    todo: list[int],
+    n_trials: int,
+    n_done: int,
+    fail_fast: bool,
+    progress: bool,
+) -> tuple[bool, bool, dict]:
+    """Run ``todo`` on ``exe``, persisting each result as it arrives.
+
+    Returns (interrupted by Ctrl-C, stopped by fail-fast, {"started", "wall_s"}).
+    """
+    interrupted = stopped = False
+    store.clear_merged()
+    t_start = time.time()
+    bar = Progress(n_trials, n_done, progress)
+    gen = exe.results(spec, todo)
+    try:
+        for _, rec in gen:
+            if rec.get("status") == "ok":
+                store.write_trial(rec)
+                bar.update(True)
+            else:
+                store.write_failure(rec)
+                bar.update(False)
+                _print_failure(rec, bar)
+                if fail_fast:
+                    stopped = True
+                    break
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        gen.close()
+        bar.close()
+        wall = time.time() - t_start
+    return interrupted, stopped, {"started": t_start, "wall_s": wall}
+
+
+def _print_failure(rec: dict, bar: Progress) -> None:
+    if bar.enabled:
+        sys.stderr.write("\n")
+    print(
+        f"trial {rec['trial']} failed (seed {rec['seed']}, sumo_seed {rec['sumo_seed']}): {rec['error']}",
+        file=sys.stderr,
+    )

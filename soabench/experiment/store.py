@@ -1,0 +1,408 @@
+"""The run folder on disk: append-only, atomic per-trial records, merged into CSV files at the end.
+
+Layout of a run folder (``results/<net>/<UTC timestamp>/``)::
+
+    run.json                 written once at start: resolved config (Config.to_dict()), net, polys, scenario,
+                             trial count, save_estimates, trial function, package versions
+    trials/trial_00042.json  one record per finished trial (status "ok"): rows, episodes, steps, timing
+    failed/trial_00042.json  one record per failed trial: seed, sumo_seed, error, traceback (retried by --resume)
+    estimates/trial_00042.json.gz   with --save-estimates: gzipped JSON {"trial": n, "estimates": [...]}, the
+                             trial's ``TrialResult.estimates``: one object per extracted estimate (with
+                             multiplicity) with keys trial, clutter, model, mode, k (scan), x, y (m), w (weight)
+    sessions/session_*.json  wall time, executor and versions of each (resumed) session
+    trials.csv episodes.csv steps.csv timing.csv   merged, written only once every trial was attempted
+    summary.json summary.md figures/*.png           written by :mod:`soabench.experiment.report`
+
+Why one file per trial: each record is written to a temporary file in the same folder, flushed, fsynced and moved
+into place with ``os.replace`` (atomic on POSIX), so a record is either absent or whole. A Ctrl-C, a killed
+driver or a lost worker loses at most the trials in flight; ``--resume`` runs exactly the trials without an "ok"
+record. Appending CSV lines would need a commit marker and a torn-line repair on restart; separate files do not.
+
+Determinism: records store floats through ``json`` (``float.__repr__``, exact round trip) and the CSVs write
+``repr`` of every float, rows sorted by (trial, clutter, model, mode[, target/k]) in the config's order. Wall-clock
+columns (``t_*`` and the per-trial SUMO/sensor seconds) go to ``timing.csv`` so that ``trials.csv``,
+``episodes.csv`` and ``steps.csv`` are bit-identical for the same seed on any executor (ALGORITHMS.md §6 T28).
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from soabench.errors import SoabenchError
+
+RUN_FILE = "run.json"
+TRIALS_DIR = "trials"
+FAILED_DIR = "failed"
+ESTIMATES_DIR = "estimates"
+SESSIONS_DIR = "sessions"
+FORMAT_VERSION = 1
+
+#: identifying columns of a result row, in order
+KEY_COLUMNS = ("trial", "seed", "sumo_seed", "clutter", "N_hat", "model", "mode")
+#: metric columns of ``trials.csv`` (ALGORITHMS.md §5.2-5.7)
+METRIC_COLUMNS = (
+    "delay_mean",
+    "delay_std",
+    "delay_mean_lb",
+    "delay_std_lb",
+    "n_episodes",
+    "n_censored",
+    "card_err",
+    "card_err_sumw",
+    "ospa",
+    "ospa_loc",
+    "ospa_card",
+    "gospa",
+    "gospa_loc",
+    "gospa_missed",
+    "gospa_false",
+    "precision",
+    "recall",
+    "tp",
+    "fp",
+    "fn",
+    "mean_components",
+    "max_components",
+    "mean_predicted",
+    "mean_updated",
+    "cap_hits",
+    "mean_pD",
+)
+#: wall-clock columns of a row (seconds), written to ``timing.csv``
+TIMING_COLUMNS = ("t_birth", "t_predict", "t_update", "t_reduce", "t_metrics", "t_filter_total")
+TRIAL_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
+EPISODE_COLUMNS = (
+    "trial",
+    "clutter",
+    "model",
+    "mode",
+    "target",
+    "k0",
+    "k_end",
+    "k_d",
+    "k_t",
+    "delay",
+    "delay_lb",
+    "censored",
+)
+STEP_COLUMNS = (
+    "trial",
+    "clutter",
+    "model",
+    "mode",
+    "k",
+    "n_gt",
+    "n_est",
+    "tp",
+    "fp",
+    "fn",
+    "ospa",
+    "gospa",
+    "card_err",
+    "sum_w",
+    "n_components",
+)
+#: per-trial stage timing (seconds) from ``TrialResult.timing``
+TRIAL_TIMING_KEYS = ("sumo", "sensor")
+
+
+# --------------------------------------------------------------------------------------------- JSON and files
+def to_jsonable(obj: Any) -> Any:
+    """Plain Python values for ``json``: numpy scalars and arrays, tuples, dataclass-free containers."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj)
+    if isinstance(obj, (str, type(None))):
+        return obj
+    if isinstance(obj, Path):
+        return str(obj)
+    return repr(obj)
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:  # pragma: no cover - platforms without directory fds
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` via a temporary file in the same folder, fsync, then ``os.replace``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    _fsync_dir(path.parent)
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def write_json_atomic(path: Path, obj: Any) -> None:
+    write_text_atomic(path, json.dumps(to_jsonable(obj), indent=1, allow_nan=True) + "\n")
+
+
+def read_json(path: Path) -> Any:
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise SoabenchError(f"cannot read {str(path)!r}: {exc}") from None
+
+
+# ------------------------------------------------------------------------------------------------ tables
+def pack_table(rows: Sequence[dict], columns: Sequence[str]) -> dict:
+    """Column-major-free compact form ``{"columns": [...], "rows": [[...], ...]}``; unknown keys are kept."""
+    cols = list(columns)
+    extra = sorted({k for r in rows for k in r} - set(cols))
+    cols += extra
+    return {"columns": cols, "rows": [[to_jsonable(r.get(c)) for c in cols] for r in rows]}
+
+
+def unpack_table(table: dict | None) -> list[dict]:
+    if not table:
+        return []
+    cols = table["columns"]
+    return [dict(zip(cols, r, strict=False)) for r in table["rows"]]
+
+
+def format_value(v: Any) -> str:
+    """CSV text of one value: ``repr`` for floats (exact round trip), ``nan``/``inf`` spelled out, '' for None."""
+    if v is None:
+        return ""
+    if isinstance(v, (bool, np.bool_)):
+        return "1" if v else "0"
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return "nan" if math.isnan(v) else repr(v)
+    if isinstance(v, np.integer):
+        return str(int(v))
+    return str(v)
+
+
+def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
+    """Atomically write ``rows`` (dicts) with ``columns`` (plus any extra keys, sorted) as a CSV file."""
+    rows = list(rows)
+    cols = list(columns) + sorted({k for r in rows for k in r} - set(columns))
+    lines = [",".join(cols)]
+    for r in rows:
+        cells = []
+        for c in cols:
+            s = format_value(r.get(c))
+            if any(ch in s for ch in ',"\n'):
+                s = '"' + s.replace('"', '""') + '"'
+            cells.append(s)
+        lines.append(",".join(cells))
+    write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+def read_csv(path: Path) -> dict[str, np.ndarray]:
+    """Read a CSV written by :func:`write_csv` into columns: float arrays where every cell parses, else str arrays."""
+    import csv
+
+    with open(path, newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if header is None:
+            raise SoabenchError(f"{str(path)!r} is empty")
+        data = list(reader)
+    out: dict[str, np.ndarray] = {}
+    for j, name in enumerate(header):
+        col = [r[j] for r in data]
+        try:
+            out[name] = np.array([float(x) if x != "" else math.nan for x in col], dtype=float)
+        except ValueError:
+            out[name] = np.array(col, dtype=str)
+    return out
+
+
+# --------------------------------------------------------------------------------------------- the store
+def trial_name(trial: int) -> str:
+    return f"trial_{int(trial):05d}"
+
+
+class RunStore:
+    """Reads and writes one run folder (layout in the module docstring)."""
+
+    def __init__(self, run_dir: Path):
+        self.run_dir = Path(run_dir)
+
+    # -- run metadata
+    @property
+    def run_file(self) -> Path:
+        return self.run_dir / RUN_FILE
+
+    def exists(self) -> bool:
+        return self.run_file.is_file()
+
+    def create(self, meta: dict) -> None:
+        """Start a new run folder; refuses a folder that already holds a run."""
+        if self.exists():
+            raise SoabenchError(
+                f"{str(self.run_dir)!r} already holds a run; use --resume {self.run_dir} or another --out"
+            )
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(self.run_file, {"format": FORMAT_VERSION, **meta})
+
+    def meta(self) -> dict:
+        if not self.exists():
+            raise SoabenchError(f"{str(self.run_dir)!r} is not a run folder (no {RUN_FILE})")
+        meta = read_json(self.run_file)
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT_VERSION:
+            raise SoabenchError(f"{str(self.run_file)!r} has an unknown format")
+        return meta
+
+    # -- per-trial records
+    def _record_path(self, folder: str, trial: int) -> Path:
+        return self.run_dir / folder / f"{trial_name(trial)}.json"
+
+    def write_trial(self, record: dict) -> None:
+        """Persist a finished trial (status "ok") and drop an older failure record of it."""
+        trial = int(record["trial"])
+        est = record.pop("estimates", None)
+        if est is not None:
+            payload = json.dumps(to_jsonable({"trial": trial, "estimates": est}), allow_nan=True).encode()
+            write_bytes_atomic(
+                self.run_dir / ESTIMATES_DIR / f"{trial_name(trial)}.json.gz", gzip.compress(payload, mtime=0)
+            )
+        write_json_atomic(self._record_path(TRIALS_DIR, trial), record)
+        failed = self._record_path(FAILED_DIR, trial)
+        if failed.exists():
+            failed.unlink()
+
+    def write_failure(self, record: dict) -> None:
+        write_json_atomic(self._record_path(FAILED_DIR, int(record["trial"])), record)
+
+    def _trials_in(self, folder: str) -> list[int]:
+        d = self.run_dir / folder
+        if not d.is_dir():
+            return []
+        out = []
+        for p in d.glob("trial_*.json"):
+            try:
+                out.append(int(p.stem.split("_", 1)[1]))
+            except ValueError:
+                continue
+        return sorted(out)
+
+    def done_trials(self) -> list[int]:
+        return self._trials_in(TRIALS_DIR)
+
+    def failed_trials(self) -> list[int]:
+        done = set(self.done_trials())
+        return [t for t in self._trials_in(FAILED_DIR) if t not in done]
+
+    def failures(self) -> list[dict]:
+        """Failure records (trial, seed, sumo_seed, error) of trials without an ok record, by trial."""
+        return [read_json(self._record_path(FAILED_DIR, t)) for t in self.failed_trials()]
+
+    def load_trial(self, trial: int) -> dict:
+        return read_json(self._record_path(TRIALS_DIR, trial))
+
+    def write_session(self, name: str, info: dict) -> None:
+        write_json_atomic(self.run_dir / SESSIONS_DIR / f"session_{name}.json", info)
+
+    def sessions(self) -> list[dict]:
+        d = self.run_dir / SESSIONS_DIR
+        return [read_json(p) for p in sorted(d.glob("session_*.json"))] if d.is_dir() else []
+
+    # -- merge
+    def merge(self, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
+        """Write trials.csv, episodes.csv, steps.csv and timing.csv from the ok records; returns row counts."""
+        m_idx = {m: i for i, m in enumerate(models)}
+        p_idx = {p: i for i, p in enumerate(modes)}
+
+        def key(r: dict) -> tuple:
+            return (
+                int(r["trial"]),
+                float(r["clutter"]),
+                m_idx.get(r["model"], len(m_idx)),
+                str(r["model"]),
+                p_idx.get(r["mode"], len(p_idx)),
+                str(r["mode"]),
+            )
+
+        rows: list[dict] = []
+        episodes: list[dict] = []
+        steps: list[dict] = []
+        timing: list[dict] = []
+        for t in self.done_trials():
+            rec = self.load_trial(t)
+            rrows = unpack_table(rec.get("rows"))
+            rows += rrows
+            episodes += unpack_table(rec.get("episodes"))
+            steps += unpack_table(rec.get("steps"))
+            tt = rec.get("timing") or {}
+            for r in rrows:
+                timing.append(
+                    {
+                        **{c: r.get(c) for c in ("trial", "clutter", "model", "mode")},
+                        **{c: r.get(c) for c in TIMING_COLUMNS},
+                        **{f"t_{k}": tt.get(k) for k in TRIAL_TIMING_KEYS},
+                    }
+                )
+        rows.sort(key=key)
+        timing.sort(key=key)
+        episodes.sort(
+            key=lambda r: (*key(r), float(r["target"]) if _is_num(r["target"]) else 0, str(r["target"]), r["k0"])
+        )
+        steps.sort(key=lambda r: (*key(r), r["k"]))
+        write_csv(
+            self.run_dir / "trials.csv",
+            [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows],
+            TRIAL_COLUMNS,
+        )
+        write_csv(self.run_dir / "episodes.csv", episodes, EPISODE_COLUMNS)
+        write_csv(self.run_dir / "steps.csv", steps, STEP_COLUMNS)
+        write_csv(
+            self.run_dir / "timing.csv",
+            timing,
+            ("trial", "clutter", "model", "mode", *TIMING_COLUMNS, *(f"t_{k}" for k in TRIAL_TIMING_KEYS)),
+        )
+        return {"trials": len(rows), "episodes": len(episodes), "steps": len(steps)}
+
+    def clear_merged(self) -> None:
+        """Remove merged outputs of an earlier session (they are rewritten when the run completes)."""
+        for name in ("trials.csv", "episodes.csv", "steps.csv", "timing.csv", "summary.json", "summary.md"):
+            p = self.run_dir / name
+            if p.exists():
+                p.unlink()
+
+
+def _is_num(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)

@@ -1,0 +1,165 @@
+"""Resumable runs (issue 7): a run killed midway and resumed equals an uninterrupted run."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import fake_trial as ft
+import pytest
+
+from soabench.config import Config
+from soabench.errors import SoabenchError
+from soabench.experiment.runner import run_experiment
+
+HERE = Path(__file__).parent
+CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
+
+SCRIPT = """
+import sys
+from pathlib import Path
+sys.path.insert(0, {here!r})
+import fake_trial as ft
+from soabench.config import Config
+from soabench.experiment.runner import run_experiment
+cfg = Config.from_dict({cfg!r}).validate()
+run_experiment(cfg, "intersection", out=Path({out!r}), workers=1, trial_fn=ft.slow_trial, load_fn=ft.fake_load,
+               progress=False, figures=False)
+"""
+
+
+def small_config(trials: int) -> Config:
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(cfg.experiment, trials=trials, duration=15.0, clutter=(0.5, 3.0), seed=5)
+    return cfg.validate()
+
+
+def start_run(cfg: Config, out: Path) -> subprocess.Popen:
+    code = SCRIPT.format(here=str(HERE), cfg=cfg.to_dict(), out=str(out))
+    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_for_trials(out: Path, n: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+    t0 = time.monotonic()
+    while len(list((out / "trials").glob("trial_*.json"))) < n:
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() - t0 < timeout, "the run produced no trials"
+        time.sleep(0.05)
+
+
+def test_killed_run_resumes_to_the_uninterrupted_result(tmp_path):
+    cfg = small_config(trials=10)
+    out = tmp_path / "killed"
+    proc = start_run(cfg, out)
+    try:
+        wait_for_trials(out, 3, proc)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate()
+    n_on_disk = len(list((out / "trials").glob("trial_*.json")))
+    assert 3 <= n_on_disk < 10
+    assert not (out / "trials.csv").exists() and not (out / "summary.md").exists()
+    stamp = {p.name: p.stat().st_mtime_ns for p in (out / "trials").glob("trial_*.json")}
+
+    # resume uses the run's stored config and functions (run.json); the net argument is ignored
+    o = run_experiment(None, "ignored", resume=out, workers=1, progress=False, figures=False)
+    assert o.complete and o.n_done == 10 and o.n_missing == 0
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "trials").glob("trial_*.json") if p.name in stamp} == stamp
+    sessions = [json.loads(p.read_text()) for p in (out / "sessions").glob("*.json")]
+    assert [s["trials_run"] for s in sessions if s["resumed"]] == [10 - n_on_disk]
+
+    ref = run_experiment(
+        cfg,
+        "intersection",
+        out=tmp_path / "ref",
+        workers=1,
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+        progress=False,
+        figures=False,
+    )
+    assert ref.complete
+    for name in CSV_FILES:
+        assert (out / name).read_bytes() == (tmp_path / "ref" / name).read_bytes(), name
+    assert json.loads((out / "summary.json").read_text())["config"] == cfg.to_dict()
+
+
+def test_interrupted_run_says_how_to_resume(tmp_path):
+    cfg = small_config(trials=10)
+    out = tmp_path / "interrupted"
+    proc = start_run(cfg, out)
+    try:
+        wait_for_trials(out, 2, proc)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode != 0
+    assert f"soabench run --resume {out}" in err
+    assert not (out / "trials.csv").exists()
+    assert 2 <= len(list((out / "trials").glob("trial_*.json"))) < 10
+
+
+def test_resume_of_a_complete_run_reruns_nothing(tmp_path):
+    cfg = small_config(trials=3)
+    out = tmp_path / "run"
+    run_experiment(
+        cfg,
+        "intersection",
+        out=out,
+        workers=1,
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+        progress=False,
+        figures=False,
+    )
+    before = (out / "trials.csv").read_bytes()
+    o = run_experiment(None, "x", resume=out, trial_fn=ft.failing_trial, progress=False, figures=False)
+    assert o.complete and o.n_done == 3 and not o.failures  # failing_trial would fail trial 2 if it ran
+    assert (out / "trials.csv").read_bytes() == before
+    assert len(list((out / "sessions").glob("*.json"))) == 1
+
+
+def test_resume_needs_a_run_folder(tmp_path):
+    with pytest.raises(SoabenchError, match="not a run folder"):
+        run_experiment(None, "intersection", resume=tmp_path, progress=False)
+
+
+def test_lost_worker_loses_only_trials_in_flight(tmp_path, capsys):
+    cfg = small_config(trials=10)
+    out = tmp_path / "run"
+    o = run_experiment(
+        cfg,
+        "intersection",
+        out=out,
+        workers=2,
+        trial_fn=ft.crashing_trial,
+        load_fn=ft.fake_load,
+        progress=False,
+        figures=False,
+    )
+    failed = [f["trial"] for f in o.failures]
+    assert 3 in failed and len(failed) <= 4  # at most 2 x workers trials in flight
+    assert all("worker process died" in f["error"] and f["sumo_seed"] > 0 for f in o.failures)
+    assert o.n_done == 10 - len(failed) and not o.complete
+    assert "trial 3 failed" in capsys.readouterr().err
+    o2 = run_experiment(None, "x", resume=out, workers=1, trial_fn=ft.fake_trial, progress=False, figures=False)
+    assert o2.complete
+    run_experiment(
+        cfg,
+        "intersection",
+        out=tmp_path / "ref",
+        workers=1,
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+        progress=False,
+        figures=False,
+    )
+    for name in CSV_FILES:
+        assert (out / name).read_bytes() == (tmp_path / "ref" / name).read_bytes(), name
