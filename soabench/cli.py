@@ -144,6 +144,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--offsets", type=_offsets, help="N_tot offsets for `sweep births` (default -10:10)")
     p.add_argument("--clutter", type=_float_list, help="clutter rate for `sweep births` (default 3)")
     p.add_argument("--resume", type=Path, metavar="SWEEP_DIR", help="finish the missing trials of an earlier sweep")
+
+    p = sub.add_parser(
+        "study", help="the paper's whole simulation study: main protocol, clutter sweep, N_hat sweep, comparison"
+    )
+    _add_run_args(p)
+    p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
+    p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
     return parser
 
 
@@ -355,7 +362,33 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return _report_outcome(outcome)
 
 
-COMMANDS = {"scene": cmd_scene, "record": cmd_record, "birth": cmd_birth, "run": cmd_run, "sweep": cmd_sweep}
+def cmd_study(args: argparse.Namespace) -> int:
+    kwargs = _executor_kwargs(args)
+    for flag in ("sweep_trials", "births_trials"):
+        value = getattr(args, flag)
+        require(value is None or value >= 1, f"--{flag.replace('_', '-')} {value} must be >= 1")
+    require(not args.save_estimates, "--save-estimates is not offered by `study`; use `run`")
+    require(not args.fail_fast, "--fail-fast is not offered by `study`; use `run`")
+    require(args.models is None and args.probabilities is None, "`study` runs the paper's models and modes")
+    cfg = _config_from_args(args)
+    from soabench.experiment.study import run_study
+
+    for key in ("save_estimates", "fail_fast"):
+        kwargs.pop(key)
+    outcome = run_study(
+        cfg, args.net, out=args.out, sweep_trials=args.sweep_trials, births_trials=args.births_trials, **kwargs
+    )
+    return _report_outcome(outcome)
+
+
+COMMANDS = {
+    "scene": cmd_scene,
+    "record": cmd_record,
+    "birth": cmd_birth,
+    "run": cmd_run,
+    "sweep": cmd_sweep,
+    "study": cmd_study,
+}
 
 
 def _join_negative_values(argv: Sequence[str]) -> list[str]:

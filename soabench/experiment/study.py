@@ -1,0 +1,160 @@
+"""The paper's simulation study as one command (issue 8): ``soabench study``.
+
+Three parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (default ``results/<net>/``):
+
+* ``main/``: the main protocol (ALGORITHMS.md §5.8): five birth models x {static, dynamic}, lambda = 3;
+* ``clutter/``: the clutter sweep lambda in {0.5, 3, 5} with precision curves (paper Fig. 5h);
+* ``births/``: the N_hat sensitivity sweep N_tot = N_true + {-10..10} (clipped at 1) for S-OA, PUBM and UBM.
+
+``comparison.md`` then puts every headline number of the paper (§5.9) beside ours with paired Wilcoxon tests and
+bootstrap intervals (:mod:`soabench.experiment.paper`). Re-running the command on a finished folder re-reports it;
+on an interrupted one it finishes the missing trials.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+from soabench.config import Config
+from soabench.experiment import paper
+from soabench.experiment.runner import RunOutcome, net_name, run_experiment
+from soabench.experiment.store import write_text_atomic
+from soabench.experiment.sweep import SweepOutcome, run_sweep
+
+CLUTTER_VALUES = (0.5, 3.0, 5.0)
+BIRTH_OFFSETS = tuple(range(-10, 11))
+BIRTH_MODELS = ("soa", "pubm", "ubm")
+
+
+@dataclass
+class StudyOutcome:
+    """The three parts of a study and where its comparison was written."""
+
+    run_dir: Path
+    main: RunOutcome
+    clutter: SweepOutcome
+    births: SweepOutcome
+    summary_markdown: str
+
+    @property
+    def complete(self) -> bool:
+        return self.main.complete and self.clutter.complete and self.births.complete
+
+    @property
+    def n_missing(self) -> int:
+        return self.main.n_missing + self.clutter.n_missing + self.births.n_missing
+
+
+def _with_experiment(cfg: Config, **changes) -> Config:
+    out = Config.from_dict(cfg.to_dict())
+    out.experiment = dataclasses.replace(out.experiment, **changes)
+    return out.validate()
+
+
+def run_study(
+    config: Config,
+    net: str = "intersection",
+    *,
+    out: Path | None = None,
+    sweep_trials: int | None = None,
+    births_trials: int = 30,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    dask_local: bool = False,
+    progress: bool = True,
+) -> StudyOutcome:
+    """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
+
+    ``sweep_trials``: trials of the clutter sweep (default: as many as the main protocol). ``births_trials``: trials
+    per N_tot point of the N_hat sweep, static probabilities only (21 offsets make it the costliest part).
+    """
+    root = Path(out) if out is not None else Path("results") / net_name(net)
+    root.mkdir(parents=True, exist_ok=True)
+    exe = dict(workers=workers, scheduler=scheduler, dask_local=dask_local, progress=progress)
+
+    main_dir = root / "main"
+    if (main_dir / "run.json").is_file():
+        main = run_experiment(None, net, resume=main_dir, **exe)
+    else:
+        main = run_experiment(config, net, out=main_dir, **exe)
+
+    n_sweep = sweep_trials or config.experiment.trials
+    clutter_dir = root / "clutter"
+    if (clutter_dir / "sweep.json").is_file():
+        clutter = run_sweep("clutter", (), None, net, resume=clutter_dir, **exe)
+    else:
+        cfg = _with_experiment(config, trials=n_sweep)
+        clutter = run_sweep("clutter", CLUTTER_VALUES, cfg, net, out=clutter_dir, **exe)
+
+    births_dir = root / "births"
+    if (births_dir / "sweep.json").is_file():
+        births = run_sweep("births", (), None, net, resume=births_dir, **exe)
+    else:
+        cfg = _with_experiment(config, trials=births_trials, models=BIRTH_MODELS, probabilities=("static",))
+        births = run_sweep("births", BIRTH_OFFSETS, cfg, net, out=births_dir, **exe)
+
+    md = ""
+    if main.complete:
+        md = write_comparison(root)
+    return StudyOutcome(root, main, clutter, births, md)
+
+
+def _precision_table(rows: list[dict]) -> str:
+    prec = paper.precision_by_clutter(rows)
+    lams = sorted({k[2] for k in prec})
+    models = [m for m in ("soa", *paper.BASELINES) if any(k[1] == m for k in prec)]
+    lines = ["| mode | model | " + " | ".join(f"λ = {lam:g}" for lam in lams) + " |", "|---|---|" + "---:|" * len(lams)]
+    for mode in [m for m in ("static", "dynamic") if any(k[0] == m for k in prec)]:
+        for m in models:
+            cells = [f"{prec[(mode, m, lam)]:.3f}" if (mode, m, lam) in prec else "n/a" for lam in lams]
+            lines.append(f"| {mode} | {paper.LABEL[m]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _ratio_table(rows: list[dict]) -> str:
+    ratios = paper.component_ratios(rows)
+    models = ["soa", *paper.BASELINES]
+    lines = ["| mode | " + " | ".join(paper.LABEL[m] for m in models) + " |", "|---|" + "---:|" * len(models)]
+    for mode in ("static", "dynamic"):
+        if any(k[0] == mode for k in ratios):
+            lines.append(
+                f"| {mode} | " + " | ".join(f"{ratios.get((mode, m), float('nan')):.2f}" for m in models) + " |"
+            )
+    return "\n".join(lines)
+
+
+def write_comparison(root: Path) -> str:
+    """``comparison.md``: the paper's headline numbers beside ours, from the committed CSV files alone."""
+    root = Path(root)
+    main_rows = paper.read_rows(root / "main" / "trials.csv")
+    parts = [
+        "# The paper's simulation study on the shipped intersection: paper vs soabench",
+        "",
+        "Generated by `soabench study` from `main/trials.csv`, `clutter/points/*/trials.csv` and `births/`.",
+        "",
+        "## Main protocol (λ = 3)",
+        "",
+        paper.markdown(main_rows),
+        "",
+        "### Mean posterior components relative to S-OA (paper: UBM ≈ 5-6 × S-OA on KITTI; S-OA lowest)",
+        "",
+        _ratio_table(main_rows),
+    ]
+    clutter_rows = [r for f in sorted((root / "clutter" / "points").glob("*/trials.csv")) for r in paper.read_rows(f)]
+    if clutter_rows:
+        parts += [
+            "",
+            "## Precision under clutter (paper Fig. 5h: ATBM falls sharply from λ = 0.5 to 5, S-OA stays high)",
+            "",
+            "Mean per-trial precision of the extracted estimates (gated Hungarian matching, 5 m).",
+            "",
+            _precision_table(clutter_rows),
+        ]
+    births_md = root / "births" / "sweep.md"
+    if births_md.is_file():
+        parts += ["", "## Sensitivity to N_hat (paper §V.C)", "", births_md.read_text(encoding="utf-8").strip()]
+    md = "\n".join(parts) + "\n"
+    write_text_atomic(root / "comparison.md", md)
+    return md
