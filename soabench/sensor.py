@@ -38,7 +38,7 @@ if TYPE_CHECKING:
 CLUTTER = -1  #: source id of a clutter measurement
 
 OCCLUDER_KINDS = ("building", "parked", "vehicle")  #: values of ``Obstacles.kind``
-SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (docs/scans_format.md)
+SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (README, "Scans format")
 _FOV_ARC_STEP = np.radians(1.0)  #: vertex spacing of the FOV polygon arcs (chord error 2 mm at 50 m)
 _SHADOW_ARC_POINTS = 16  #: far-arc vertices of each shadow polygon
 
@@ -127,7 +127,7 @@ class Scans:
         return len(self.scans)
 
     def save_npz(self, path: str | Path) -> None:
-        """Write the Scans as a compressed .npz without pickles (format: docs/scans_format.md)."""
+        """Write the Scans as a compressed .npz without pickles (format: README, "Scans format")."""
         np.savez_compressed(Path(path), **_scans_to_arrays(self))
 
     @classmethod
@@ -567,7 +567,7 @@ def _observe_step(
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# .npz round trip (docs/scans_format.md)
+# .npz round trip (README, "Scans format")
 
 
 def _offsets(counts: Sequence[int]) -> np.ndarray:

@@ -34,7 +34,7 @@ def load(net: str, polys: Sequence[str] = (), scenario: str | None = None) -> tu
         polys: extra SUMO polygon files (buildings / obstacles), added to the scenario's own.
         scenario: a scenario TOML; default: the shipped net's own, or defaults for a user network.
 
-    Defaults for a user network without a scenario (docs/recording_format.md, "User networks"): world box = the
+    Defaults for a user network without a scenario (README, "User networks"): world box = the
     network boundary; ego route = the longest shortest route between two fringe edges; vehicle sources / sinks =
     the fringe edges not on the ego route; doors = for each building, its outline point nearest the sidewalk.
     """

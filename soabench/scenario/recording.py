@@ -57,7 +57,7 @@ class Recording:
     meta: dict = field(default_factory=dict)
 
     def save_npz(self, path: str | Path) -> None:
-        """Write the Recording as a compressed .npz (format: docs/recording_format.md); exact round trip."""
+        """Write the Recording as a compressed .npz (format: README, "Recording format"); exact round trip."""
         occ = [np.asarray(o, dtype=float).reshape(-1, 2) for o in self.static_occluders]
         offsets = np.cumsum([0] + [len(o) for o in occ]).astype(np.int64)
         np.savez_compressed(
