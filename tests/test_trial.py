@@ -24,7 +24,6 @@ from soabench.experiment.trial import (
     ROW_TIME_KEYS,
     STEP_KEYS,
     TrialResult,
-    mode_setup,
     run_trial,
 )
 from soabench.geometry import fov_mask, polar_to_world, range_bearing
@@ -150,18 +149,6 @@ def without_timing(rows: list[dict]) -> list[dict]:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # trial logic with fakes
-
-
-def test_mode_setup() -> None:
-    cfg = Config().filter
-    assert mode_setup("static", cfg) == ("static", cfg, cfg.p_D)
-    mode, fc, p = mode_setup("dynamic", cfg)
-    assert (mode, fc.occlusion_pd, p) == ("dynamic", False, cfg.mu_D0)
-    mode, fc, p = mode_setup("dynamic+occ", cfg)
-    assert (mode, fc.occlusion_pd, p) == ("dynamic", True, cfg.mu_D0)
-    assert cfg.occlusion_pd is False  # the given config is not mutated
-    with pytest.raises(SoabenchError, match="probability mode"):
-        mode_setup("bogus", cfg)
 
 
 def test_rows_schema_and_counts() -> None:

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from soabench.errors import SoabenchError
+from soabench.experiment.trial import EPISODE_KEYS, ROW_ID_KEYS, ROW_KEYS, ROW_TIME_KEYS, STEP_KEYS, TIMING_KEYS
 
 RUN_FILE = "run.json"
 TRIALS_DIR = "trials"
@@ -46,73 +47,19 @@ ESTIMATES_DIR = "estimates"
 SESSIONS_DIR = "sessions"
 FORMAT_VERSION = 1
 
+# The schemas are those of a TrialResult (:mod:`soabench.experiment.trial`), whose metric names come from
+# :mod:`soabench.metrics`: one definition, here only sorted into the files they go to.
 #: identifying columns of a result row, in order
-KEY_COLUMNS = ("trial", "seed", "sumo_seed", "clutter", "N_hat", "model", "mode")
-#: metric columns of ``trials.csv`` (ALGORITHMS.md §5.2-5.7)
-METRIC_COLUMNS = (
-    "delay_mean",
-    "delay_std",
-    "delay_mean_lb",
-    "delay_std_lb",
-    "n_episodes",
-    "n_censored",
-    "card_err",
-    "card_err_sumw",
-    "ospa",
-    "ospa_loc",
-    "ospa_card",
-    "gospa",
-    "gospa_loc",
-    "gospa_missed",
-    "gospa_false",
-    "precision",
-    "recall",
-    "tp",
-    "fp",
-    "fn",
-    "mean_components",
-    "max_components",
-    "mean_predicted",
-    "mean_updated",
-    "cap_hits",
-    "mean_pD",
-)
+KEY_COLUMNS = ROW_ID_KEYS
 #: wall-clock columns of a row (seconds), written to ``timing.csv``
-TIMING_COLUMNS = ("t_birth", "t_predict", "t_update", "t_reduce", "t_metrics", "t_filter_total")
+TIMING_COLUMNS = ROW_TIME_KEYS
+#: metric columns of ``trials.csv`` (ALGORITHMS.md §5.2-5.7)
+METRIC_COLUMNS = tuple(k for k in ROW_KEYS if k not in KEY_COLUMNS + TIMING_COLUMNS)
 TRIAL_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
-EPISODE_COLUMNS = (
-    "trial",
-    "clutter",
-    "model",
-    "mode",
-    "target",
-    "k0",
-    "k_end",
-    "k_d",
-    "k_t",
-    "delay",
-    "delay_lb",
-    "censored",
-)
-STEP_COLUMNS = (
-    "trial",
-    "clutter",
-    "model",
-    "mode",
-    "k",
-    "n_gt",
-    "n_est",
-    "tp",
-    "fp",
-    "fn",
-    "ospa",
-    "gospa",
-    "card_err",
-    "sum_w",
-    "n_components",
-)
+EPISODE_COLUMNS = EPISODE_KEYS
+STEP_COLUMNS = STEP_KEYS
 #: per-trial stage timing (seconds) from ``TrialResult.timing``
-TRIAL_TIMING_KEYS = ("sumo", "sensor")
+TRIAL_TIMING_KEYS = TIMING_KEYS
 
 
 # --------------------------------------------------------------------------------------------- JSON and files

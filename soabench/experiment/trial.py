@@ -19,12 +19,13 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from soabench.birth.base import BirthContext
+from soabench.config import filter_config_for_mode
 from soabench.errors import require
-from soabench.metrics import SUMMARY_KEYS, TrialMetrics, evaluate
+from soabench.metrics import SERIES_KEYS, SUMMARY_KEYS, TrialMetrics, evaluate
 from soabench.seeding import TrialSeeds, trial_seeds
 
 if TYPE_CHECKING:
-    from soabench.config import Config, FilterConfig, SensorConfig
+    from soabench.config import Config, SensorConfig
     from soabench.gmphd.filter import StepResult
     from soabench.scenario.config import ScenarioConfig
     from soabench.scenario.recording import Recording
@@ -52,24 +53,8 @@ EPISODE_KEYS = (
     "delay_lb",
     "censored",
 )
-#: columns of a step row (one per filter run and scan k)
-STEP_KEYS = (
-    "trial",
-    "clutter",
-    "model",
-    "mode",
-    "k",
-    "n_gt",
-    "n_est",
-    "tp",
-    "fp",
-    "fn",
-    "ospa",
-    "gospa",
-    "card_err",
-    "sum_w",
-    "n_components",
-)
+#: columns of a step row (one per filter run and scan k): the run's keys, k, and the metrics' per-scan series
+STEP_KEYS = ("trial", "clutter", "model", "mode", "k", *SERIES_KEYS)
 #: columns of an estimate row (``save_estimates``): one per extracted estimate (with multiplicity)
 ESTIMATE_KEYS = ("trial", "clutter", "model", "mode", "k", "x", "y", "w")
 #: keys of :attr:`TrialResult.timing` (seconds per trial; "sensor" sums every clutter rate)
@@ -107,20 +92,6 @@ class RunKey:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # probability modes (§4.6)
-
-
-def mode_setup(mode: str, filter_cfg: FilterConfig) -> tuple[str, FilterConfig, float]:
-    """Filter mode, filter config and newborn p_D of a probability mode (§4.1, §4.2, §4.4).
-
-    "static": the config as given, p_D_b = p_D; "dynamic": Beta p_D/p_S, p_D_b = mu_D0; "dynamic+occ": dynamic
-    with ``occlusion_pd = True``.
-    """
-    if mode == "static":
-        return "static", filter_cfg, filter_cfg.p_D
-    if mode == "dynamic":
-        return "dynamic", filter_cfg, filter_cfg.mu_D0
-    require(mode == "dynamic+occ", f"probability mode {mode!r}; choose 'static', 'dynamic' or 'dynamic+occ'")
-    return "dynamic", dataclasses.replace(filter_cfg, occlusion_pd=True), filter_cfg.mu_D0
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -299,7 +270,7 @@ def _run_one(
     out: TrialResult,
 ) -> None:
     """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``."""
-    filter_mode, filter_cfg, p_D_b = mode_setup(key.mode, config.filter)
+    filter_cfg, filter_mode, p_D_b = filter_config_for_mode(config.filter, key.mode)
     birth_model = birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
     filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
     run = run_filter(scans, birth_model, filt, p_D_b)
