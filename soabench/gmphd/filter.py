@@ -8,13 +8,34 @@ Usage per trial and (birth model x probability mode)::
         births = birth_model(BirthContext(scan, prev))
         prev = filt.step(scan, births)                              # predict, append/inject births, update,
                                                                      # reduce, extract
+
+Mode "static": p_S = 0.99, p_D = 0.98 g(x) (§4.1); "dynamic": Beta p_D and Beta p_S (§4.2-4.5); "dynamic+occ":
+dynamic with the line-of-sight gate (§4.4). Static mode also honours ``FilterConfig.occlusion_pd``.
+
+Choice [D]: in dynamic mode, appended birth components get the Beta priors (n_D, mu_D0), (n_S, mu_S0); a
+measurement-driven newborn (PUBM/ATBM) is born *from* a detection, so it carries the detection-updated p_D Beta
+(s_D0 + 1, t_D0) (and n_det = 1), exactly as if a prior-Beta birth component at z had been detected.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from soabench.birth.base import Births
+from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
+from soabench.errors import require
+from soabench.geometry import clutter_intensity
+from soabench.gmphd.mixture import Mixture
+from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
+from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
+from soabench.gmphd.reduction import extract, prune_merge_cap
+
+if TYPE_CHECKING:
+    from soabench.sensor import Scan
 
 
 @dataclass
@@ -52,3 +73,129 @@ class StepResult:
     mean_pD: float
     A: np.ndarray
     kappa: np.ndarray
+    n_pruned: int = 0  #: components after pruning (before merging)
+    n_merged: int = 0  #: components after merging (before the cap)
+    n_pairs: int = 0  #: detection (j, l) pairs built in the update (q > 0)
+    n_newborn: int = 0  #: measurement-driven newborn components built in the update
+
+
+class GMPHDFilter:
+    """The GM-PHD filter cycle of §2.11 for one run: ``step(scan, births)`` once per scan.
+
+    Args:
+        filter_cfg: filter settings (form, p_S, p_D, T, U, J_max, gate, extraction, Beta parameters, ...).
+        sensor_cfg: sensor model (dt, FOV, R, clutter rate) shared with the simulator (§2.3).
+        mode: "static", "dynamic" or "dynamic+occ" (§4.6).
+
+    Attributes:
+        mixture: the current posterior (after reduction); empty at k = 0.
+    """
+
+    def __init__(self, filter_cfg: FilterConfig, sensor_cfg: SensorConfig, mode: str = "static") -> None:
+        require(
+            mode in PROBABILITY_MODES,
+            f"probability mode {mode!r} is not allowed; choose one of {', '.join(map(repr, PROBABILITY_MODES))}",
+        )
+        filter_cfg.validate()
+        sensor_cfg.validate()
+        self.cfg = filter_cfg
+        self.sensor = sensor_cfg
+        self.mode = mode
+        self.dynamic = mode != "static"
+        self.occlusion = mode == "dynamic+occ" or filter_cfg.occlusion_pd
+        self.F, self.Q = cv_model(sensor_cfg.dt, filter_cfg.sigma_a)
+        self.R = measurement_noise(sensor_cfg.sigma_r, sensor_cfg.sigma_b)
+        self.gate_thr = gate_threshold(filter_cfg.gate, filter_cfg.gate_prob)
+        self.beta0 = beta_prior(filter_cfg) if self.dynamic else None
+        self.beta_newborn = None
+        if self.dynamic:
+            self.beta_newborn = self.beta0.copy()
+            self.beta_newborn[0] += 1.0
+        self.mixture = Mixture.empty(self.dynamic)
+
+    def reset(self) -> None:
+        """Forget the posterior (next step is k = 0 again)."""
+        self.mixture = Mixture.empty(self.dynamic)
+
+    def _predict(self, births: Births) -> Mixture:
+        """Step 1-2 of §2.11: predict the persistent mixture (§2.5, §4.3) and append the birth components."""
+        mix = self.mixture
+        if self.dynamic and len(mix):
+            p_S, beta = beta_predict(mix.beta, self.cfg)
+            mix = predict(mix, self.F, self.Q, p_S)
+            mix.beta = beta
+        else:
+            mix = predict(mix, self.F, self.Q, self.cfg.p_S)
+        if len(births):
+            born = Mixture.from_arrays(
+                births.w, births.m, births.P, origin=births.source, n_det=0, age=0, beta=self.beta0
+            )
+            mix = Mixture.concatenate([mix, born]) if len(mix) else born
+        return mix
+
+    def step(self, scan: Scan, births: Births) -> StepResult:
+        """One cycle of §2.11: predict (dt), append ``births``, update with ``scan.Z`` (incl. ``births.newborn``)
+        relative to ``scan.ego``, prune/merge/cap, extract."""
+        cfg = self.cfg
+        ego = np.asarray(scan.ego, dtype=float)
+        Z = np.asarray(scan.Z, dtype=float).reshape(-1, 2)
+        t0 = time.perf_counter()
+        mix = self._predict(births)
+        n_predicted = len(mix) + (len(Z) if births.newborn is not None else 0)
+        t1 = time.perf_counter()
+
+        g = detection_gate(mix.m, ego, self.sensor, scan.occluders if self.occlusion else None)
+        p_D = g * beta_mean(mix.sD, mix.tD) if self.dynamic else g * cfg.p_D
+        kappa = clutter_intensity(Z, self.sensor)
+        up = update(
+            mix,
+            Z,
+            ego,
+            p_D,
+            kappa,
+            self.R,
+            g=g,
+            form=cfg.form,
+            gate_thr=self.gate_thr,
+            r_min=self.sensor.r_min,
+            newborn=births.newborn,
+            newborn_beta=self.beta_newborn,
+        )
+        post = up.mix
+        t2 = time.perf_counter()
+
+        if cfg.max_undetected_birth_age is not None and len(post):
+            keep = ~((post.n_det == 0) & (post.age > cfg.max_undetected_birth_age))
+            if not keep.all():
+                post = post.select(keep)
+        red = prune_merge_cap(post, cfg.prune_T, cfg.merge_U, cfg.J_max, cfg.theta_min)
+        self.mixture = red.mix
+        X, X_w = extract(red.mix, cfg.extract_thr, cfg.extraction)
+        t3 = time.perf_counter()
+
+        w = red.mix.w
+        if self.dynamic:
+            mean_pD = float(w @ beta_mean(red.mix.sD, red.mix.tD) / w.sum()) if w.sum() > 0 else cfg.mu_D0
+        else:
+            mean_pD = cfg.p_D
+        return StepResult(
+            k=scan.k,
+            X=X,
+            X_w=X_w,
+            sum_w=float(up.mix.w.sum()),
+            sum_w_reduced=float(w.sum()),
+            n_predicted=n_predicted,
+            n_updated=len(up.mix),
+            n_reduced=len(red.mix),
+            cap_hit=red.cap_hit,
+            t_predict=t1 - t0,
+            t_update=t2 - t1,
+            t_reduce=t3 - t2,
+            mean_pD=mean_pD,
+            A=up.A,
+            kappa=np.asarray(kappa, dtype=float),
+            n_pruned=red.n_pruned,
+            n_merged=red.n_merged,
+            n_pairs=up.n_pairs,
+            n_newborn=up.n_newborn,
+        )
