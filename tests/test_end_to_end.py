@@ -104,3 +104,11 @@ def test_record_and_scene_commands_write_their_files(tmp_path, capsys):
     assert main(["birth", "--seed", "1", "--time", "10", "--model", "ubm", "--out", str(tmp_path / "b.png")]) == 0
     assert (tmp_path / "b.png").stat().st_size > 10_000
     assert "wrote" in capsys.readouterr().out
+
+
+def test_serial_and_process_pool_give_bit_identical_csvs(run_dir, tmp_path):
+    serial = tmp_path / "serial"
+    argv = ["run", "--trials", "2", "--duration", "40", "--workers", "1", "--out", str(serial), "--no-progress"]
+    assert main(argv) == 0
+    for name in ("trials.csv", "episodes.csv", "steps.csv"):
+        assert (serial / name).read_bytes() == (run_dir / name).read_bytes(), name
