@@ -69,3 +69,12 @@ def test_clutter_sweep_rows_are_reproduced():
 def test_births_sweep_point_is_reproduced():
     point = sorted((RESULTS / "births" / "points").iterdir())[0]
     _assert_reproduced(point, (1,), ("soa",), ("static",))
+
+
+def test_results_readme_tables_are_the_generated_ones():
+    readme = (RESULTS.parent / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## Paper vs soabench", 1)[1].split("Component counts relative to S-OA", 1)[0]
+    generated = (RESULTS / "comparison.md").read_text(encoding="utf-8")
+    table_lines = [ln for ln in section.splitlines() if ln.startswith("|")]
+    assert len(table_lines) > 30
+    assert [ln for ln in table_lines if ln not in generated] == []
