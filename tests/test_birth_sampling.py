@@ -135,3 +135,14 @@ def test_dbscan_split_gives_more_compact_clusters():
     assert len(mu1) == 1 and len(mu2) == math.ceil(300 / 25)
     assert s2.max() < s1[0]
     assert shapely.contains_xy(region, mu2[:, 0], mu2[:, 1]).all()
+
+
+def test_dbscan_labels_core_border_noise():
+    from soabench.birth.sampling import dbscan_labels
+
+    chain = np.column_stack([np.arange(6) * 0.9, np.zeros(6)])  # 0.9 m apart: one chain cluster
+    pair = np.array([[20.0, 0.0], [20.5, 0.0]])  # too few points for a core: noise
+    far_border = np.array([[5 * 0.9 + 1.0, 0.0]])  # within eps of the chain's end only: a border point
+    pts = np.concatenate([chain, pair, far_border])
+    labels = dbscan_labels(pts, eps=1.0, min_samples=3)
+    assert list(labels) == [0, 0, 0, 0, 0, 0, -1, -1, 0]

@@ -151,6 +151,35 @@ def grid_points(region: BaseGeometry, step: float) -> np.ndarray:
     return xy[shapely.contains_xy(region, xy[:, 0], xy[:, 1])]
 
 
+def dbscan_labels(points: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
+    """DBSCAN (Ester et al. 1996) cluster labels of ``points`` (n, 2); -1 marks noise.
+
+    A core point has at least ``min_samples`` points (itself included) within ``eps``; clusters are the connected
+    components of core points linked within ``eps``; a border point joins the cluster of its nearest core
+    neighbour. Built on scipy's k-d tree and graph components, so the mode needs no extra dependency.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    n = len(points)
+    tree = cKDTree(points)
+    pairs = tree.query_pairs(eps, output_type="ndarray")
+    core = np.bincount(pairs.ravel(), minlength=n) + 1 >= min_samples
+    cc = pairs[core[pairs[:, 0]] & core[pairs[:, 1]]]
+    graph = coo_matrix((np.ones(len(cc)), (cc[:, 0], cc[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    labels = np.full(n, -1)
+    core_ids = np.flatnonzero(core)
+    _, labels[core_ids] = np.unique(comp[core_ids], return_inverse=True)  # clusters numbered 0..C-1
+    border = np.flatnonzero(~core)
+    if len(border) and len(core_ids):
+        d, j = cKDTree(points[core_ids]).query(points[border], distance_upper_bound=eps * (1 + 1e-12))
+        ok = np.isfinite(d)
+        labels[border[ok]] = labels[core_ids[j[ok]]]
+    return labels
+
+
 def dbscan_clusters(
     points: np.ndarray,
     eps: float,
@@ -175,9 +204,9 @@ def dbscan_clusters(
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if len(points) == 0:
         return np.zeros((0, 2)), np.zeros(0)
-    from sklearn.cluster import DBSCAN, KMeans  # optional dependency of this mode only
+    from scipy.cluster.vq import kmeans2
 
-    labels = DBSCAN(eps=eps, min_samples=min_samples).fit(points).labels_
+    labels = dbscan_labels(points, eps, min_samples)
     groups = [points[labels == c] for c in range(labels.max() + 1)]
     if split_d_min is not None:
         parts: list[np.ndarray] = []
@@ -186,7 +215,7 @@ def dbscan_clusters(
             if n_parts <= 1:
                 parts.append(g)
                 continue
-            sub = KMeans(n_clusters=n_parts, n_init=1, random_state=seed).fit(g).labels_
+            _, sub = kmeans2(g, n_parts, minit="++", rng=np.random.default_rng(seed))
             parts.extend(g[sub == c] for c in range(n_parts) if np.any(sub == c))
         groups = parts
     if not groups:
