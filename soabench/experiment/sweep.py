@@ -1,4 +1,4 @@
-"""Parameter sweeps over clutter rate and expected births N̂ (ALGORITHMS.md §5.5, §5.8; paper Fig. 5h, Fig. 8).
+"""Parameter sweeps over clutter rate and expected births N̂ (ALGORITHMS.md §5.5, §5.8; paper Fig. 5h, §V.C).
 
 * ``clutter`` (values such as 0.5, 3, 5): one run with ``experiment.clutter = values``; every trial's truth and
   detections are shared across lambda (common random numbers, :mod:`soabench.seeding`), so one run gives the
@@ -32,6 +32,7 @@ import numpy as np
 
 from soabench.config import BIRTH_MODEL_NAMES, Config
 from soabench.errors import SoabenchError, require
+from soabench.experiment.plots import MODEL_COLOR, _figure, _save
 from soabench.experiment.report import LABEL, fmt
 from soabench.experiment.runner import (
     LoadFn,
@@ -42,7 +43,7 @@ from soabench.experiment.runner import (
     open_executor,
     run_experiment,
 )
-from soabench.experiment.store import read_csv, read_json, write_bytes_atomic, write_json_atomic, write_text_atomic
+from soabench.experiment.store import read_csv, read_json, write_json_atomic, write_text_atomic
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births")
@@ -207,25 +208,8 @@ def _episode_means(run_dir: Path, models: Sequence[str], modes: Sequence[str], c
     return out
 
 
-def _save_fig(fig, path: Path) -> None:
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=120, bbox_inches="tight")
-    write_bytes_atomic(path, buf.getvalue())
-
-
-def _figure(w: float, h: float):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(w, h))
-    FigureCanvasAgg(fig)
-    return fig
-
-
 def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
-    """k̄_delay vs N_tot per model and mode, and the std of those means (paper §V.C, Fig. 8)."""
+    """k̄_delay vs N_tot per model and mode, and the std of those means (paper §V.C)."""
     points = meta["points"]
     exp = points[0]["config"]["experiment"]
     models, modes, clutter = exp["models"], exp["probabilities"], float(exp["clutter"][0])
@@ -265,6 +249,7 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
                 [r["N_tot"] for r in table],
                 [r["delay"][f"{model}/{mode}"] for r in table],
                 styles[i % 3],
+                color=MODEL_COLOR.get(model, "k"),
                 marker="o",
                 ms=3,
                 label=f"{LABEL.get(model, model)} {mode} (std {fmt(std[f'{model}/{mode}'], 2)} s)",
@@ -272,10 +257,10 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     ax.axvline(meta["n_true"], color="k", lw=0.8, alpha=0.5)
     ax.set_xlabel("expected births per run N_tot")
     ax.set_ylabel("mean tracking delay k̄ (s)")
-    ax.set_title("Average delay vs N̂ (paper Fig. 8)")
+    ax.set_title("Average delay vs N̂ (paper §V.C)")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
-    _save_fig(fig, sweep_dir / "sweep_births.png")
+    _save(fig, sweep_dir / "sweep_births.png")
     lines += ["", "Figure: `sweep_births.png`"]
     return {"kind": "births", "table": table, "std_over_N_tot": std}, "\n".join(lines) + "\n"
 
@@ -311,16 +296,16 @@ def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
             [r["clutter"] for r in sub],
             [r["precision_mean"] for r in sub],
             "--" if mode != "static" else "-",
+            color=MODEL_COLOR.get(model, "k"),
             marker="o",
             label=f"{LABEL.get(model, model)} {mode}",
         )
     ax.set_xlabel("clutter rate λ (per scan)")
     ax.set_ylabel("mean precision over trials")
-    ax.set_ylim(-0.02, 1.02)
-    ax.set_title("Precision vs clutter (paper Fig. 5h)")
-    ax.legend(fontsize=7)
+    ax.set_title("Precision vs clutter (paper Fig. 5h; dashed: dynamic)")
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
     ax.grid(alpha=0.3)
-    _save_fig(fig, sweep_dir / "sweep_clutter.png")
+    _save(fig, sweep_dir / "sweep_clutter.png")
     lines += ["", f"Figures: `sweep_clutter.png`, `points/{meta['points'][0]['name']}/figures/fig5h_precision.png`"]
     return {"kind": "clutter", "table": rows}, "\n".join(lines) + "\n"
 
