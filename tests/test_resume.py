@@ -52,6 +52,23 @@ def wait_for_trials(out: Path, n: int, proc: subprocess.Popen, timeout: float = 
         time.sleep(0.05)
 
 
+def assert_same_as_uninterrupted(out: Path, cfg: Config, ref_dir: Path) -> None:
+    """An uninterrupted serial run of ``cfg`` writes the same CSV files, byte for byte, as the run in ``out``."""
+    ref = run_experiment(
+        cfg,
+        "intersection",
+        out=ref_dir,
+        workers=1,
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+        progress=False,
+        figures=False,
+    )
+    assert ref.complete
+    for name in CSV_FILES:
+        assert (out / name).read_bytes() == (ref_dir / name).read_bytes(), name
+
+
 def test_killed_run_resumes_to_the_uninterrupted_result(tmp_path):
     cfg = small_config(trials=10)
     out = tmp_path / "killed"
@@ -73,19 +90,7 @@ def test_killed_run_resumes_to_the_uninterrupted_result(tmp_path):
     sessions = [json.loads(p.read_text()) for p in (out / "sessions").glob("*.json")]
     assert [s["trials_run"] for s in sessions if s["resumed"]] == [10 - n_on_disk]
 
-    ref = run_experiment(
-        cfg,
-        "intersection",
-        out=tmp_path / "ref",
-        workers=1,
-        trial_fn=ft.fake_trial,
-        load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
-    )
-    assert ref.complete
-    for name in CSV_FILES:
-        assert (out / name).read_bytes() == (tmp_path / "ref" / name).read_bytes(), name
+    assert_same_as_uninterrupted(out, cfg, tmp_path / "ref")
     assert json.loads((out / "summary.json").read_text())["config"] == cfg.to_dict()
 
 
@@ -151,15 +156,4 @@ def test_lost_worker_loses_only_trials_in_flight(tmp_path, capsys):
     assert "trial 3 failed" in capsys.readouterr().err
     o2 = run_experiment(None, "x", resume=out, workers=1, trial_fn=ft.fake_trial, progress=False, figures=False)
     assert o2.complete
-    run_experiment(
-        cfg,
-        "intersection",
-        out=tmp_path / "ref",
-        workers=1,
-        trial_fn=ft.fake_trial,
-        load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
-    )
-    for name in CSV_FILES:
-        assert (out / name).read_bytes() == (tmp_path / "ref" / name).read_bytes(), name
+    assert_same_as_uninterrupted(out, cfg, tmp_path / "ref")
