@@ -19,6 +19,12 @@ REGISTRY: dict[str, str] = {
 }
 
 
+#: display names of the registered models (tables and figures)
+LABEL: dict[str, str] = {"soa": "S-OA", "pubm": "PUBM", "ubm": "UBM", "atbm": "ATBM", "gmbm": "GMBM"}
+#: the four baselines S-OA is compared against (§5.8)
+BASELINES: tuple[str, ...] = tuple(name for name in REGISTRY if name != "soa")
+
+
 def get_birth_model(name: str) -> type:
     """The class registered under ``name`` (one of REGISTRY)."""
     require(name in REGISTRY, f"birth model {name!r} is unknown; choose one of {', '.join(REGISTRY)}")

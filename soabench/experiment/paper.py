@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-BASELINES = ("pubm", "ubm", "atbm", "gmbm")
-LABEL = {"soa": "S-OA", "pubm": "PUBM", "ubm": "UBM", "atbm": "ATBM", "gmbm": "GMBM"}
+from soabench.birth import BASELINES, LABEL
+
 MODE_LABEL = {"static": "without dyn. p", "dynamic": "with dyn. p", "dynamic+occ": "dyn. p + occlusion"}
 
 #: trials (of 100) in which S-OA has the lower mean delay than X (§5.9)
@@ -106,12 +106,22 @@ def _bootstrap(statistic, x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def _reduction(x_soa: np.ndarray, x_base: np.ndarray) -> np.ndarray:
-    """100 (M_X - M_SOA) / M_X on the (resampled) grand means (§5.8), along the last axis."""
-    m_soa = np.mean(x_soa, axis=-1)
-    m_base = np.mean(x_base, axis=-1)
+def percent_reduction(m_x, m_soa):
+    """S-OA's percent reduction ``100 (M_X - M_SOA) / M_X`` of a metric's grand means (§5.8).
+
+    Works on scalars and arrays; NaN where M_X is 0 or either mean is not finite.
+    """
+    m_x = np.asarray(m_x, dtype=float)
+    m_soa = np.asarray(m_soa, dtype=float)
+    ok = np.isfinite(m_x) & np.isfinite(m_soa) & (m_x != 0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return 100.0 * (m_base - m_soa) / m_base
+        out = np.where(ok, 100.0 * (m_x - m_soa) / np.where(ok, m_x, 1.0), np.nan)
+    return float(out) if out.ndim == 0 else out
+
+
+def _reduction(x_soa: np.ndarray, x_base: np.ndarray) -> np.ndarray:
+    """:func:`percent_reduction` of the (resampled) per-trial values, means along the last axis."""
+    return percent_reduction(np.mean(x_base, axis=-1), np.mean(x_soa, axis=-1))
 
 
 def _win_fraction(x_soa: np.ndarray, x_base: np.ndarray) -> np.ndarray:

@@ -22,13 +22,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from soabench.birth import LABEL
 from soabench.experiment.store import write_bytes_atomic
 
 if TYPE_CHECKING:
     from soabench.experiment.report import RunTables
 
 LETTER = {"soa": "a", "pubm": "b", "ubm": "c", "gmbm": "d", "atbm": "e"}
-LABEL = {"soa": "S-OA", "pubm": "PUBM", "ubm": "UBM", "atbm": "ATBM", "gmbm": "GMBM"}
 MODE_STYLE = {"static": ("tab:blue", "-"), "dynamic": ("tab:orange", "--"), "dynamic+occ": ("tab:green", ":")}
 MODEL_COLOR = {"soa": "tab:green", "pubm": "tab:blue", "ubm": "tab:purple", "atbm": "tab:red", "gmbm": "tab:gray"}
 

@@ -28,12 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from soabench.birth import BASELINES, LABEL
 from soabench.errors import SoabenchError
+from soabench.experiment.paper import percent_reduction
 from soabench.experiment.store import RunStore, read_csv, write_json_atomic, write_text_atomic
-
-LABEL = {"soa": "S-OA", "pubm": "PUBM", "ubm": "UBM", "atbm": "ATBM", "gmbm": "GMBM"}
-MODE_LABEL = {"static": "static", "dynamic": "dynamic", "dynamic+occ": "dynamic+occ"}
-BASELINES = ("pubm", "ubm", "atbm", "gmbm")
 
 
 @dataclass
@@ -137,13 +135,6 @@ def model_stats(tables: RunTables, clutter: float, model: str, mode: str) -> dic
     }
 
 
-def _reduction(m_x: float, m_soa: float) -> float:
-    """``100 (M_X - M_SOA) / M_X`` (§5.8)."""
-    if not (math.isfinite(m_x) and math.isfinite(m_soa)) or m_x == 0:
-        return math.nan
-    return 100.0 * (m_x - m_soa) / m_x
-
-
 def episode_le_fraction(tables: RunTables, clutter: float, mode: str, baseline: str) -> float:
     """Fraction of episodes (counted for both) with delay_SOA <= delay_X (KITTI-style pairwise, §5.8)."""
     e = tables.episodes
@@ -186,8 +177,8 @@ def compare(tables: RunTables, clutter: float, mode: str, baseline: str, stats: 
         "ties": ties,
         "losses": losses,
         "na": na,
-        "card_reduction": _reduction(x["card_err_mean"], s["card_err_mean"]),
-        "ospa_reduction": _reduction(x["ospa_mean"], s["ospa_mean"]),
+        "card_reduction": percent_reduction(x["card_err_mean"], s["card_err_mean"]),
+        "ospa_reduction": percent_reduction(x["ospa_mean"], s["ospa_mean"]),
         "episode_le_fraction": episode_le_fraction(tables, clutter, mode, baseline),
     }
 

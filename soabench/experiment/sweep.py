@@ -30,10 +30,11 @@ from typing import Any
 
 import numpy as np
 
+from soabench.birth import LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.plots import MODEL_COLOR, _figure, _save
-from soabench.experiment.report import LABEL, fmt
+from soabench.experiment.report import fmt
 from soabench.experiment.runner import (
     LoadFn,
     RunOutcome,
