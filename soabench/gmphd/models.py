@@ -13,6 +13,7 @@ import numpy as np
 
 from soabench.birth.base import SOURCE_MEAS, NewbornTerms
 from soabench.geometry import wrap
+from soabench.gmphd import kernels
 from soabench.gmphd.mixture import Mixture
 
 LOG_2PI = math.log(2.0 * math.pi)
@@ -115,22 +116,16 @@ def _inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def ekf_terms(m: np.ndarray, P: np.ndarray, ego: np.ndarray, R: np.ndarray, r_min: float) -> MeasurementTerms:
-    """EKF linearisation at the predicted mean (§2.6): eta = h(m), H = H(m), S = H P H^T + R, C = P H^T."""
-    dx = m[:, 0] - ego[0]
-    dy = m[:, 1] - ego[1]
-    r = np.hypot(dx, dy)
-    valid = (r >= r_min) & (r > 1e-9)
-    mm = m.copy()
-    if not valid.all():  # keep 1/r finite for undetectable components; their rows are never used
-        mm[~valid, 0] = ego[0] + 1.0
-        mm[~valid, 1] = ego[1]
-    H = jacobian(mm, ego)
-    Hp = H[:, :, :2]
-    C = P[:, :, :2] @ np.swapaxes(Hp, 1, 2)  # P H^T (J, 4, 2): H has zero velocity columns
-    S = Hp @ C[:, :2, :] + R
-    S = symmetrise(S)
-    Sinv, logdet, ok = _inv2(S)
-    return MeasurementTerms(h(m, ego), S, Sinv, logdet, C, H, valid & ok)
+    """EKF linearisation at the predicted mean (§2.6): eta = h(m), H = H(m), S = H P H^T + R, C = P H^T
+    (compiled: :func:`soabench.gmphd.kernels.ekf_terms`)."""
+    eta, S, Sinv, logdet, C, H, valid = kernels.ekf_terms(
+        np.ascontiguousarray(m, dtype=float),
+        np.ascontiguousarray(P, dtype=float),
+        np.asarray(ego, dtype=float),
+        np.asarray(R, dtype=float),
+        float(r_min),
+    )
+    return MeasurementTerms(eta, S, Sinv, logdet, C, H, valid)
 
 
 def safe_cholesky(P: np.ndarray) -> np.ndarray:
@@ -174,23 +169,6 @@ def ukf_terms(m: np.ndarray, P: np.ndarray, ego: np.ndarray, R: np.ndarray, r_mi
     return MeasurementTerms(eta, S, Sinv, logdet, C, None, valid & ok)
 
 
-def gain_and_posterior_cov(
-    terms: MeasurementTerms, P: np.ndarray, R: np.ndarray, idx: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """K = C S^-1 and the updated covariance for the rows ``idx`` (§2.6, §2.7), symmetrised.
-
-    EKF: Joseph form (I - K H) P (I - K H)^T + K R K^T. UKF: P - K S K^T.
-    """
-    K = terms.C[idx] @ terms.Sinv[idx]  # (n, 4, 2)
-    Pi = P[idx]
-    if terms.H is not None:
-        IKH = _I4 - K @ terms.H[idx]
-        Pp = IKH @ Pi @ np.swapaxes(IKH, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
-    else:
-        Pp = Pi - K @ terms.S[idx] @ np.swapaxes(K, 1, 2)
-    return K, symmetrise(Pp)
-
-
 def innovations(Z: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """nu_jl = z_l - eta_j (J, M) per coordinate, with the bearing wrapped (§2.6, T11)."""
     nu_r = Z[None, :, 0] - eta[:, 0, None]
@@ -201,14 +179,10 @@ def innovations(Z: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 def log_likelihood(terms: MeasurementTerms, Z: np.ndarray, gate_thr: float) -> tuple[np.ndarray, ...]:
     """log q_jl (J, M) = -d2/2 - log 2 pi - log det S / 2, -inf where d2 > gate_thr (§2.6, §2.8).
 
-    Returns (log q, nu_r, nu_b).
+    Returns (log q, nu_r, nu_b) (compiled: :func:`soabench.gmphd.kernels.log_likelihood`).
     """
-    nu_r, nu_b = innovations(Z, terms.eta)
-    Si = terms.Sinv
-    d2 = Si[:, 0, 0, None] * nu_r * nu_r + 2.0 * Si[:, 0, 1, None] * nu_r * nu_b + Si[:, 1, 1, None] * nu_b * nu_b
-    logq = -0.5 * d2 - LOG_2PI - 0.5 * terms.logdet[:, None]
-    logq[~(d2 <= gate_thr)] = -np.inf
-    return logq, nu_r, nu_b
+    Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
+    return kernels.log_likelihood(terms.eta, terms.Sinv, terms.logdet, Z, float(gate_thr))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -225,6 +199,16 @@ def logsumexp0(x: np.ndarray) -> np.ndarray:
     shift = np.where(np.isfinite(mx), mx, 0.0)
     with np.errstate(divide="ignore"):
         return np.log(np.exp(x - shift).sum(axis=0)) + shift
+
+
+_NO_JACOBIAN = np.zeros((0, 2, 4))  #: the UKF form has no H: ``posterior_pairs`` then uses P - K S K^T
+
+
+def _per_row(x: np.ndarray | float, n: int) -> np.ndarray:
+    """A scalar or (n,) input as a float (n,) array (read-only use)."""
+    if np.ndim(x) == 0:
+        return np.full(n, float(x))
+    return np.asarray(x, dtype=float).reshape(n)
 
 
 @dataclass
@@ -285,18 +269,19 @@ def update(
     L_l = 0 is skipped. Dynamic mode: missed w (1 - p_D) with t_D += g; detected w p_D q/L with s_D += 1.
     The posterior may share (read-only) arrays with ``mix``.
     """
-    Z = np.asarray(Z, dtype=float).reshape(-1, 2)
+    Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
+    R = np.asarray(R, dtype=float)
     M = len(Z)
     J = len(mix)
-    p_D = np.broadcast_to(np.asarray(p_D, dtype=float), (J,))
-    kappa = np.broadcast_to(np.asarray(kappa, dtype=float), (M,))
-    g = (p_D > 0).astype(float) if g is None else np.broadcast_to(np.asarray(g, dtype=float), (J,))
+    p_D = _per_row(p_D, J)
+    kappa = _per_row(kappa, M)
+    g = (p_D > 0.0).astype(float) if g is None else _per_row(g, J)
 
     det_idx = np.flatnonzero(p_D > 0.0)
     terms = None
     if len(det_idx):
-        model = ekf_terms if form == "ekf" else ukf_terms
-        terms = model(mix.m[det_idx], mix.P[det_idx], ego, R, r_min)
+        m_d, P_d = mix.m[det_idx], mix.P[det_idx]
+        terms = (ekf_terms if form == "ekf" else ukf_terms)(m_d, P_d, ego, R, r_min)
         if not terms.valid.all():  # r -> 0 / UKF sigma point inside r_min / det S <= 0: undetectable (§2.12)
             bad = det_idx[~terms.valid]
             p_D = p_D.copy()
@@ -312,53 +297,43 @@ def update(
         miss.beta = mix.beta.copy()
         miss.beta[:, 1] += g
 
-    with np.errstate(divide="ignore"):
-        log_kappa = np.log(kappa)
-    log_A = np.full(M, -np.inf)
     parts = [miss]
     n_pairs = 0
-    if terms is not None:
-        logq, nu_r, nu_b = log_likelihood(terms, Z, gate_thr)
-        with np.errstate(divide="ignore"):
-            log_pw = np.log(p_D[det_idx] * mix.w[det_idx])
-        log_t = log_pw[:, None] + logq  # (Jd, M) log p_D w q
-        log_A = logsumexp0(log_t)
-    log_L = np.logaddexp(log_kappa, log_A)
-    A = np.exp(log_A)
-    beta_nb = np.zeros(M)
-    if newborn is not None and M:
-        beta_nb = np.asarray(newborn.beta(A, np.asarray(kappa, dtype=float)), dtype=float).reshape(M)
-        beta_nb = np.where(beta_nb > 0.0, beta_nb, 0.0)  # a newborn term is a non-negative intensity
-        with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # log 0 = -inf is the intended value throughout
+        log_L = np.log(kappa)
+        A = np.zeros(M)
+        if terms is not None:
+            logq, nu_r, nu_b = log_likelihood(terms, Z, gate_thr)
+            log_t = np.log(p_D[det_idx] * mix.w[det_idx])[:, None] + logq  # (Jd, M) log p_D w q
+            log_A = logsumexp0(log_t)
+            log_L = np.logaddexp(log_L, log_A)
+            A = np.exp(log_A)
+        beta_nb = np.zeros(M)
+        if newborn is not None and M:
+            beta_nb = np.asarray(newborn.beta(A, kappa), dtype=float).reshape(M)
+            beta_nb = np.where(beta_nb > 0.0, beta_nb, 0.0)  # a newborn term is a non-negative intensity
             log_L = np.logaddexp(log_L, np.log(beta_nb))
+        log_L_safe = np.where(np.isfinite(log_L), log_L, 0.0)  # L_l = 0: every term of L_l is 0, so w = 0
 
-    if terms is not None:
-        log_L_safe = np.where(np.isfinite(log_L), log_L, 0.0)  # L_l = 0: every log_t = -inf there, so w = 0
-        w_det = np.exp(log_t - log_L_safe[None, :])
-        jj, ll = np.nonzero(w_det > 0.0)
-        n_pairs = len(jj)
-        if n_pairs:
-            first = np.empty(n_pairs, dtype=bool)  # jj is sorted (row-major nonzero): rows with any pair
-            first[0] = True
-            np.not_equal(jj[1:], jj[:-1], out=first[1:])
-            rows = jj[first]
-            inv = np.cumsum(first) - 1
-            K, Pp = gain_and_posterior_cov(terms, mix.P[det_idx], R, rows)
-            nu = np.stack([nu_r[jj, ll], nu_b[jj, ll]], axis=-1)
-            src = det_idx[jj]
-            m_new = mix.m[src] + np.einsum("nij,nj->ni", K[inv], nu)
-            beta_new = None
-            if mix.beta is not None:
-                beta_new = mix.beta[src].copy()
-                beta_new[:, 0] += 1.0
-            parts.append(
-                Mixture(w_det[jj, ll], m_new, Pp[inv], mix.origin[src], mix.n_det[src] + 1, mix.age[src], beta_new)
-            )
+        if terms is not None:
+            w_det = np.exp(log_t - log_L_safe)
+            jj, ll = np.nonzero(w_det > 0.0)
+            n_pairs = len(jj)
+            if n_pairs:
+                H = terms.H if terms.H is not None else _NO_JACOBIAN
+                m_new, P_new = kernels.posterior_pairs(m_d, P_d, terms.C, terms.Sinv, terms.S, H, R, jj, ll, nu_r, nu_b)
+                src = det_idx[jj]
+                beta_new = None
+                if mix.beta is not None:
+                    beta_new = mix.beta[src].copy()
+                    beta_new[:, 0] += 1.0
+                parts.append(
+                    Mixture(w_det[jj, ll], m_new, P_new, mix.origin[src], mix.n_det[src] + 1, mix.age[src], beta_new)
+                )
+        w_nb = np.exp(np.log(beta_nb) - log_L_safe) if newborn is not None and M else None
 
     n_newborn = 0
-    if newborn is not None and M:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            w_nb = np.where(np.isfinite(log_L), np.exp(np.log(beta_nb) - log_L), 0.0)
+    if w_nb is not None:
         keep = np.flatnonzero(w_nb > 0.0)
         n_newborn = len(keep)
         if n_newborn:

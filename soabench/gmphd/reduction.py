@@ -4,9 +4,8 @@ Exactly Vo & Ma: prune w <= T (no renormalisation); greedy merge around the heav
 every i with (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U (P_i of the candidate); no weight cap, no redistribution;
 then keep the J_max heaviest (logged when hit).
 
-The O(J^2) merge is vectorised: P_i^-1 is computed once per call, and the Mahalanobis distances of a batch of
-passes are computed at once for the candidates a k-d tree proposes (d^T P_i^-1 d <= U implies
-|d|^2 <= U lambda_max(P_i)); see :func:`merge_groups`.
+The greedy merge and the moment matching are compiled loops (:mod:`soabench.gmphd.kernels`): Table II literally,
+with an x-sorted window so that a pass only visits the candidates whose x alone does not already exceed U.
 """
 
 from __future__ import annotations
@@ -15,8 +14,8 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from soabench.gmphd import kernels
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.probabilities import beta_mean, beta_moment_match, beta_var
 
@@ -29,100 +28,16 @@ def prune(mix: Mixture, T: float) -> Mixture:
     return mix if keep.all() else mix.select(keep)
 
 
-def lambda_max_bound(P: np.ndarray) -> np.ndarray:
-    """Cheap upper bound of the largest eigenvalue of each SPD block (J, 4, 4): min(Frobenius, Gershgorin)."""
-    fro = np.sqrt(np.einsum("nij,nij->n", P, P))
-    gersh = np.abs(P).sum(axis=2).max(axis=1)
-    return np.minimum(fro, gersh)
-
-
-def _mahalanobis2(PiT: np.ndarray, i: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """d_n^T P_{i_n}^-1 d_n for pairs n, from P^-1 stored coordinate-major (16, J) and d (4, n)."""
-    d2 = np.zeros(d.shape[1])
-    for a in range(4):
-        d2 += PiT[5 * a][i] * d[a] * d[a]
-        for b in range(a + 1, 4):
-            d2 += 2.0 * PiT[4 * a + b][i] * d[a] * d[b]
-    return d2
-
-
 def merge_groups(m: np.ndarray, P: np.ndarray, w: np.ndarray, U: float) -> tuple[np.ndarray, np.ndarray]:
     """Vo-Ma greedy merge groups: returns (label (J,), centre index per group (G,)), groups in creation order.
 
     Pass g takes j* = the heaviest unmerged component (lowest index on ties) and absorbs every unmerged i with
-    (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U.
-
-    Vectorised by batches of passes: the next B heaviest unmerged components are the next B possible centres, in
-    order. One k-d tree query per radius class finds, for all of them at once, the unmerged i within the candidate
-    radius sqrt(U lambda_max(P_i)) (a necessary condition), one array expression applies the exact test with
-    P_i^-1 (computed once per call), and the passes then run in weight order over these lists (a batch member
-    already absorbed by an earlier pass is skipped). Only lists of actual or possible centres are built, so a dense
-    clique of n components costs O(n B), not O(n^2). B doubles from 64 up to 512.
+    (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U (compiled loop: :func:`soabench.gmphd.kernels.merge_groups`).
     """
-    J = len(w)
-    if J == 0:
+    if len(w) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    r2 = U * lambda_max_bound(P) * (1.0 + 1e-9) + 1e-24
-    # two radius classes (split at the median) so narrow candidates are not searched with the widest radius
-    wide = r2 > np.median(r2)
-    mT = np.ascontiguousarray(m.T)
-    PiT = np.ascontiguousarray(np.linalg.inv(P).reshape(J, 16).T)  # P_i^-1 once per call, coordinate-major
-    order = np.argsort(-w, kind="stable")
-    alive_b = bytearray(b"\x01") * J  # Python-side flags for the pass loop ...
-    alive = np.frombuffer(alive_b, dtype=bool)  # ... and the same memory seen by numpy
-    label = [0] * J
-    centres: list[int] = []
-    pos = 0
-    B = 64
-    while pos < J:
-        rest = order[pos:]
-        nxt = np.flatnonzero(alive[rest])[:B]  # the next B heaviest unmerged components, in weight order
-        if not len(nxt):
-            break
-        bidx = rest[nxt]
-        pos += int(nxt[-1]) + 1
-        btree = cKDTree(m[bidx])
-        ks, iss = [], []
-        for cls in (alive & ~wide, alive & wide):  # unmerged candidates (trees rebuilt: merged ones drop out)
-            cand = np.flatnonzero(cls)
-            if not len(cand):
-                continue
-            r = float(np.sqrt(r2[cand].max()))
-            sdm = btree.sparse_distance_matrix(cKDTree(m[cand]), r, output_type="ndarray")
-            i = cand[sdm["j"]]
-            keep = sdm["v"] ** 2 <= r2[i]
-            ks.append(sdm["i"][keep])
-            iss.append(i[keep])
-        k = np.concatenate(ks)
-        i = np.concatenate(iss)
-        c = bidx[k]
-        ok = _mahalanobis2(PiT, i, mT[:, i] - mT[:, c]) <= U
-        k, i = k[ok], i[ok]
-        srt = np.argsort(k, kind="stable")
-        i = i[srt]
-        il = i.tolist()
-        ptr = np.searchsorted(k[srt], np.arange(len(bidx) + 1)).tolist()
-        for kk, cj in enumerate(bidx.tolist()):  # the passes, in weight order
-            if not alive_b[cj]:
-                continue
-            g = len(centres)
-            centres.append(cj)
-            alive_b[cj] = 0
-            label[cj] = g
-            lo, hi = ptr[kk], ptr[kk + 1]
-            if hi - lo > 48:  # long candidate list (a clique): filter it in numpy
-                members = i[lo:hi]
-                members = members[alive[members]].tolist()
-                for ii in members:
-                    alive_b[ii] = 0
-                    label[ii] = g
-            else:
-                for ii in il[lo:hi]:
-                    if alive_b[ii]:
-                        alive_b[ii] = 0
-                        label[ii] = g
-        B = min(2 * B, 512)
-    return np.asarray(label, dtype=np.int64), np.asarray(centres, dtype=np.int64)
+    order = np.argsort(-np.asarray(w), kind="stable")
+    return kernels.merge_groups(np.ascontiguousarray(m, dtype=float), np.ascontiguousarray(P, dtype=float), order, U)
 
 
 def merge(mix: Mixture, U: float, theta_min: float = 2.0) -> Mixture:
@@ -138,38 +53,21 @@ def merge(mix: Mixture, U: float, theta_min: float = 2.0) -> Mixture:
     G = len(centres)
     if G == J:
         return mix.select(centres)
-    counts = np.bincount(label, minlength=G)
-    multi = counts[label] > 1  # members of groups with >= 2 components; singletons pass through unchanged
-    W = mix.w[centres].copy()
-    mt = mix.m[centres].copy()
-    Pt = mix.P[centres].copy()
-    beta = None if mix.beta is None else mix.beta[centres].copy()
-    n_det = mix.n_det[centres].copy()
-    age = mix.age[centres].copy()
-    idx = np.flatnonzero(multi)
-    perm = idx[np.argsort(label[idx], kind="stable")]
-    lab_s = label[perm]
-    starts = np.flatnonzero(np.r_[True, lab_s[1:] != lab_s[:-1]])
-    gs = lab_s[starts]  # the multi-member groups
-    w = mix.w[perm]
-    m = mix.m[perm]
-    Wg = np.add.reduceat(w, starts)
-    mg = np.add.reduceat(w[:, None] * m, starts, axis=0) / Wg[:, None]
-    dev = m - np.repeat(mg, counts[gs], axis=0)
-    second = w[:, None, None] * (mix.P[perm] + dev[:, :, None] * dev[:, None, :])
-    Pg = np.add.reduceat(second, starts, axis=0) / Wg[:, None, None]
-    W[gs] = Wg
-    mt[gs] = mg
-    Pt[gs] = 0.5 * (Pg + np.swapaxes(Pg, 1, 2))
-    n_det[gs] = np.maximum.reduceat(mix.n_det[perm], starts)
-    age[gs] = np.maximum.reduceat(mix.age[perm], starts)
-    if beta is not None:
-        b = mix.beta[perm]
+    W, mt, Pt, n_det, age, counts = kernels.merge_moments(label, centres, mix.w, mix.m, mix.P, mix.n_det, mix.age)
+    beta = None
+    if mix.beta is not None:  # §4.5: moment-matched Beta of each multi-member group; singletons unchanged
+        beta = mix.beta[centres].copy()
+        gs = np.flatnonzero(counts > 1)
+        multi = counts[label] > 1
+        lab, w, b = label[multi], mix.w[multi], mix.beta[multi]
         for c in (0, 2):
             mu = beta_mean(b[:, c], b[:, c + 1])
             sec = beta_var(b[:, c], b[:, c + 1]) + mu * mu
             beta[gs, c], beta[gs, c + 1] = beta_moment_match(
-                Wg, np.add.reduceat(w * mu, starts), np.add.reduceat(w * sec, starts), theta_min
+                W[gs],
+                np.bincount(lab, weights=w * mu, minlength=G)[gs],
+                np.bincount(lab, weights=w * sec, minlength=G)[gs],
+                theta_min,
             )
     return Mixture(W, mt, Pt, mix.origin[centres], n_det, age, beta)
 
