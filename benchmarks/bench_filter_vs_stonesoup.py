@@ -10,7 +10,8 @@ finite-difference Jacobian (``compute_jac``) where ours is analytic; the compone
 gate, same (j, l) pairs).
 
 * soabench: ``update`` (EKF, log domain, chi-square gate 13.8155) and ``prune_merge_cap`` (Vo & Ma: T = 1e-5,
-  U = 4, J_max = 1000).
+  U = 4, J_max = 1000). Their inner loops are compiled (numba, ``soabench/gmphd/kernels.py``); the agreement check
+  runs first, so compilation (or loading the cached machine code) is never inside a timed call.
 * Stone Soup: ``GaussianMixtureHypothesiser`` over a ``DistanceHypothesiser`` (``SquaredMahalanobis`` measure,
   missed_distance = 13.8155, a ``KalmanPredictor`` that is the identity because the components and detections
   share one timestamp), ``ExtendedKalmanUpdater`` with ``CartesianToBearingRange`` (state order [x, vx, y, vy],

@@ -306,6 +306,37 @@ def test_t9_fast_merge_equals_literal_loop():
     assert 12 < len(centres) < 720
 
 
+def test_merge_window_with_one_wide_component():
+    """The x-sorted window is sized by the widest P_xx: one very wide component must still find (and be found by)
+    the same groups as the literal loop."""
+    rng = np.random.default_rng(23)
+    mix = random_mixture(rng, 300, spread=30.0)
+    mix.P[7] = np.diag([400.0, 1.0, 1.0, 1.0])
+    mix.w[7] = 0.001  # a candidate for many centres
+    label, _ = merge_groups(mix.m, mix.P, mix.w, 4.0)
+    np.testing.assert_array_equal(label, reference_merge_groups(mix.m, mix.P, mix.w, 4.0))
+    mix.w[7] = 10.0  # now the first centre
+    label, centres = merge_groups(mix.m, mix.P, mix.w, 4.0)
+    assert centres[0] == 7
+    np.testing.assert_array_equal(label, reference_merge_groups(mix.m, mix.P, mix.w, 4.0))
+
+
+def test_merge_non_positive_definite_candidate_stays_apart():
+    """A covariance that is not positive definite has no Mahalanobis distance: it never joins a group, though as
+    the heaviest component it still absorbs its neighbours (whose own P_i decides)."""
+    m = np.zeros((2, 4))
+    bad = np.diag([1.0, -1.0, 1.0, 1.0])
+    assert len(merge(Mixture.from_arrays([1.0, 0.5], m, [np.eye(4), bad]), 4.0)) == 2
+    assert len(merge(Mixture.from_arrays([0.5, 1.0], m, [np.eye(4), bad]), 4.0)) == 1
+
+
+def test_compiled_wrap_matches_geometry_wrap():
+    from soabench.gmphd import kernels
+
+    a = np.r_[np.linspace(-20.0, 20.0, 4001), [np.pi, -np.pi, 3 * np.pi, -3 * np.pi, 0.0, 2 * np.pi]]
+    np.testing.assert_array_equal([kernels.wrap(x) for x in a], wrap(a))
+
+
 def test_merge_metadata_rules():
     P = np.eye(4)
     mix = Mixture.from_arrays(
