@@ -1,7 +1,8 @@
 """Motion and measurement models and the GM-PHD predict/update (ALGORITHMS.md §2.2, §2.3, §2.5-2.8, §3.2, §3.4).
 
-Everything is array code over all components and measurements at once: S is 2x2 and inverted in closed form,
-the likelihoods q (J, M) are formed in the log domain, and only (j, l) pairs with q > 0 become posterior components.
+The per-component and per-(j, l) formulas (EKF terms, log-likelihoods, Kalman posteriors) are compiled loops in
+:mod:`soabench.gmphd.kernels`; this module holds the models and the update's bookkeeping as array code. The
+likelihoods q (J, M) are formed in the log domain, and only (j, l) pairs with q > 0 become posterior components.
 """
 
 from __future__ import annotations
@@ -64,20 +65,6 @@ def h(x: np.ndarray, ego: np.ndarray) -> np.ndarray:
     dx = x[..., 0] - ego[0]
     dy = x[..., 1] - ego[1]
     return np.stack([np.hypot(dx, dy), wrap(np.arctan2(dy, dx) - ego[2])], axis=-1)
-
-
-def jacobian(m: np.ndarray, ego: np.ndarray) -> np.ndarray:
-    """H(m) (J, 2, 4) = [[dx/r, dy/r, 0, 0], [-dy/r^2, dx/r^2, 0, 0]] (§2.3); callers guard r > 0."""
-    dx = m[:, 0] - ego[0]
-    dy = m[:, 1] - ego[1]
-    r2 = dx * dx + dy * dy
-    r = np.sqrt(r2)
-    H = np.zeros((len(m), 2, 4))
-    H[:, 0, 0] = dx / r
-    H[:, 0, 1] = dy / r
-    H[:, 1, 0] = -dy / r2
-    H[:, 1, 1] = dx / r2
-    return H
 
 
 @dataclass
@@ -167,13 +154,6 @@ def ukf_terms(m: np.ndarray, P: np.ndarray, ego: np.ndarray, R: np.ndarray, r_mi
     Sinv, logdet, ok = _inv2(S)
     eta = np.stack([zr, wrap(zb)], axis=-1)
     return MeasurementTerms(eta, S, Sinv, logdet, C, None, valid & ok)
-
-
-def innovations(Z: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """nu_jl = z_l - eta_j (J, M) per coordinate, with the bearing wrapped (§2.6, T11)."""
-    nu_r = Z[None, :, 0] - eta[:, 0, None]
-    nu_b = wrap(Z[None, :, 1] - eta[:, 1, None])
-    return nu_r, nu_b
 
 
 def log_likelihood(terms: MeasurementTerms, Z: np.ndarray, gate_thr: float) -> tuple[np.ndarray, ...]:
