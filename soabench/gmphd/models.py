@@ -17,7 +17,6 @@ from soabench.geometry import wrap
 from soabench.gmphd import kernels
 from soabench.gmphd.mixture import Mixture
 
-LOG_2PI = math.log(2.0 * math.pi)
 GATE_999 = -2.0 * math.log(1.0 - 0.999)  #: chi2_2(0.999) = 13.8155 (§2.8)
 _I4 = np.eye(4)
 
@@ -185,10 +184,10 @@ _NO_JACOBIAN = np.zeros((0, 2, 4))  #: the UKF form has no H: ``posterior_pairs`
 
 
 def _per_row(x: np.ndarray | float, n: int) -> np.ndarray:
-    """A scalar or (n,) input as a float (n,) array (read-only use)."""
+    """A scalar or an array broadcastable to (n,) as a float (n,) array (read-only use)."""
     if np.ndim(x) == 0:
         return np.full(n, float(x))
-    return np.asarray(x, dtype=float).reshape(n)
+    return np.broadcast_to(np.asarray(x, dtype=float), (n,))
 
 
 @dataclass
