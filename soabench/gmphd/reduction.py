@@ -37,7 +37,8 @@ def merge_groups(m: np.ndarray, P: np.ndarray, w: np.ndarray, U: float) -> tuple
     if len(w) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     order = np.argsort(-np.asarray(w), kind="stable")
-    return kernels.merge_groups(np.ascontiguousarray(m, dtype=float), np.ascontiguousarray(P, dtype=float), order, U)
+    m, P = np.ascontiguousarray(m, dtype=float), np.ascontiguousarray(P, dtype=float)
+    return kernels.merge_groups(m, P, order, float(U))  # float U: one compiled signature, whatever the config type
 
 
 def merge(mix: Mixture, U: float, theta_min: float = 2.0) -> Mixture:
