@@ -312,23 +312,28 @@ def _fov_template(r_min: float, r_max: float, fov_deg: float) -> tuple[np.ndarra
 
 
 def shadow_polygons(ego_xy: np.ndarray, obstacles: Obstacles, r_far: float) -> np.ndarray:
-    """(N,) object array: each obstacle together with its shadow (the region behind it between its tangent rays),
-    reaching at least ``r_far`` from the sensor (§3.1.2 cone C_j, §3.1.4).
+    """(N,) object array: each obstacle together with its exact shadow, the set of points whose segment to the
+    sensor meets the obstacle (the region between its tangent rays and beyond it), reaching at least ``r_far`` from
+    the sensor (§3.1.2 cone C_j, §3.1.4, test T19b).
 
-    For a convex obstacle not containing the sensor, obstacle plus shadow is convex, so it is the convex hull of the
-    obstacle's vertices and far points on the arc between theta_min and theta_max (radius chosen so the sampled arc
-    encloses the r_far circle).
+    For a convex obstacle not containing the sensor, obstacle plus shadow is convex: the convex hull of the obstacle's
+    vertices and far points on the arc between theta_min and theta_max. The arc lies beyond every vertex of the
+    obstacle (radius max(r_far, farthest vertex range)), so each far point is behind the supporting line of every
+    edge facing the sensor and the hull adds nothing in front of the obstacle. (An arc at r_far alone would, when a
+    tangent point lies beyond r_far, also cover visible ground in front of a large building.)
     """
     n_obs = len(obstacles)
     if n_obs == 0:
         return np.zeros(0, dtype=object)
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
+    verts = _padded(obstacles.polygons)
+    reach = np.maximum(r_far, np.hypot(*(verts - ego_xy).transpose(2, 0, 1)).max(axis=1))
     width = np.mod(obstacles.theta_max - obstacles.theta_min, 2.0 * np.pi)
     s = np.linspace(0.0, 1.0, _SHADOW_ARC_POINTS)
     phi = obstacles.theta_min[:, None] + width[:, None] * s[None, :]
-    radius = (r_far * (1.0 + 1e-9) + 1e-6) / np.cos(0.5 * width / (_SHADOW_ARC_POINTS - 1))
+    radius = (reach * (1.0 + 1e-9) + 1e-6) / np.cos(0.5 * width / (_SHADOW_ARC_POINTS - 1))
     far = ego_xy + radius[:, None, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
-    return shapely.convex_hull(shapely.multipoints(np.concatenate([_padded(obstacles.polygons), far], axis=1)))
+    return shapely.convex_hull(shapely.multipoints(np.concatenate([verts, far], axis=1)))
 
 
 def _padded(polygons: Sequence[np.ndarray]) -> np.ndarray:

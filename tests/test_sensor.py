@@ -542,3 +542,87 @@ def test_ego_in_the_courtyard_of_a_u_shaped_building():
     assert scans.visible[0].tolist() == [True, False, True]
     omega = scans.scans[0].visible_region
     assert not omega.contains(shapely.Point(7.5, 0.0)) and omega.contains(shapely.Point(0.0, 20.0))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# T19b: exact shadows (a tangent point beyond r_max must not hide the ground in front of the obstacle)
+
+
+def _ray_visible(ego_xy: np.ndarray, pts: np.ndarray, occ: list[Polygon]) -> np.ndarray:
+    """Brute force: a point is visible when it is in no occluder and its segment to the sensor meets no occluder."""
+    inside = shapely.intersects(shapely.union_all(occ), shapely.points(pts)) if occ else np.zeros(len(pts), bool)
+    return line_of_sight(ego_xy, pts, occ) & ~inside
+
+
+def test_T19b_shadow_of_a_small_obstacle_and_of_a_building_reaching_past_r_max():
+    ego = np.array([0.0, 0.0, 0.0])
+    cfg = SensorConfig()  # r_max = 50 m
+    small = box(29.0, -1.0, 31.0, 1.0)  # 2 m square at 30 m
+    building = box(10.0, 45.0, 60.0, 75.0)  # seen obliquely: near corner at 46 m, both tangent corners at ~75 m
+    occ = [small, building]
+    obs = compute_obstacles([np.asarray(p.exterior.coords)[:-1] for p in occ], ["parked", "building"], ego[:2], 50.0)
+    assert min(obs.r_min[1], obs.r_max[1]) > cfg.r_max  # both tangent points of the building lie beyond r_max
+    scene = synthetic_scene(buildings=[], parked=occ)
+    scene.sidewalk = box(-60, -60, 60, 60)
+    omega = visible_region(scene, ego, obs, cfg)
+    assert omega.contains(shapely.Point(28.0, 0.0)) and not omega.contains(shapely.Point(32.0, 0.0))
+    assert omega.contains(shapely.Point(20.0, 44.0)) and not omega.contains(shapely.Point(20.0, 46.0))
+    assert omega.contains(shapely.Point(8.0, 47.0))  # in front of the building's side face
+    assert omega.contains(shapely.Point(33.0, 5.0))  # beside the small obstacle's cone
+    assert not omega.contains(shapely.Point(11.0, 48.0))  # inside the building
+    # the visible area equals a brute-force ray test on a 0.5 m grid to within 1 %
+    g = np.arange(-59.75, 60.0, 0.5)
+    pts = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    brute = fov_mask(pts, ego, cfg) & _ray_visible(ego[:2], pts, occ)
+    assert omega.area == pytest.approx(brute.sum() * 0.25, rel=0.01)
+
+
+def test_shadow_is_exactly_the_occluded_set_for_random_obstacles():
+    """Random convex obstacles, many reaching past r_max: within r_max, a point is in obstacle-plus-shadow exactly
+    when it is inside the obstacle or its segment to the sensor meets it (T19b, away from the boundary)."""
+    rng = np.random.default_rng(7)
+    ego = np.array([1.0, -2.0])
+    tested = beyond = 0
+    for _ in range(150):
+        c = ego + rng.uniform(8, 60) * np.array([np.cos(a := rng.uniform(-np.pi, np.pi)), np.sin(a)])
+        poly = shapely.convex_hull(shapely.multipoints(c + rng.normal(0, rng.uniform(0.5, 15), (6, 2))))
+        if poly.intersects(shapely.Point(ego)) or poly.area < 0.1:
+            continue
+        obs = compute_obstacles([np.asarray(poly.exterior.coords)[:-1]], ["building"], ego, 50.0)
+        if len(obs) == 0:
+            continue
+        beyond += bool(max(obs.r_min[0], obs.r_max[0]) > 50.0)
+        shadow = shadow_polygons(ego, obs, 50.0)[0]
+        pts = ego + rng.uniform(-50, 50, (2000, 2))
+        pts = pts[np.hypot(*(pts - ego).T) < 50.0]
+        away = shapely.distance(shadow.boundary, shapely.points(pts)) > 1e-3
+        got = shapely.contains_xy(shadow, pts[:, 0], pts[:, 1])
+        assert np.array_equal(got[away], ~_ray_visible(ego, pts, [poly])[away])
+        tested += 1
+    assert tested > 100 and beyond > 10
+
+
+def test_visible_region_matches_a_brute_force_ray_test_on_the_shipped_scene():
+    """Omega_k on scans of the shipped intersection agrees point by point with casting rays (T19b, SUMO scans)."""
+    from soabench.scenario import load, simulate
+
+    scene, scenario = load("intersection")
+    seeds = trial_seeds(0, 0)
+    rec = simulate(scene, scenario, seeds, duration=20.0)
+    cfg = SensorConfig()
+    scans = observe(rec, scene, cfg, seeds.sensor_rngs())
+    rng = np.random.default_rng(0)
+    checked = 0
+    for k in range(0, len(scans), 4):
+        scan = scans.scans[k]
+        ego, occ = scan.ego, list(scan.occluders)
+        bounds = scene.sidewalk.bounds
+        cand = rng.uniform(bounds[:2], bounds[2:], (60000, 2))
+        cand = cand[shapely.contains_xy(scene.sidewalk, cand[:, 0], cand[:, 1])]
+        pts = cand[fov_mask(cand, ego, cfg)]
+        brute = _ray_visible(ego[:2], pts, occ)
+        got = shapely.contains_xy(scan.visible_region, pts[:, 0], pts[:, 1])
+        near = shapely.distance(scan.visible_region.boundary, shapely.points(pts)) < 0.05
+        assert np.array_equal(got[~near], brute[~near]), f"scan {k}: {np.sum(got[~near] != brute[~near])} points differ"
+        checked += len(pts)
+    assert checked > 5000
