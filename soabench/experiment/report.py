@@ -331,14 +331,14 @@ def unobserved_warning(tables: RunTables, clutter: float) -> str:
     "100 % lower cardinality error" would only say that S-OA made no false tracks of nothing. '' otherwise."""
     t = tables.trials
     m = select(t, clutter=clutter)
-    total = lambda c: float(np.nansum(t[c][m])) if c in t else 0.0  # noqa: E731
-    n_episodes, n_truth = total("n_episodes"), total("tp") + total("fn")
-    if n_episodes > 0 and n_truth > 0:
+    total = lambda *cs: float(sum(np.nansum(t[c][m]) for c in cs)) if all(c in t for c in cs) else None  # noqa: E731
+    n_episodes, n_truth = total("n_episodes"), total("tp", "fn")  # None: a table without the column
+    if (n_episodes is None or n_episodes > 0) and (n_truth is None or n_truth > 0):
         return ""
     n_trials = len({int(x) for x in t["trial"][m]}) if "trial" in t else 0
     return (
-        f"no pedestrian was observed at λ = {clutter:g} in {n_trials} trial(s) ({int(n_truth)} ground-truth "
-        f"target-scans, {int(n_episodes)} detection episodes): delays, win counts and percent reductions are "
+        f"no pedestrian was observed at λ = {clutter:g} in {n_trials} trial(s) ({int(n_truth or 0)} ground-truth "
+        f"target-scans, {int(n_episodes or 0)} detection episodes): delays, win counts and percent reductions are "
         "undefined and not reported. Check that pedestrians walk inside the sensor's field of view (scenario, "
         "sensor fov_deg and r_max)."
     )
