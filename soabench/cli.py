@@ -162,8 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("birth", help="birth components of one model over the scene (paper Fig. 2 colours)")
     _add_snapshot_args(p)
     p.add_argument("--time", type=float, default=50.0, help="time of the snapshot (s)")
-    p.add_argument("--model", default="soa", choices=BIRTH_MODEL_NAMES)
-    p.add_argument("--probability", default="static", choices=PROBABILITY_MODES)
+    p.add_argument("--model", default="soa", choices=BIRTH_MODEL_NAMES, help="birth model")
+    p.add_argument("--probability", default="static", choices=PROBABILITY_MODES, help="probability mode")
 
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
     _add_run_args(p)
