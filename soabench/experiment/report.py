@@ -326,9 +326,10 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
 
 
 def unobserved_warning(tables: RunTables, clutter: float) -> str:
-    """A warning when no pedestrian was ever observed at ``clutter`` (no ground truth in the metrics' set, or no
-    detection episode for any model): delays, win counts and percent reductions are then undefined, and a
-    "100 % lower cardinality error" would only say that S-OA made no false tracks of nothing. '' otherwise."""
+    """A warning when no pedestrian was ever observed at ``clutter``: no detection episode (a visibility run with a
+    detection, §5.4) for any model, or no target in the metrics' ground-truth set. Delays, win counts and percent
+    reductions are then undefined: a "100 % lower cardinality error" would only say that S-OA made no false tracks
+    where there was nothing to see. '' otherwise."""
     t = tables.trials
     m = select(t, clutter=clutter)
     total = lambda *cs: float(sum(np.nansum(t[c][m]) for c in cs)) if all(c in t for c in cs) else None  # noqa: E731
@@ -337,10 +338,10 @@ def unobserved_warning(tables: RunTables, clutter: float) -> str:
         return ""
     n_trials = len({int(x) for x in t["trial"][m]}) if "trial" in t else 0
     return (
-        f"no pedestrian was observed at λ = {clutter:g} in {n_trials} trial(s) ({int(n_truth or 0)} ground-truth "
-        f"target-scans, {int(n_episodes or 0)} detection episodes): delays, win counts and percent reductions are "
-        "undefined and not reported. Check that pedestrians walk inside the sensor's field of view (scenario, "
-        "sensor fov_deg and r_max)."
+        f"no pedestrian was observed at λ = {clutter:g} in {n_trials} trial(s): {int(n_episodes or 0)} detection "
+        f"episodes (the ground-truth set held {int(n_truth or 0)} target-scans, none of them seen), so delays, win counts "
+        "and percent reductions are undefined and not reported. Check that pedestrians walk into the sensor's "
+        "field of view and line of sight (scenario, duration, sensor fov_deg and r_max)."
     )
 
 
