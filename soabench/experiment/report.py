@@ -339,9 +339,9 @@ def unobserved_warning(tables: RunTables, clutter: float) -> str:
     n_trials = len({int(x) for x in t["trial"][m]}) if "trial" in t else 0
     return (
         f"no pedestrian was observed at λ = {clutter:g} in {n_trials} trial(s): {int(n_episodes or 0)} detection "
-        f"episodes (the ground-truth set held {int(n_truth or 0)} target-scans, none of them seen), so delays, win counts "
-        "and percent reductions are undefined and not reported. Check that pedestrians walk into the sensor's "
-        "field of view and line of sight (scenario, duration, sensor fov_deg and r_max)."
+        f"episodes (the ground-truth set held {int(n_truth or 0)} target-scans, none of them seen), so delays, win "
+        "counts and percent reductions are undefined and not reported. Check that pedestrians walk into the "
+        "sensor's field of view and line of sight (scenario, duration, sensor fov_deg and r_max)."
     )
 
 
