@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from baselines.partially_uniform import inverse_measurement_terms
+from soabench.baselines.partially_uniform import inverse_measurement_terms
 from soabench.birth.base import SOURCE_MEAS, BirthContext, Births, FOVRule, NewbornTerms
 from soabench.config import BirthConfig, SensorConfig
 from soabench.errors import require

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from baselines.standard_gm import StandardGMBirth
+from soabench.baselines.standard_gm import StandardGMBirth
 from soabench.birth.base import BirthContext, Births, NewbornTerms, build_components
 from soabench.config import BirthConfig, SensorConfig
 from soabench.geometry import fov_area, inverse_measurement_cov, measurement_volume, polar_to_world

@@ -65,10 +65,22 @@ def _offsets(text: str) -> tuple[int, ...]:
 def _add_net_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--net", default="intersection", help="shipped network name or path to a .net.xml")
     p.add_argument(
-        "--poly", action="append", default=[], metavar="FILE", help="polygon file (buildings, obstacles); repeatable"
+        "--poly",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="polygon file (buildings, obstacles); repeatable (default: only the scenario's own)",
     )
-    p.add_argument("--scenario", metavar="FILE.toml", help="scenario file (default: the shipped net's own)")
-    p.add_argument("--config", metavar="FILE.toml", help="parameters (ALGORITHMS.md §7), section by section")
+    p.add_argument(
+        "--scenario",
+        metavar="FILE.toml",
+        help="scenario file (default: the shipped net's own; for a user net, defaults derived from the net)",
+    )
+    p.add_argument(
+        "--config",
+        metavar="FILE.toml",
+        help="parameters, section by section (docs/method.md §7; default: the built-in defaults, soabench/config.py)",
+    )
 
 
 def _add_snapshot_args(p: argparse.ArgumentParser, need_out: bool = True) -> None:
@@ -90,17 +102,38 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--seed", type=int, help="base seed (default 0)")
     p.add_argument("--workers", type=int, help="process workers (default: every core)")
-    p.add_argument("--out", type=Path, help="run folder (default results/<net>/<timestamp>/)")
+    p.add_argument("--out", type=Path, help="run folder (default results/<scenario name>/<timestamp>/)")
     p.add_argument("--save-estimates", action="store_true", help="also write the per-scan estimates")
-    p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="submit trials to this Dask scheduler")
-    p.add_argument("--dask", choices=["local"], help="start a Dask LocalCluster (processes, one thread each)")
+    p.add_argument(
+        "--scheduler", metavar="tcp://HOST:PORT", help="submit trials to this Dask scheduler (default: no Dask)"
+    )
+    p.add_argument(
+        "--dask", choices=["local"], help="start a Dask LocalCluster (processes, one thread each; default: no Dask)"
+    )
     p.add_argument("--fail-fast", action="store_true", help="stop at the first failed trial")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress report (default: a bar on a terminal, a line every 10 s or 5%% of the trials otherwise)",
+    )
+
+
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """``--help`` shows every option's default: appended as "(default: X)" unless the help text already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        unset = any(action.default is v for v in (None, False, argparse.SUPPRESS))  # flags, optional values
+        if "default" in text or not action.option_strings or unset:
+            return text
+        value = ", ".join(map(str, action.default)) if isinstance(action.default, list) else "%(default)s"
+        return f"{text} (default: {value or 'none'})"
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="soabench",
+        formatter_class=DefaultsHelpFormatter,
         description="Where should a multi-target filter expect new targets to appear? "
         "GM-PHD birth models (S-OA and four baselines) on SUMO scenarios.",
     )
@@ -129,13 +162,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("birth", help="birth components of one model over the scene (paper Fig. 2 colours)")
     _add_snapshot_args(p)
     p.add_argument("--time", type=float, default=50.0, help="time of the snapshot (s)")
-    p.add_argument("--model", default="soa", choices=BIRTH_MODEL_NAMES)
-    p.add_argument("--probability", default="static", choices=PROBABILITY_MODES)
+    p.add_argument("--model", default="soa", choices=BIRTH_MODEL_NAMES, help="birth model")
+    p.add_argument("--probability", default="static", choices=PROBABILITY_MODES, help="probability mode")
 
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
     _add_run_args(p)
     p.add_argument("--clutter", type=_float_list, help="clutter rate(s) lambda, e.g. 3 or 0.5,3,5 (default 3)")
-    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run")
+    p.add_argument(
+        "--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run (default: new run)"
+    )
 
     p = sub.add_parser("sweep", help="parameter sweeps: clutter rate or expected births N_hat")
     p.add_argument("kind", choices=["clutter", "births"])
@@ -143,7 +178,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--values", type=_float_list, help="clutter rates for `sweep clutter` (default 0.5,3,5)")
     p.add_argument("--offsets", type=_offsets, help="N_tot offsets for `sweep births` (default -10:10)")
     p.add_argument("--clutter", type=_float_list, help="clutter rate for `sweep births` (default 3)")
-    p.add_argument("--resume", type=Path, metavar="SWEEP_DIR", help="finish the missing trials of an earlier sweep")
+    p.add_argument(
+        "--resume",
+        type=Path,
+        metavar="SWEEP_DIR",
+        help="finish the missing trials of an earlier sweep (default: a new sweep)",
+    )
 
     p = sub.add_parser(
         "study", help="the paper's whole simulation study: main protocol, clutter sweep, N_hat sweep, comparison"
@@ -151,6 +191,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_args(p)
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
+    for command in sub.choices.values():  # subparsers do not inherit the formatter
+        command.formatter_class = DefaultsHelpFormatter
     return parser
 
 

@@ -16,6 +16,8 @@ measurements (same values, same sources) and differ only in their clutter and in
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -111,6 +113,7 @@ class Scans:
         truth_xy: (K, P, 2) true positions (NaN while absent).
         present, in_fov, visible, detected: (K, P) bool flags (§5.1, §5.4).
         ped_ids: (P,) pedestrian ids.
+        sensor: the :class:`SensorConfig` that produced the scans (written into every exported file).
     """
 
     scans: list[Scan]
@@ -122,13 +125,20 @@ class Scans:
     visible: np.ndarray
     detected: np.ndarray
     ped_ids: np.ndarray
+    sensor: SensorConfig | None = None
 
     def __len__(self) -> int:
         return len(self.scans)
 
     def save_npz(self, path: str | Path) -> None:
-        """Write the Scans as a compressed .npz without pickles (format: README, "Scans format")."""
-        np.savez_compressed(Path(path), **_scans_to_arrays(self))
+        """Write the Scans as a compressed .npz without pickles (format: README, "Scans format"), with the sensor
+        parameters and their units (:func:`sensor_arrays`): a tracker reading the file needs R, p_D and kappa."""
+        require(
+            self.sensor is not None,
+            "these Scans carry no SensorConfig (Scans.sensor); set it before exporting: the file must say how it "
+            "was measured",
+        )
+        np.savez_compressed(Path(path), **_scans_to_arrays(self), **sensor_arrays(self.sensor))
 
     @classmethod
     def load_npz(cls, path: str | Path) -> Scans:
@@ -500,6 +510,7 @@ def observe(
         scans.append(scan)
         sources.append(source)
     return Scans(
+        sensor=dataclasses.replace(cfg),
         scans=scans,
         dt=float(cfg.dt),
         source=sources,
@@ -680,4 +691,47 @@ def _scans_from_arrays(a: dict[str, np.ndarray], where: str) -> Scans:
         visible=a["visible"],
         detected=a["detected"],
         ped_ids=a["ped_ids"],
+        sensor=_sensor_from_arrays(a, where),
     )
+
+
+#: unit of each sensor parameter written into a scans file (README, "Scans format")
+SENSOR_UNITS: dict[str, str] = {
+    "dt": "s",
+    "sigma_r": "m",
+    "sigma_b": "rad",
+    "p_D": "1",
+    "lambda_c": "1/scan",
+    "r_min": "m",
+    "r_max": "m",
+    "fov": "rad",
+}
+
+
+def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
+    """The sensor parameters of a scans file: one float64 scalar per parameter in SI units and radians
+    (``sigma_r``, ``sigma_b``, ``p_D``, ``lambda_c``, ``r_min``, ``r_max``, ``fov``; ``dt`` is written with the
+    scans) and ``sensor_json``: every :class:`SensorConfig` field as configured (degrees where the config uses them)
+    plus the units of the scalars."""
+    values = {
+        "sigma_r": cfg.sigma_r,
+        "sigma_b": cfg.sigma_b,
+        "p_D": cfg.p_D,
+        "lambda_c": cfg.lambda_c,
+        "r_min": cfg.r_min,
+        "r_max": cfg.r_max,
+        "fov": cfg.fov,
+    }
+    meta = {"config": dataclasses.asdict(cfg), "units": SENSOR_UNITS}
+    out = {k: np.float64(v) for k, v in values.items()}
+    out["sensor_json"] = np.array(json.dumps(meta, sort_keys=True))
+    return out
+
+
+def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
+    if "sensor_json" not in a:
+        return None
+    try:
+        return SensorConfig(**json.loads(str(a["sensor_json"]))["config"])
+    except (ValueError, TypeError, KeyError) as exc:
+        raise SoabenchError(f"{where}: sensor_json is not a soabench sensor configuration ({exc})") from None

@@ -9,10 +9,10 @@ import pytest
 import shapely
 from shapely.geometry import MultiLineString, Polygon, box
 
-from baselines.adaptive import AdaptiveBirth, newborn_likelihood, unexplained_mass
-from baselines.partially_uniform import PartiallyUniformBirth
-from baselines.standard_gm import StandardGMBirth, boundary_exits, entry_points
-from baselines.uniform import UniformBirth, grid_nodes
+from soabench.baselines.adaptive import AdaptiveBirth, newborn_likelihood, unexplained_mass
+from soabench.baselines.partially_uniform import PartiallyUniformBirth
+from soabench.baselines.standard_gm import StandardGMBirth, boundary_exits, entry_points
+from soabench.baselines.uniform import UniformBirth, grid_nodes
 from soabench.birth import REGISTRY, get_birth_model
 from soabench.birth.base import SOURCE_GM, SOURCE_GRID, SOURCE_MEAS, BirthContext, inside_any
 from soabench.config import BirthConfig, SensorConfig

@@ -1,4 +1,5 @@
-"""Birth models: the S-OA model here, the four baselines in the top-level ``baselines`` package.
+"""Birth models: the S-OA model here, the four baselines in :mod:`soabench.baselines` (repository folder
+``baselines/``).
 
 One registry maps the CLI/config names to classes; a new model is one file plus one line here.
 """
@@ -12,10 +13,10 @@ from soabench.errors import require
 #: name -> "module:Class" (imported lazily so baselines may import soabench.birth.base)
 REGISTRY: dict[str, str] = {
     "soa": "soabench.birth.soa:SOABirth",
-    "pubm": "baselines.partially_uniform:PartiallyUniformBirth",
-    "ubm": "baselines.uniform:UniformBirth",
-    "atbm": "baselines.adaptive:AdaptiveBirth",
-    "gmbm": "baselines.standard_gm:StandardGMBirth",
+    "pubm": "soabench.baselines.partially_uniform:PartiallyUniformBirth",
+    "ubm": "soabench.baselines.uniform:UniformBirth",
+    "atbm": "soabench.baselines.adaptive:AdaptiveBirth",
+    "gmbm": "soabench.baselines.standard_gm:StandardGMBirth",
 }
 
 

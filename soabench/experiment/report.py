@@ -21,6 +21,7 @@ Statistics (per clutter rate lambda, birth model and probability mode):
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +32,7 @@ import numpy as np
 from soabench.birth import BASELINES, LABEL
 from soabench.errors import SoabenchError
 from soabench.experiment.paper import percent_reduction
+from soabench.experiment.provenance import REPRODUCTION_TOLERANCE
 from soabench.experiment.store import RunStore, read_csv, write_json_atomic, write_text_atomic
 
 
@@ -220,12 +222,13 @@ def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: l
     for clutter in tables.clutters:
         stats = {(mo, md): model_stats(tables, clutter, mo, md) for mo in tables.models for md in tables.modes}
         comps = []
-        if "soa" in tables.models:
+        warning = unobserved_warning(tables, clutter)
+        if "soa" in tables.models and not warning:  # nothing observed: no win counts, no percentages
             for md in tables.modes:
                 for b in BASELINES:
                     if b in tables.models:
                         comps.append(compare(tables, clutter, md, b, stats))
-        results.append({"clutter": clutter, "models": list(stats.values()), "vs_soa": comps})
+        results.append({"clutter": clutter, "models": list(stats.values()), "vs_soa": comps, "warning": warning})
     failures = failures or []
     return {
         "net": meta.get("net"),
@@ -235,6 +238,9 @@ def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: l
         "scenario_config": meta.get("scenario_config"),
         "config": meta["config"],
         "versions": meta.get("versions"),
+        "platform": meta.get("platform"),
+        "reproduction_tolerance": meta.get("reproduction_tolerance", REPRODUCTION_TOLERANCE),
+        "warnings": [r["warning"] for r in results if r["warning"]],
         "n_trials": n_trials,
         "n_ok": len(ok_trials),
         "complete": len(ok_trials) == n_trials and not failures,
@@ -267,6 +273,8 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
     )
     for res in summary["results"]:
         lines += ["", f"## λ = {res['clutter']:g}", ""]
+        if res.get("warning"):
+            lines += [f"**Warning:** {res['warning']}", ""]
         lines.append(
             "| model | mode | trials | k̄ delay (s) | σ̄ delay (s) | card. error | OSPA (m) | GOSPA (m) | precision "
             "| recall | components | censored |"
@@ -317,10 +325,70 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
     return "\n".join(lines) + "\n"
 
 
+def unobserved_warning(tables: RunTables, clutter: float) -> str:
+    """A warning when no pedestrian was ever observed at ``clutter``: no detection episode (a visibility run with a
+    detection, §5.4) for any model, or no target in the metrics' ground-truth set. Delays, win counts and percent
+    reductions are then undefined: a "100 % lower cardinality error" would only say that S-OA made no false tracks
+    where there was nothing to see. '' otherwise."""
+    t = tables.trials
+    m = select(t, clutter=clutter)
+    total = lambda *cs: float(sum(np.nansum(t[c][m]) for c in cs)) if all(c in t for c in cs) else None  # noqa: E731
+    n_episodes, n_truth = total("n_episodes"), total("tp", "fn")  # None: a table without the column
+    if (n_episodes is None or n_episodes > 0) and (n_truth is None or n_truth > 0):
+        return ""
+    n_trials = len({int(x) for x in t["trial"][m]}) if "trial" in t else 0
+    return (
+        f"no pedestrian was observed at λ = {clutter:g} in {n_trials} trial(s): {int(n_episodes or 0)} detection "
+        f"episodes (the ground-truth set held {int(n_truth or 0)} target-scans, none of them seen), so delays, win "
+        "counts and percent reductions are undefined and not reported. Check that pedestrians walk into the "
+        "sensor's field of view and line of sight (scenario, duration, sensor fov_deg and r_max)."
+    )
+
+
+#: what the paper's protocol fixes besides the network: every parameter section at its default (the paper's
+#: values) and 100 s trials; trial count, seed, models and clutter rates may differ (λ = 3 is compared)
+PAPER_SECTIONS = ("sensor", "filter", "birth", "metrics")
+PAPER_DURATION_S = 100.0
+
+
+def paper_protocol_mismatch(meta: dict) -> str:
+    """Why the paper's numbers do not apply to a run ('' when they do): they hold only for the paper's protocol
+    on the shipped intersection (its own scenario and polygons, default parameters, 100 s trials)."""
+    from soabench.config import Config
+
+    if str(meta.get("net")) != "intersection":
+        return f"the network is {meta.get('net_name') or meta.get('net')!r}, not the shipped intersection"
+    if meta.get("scenario") is not None:
+        return f"a user scenario file ({meta['scenario']}) replaces the shipped one"
+    if meta.get("polys"):
+        return "extra polygon files change the scene"
+    try:
+        cfg = Config.from_dict(meta["config"]).to_dict()
+    except SoabenchError as exc:
+        return f"the run's configuration is not readable ({exc})"
+    default = Config().to_dict()
+    for sec in PAPER_SECTIONS:
+        diff = sorted(k for k in default[sec] if cfg[sec].get(k) != default[sec][k])
+        if diff:
+            return f"[{sec}] {', '.join(diff)} differ from the paper's values"
+    if float(cfg["experiment"]["duration"]) != PAPER_DURATION_S:
+        return f"trials last {cfg['experiment']['duration']:g} s, not the paper's {PAPER_DURATION_S:g} s"
+    return ""
+
+
 def paper_section(run_dir: Path, tables: RunTables, clutter: float = 3.0) -> str:
-    """The paper's headline numbers beside ours (:mod:`soabench.experiment.paper`), when S-OA, a baseline and
-    lambda = 3 were run."""
+    """The paper's headline numbers beside ours (:mod:`soabench.experiment.paper`), when the run follows the paper's
+    protocol on the shipped intersection (:func:`paper_protocol_mismatch`) and S-OA, a baseline and lambda = 3 were
+    run; otherwise a line saying why there is no comparison."""
+    mismatch = paper_protocol_mismatch(tables.meta)
+    if mismatch:
+        return (
+            f"No comparison with the paper: {mismatch}; its numbers hold only for its own protocol on the shipped "
+            "intersection.\n"
+        )
     if "soa" not in tables.models or not set(BASELINES) & set(tables.models) or clutter not in tables.clutters:
+        return ""
+    if unobserved_warning(tables, clutter):
         return ""
     if not set(tables.modes) & {"static", "dynamic"}:
         return ""
@@ -348,6 +416,8 @@ def write_report(run_dir: Path, figures: bool = True) -> str:
     paper_md = paper_section(run_dir, tables)
     if paper_md:
         md += "\n" + paper_md
+    for warning in summary["warnings"]:
+        print(f"soabench: warning: {warning}", file=sys.stderr)
     write_json_atomic(run_dir / "summary.json", summary)
     write_text_atomic(run_dir / "summary.md", md)
     return md

@@ -32,6 +32,8 @@ from typing import Any
 
 from soabench.config import Config
 from soabench.errors import SoabenchError, require
+from soabench.experiment.progress import Progress
+from soabench.experiment.provenance import REPRODUCTION_TOLERANCE, platform_info
 from soabench.experiment.store import (
     EPISODE_COLUMNS,
     STEP_COLUMNS,
@@ -316,43 +318,6 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, dask
     return SerialExecutor() if n == 1 else PoolExecutor(n)
 
 
-# ------------------------------------------------------------------------------------------------ progress
-class Progress:
-    """A one-line progress bar on stderr, drawn only on a terminal."""
-
-    def __init__(self, total: int, done: int, enabled: bool):
-        self.total, self.done, self.failed = total, done, 0
-        self.enabled = enabled and sys.stderr.isatty()
-        self._start_done = done
-        self._t0 = time.monotonic()
-        self.draw()
-
-    def update(self, ok: bool) -> None:
-        self.done += 1
-        self.failed += 0 if ok else 1
-        self.draw()
-
-    def draw(self) -> None:
-        if not self.enabled:
-            return
-        frac = self.done / self.total if self.total else 1.0
-        width = 30
-        bar = "#" * int(frac * width) + "." * (width - int(frac * width))
-        ran = self.done - self._start_done
-        eta = ""
-        if ran > 0 and self.done < self.total:
-            rem = (time.monotonic() - self._t0) / ran * (self.total - self.done)
-            eta = f" ETA {int(rem // 60)}m{int(rem % 60):02d}s"
-        fail = f", {self.failed} failed" if self.failed else ""
-        sys.stderr.write(f"\r[{bar}] {self.done}/{self.total} trials{fail}{eta}   ")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
-
-
 # ------------------------------------------------------------------------------------------------ metadata
 def package_versions() -> dict[str, str]:
     """Versions of the packages that shape the results (summary.json)."""
@@ -363,6 +328,8 @@ def package_versions() -> dict[str, str]:
         ("numpy", "numpy"),
         ("scipy", "scipy"),
         ("shapely", "shapely"),
+        ("numba", "numba"),
+        ("llvmlite", "llvmlite"),
         ("sumo", "eclipse-sumo"),
         ("libsumo", "libsumo"),
         ("soabench", "soabench"),
@@ -403,6 +370,12 @@ def net_name(net: str) -> str:
         if name.endswith(suffix):
             return name[: -len(suffix)]
     return name
+
+
+def scenario_name(net: str, scenario_cfg: Any) -> str:
+    """The name a run is filed and labelled under: the scenario's (``[scenario] name``, else what
+    :func:`soabench.scenario.load` derived from the scenario file or network), else the network's."""
+    return str(getattr(scenario_cfg, "name", "") or "") or net_name(net)
 
 
 def default_run_dir(net: str, root: Path = Path("results")) -> Path:
@@ -457,7 +430,7 @@ def run_experiment(
         resume: an earlier run folder: run only its trials without a result, with its stored config.
         fail_fast: stop at the first failed trial (trials in flight are still recorded).
         save_estimates: also store the per-scan estimates (``estimates/``, format in :mod:`.store`).
-        progress: draw a progress bar on stderr when it is a terminal.
+        progress: report progress on stderr (a bar on a terminal, periodic lines otherwise: :mod:`.progress`).
         trial_fn: ``run_trial(trial, config, scene, scenario, *, save_estimates)``; must be importable by
             worker processes (a module-level function). Default :func:`soabench.experiment.trial.run_trial`.
         load_fn: ``load(net, polys, scenario) -> (SceneMap, ScenarioConfig)``; default :func:`soabench.scenario.load`.
@@ -480,14 +453,17 @@ def run_experiment(
     else:
         require(config is not None, "run_experiment needs a config (or resume=RUN_DIR)")
         config = Config.from_dict(config.to_dict()).validate()
-        store = RunStore(Path(out) if out is not None else default_run_dir(net))
-        if store.exists():
+        store = RunStore(Path(out)) if out is not None else None
+        if store is not None and store.exists():
             raise SoabenchError(f"{str(store.run_dir)!r} already holds a run; use --resume {store.run_dir}")
     n_trials = config.experiment.trials
     polys = tuple(str(p) for p in polys)
 
     # validate the network before starting workers (a bad path is a user error, not 100 failed trials)
     _, scenario_cfg = load_scene_cached(net, polys, scenario, load_fn)
+    name = scenario_name(net, scenario_cfg)
+    if store is None:
+        store = RunStore(default_run_dir(name))
     done = set(store.done_trials()) if resume is not None else set()
     todo = [t for t in range(n_trials) if t not in done]
     # connect to the executor before creating the run folder (an unreachable scheduler leaves nothing behind)
@@ -500,7 +476,7 @@ def run_experiment(
                 {
                     "created": _utc_stamp(),
                     "net": str(net),
-                    "net_name": net_name(net),
+                    "net_name": name,
                     "polys": list(polys),
                     "scenario": scenario,
                     "scenario_config": _scenario_info(scenario_cfg),
@@ -510,6 +486,8 @@ def run_experiment(
                     "load_fn": _fn_name(load_fn),
                     "config": config.to_dict(),
                     "versions": package_versions(),
+                    "platform": platform_info(),
+                    "reproduction_tolerance": REPRODUCTION_TOLERANCE,
                 }
             )
         if todo:
@@ -571,7 +549,7 @@ def _run_trials(
     interrupted = stopped = False
     store.clear_merged()
     t_start = time.time()
-    bar = Progress(n_trials, n_done, progress)
+    bar = Progress(n_trials, n_done, progress, label=store.run_dir.name)
     gen = exe.results(spec, todo)
     try:
         for _, rec in gen:

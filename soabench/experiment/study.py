@@ -19,8 +19,9 @@ from pathlib import Path
 
 from soabench.config import Config
 from soabench.experiment import paper
+from soabench.experiment.report import paper_protocol_mismatch
 from soabench.experiment.runner import RunOutcome, net_name, run_experiment
-from soabench.experiment.store import write_text_atomic
+from soabench.experiment.store import RunStore, write_text_atomic
 from soabench.experiment.sweep import SweepOutcome, run_sweep
 
 CLUTTER_VALUES = (0.5, 3.0, 5.0)
@@ -96,8 +97,9 @@ def run_study(
         births = run_sweep("births", BIRTH_OFFSETS, cfg, net, out=births_dir, **exe)
 
     md = ""
-    if main.complete:
-        md = write_comparison(root)
+    if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
+        mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
+        md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
     return StudyOutcome(root, main, clutter, births, md)
 
 

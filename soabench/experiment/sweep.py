@@ -40,9 +40,10 @@ from soabench.experiment.runner import (
     RunOutcome,
     TrialFn,
     _utc_stamp,
-    net_name,
+    load_scene_cached,
     open_executor,
     run_experiment,
+    scenario_name,
 )
 from soabench.experiment.store import read_csv, read_json, write_json_atomic, write_text_atomic
 
@@ -135,7 +136,8 @@ def run_sweep(
     else:
         require(config is not None, "run_sweep needs a config (or resume=SWEEP_DIR)")
         points = sweep_points(kind, values, config, models, n_true)
-        sweep_dir = Path(out) if out is not None else Path("results") / net_name(net) / f"sweep-{kind}-{_utc_stamp()}"
+        name = scenario_name(net, load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)[1])
+        sweep_dir = Path(out) if out is not None else Path("results") / name / f"sweep-{kind}-{_utc_stamp()}"
         if (sweep_dir / SWEEP_FILE).exists():
             raise SoabenchError(f"{str(sweep_dir)!r} already holds a sweep; resume it or choose another --out")
         sweep_dir.mkdir(parents=True, exist_ok=True)
@@ -144,7 +146,7 @@ def run_sweep(
             "values": [float(v) for v in values],
             "n_true": int(n_true),
             "net": str(net),
-            "net_name": net_name(net),
+            "net_name": name,
             "polys": [str(p) for p in polys],
             "scenario": scenario,
             "base_config": config.to_dict(),

@@ -7,8 +7,8 @@ microseconds; ``benchmarks/bench_filter_vs_stonesoup.py`` measures it against St
 
 Arithmetic is IEEE (no ``fastmath``: no reassociation, no fused multiply-add contraction), so a result does not
 depend on the vector width of the CPU, and the same seed gives bit-identical results serial or parallel.
-``cache=True`` stores the machine code next to this file (or in numba's user cache when that is not writable), so
-only the first import on a machine compiles.
+``cache=True`` stores the machine code in a per-user cache folder (:mod:`soabench.cache`: ``NUMBA_CACHE_DIR``, else
+``~/.cache/soabench/numba``), never inside the installed package, so only the first import on a machine compiles.
 """
 
 from __future__ import annotations
@@ -16,7 +16,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from soabench.cache import configure_numba_cache
+
+configure_numba_cache()  # before numba is imported: compiled kernels go to the per-user cache, not site-packages
+
+from numba import njit  # noqa: E402
 
 _TWO_PI = 2.0 * math.pi
 _LOG_2PI = math.log(_TWO_PI)

@@ -20,19 +20,36 @@ __all__ = ["Recording", "ScenarioConfig", "SceneMap", "load", "load_scenario", "
 
 
 def shipped_nets() -> list[str]:
-    """Names of the networks shipped in the ``sumo_nets`` package (folders holding a ``scenario.toml``)."""
-    root = Path(str(files("sumo_nets")))
+    """Names of the networks shipped in :mod:`soabench.nets` (repository folder ``sumo_nets/``): its folders holding
+    a ``scenario.toml``."""
+    root = Path(str(files("soabench.nets")))
     return sorted(p.name for p in root.iterdir() if p.is_dir() and (p / "scenario.toml").is_file())
+
+
+def _stem(net_file: str) -> str:
+    """``foo`` for ``path/foo.net.xml``."""
+    return Path(net_file).name.removesuffix(".gz").removesuffix(".xml").removesuffix(".net")
+
+
+def _scenario_file_name(path: str | Path) -> str:
+    """``busy`` for ``busy.toml``; the folder's name for a file called ``scenario.toml``."""
+    p = Path(path)
+    return p.resolve().parent.name if p.stem == "scenario" else p.stem
 
 
 def load(net: str, polys: Sequence[str] = (), scenario: str | None = None) -> tuple[SceneMap, ScenarioConfig]:
     """The scene map and the resolved scenario of a network.
 
     Args:
-        net: a shipped name (folder under ``sumo_nets``, which brings its own polygon files and scenario.toml)
+        net: a shipped name (folder under :mod:`soabench.nets`, which brings its own polygon files and scenario.toml)
             or the path of a user ``.net.xml``.
         polys: extra SUMO polygon files (buildings / obstacles), added to the scenario's own.
         scenario: a scenario TOML; default: the shipped net's own, or defaults for a user network.
+
+    The scenario's name (``ScenarioConfig.name``: labels, summaries, the default output folder) is the scenario
+    file's ``[scenario] name``; without one, the file stem of the network the scenario names (``files.net``), else
+    of the scenario file (its folder's name for a ``scenario.toml``); without a scenario file, the shipped name or
+    the ``.net.xml`` file stem.
 
     Defaults for a user network without a scenario (README, "User networks"): world box = the
     network boundary; ego route = the longest shortest route between two fringe edges; vehicle sources / sinks =
@@ -42,8 +59,9 @@ def load(net: str, polys: Sequence[str] = (), scenario: str | None = None) -> tu
 
     shipped = shipped_nets()
     if net in shipped:
-        folder = Path(str(files("sumo_nets"))) / net
+        folder = Path(str(files("soabench.nets"))) / net
         cfg = load_scenario(scenario if scenario is not None else folder / "scenario.toml")
+        user_net = scenario is not None and bool(cfg.net_file)  # the user's scenario names its own network
         if scenario is None or not cfg.net_file:
             nets = sorted(folder.glob("*.net.xml"))
             require(len(nets) == 1, f"shipped net {net!r} must hold exactly one .net.xml, found {len(nets)}")
@@ -52,7 +70,12 @@ def load(net: str, polys: Sequence[str] = (), scenario: str | None = None) -> tu
             if scenario is not None:  # a user scenario on a shipped net keeps the net's own polygons
                 own = load_scenario(folder / "scenario.toml")
                 cfg.poly_files = own.poly_files + cfg.poly_files
-        name = net
+        if scenario is None:
+            name = net
+        elif user_net:
+            name = _stem(cfg.net_file)
+        else:  # the shipped network under a user scenario is no longer the shipped scenario: name it after the file
+            name = _scenario_file_name(scenario)
     else:
         looks_like_path = os.sep in net or net.endswith(".xml") or Path(net).exists()
         require(
@@ -61,7 +84,7 @@ def load(net: str, polys: Sequence[str] = (), scenario: str | None = None) -> tu
         )
         cfg = load_scenario(scenario) if scenario is not None else ScenarioConfig()
         cfg.net_file = str(Path(net).resolve()) if Path(net).exists() else net
-        name = Path(net).name.removesuffix(".xml").removesuffix(".net")
+        name = _stem(net)
     cfg.poly_files = list(cfg.poly_files) + [str(p) for p in polys]
     cfg.name = cfg.name or name
     sumo_net = read_net(cfg.net_file)
