@@ -13,6 +13,7 @@ only on (seed, n) (:mod:`soabench.seeding`): trials 0..N-1 of a longer run are t
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -131,3 +132,42 @@ def check_requested(stored: dict, requested: dict, where: str, keys: set[str] | 
     if more is not None:
         require(more <= MAX_TRIALS, f"trials = {more} exceeds the limit {MAX_TRIALS}")
     return more
+
+
+POINT_NAME = re.compile(r"^[a-z][a-z0-9_]{0,63}$")  #: a sweep point's folder name (never a path)
+
+
+def validate_sweep_meta(meta: Any, where: str, kinds: tuple[str, ...]) -> dict:
+    """Check every value of a ``sweep.json`` that is used (points' names are folder names: no path may sneak in)."""
+    require(isinstance(meta, dict), f"{where} must hold a JSON object")
+    require(meta.get("kind") in kinds, f"{where}: kind = {meta.get('kind')!r} must be one of {', '.join(kinds)}")
+    _string(where, "net", meta.get("net"))
+    polys = meta.get("polys", [])
+    require(isinstance(polys, list), f"{where}: polys = {polys!r} must be a list of file names")
+    for p in polys:
+        _string(where, "polys[]", p)
+    _string(where, "scenario", meta.get("scenario"), optional=True)
+    points = meta.get("points")
+    require(isinstance(points, list) and len(points) >= 1, f"{where}: points must be a non-empty list")
+    names = set()
+    for p in points:
+        require(isinstance(p, dict), f"{where}: every point must be a JSON object")
+        name = p.get("name")
+        require(isinstance(name, str) and bool(POINT_NAME.match(name)), f"{where}: point name {name!r} is not allowed")
+        require(name not in names, f"{where}: point name {name!r} appears twice")
+        names.add(name)
+        try:
+            Config.from_dict(p.get("config")).validate()
+        except SoabenchError as exc:
+            raise SoabenchError(f"{where}: point {name}: {exc}") from None
+    values = meta.get("values", [])
+    require(
+        isinstance(values, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values),
+        f"{where}: values must be a list of numbers",
+    )
+    return meta
+
+
+def flatten_config(cfg: dict) -> dict[str, Any]:
+    """``{"sensor.dt": 1.0, ...}`` from ``Config.to_dict()``."""
+    return _flatten(cfg)

@@ -29,6 +29,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from soabench.cli_checks import check_scheduler_address
 from soabench.config import Config
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment import registry
@@ -87,6 +88,7 @@ class TaskSpec:
     load_fn: LoadFn | None = None
 
 
+MAX_WORKERS = 1024  #: upper bound of --workers (processes or LocalCluster workers on one machine)
 _SCENES: dict[tuple, tuple[Any, Any]] = {}
 _SUMO_LOCK = threading.Lock()
 
@@ -323,7 +325,11 @@ class DaskExecutor:
 def open_executor(workers: int | None = None, scheduler: str | None = None, dask_local: bool = False, n_trials=None):
     """The executor for the given options (see the module docstring); the caller must ``close()`` it."""
     require(not (scheduler and dask_local), "--scheduler and --dask local are alternatives; give one of them")
-    require(workers is None or (isinstance(workers, int) and workers >= 1), f"workers = {workers!r} must be >= 1")
+    require(
+        workers is None or (isinstance(workers, int) and 1 <= workers <= MAX_WORKERS),
+        f"workers = {workers!r} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
+    check_scheduler_address(scheduler)
     if scheduler or dask_local:
         return DaskExecutor(scheduler=scheduler, local_workers=workers)
     n = workers or os.cpu_count() or 1
