@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -86,7 +85,9 @@ def check_out_file(path: str) -> Path:
         require(anc.is_dir(), f"--out {path!r} lies under {str(anc)!r}, which is a file, not a folder")
         raise SoabenchError(f"output folder {str(parent)!r} does not exist for {path!r}")
     require(parent.is_dir(), f"--out {path!r} lies under {str(parent)!r}, which is a file, not a folder")
-    require(os.access(parent, os.W_OK | os.X_OK), f"--out {path!r}: the folder {str(parent)!r} is not writable")
+    from soabench.experiment.ownership import probe_writable
+
+    probe_writable(parent, f"--out {path!r}: the folder {str(parent)!r}")
     return out
 
 

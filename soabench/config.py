@@ -355,6 +355,10 @@ class Config:
         self.birth.validate()
         self.metrics.validate()
         self.experiment.validate()
+        require(
+            self.experiment.duration >= self.sensor.dt,
+            f"duration = {self.experiment.duration!r} is shorter than one sensor period sensor.dt = {self.sensor.dt!r}",
+        )
         return self
 
     def to_dict(self) -> dict[str, dict[str, Any]]:

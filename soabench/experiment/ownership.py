@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import socket
+import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -36,18 +37,28 @@ def resolve(path: str | os.PathLike) -> Path:
         raise SoabenchError(f"cannot resolve the path {str(path)!r}: {exc}") from None
 
 
+def probe_writable(folder: Path, message: str) -> None:
+    """Create and remove a temporary file in ``folder`` (permission bits do not tell for root or read-only mounts)."""
+    try:
+        fd, name = tempfile.mkstemp(prefix=".soabench-probe-", dir=folder)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        raise SoabenchError(f"{message} is not writable ({exc.strerror or exc})") from None
+
+
 def check_writable_target(path: Path, what: str) -> None:
     """``path`` may be created as a folder: it is a folder already, or its first existing ancestor is a writable
     folder (not a file)."""
     if path.exists():
         require(path.is_dir(), f"{what} {str(path)!r} is a file, not a folder; give a folder path")
-        require(os.access(path, os.W_OK | os.X_OK), f"{what} {str(path)!r} is not writable")
+        probe_writable(path, f"{what} {str(path)!r}")
         return
     parent = path.parent
     while not parent.exists():
         parent = parent.parent
     require(parent.is_dir(), f"{what} {str(path)!r} lies under {str(parent)!r}, which is a file, not a folder")
-    require(os.access(parent, os.W_OK | os.X_OK), f"{what} {str(path)!r}: the folder {str(parent)!r} is not writable")
+    probe_writable(parent, f"{what} {str(path)!r}: the folder {str(parent)!r}")
 
 
 def check_new_folder(path: Path, marker: str, what: str, resume_hint: str) -> None:
@@ -95,12 +106,16 @@ class FolderLock:
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise SoabenchError(f"cannot create the {self.what} {str(self.folder)!r}: {exc}") from None
+            raise SoabenchError(
+                f"the {self.what} {str(self.folder)!r} is not writable ({exc.strerror or exc})"
+            ) from None
         for _ in range(10):
             try:
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
             except OSError as exc:
-                raise SoabenchError(f"cannot write to the {self.what} {str(self.folder)!r}: {exc}") from None
+                raise SoabenchError(
+                    f"the {self.what} {str(self.folder)!r} is not writable ({exc.strerror or exc})"
+                ) from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:

@@ -272,6 +272,7 @@ class DaskExecutor:
         else:
             self.address = scheduler
             self.name = f"dask({scheduler})"
+            _probe_scheduler(scheduler)
         try:
             self.client = distributed.Client(self.address, timeout="30s", set_as_default=False)
         except OSError as exc:
@@ -320,6 +321,19 @@ class DaskExecutor:
         if self._cluster is not None:
             self._cluster.close()
             self._cluster = None
+
+
+def _probe_scheduler(address: str, timeout: float = 10.0) -> None:
+    """A plain TCP connect to a ``tcp://`` scheduler first: a refused or unroutable address fails in a moment
+    with one line, instead of Dask's connection retries until its timeout."""
+    scheme, _, rest = address.rpartition("://")
+    if scheme not in ("", "tcp"):
+        return
+    host, _, port = rest.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except (OSError, ValueError) as exc:
+        raise SoabenchError(f"cannot connect to the Dask scheduler {address!r}: {exc}") from None
 
 
 def open_executor(workers: int | None = None, scheduler: str | None = None, dask_local: bool = False, n_trials=None):
