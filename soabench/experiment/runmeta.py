@@ -109,12 +109,13 @@ def config_differences(stored: dict, requested: dict, keys: set[str] | None = No
     return [(k, a.get(k), b.get(k)) for k in names if not _same(a.get(k), b.get(k))]
 
 
-def check_requested(stored: dict, requested: dict, where: str, keys: set[str] | None = None) -> int | None:
-    """Refuse every difference between ``requested`` and ``stored`` (configs as dicts) except more trials.
+def check_requested(stored: dict, requested: dict, where: str) -> int | None:
+    """Refuse every difference between the keys of ``requested`` and ``stored`` (flat ``{dotted key: value}``
+    dicts) except more trials.
 
-    Returns the new trial count when the only difference is ``experiment.trials`` growing, else None.
+    Returns the new trial count when ``experiment.trials`` grows (and nothing else differs), else None.
     """
-    diffs = config_differences(stored, requested, keys)
+    diffs = config_differences(stored, requested, set(requested))
     more = None
     rest = []
     for key, old, new in diffs:
