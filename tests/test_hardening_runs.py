@@ -88,17 +88,32 @@ def poison_module(tmp_path, monkeypatch):
     return marker
 
 
-@pytest.mark.parametrize(
-    "changes",
-    [
-        {"trial_kind": "poison_marker:run"},
-        {"scene_loader": "poison_marker:run"},
-        {"trial_kind": "os:system"},
-        {"trial_kind": ..., "scene_loader": ..., "trial_fn": "poison_marker:run", "load_fn": None},  # old format
-        {"trial_kind": ..., "scene_loader": ..., "trial_fn": None, "load_fn": "poison_marker:run"},
-        {"trial_kind": ["poison_marker", "run"]},
-    ],
-)
+#: run.json edits that name code: each must be refused without importing or calling anything
+POISONS = [
+    {"trial_kind": "poison_marker:run"},
+    {"scene_loader": "poison_marker:run"},
+    {"trial_kind": "os:system"},
+    {"trial_kind": ..., "scene_loader": ..., "trial_fn": "poison_marker:run", "load_fn": None},  # old format
+    {"trial_kind": ..., "scene_loader": ..., "trial_fn": None, "load_fn": "poison_marker:run"},
+    {"trial_kind": ["poison_marker", "run"]},
+]
+#: run.json values that are not what a run may hold, and the words of their error
+BAD_META = [
+    ({"net": 5}, "net = 5 must be a non-empty string"),
+    ({"polys": "a.xml"}, "polys = 'a.xml' must be a list"),
+    ({"scenario": ["x"]}, "scenario = ['x']"),
+    ({"save_estimates": "yes"}, "save_estimates = 'yes' must be true or false"),
+    ({"trials": 7}, "trials = 7 must equal config.experiment.trials = 3"),
+    ({"format": 99}, "unknown format"),
+    ({"config": {"filter": {"gate": "no"}}}, "filter.gate = 'no' must be a boolean"),
+    ({"config": {"birth": {"rho": [1.0, float("inf"), 1.0]}}}, "birth.rho"),
+    ({"config": {"sensor": {"r_max": 1e300}}}, "sensor.r_max"),
+    ({"config": {"experiment": {"trials": 10**9}}}, "[1, 100000]"),
+    ({"config": "everything"}, "a configuration must be a table"),
+]
+
+
+@pytest.mark.parametrize("changes", POISONS)
 def test_a_poisoned_run_folder_runs_nothing(tmp_path, capsys, poison_module, changes):
     run = make_run(tmp_path / "run")
     for p in (run / "trials").glob("*.json"):
@@ -123,22 +138,7 @@ def test_a_poisoned_sweep_point_name_is_refused(tmp_path, capsys):
     assert not (tmp_path / "evil").exists()
 
 
-@pytest.mark.parametrize(
-    ("changes", "needle"),
-    [
-        ({"net": 5}, "net = 5 must be a non-empty string"),
-        ({"polys": "a.xml"}, "polys = 'a.xml' must be a list"),
-        ({"scenario": ["x"]}, "scenario = ['x']"),
-        ({"save_estimates": "yes"}, "save_estimates = 'yes' must be true or false"),
-        ({"trials": 7}, "trials = 7 must equal config.experiment.trials = 3"),
-        ({"format": 99}, "unknown format"),
-        ({"config": {"filter": {"gate": "no"}}}, "filter.gate = 'no' must be a boolean"),
-        ({"config": {"birth": {"rho": [1.0, float("inf"), 1.0]}}}, "birth.rho"),
-        ({"config": {"sensor": {"r_max": 1e300}}}, "sensor.r_max"),
-        ({"config": {"experiment": {"trials": 10**9}}}, "[1, 100000]"),
-        ({"config": "everything"}, "a configuration must be a table"),
-    ],
-)
+@pytest.mark.parametrize(("changes", "needle"), BAD_META)
 def test_every_run_json_value_is_validated(tmp_path, capsys, changes, needle):
     run = make_run(tmp_path / "run")
     edit_run_json(run, **changes)
