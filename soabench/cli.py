@@ -332,7 +332,7 @@ def _requested(args: argparse.Namespace, cfg: Config) -> dict:
     return cli_checks.requested_values(cfg, cli_checks.requested_keys(args, explicit), args, explicit)
 
 
-def _report_outcome(outcome) -> int:
+def _report_outcome(outcome, finish: str = "soabench run --resume {dir}") -> int:
     if getattr(outcome, "summary_markdown", None):
         print(outcome.summary_markdown)
     if outcome.complete:
@@ -340,7 +340,7 @@ def _report_outcome(outcome) -> int:
         return 0
     print(
         f"run incomplete: {outcome.n_missing} trial(s) missing in {outcome.run_dir}; "
-        f"finish with: soabench run --resume {outcome.run_dir}",
+        f"finish with: {finish.format(dir=outcome.run_dir)}",
         file=sys.stderr,
     )
     return 1
@@ -356,7 +356,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if args.values is not None or args.offsets is not None:
             requested["values"] = list(args.values if args.values is not None else args.offsets)
         outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, requested=requested, **kwargs)
-        return _report_outcome(outcome)
+        return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
     if args.kind == "clutter":
         require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep clutter`")
         values = args.values or (0.5, 3.0, 5.0)
@@ -367,7 +367,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from soabench.experiment.sweep import run_sweep
 
     outcome = run_sweep(args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out, **kwargs)
-    return _report_outcome(outcome)
+    return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -394,7 +394,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         explicit=keys,
         **kwargs,
     )
-    return _report_outcome(outcome)
+    return _report_outcome(outcome, "soabench study --out {dir}")
 
 
 COMMANDS = {
