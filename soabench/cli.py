@@ -14,8 +14,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from soabench import cli_checks
 from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config, filter_config_for_mode, load_config
-from soabench.errors import SoabenchError, require
+from soabench.errors import Interrupted, SoabenchError, require
 
 EXIT_USAGE = 2
 
@@ -227,6 +228,7 @@ def _snapshot(args: argparse.Namespace, duration: float | None, include_end: boo
     """
     require(args.seed >= 0, f"--seed {args.seed} must be >= 0")
     require(args.trial >= 0, f"--trial {args.trial} must be >= 0")
+    cli_checks.check_time("--time/--duration", duration)
     cfg = load_config(args.config)
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
@@ -249,11 +251,7 @@ def _observe(recording, scene, cfg: Config, seeds):
 
 
 def _prepare_out(path: str) -> Path:
-    out = Path(path)
-    require(
-        out.parent == Path("") or out.parent.is_dir(), f"output folder {str(out.parent)!r} does not exist for {path!r}"
-    )
-    return out
+    return cli_checks.check_out_file(path)
 
 
 def _save_figure(fig, out: Path) -> None:
@@ -343,6 +341,7 @@ def _executor_kwargs(args: argparse.Namespace) -> dict:
     require(
         not (args.scheduler and args.dask), "--scheduler and --dask local are alternatives; give one of them, not both"
     )
+    cli_checks.check_scheduler_address(args.scheduler)
     return dict(
         workers=args.workers,
         scheduler=args.scheduler,
@@ -355,21 +354,27 @@ def _executor_kwargs(args: argparse.Namespace) -> dict:
 
 def cmd_run(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
-    if args.resume is not None:
-        require(args.resume.is_dir(), f"--resume {str(args.resume)!r} is not a run folder")
-        cfg = None
-    else:
-        cfg = _config_from_args(args)
+    cfg = _config_from_args(args)  # also validates the flags given with --resume
     from soabench.experiment.runner import run_experiment
 
-    if cfg is None:
-        outcome = run_experiment(None, args.net, tuple(args.poly), args.scenario, resume=args.resume, **kwargs)
+    if args.resume is not None:
+        require(args.out is None, "--out and --resume are alternatives: --resume continues the run in its folder")
+        requested = _requested(args, cfg)
+        outcome = run_experiment(
+            None, args.net, tuple(args.poly), args.scenario, resume=args.resume, requested=requested, **kwargs
+        )
     else:
         outcome = run_experiment(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, **kwargs)
     return _report_outcome(outcome)
 
 
-def _report_outcome(outcome) -> int:
+def _requested(args: argparse.Namespace, cfg: Config) -> dict:
+    """What a resume asked for explicitly (flags, config file keys, net/poly/scenario), for the conflict check."""
+    explicit = getattr(args, "explicit", set())
+    return cli_checks.requested_values(cfg, cli_checks.requested_keys(args, explicit), args, explicit)
+
+
+def _report_outcome(outcome, finish: str = "soabench run --resume {dir}") -> int:
     if getattr(outcome, "summary_markdown", None):
         print(outcome.summary_markdown)
     if outcome.complete:
@@ -377,7 +382,7 @@ def _report_outcome(outcome) -> int:
         return 0
     print(
         f"run incomplete: {outcome.n_missing} trial(s) missing in {outcome.run_dir}; "
-        f"finish with: soabench run --resume {outcome.run_dir}",
+        f"finish with: {finish.format(dir=outcome.run_dir)}",
         file=sys.stderr,
     )
     return 1
@@ -386,11 +391,14 @@ def _report_outcome(outcome) -> int:
 def cmd_sweep(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
     if args.resume is not None:
-        require(args.resume.is_dir(), f"--resume {str(args.resume)!r} is not a sweep folder")
+        require(args.out is None, "--out and --resume are alternatives: --resume continues the sweep in its folder")
         from soabench.experiment.sweep import run_sweep
 
-        outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, **kwargs)
-        return _report_outcome(outcome)
+        requested = {"kind": args.kind, **_requested(args, _config_from_args(args))}
+        if args.values is not None or args.offsets is not None:
+            requested["values"] = list(args.values if args.values is not None else args.offsets)
+        outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, requested=requested, **kwargs)
+        return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
     if args.kind == "clutter":
         require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep clutter`")
         values = args.values or (0.5, 3.0, 5.0)
@@ -401,7 +409,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from soabench.experiment.sweep import run_sweep
 
     outcome = run_sweep(args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out, **kwargs)
-    return _report_outcome(outcome)
+    return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -417,10 +425,18 @@ def cmd_study(args: argparse.Namespace) -> int:
 
     for key in ("save_estimates", "fail_fast"):
         kwargs.pop(key)
+    explicit = getattr(args, "explicit", set())
+    keys = cli_checks.requested_keys(args, explicit) | {k for k in ("sweep_trials", "births_trials") if k in explicit}
     outcome = run_study(
-        cfg, args.net, out=args.out, sweep_trials=args.sweep_trials, births_trials=args.births_trials, **kwargs
+        cfg,
+        args.net,
+        out=args.out,
+        sweep_trials=args.sweep_trials,
+        births_trials=args.births_trials,
+        explicit=keys,
+        **kwargs,
     )
-    return _report_outcome(outcome)
+    return _report_outcome(outcome, "soabench study --out {dir}")
 
 
 COMMANDS = {
@@ -459,7 +475,9 @@ def _join_negative_values(argv: Sequence[str]) -> list[str]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``soabench`` console script."""
     parser = build_parser()
-    args = parser.parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
+    argv = _join_negative_values(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(argv)
+    args.explicit = cli_checks.explicit_dests(parser, argv)
     try:
         return COMMANDS[args.command](args)
     except BrokenPipeError:  # e.g. `soabench run | head`: the reader left; say nothing more
@@ -468,9 +486,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SoabenchError as exc:
         print(f"soabench: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except Interrupted as exc:  # the message says what is on disk and how to finish
+        print(f"soabench: {exc}", file=sys.stderr)
+        return 130
     except KeyboardInterrupt:
         print("soabench: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:  # a file system refusal the checks could not foresee (disk full, a race): one line
+        where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
+        print(f"soabench: error: cannot read or write{where}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":  # pragma: no cover

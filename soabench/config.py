@@ -32,25 +32,67 @@ BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "atbm", "gmbm")
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
 
 
+MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 10^5 trials of 100 s are ~6 months of CPU
+MAX_SEED = 2**63 - 1  #: largest base seed
+
+
 def _one_of(name: str, value: Any, allowed: tuple) -> None:
     require(value in allowed, f"{name} = {value!r} is not allowed; choose one of {', '.join(map(repr, allowed))}")
 
 
-def _in_range(name: str, value: float, lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> None:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if ok:
-        ok = (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _in_range(
+    name: str, value: float, lo: float, hi: float = 1e6, lo_open: bool = False, hi_open: bool = False
+) -> None:
+    """``value`` is a finite number in the interval; the message says the expected type or the allowed interval."""
+    require(_is_number(value), f"{name} = {value!r} must be a number, not {type(value).__name__}")
+    ok = math.isfinite(value) and (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
     lb = "(" if lo_open else "["
     rb = ")" if hi_open else "]"
-    require(ok, f"{name} = {value!r} is out of range; allowed: {lb}{lo}, {hi}{rb}")
+    require(ok, f"{name} = {value!r} is out of range; allowed: {lb}{lo:g}, {hi:g}{rb}")
 
 
-def _positive(name: str, value: float) -> None:
-    _in_range(name, value, 0.0, math.inf, lo_open=True, hi_open=True)
+def _int_range(name: str, value: int, lo: int, hi: int) -> None:
+    """``value`` is an integer (not a boolean) in [lo, hi]."""
+    require(
+        isinstance(value, int) and not isinstance(value, bool),
+        f"{name} = {value!r} must be an integer, not {type(value).__name__}",
+    )
+    require(lo <= value <= hi, f"{name} = {value!r} is out of range; allowed: integers in [{lo}, {hi}]")
 
 
-def _non_negative(name: str, value: float) -> None:
-    _in_range(name, value, 0.0, math.inf, hi_open=True)
+def _positive(name: str, value: float, hi: float = 1e6) -> None:
+    _in_range(name, value, 0.0, hi, lo_open=True)
+
+
+def _non_negative(name: str, value: float, hi: float = 1e6) -> None:
+    _in_range(name, value, 0.0, hi)
+
+
+def _check_type(name: str, default: Any, value: Any) -> Any:
+    """``value`` from a file, checked against the type of the field's ``default``; ints become floats for floats."""
+    if default is None and value is None:  # an unset Optional field (JSON null in a run file)
+        return None
+    if isinstance(default, bool):
+        require(isinstance(value, bool), f"{name} = {value!r} must be a boolean (true or false)")
+    elif default is None or isinstance(default, int):  # Optional[int] fields default to None
+        require(
+            isinstance(value, int) and not isinstance(value, bool),
+            f"{name} = {value!r} must be an integer, not {type(value).__name__}",
+        )
+    elif isinstance(default, float):
+        require(_is_number(value), f"{name} = {value!r} must be a number, not {type(value).__name__}")
+        return float(value)
+    elif isinstance(default, str):
+        require(isinstance(value, str), f"{name} = {value!r} must be a string, not {type(value).__name__}")
+    elif isinstance(default, tuple):
+        require(isinstance(value, (list, tuple)), f"{name} = {value!r} must be a list")
+        item = default[0] if default else 0.0
+        return tuple(_check_type(f"{name}[]", item, v) for v in value)
+    return value
 
 
 @dataclass
@@ -80,26 +122,27 @@ class SensorConfig:
         return math.radians(self.sigma_b_deg)
 
     def validate(self, sumo_step: float | None = None) -> None:
-        _positive("sensor.dt", self.dt)
+        _positive("sensor.dt", self.dt, hi=60.0)
         if sumo_step is not None:
             ratio = self.dt / sumo_step
             require(
                 abs(ratio - round(ratio)) < 1e-9 and round(ratio) >= 1,
                 f"sensor.dt = {self.dt!r} must be a positive multiple of the SUMO step {sumo_step!r} s",
             )
-        _non_negative("sensor.r_min", self.r_min)
+        _in_range("sensor.r_min", self.r_min, 0.0, 1e4, hi_open=True)
+        _in_range("sensor.r_max", self.r_max, 0.0, 1e4, lo_open=True)
         require(
-            isinstance(self.r_max, (int, float)) and self.r_max > self.r_min,
+            self.r_max > self.r_min,
             f"sensor.r_max = {self.r_max!r} must exceed r_min = {self.r_min!r} (need 0 <= r_min < r_max)",
         )
         _in_range("sensor.fov_deg", self.fov_deg, 0.0, 360.0, lo_open=True)
         _in_range("sensor.p_D", self.p_D, 0.0, 1.0)
-        _positive("sensor.sigma_r", self.sigma_r)
-        _positive("sensor.sigma_b_deg", self.sigma_b_deg)
-        _non_negative("sensor.lambda_c", self.lambda_c)
+        _positive("sensor.sigma_r", self.sigma_r, hi=1e3)
+        _positive("sensor.sigma_b_deg", self.sigma_b_deg, hi=180.0)
+        _non_negative("sensor.lambda_c", self.lambda_c, hi=1e4)
         _one_of("sensor.clutter_space", self.clutter_space, ("polar", "cartesian"))
         _one_of("sensor.visibility_points", self.visibility_points, (1, 3))
-        _non_negative("sensor.visibility_offset", self.visibility_offset)
+        _non_negative("sensor.visibility_offset", self.visibility_offset, hi=100.0)
 
 
 @dataclass
@@ -119,6 +162,9 @@ class FilterConfig:
     extraction: str = "vo_ma"  #: "vo_ma" (w > 0.5, floor(w + 0.5) copies) or "top_n" (ablation)
     occlusion_pd: bool = False  #: line-of-sight gate in p_D (§4.4); set by the "dynamic+occ" mode
     max_undetected_birth_age: int | None = None  #: prune n_det = 0 components older than this (§4.4)
+    #: non-finite measurements, ego poses or birth components given to ``GMPHDFilter.step``: "raise" (default: they
+    #: mean a broken input upstream) or "drop" (dropped and counted in ``StepResult.n_dropped``; for real sensor data)
+    nonfinite: str = "raise"
     # dynamic probabilities (§4.2-4.5)
     beta_factor: float = 1.1  #: mean-preserving variance inflation f
     theta_min: float = 2.0  #: inflation guard
@@ -130,28 +176,23 @@ class FilterConfig:
 
     def validate(self) -> None:
         _one_of("filter.form", self.form, ("ekf", "ukf"))
-        _non_negative("filter.sigma_a", self.sigma_a)
+        _non_negative("filter.sigma_a", self.sigma_a, hi=100.0)
         _in_range("filter.p_S", self.p_S, 0.0, 1.0)
         _in_range("filter.p_D", self.p_D, 0.0, 1.0)
         _in_range("filter.prune_T", self.prune_T, 0.0, 1.0, hi_open=True)
         _positive("filter.merge_U", self.merge_U)
-        require(
-            isinstance(self.J_max, int) and not isinstance(self.J_max, bool) and self.J_max >= 1,
-            f"filter.J_max = {self.J_max!r} must be an integer >= 1",
-        )
+        _int_range("filter.J_max", self.J_max, 1, 1_000_000)
         _in_range("filter.gate_prob", self.gate_prob, 0.0, 1.0, lo_open=True, hi_open=True)
         _non_negative("filter.extract_thr", self.extract_thr)
         _one_of("filter.extraction", self.extraction, ("vo_ma", "top_n"))
+        _one_of("filter.nonfinite", self.nonfinite, ("raise", "drop"))
         if self.max_undetected_birth_age is not None:
-            require(
-                isinstance(self.max_undetected_birth_age, int) and self.max_undetected_birth_age >= 0,
-                f"filter.max_undetected_birth_age = {self.max_undetected_birth_age!r} must be an integer >= 0",
-            )
-        _in_range("filter.beta_factor", self.beta_factor, 1.0, math.inf, hi_open=True)
+            _int_range("filter.max_undetected_birth_age", self.max_undetected_birth_age, 0, 10**9)
+        _in_range("filter.beta_factor", self.beta_factor, 1.0, 1e3)
         _positive("filter.theta_min", self.theta_min)
-        _positive("filter.n_D", self.n_D)
+        _positive("filter.n_D", self.n_D, hi=1e9)
         _in_range("filter.mu_D0", self.mu_D0, 0.0, 1.0, lo_open=True, hi_open=True)
-        _positive("filter.n_S", self.n_S)
+        _positive("filter.n_S", self.n_S, hi=1e9)
         _in_range("filter.mu_S0", self.mu_S0, 0.0, 1.0, lo_open=True, hi_open=True)
         _in_range("filter.p_S_max", self.p_S_max, 0.0, 1.0, lo_open=True, hi_open=True)
 
@@ -203,43 +244,39 @@ class BirthConfig:
     sigma_gm: float = 3.0  #: GMBM std (m)
 
     def validate(self) -> None:
-        _non_negative("birth.N_hat", self.N_hat)
-        _positive("birth.sigma_v_birth", self.sigma_v_birth)
-        _non_negative("birth.delta_in", self.delta_in)
-        _positive("birth.delta_r", self.delta_r)
-        require(isinstance(self.L, int) and self.L >= 0, f"birth.L = {self.L!r} must be an integer >= 0")
-        _positive("birth.sigma_par", self.sigma_par)
-        _positive("birth.sigma_perp", self.sigma_perp)
+        _non_negative("birth.N_hat", self.N_hat, hi=1e4)
+        _positive("birth.sigma_v_birth", self.sigma_v_birth, hi=100.0)
+        _non_negative("birth.delta_in", self.delta_in, hi=1e4)
+        _positive("birth.delta_r", self.delta_r, hi=1e4)
+        _int_range("birth.L", self.L, 0, 1000)
+        _positive("birth.sigma_par", self.sigma_par, hi=1e4)
+        _positive("birth.sigma_perp", self.sigma_perp, hi=1e4)
         _one_of("birth.ray_start", self.ray_start, ("tangent", "centroid"))
         _one_of("birth.sem_mode", self.sem_mode, ("poisson", "hex", "dbscan", "uniform"))
         _one_of("birth.sem_resample", self.sem_resample, ("trial", "step"))
-        _positive("birth.d_min", self.d_min)
-        _positive("birth.sigma_sem", self.sigma_sem)
-        require(
-            isinstance(self.poisson_k, int) and self.poisson_k >= 1,
-            f"birth.poisson_k = {self.poisson_k!r} must be >= 1",
-        )
-        _positive("birth.dbscan_eps", self.dbscan_eps)
-        require(
-            isinstance(self.dbscan_min_samples, int) and self.dbscan_min_samples >= 1,
-            f"birth.dbscan_min_samples = {self.dbscan_min_samples!r} must be an integer >= 1",
-        )
-        _positive("birth.d_fov", self.d_fov)
-        _positive("birth.sigma_fov", self.sigma_fov)
+        _in_range("birth.d_min", self.d_min, 0.5, 1e4)  # spacings: >= 0.5 m bounds the sample count
+        _positive("birth.sigma_sem", self.sigma_sem, hi=1e4)
+        _int_range("birth.poisson_k", self.poisson_k, 1, 1000)
+        _positive("birth.dbscan_eps", self.dbscan_eps, hi=1e4)
+        _int_range("birth.dbscan_min_samples", self.dbscan_min_samples, 1, 1_000_000)
+        _in_range("birth.d_fov", self.d_fov, 0.5, 1e4)
+        _positive("birth.sigma_fov", self.sigma_fov, hi=1e4)
         _one_of("birth.fov_boundary", self.fov_boundary, ("range", "visible"))
         require(
-            len(self.rho) == 3 and all(isinstance(r, (int, float)) and r >= 0 for r in self.rho) and sum(self.rho) > 0,
-            f"birth.rho = {list(self.rho)!r} must be three non-negative numbers (occl, sem, fov), not all zero",
+            len(self.rho) == 3
+            and all(_is_number(r) and math.isfinite(r) and 0 <= r <= 1e6 for r in self.rho)
+            and sum(self.rho) > 0,
+            f"birth.rho = {list(self.rho)!r} must be three finite numbers in [0, 1e6] (occl, sem, fov), not all zero",
         )
         _one_of("birth.rho_norm", self.rho_norm, ("component", "source"))
         _one_of("birth.pubm_space", self.pubm_space, ("meas", "cart"))
         _in_range("birth.pubm_hybrid", self.pubm_hybrid, 0.0, 1.0)
-        _positive("birth.d_u", self.d_u)
-        _positive("birth.sigma_u", self.sigma_u)
+        _in_range("birth.d_u", self.d_u, 0.5, 1e4)
+        _positive("birth.sigma_u", self.sigma_u, hi=1e4)
         _one_of("birth.ubm_extent", self.ubm_extent, ("fov", "workspace"))
         _one_of("birth.atbm", self.atbm, ("same_scan", "prev_scan"))
         _one_of("birth.atbm_alloc", self.atbm_alloc, ("uniform", "unexplained"))
-        _positive("birth.sigma_gm", self.sigma_gm)
+        _positive("birth.sigma_gm", self.sigma_gm, hi=1e4)
 
 
 @dataclass
@@ -259,18 +296,13 @@ class MetricsConfig:
 
     def validate(self) -> None:
         _positive("metrics.ospa_c", self.ospa_c)
-        _in_range("metrics.ospa_p", self.ospa_p, 1.0, math.inf, hi_open=True)
+        _in_range("metrics.ospa_p", self.ospa_p, 1.0, 100.0)
         _positive("metrics.gospa_c", self.gospa_c)
-        _in_range("metrics.gospa_p", self.gospa_p, 1.0, math.inf, hi_open=True)
+        _in_range("metrics.gospa_p", self.gospa_p, 1.0, 100.0)
         _one_of("metrics.gt_set", self.gt_set, ("fov", "visible", "scene"))
         _positive("metrics.d_gate", self.d_gate)
-        require(
-            isinstance(self.g_min, int) and self.g_min >= 1, f"metrics.g_min = {self.g_min!r} must be an integer >= 1"
-        )
-        require(
-            isinstance(self.confirm_n, int) and self.confirm_n >= 1,
-            f"metrics.confirm_n = {self.confirm_n!r} must be an integer >= 1",
-        )
+        _int_range("metrics.g_min", self.g_min, 1, 1_000_000)
+        _int_range("metrics.confirm_n", self.confirm_n, 1, 1_000_000)
         _one_of("metrics.censored", self.censored, ("exclude", "lower_bound"))
         _one_of("metrics.ddof", self.ddof, (0, 1))
 
@@ -287,11 +319,8 @@ class ExperimentConfig:
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
 
     def validate(self) -> None:
-        require(
-            isinstance(self.trials, int) and not isinstance(self.trials, bool) and self.trials >= 1,
-            f"trials = {self.trials!r} must be an integer >= 1",
-        )
-        _positive("duration", self.duration)
+        _int_range("trials", self.trials, 1, MAX_TRIALS)
+        _positive("duration", self.duration, hi=86400.0)
         require(len(self.models) >= 1, "models must name at least one birth model")
         for m in self.models:
             _one_of("model", m, BIRTH_MODEL_NAMES)
@@ -301,11 +330,8 @@ class ExperimentConfig:
             _one_of("probability mode", p, PROBABILITY_MODES)
         require(len(self.clutter) >= 1, "clutter must give at least one rate")
         for lam in self.clutter:
-            _non_negative("clutter", lam)
-        require(
-            isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0,
-            f"seed = {self.seed!r} must be an integer >= 0",
-        )
+            _non_negative("clutter", lam, hi=1e4)
+        _int_range("seed", self.seed, 0, MAX_SEED)
 
 
 @dataclass
@@ -319,11 +345,20 @@ class Config:
     experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
 
     def validate(self, sumo_step: float | None = None) -> Config:
+        for sec in dataclasses.fields(self):  # exact types first (a boolean is not an integer, "no" is not false)
+            obj = getattr(self, sec.name)
+            for f in dataclasses.fields(obj):
+                default = f.default_factory() if f.default is dataclasses.MISSING else f.default
+                _check_type(f"{sec.name}.{f.name}", default, getattr(obj, f.name))
         self.sensor.validate(sumo_step)
         self.filter.validate()
         self.birth.validate()
         self.metrics.validate()
         self.experiment.validate()
+        require(
+            self.experiment.duration >= self.sensor.dt,
+            f"duration = {self.experiment.duration!r} is shorter than one sensor period sensor.dt = {self.sensor.dt!r}",
+        )
         return self
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
@@ -348,16 +383,9 @@ class Config:
                     key in fields,
                     f"unknown config key {sec}.{key}; allowed: {', '.join(sorted(fields))}",
                 )
-                default = getattr(obj, key)
-                if isinstance(default, tuple):
-                    require(
-                        isinstance(value, (list, tuple)),
-                        f"{sec}.{key} = {value!r} must be a list",
-                    )
-                    value = tuple(value)
-                elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-                    value = float(value)
-                setattr(obj, key, value)
+                f = fields[key]
+                default = f.default_factory() if f.default is dataclasses.MISSING else f.default
+                setattr(obj, key, _check_type(f"{sec}.{key}", default, value))
         return cfg
 
 
@@ -384,6 +412,10 @@ def load_config(path: str | Path | None, base: Config | None = None) -> Config:
     require(p.is_file(), f"config file {str(p)!r} does not exist")
     try:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise SoabenchError(f"config file {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+    except OSError as exc:
+        raise SoabenchError(f"cannot read the config file {str(p)!r}: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise SoabenchError(f"config file {str(p)!r} is not valid TOML: {exc}") from None
     return Config.from_dict(data, base).validate()

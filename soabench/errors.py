@@ -14,3 +14,7 @@ def require(condition: bool, message: str) -> None:
     """Raise :class:`SoabenchError` with ``message`` unless ``condition`` holds."""
     if not condition:
         raise SoabenchError(message)
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during a run: the message says what is on disk and how to finish (printed as one line by the CLI)."""

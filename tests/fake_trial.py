@@ -192,3 +192,17 @@ def crashing_trial(trial, config, scene, scenario, *, save_estimates=False):
         os._exit(13)
     time.sleep(0.05)
     return fake_trial(trial, config, scene, scenario, save_estimates=save_estimates)
+
+
+# the fakes are registered trial kinds / scene loaders, so a run made with them can be resumed by name (a run
+# folder names what it needs; it never spells out an import path)
+from soabench.experiment.registry import register_scene_loader, register_trial_kind  # noqa: E402
+
+register_scene_loader("fake-load", fake_load)
+for _name, _fn in (
+    ("fake", fake_trial),
+    ("fake-slow", slow_trial),
+    ("fake-failing", failing_trial),
+    ("fake-crashing", crashing_trial),
+):
+    register_trial_kind(_name, _fn)

@@ -14,7 +14,6 @@ atomic file per finished trial (:mod:`soabench.experiment.store`), so workers ne
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import os
 import platform
 import socket
@@ -30,19 +29,26 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from soabench.cli_checks import check_scheduler_address
 from soabench.config import Config
-from soabench.errors import SoabenchError, require
+from soabench.errors import Interrupted, SoabenchError, require
+from soabench.experiment import registry
+from soabench.experiment.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.progress import Progress
 from soabench.experiment.provenance import REPRODUCTION_TOLERANCE, platform_info
+from soabench.experiment.runmeta import check_requested, validate_run_meta
 from soabench.experiment.store import (
     EPISODE_COLUMNS,
+    RUN_FILE,
     STEP_COLUMNS,
     TIMING_COLUMNS,
     TRIAL_COLUMNS,
     RunStore,
     pack_table,
     to_jsonable,
+    write_json_atomic,
 )
+from soabench.experiment.workers import init_worker
 from soabench.seeding import trial_seeds
 
 TrialFn = Callable[..., Any]
@@ -57,8 +63,9 @@ class RunOutcome:
     ``complete`` is True when every trial has a result. When every trial was attempted but some failed, the
     CSV files, summary and figures cover the successful trials and list the failures, ``complete`` is False and
     ``n_missing`` counts the failed trials (``--resume`` retries them). When trials were never attempted
-    (``--fail-fast``) no CSV or summary is written. Ctrl-C re-raises ``KeyboardInterrupt`` after saying how to
-    resume; the trials finished so far stay on disk.
+    (``--fail-fast``) no CSV or summary is written. Ctrl-C (at any stage, the report included) raises
+    :class:`~soabench.errors.Interrupted`, a ``KeyboardInterrupt`` whose message says how to resume; the trials
+    finished so far stay on disk.
     """
 
     run_dir: Path
@@ -83,20 +90,17 @@ class TaskSpec:
     load_fn: LoadFn | None = None
 
 
+MAX_WORKERS = 1024  #: upper bound of --workers (processes or LocalCluster workers on one machine)
 _SCENES: dict[tuple, tuple[Any, Any]] = {}
 _SUMO_LOCK = threading.Lock()
 
 
 def _default_trial_fn() -> TrialFn:
-    from soabench.experiment.trial import run_trial
-
-    return run_trial
+    return registry.trial_kind(registry.DEFAULT_TRIAL_KIND)
 
 
 def _default_load_fn() -> LoadFn:
-    from soabench.scenario import load
-
-    return load
+    return registry.scene_loader(registry.DEFAULT_SCENE_LOADER)
 
 
 def load_scene_cached(net: str, polys: Sequence[str], scenario: str | None, load_fn: LoadFn | None = None):
@@ -185,18 +189,22 @@ class PoolExecutor:
 
     def _get_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.n_workers)
+            self._pool = ProcessPoolExecutor(max_workers=self.n_workers, initializer=init_worker)
         return self._pool
 
     def results(self, spec: TaskSpec, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
         base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
-        queue = list(trials)[::-1]
+        queue = iter(trials)  # consumed lazily: a huge to-do list is never built in memory
         pending: dict = {}  # future -> (trial, pool generation)
         lost = "worker process died (BrokenProcessPool)"
+        exhausted = False
         try:
-            while queue or pending:
-                while queue and len(pending) < 2 * self.n_workers:
-                    t = queue.pop()
+            while not exhausted or pending:
+                while not exhausted and len(pending) < 2 * self.n_workers:
+                    t = next(queue, None)
+                    if t is None:
+                        exhausted = True
+                        break
                     try:
                         fut = self._get_pool().submit(run_trial_task, t, spec)
                     except BrokenProcessPool:  # the pool broke since the last submit: start a fresh one
@@ -266,6 +274,7 @@ class DaskExecutor:
         else:
             self.address = scheduler
             self.name = f"dask({scheduler})"
+            _probe_scheduler(scheduler)
         try:
             self.client = distributed.Client(self.address, timeout="30s", set_as_default=False)
         except OSError as exc:
@@ -277,12 +286,22 @@ class DaskExecutor:
         base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
         token = f"{os.getpid()}-{time.time_ns()}"
         futures = {}
-        for t in trials:
-            f = self.client.submit(run_trial_task, t, spec, key=f"soabench-trial-{t:05d}-{token}", pure=False)
-            futures[f.key] = (f, t)
+        queue = iter(trials)  # submitted in a window of 4 per worker: a huge to-do list is never built in memory
+        done_iter = self._distributed.as_completed(loop=self.client.loop)
+
+        def submit_next() -> None:
+            t = next(queue, None)
+            if t is not None:
+                f = self.client.submit(run_trial_task, t, spec, key=f"soabench-trial-{t:05d}-{token}", pure=False)
+                futures[f.key] = (f, t)
+                done_iter.add(f)
+
+        for _ in range(max(8, 4 * self.n_workers)):
+            submit_next()
         try:
-            for fut in self._distributed.as_completed([f for f, _ in futures.values()], loop=self.client.loop):
+            for fut in done_iter:
                 _, t = futures.pop(fut.key)
+                submit_next()
                 try:
                     rec = fut.result()
                 except Exception as exc:  # KilledWorker, lost connection, ...
@@ -306,10 +325,27 @@ class DaskExecutor:
             self._cluster = None
 
 
+def _probe_scheduler(address: str, timeout: float = 10.0) -> None:
+    """A plain TCP connect to a ``tcp://`` scheduler first: a refused or unroutable address fails in a moment
+    with one line, instead of Dask's connection retries until its timeout."""
+    scheme, _, rest = address.rpartition("://")
+    if scheme not in ("", "tcp"):
+        return
+    host, _, port = rest.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except (OSError, ValueError) as exc:
+        raise SoabenchError(f"cannot connect to the Dask scheduler {address!r}: {exc}") from None
+
+
 def open_executor(workers: int | None = None, scheduler: str | None = None, dask_local: bool = False, n_trials=None):
     """The executor for the given options (see the module docstring); the caller must ``close()`` it."""
     require(not (scheduler and dask_local), "--scheduler and --dask local are alternatives; give one of them")
-    require(workers is None or (isinstance(workers, int) and workers >= 1), f"workers = {workers!r} must be >= 1")
+    require(
+        workers is None or (isinstance(workers, int) and 1 <= workers <= MAX_WORKERS),
+        f"workers = {workers!r} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
+    check_scheduler_address(scheduler)
     if scheduler or dask_local:
         return DaskExecutor(scheduler=scheduler, local_workers=workers)
     n = workers or os.cpu_count() or 1
@@ -341,22 +377,26 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-def _fn_name(fn: Callable | None) -> str | None:
-    return None if fn is None else f"{fn.__module__}:{fn.__qualname__}"
+class TodoTrials:
+    """Trials ``0 .. n-1`` without an ok record, generated lazily (no list of a huge count is built)."""
+
+    def __init__(self, n_trials: int, done: set[int]):
+        self.n_trials = int(n_trials)
+        self.done = {t for t in done if 0 <= t < n_trials}
+
+    def __len__(self) -> int:
+        return self.n_trials - len(self.done)
+
+    def __iter__(self) -> Iterator[int]:
+        return (t for t in range(self.n_trials) if t not in self.done)
 
 
-def resolve_fn(name: str | None) -> Callable | None:
-    """Import ``module:qualname`` (as stored in run.json)."""
-    if not name:
-        return None
-    mod, _, qual = name.partition(":")
-    try:
-        obj: Any = importlib.import_module(mod)
-        for part in qual.split("."):
-            obj = getattr(obj, part)
-    except (ImportError, AttributeError) as exc:
-        raise SoabenchError(f"cannot import the run's function {name!r}: {exc}") from None
-    return obj
+def check_against_scenario(config: Config, scenario_cfg: Any) -> None:
+    """Cross-checks of a config against its scenario, once at load (before any folder is written): sensor.dt must
+    be a multiple of the SUMO step."""
+    step = getattr(scenario_cfg, "step_length", None)
+    if step is not None:
+        config.sensor.validate(float(step))
 
 
 def _utc_stamp() -> str:
@@ -416,62 +456,123 @@ def run_experiment(
     load_fn: LoadFn | None = None,
     executor: Any = None,
     figures: bool = True,
+    requested: dict[str, Any] | None = None,
 ) -> RunOutcome:
     """Run (or finish, with ``resume``) the Monte Carlo protocol of ``config`` on ``net``.
 
     Args:
         config: the resolved configuration; ignored (may be None) with ``resume``, which reads the run's own.
         net, polys, scenario: passed to :func:`soabench.scenario.load` (ignored with ``resume``).
-        out: run folder (default ``results/<net>/<UTC timestamp>/``).
+        out: run folder (default ``results/<net>/<UTC timestamp>/``); resolved, and refused unless new or empty.
         workers: process workers (default: every core; 1 runs in this process); with ``dask_local`` the number
             of LocalCluster workers.
         scheduler: address of an existing Dask scheduler (``tcp://HOST:PORT``).
         dask_local: start a Dask LocalCluster (processes, one thread per worker).
-        resume: an earlier run folder: run only its trials without a result, with its stored config.
+        resume: an earlier run folder: run only its trials without a result, with its stored config. Every value of
+            its ``run.json`` is validated; its trial kind and scene loader are names looked up in
+            :mod:`~soabench.experiment.registry` (nothing from the folder is imported).
         fail_fast: stop at the first failed trial (trials in flight are still recorded).
         save_estimates: also store the per-scan estimates (``estimates/``, format in :mod:`.store`).
         progress: report progress on stderr (a bar on a terminal, periodic lines otherwise: :mod:`.progress`).
         trial_fn: ``run_trial(trial, config, scene, scenario, *, save_estimates)``; must be importable by
-            worker processes (a module-level function). Default :func:`soabench.experiment.trial.run_trial`.
-        load_fn: ``load(net, polys, scenario) -> (SceneMap, ScenarioConfig)``; default :func:`soabench.scenario.load`.
+            worker processes (a module-level function). Default: the registered trial kind ``soabench``
+            (:func:`soabench.experiment.trial.run_trial`); run.json records its registered name.
+        load_fn: ``load(net, polys, scenario) -> (SceneMap, ScenarioConfig)``; default: scene loader ``sumo``.
         executor: an open executor (from :func:`open_executor`) to reuse, e.g. across the points of a sweep.
         figures: draw the figures (``write_report`` can draw them later from the CSV files).
+        requested: with ``resume``, what the caller asked for (dotted keys such as ``experiment.clutter``, ``net``,
+            ``polys``, ``scenario``); every value that differs from the stored run is refused, except more
+            ``experiment.trials``, which extends the run (see :mod:`~soabench.experiment.runmeta`).
 
     Returns:
         A :class:`RunOutcome`. The summary (Markdown) is written and returned only once every trial was attempted.
+        One process at a time works a run folder (a lock; the second gets an error naming the holder).
     """
+    locks: list[FolderLock] = []  # held until the report is written
     if resume is not None:
-        store = RunStore(Path(resume))
-        meta = store.meta()
-        config = Config.from_dict(meta["config"]).validate()
-        net, polys, scenario = meta["net"], tuple(meta.get("polys", ())), meta.get("scenario")
-        save_estimates = bool(meta.get("save_estimates", False))
-        if trial_fn is None and meta.get("trial_fn"):
-            trial_fn = resolve_fn(meta["trial_fn"])
-        if load_fn is None and meta.get("load_fn"):
-            load_fn = resolve_fn(meta.get("load_fn"))
-    else:
-        require(config is not None, "run_experiment needs a config (or resume=RUN_DIR)")
-        config = Config.from_dict(config.to_dict()).validate()
-        store = RunStore(Path(out)) if out is not None else None
-        if store is not None and store.exists():
-            raise SoabenchError(f"{str(store.run_dir)!r} already holds a run; use --resume {store.run_dir}")
-    n_trials = config.experiment.trials
-    polys = tuple(str(p) for p in polys)
+        run_dir = resolve(resume)
+        check_existing_folder(run_dir, RUN_FILE, "run")
+        locks.append(FolderLock(run_dir).acquire())
+    try:
+        if resume is not None:
+            store = RunStore(run_dir)
+            raw = store.meta()
+            meta = validate_run_meta(raw, str(store.run_file))
+            if requested:
+                stored = {"net": meta.net, "polys": list(meta.polys), "scenario": meta.scenario}
+                stored.update({f"{sec}.{k}": v for sec, d in meta.config.to_dict().items() for k, v in d.items()})
+                more = check_requested(stored, requested, f"run folder {str(run_dir)!r}")
+                if more is not None:  # safe: trial n's seeds depend only on (seed, n)
+                    raw["config"]["experiment"]["trials"] = more
+                    raw["trials"] = more
+                    write_json_atomic(store.run_file, raw)
+                    meta = validate_run_meta(raw, str(store.run_file))
+            config = meta.config
+            net, polys, scenario = meta.net, meta.polys, meta.scenario
+            save_estimates = meta.save_estimates
+            trial_fn = trial_fn or registry.trial_kind(meta.trial_kind)
+            load_fn = load_fn or registry.scene_loader(meta.scene_loader)
+        else:
+            require(config is not None, "run_experiment needs a config (or resume=RUN_DIR)")
+            config = Config.from_dict(config.to_dict()).validate()
+            if out is None:  # filed under the scenario's name, so the scene is loaded first
+                _, scenario_cfg = load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
+                out = default_run_dir(scenario_name(net, scenario_cfg))
+            run_dir = resolve(out)
+            check_new_folder(run_dir, RUN_FILE, "run", f"finish it with --resume {run_dir}")
+            store = RunStore(run_dir)
+        return _run_locked(
+            store, config, net, tuple(str(p) for p in polys), scenario, resume is not None, locks,
+            workers=workers, scheduler=scheduler, dask_local=dask_local, fail_fast=fail_fast,
+            save_estimates=save_estimates, progress=progress, trial_fn=trial_fn, load_fn=load_fn,
+            executor=executor, figures=figures,
+        )  # fmt: skip
+    finally:
+        for lock in locks:
+            lock.release()
 
-    # validate the network before starting workers (a bad path is a user error, not 100 failed trials)
+
+def _run_locked(
+    store: RunStore,
+    config: Config,
+    net: str,
+    polys: tuple[str, ...],
+    scenario: str | None,
+    resumed: bool,
+    locks: list[FolderLock],
+    *,
+    workers: int | None,
+    scheduler: str | None,
+    dask_local: bool,
+    fail_fast: bool,
+    save_estimates: bool,
+    progress: bool,
+    trial_fn: TrialFn | None,
+    load_fn: LoadFn | None,
+    executor: Any,
+    figures: bool,
+) -> RunOutcome:
+    """The body of :func:`run_experiment` once the folder is checked (and, for a resume, locked)."""
+    n_trials = config.experiment.trials
+    hint = f"finish with: soabench run --resume {store.run_dir}"
+
+    # validate the network and the config against it before starting workers (a bad path or a dt that is no
+    # multiple of the SUMO step is a user error, not 100 failed trials)
     _, scenario_cfg = load_scene_cached(net, polys, scenario, load_fn)
+    check_against_scenario(config, scenario_cfg)
     name = scenario_name(net, scenario_cfg)
-    if store is None:
-        store = RunStore(default_run_dir(name))
-    done = set(store.done_trials()) if resume is not None else set()
-    todo = [t for t in range(n_trials) if t not in done]
+    done = set(store.done_trials()) if resumed else set()
+    foreign = sorted(t for t in done if t >= n_trials)
+    require(not foreign, f"{str(store.run_dir)!r} holds trial {foreign[:1]} beyond its {n_trials} trials: foreign")
+    todo = TodoTrials(n_trials, done)
     # connect to the executor before creating the run folder (an unreachable scheduler leaves nothing behind)
-    own_executor = executor is None and bool(todo)
+    own_executor = executor is None and len(todo) > 0
     exe = open_executor(workers, scheduler, dask_local, n_trials=len(todo)) if own_executor else executor
     interrupted = stopped = False
     try:
-        if resume is None:
+        if not resumed:
+            locks.append(FolderLock(store.run_dir).acquire())  # creates the folder; run_experiment releases it
+            check_new_folder(store.run_dir, RUN_FILE, "run", f"finish it with --resume {store.run_dir}")
             store.create(
                 {
                     "created": _utc_stamp(),
@@ -482,15 +583,15 @@ def run_experiment(
                     "scenario_config": _scenario_info(scenario_cfg),
                     "trials": n_trials,
                     "save_estimates": bool(save_estimates),
-                    "trial_fn": _fn_name(trial_fn),
-                    "load_fn": _fn_name(load_fn),
+                    "trial_kind": registry.trial_kind_name(trial_fn),
+                    "scene_loader": registry.scene_loader_name(load_fn),
                     "config": config.to_dict(),
                     "versions": package_versions(),
                     "platform": platform_info(),
                     "reproduction_tolerance": REPRODUCTION_TOLERANCE,
                 }
             )
-        if todo:
+        if len(todo):
             spec = TaskSpec(config.to_dict(), str(net), polys, scenario, bool(save_estimates), trial_fn, load_fn)
             interrupted, stopped, times = _run_trials(store, exe, spec, todo, n_trials, len(done), fail_fast, progress)
             store.write_session(
@@ -499,13 +600,18 @@ def run_experiment(
                     "executor": exe.name,
                     "n_workers": getattr(exe, "n_workers", 1),
                     "trials_run": len(todo),
-                    "resumed": resume is not None,
+                    "resumed": resumed,
                     "interrupted": interrupted,
                     "stopped_fail_fast": stopped,
                     "versions": package_versions(),
                     **times,
                 },
             )
+    except KeyboardInterrupt:
+        interrupted = True
+        raise Interrupted(
+            f"interrupted: {len(store.done_trials())} of {n_trials} trials on disk in {store.run_dir}; {hint}"
+        ) from None
     finally:
         if own_executor:
             exe.close(abort=interrupted or stopped)
@@ -513,22 +619,22 @@ def run_experiment(
     done = set(store.done_trials())
     failures = store.failures()
     failed_set = {int(f["trial"]) for f in failures}
-    unattempted = [t for t in range(n_trials) if t not in done and t not in failed_set]
     n_missing = n_trials - len(done)
+    unattempted = n_missing - len(failed_set - done)
     outcome = RunOutcome(store.run_dir, n_missing == 0, len(done), n_missing, failures, "")
-    if unattempted or interrupted or stopped:
-        if interrupted:
-            print(
-                f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; "
-                f"finish with: soabench run --resume {store.run_dir}",
-                file=sys.stderr,
-            )
-            raise KeyboardInterrupt
+    if interrupted:
+        raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
+    if unattempted or stopped:
         return outcome
     from soabench.experiment.report import write_report
 
-    store.merge(config.experiment.models, config.experiment.probabilities)
-    outcome.summary_markdown = write_report(store.run_dir, figures=figures)
+    try:
+        store.merge(config.experiment.models, config.experiment.probabilities)
+        outcome.summary_markdown = write_report(store.run_dir, figures=figures)
+    except KeyboardInterrupt:
+        raise Interrupted(
+            f"interrupted while writing the report of {store.run_dir} (all {len(done)} trials are on disk); {hint}"
+        ) from None
     return outcome
 
 

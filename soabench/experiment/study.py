@@ -18,8 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from soabench.config import Config
+from soabench.errors import Interrupted
 from soabench.experiment import paper
+from soabench.experiment.ownership import FolderLock, check_writable_target, resolve
 from soabench.experiment.report import paper_protocol_mismatch
+from soabench.experiment.runmeta import flatten_config
 from soabench.experiment.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.store import RunStore, write_text_atomic
 from soabench.experiment.sweep import SweepOutcome, run_sweep
@@ -65,41 +68,68 @@ def run_study(
     scheduler: str | None = None,
     dask_local: bool = False,
     progress: bool = True,
+    explicit: set[str] | None = None,
 ) -> StudyOutcome:
     """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
 
     ``sweep_trials``: trials of the clutter sweep (default: as many as the main protocol). ``births_trials``: trials
     per N_tot point of the N_hat sweep, static probabilities only (21 offsets make it the costliest part).
+    ``explicit``: the dotted config keys the user asked for (command-line flags, config file keys; ``trials`` of
+    a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
+    refuses differences, except more trials (see :mod:`~soabench.experiment.runmeta`); None compares nothing.
     """
-    root = Path(out) if out is not None else Path("results") / net_name(net)
-    root.mkdir(parents=True, exist_ok=True)
-    exe = dict(workers=workers, scheduler=scheduler, dask_local=dask_local, progress=progress)
-
-    main_dir = root / "main"
-    if (main_dir / "run.json").is_file():
-        main = run_experiment(None, net, resume=main_dir, **exe)
-    else:
-        main = run_experiment(config, net, out=main_dir, **exe)
-
+    root = resolve(out if out is not None else Path("results") / net_name(net))
+    check_writable_target(root, "study folder")
+    hint = f"finish with: soabench study --out {root}"
+    explicit = set(explicit or ())
+    main_cfg = config
     n_sweep = sweep_trials or config.experiment.trials
-    clutter_dir = root / "clutter"
-    if (clutter_dir / "sweep.json").is_file():
-        clutter = run_sweep("clutter", (), None, net, resume=clutter_dir, **exe)
-    else:
-        cfg = _with_experiment(config, trials=n_sweep)
-        clutter = run_sweep("clutter", CLUTTER_VALUES, cfg, net, out=clutter_dir, **exe)
+    clutter_cfg = _with_experiment(config, trials=n_sweep)
+    births_cfg = _with_experiment(config, trials=births_trials, models=BIRTH_MODELS, probabilities=("static",))
 
-    births_dir = root / "births"
-    if (births_dir / "sweep.json").is_file():
-        births = run_sweep("births", (), None, net, resume=births_dir, **exe)
-    else:
-        cfg = _with_experiment(config, trials=births_trials, models=BIRTH_MODELS, probabilities=("static",))
-        births = run_sweep("births", BIRTH_OFFSETS, cfg, net, out=births_dir, **exe)
+    def requested(cfg: Config, trials_key: str | None, skip: tuple[str, ...] = ()) -> dict:
+        keys = {k for k in explicit if k != "experiment.trials" and k not in skip}
+        if trials_key in explicit:
+            keys.add("experiment.trials")
+        flat = flatten_config(cfg.to_dict())
+        return {k: flat[k] for k in keys if k in flat}
 
-    md = ""
-    if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
-        mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
-        md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
+    exe = dict(workers=workers, scheduler=scheduler, dask_local=dask_local, progress=progress)
+    with FolderLock(root, "study folder"):
+        try:
+            main_dir = root / "main"
+            if (main_dir / "run.json").is_file():
+                req = requested(main_cfg, "experiment.trials")
+                main = run_experiment(None, net, resume=main_dir, requested=req, **exe)
+            else:
+                main = run_experiment(main_cfg, net, out=main_dir, **exe)
+
+            clutter_dir = root / "clutter"
+            if (clutter_dir / "sweep.json").is_file():
+                trials_key = "experiment.trials" if "sweep_trials" in explicit else None
+                if sweep_trials is None and "experiment.trials" in explicit:
+                    trials_key = "experiment.trials"  # the clutter sweep follows --trials by default
+                req = requested(clutter_cfg, trials_key, skip=("experiment.clutter",))
+                clutter = run_sweep("clutter", (), None, net, resume=clutter_dir, requested=req, **exe)
+            else:
+                clutter = run_sweep("clutter", CLUTTER_VALUES, clutter_cfg, net, out=clutter_dir, **exe)
+
+            births_dir = root / "births"
+            if (births_dir / "sweep.json").is_file():
+                trials_key = "experiment.trials" if "births_trials" in explicit else None
+                req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
+                births = run_sweep("births", (), None, net, resume=births_dir, requested=req, **exe)
+            else:
+                births = run_sweep("births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, **exe)
+
+            md = ""
+            if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
+                mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
+                md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
+        except KeyboardInterrupt:
+            raise Interrupted(
+                f"interrupted: the study in {root} is incomplete (finished trials are on disk); {hint}"
+            ) from None
     return StudyOutcome(root, main, clutter, births, md)
 
 

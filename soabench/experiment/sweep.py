@@ -32,14 +32,17 @@ import numpy as np
 
 from soabench.birth import LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config
-from soabench.errors import SoabenchError, require
+from soabench.errors import Interrupted, require
+from soabench.experiment.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.plots import MODEL_COLOR, _figure, _save
 from soabench.experiment.report import fmt
+from soabench.experiment.runmeta import check_requested, flatten_config, validate_sweep_meta
 from soabench.experiment.runner import (
     LoadFn,
     RunOutcome,
     TrialFn,
     _utc_stamp,
+    check_against_scenario,
     load_scene_cached,
     open_executor,
     run_experiment,
@@ -121,40 +124,100 @@ def run_sweep(
     models: Sequence[str] | None = None,
     n_true: int = N_TRUE,
     figures: bool = True,
+    requested: dict[str, Any] | None = None,
 ) -> SweepOutcome:
     """Run (or resume) a ``clutter`` or ``births`` sweep; each point is its own run folder under ``points/``.
 
     Executor options are those of :func:`~soabench.experiment.runner.run_experiment`; one executor (pool or Dask
     cluster) serves every point. The sweep table and figure are written once every point has attempted all trials.
+    The folder is resolved, checked and locked like a run folder; on ``resume``, every value of ``sweep.json`` is
+    validated and ``requested`` (dotted config keys, ``net``, ``polys``, ``scenario``, ``values``, ``kind``) is
+    compared with it: differences are refused except more ``experiment.trials``, which extends every point.
     """
-    if resume is not None:
-        sweep_dir = Path(resume)
-        meta = read_json(sweep_dir / SWEEP_FILE) if (sweep_dir / SWEEP_FILE).is_file() else None
-        require(meta is not None, f"{str(sweep_dir)!r} is not a sweep folder (no {SWEEP_FILE})")
-        kind, net, polys, scenario = meta["kind"], meta["net"], tuple(meta["polys"]), meta["scenario"]
-        points = meta["points"]
-    else:
-        require(config is not None, "run_sweep needs a config (or resume=SWEEP_DIR)")
-        points = sweep_points(kind, values, config, models, n_true)
-        name = scenario_name(net, load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)[1])
-        sweep_dir = Path(out) if out is not None else Path("results") / name / f"sweep-{kind}-{_utc_stamp()}"
-        if (sweep_dir / SWEEP_FILE).exists():
-            raise SoabenchError(f"{str(sweep_dir)!r} already holds a sweep; resume it or choose another --out")
-        sweep_dir.mkdir(parents=True, exist_ok=True)
-        meta = {
-            "kind": kind,
-            "values": [float(v) for v in values],
-            "n_true": int(n_true),
-            "net": str(net),
-            "net_name": name,
-            "polys": [str(p) for p in polys],
-            "scenario": scenario,
-            "base_config": config.to_dict(),
-            "created": _utc_stamp(),
-            "points": points,
-        }
-        write_json_atomic(sweep_dir / SWEEP_FILE, meta)
+    locks: list[FolderLock] = []
+    try:
+        if resume is not None:
+            sweep_dir = resolve(resume)
+            check_existing_folder(sweep_dir, SWEEP_FILE, "sweep")
+            locks.append(FolderLock(sweep_dir, "sweep folder").acquire())
+            where = str(sweep_dir / SWEEP_FILE)
+            meta = validate_sweep_meta(read_json(sweep_dir / SWEEP_FILE), where, KINDS)
+            kind, net, polys, scenario = meta["kind"], meta["net"], tuple(meta["polys"]), meta["scenario"]
+            points = meta["points"]
+            more = None
+            if requested:
+                swept = "birth.N_hat" if kind == "births" else "experiment.clutter"
+                stored = {"kind": kind, "net": net, "polys": list(polys), "scenario": scenario}
+                stored["values"] = [float(v) for v in meta.get("values", [])]
+                stored.update({k: v for k, v in flatten_config(points[0]["config"]).items() if k != swept})
+                req = {k: v for k, v in requested.items() if k != swept}
+                if "values" in req:
+                    req["values"] = [float(v) for v in req["values"]]
+                more = check_requested(stored, req, f"sweep folder {str(sweep_dir)!r}")
+            if more is not None:  # safe: trial n's seeds depend only on (seed, n); every point gets the new count
+                for p in points:
+                    p["config"]["experiment"]["trials"] = more
+                if isinstance(meta.get("base_config"), dict):
+                    meta["base_config"].setdefault("experiment", {})["trials"] = more
+                write_json_atomic(sweep_dir / SWEEP_FILE, meta)
+        else:
+            require(config is not None, "run_sweep needs a config (or resume=SWEEP_DIR)")
+            points = sweep_points(kind, values, config, models, n_true)
+            # the network and the config cross-checks, before the folder is written
+            _, scenario_cfg = load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
+            check_against_scenario(config, scenario_cfg)
+            name = scenario_name(net, scenario_cfg)
+            default = Path("results") / name / f"sweep-{kind}-{_utc_stamp()}"
+            sweep_dir = resolve(out if out is not None else default)
+            hint = f"finish it with: soabench sweep {kind} --resume {sweep_dir}"
+            check_new_folder(sweep_dir, SWEEP_FILE, "sweep", hint)
+            locks.append(FolderLock(sweep_dir, "sweep folder").acquire())
+            check_new_folder(sweep_dir, SWEEP_FILE, "sweep", hint)
+            meta = {
+                "kind": kind,
+                "values": [float(v) for v in values],
+                "n_true": int(n_true),
+                "net": str(net),
+                "net_name": name,
+                "polys": [str(p) for p in polys],
+                "scenario": scenario,
+                "base_config": config.to_dict(),
+                "created": _utc_stamp(),
+                "points": points,
+            }
+            write_json_atomic(sweep_dir / SWEEP_FILE, meta)
+            more = None
+        return _run_points(
+            sweep_dir, kind, points, net, polys, scenario, more,
+            workers=workers, scheduler=scheduler, dask_local=dask_local, fail_fast=fail_fast,
+            save_estimates=save_estimates, progress=progress, trial_fn=trial_fn, load_fn=load_fn, figures=figures,
+        )  # fmt: skip
+    finally:
+        for lock in locks:
+            lock.release()
 
+
+def _run_points(
+    sweep_dir: Path,
+    kind: str,
+    points: list[dict],
+    net: str,
+    polys: Sequence[str],
+    scenario: str | None,
+    more: int | None,
+    *,
+    workers: int | None,
+    scheduler: str | None,
+    dask_local: bool,
+    fail_fast: bool,
+    save_estimates: bool,
+    progress: bool,
+    trial_fn: TrialFn | None,
+    load_fn: LoadFn | None,
+    figures: bool,
+) -> SweepOutcome:
+    """The points of a checked, locked sweep folder, one after another on one executor."""
+    hint = f"finish with: soabench sweep {kind} --resume {sweep_dir}"
     n_trials_total = sum(int(p["config"]["experiment"]["trials"]) for p in points)
     outcomes: list[RunOutcome] = []
     exe = open_executor(workers, scheduler, dask_local, n_trials=n_trials_total)
@@ -173,7 +236,8 @@ def run_sweep(
                 figures=figures,
             )
             if (pdir / "run.json").is_file():
-                o = run_experiment(None, net, polys, scenario, resume=pdir, **kwargs)
+                req = {"experiment.trials": more} if more is not None else None
+                o = run_experiment(None, net, polys, scenario, resume=pdir, requested=req, **kwargs)
             else:
                 o = run_experiment(Config.from_dict(p["config"]), net, polys, scenario, out=pdir, **kwargs)
             outcomes.append(o)
@@ -181,6 +245,9 @@ def run_sweep(
                 stopped = True
                 break
         aborted = stopped
+    except KeyboardInterrupt:
+        done = sum(o.n_done for o in outcomes)
+        raise Interrupted(f"interrupted: sweep {sweep_dir} is incomplete ({done}+ trials on disk); {hint}") from None
     finally:
         exe.close(abort=aborted)
 
@@ -190,7 +257,10 @@ def run_sweep(
     outcome = SweepOutcome(sweep_dir, n_missing == 0, n_done, n_missing, failures, "", outcomes)
     if stopped or len(outcomes) < len(points):
         return outcome
-    outcome.summary_markdown = write_sweep_report(sweep_dir)
+    try:
+        outcome.summary_markdown = write_sweep_report(sweep_dir)
+    except KeyboardInterrupt:
+        raise Interrupted(f"interrupted while writing the sweep report of {sweep_dir}; {hint}") from None
     return outcome
 
 

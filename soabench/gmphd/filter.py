@@ -27,8 +27,9 @@ import numpy as np
 
 from soabench.birth.base import Births
 from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
-from soabench.errors import require
+from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
+from soabench.gmphd.inputs import check_step_inputs
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
@@ -77,6 +78,8 @@ class StepResult:
     n_merged: int = 0  #: components after merging (before the cap)
     n_pairs: int = 0  #: detection (j, l) pairs built in the update (q > 0)
     n_newborn: int = 0  #: measurement-driven newborn components built in the update
+    n_dropped: int = 0  #: non-finite measurements dropped (``filter.nonfinite = "drop"``; all if the pose was)
+    n_dropped_births: int = 0  #: birth components dropped for a non-finite or negative value
 
 
 class GMPHDFilter:
@@ -135,16 +138,29 @@ class GMPHDFilter:
 
     def step(self, scan: Scan, births: Births) -> StepResult:
         """One cycle of §2.11: predict (dt), append ``births``, update with ``scan.Z`` (incl. ``births.newborn``)
-        relative to ``scan.ego``, prune/merge/cap, extract."""
+        relative to ``scan.ego``, prune/merge/cap, extract.
+
+        Non-finite inputs raise :class:`~soabench.errors.SoabenchError` or are dropped and counted, as
+        ``filter.nonfinite`` says (:mod:`soabench.gmphd.inputs`); a result never holds a NaN."""
         cfg = self.cfg
-        ego = np.asarray(scan.ego, dtype=float)
-        Z = np.asarray(scan.Z, dtype=float).reshape(-1, 2)
+        checked = check_step_inputs(
+            scan.k,
+            np.asarray(scan.Z, dtype=float).reshape(-1, 2),
+            np.asarray(scan.ego, dtype=float),
+            births,
+            cfg.nonfinite,
+        )
+        Z, births = checked.Z, checked.births
+        ego = checked.ego if checked.ego is not None else np.zeros(3)
         t0 = time.perf_counter()
         mix = self._predict(births)
         n_predicted = len(mix) + (len(Z) if births.newborn is not None else 0)
         t1 = time.perf_counter()
 
-        g = detection_gate(mix.m, ego, self.sensor, scan.occluders if self.occlusion else None)
+        if checked.ego is None:  # a dropped scan: no detection geometry, prediction only
+            g = np.zeros(len(mix))
+        else:
+            g = detection_gate(mix.m, ego, self.sensor, scan.occluders if self.occlusion else None)
         p_D = g * beta_mean(mix.sD, mix.tD) if self.dynamic else g * cfg.p_D
         kappa = clutter_intensity(Z, self.sensor)
         up = update(
@@ -174,6 +190,8 @@ class GMPHDFilter:
         t3 = time.perf_counter()
 
         w = red.mix.w
+        if not (np.isfinite(w).all() and np.isfinite(X).all()):  # finite inputs must give a finite posterior
+            raise SoabenchError(f"scan {scan.k}: the filter produced a non-finite posterior from finite inputs")
         if self.dynamic:
             mean_pD = float(w @ beta_mean(red.mix.sD, red.mix.tD) / w.sum()) if w.sum() > 0 else cfg.mu_D0
         else:
@@ -198,4 +216,6 @@ class GMPHDFilter:
             n_merged=red.n_merged,
             n_pairs=up.n_pairs,
             n_newborn=up.n_newborn,
+            n_dropped=checked.n_dropped,
+            n_dropped_births=checked.n_dropped_births,
         )

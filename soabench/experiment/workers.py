@@ -1,0 +1,50 @@
+"""Process-pool workers die with their driver and leave Ctrl-C to it.
+
+:func:`init_worker` runs first in every worker process of :class:`~soabench.experiment.runner.PoolExecutor`:
+
+* on Linux it asks the kernel for SIGKILL when the parent dies (``prctl(PR_SET_PDEATHSIG)`` via ctypes), so a
+  driver killed by SIGKILL (or the OOM killer) leaves no orphan simulating on; elsewhere a daemon thread polls
+  the parent pid once a second and exits the worker when it changes;
+* it ignores SIGINT: Ctrl-C reaches the whole foreground process group, and only the driver should act on it (it
+  stops the pool and prints one line with the resume hint), so no worker prints a KeyboardInterrupt traceback.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import sys
+import threading
+import time
+
+PR_SET_PDEATHSIG = 1  #: from <linux/prctl.h>
+
+
+def _set_pdeathsig() -> bool:
+    """Ask Linux to SIGKILL this process when its parent exits; False where that is unavailable."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+    except (OSError, AttributeError):  # pragma: no cover - no libc symbol
+        return False
+
+
+def _watch_parent(parent: int, period: float = 1.0) -> None:
+    while True:
+        time.sleep(period)
+        if os.getppid() != parent:
+            os._exit(1)
+
+
+def init_worker(parent: int | None = None) -> None:
+    """Initializer of a pool worker; ``parent`` is the pid the worker must outlive no longer (its parent now)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid() if parent is None else parent
+    armed = _set_pdeathsig()
+    if os.getppid() != parent:  # the parent died before the request took effect
+        os._exit(1)
+    if not armed:
+        threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="soabench-parent-watch").start()

@@ -1,0 +1,232 @@
+"""Issue 14, the command line: one line and exit 2 for every bad input (a table), a scheduler address refused at
+once, Ctrl-C as one line with the resume hint (the report stage included, no worker tracebacks), pool workers
+that die with their driver, and a bounded fuzz test of the argument space."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import bad_inputs
+import fake_trial as ft
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import soabench.scenario
+from soabench.cli import main
+from soabench.experiment import registry
+
+HERE = Path(__file__).parent
+
+
+class Simulated(Exception):
+    """Raised by the stubbed simulator: validation passed and a simulation would have started."""
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Any trial or simulation started by a case fails the test (bad inputs must be refused before)."""
+    started = []
+
+    def trial(*a, **k):
+        started.append(a[0])
+        raise AssertionError("a trial ran")
+
+    def simulate(*a, **k):
+        raise Simulated
+
+    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, trial)
+    monkeypatch.setattr(soabench.scenario, "simulate", simulate)
+    return started
+
+
+@pytest.mark.parametrize(("name", "make", "needle"), bad_inputs.CASES, ids=[c[0] for c in bad_inputs.CASES])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, no_work, name, make, needle):
+    argv = make(tmp_path)
+    assert main(argv) == 2, name
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("soabench: error: ") and needle in lines[0], lines[0]
+    assert "Traceback" not in err and not no_work
+    assert not (tmp_path / "out" / "run.json").exists()
+
+
+def test_the_bad_input_table_is_large_and_distinct():
+    names = [c[0] for c in bad_inputs.CASES]
+    assert len(names) == len(set(names)) and len(names) >= 60
+
+
+def test_malformed_scheduler_is_refused_at_once(tmp_path, capsys):
+    t0 = time.monotonic()
+    assert main(["run", "--trials", "1", "--scheduler", "tcp://host:notaport", "--out", str(tmp_path / "o")]) == 2
+    assert time.monotonic() - t0 < 5.0  # no connection attempt (it would wait for the 30 s timeout)
+    assert "tcp://HOST:PORT" in capsys.readouterr().err
+
+
+def test_report_stage_ctrl_c_is_one_line_with_the_resume_hint(tmp_path, capsys, monkeypatch):
+    import soabench.experiment.report as report
+
+    def interrupted_report(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
+    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
+    monkeypatch.setattr(report, "write_report", interrupted_report)
+    out = tmp_path / "run"
+    assert main(["run", "--trials", "2", "--duration", "10", "--workers", "1", "--out", str(out)]) == 130
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and f"soabench run --resume {out}" in lines[0] and "report" in lines[0]
+    monkeypatch.undo()
+    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+    assert main(["run", "--resume", str(out)]) == 0  # nothing left to run: the report is written now
+
+
+DRIVER = """
+import sys
+sys.path.insert(0, {here!r})
+import fake_trial as ft
+from soabench.experiment import registry
+registry._TRIAL_KINDS["soabench"] = ft.slow_trial
+registry._SCENE_LOADERS["sumo"] = ft.fake_load
+from soabench.cli import main
+sys.exit(main({argv!r}))
+"""
+
+
+def _driver(argv: list[str]) -> subprocess.Popen:
+    code = DRIVER.format(here=str(HERE), argv=argv)
+    return subprocess.Popen(
+        [sys.executable, "-c", code],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as a shell gives a foreground job
+    )
+
+
+def _wait_for(out: Path, n: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+    t0 = time.monotonic()
+    while len(list((out / "trials").glob("trial_*.json"))) < n:
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() - t0 < timeout
+        time.sleep(0.05)
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            out += [int(c) for c in (task / "children").read_text().split()]
+        except OSError:
+            pass
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_ctrl_c_with_pool_workers_prints_one_line_and_no_worker_traceback(tmp_path):
+    out = tmp_path / "run"
+    proc = _driver(["run", "--trials", "20", "--duration", "10", "--workers", "2", "--out", str(out)])
+    try:
+        _wait_for(out, 2, proc)
+        os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does: the whole foreground group
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and f"finish with: soabench run --resume {out}" in lines[0], err
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_pool_workers_die_with_a_killed_driver(tmp_path):
+    out = tmp_path / "run"
+    proc = _driver(["run", "--trials", "40", "--duration", "10", "--workers", "2", "--out", str(out)])
+    try:
+        _wait_for(out, 2, proc)
+        workers = _children(proc.pid)
+        assert workers, "the driver has no worker processes"
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=30)
+        t0 = time.monotonic()
+        while any(_alive(p) for p in workers) and time.monotonic() - t0 < 10:
+            time.sleep(0.1)
+        assert not any(_alive(p) for p in workers), "orphaned workers still run"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    # and the folder resumes: the killed driver's lock is gone with it
+    p2 = subprocess.run(
+        [sys.executable, "-c", DRIVER.format(here=str(HERE), argv=["run", "--resume", str(out), "--workers", "1"])],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert p2.returncode == 0, p2.stderr
+    assert len(list((out / "trials").glob("trial_*.json"))) == 40
+
+
+# ------------------------------------------------------------------------------------------------ fuzz
+VALUES = st.sampled_from(
+    ["1", "2", "0", "-1", "1000000000", "nan", "inf", "-inf", "1e300", "0.15", "x", "", "soa", "soa,pubm", "kalman",
+     "static", "dynamic+occ", "tcp://127.0.0.1:1", "tcp://", "-10:10", "3:1", "1,2", "é"]
+)  # fmt: skip
+OPTIONS = st.sampled_from(
+    ["--trials", "--duration", "--models", "--probabilities", "--seed", "--workers", "--clutter", "--scheduler",
+     "--values", "--offsets", "--time", "--trial", "--model", "--probability", "--sweep-trials", "--births-trials",
+     "--bogus"]
+)  # fmt: skip
+COMMANDS = st.sampled_from(["run", "sweep clutter", "sweep births", "study", "scene", "record", "birth", "nope"])
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(COMMANDS, st.lists(st.tuples(OPTIONS, VALUES), max_size=4), st.booleans())
+def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, command, options, with_out):
+    """Random commands and option values: exit 0/1/2 (or argparse's 2), never another exception or a traceback;
+    exit 2 is one line. Trials are the fake trial, figures and simulations are stubbed, so this stays fast."""
+    import soabench.experiment.report as report
+
+    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
+    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+    monkeypatch.setattr(soabench.scenario, "load", lambda *a, **k: (None, SimpleNamespace(step_length=0.1, duration=5)))
+    monkeypatch.setattr(soabench.scenario, "simulate", lambda *a, **k: (_ for _ in ()).throw(Simulated()))
+    tmp = tmp_path_factory.mktemp("fuzz")
+    monkeypatch.chdir(tmp)  # default output folders (results/...) land here
+    argv = command.split()
+    if command in ("run", "study") or command.startswith("sweep"):
+        argv += ["--trials", "1", "--duration", "5"] + (["--births-trials", "1"] if command == "study" else [])
+    for opt, val in options:
+        argv += [opt, val]
+    if with_out:
+        argv += ["--out", str(tmp / ("o.png" if command in ("scene", "record", "birth") else "o"))]
+    argv += ["--workers", "1"] if command in ("run", "study") or command.startswith("sweep") else []
+    capsys.readouterr()
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse: usage errors (2), --help (0)
+        code = exc.code
+    except Simulated:
+        code = 0
+    err = capsys.readouterr().err
+    assert code in (0, 1, 2, 130), (argv, code, err)
+    assert "Traceback" not in err, (argv, err)
+    if code == 2 and err.startswith("soabench: error"):
+        assert len(err.strip().splitlines()) == 1, (argv, err)
