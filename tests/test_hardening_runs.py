@@ -25,6 +25,11 @@ HERE = Path(__file__).parent
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
 
+def _messages(err: str) -> list[str]:
+    """stderr without the periodic progress lines (off a terminal a run reports progress there)."""
+    return [ln for ln in err.strip().splitlines() if not ln.startswith("progress:")]
+
+
 def small_config(trials: int = 3, **exp) -> Config:
     cfg = Config()
     cfg.experiment = dataclasses.replace(
@@ -59,7 +64,7 @@ def edit_run_json(run: Path, **changes) -> None:
 
 
 def one_error_line(capsys) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
+    err = _messages(capsys.readouterr().err)
     assert len(err) == 1, err
     assert err[0].startswith("soabench: error: ")
     return err[0]
