@@ -12,9 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import tomllib
-
-from soabench.config import Config
+from soabench.config import Config, tomllib
 from soabench.errors import SoabenchError, require
 
 VEHICLE_CLASSES = ("Car", "Van", "Truck", "Tram")  #: KITTI classes that occlude (obstacles O_k)
