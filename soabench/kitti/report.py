@@ -140,12 +140,16 @@ def fig6(records: dict, models: list[str], dt: float, path: Path) -> str:
     fig = _figure(6.0, 3.6)
     ax = fig.add_subplot()
     data = [delays(records, "cv", m) for m in models]
+    censored = [sum(math.isinf(v) for v in _episodes(records, "cv", m).values()) for m in models]
     top = max([float(d.max()) for d in data if len(d)] + [dt])
-    bins = np.linspace(0.0, top + dt, min(16, max(2, int(round((top + dt) / dt)) + 1)))
-    width = np.diff(bins)[0] / (len(models) + 1)
+    step = dt * max(1, math.ceil(top / dt / 15))  # at most ~16 bins, each a whole number of frames
+    bins = (np.arange(int(round(top / step)) + 2) - 0.5) * step  # centred on 0, step, 2 step, ...
+    width = step / (len(models) + 1)
     for i, (m, d) in enumerate(zip(models, data, strict=True)):
         counts, _ = np.histogram(d, bins)
-        ax.bar(bins[:-1] + (i + 0.5) * width, counts, width, label=f"{_label(m)} (n = {len(d)})", color=_color(m))
+        label = f"{_label(m)} (n = {len(d)}, {censored[i]} never initiated)"
+        ax.bar(bins[:-1] + (i + 1) * width, counts, width, label=label, color=_color(m))
+    ax.yaxis.get_major_locator().set_params(integer=True)
     ax.set_xlabel("tracking delay $k_{delay}$ (s)")
     ax.set_ylabel("number of targets")
     ax.set_title("Fig. 6: tracking delays of all target episodes")
@@ -168,7 +172,8 @@ def fig7(records: dict, models: list[str], path: Path) -> str:
     ax.set_xlabel("sequence")
     ax.set_ylabel("mean posterior components")
     ax.set_title("Fig. 7: components of the posterior intensity")
-    ax.legend()
+    ax.set_ylim(0, 1.25 * ax.get_ylim()[1])
+    ax.legend(ncols=len(models), loc="upper center")
     ax.grid(axis="y", alpha=0.3)
     return _save(fig, path)
 
@@ -183,6 +188,7 @@ def fig8(sweep: dict, models: list[str], path: Path) -> str:
             s["offsets"], s["mean_delay"], "o-", ms=3, color=_color(m),
             label=f"{_label(m)} (std of means {s['std_of_means']:.3f} s)",
         )  # fmt: skip
+    ax.xaxis.get_major_locator().set_params(integer=True)
     ax.set_xlabel(r"$N_{tot} - N_{true}$ (expected births per sequence)")
     ax.set_ylabel(r"mean delay $\bar{k}_{delay}$ (s)")
     ax.set_title(r"Fig. 8: sensitivity to $\hat{N}_k$")
