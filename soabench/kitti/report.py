@@ -333,6 +333,9 @@ def _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, station
         L.append(f"- Nominal calibration values used for {', '.join(nominal)}.")
     for s in skipped:
         L.append(f"- Skipped sequence {s['sequence']}: {s['reason']}")
+    if "gmbm" in models:
+        L.append("- GMBM's a-priori entry points come from a map (sidewalk exits, doors); KITTI sequences have none, so "
+                 "it places no births here.")  # fmt: skip
     dropped = sum(i["outside_fov"] for i in infos.values())
     below = sum(i["below_score"] for i in infos.values())
     L.append(f"- Detections dropped: {dropped} outside the FOV, {below} below the score threshold.")
