@@ -334,8 +334,10 @@ def _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, station
     for s in skipped:
         L.append(f"- Skipped sequence {s['sequence']}: {s['reason']}")
     if "gmbm" in models:
-        L.append("- GMBM's a-priori entry points come from a map (sidewalk exits, doors); KITTI sequences have none, so "
-                 "it places no births here.")  # fmt: skip
+        L.append(
+            "- GMBM's a-priori entry points come from a map (sidewalk exits, doors); KITTI sequences have none, "
+            "so it places no births here."
+        )
     dropped = sum(i["outside_fov"] for i in infos.values())
     below = sum(i["below_score"] for i in infos.values())
     L.append(f"- Detections dropped: {dropped} outside the FOV, {below} below the score threshold.")
