@@ -163,6 +163,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--probability", choices=PROBABILITY_MODES, help="probability mode (default static)")
     p.add_argument("--config", metavar="FILE.toml", help="parameters, plus a [kitti] section")
     p.add_argument("--seed", type=int, help="base seed of the birth placement (default 0)")
+    p.add_argument("--classes", type=_csv_list("class"), help="tracked classes (default Pedestrian,Cyclist)")
+    p.add_argument("--score-min", type=float, help="drop detections scoring below this (default: keep all)")
     p.add_argument("--skip-bad", action="store_true", help="skip (and report) sequences with malformed files")
     p.add_argument("--out", type=Path, help="run folder to create")
     p.add_argument("--resume", type=Path, metavar="RUN", help="finish an interrupted `soabench kitti` run")

@@ -151,3 +151,14 @@ def test_bad_kitti_config_key(data, tmp_path, capsys):
     cfg.write_text("[kitti]\nobstacles = 'lidar'\n")
     code, _, err = _run(capsys, "--root", str(data), "--out", str(tmp_path / "run"), "--config", str(cfg))
     assert code == 2 and "kitti.obstacles = 'lidar'" in _one_error_line(err)
+
+
+def test_classes_and_score_flags(data, tmp_path, capsys):
+    code, _, err = _run(capsys, "--root", str(data), "--out", str(tmp_path / "r1"), "--classes", "Pedestrian,Car")
+    assert code == 2 and "overlap" in _one_error_line(err)
+    r2 = str(tmp_path / "r2")
+    code, _, _ = _run(capsys, "--root", str(data), "--out", r2, "--models", "soa", "--score-min", "0.5")
+    assert code == 0
+    info = json.loads((tmp_path / "r2" / "summary.json").read_text())["sequence_info"]["0000"]
+    assert info["below_score"] == 4 and info["measurements"] == 10
+    assert json.loads((tmp_path / "r2" / "run.json").read_text())["kitti"]["score_min"] == 0.5

@@ -17,7 +17,7 @@ def cmd_kitti(args: argparse.Namespace) -> int:
     from soabench.kitti.reader import parse_sequences
 
     if args.resume is not None:
-        flags = ("root", "detections", "semantics", "sequences", "out", "config", "models", "nhat_sweep")
+        flags = ("root", "detections", "semantics", "sequences", "out", "config", "models", "nhat_sweep", "classes")
         given = [f for f in flags if getattr(args, f) is not None]
         first = given[0].replace("_", "-") if given else ""
         require(not given, f"--resume takes its settings from the run folder; drop --{first}")
@@ -32,6 +32,10 @@ def cmd_kitti(args: argparse.Namespace) -> int:
             overrides["probabilities"] = (args.probability,)
         cfg.experiment = dataclasses.replace(exp, **{k: v for k, v in overrides.items() if v is not None})
         cfg.validate()
+        if args.classes is not None:
+            kcfg = dataclasses.replace(kcfg, classes=tuple(args.classes)).validate()
+        if args.score_min is not None:
+            kcfg = dataclasses.replace(kcfg, score_min=float(args.score_min)).validate()
         spec = KittiSpec(
             root=str(Path(args.root).resolve()),
             detections=str(Path(args.detections).resolve()) if args.detections else None,

@@ -38,6 +38,12 @@ class KittiConfig:
     def validate(self) -> KittiConfig:
         require(len(self.classes) >= 1, "kitti.classes must name at least one class")
         require(
+            not set(self.classes) & set(self.obstacle_classes),
+            f"kitti.classes {list(self.classes)} and kitti.obstacle_classes {list(self.obstacle_classes)} overlap; "
+            "a tracked class cannot also be an occluder",
+        )
+        require(not math.isnan(self.score_min), "kitti.score_min must be a number")
+        require(
             self.obstacles in ("labels", "detections"),
             f"kitti.obstacles = {self.obstacles!r}; choose 'labels' or 'detections'",
         )
