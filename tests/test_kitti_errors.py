@@ -162,3 +162,13 @@ def test_classes_and_score_flags(data, tmp_path, capsys):
     info = json.loads((tmp_path / "r2" / "summary.json").read_text())["sequence_info"]["0000"]
     assert info["below_score"] == 4 and info["measurements"] == 10
     assert json.loads((tmp_path / "r2" / "run.json").read_text())["kitti"]["score_min"] == 0.5
+
+
+def test_resume_refuses_records_made_with_other_data(data, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert _run(capsys, "--root", str(data), "--out", str(run), "--models", "soa")[0] == 0
+    (run / "records" / "cv" / "0000.json").unlink()
+    path = data / "label_02" / "0000.txt"  # one more target in sequence 0000 changes N_hat of the other folds
+    path.write_text(path.read_text() + "3 9 Cyclist 0 0 0.0 -1 -1 -1 -1 1.75 0.6 1.8 2.0 1.65 20.0 0.0\n")
+    code, _, err = _run(capsys, "--resume", str(run))
+    assert code == 2 and "made with other data or settings" in _one_error_line(err)

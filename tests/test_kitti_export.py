@@ -103,7 +103,11 @@ def test_kitti_protocol_end_to_end_and_resume(exported, tmp_path, capsys):
     argv = ["kitti", "--root", str(exported), "--semantics", str(exported / "semantics"), "--nhat-sweep", "-1:0"]
     assert main([*argv, "--out", str(run)]) == 0
     err = capsys.readouterr().err
-    assert "[1/6] cv sequence 0000" in err and "[6/6] sweep+0 sequence 0001" in err
+    assert (
+        "[1/6] cv sequence 0000" in err
+        and "[6/6] sweep+0 sequence 0001" in err
+        and "[4/6] sweep+0 sequence 0000" in err
+    )
     summary = json.loads((run / "summary.json").read_text())
 
     # N_hat of each held-out fold = targets / frames of the other sequence, counted here from the files themselves

@@ -183,7 +183,7 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
         for tid, corners in boxes:
             centre, length, width, heading = _box(_ego_frame(corners, ego))
             xyz = calib.velo_to_rect_pts([centre[0], centre[1], GROUND_Z])[0]
-            ry = _ry(calib, heading - 0.0)
+            ry = _ry(calib, heading)
             labels.append(_object_row(k, tid, "Car", 0, (CAR_H, width, length), xyz, ry))
             dets.append(_object_row(k, tid, "Car", 0, (CAR_H, width, length), xyz, ry, 1.0))
         # measurements in scan order
@@ -233,6 +233,7 @@ def export_kitti(
         f"--out {str(out)!r} already holds a KITTI layout ({LABEL_DIR}/ is not empty); choose another folder",
     )
     require(out.parent.is_dir(), f"--out {str(out)!r}: folder {str(out.parent)!r} does not exist")
+    require(not out.exists() or out.is_dir(), f"--out {str(out)!r} is a file; give a folder")
     fov = float(fov_deg) if fov_deg is not None else export_default_fov(cfg.sensor)
     require(0.0 < fov < 180.0, f"--fov-deg {fov!r} must be in (0, 180): a camera's horizontal field of view")
     sensor = dataclasses.replace(cfg.sensor, fov_deg=fov)

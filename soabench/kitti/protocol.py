@@ -211,11 +211,21 @@ def run_kitti(
         nh = n_hat(targets, frames, train)
         fold_info.append({"fold": i, "sequences": held, "train": train, "N_hat": nh})
         tasks.extend((CV, s, nh) for s in held)
-    for o in spec.nhat_sweep or []:
-        tasks.extend((f"sweep{o:+d}", s, sweep_n_hat(targets[s], frames[s], o)) for s in ids)
+    for s in ids:  # sequence by sequence, so each sequence's Scans are built once for all offsets
+        tasks.extend((f"sweep{o:+d}", s, sweep_n_hat(targets[s], frames[s], o)) for o in spec.nhat_sweep or [])
     if not resume:
         out.mkdir(parents=True, exist_ok=True)
         write_json_atomic(run_file, spec.to_meta())
+    models = list(spec.config.experiment.models)
+    for setting, s, nh in tasks:  # records of an earlier session must match this data before anything runs
+        path = out / RECORDS / setting / f"{s}.json"
+        if path.is_file():
+            rec = read_json(path)
+            require(
+                isinstance(rec, dict) and rec.get("N_hat") == nh and set(rec.get("models", {})) == set(models),
+                f"{path} was made with other data or settings (N_hat {rec.get('N_hat')!r}, now {nh!r}); "
+                "start a new run folder",
+            )
     cache: dict[str, SequenceScans] = {}
     sensor = spec.config.sensor
     for n, (setting, s, nh) in enumerate(tasks, start=1):

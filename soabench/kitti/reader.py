@@ -280,7 +280,7 @@ def to_scans(seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig) -> Seq
     ids = np.unique(lab.track_id)
     col = np.searchsorted(ids, lab.track_id)
     key = lab.frame * max(len(ids), 1) + col
-    _, first, counts = np.unique(key, return_index=True, return_counts=True)
+    _, counts = np.unique(key, return_counts=True)
     if (counts > 1).any():
         dup = np.flatnonzero(np.isin(key, np.unique(key)[counts > 1]))[1]
         where = f"{lab.path}:{lab.line[dup]}"
