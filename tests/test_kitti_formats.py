@@ -157,3 +157,23 @@ def test_label_rows_parse_and_drop_dontcare(tmp_path):
     obj, fmt = parse_objects(tmp_path / "label_02" / "0000.txt", "label")
     assert fmt == "label" and len(obj) == 4 and "DontCare" not in set(obj.type)
     assert obj.line.tolist() == [1, 2, 4, 5]
+
+
+def test_semantic_polygons_used_and_other_classes_reported(tmp_path):
+    write_sequence(tmp_path, "0000", n_frames=3)
+    sem = tmp_path / "sem"
+    sem.mkdir()
+    (sem / "0000.txt").write_text(
+        "1 sidewalk 5 -10 30 -10 30 -6 5 -6\n"  # a strip 6-10 m right of the ego, in the FOV
+        "1 building 20 4 30 4 30 14 20 14\n"
+        "1 Sidewalk 5 6 30 6 30 10 5 10\n"  # class names are case-sensitive: reported, not used
+        "2 sidewalk 0 0 1 1 2 2 3 3\n"  # zero area
+    )
+    ds = open_dataset(tmp_path, semantics=sem)
+    ss = to_scans(read_sequence(ds, "0000"), KittiConfig(), SENSOR)
+    scan = ss.scans.scans[1]
+    assert scan.visible_region.area > 0 and ss.scans.scans[0].visible_region.is_empty
+    assert list(scan.obstacles.kind).count("building") == 1
+    assert ss.scene.sidewalk.area == pytest.approx(25 * 4)
+    notes = " ".join(ss.info["notes"])
+    assert "Sidewalk (1) not used" in notes and "1 polygon(s) of zero area" in notes

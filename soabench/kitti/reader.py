@@ -330,7 +330,7 @@ def to_scans(seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig) -> Seq
     feet = to_world(footprints_ego(obs, seq.calib), ego[obs.frame][:, None, :]) if len(obs) else np.zeros((0, 4, 2))
     obs_order = np.argsort(obs.frame, kind="stable")
     obs_bounds = np.searchsorted(obs.frame[obs_order], np.arange(F + 1))
-    sem_regions, sem_occ = _semantic_world(seq, ego, kcfg)
+    sem_regions, sem_occ, sem_notes = _semantic_world(seq, ego, kcfg)
     sidewalk = shapely.union_all([g for g in sem_regions if g is not None]) if seq.semantics else Polygon()
 
     scans: list[Scan] = []
@@ -375,7 +375,7 @@ def to_scans(seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig) -> Seq
         "calib_nominal": list(seq.calib.nominal),
         "stationary_ego": seq.imu_poses is None,
         "semantics": seq.semantics is not None,
-        "notes": list(seq.notes),
+        "notes": list(seq.notes) + sem_notes,
     }
     out = Scans(
         scans=scans, dt=float(sensor.dt), source=sources, truth_xy=truth, present=present, in_fov=in_fov,
@@ -384,25 +384,39 @@ def to_scans(seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig) -> Seq
     return SequenceScans(out, scene, sensor, info)
 
 
-def _semantic_world(seq: KittiSequence, ego: np.ndarray, kcfg: KittiConfig) -> tuple[list, list[np.ndarray]]:
-    """Per frame: the semantic region (world, or None) and the semantic occluder polygons (object array)."""
+def _semantic_world(seq: KittiSequence, ego: np.ndarray, kcfg: KittiConfig) -> tuple[list, list[np.ndarray], list]:
+    """Per frame: the semantic region (world, or None) and the semantic occluder polygons (object array); notes on
+    polygons left out (other classes, zero area)."""
     regions: list = [None] * seq.n_frames
     occluders = [np.zeros(0, dtype=object) for _ in range(seq.n_frames)]
     if not seq.semantics:
-        return regions, occluders
+        return regions, occluders, []
+    other: dict[str, int] = {}
+    flat = 0
     for k, polys in seq.semantics.items():
         reg, occ = [], []
         for cls, xy in polys:
             if cls not in kcfg.semantic_classes and cls not in kcfg.occluder_classes:
+                other[cls] = other.get(cls, 0) + 1
                 continue
             g = shapely.make_valid(Polygon(to_world(xy, ego[k])))
             if g.is_empty or g.area <= 0:
+                flat += 1
                 continue
             (reg if cls in kcfg.semantic_classes else occ).append(g)
         regions[k] = shapely.union_all(reg) if reg else None
         parts = [p for g in occ for p in shapely.get_parts(g) if isinstance(p, Polygon)]
         occluders[k] = np.asarray(parts, dtype=object)
-    return regions, occluders
+    notes = []
+    if other:
+        listed = ", ".join(f"{c} ({n})" for c, n in sorted(other.items()))
+        notes.append(
+            f"semantics/{seq.seq}.txt: polygons of classes {listed} not used (kitti.semantic_classes = "
+            f"{list(kcfg.semantic_classes)}, kitti.occluder_classes = {list(kcfg.occluder_classes)})"
+        )
+    if flat:
+        notes.append(f"semantics/{seq.seq}.txt: {flat} polygon(s) of zero area left out")
+    return regions, occluders, notes
 
 
 def _scene_map(seq: KittiSequence, ego: np.ndarray, sensor: SensorConfig, sidewalk) -> SceneMap:
