@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 
 import pytest
+from kitti_files import write_dataset
 
 from soabench.cli import main
-from tests.kitti_files import write_dataset
 
 
 def _run(capsys, *argv: str) -> tuple[int, str, str]:

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from kitti_files import ab3dmot_rows, write_dataset, write_sequence
 
 from soabench.config import SensorConfig
 from soabench.kitti.config import KittiConfig, kitti_from_dict
@@ -20,7 +21,6 @@ from soabench.kitti.formats import (
 )
 from soabench.kitti.protocol import fold_partition, n_hat, sweep_n_hat
 from soabench.kitti.reader import footprints_ego, open_dataset, parse_sequences, read_sequence, to_scans
-from tests.kitti_files import ab3dmot_rows, write_dataset, write_sequence
 
 SENSOR = SensorConfig(dt=0.1, r_max=50.0)
 
