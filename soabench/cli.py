@@ -192,6 +192,32 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_args(p)
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
+
+    p = sub.add_parser("kitti", help="the paper's KITTI protocol (k-fold N_hat, Table I, Figs. 6-8)")
+    p.add_argument("--root", help="KITTI tracking folder holding label_02/ (and calib/, oxts/)")
+    p.add_argument("--detections", help="detections, KITTI result or AB3DMOT format (default ROOT/detections)")
+    p.add_argument("--semantics", help="per-frame bird's-eye semantic polygons per sequence (optional)")
+    p.add_argument("--sequences", help="e.g. 0000-0020 or 0,3,5 (default: every labelled sequence)")
+    p.add_argument("--folds", type=int, default=7, help="cross-validation folds (default 7; at most one per sequence)")
+    p.add_argument("--nhat-sweep", type=_offsets, help="N_hat offsets per sequence, e.g. -10:10 (default: no sweep)")
+    p.add_argument("--models", type=_csv_list("model", BIRTH_MODEL_NAMES), help="default soa,pubm,ubm")
+    p.add_argument("--probability", choices=PROBABILITY_MODES, help="probability mode (default static)")
+    p.add_argument("--config", metavar="FILE.toml", help="parameters, plus a [kitti] section")
+    p.add_argument("--seed", type=int, help="base seed of the birth placement (default 0)")
+    p.add_argument("--classes", type=_csv_list("class"), help="tracked classes (default Pedestrian,Cyclist)")
+    p.add_argument("--score-min", type=float, help="drop detections scoring below this (default: keep all)")
+    p.add_argument("--skip-bad", action="store_true", help="skip (and report) sequences with malformed files")
+    p.add_argument("--out", type=Path, help="run folder to create")
+    p.add_argument("--resume", type=Path, metavar="RUN", help="finish an interrupted `soabench kitti` run")
+
+    p = sub.add_parser("export", help="write SUMO trials in another format (kitti: the KITTI tracking layout)")
+    p.add_argument("format", choices=["kitti"])
+    _add_net_args(p)
+    p.add_argument("--trials", type=int, required=True, help="trials, written as sequences 0000, 0001, ...")
+    p.add_argument("--duration", type=float, help="seconds per trial (default: the scenario's)")
+    p.add_argument("--seed", type=int, help="base seed (as in `run`, default 0)")
+    p.add_argument("--fov-deg", type=float, help="camera horizontal FOV (default: the nominal KITTI camera's)")
+    p.add_argument("--out", required=True, help="output folder (KITTI layout)")
     for command in sub.choices.values():  # subparsers do not inherit the formatter
         command.formatter_class = DefaultsHelpFormatter
     return parser
@@ -439,7 +465,21 @@ def cmd_study(args: argparse.Namespace) -> int:
     return _report_outcome(outcome, "soabench study --out {dir}")
 
 
+def cmd_kitti(args: argparse.Namespace) -> int:
+    from soabench.kitti.commands import cmd_kitti as run
+
+    return run(args)
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from soabench.kitti.commands import cmd_export as run
+
+    return run(args)
+
+
 COMMANDS = {
+    "kitti": cmd_kitti,
+    "export": cmd_export,
     "scene": cmd_scene,
     "record": cmd_record,
     "birth": cmd_birth,
@@ -454,7 +494,7 @@ def _join_negative_values(argv: Sequence[str]) -> list[str]:
     out: list[str] = []
     it = iter(argv)
     for token in it:
-        if token in ("--offsets", "--values", "--clutter"):
+        if token in ("--offsets", "--values", "--clutter", "--nhat-sweep"):
             value = next(it, None)
             if (
                 value is not None

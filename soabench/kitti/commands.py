@@ -1,0 +1,75 @@
+"""Handlers of ``soabench kitti`` and ``soabench export kitti`` (the parser lines live in :mod:`soabench.cli`)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+from soabench.errors import require
+
+
+def cmd_kitti(args: argparse.Namespace) -> int:
+    """The paper's KITTI protocol on a KITTI-format folder (``soabench kitti --root DIR ... --out RUN``)."""
+    from soabench.kitti.config import load_kitti_config
+    from soabench.kitti.protocol import KittiSpec, run_kitti
+    from soabench.kitti.reader import parse_sequences
+
+    if args.resume is not None:
+        flags = ("root", "detections", "semantics", "sequences", "out", "config", "models", "nhat_sweep", "classes")
+        given = [f for f in flags if getattr(args, f) is not None]
+        first = given[0].replace("_", "-") if given else ""
+        require(not given, f"--resume takes its settings from the run folder; drop --{first}")
+        outcome = run_kitti(None, args.resume, resume=True)
+    else:
+        require(args.root is not None, "--root DIR is required (a KITTI tracking folder holding label_02/)")
+        require(args.out is not None, "--out RUN is required (the run folder to create)")
+        cfg, kcfg = load_kitti_config(args.config)
+        exp = cfg.experiment
+        overrides = {"models": args.models, "seed": args.seed}
+        if args.probability is not None:
+            overrides["probabilities"] = (args.probability,)
+        cfg.experiment = dataclasses.replace(exp, **{k: v for k, v in overrides.items() if v is not None})
+        cfg.validate()
+        if args.classes is not None:
+            kcfg = dataclasses.replace(kcfg, classes=tuple(args.classes)).validate()
+        if args.score_min is not None:
+            kcfg = dataclasses.replace(kcfg, score_min=float(args.score_min)).validate()
+        spec = KittiSpec(
+            root=str(Path(args.root).resolve()),
+            detections=str(Path(args.detections).resolve()) if args.detections else None,
+            semantics=str(Path(args.semantics).resolve()) if args.semantics else None,
+            sequences=parse_sequences(args.sequences) if args.sequences else None,
+            folds=args.folds,
+            nhat_sweep=list(args.nhat_sweep) if args.nhat_sweep is not None else None,
+            skip_bad=args.skip_bad,
+            config=cfg,
+            kitti=kcfg,
+        )
+        outcome = run_kitti(spec, args.out)
+    if outcome.summary_markdown:
+        print(outcome.summary_markdown)
+    if outcome.complete:
+        print(f"results in {outcome.run_dir}")
+        return 0
+    print(f"run incomplete; finish with: soabench kitti --resume {outcome.run_dir}", file=sys.stderr)
+    return 1
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """``soabench export kitti``: SUMO trials written in the KITTI tracking layout."""
+    from soabench.kitti.config import load_kitti_config
+    from soabench.kitti.export import export_kitti
+
+    require(args.trials is not None and args.trials >= 1, f"--trials {args.trials!r} must be an integer >= 1")
+    cfg, _ = load_kitti_config(args.config)
+    if args.seed is not None:
+        require(args.seed >= 0, f"--seed {args.seed} must be >= 0")
+        cfg.experiment = dataclasses.replace(cfg.experiment, seed=args.seed)
+    out = Path(args.out)
+    rows = export_kitti(
+        cfg, args.net, tuple(args.poly), args.scenario, args.trials, out, duration=args.duration, fov_deg=args.fov_deg
+    )
+    print(f"wrote {len(rows)} sequence(s) in the KITTI tracking layout to {out}")
+    return 0
