@@ -194,21 +194,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
 
     p = sub.add_parser("kitti", help="the paper's KITTI protocol (k-fold N_hat, Table I, Figs. 6-8)")
-    p.add_argument("--root", help="KITTI tracking folder holding label_02/ (and calib/, oxts/)")
+    p.add_argument(
+        "--root",
+        help="KITTI tracking folder holding label_02/ (and calib/, oxts/); required unless --resume (default: none)",
+    )
     p.add_argument("--detections", help="detections, KITTI result or AB3DMOT format (default ROOT/detections)")
-    p.add_argument("--semantics", help="per-frame bird's-eye semantic polygons per sequence (optional)")
+    p.add_argument(
+        "--semantics",
+        help="per-frame bird's-eye semantic polygons per sequence (default: none; S-OA then has no semantic term)",
+    )
     p.add_argument("--sequences", help="e.g. 0000-0020 or 0,3,5 (default: every labelled sequence)")
     p.add_argument("--folds", type=int, default=7, help="cross-validation folds (default 7; at most one per sequence)")
     p.add_argument("--nhat-sweep", type=_offsets, help="N_hat offsets per sequence, e.g. -10:10 (default: no sweep)")
     p.add_argument("--models", type=_csv_list("model", BIRTH_MODEL_NAMES), help="default soa,pubm,ubm")
     p.add_argument("--probability", choices=PROBABILITY_MODES, help="probability mode (default static)")
-    p.add_argument("--config", metavar="FILE.toml", help="parameters, plus a [kitti] section")
+    p.add_argument(
+        "--config",
+        metavar="FILE.toml",
+        help="parameters, plus a [kitti] section (default: the KITTI protocol's settings)",
+    )
     p.add_argument("--seed", type=int, help="base seed of the birth placement (default 0)")
     p.add_argument("--classes", type=_csv_list("class"), help="tracked classes (default Pedestrian,Cyclist)")
     p.add_argument("--score-min", type=float, help="drop detections scoring below this (default: keep all)")
     p.add_argument("--skip-bad", action="store_true", help="skip (and report) sequences with malformed files")
-    p.add_argument("--out", type=Path, help="run folder to create")
-    p.add_argument("--resume", type=Path, metavar="RUN", help="finish an interrupted `soabench kitti` run")
+    p.add_argument("--out", type=Path, help="run folder to create; required unless --resume (default: none)")
+    p.add_argument(
+        "--resume",
+        type=Path,
+        metavar="RUN",
+        help="finish an interrupted `soabench kitti` run (default: start a new one)",
+    )
 
     p = sub.add_parser("export", help="write SUMO trials in another format (kitti: the KITTI tracking layout)")
     p.add_argument("format", choices=["kitti"])

@@ -115,7 +115,7 @@ def test_default_run_folder_and_labels_use_the_scenario_name(tmp_path, monkeypat
         _config(trials=1, duration=10.0), "intersection", scenario="x.toml", workers=1, trial_fn=ft.fake_trial,
         load_fn=named_load, progress=False, figures=False,
     )  # fmt: skip
-    assert o.run_dir.parent == Path("results") / "rush_hour"
+    assert o.run_dir.parent == (Path("results") / "rush_hour").resolve()
     assert o.summary_markdown.startswith("# soabench run: rush_hour")
     assert json.loads((o.run_dir / "run.json").read_text())["net_name"] == "rush_hour"
 
