@@ -201,7 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--detections", help="detections, KITTI result or AB3DMOT format (default ROOT/detections)")
     p.add_argument(
         "--semantics",
-        help="per-frame bird's-eye semantic polygons per sequence (default: none; S-OA then has no semantic term)",
+        help="per-frame bird's-eye semantic polygons per sequence (default: none)",
     )
     p.add_argument("--sequences", help="e.g. 0000-0020 or 0,3,5 (default: every labelled sequence)")
     p.add_argument("--folds", type=int, default=7, help="cross-validation folds (default 7; at most one per sequence)")
@@ -211,13 +211,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--config",
         metavar="FILE.toml",
-        help="parameters, plus a [kitti] section (default: the KITTI protocol's settings)",
+        help="parameters, plus a [kitti] section (default: the protocol's)",
     )
     p.add_argument("--seed", type=int, help="base seed of the birth placement (default 0)")
     p.add_argument("--classes", type=_csv_list("class"), help="tracked classes (default Pedestrian,Cyclist)")
     p.add_argument("--score-min", type=float, help="drop detections scoring below this (default: keep all)")
     p.add_argument("--skip-bad", action="store_true", help="skip (and report) sequences with malformed files")
-    p.add_argument("--out", type=Path, help="run folder to create; required unless --resume (default: none)")
+    p.add_argument("--out", type=Path, help="run folder to create (default: none; needed unless --resume)")
     p.add_argument(
         "--resume",
         type=Path,
