@@ -82,7 +82,16 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     _add_net_args(p)
     p.add_argument("--trials", type=int, help="Monte Carlo trials (default 100)")
     p.add_argument("--duration", type=float, help="seconds per trial (default 100)")
-    p.add_argument("--models", type=_csv_list("model", BIRTH_MODEL_NAMES), help="e.g. soa,pubm (default: all five)")
+    p.add_argument(
+        "--models",
+        type=_csv_list("model"),
+        help="birth models: soa,pubm,ubm,atbm,gmbm (default: all five), installed plugins, or module:Class",
+    )
+    p.add_argument(
+        "--trackers",
+        type=_csv_list("tracker"),
+        help="whole trackers beside them: stonesoup-gmphd, stonesoup-gnn, installed plugins, or module:Class",
+    )
     p.add_argument(
         "--probabilities",
         type=_csv_list("probability mode", PROBABILITY_MODES),
@@ -157,18 +166,27 @@ def build_parser() -> argparse.ArgumentParser:
 # ------------------------------------------------------------------------------------------------------ helpers
 def _config_from_args(args: argparse.Namespace) -> Config:
     """The config file (if any) overlaid by the command-line flags, validated."""
+    _allow_typed_plugins(args)
     cfg = load_config(getattr(args, "config", None))
     exp = cfg.experiment
     overrides = {
         "trials": getattr(args, "trials", None),
         "duration": getattr(args, "duration", None),
         "models": getattr(args, "models", None),
+        "trackers": getattr(args, "trackers", None),
         "probabilities": getattr(args, "probabilities", None),
         "clutter": getattr(args, "clutter", None),
         "seed": getattr(args, "seed", None),
     }
     cfg.experiment = dataclasses.replace(exp, **{k: v for k, v in overrides.items() if v is not None})
     return cfg.validate()
+
+
+def _allow_typed_plugins(args: argparse.Namespace) -> None:
+    """The ``module:Class`` names typed with --models/--trackers join this run's closed list (soabench.plugins)."""
+    from soabench import plugins
+
+    plugins.allow_import_paths([*(getattr(args, "models", None) or ()), *(getattr(args, "trackers", None) or ())])
 
 
 def _load_scene(args: argparse.Namespace):
@@ -315,6 +333,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
     if args.resume is not None:
         require(args.resume.is_dir(), f"--resume {str(args.resume)!r} is not a run folder")
+        _allow_typed_plugins(args)  # with --resume, --models/--trackers only re-allow import-path plugins
         cfg = None
     else:
         cfg = _config_from_args(args)
@@ -345,6 +364,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
     if args.resume is not None:
         require(args.resume.is_dir(), f"--resume {str(args.resume)!r} is not a sweep folder")
+        _allow_typed_plugins(args)
         from soabench.experiment.sweep import run_sweep
 
         outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, **kwargs)
@@ -369,8 +389,18 @@ def cmd_study(args: argparse.Namespace) -> int:
         require(value is None or value >= 1, f"--{flag.replace('_', '-')} {value} must be >= 1")
     require(not args.save_estimates, "--save-estimates is not offered by `study`; use `run`")
     require(not args.fail_fast, "--fail-fast is not offered by `study`; use `run`")
-    require(args.models is None and args.probabilities is None, "`study` runs the paper's models and modes")
+    require(args.probabilities is None, "`study` runs the paper's probability modes")
+    from soabench import plugins
+
+    extra = tuple(args.models or ())  # plugins ride along with the paper's five (--trackers too)
+    bad = [m for m in extra if plugins.is_builtin_birth(m)]
+    require(not bad, f"`study` runs the paper's five models; --models {','.join(bad)} adds plugins only")
+    args.models = None
     cfg = _config_from_args(args)
+    if extra:
+        plugins.allow_import_paths(extra)
+        cfg.experiment = dataclasses.replace(cfg.experiment, models=(*cfg.experiment.models, *extra))
+        cfg.validate()
     from soabench.experiment.study import run_study
 
     for key in ("save_estimates", "fail_fast"):

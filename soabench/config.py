@@ -281,7 +281,8 @@ class ExperimentConfig:
 
     trials: int = 100  #: Monte Carlo trials
     duration: float = 100.0  #: seconds simulated per trial
-    models: tuple[str, ...] = BIRTH_MODEL_NAMES  #: birth models to run
+    models: tuple[str, ...] = BIRTH_MODEL_NAMES  #: birth models to run in our GM-PHD (built-ins or plugins)
+    trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda (each gets every model x mode)
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
@@ -292,10 +293,18 @@ class ExperimentConfig:
             f"trials = {self.trials!r} must be an integer >= 1",
         )
         _positive("duration", self.duration)
-        require(len(self.models) >= 1, "models must name at least one birth model")
+        require(len(self.models) + len(self.trackers) >= 1, "models must name at least one birth model or tracker")
+        from soabench import plugins  # the closed list of names: built-ins, entry points, typed import paths
+
         for m in self.models:
-            _one_of("model", m, BIRTH_MODEL_NAMES)
+            plugins.check_name(plugins.BIRTH, m)
+        for t in self.trackers:
+            plugins.check_name(plugins.TRACKER, t)
         require(len(set(self.models)) == len(self.models), f"models = {list(self.models)!r} has duplicates")
+        both = set(self.models) & set(self.trackers)
+        require(len(set(self.trackers)) == len(self.trackers), f"trackers = {list(self.trackers)!r} has duplicates")
+        if both:
+            raise SoabenchError(f"{sorted(both)[0]!r} is named both as a model and as a tracker")
         require(len(self.probabilities) >= 1, "probabilities must name at least one mode")
         for p in self.probabilities:
             _one_of("probability mode", p, PROBABILITY_MODES)
@@ -317,6 +326,8 @@ class Config:
     birth: BirthConfig = field(default_factory=BirthConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
+    #: ``[plugins.<name>]`` tables: a plugin's own options, passed to its constructor as keyword arguments
+    plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def validate(self, sumo_step: float | None = None) -> Config:
         self.sensor.validate(sumo_step)
@@ -324,6 +335,8 @@ class Config:
         self.birth.validate()
         self.metrics.validate()
         self.experiment.validate()
+        for name, table in self.plugins.items():
+            require(isinstance(table, dict), f"[plugins.{name}] must be a table of option = value")
         return self
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
@@ -335,12 +348,22 @@ class Config:
     def from_dict(cls, data: dict[str, Any], base: Config | None = None) -> Config:
         """Overlay ``data`` (sections of key = value) on ``base`` (defaults if None); unknown keys are errors."""
         cfg = dataclasses.replace(base) if base is not None else cls()
-        cfg = cls(**{f.name: dataclasses.replace(getattr(cfg, f.name)) for f in dataclasses.fields(cls)})
+        cfg = cls(
+            **{
+                f.name: dict(cfg.plugins) if f.name == "plugins" else dataclasses.replace(getattr(cfg, f.name))
+                for f in dataclasses.fields(cls)
+            }
+        )
         sections = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cls)}
         require(isinstance(data, dict), "a configuration must be a table of sections")
         for sec, values in data.items():
             require(sec in sections, f"unknown config section [{sec}]; allowed: {', '.join(sections)}")
             require(isinstance(values, dict), f"config section [{sec}] must be a table of key = value")
+            if sec == "plugins":  # free-form per plugin; the plugin's constructor is the judge (soabench.plugins)
+                for name, table in values.items():
+                    require(isinstance(table, dict), f"[plugins.{name}] must be a table of option = value")
+                    cfg.plugins[name] = dict(table)
+                continue
             obj = sections[sec]
             fields = {f.name: f for f in dataclasses.fields(obj)}
             for key, value in values.items():

@@ -220,11 +220,13 @@ def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: l
     for clutter in tables.clutters:
         stats = {(mo, md): model_stats(tables, clutter, mo, md) for mo in tables.models for md in tables.modes}
         comps = []
-        if "soa" in tables.models:
+        if "soa" in tables.models:  # paired against S-OA: the four baselines first, then every plugin
+            others = [b for b in BASELINES if b in tables.models] + [
+                m for m in tables.models if m != "soa" and m not in BASELINES
+            ]
             for md in tables.modes:
-                for b in BASELINES:
-                    if b in tables.models:
-                        comps.append(compare(tables, clutter, md, b, stats))
+                for b in others:
+                    comps.append(compare(tables, clutter, md, b, stats))
         results.append({"clutter": clutter, "models": list(stats.values()), "vs_soa": comps})
     failures = failures or []
     return {
@@ -344,7 +346,9 @@ def write_report(run_dir: Path, figures: bool = True) -> str:
 
         fig_paths = [str(p.relative_to(run_dir)) for p in make_figures(tables, run_dir / "figures")]
     summary["figures"] = fig_paths
-    md = render_markdown(summary, fig_paths)
+    from soabench.experiment.failures import write_model_failures
+
+    md = render_markdown(summary, fig_paths) + write_model_failures(run_dir, store.model_failures(), summary)
     paper_md = paper_section(run_dir, tables)
     if paper_md:
         md += "\n" + paper_md

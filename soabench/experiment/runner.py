@@ -30,6 +30,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from soabench import plugins
 from soabench.config import Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.store import (
@@ -79,6 +80,8 @@ class TaskSpec:
     save_estimates: bool
     trial_fn: TrialFn | None = None
     load_fn: LoadFn | None = None
+    #: import paths of plugins typed on the driver's command line (soabench.plugins: the closed list)
+    plugin_paths: tuple[str, ...] = ()
 
 
 _SCENES: dict[tuple, tuple[Any, Any]] = {}
@@ -129,6 +132,7 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     t0 = time.perf_counter()
     try:
         with _SUMO_LOCK:
+            plugins.allow_import_paths(spec.plugin_paths)
             config = Config.from_dict(spec.config)
             scene, scenario = load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
             fn = spec.trial_fn or _default_trial_fn()
@@ -150,6 +154,8 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
         "worker": _where(),
         "elapsed": time.perf_counter() - t0,
     }
+    if getattr(result, "failures", None):
+        record["model_failures"] = to_jsonable(result.failures)
     est = getattr(result, "estimates", None)
     if spec.save_estimates and est is not None:
         record["estimates"] = to_jsonable(est)
@@ -513,7 +519,16 @@ def run_experiment(
                 }
             )
         if todo:
-            spec = TaskSpec(config.to_dict(), str(net), polys, scenario, bool(save_estimates), trial_fn, load_fn)
+            spec = TaskSpec(
+                config.to_dict(),
+                str(net),
+                polys,
+                scenario,
+                bool(save_estimates),
+                trial_fn,
+                load_fn,
+                plugins.session_import_paths(),
+            )
             interrupted, stopped, times = _run_trials(store, exe, spec, todo, n_trials, len(done), fail_fast, progress)
             store.write_session(
                 f"{_utc_stamp()}-{os.getpid()}",
@@ -549,7 +564,7 @@ def run_experiment(
         return outcome
     from soabench.experiment.report import write_report
 
-    store.merge(config.experiment.models, config.experiment.probabilities)
+    store.merge((*config.experiment.models, *config.experiment.trackers), config.experiment.probabilities)
     outcome.summary_markdown = write_report(store.run_dir, figures=figures)
     return outcome
 
@@ -578,6 +593,7 @@ def _run_trials(
             if rec.get("status") == "ok":
                 store.write_trial(rec)
                 bar.update(True)
+                _print_model_failures(rec, bar)
             else:
                 store.write_failure(rec)
                 bar.update(False)
@@ -592,6 +608,16 @@ def _run_trials(
         bar.close()
         wall = time.time() - t_start
     return interrupted, stopped, {"started": t_start, "wall_s": wall}
+
+
+def _print_model_failures(rec: dict, bar: Progress) -> None:
+    """One line per failed plugin run of a trial (soabench.experiment.guard)."""
+    from soabench.experiment.guard import failure_message
+
+    for f in rec.get("model_failures") or ():
+        if bar.enabled:
+            sys.stderr.write("\n")
+        print(f"soabench: {failure_message(f)}", file=sys.stderr)
 
 
 def _print_failure(rec: dict, bar: Progress) -> None:
