@@ -154,3 +154,20 @@ def check_options(kind: str, name: str, cls: type, options: dict[str, Any]) -> N
             f"[plugins.{name}] sets {key!r}, which the {kind} {name!r} does not accept; "
             f"its options: {', '.join(accepted) or 'none'}",
         )
+
+
+def preflight(config: Any) -> None:
+    """Before the first trial: every plugin of ``config`` imports and its ``[plugins.<name>]`` table fits it.
+
+    An import error or an unknown option is a user error (one line, exit 2) caught here, in the driver, so no
+    trial runs with a plugin that cannot even be built; errors while a plugin runs are recorded per run instead
+    (:mod:`soabench.experiment.guard`).
+    """
+    exp = config.experiment
+    for kind, names_ in ((BIRTH, exp.models), (TRACKER, exp.trackers)):
+        for name in names_:
+            options = config.plugins.get(name, {})
+            if kind == BIRTH and is_builtin_birth(name):
+                require(not options, f"[plugins.{name}]: {name} is a built-in birth model; set it in [birth]")
+                continue
+            check_options(kind, name, resolve(kind, name), options)

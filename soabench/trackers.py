@@ -70,7 +70,7 @@ def step_result_from(est: Estimates, k: int, t_step: float) -> StepResult:
     the component count is ``est.n_components`` (else the number of estimates); the cardinality is
     ``est.cardinality`` (else NaN); GM-PHD-only diagnostics (p_D, A, kappa) are NaN or empty.
     """
-    X = np.asarray(est.X, dtype=float).reshape(len(est.X), -1)
+    X = np.asarray(est.X, dtype=float)
     if X.shape[1] == 2:
         X = np.hstack([X, np.zeros((len(X), 2))])
     w = np.full(len(X), math.nan) if est.w is None else np.asarray(est.w, dtype=float).reshape(-1)

@@ -47,7 +47,7 @@ class RunTables:
     @property
     def models(self) -> list[str]:
         present = set(self.trials.get("model", []))
-        return [m for m in self.meta["config"]["experiment"]["models"] if m in present]
+        return [m for m in tables_models(self.meta["config"]["experiment"]) if m in present]
 
     @property
     def modes(self) -> list[str]:
@@ -57,6 +57,11 @@ class RunTables:
     @property
     def clutters(self) -> list[float]:
         return sorted({float(c) for c in self.trials.get("clutter", [])})
+
+
+def tables_models(exp: dict) -> list[str]:
+    """Every model and tracker a run's experiment section names, in order (birth models, then trackers)."""
+    return [*exp["models"], *exp.get("trackers", ())]
 
 
 def _empty(columns: Sequence[str]) -> dict[str, np.ndarray]:
@@ -262,7 +267,7 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
     lines = [f"# soabench run: {summary.get('net_name') or summary.get('net')}", ""]
     lines.append(
         f"{summary['n_trials']} trials x {exp['duration']:g} s, seed {exp['seed']}, "
-        f"models {', '.join(LABEL.get(m, m) for m in exp['models'])}, modes {', '.join(exp['probabilities'])}, "
+        f"models {', '.join(LABEL.get(m, m) for m in tables_models(exp))}, modes {', '.join(exp['probabilities'])}, "
         f"clutter λ = {', '.join(f'{c:g}' for c in exp['clutter'])}. "
         f"{summary['n_ok']} of {summary['n_trials']} trials succeeded"
         + (f", {len(summary['failures'])} failed (listed below)." if summary["failures"] else ".")

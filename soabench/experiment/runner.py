@@ -489,6 +489,7 @@ def run_experiment(
         store = RunStore(Path(out) if out is not None else default_run_dir(net))
         if store.exists():
             raise SoabenchError(f"{str(store.run_dir)!r} already holds a run; use --resume {store.run_dir}")
+    plugins.preflight(config)  # a plugin that cannot be imported or configured stops the run before any trial
     n_trials = config.experiment.trials
     polys = tuple(str(p) for p in polys)
 
