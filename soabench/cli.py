@@ -160,6 +160,19 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_args(p)
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
+
+    p = sub.add_parser("check", help="CI mode: short scenarios against per-metric thresholds (exit 1 on regression)")
+    p.add_argument("--suite", required=True, metavar="FILE.toml", help="scenarios and thresholds (README, CI)")
+    p.add_argument("--out", type=Path, default=Path("check-results"), help="check.json, junit.xml, run folders")
+    p.add_argument("--update-baseline", action="store_true", help="rewrite the suite's baseline JSON from this run")
+    p.add_argument("--workers", type=int, default=1, help="process workers per run (default 1)")
+    p.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="MODULE:CLASS",
+        help="allow this import-path plugin named by the suite (entry points need nothing); repeatable",
+    )
     return parser
 
 
@@ -411,6 +424,15 @@ def cmd_study(args: argparse.Namespace) -> int:
     return _report_outcome(outcome)
 
 
+def cmd_check(args: argparse.Namespace) -> int:
+    require(args.workers >= 1, f"--workers {args.workers} must be >= 1")
+    from soabench import plugins
+    from soabench.experiment.check import run_check
+
+    plugins.allow_import_paths(args.plugin)
+    return run_check(args.suite, args.out, update_baseline=args.update_baseline, workers=args.workers)
+
+
 COMMANDS = {
     "scene": cmd_scene,
     "record": cmd_record,
@@ -418,6 +440,7 @@ COMMANDS = {
     "run": cmd_run,
     "sweep": cmd_sweep,
     "study": cmd_study,
+    "check": cmd_check,
 }
 
 
