@@ -198,7 +198,7 @@ def intersection():
 
 
 def _cfg(models, trackers=(), **plugin_options) -> Config:
-    exp = ExperimentConfig(duration=8.0, models=models, trackers=trackers, probabilities=("static",), seed=3)
+    exp = ExperimentConfig(trials=1, duration=8.0, models=models, trackers=trackers, probabilities=("static",), seed=3)
     return Config(experiment=exp, plugins=plugin_options)
 
 
@@ -280,3 +280,42 @@ def test_cli_plugin_errors_are_one_line(capsys) -> None:
     assert main(["run", "--models", "no_such_module_xyz:Thing", "--trials", "1", "--duration", "2"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "'no_such_module_xyz:Thing' cannot be imported" in err[0]
+
+
+def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
+    """Dask workers get the typed import paths from the task (not from a file) and compute the same numbers."""
+    import logging
+    import os
+    from pathlib import Path
+
+    distributed = pytest.importorskip("distributed")
+    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.store import read_csv
+
+    one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
+    plugins.allow_import_paths([one, echo, bad])
+    cfg = _cfg(("soa", one, bad), (echo,))
+    serial = run_experiment(cfg, "intersection", out=tmp_path / "s", workers=1, progress=False, figures=False)
+    old = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = str(Path(__file__).parent) + (os.pathsep + old if old else "")
+    cluster = distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+    )
+    try:
+        dask = run_experiment(
+            cfg, "intersection", out=tmp_path / "d", scheduler=cluster.scheduler_address, progress=False, figures=False
+        )
+    finally:
+        cluster.close()
+        if old is None:
+            os.environ.pop("PYTHONPATH", None)
+        else:
+            os.environ["PYTHONPATH"] = old
+    assert serial.complete and dask.complete
+    a, b = read_csv(tmp_path / "s" / "trials.csv"), read_csv(tmp_path / "d" / "trials.csv")
+    assert list(a["model"]) == list(b["model"]) == ["soa", one, echo]
+    for col in a:
+        if not col.startswith("t_") and a[col].dtype.kind == "f":
+            assert np.array_equal(a[col], b[col], equal_nan=True), col
+    fa = json.loads((tmp_path / "d" / "summary.json").read_text())["model_failures"]
+    assert [(f["model"], f["k"]) for f in fa] == [(bad, 3)]
