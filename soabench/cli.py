@@ -14,7 +14,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config, filter_config_for_mode, load_config
+from soabench.config import PROBABILITY_MODES, Config, filter_config_for_mode, load_config
 from soabench.errors import SoabenchError, require
 
 EXIT_USAGE = 2
@@ -138,7 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("birth", help="birth components of one model over the scene (paper Fig. 2 colours)")
     _add_snapshot_args(p)
     p.add_argument("--time", type=float, default=50.0, help="time of the snapshot (s)")
-    p.add_argument("--model", default="soa", choices=BIRTH_MODEL_NAMES)
+    p.add_argument("--model", default="soa", help="soa, pubm, ubm, atbm, gmbm, an installed plugin or module:Class")
     p.add_argument("--probability", default="static", choices=PROBABILITY_MODES)
 
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
@@ -299,16 +299,20 @@ def cmd_birth(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from soabench.birth import get_birth_model
+    from soabench import plugins
     from soabench.birth.base import BirthContext
     from soabench.birth.plots import draw_births
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.scenario.plots import plot_scene
 
     out = _prepare_out(args.out)
+    plugins.allow_import_paths([args.model])
+    cls = plugins.resolve(plugins.BIRTH, args.model)  # an unknown or broken model fails before SUMO runs
     scene, _, cfg, seeds, recording = _snapshot(args, args.time, include_end=True)
     scans = _observe(recording, scene, cfg, seeds)
-    model = get_birth_model(args.model)(cfg.birth, cfg.sensor, scene, seeds.placement_rng())
+    options = {} if plugins.is_builtin_birth(args.model) else cfg.plugins.get(args.model, {})
+    plugins.check_options(plugins.BIRTH, args.model, cls, options)
+    model = cls(cfg.birth, cfg.sensor, scene, seeds.placement_rng(), **options)
     filter_cfg, mode, p_D_b = filter_config_for_mode(cfg.filter, args.probability)
     filt = GMPHDFilter(filter_cfg, cfg.sensor, mode)
     prev = None
