@@ -50,6 +50,7 @@ def test_bad_suites_are_one_line_errors(tmp_path, capsys) -> None:
         ('[suite]\nbaseline = "nope.json"\n[[scenario]]\nname = "a"\nnet = "intersection"\n[[threshold]]\n'
          'metric = "ospa"\nmax_increase = 0.1\n', "create it with soabench check --update-baseline"),
         ('[[scenario]]\nname = "a"\nnet = "intersection"\nmodels = ["nosuch"]\n', "'nosuch' is unknown"),
+        ('[[scenario]]\nname = "a"\nnet = "intersection"\npolys = ["nope.poly.xml"]\n', "poly.xml' does not exist"),
     ]:  # fmt: skip
         suite.write_text(text)
         assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2, text

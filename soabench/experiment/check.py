@@ -5,8 +5,8 @@ A suite file (TOML, read as data only) holds:
 * ``[suite]``: ``name``, optional ``baseline`` (JSON path, relative to the suite file) and ``config`` (a soabench
   configuration TOML, relative to the suite file, e.g. for ``[plugins.<name>]`` options);
 * one ``[[scenario]]`` table per short scenario: ``name``, ``net`` (a shipped network or a path relative to the
-  suite file), ``seeds`` (base seeds), ``trials`` per seed, ``duration`` (s), ``models``, ``trackers``,
-  ``probabilities``, ``clutter``;
+  suite file), optional ``polys`` (polygon files) and ``scenario`` (scenario TOML), ``seeds`` (base seeds),
+  ``trials`` per seed, ``duration`` (s), ``models``, ``trackers``, ``probabilities``, ``clutter``;
 * one ``[[threshold]]`` table per check: ``metric`` (a column of trials.csv, e.g. ``ospa``, ``card_err``,
   ``precision``), ``model`` (a name or ``"*"``), optional ``mode``/``scenario`` filters, and any of ``max``,
   ``min`` (absolute), ``max_increase``, ``max_decrease`` (relative to the baseline value: fail when the value
@@ -37,7 +37,19 @@ from soabench.config import Config, load_config, tomllib
 from soabench.errors import SoabenchError, require
 
 SUITE_KEYS = {"name", "baseline", "config"}
-SCENARIO_KEYS = {"name", "net", "seeds", "trials", "duration", "models", "trackers", "probabilities", "clutter"}
+SCENARIO_KEYS = {
+    "name",
+    "net",
+    "polys",
+    "scenario",
+    "seeds",
+    "trials",
+    "duration",
+    "models",
+    "trackers",
+    "probabilities",
+    "clutter",
+}
 THRESHOLD_KEYS = {"metric", "model", "mode", "scenario", "max", "min", "max_increase", "max_decrease", "abs_tol"}
 BASELINE_FORMAT = 1
 
@@ -46,6 +58,8 @@ BASELINE_FORMAT = 1
 class Scenario:
     name: str
     net: str
+    polys: tuple[str, ...] = ()
+    scenario: str | None = None
     seeds: tuple[int, ...] = (0,)
     trials: int = 1
     duration: float = 20.0
@@ -154,6 +168,11 @@ def load_suite(path: str | Path) -> Suite:
             net = str(here / net)
         s = Scenario(name=str(t["name"]), net=net)
         w = f"scenario {s.name!r}"
+        if "polys" in t:
+            s.polys = tuple(str(here / f) for f in _strs(t["polys"], f"{w}: polys"))
+        if "scenario" in t:
+            require(isinstance(t["scenario"], str), f"{w}: scenario must be a path to a scenario TOML")
+            s.scenario = str(here / t["scenario"])
         if "seeds" in t:
             require(
                 isinstance(t["seeds"], list)
@@ -236,7 +255,9 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
 
                 shutil.rmtree(run_dir)
             cfg = _config_for(base, s, seed)
-            o = run_experiment(cfg, s.net, out=run_dir, workers=workers, progress=False, figures=False)
+            o = run_experiment(
+                cfg, s.net, s.polys, s.scenario, out=run_dir, workers=workers, progress=False, figures=False
+            )
             require(o.complete, f"scenario {s.name!r} seed {seed}: {o.n_missing} trial(s) failed; see {run_dir}")
             failures += [{**f, "scenario": s.name, "seed": seed} for f in RunStore(run_dir).model_failures()]
             table = read_csv(run_dir / "trials.csv")
