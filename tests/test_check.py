@@ -56,3 +56,28 @@ def test_bad_suites_are_one_line_errors(tmp_path, capsys) -> None:
         assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2, text
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and msg in err[0], (err, msg)
+
+
+def test_import_path_plugins_need_plugin_flag_and_a_failed_plugin_fails(tmp_path, capsys) -> None:
+    from soabench import plugins
+
+    saved = set(plugins._TYPED)
+    plugins._TYPED.clear()
+    try:
+        suite = tmp_path / "s.toml"
+        suite.write_text(
+            '[[scenario]]\nname = "a"\nnet = "intersection"\nduration = 6\n'
+            'models = ["soa", "plugin_fixtures:RaiseAtScan3"]\ntrackers = ["plugin_fixtures:EchoTracker"]\n'
+            '[[threshold]]\nmetric = "gospa"\nmodel = "plugin_fixtures:EchoTracker"\nmin = 0\n'
+        )
+        assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2
+        assert "not given on this command line" in capsys.readouterr().err
+        argv = ["check", "--suite", str(suite), "--out", str(tmp_path / "o")]
+        argv += ["--plugin", "plugin_fixtures:RaiseAtScan3", "--plugin", "plugin_fixtures:EchoTracker"]
+        assert main(argv) == 1
+        out = capsys.readouterr().out
+        assert "a/plugin_fixtures:EchoTracker/static/lambda=3/gospa" in out and "FAIL (1 of 2 checks)" in out
+        assert "'plugin_fixtures:RaiseAtScan3' failed in trial 0 at scan 3" in out
+    finally:
+        plugins._TYPED.clear()
+        plugins._TYPED.update(saved)
