@@ -100,6 +100,8 @@ def check_name(kind: str, name: str) -> None:
             f"(to resume such a run, type it again: --resume DIR --{'models' if kind == BIRTH else 'trackers'} {name})",
         )
         return
+    if name in (_builtin_birth() if kind == BIRTH else BUILTIN_TRACKERS):
+        return  # no entry-point scan for a built-in
     known = names(kind)
     require(
         name in known,
