@@ -319,3 +319,25 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
             assert np.array_equal(a[col], b[col], equal_nan=True), col
     fa = json.loads((tmp_path / "d" / "summary.json").read_text())["model_failures"]
     assert [(f["model"], f["k"]) for f in fa] == [(bad, 3)]
+
+
+def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None:
+    from types import SimpleNamespace
+
+    from soabench.cli import main
+    from soabench.config import BIRTH_MODEL_NAMES
+    from soabench.experiment import study
+
+    seen = {}
+
+    def fake_run_study(cfg, net, **kw):
+        seen["cfg"] = cfg
+        return SimpleNamespace(summary_markdown="", complete=True, run_dir="x", n_missing=0)
+
+    monkeypatch.setattr(study, "run_study", fake_run_study)
+    one, echo = f"{FX}:OneBirth", f"{FX}:EchoTracker"
+    assert main(["study", "--models", one, "--trackers", echo, "--trials", "1"]) == 0
+    exp = seen["cfg"].experiment
+    assert exp.models == (*BIRTH_MODEL_NAMES, one) and exp.trackers == (echo,)
+    assert main(["study", "--models", "soa"]) == 2
+    assert "adds plugins only" in capsys.readouterr().err
