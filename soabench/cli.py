@@ -95,7 +95,16 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     _add_net_args(p)
     p.add_argument("--trials", type=int, help="Monte Carlo trials (default 100)")
     p.add_argument("--duration", type=float, help="seconds per trial (default 100)")
-    p.add_argument("--models", type=_csv_list("model", BIRTH_MODEL_NAMES), help="e.g. soa,pubm (default: all five)")
+    p.add_argument(
+        "--models",
+        type=_csv_list("model"),
+        help="birth models: soa,pubm,ubm,atbm,gmbm (default: all five), installed plugins, or module:Class",
+    )
+    p.add_argument(
+        "--trackers",
+        type=_csv_list("tracker"),
+        help="whole trackers beside them: stonesoup-gmphd, stonesoup-gnn, installed plugins, or module:Class",
+    )
     p.add_argument(
         "--probabilities",
         type=_csv_list("probability mode", PROBABILITY_MODES),
@@ -163,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("birth", help="birth components of one model over the scene (paper Fig. 2 colours)")
     _add_snapshot_args(p)
     p.add_argument("--time", type=float, default=50.0, help="time of the snapshot (s)")
-    p.add_argument("--model", default="soa", choices=BIRTH_MODEL_NAMES, help="birth model")
+    p.add_argument("--model", default="soa", help="soa, pubm, ubm, atbm, gmbm, an installed plugin or module:Class")
     p.add_argument("--probability", default="static", choices=PROBABILITY_MODES, help="probability mode")
 
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
@@ -233,6 +242,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="base seed (as in `run`, default 0)")
     p.add_argument("--fov-deg", type=float, help="camera horizontal FOV (default: the nominal KITTI camera's)")
     p.add_argument("--out", required=True, help="output folder (KITTI layout)")
+
+    p = sub.add_parser("check", help="CI mode: short scenarios against per-metric thresholds (exit 1 on regression)")
+    p.add_argument("--suite", required=True, metavar="FILE.toml", help="scenarios and thresholds (README, CI)")
+    p.add_argument("--out", type=Path, default=Path("check-results"), help="check.json, junit.xml, run folders")
+    p.add_argument("--update-baseline", action="store_true", help="rewrite the suite's baseline JSON from this run")
+    p.add_argument("--workers", type=int, default=1, help="process workers per run (default 1)")
+    p.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="MODULE:CLASS",
+        help="allow this import-path plugin named by the suite (entry points need nothing); repeatable",
+    )
     for command in sub.choices.values():  # subparsers do not inherit the formatter
         command.formatter_class = DefaultsHelpFormatter
     return parser
@@ -241,18 +263,27 @@ def build_parser() -> argparse.ArgumentParser:
 # ------------------------------------------------------------------------------------------------------ helpers
 def _config_from_args(args: argparse.Namespace) -> Config:
     """The config file (if any) overlaid by the command-line flags, validated."""
+    _allow_typed_plugins(args)
     cfg = load_config(getattr(args, "config", None))
     exp = cfg.experiment
     overrides = {
         "trials": getattr(args, "trials", None),
         "duration": getattr(args, "duration", None),
         "models": getattr(args, "models", None),
+        "trackers": getattr(args, "trackers", None),
         "probabilities": getattr(args, "probabilities", None),
         "clutter": getattr(args, "clutter", None),
         "seed": getattr(args, "seed", None),
     }
     cfg.experiment = dataclasses.replace(exp, **{k: v for k, v in overrides.items() if v is not None})
     return cfg.validate()
+
+
+def _allow_typed_plugins(args: argparse.Namespace) -> None:
+    """The ``module:Class`` names typed with --models/--trackers join this run's closed list (soabench.plugins)."""
+    from soabench import plugins
+
+    plugins.allow_import_paths([*(getattr(args, "models", None) or ()), *(getattr(args, "trackers", None) or ())])
 
 
 def _load_scene(args: argparse.Namespace):
@@ -349,16 +380,20 @@ def cmd_birth(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from soabench.birth import get_birth_model
+    from soabench import plugins
     from soabench.birth.base import BirthContext
     from soabench.birth.plots import draw_births
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.scenario.plots import plot_scene
 
     out = _prepare_out(args.out)
+    plugins.allow_import_paths([args.model])
+    cls = plugins.resolve(plugins.BIRTH, args.model)  # an unknown or broken model fails before SUMO runs
     scene, _, cfg, seeds, recording = _snapshot(args, args.time, include_end=True)
     scans = _observe(recording, scene, cfg, seeds)
-    model = get_birth_model(args.model)(cfg.birth, cfg.sensor, scene, seeds.placement_rng())
+    options = {} if plugins.is_builtin_birth(args.model) else cfg.plugins.get(args.model, {})
+    plugins.check_options(plugins.BIRTH, args.model, cls, options)
+    model = cls(cfg.birth, cfg.sensor, scene, seeds.placement_rng(), **options)
     filter_cfg, mode, p_D_b = filter_config_for_mode(cfg.filter, args.probability)
     filt = GMPHDFilter(filter_cfg, cfg.sensor, mode)
     prev = None
@@ -395,6 +430,8 @@ def _executor_kwargs(args: argparse.Namespace) -> dict:
 
 def cmd_run(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
+    if args.resume is not None:  # --models/--trackers re-allow the run's import-path plugins (and are compared)
+        _allow_typed_plugins(args)
     cfg = _config_from_args(args)  # also validates the flags given with --resume
     from soabench.experiment.runner import run_experiment
 
@@ -433,6 +470,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the sweep in its folder")
+        _allow_typed_plugins(args)
         from soabench.experiment.sweep import run_sweep
 
         requested = {"kind": args.kind, **_requested(args, _config_from_args(args))}
@@ -460,8 +498,18 @@ def cmd_study(args: argparse.Namespace) -> int:
         require(value is None or value >= 1, f"--{flag.replace('_', '-')} {value} must be >= 1")
     require(not args.save_estimates, "--save-estimates is not offered by `study`; use `run`")
     require(not args.fail_fast, "--fail-fast is not offered by `study`; use `run`")
-    require(args.models is None and args.probabilities is None, "`study` runs the paper's models and modes")
+    require(args.probabilities is None, "`study` runs the paper's probability modes")
+    from soabench import plugins
+
+    extra = tuple(args.models or ())  # plugins ride along with the paper's five (--trackers too)
+    bad = [m for m in extra if plugins.is_builtin_birth(m)]
+    require(not bad, f"`study` runs the paper's five models; --models {','.join(bad)} adds plugins only")
+    args.models = None
     cfg = _config_from_args(args)
+    if extra:
+        plugins.allow_import_paths(extra)
+        cfg.experiment = dataclasses.replace(cfg.experiment, models=(*cfg.experiment.models, *extra))
+        cfg.validate()
     from soabench.experiment.study import run_study
 
     for key in ("save_estimates", "fail_fast"):
@@ -492,6 +540,15 @@ def cmd_export(args: argparse.Namespace) -> int:
     return run(args)
 
 
+def cmd_check(args: argparse.Namespace) -> int:
+    require(args.workers >= 1, f"--workers {args.workers} must be >= 1")
+    from soabench import plugins
+    from soabench.experiment.check import run_check
+
+    plugins.allow_import_paths(args.plugin)
+    return run_check(args.suite, args.out, update_baseline=args.update_baseline, workers=args.workers)
+
+
 COMMANDS = {
     "kitti": cmd_kitti,
     "export": cmd_export,
@@ -501,6 +558,7 @@ COMMANDS = {
     "run": cmd_run,
     "sweep": cmd_sweep,
     "study": cmd_study,
+    "check": cmd_check,
 }
 
 

@@ -96,6 +96,7 @@ FLAG_KEYS = {
     "trials": "experiment.trials",
     "duration": "experiment.duration",
     "models": "experiment.models",
+    "trackers": "experiment.trackers",
     "probabilities": "experiment.probabilities",
     "clutter": "experiment.clutter",
     "seed": "experiment.seed",

@@ -90,7 +90,7 @@ def _check_type(name: str, default: Any, value: Any) -> Any:
         require(isinstance(value, str), f"{name} = {value!r} must be a string, not {type(value).__name__}")
     elif isinstance(default, tuple):
         require(isinstance(value, (list, tuple)), f"{name} = {value!r} must be a list")
-        item = default[0] if default else 0.0
+        item = default[0] if default else ""  # the one empty-default list (experiment.trackers) holds names
         return tuple(_check_type(f"{name}[]", item, v) for v in value)
     return value
 
@@ -313,7 +313,8 @@ class ExperimentConfig:
 
     trials: int = 100  #: Monte Carlo trials
     duration: float = 100.0  #: seconds simulated per trial
-    models: tuple[str, ...] = BIRTH_MODEL_NAMES  #: birth models to run
+    models: tuple[str, ...] = BIRTH_MODEL_NAMES  #: birth models to run in our GM-PHD (built-ins or plugins)
+    trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda (each gets every model x mode)
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
@@ -321,10 +322,18 @@ class ExperimentConfig:
     def validate(self) -> None:
         _int_range("trials", self.trials, 1, MAX_TRIALS)
         _positive("duration", self.duration, hi=86400.0)
-        require(len(self.models) >= 1, "models must name at least one birth model")
+        require(len(self.models) + len(self.trackers) >= 1, "models must name at least one birth model or tracker")
+        from soabench import plugins  # the closed list of names: built-ins, entry points, typed import paths
+
         for m in self.models:
-            _one_of("model", m, BIRTH_MODEL_NAMES)
+            plugins.check_name(plugins.BIRTH, m)
+        for t in self.trackers:
+            plugins.check_name(plugins.TRACKER, t)
         require(len(set(self.models)) == len(self.models), f"models = {list(self.models)!r} has duplicates")
+        both = set(self.models) & set(self.trackers)
+        require(len(set(self.trackers)) == len(self.trackers), f"trackers = {list(self.trackers)!r} has duplicates")
+        if both:
+            raise SoabenchError(f"{sorted(both)[0]!r} is named both as a model and as a tracker")
         require(len(self.probabilities) >= 1, "probabilities must name at least one mode")
         for p in self.probabilities:
             _one_of("probability mode", p, PROBABILITY_MODES)
@@ -343,10 +352,14 @@ class Config:
     birth: BirthConfig = field(default_factory=BirthConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
+    #: ``[plugins.<name>]`` tables: a plugin's own options, passed to its constructor as keyword arguments
+    plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def validate(self, sumo_step: float | None = None) -> Config:
         for sec in dataclasses.fields(self):  # exact types first (a boolean is not an integer, "no" is not false)
             obj = getattr(self, sec.name)
+            if not dataclasses.is_dataclass(obj):  # [plugins.<name>]: the plugin checks its own options
+                continue
             for f in dataclasses.fields(obj):
                 default = f.default_factory() if f.default is dataclasses.MISSING else f.default
                 _check_type(f"{sec.name}.{f.name}", default, getattr(obj, f.name))
@@ -359,6 +372,8 @@ class Config:
             self.experiment.duration >= self.sensor.dt,
             f"duration = {self.experiment.duration!r} is shorter than one sensor period sensor.dt = {self.sensor.dt!r}",
         )
+        for name, table in self.plugins.items():
+            require(isinstance(table, dict), f"[plugins.{name}] must be a table of option = value")
         return self
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
@@ -370,12 +385,22 @@ class Config:
     def from_dict(cls, data: dict[str, Any], base: Config | None = None) -> Config:
         """Overlay ``data`` (sections of key = value) on ``base`` (defaults if None); unknown keys are errors."""
         cfg = dataclasses.replace(base) if base is not None else cls()
-        cfg = cls(**{f.name: dataclasses.replace(getattr(cfg, f.name)) for f in dataclasses.fields(cls)})
+        cfg = cls(
+            **{
+                f.name: dict(cfg.plugins) if f.name == "plugins" else dataclasses.replace(getattr(cfg, f.name))
+                for f in dataclasses.fields(cls)
+            }
+        )
         sections = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cls)}
         require(isinstance(data, dict), "a configuration must be a table of sections")
         for sec, values in data.items():
             require(sec in sections, f"unknown config section [{sec}]; allowed: {', '.join(sections)}")
             require(isinstance(values, dict), f"config section [{sec}] must be a table of key = value")
+            if sec == "plugins":  # free-form per plugin; the plugin's constructor is the judge (soabench.plugins)
+                for name, table in values.items():
+                    require(isinstance(table, dict), f"[plugins.{name}] must be a table of option = value")
+                    cfg.plugins[name] = dict(table)
+                continue
             obj = sections[sec]
             fields = {f.name: f for f in dataclasses.fields(obj)}
             for key, value in values.items():

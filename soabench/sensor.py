@@ -1,6 +1,6 @@
 """Synthetic range-bearing sensor: Recording -> Scans (ALGORITHMS.md §2.3, §3.1.1-3.1.2, §3.1.4, §5.1, §5.4).
 
-The data classes at the top are the stage contract. Below them:
+The stage contract (:class:`Scan`, :class:`Scans`, :class:`Obstacles`) lives in :mod:`soabench.types`. Here:
 
 * geometry of one scan: :func:`circle_tangents`, :func:`compute_obstacles` (O_k with tangent rays, T12-T15),
   :func:`line_of_sight` (strict: merely touching an occluder is visible), :func:`fov_polygon`,
@@ -17,11 +17,9 @@ measurements (same values, same sources) and differ only in their clutter and in
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -33,121 +31,24 @@ from soabench.config import SensorConfig
 from soabench.errors import SoabenchError, require
 from soabench.geometry import fov_mask, range_bearing, wrap
 
+# the stage contract lives in the bottom layer; re-exported here so old import paths keep working
+from soabench.types import (  # noqa: F401
+    CLUTTER,
+    OCCLUDER_KINDS,
+    SCANS_FORMAT_VERSION,
+    SENSOR_UNITS,
+    Obstacles,
+    Scan,
+    Scans,
+    sensor_arrays,
+)
+
 if TYPE_CHECKING:
     from soabench.scenario.recording import Recording
     from soabench.scenario.scene import SceneMap
 
-CLUTTER = -1  #: source id of a clutter measurement
-
-OCCLUDER_KINDS = ("building", "parked", "vehicle")  #: values of ``Obstacles.kind``
-SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (README, "Scans format")
 _FOV_ARC_STEP = np.radians(1.0)  #: vertex spacing of the FOV polygon arcs (chord error 2 mm at 50 m)
 _SHADOW_ARC_POINTS = 16  #: far-arc vertices of each shadow polygon
-
-
-@dataclass
-class Obstacles:
-    """Occluders O_k seen from the sensor at one scan (§3.1.1-3.1.2), world frame. N obstacles.
-
-    Attributes:
-        polygons: list of N convex (n_i, 2) vertex arrays (convex hull of each occluder).
-        kind: (N,) str, "building", "parked", or "vehicle".
-        centroid_range: (N,) r'_j (m).
-        centroid_bearing: (N,) alpha_c, world-frame direction of the centroid (rad).
-        theta_min, theta_max: (N,) world-frame tangent ray directions (rad), wrap-safe (T14).
-        r_min, r_max: (N,) tangent-point ranges r^b_min, r^b_max (m).
-    Obstacles containing the sensor are left out (T15); only those intersecting the r_max disk are included.
-    """
-
-    polygons: list[np.ndarray]
-    kind: np.ndarray
-    centroid_range: np.ndarray
-    centroid_bearing: np.ndarray
-    theta_min: np.ndarray
-    theta_max: np.ndarray
-    r_min: np.ndarray
-    r_max: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.polygons)
-
-    @classmethod
-    def empty(cls) -> Obstacles:
-        """No obstacles."""
-        z = np.zeros(0)
-        return cls([], np.zeros(0, dtype="<U8"), z, z.copy(), z.copy(), z.copy(), z.copy(), z.copy())
-
-
-@dataclass
-class Scan:
-    """What the filters receive at scan k (never the truth).
-
-    Attributes:
-        k: scan index; t: time (s).
-        ego: (3,) sensor pose x, y, theta (ego geometric centre, heading).
-        Z: (M, 2) measurements (range m, bearing rad relative to the ego heading, wrapped to (-pi, pi]).
-        obstacles: O_k.
-        occluders: shapely polygons of every occluder at k (buildings, parked cars, other vehicles) for
-            line-of-sight tests (the ``occlusion_pd`` option). Exact shapes (not hulls); only those within r_max
-            of the sensor, since no segment to a point in the FOV can meet any other.
-        visible_region: Omega_k = sidewalk within the FOV minus occluders and their shadows (shapely).
-    """
-
-    k: int
-    t: float
-    ego: np.ndarray
-    Z: np.ndarray
-    obstacles: Obstacles
-    occluders: list[BaseGeometry]
-    visible_region: BaseGeometry
-
-
-@dataclass
-class Scans:
-    """K scans plus the per-scan truth needed by the metrics. P pedestrians (same order as the Recording).
-
-    Attributes:
-        scans: list of K :class:`Scan` (filter inputs).
-        dt: sensor period (s).
-        source: list of K (M_k,) int arrays: pedestrian index of each measurement, or CLUTTER (-1).
-        truth_xy: (K, P, 2) true positions (NaN while absent).
-        present, in_fov, visible, detected: (K, P) bool flags (§5.1, §5.4).
-        ped_ids: (P,) pedestrian ids.
-        sensor: the :class:`SensorConfig` that produced the scans (written into every exported file).
-    """
-
-    scans: list[Scan]
-    dt: float
-    source: list[np.ndarray]
-    truth_xy: np.ndarray
-    present: np.ndarray
-    in_fov: np.ndarray
-    visible: np.ndarray
-    detected: np.ndarray
-    ped_ids: np.ndarray
-    sensor: SensorConfig | None = None
-
-    def __len__(self) -> int:
-        return len(self.scans)
-
-    def save_npz(self, path: str | Path) -> None:
-        """Write the Scans as a compressed .npz without pickles (format: README, "Scans format"), with the sensor
-        parameters and their units (:func:`sensor_arrays`): a tracker reading the file needs R, p_D and kappa."""
-        require(
-            self.sensor is not None,
-            "these Scans carry no SensorConfig (Scans.sensor); set it before exporting: the file must say how it "
-            "was measured",
-        )
-        np.savez_compressed(Path(path), **_scans_to_arrays(self), **sensor_arrays(self.sensor))
-
-    @classmethod
-    def load_npz(cls, path: str | Path) -> Scans:
-        """Read Scans written by :meth:`save_npz`."""
-        p = Path(path)
-        require(p.is_file(), f"scans file {str(p)!r} does not exist")
-        with np.load(p, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files}
-        return _scans_from_arrays(arrays, str(p))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -580,158 +481,3 @@ def _observe_step(
     out["detected"][k] = detected
     scan = Scan(k, k * float(cfg.dt), ego, Z[perm], obstacles, list(occ), omega)
     return scan, source[perm]
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# .npz round trip (README, "Scans format")
-
-
-def _offsets(counts: Sequence[int]) -> np.ndarray:
-    return np.concatenate([[0], np.cumsum(np.asarray(counts, dtype=np.int64))]).astype(np.int64)
-
-
-def _wkb_pack(geoms: Sequence[BaseGeometry]) -> tuple[np.ndarray, np.ndarray]:
-    """Concatenated WKB bytes (uint8) and (n+1,) byte offsets."""
-    blobs = [shapely.to_wkb(g) for g in geoms]
-    data = np.frombuffer(b"".join(blobs), dtype=np.uint8) if blobs else np.zeros(0, dtype=np.uint8)
-    return data.copy(), _offsets([len(b) for b in blobs])
-
-
-def _wkb_unpack(data: np.ndarray, offsets: np.ndarray) -> list[BaseGeometry]:
-    raw = data.tobytes()
-    return [shapely.from_wkb(raw[a:b]) for a, b in zip(offsets[:-1], offsets[1:], strict=True)]
-
-
-def _scans_to_arrays(scans: Scans) -> dict[str, np.ndarray]:
-    s = scans.scans
-    obstacles = [sc.obstacles for sc in s]
-    all_polys = [p for o in obstacles for p in o.polygons]
-    occluders = [g for sc in s for g in sc.occluders]
-    occ_wkb, occ_wkb_off = _wkb_pack(occluders)
-    reg_wkb, reg_wkb_off = _wkb_pack([sc.visible_region for sc in s])
-
-    def cat(name: str) -> np.ndarray:
-        parts = [getattr(o, name) for o in obstacles]
-        return np.concatenate(parts).astype(float) if parts else np.zeros(0)
-
-    return {
-        "format_version": np.int64(SCANS_FORMAT_VERSION),
-        "dt": np.float64(scans.dt),
-        "k": np.array([sc.k for sc in s], dtype=np.int64),
-        "t": np.array([sc.t for sc in s], dtype=float),
-        "ego": np.array([sc.ego for sc in s], dtype=float).reshape(-1, 3),
-        "z_offsets": _offsets([len(sc.Z) for sc in s]),
-        "Z": np.concatenate([sc.Z for sc in s]).reshape(-1, 2) if s else np.zeros((0, 2)),
-        "source": np.concatenate(scans.source).astype(np.int64) if s else np.zeros(0, dtype=np.int64),
-        "ped_ids": np.asarray(scans.ped_ids, dtype=str),
-        "truth_xy": np.asarray(scans.truth_xy, dtype=float),
-        "present": np.asarray(scans.present, dtype=bool),
-        "in_fov": np.asarray(scans.in_fov, dtype=bool),
-        "visible": np.asarray(scans.visible, dtype=bool),
-        "detected": np.asarray(scans.detected, dtype=bool),
-        "obst_offsets": _offsets([len(o) for o in obstacles]),
-        "obst_kind": np.concatenate([o.kind for o in obstacles]).astype("<U8") if s else np.zeros(0, "<U8"),
-        "obst_centroid_range": cat("centroid_range"),
-        "obst_centroid_bearing": cat("centroid_bearing"),
-        "obst_theta_min": cat("theta_min"),
-        "obst_theta_max": cat("theta_max"),
-        "obst_r_min": cat("r_min"),
-        "obst_r_max": cat("r_max"),
-        "obst_vertex_offsets": _offsets([len(p) for p in all_polys]),
-        "obst_vertices": np.concatenate(all_polys).reshape(-1, 2) if all_polys else np.zeros((0, 2)),
-        "occluder_offsets": _offsets([len(sc.occluders) for sc in s]),
-        "occluder_wkb": occ_wkb,
-        "occluder_wkb_offsets": occ_wkb_off,
-        "region_wkb": reg_wkb,
-        "region_wkb_offsets": reg_wkb_off,
-    }
-
-
-def _scans_from_arrays(a: dict[str, np.ndarray], where: str) -> Scans:
-    require(
-        "format_version" in a and int(a["format_version"]) == SCANS_FORMAT_VERSION,
-        f"{where} is not a soabench Scans file of format version {SCANS_FORMAT_VERSION}",
-    )
-    zo, oo, vo, co = a["z_offsets"], a["obst_offsets"], a["obst_vertex_offsets"], a["occluder_offsets"]
-    verts = [a["obst_vertices"][p:q] for p, q in zip(vo[:-1], vo[1:], strict=True)]
-    occluders = _wkb_unpack(a["occluder_wkb"], a["occluder_wkb_offsets"])
-    regions = _wkb_unpack(a["region_wkb"], a["region_wkb_offsets"])
-    scans, sources = [], []
-    for i in range(len(a["k"])):
-        sl = slice(oo[i], oo[i + 1])
-        obstacles = Obstacles(
-            polygons=verts[sl],
-            kind=a["obst_kind"][sl],
-            centroid_range=a["obst_centroid_range"][sl],
-            centroid_bearing=a["obst_centroid_bearing"][sl],
-            theta_min=a["obst_theta_min"][sl],
-            theta_max=a["obst_theta_max"][sl],
-            r_min=a["obst_r_min"][sl],
-            r_max=a["obst_r_max"][sl],
-        )
-        z_sl = slice(zo[i], zo[i + 1])
-        scan = Scan(
-            int(a["k"][i]),
-            float(a["t"][i]),
-            a["ego"][i],
-            a["Z"][z_sl],
-            obstacles,
-            occluders[co[i] : co[i + 1]],
-            regions[i],
-        )
-        scans.append(scan)
-        sources.append(a["source"][z_sl])
-    return Scans(
-        scans=scans,
-        dt=float(a["dt"]),
-        source=sources,
-        truth_xy=a["truth_xy"],
-        present=a["present"],
-        in_fov=a["in_fov"],
-        visible=a["visible"],
-        detected=a["detected"],
-        ped_ids=a["ped_ids"],
-        sensor=_sensor_from_arrays(a, where),
-    )
-
-
-#: unit of each sensor parameter written into a scans file (README, "Scans format")
-SENSOR_UNITS: dict[str, str] = {
-    "dt": "s",
-    "sigma_r": "m",
-    "sigma_b": "rad",
-    "p_D": "1",
-    "lambda_c": "1/scan",
-    "r_min": "m",
-    "r_max": "m",
-    "fov": "rad",
-}
-
-
-def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
-    """The sensor parameters of a scans file: one float64 scalar per parameter in SI units and radians
-    (``sigma_r``, ``sigma_b``, ``p_D``, ``lambda_c``, ``r_min``, ``r_max``, ``fov``; ``dt`` is written with the
-    scans) and ``sensor_json``: every :class:`SensorConfig` field as configured (degrees where the config uses them)
-    plus the units of the scalars."""
-    values = {
-        "sigma_r": cfg.sigma_r,
-        "sigma_b": cfg.sigma_b,
-        "p_D": cfg.p_D,
-        "lambda_c": cfg.lambda_c,
-        "r_min": cfg.r_min,
-        "r_max": cfg.r_max,
-        "fov": cfg.fov,
-    }
-    meta = {"config": dataclasses.asdict(cfg), "units": SENSOR_UNITS}
-    out = {k: np.float64(v) for k, v in values.items()}
-    out["sensor_json"] = np.array(json.dumps(meta, sort_keys=True))
-    return out
-
-
-def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
-    if "sensor_json" not in a:
-        return None
-    try:
-        return SensorConfig(**json.loads(str(a["sensor_json"]))["config"])
-    except (ValueError, TypeError, KeyError) as exc:
-        raise SoabenchError(f"{where}: sensor_json is not a soabench sensor configuration ({exc})") from None

@@ -30,7 +30,22 @@ if TYPE_CHECKING:
 
 LETTER = {"soa": "a", "pubm": "b", "ubm": "c", "gmbm": "d", "atbm": "e"}
 MODE_STYLE = {"static": ("tab:blue", "-"), "dynamic": ("tab:orange", "--"), "dynamic+occ": ("tab:green", ":")}
-MODEL_COLOR = {"soa": "tab:green", "pubm": "tab:blue", "ubm": "tab:purple", "atbm": "tab:red", "gmbm": "tab:gray"}
+
+
+class _ModelColors(dict):
+    """The built-ins' fixed colours; a plugin (birth model or tracker) gets the next free colour the first time."""
+
+    PALETTE = ("tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "black")
+
+    def get(self, model, default=None):
+        if model not in self:
+            self[model] = self.PALETTE[(len(self) - 5) % len(self.PALETTE)]
+        return self[model]
+
+
+MODEL_COLOR = _ModelColors(
+    {"soa": "tab:green", "pubm": "tab:blue", "ubm": "tab:purple", "atbm": "tab:red", "gmbm": "tab:gray"}
+)
 
 
 def _figure(w: float = 6.0, h: float = 4.0):

@@ -49,7 +49,7 @@ class RunTables:
     @property
     def models(self) -> list[str]:
         present = set(self.trials.get("model", []))
-        return [m for m in self.meta["config"]["experiment"]["models"] if m in present]
+        return [m for m in tables_models(self.meta["config"]["experiment"]) if m in present]
 
     @property
     def modes(self) -> list[str]:
@@ -59,6 +59,11 @@ class RunTables:
     @property
     def clutters(self) -> list[float]:
         return sorted({float(c) for c in self.trials.get("clutter", [])})
+
+
+def tables_models(exp: dict) -> list[str]:
+    """Every model and tracker a run's experiment section names, in order (birth models, then trackers)."""
+    return [*exp["models"], *exp.get("trackers", ())]
 
 
 def _empty(columns: Sequence[str]) -> dict[str, np.ndarray]:
@@ -223,11 +228,13 @@ def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: l
         stats = {(mo, md): model_stats(tables, clutter, mo, md) for mo in tables.models for md in tables.modes}
         comps = []
         warning = unobserved_warning(tables, clutter)
-        if "soa" in tables.models and not warning:  # nothing observed: no win counts, no percentages
+        if "soa" in tables.models and not warning:  # paired against S-OA: the baselines, then every plugin
+            others = [b for b in BASELINES if b in tables.models] + [
+                m for m in tables.models if m != "soa" and m not in BASELINES
+            ]
             for md in tables.modes:
-                for b in BASELINES:
-                    if b in tables.models:
-                        comps.append(compare(tables, clutter, md, b, stats))
+                for b in others:
+                    comps.append(compare(tables, clutter, md, b, stats))
         results.append({"clutter": clutter, "models": list(stats.values()), "vs_soa": comps, "warning": warning})
     failures = failures or []
     return {
@@ -266,7 +273,7 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
     lines = [f"# soabench run: {summary.get('net_name') or summary.get('net')}", ""]
     lines.append(
         f"{summary['n_trials']} trials x {exp['duration']:g} s, seed {exp['seed']}, "
-        f"models {', '.join(LABEL.get(m, m) for m in exp['models'])}, modes {', '.join(exp['probabilities'])}, "
+        f"models {', '.join(LABEL.get(m, m) for m in tables_models(exp))}, modes {', '.join(exp['probabilities'])}, "
         f"clutter λ = {', '.join(f'{c:g}' for c in exp['clutter'])}. "
         f"{summary['n_ok']} of {summary['n_trials']} trials succeeded"
         + (f", {len(summary['failures'])} failed (listed below)." if summary["failures"] else ".")
@@ -412,7 +419,9 @@ def write_report(run_dir: Path, figures: bool = True) -> str:
 
         fig_paths = [str(p.relative_to(run_dir)) for p in make_figures(tables, run_dir / "figures")]
     summary["figures"] = fig_paths
-    md = render_markdown(summary, fig_paths)
+    from soabench.experiment.failures import write_model_failures
+
+    md = render_markdown(summary, fig_paths) + write_model_failures(run_dir, store.model_failures(), summary)
     paper_md = paper_section(run_dir, tables)
     if paper_md:
         md += "\n" + paper_md

@@ -29,6 +29,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from soabench import plugins
 from soabench.cli_checks import check_scheduler_address
 from soabench.config import Config
 from soabench.errors import Interrupted, SoabenchError, require
@@ -88,6 +89,8 @@ class TaskSpec:
     save_estimates: bool
     trial_fn: TrialFn | None = None
     load_fn: LoadFn | None = None
+    #: import paths of plugins typed on the driver's command line (soabench.plugins: the closed list)
+    plugin_paths: tuple[str, ...] = ()
 
 
 MAX_WORKERS = 1024  #: upper bound of --workers (processes or LocalCluster workers on one machine)
@@ -135,6 +138,7 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     t0 = time.perf_counter()
     try:
         with _SUMO_LOCK:
+            plugins.allow_import_paths(spec.plugin_paths)
             config = Config.from_dict(spec.config)
             scene, scenario = load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
             fn = spec.trial_fn or _default_trial_fn()
@@ -156,6 +160,8 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
         "worker": _where(),
         "elapsed": time.perf_counter() - t0,
     }
+    if getattr(result, "failures", None):
+        record["model_failures"] = to_jsonable(result.failures)
     est = getattr(result, "estimates", None)
     if spec.save_estimates and est is not None:
         record["estimates"] = to_jsonable(est)
@@ -553,6 +559,7 @@ def _run_locked(
     figures: bool,
 ) -> RunOutcome:
     """The body of :func:`run_experiment` once the folder is checked (and, for a resume, locked)."""
+    plugins.preflight(config)  # a plugin that cannot be imported or configured stops the run before any trial
     n_trials = config.experiment.trials
     hint = f"finish with: soabench run --resume {store.run_dir}"
 
@@ -592,7 +599,16 @@ def _run_locked(
                 }
             )
         if len(todo):
-            spec = TaskSpec(config.to_dict(), str(net), polys, scenario, bool(save_estimates), trial_fn, load_fn)
+            spec = TaskSpec(
+                config.to_dict(),
+                str(net),
+                polys,
+                scenario,
+                bool(save_estimates),
+                trial_fn,
+                load_fn,
+                plugins.session_import_paths(),
+            )
             interrupted, stopped, times = _run_trials(store, exe, spec, todo, n_trials, len(done), fail_fast, progress)
             store.write_session(
                 f"{_utc_stamp()}-{os.getpid()}",
@@ -629,7 +645,7 @@ def _run_locked(
     from soabench.experiment.report import write_report
 
     try:
-        store.merge(config.experiment.models, config.experiment.probabilities)
+        store.merge((*config.experiment.models, *config.experiment.trackers), config.experiment.probabilities)
         outcome.summary_markdown = write_report(store.run_dir, figures=figures)
     except KeyboardInterrupt:
         raise Interrupted(
@@ -662,6 +678,7 @@ def _run_trials(
             if rec.get("status") == "ok":
                 store.write_trial(rec)
                 bar.update(True)
+                _print_model_failures(rec, bar)
             else:
                 store.write_failure(rec)
                 bar.update(False)
@@ -676,6 +693,16 @@ def _run_trials(
         bar.close()
         wall = time.time() - t_start
     return interrupted, stopped, {"started": t_start, "wall_s": wall}
+
+
+def _print_model_failures(rec: dict, bar: Progress) -> None:
+    """One line per failed plugin run of a trial (soabench.experiment.guard)."""
+    from soabench.experiment.guard import failure_message
+
+    for f in rec.get("model_failures") or ():
+        if bar.enabled:
+            sys.stderr.write("\n")
+        print(f"soabench: {failure_message(f)}", file=sys.stderr)
 
 
 def _print_failure(rec: dict, bar: Progress) -> None:

@@ -291,6 +291,10 @@ class RunStore:
         """Failure records (trial, seed, sumo_seed, error) of trials without an ok record, by trial."""
         return [read_json(self._record_path(FAILED_DIR, t)) for t in self.failed_trials()]
 
+    def model_failures(self) -> list[dict]:
+        """Failed plugin runs inside finished trials (soabench.experiment.guard.FAILURE_KEYS), by trial."""
+        return [f for t in self.done_trials() for f in self.load_trial(t).get("model_failures") or ()]
+
     def load_trial(self, trial: int) -> dict:
         return read_json(self._record_path(TRIALS_DIR, trial))
 
@@ -358,7 +362,15 @@ class RunStore:
 
     def clear_merged(self) -> None:
         """Remove merged outputs of an earlier session (they are rewritten when the run completes)."""
-        for name in ("trials.csv", "episodes.csv", "steps.csv", "timing.csv", "summary.json", "summary.md"):
+        for name in (
+            "trials.csv",
+            "episodes.csv",
+            "steps.csv",
+            "timing.csv",
+            "model_failures.csv",
+            "summary.json",
+            "summary.md",
+        ):
             p = self.run_dir / name
             if p.exists():
                 p.unlink()

@@ -285,7 +285,7 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     """k̄_delay vs N_tot per model and mode, and the std of those means (paper §V.C)."""
     points = meta["points"]
     exp = points[0]["config"]["experiment"]
-    models, modes, clutter = exp["models"], exp["probabilities"], float(exp["clutter"][0])
+    models, modes, clutter = [*exp["models"], *exp.get("trackers", ())], exp["probabilities"], float(exp["clutter"][0])
     table = []
     for p in points:
         means = _episode_means(sweep_dir / "points" / p["name"], models, modes, clutter)
@@ -298,7 +298,7 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
         v = np.array([r["delay"][c] for r in table], dtype=float)
         v = v[~np.isnan(v)]
         std[c] = float(v.std(ddof=0)) if v.size else math.nan
-    head = [f"{LABEL.get(c.split('/')[0], c)} {c.split('/')[1]}" for c in cols]
+    head = [f"{LABEL.get(a, a)} {b}" for a in models for b in modes]
     K = scans_per_run(Config.from_dict(points[0]["config"]))
     lines = [
         f"# N̂ sensitivity sweep: {meta.get('net_name')}",

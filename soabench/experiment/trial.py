@@ -18,11 +18,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from soabench.birth.base import BirthContext
 from soabench.config import filter_config_for_mode
 from soabench.errors import require
 from soabench.metrics import SERIES_KEYS, SUMMARY_KEYS, TrialMetrics, evaluate
 from soabench.seeding import TrialSeeds, trial_seeds
+from soabench.trackers import TrackerRun as FilterRun  # the step results and times of one run
 
 if TYPE_CHECKING:
     from soabench.config import Config, SensorConfig
@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from soabench.scenario.recording import Recording
     from soabench.scenario.scene import SceneMap
     from soabench.sensor import Scans
+    from soabench.types import BirthContext
 
 #: identifying columns of a row
 ROW_ID_KEYS = ("trial", "seed", "sumo_seed", "clutter", "N_hat", "model", "mode")
@@ -75,6 +76,8 @@ class TrialResult:
     steps: list[dict[str, Any]] = field(default_factory=list)
     timing: dict[str, float] = field(default_factory=dict)
     estimates: list[dict[str, Any]] | None = None
+    #: runs of a plugin that failed (schema :data:`soabench.experiment.guard.FAILURE_KEYS`); they have no rows
+    failures: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -98,15 +101,6 @@ class RunKey:
 # one filter run
 
 
-@dataclass
-class FilterRun:
-    """The step results of one filter run and its wall-clock birth and total times (s)."""
-
-    results: list[StepResult]
-    t_birth: float
-    t_total: float
-
-
 def run_filter(
     scans: Scans,
     birth_model: Callable[[BirthContext], Any],
@@ -114,17 +108,9 @@ def run_filter(
     p_D_b: float,
 ) -> FilterRun:
     """Run the filter cycle (§2.11) over every scan: birth from the context at k, then ``filt.step``."""
-    results: list[StepResult] = []
-    t_birth = 0.0
-    t0 = time.perf_counter()
-    prev = None
-    for scan in scans.scans:
-        tb = time.perf_counter()
-        births = birth_model(BirthContext(scan, prev, p_D_b))
-        t_birth += time.perf_counter() - tb
-        prev = filt.step(scan, births)
-        results.append(prev)
-    return FilterRun(results, t_birth, time.perf_counter() - t0)
+    from soabench.trackers import GMPHDTracker, run_tracker
+
+    return run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -208,9 +194,9 @@ def _default_filter_cls() -> type:
 
 
 def _default_birth_factory() -> Callable[[str], type]:
-    from soabench.birth import get_birth_model
+    from soabench import plugins
 
-    return get_birth_model
+    return lambda name: plugins.resolve(plugins.BIRTH, name)
 
 
 def run_trial(
@@ -255,6 +241,10 @@ def run_trial(
             for mode in exp.probabilities:
                 key = RunKey(trial, float(lam), model, mode)
                 _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out)
+        for tracker in exp.trackers:
+            for mode in exp.probabilities:
+                key = RunKey(trial, float(lam), tracker, mode)
+                _run_one_tracker(key, config, sensor_cfg, scene, scans, seeds, out)
     return out
 
 
@@ -269,11 +259,91 @@ def _run_one(
     birth_factory: Callable[[str], type],
     out: TrialResult,
 ) -> None:
-    """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``."""
+    """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``.
+
+    A built-in birth model runs unguarded (an exception fails the trial: a bug of soabench). A plugin is checked at
+    every scan (:mod:`soabench.experiment.guard`); if it fails, the run is recorded in ``out.failures`` and the
+    trial goes on with the other runs.
+    """
+    from soabench import plugins
+    from soabench.trackers import GMPHDTracker, run_tracker
+
     filter_cfg, filter_mode, p_D_b = filter_config_for_mode(config.filter, key.mode)
-    birth_model = birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
-    filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
-    run = run_filter(scans, birth_model, filt, p_D_b)
+    if plugins.is_builtin_birth(key.model):
+        birth_model = birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
+        filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
+        run = run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
+    else:
+        from soabench.experiment import guard
+
+        def build() -> GMPHDTracker:
+            cls = birth_factory(key.model)
+            options = config.plugins.get(key.model, {})
+            birth_model = cls(config.birth, sensor_cfg, scene, seeds.placement_rng(), **options)
+            filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
+            return GMPHDTracker(birth_model, filt, p_D_b, check_births=guard.check_births)
+
+        run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out)
+        if run is None:
+            return
+    _record(key, config, sensor_cfg, scans, seeds, run, out)
+
+
+def _run_one_tracker(
+    key: RunKey,
+    config: Config,
+    sensor_cfg: SensorConfig,
+    scene: SceneMap,
+    scans: Scans,
+    seeds: TrialSeeds,
+    out: TrialResult,
+) -> None:
+    """One (tracker x mode) run on ``scans``, guarded like a plugin birth model (:func:`_run_one`)."""
+    from soabench import plugins
+    from soabench.experiment import guard
+    from soabench.protocols import TrackerSetup
+
+    def build() -> Any:
+        cls = plugins.resolve(plugins.TRACKER, key.model)
+        setup = TrackerSetup(sensor_cfg, scene, seeds.placement_rng(), key.mode, config)
+        return cls(setup, **config.plugins.get(key.model, {}))
+
+    run = _guarded(key, plugins.TRACKER, build, scans, guard.check_estimates, out)
+    if run is not None:
+        _record(key, config, sensor_cfg, scans, seeds, run, out)
+
+
+def _guarded(
+    key: RunKey, kind: str, build: Callable[[], Any], scans: Scans, check: Callable[..., Any], out: TrialResult
+) -> Any:
+    """Build and run a plugin; on failure append a failure record to ``out`` and return None."""
+    from soabench.experiment import guard
+    from soabench.trackers import ScanFailure, run_tracker
+
+    k: int | None = None
+    try:
+        tracker = build()
+    except Exception as exc:
+        error = f"{type(exc).__name__}: {exc}"
+    else:
+        try:
+            return run_tracker(scans, tracker, check)
+        except ScanFailure as exc:
+            k, error = exc.k, exc.message
+    out.failures.append(guard.failure_row(key.trial, key.clutter, key.model, key.mode, kind, k, error))
+    return None
+
+
+def _record(
+    key: RunKey,
+    config: Config,
+    sensor_cfg: SensorConfig,
+    scans: Scans,
+    seeds: TrialSeeds,
+    run: Any,
+    out: TrialResult,
+) -> None:
+    """Evaluate a finished run and append its row, episodes, steps (and estimates) to ``out``."""
     t0 = time.perf_counter()
     metrics = evaluate(scans, run.results, config.metrics, sensor_cfg)
     t_metrics = time.perf_counter() - t0

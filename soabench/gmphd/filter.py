@@ -20,12 +20,10 @@ measurement-driven newborn (PUBM/ATBM) is born *from* a detection, so it carries
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from soabench.birth.base import Births
 from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
@@ -34,52 +32,10 @@ from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
 from soabench.gmphd.reduction import extract, prune_merge_cap
+from soabench.types import Births, StepResult  # StepResult re-exported: old import path
 
 if TYPE_CHECKING:
-    from soabench.sensor import Scan
-
-
-@dataclass
-class StepResult:
-    """Output and diagnostics of one filter cycle at scan k (§2.10, §5.7).
-
-    Attributes:
-        k: scan index.
-        X: (n, 4) extracted states, with multiplicity (floor(w + 0.5) copies).
-        X_w: (n,) weight of the component each estimate came from.
-        sum_w: posterior mass N_k|k after the update (before reduction).
-        sum_w_reduced: mass after prune/merge/cap.
-        n_predicted: components after prediction and birth (plus newborn terms, if any).
-        n_updated: components after the update.
-        n_reduced: components after prune/merge/cap (the paper's "posterior components").
-        cap_hit: J_max was hit.
-        t_predict, t_update, t_reduce: wall time of each stage (s).
-        mean_pD: weight-averaged p_D estimate (dynamic mode; p_D otherwise).
-        A: (M,) persistent support of each measurement, sum_j p_D,j w_j q_jl.
-        kappa: (M,) clutter intensity of each measurement.
-    """
-
-    k: int
-    X: np.ndarray
-    X_w: np.ndarray
-    sum_w: float
-    sum_w_reduced: float
-    n_predicted: int
-    n_updated: int
-    n_reduced: int
-    cap_hit: bool
-    t_predict: float
-    t_update: float
-    t_reduce: float
-    mean_pD: float
-    A: np.ndarray
-    kappa: np.ndarray
-    n_pruned: int = 0  #: components after pruning (before merging)
-    n_merged: int = 0  #: components after merging (before the cap)
-    n_pairs: int = 0  #: detection (j, l) pairs built in the update (q > 0)
-    n_newborn: int = 0  #: measurement-driven newborn components built in the update
-    n_dropped: int = 0  #: non-finite measurements dropped (``filter.nonfinite = "drop"``; all if the pose was)
-    n_dropped_births: int = 0  #: birth components dropped for a non-finite or negative value
+    from soabench.types import Scan
 
 
 class GMPHDFilter:

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from soabench.birth.base import SOURCE_MEAS, NewbornTerms
 from soabench.geometry import wrap
 from soabench.gmphd import kernels
 from soabench.gmphd.mixture import Mixture
+from soabench.types import SOURCE_MEAS, NewbornTerms
 
 GATE_999 = -2.0 * math.log(1.0 - 0.999)  #: chi2_2(0.999) = 13.8155 (§2.8)
 _I4 = np.eye(4)

@@ -1,0 +1,1 @@
+"""Bridges to other tracking frameworks (each behind its own optional extra)."""

@@ -1,0 +1,175 @@
+"""Which birth models and trackers a run may use, and how a name becomes a class (README, "Benchmark your own method").
+
+The registry is a closed list, rebuilt in every process from three sources:
+
+1. the built-ins: the five birth models (:data:`soabench.birth.REGISTRY`) and the Stone Soup bridges
+   (:data:`BUILTIN_TRACKERS`, usable when Stone Soup is installed);
+2. the installed entry points of the groups ``soabench.birth_models`` and ``soabench.trackers`` (a package's
+   ``pyproject.toml`` declares them; the entry point's name is the model's name in every table);
+3. the import paths ``module:Class`` the user typed on THIS command line (``--models``, ``--trackers``); they are
+   the model's name as typed.
+
+A stored run (``run.json``, its config) records names only. Reading it never imports a string it holds: a name
+resolves if it is a built-in or an installed entry point; an import-path name of a stored run (``--resume``) must be
+typed again on the command line, otherwise the run is refused with one line saying so. Worker processes (process
+pool, Dask) receive the typed import paths of the driver in the task (:func:`session_import_paths`), never from a
+file.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import re
+from collections.abc import Iterable
+from importlib import metadata
+from typing import Any
+
+from soabench.errors import SoabenchError, require
+
+BIRTH_GROUP = "soabench.birth_models"  #: entry-point group of birth-model plugins
+TRACKER_GROUP = "soabench.trackers"  #: entry-point group of tracker plugins
+BIRTH, TRACKER = "birth model", "tracker"
+
+#: trackers that ship with soabench (bridges to other frameworks; each needs its optional extra)
+BUILTIN_TRACKERS: dict[str, str] = {
+    "stonesoup-gmphd": "soabench.bridges.stonesoup:StoneSoupGMPHD",
+    "stonesoup-gnn": "soabench.bridges.stonesoup:StoneSoupGNN",
+}
+
+_IDENT = r"[A-Za-z_]\w*"
+_IMPORT_PATH = re.compile(rf"^{_IDENT}(\.{_IDENT})*:{_IDENT}(\.{_IDENT})*$")
+_TYPED: set[str] = set()  #: import paths typed on this process's command line (or handed over by the driver)
+
+
+class PluginError(SoabenchError):
+    """A plugin could not be found, imported or built (one line naming the plugin)."""
+
+
+def is_import_path(name: str) -> bool:
+    """``module.sub:Class`` (as typed on the command line), not a registered name."""
+    return ":" in name
+
+
+def allow_import_paths(names: Iterable[str]) -> None:
+    """Add the ``module:Class`` names among ``names`` to this process's closed list (command line, driver task)."""
+    for name in names:
+        if is_import_path(name):
+            require(
+                bool(_IMPORT_PATH.match(name)),
+                f"plugin {name!r} is not an import path of the form package.module:Class",
+            )
+            _TYPED.add(name)
+
+
+def session_import_paths() -> tuple[str, ...]:
+    """The import paths allowed in this process, for the worker tasks."""
+    return tuple(sorted(_TYPED))
+
+
+def _builtin_birth() -> dict[str, str]:
+    from soabench.birth import REGISTRY
+
+    return REGISTRY
+
+
+def _entry_points(group: str) -> dict[str, metadata.EntryPoint]:
+    return {ep.name: ep for ep in metadata.entry_points(group=group)}
+
+
+def names(kind: str) -> list[str]:
+    """Every registered name of ``kind`` (built-ins first, then installed entry points, then typed paths)."""
+    builtin = _builtin_birth() if kind == BIRTH else BUILTIN_TRACKERS
+    eps = [n for n in _entry_points(BIRTH_GROUP if kind == BIRTH else TRACKER_GROUP) if n not in builtin]
+    return [*builtin, *sorted(eps)]
+
+
+def is_builtin_birth(name: str) -> bool:
+    """One of the five built-in birth models (run unguarded: an error there is a bug of soabench)."""
+    return name in _builtin_birth()
+
+
+def check_name(kind: str, name: str) -> None:
+    """SoabenchError unless ``name`` is in the closed list of ``kind`` (see the module docstring)."""
+    require(isinstance(name, str) and name != "", f"{kind} name {name!r} must be a non-empty string")
+    if is_import_path(name):
+        require(
+            name in _TYPED,
+            f"{kind} {name!r} is an import path that was not given on this command line; soabench imports only "
+            f"built-ins, installed entry points and import paths typed with --models/--trackers "
+            f"(to resume such a run, type it again: --resume DIR --{'models' if kind == BIRTH else 'trackers'} {name})",
+        )
+        return
+    if name in (_builtin_birth() if kind == BIRTH else BUILTIN_TRACKERS):
+        return  # no entry-point scan for a built-in
+    known = names(kind)
+    require(
+        name in known,
+        f"{kind} {name!r} is unknown; choose one of {', '.join(known)}, an installed entry point of group "
+        f"{BIRTH_GROUP if kind == BIRTH else TRACKER_GROUP!r} or an import path module:Class",
+    )
+
+
+def resolve(kind: str, name: str) -> type:
+    """The class registered under ``name`` (imported now); PluginError naming the plugin if that fails."""
+    check_name(kind, name)
+    builtin = _builtin_birth() if kind == BIRTH else BUILTIN_TRACKERS
+    try:
+        if name in builtin or is_import_path(name):
+            target = builtin.get(name, name)
+            module, _, qual = target.partition(":")
+            obj: Any = importlib.import_module(module)
+            for part in qual.split("."):
+                obj = getattr(obj, part)
+        else:
+            obj = _entry_points(BIRTH_GROUP if kind == BIRTH else TRACKER_GROUP)[name].load()
+    except SoabenchError as exc:
+        raise PluginError(f"{kind} plugin {name!r} cannot be used: {exc}") from None
+    except Exception as exc:  # an import error inside the plugin is the plugin's, reported in one line
+        raise PluginError(f"{kind} plugin {name!r} cannot be imported: {type(exc).__name__}: {exc}") from None
+    require(callable(obj), f"{kind} plugin {name!r} resolves to {obj!r}, which is not a class or callable")
+    if kind == TRACKER:
+        require(
+            callable(getattr(obj, "step", None)),
+            f"tracker plugin {name!r} ({obj!r}) has no step(scan) method; see soabench.api.Tracker",
+        )
+    return obj
+
+
+def check_options(kind: str, name: str, cls: type, options: dict[str, Any]) -> None:
+    """SoabenchError unless the ``[plugins.<name>]`` table fits the constructor's keyword arguments."""
+    if not options:
+        return
+    try:
+        sig = inspect.signature(cls)
+    except (TypeError, ValueError):  # a builtin or C callable: let the constructor judge
+        return
+    params = list(sig.parameters.values())
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return
+    accepted = [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    n_positional = 4 if kind == BIRTH else 1  # (cfg, sensor, scene, rng) or (setup)
+    accepted = accepted[n_positional:] if len(accepted) >= n_positional else []
+    for key in options:
+        require(
+            key in accepted,
+            f"[plugins.{name}] sets {key!r}, which the {kind} {name!r} does not accept; "
+            f"its options: {', '.join(accepted) or 'none'}",
+        )
+
+
+def preflight(config: Any) -> None:
+    """Before the first trial: every plugin of ``config`` imports and its ``[plugins.<name>]`` table fits it.
+
+    An import error or an unknown option is a user error (one line, exit 2) caught here, in the driver, so no
+    trial runs with a plugin that cannot even be built; errors while a plugin runs are recorded per run instead
+    (:mod:`soabench.experiment.guard`).
+    """
+    exp = config.experiment
+    for kind, names_ in ((BIRTH, exp.models), (TRACKER, exp.trackers)):
+        for name in names_:
+            options = config.plugins.get(name, {})
+            if kind == BIRTH and is_builtin_birth(name):
+                require(not options, f"[plugins.{name}]: {name} is a built-in birth model; set it in [birth]")
+                continue
+            check_options(kind, name, resolve(kind, name), options)

@@ -1,0 +1,83 @@
+"""The two extension points of the benchmark: :class:`BirthModel` and :class:`Tracker` (bottom layer).
+
+A *birth model* says where our GM-PHD filter expects new targets (S-OA, PUBM, UBM, ATBM, GMBM, or yours); a
+*tracker* is anything that turns scans into estimated states (our GM-PHD with a birth model and a probability mode,
+Stone Soup's trackers, or yours). Both are plain classes; nothing needs to inherit from these protocols, they only
+document the shape the harness calls. Register your class by entry point (groups ``soabench.birth_models`` and
+``soabench.trackers``) or name it on the command line as ``module:Class`` (README, "Benchmark your own method").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from soabench.config import BirthConfig, Config, SensorConfig
+    from soabench.scenario.scene import SceneMap
+    from soabench.types import BirthContext, Births, Estimates, Scan, StepResult
+
+
+@runtime_checkable
+class BirthModel(Protocol):
+    """``Model(cfg, sensor, scene, rng, **options)`` once per run, then ``model(ctx) -> Births`` once per scan.
+
+    Args of the constructor:
+        cfg: the ``[birth]`` settings (N_hat, sigma_v, delta_in, ...), shared by every birth model.
+        sensor: the sensor model (dt, FOV, noise, clutter rate of this run).
+        scene: the static scene (buildings, sidewalks, workspace box).
+        rng: this run's placement generator (same stream for every model of a trial: common random numbers).
+        options: a plugin's own ``[plugins.<name>]`` table of the TOML configuration, as keyword arguments.
+
+    The call returns :class:`~soabench.types.Births`: J Gaussian components (w (J,) >= 0, m (J, 4), P (J, 4, 4),
+    source (J,) int) appended to the predicted intensity, and/or measurement-driven
+    :class:`~soabench.types.NewbornTerms` (docs/method.md §3.0, §3.2).
+    """
+
+    name: str
+
+    def __init__(
+        self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator, **options: Any
+    ) -> None: ...
+
+    def __call__(self, ctx: BirthContext) -> Births: ...
+
+
+@dataclass(frozen=True)
+class TrackerSetup:
+    """What a tracker is built from, once per run (one trial, one clutter rate, one probability mode).
+
+    Attributes:
+        sensor: the sensor model of this run (dt, range-bearing noise sigma_r/sigma_b, FOV, clutter rate lambda_c);
+            a tracker's measurement model should be this one.
+        scene: the static scene (buildings, sidewalks, workspace box ``scene.bounds``).
+        rng: this run's generator (seeded from the trial: same seed, same results).
+        mode: the probability mode label of the run ("static", "dynamic", "dynamic+occ"); trackers without
+            such modes may ignore it (their rows then repeat per mode).
+        config: the whole resolved configuration (filter defaults, metrics settings), read-only.
+    """
+
+    sensor: SensorConfig
+    scene: SceneMap
+    rng: np.random.Generator
+    mode: str
+    config: Config
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """``Tracker(setup, **options)`` once per run, then ``tracker.step(scan) -> Estimates`` once per scan, in order.
+
+    ``setup`` is a :class:`TrackerSetup`; ``options`` is the tracker's ``[plugins.<name>]`` table. ``step`` sees
+    only the scan (ego pose, measurements Z in range-bearing relative to the ego heading, occluders), never the
+    truth, and returns :class:`~soabench.types.Estimates` (our GM-PHD tracker returns the richer
+    :class:`~soabench.types.StepResult`). The harness times each step.
+    """
+
+    name: str
+
+    def __init__(self, setup: TrackerSetup, **options: Any) -> None: ...
+
+    def step(self, scan: Scan) -> Estimates | StepResult: ...

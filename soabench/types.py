@@ -1,0 +1,539 @@
+"""The data that flows between the stages: plain dataclasses in the bottom layer (DESIGN: "Where the house goes next").
+
+Every stage and every plugin imports these without importing a stage: a scene source (SUMO, KITTI) produces a
+:class:`Recording` and :class:`Scans`; a birth model turns a :class:`BirthContext` into :class:`Births` (optionally
+with :class:`NewbornTerms`); our GM-PHD filter returns a :class:`StepResult` per scan; any tracker returns
+:class:`Estimates` per scan. The public names are re-exported by :mod:`soabench.api`.
+
+This module imports numpy, shapely (for the geometry a scan carries) and :mod:`soabench.errors` only. The ``.npz``
+round trips of :class:`Recording` and :class:`Scans` live here with their classes (formats: README, "Recording
+format" and "Scans format").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+from shapely.geometry.base import BaseGeometry
+
+from soabench.errors import SoabenchError, require
+
+if TYPE_CHECKING:  # soabench.config sits above this module; imported at run time only where a config is built
+    from soabench.config import SensorConfig
+
+CLUTTER = -1  #: source id of a clutter measurement
+OCCLUDER_KINDS = ("building", "parked", "vehicle")  #: values of ``Obstacles.kind``
+SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (README, "Scans format")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Truth: one scenario run (moved from soabench.scenario.recording, which re-exports it)
+
+
+@dataclass
+class Recording:
+    """Ground truth of one scenario run. T steps, P pedestrians (stable ids), V vehicle slots.
+
+    Attributes:
+        t: (T,) simulation time of each step (s).
+        step_length: SUMO step (s).
+        ego_pose: (T, 3) ego geometric centre x, y (m) and heading theta (rad).
+        ego_footprint: (T, 4, 2) ego rectangle corners (m).
+        ped_ids: (P,) stable pedestrian ids (str).
+        ped_present: (T, P) bool, True while the pedestrian is in the scene (not inside a building).
+        ped_xy: (T, P, 2) position (m), NaN while absent.
+        ped_speed: (T, P) speed (m/s), NaN while absent.
+        ped_heading: (T, P) heading (rad), NaN while absent.
+        veh_ids: (V,) ids of the other (non-ego) vehicle slots.
+        veh_present: (T, V) bool.
+        veh_footprint: (T, V, 4, 2) corners of each other vehicle (m), NaN while absent.
+        static_occluders: list of (n_i, 2) polygons (parked cars), constant over time.
+        seed: trial seed used for SUMO and the scenario.
+        net: network name.
+        meta: free-form provenance (SUMO version, pedestrian model, ...).
+    """
+
+    t: np.ndarray
+    step_length: float
+    ego_pose: np.ndarray
+    ego_footprint: np.ndarray
+    ped_ids: np.ndarray
+    ped_present: np.ndarray
+    ped_xy: np.ndarray
+    ped_speed: np.ndarray
+    ped_heading: np.ndarray
+    veh_ids: np.ndarray
+    veh_present: np.ndarray
+    veh_footprint: np.ndarray
+    static_occluders: list[np.ndarray]
+    seed: int
+    net: str
+    meta: dict = field(default_factory=dict)
+
+    def save_npz(self, path: str | Path) -> None:
+        """Write the Recording as a compressed .npz (format: README, "Recording format"); exact round trip."""
+        occ = [np.asarray(o, dtype=float).reshape(-1, 2) for o in self.static_occluders]
+        offsets = np.cumsum([0] + [len(o) for o in occ]).astype(np.int64)
+        np.savez_compressed(
+            Path(path),
+            format_version=np.array(RECORDING_FORMAT_VERSION),
+            t=np.asarray(self.t, dtype=float),
+            step_length=np.array(float(self.step_length)),
+            ego_pose=np.asarray(self.ego_pose, dtype=float),
+            ego_footprint=np.asarray(self.ego_footprint, dtype=float),
+            ped_ids=np.asarray(self.ped_ids, dtype=str),
+            ped_present=np.asarray(self.ped_present, dtype=bool),
+            ped_xy=np.asarray(self.ped_xy, dtype=float),
+            ped_speed=np.asarray(self.ped_speed, dtype=float),
+            ped_heading=np.asarray(self.ped_heading, dtype=float),
+            veh_ids=np.asarray(self.veh_ids, dtype=str),
+            veh_present=np.asarray(self.veh_present, dtype=bool),
+            veh_footprint=np.asarray(self.veh_footprint, dtype=float),
+            static_occluder_xy=np.concatenate(occ) if occ else np.zeros((0, 2)),
+            static_occluder_offsets=offsets,
+            seed=np.array(int(self.seed), dtype=np.int64),
+            net=np.array(str(self.net)),
+            meta_json=np.array(json.dumps(self.meta, sort_keys=True)),
+        )
+
+    @classmethod
+    def load_npz(cls, path: str | Path) -> Recording:
+        """Read a Recording written by :meth:`save_npz`; SoabenchError on a missing or foreign file."""
+        p = Path(path)
+        require(p.is_file(), f"recording file {str(path)!r} does not exist; give a .npz written by save_npz")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                d = {k: z[k] for k in z.files}
+        except (OSError, ValueError) as exc:
+            raise SoabenchError(f"recording file {str(p)!r} is not a readable .npz ({exc})") from None
+        missing = sorted(set(_RECORDING_KEYS) - set(d))
+        require(not missing, f"recording file {str(p)!r} lacks arrays {missing}; it was not written by save_npz")
+        xy, off = d["static_occluder_xy"], d["static_occluder_offsets"]
+        return cls(
+            t=d["t"],
+            step_length=float(d["step_length"]),
+            ego_pose=d["ego_pose"],
+            ego_footprint=d["ego_footprint"],
+            ped_ids=d["ped_ids"],
+            ped_present=d["ped_present"],
+            ped_xy=d["ped_xy"],
+            ped_speed=d["ped_speed"],
+            ped_heading=d["ped_heading"],
+            veh_ids=d["veh_ids"],
+            veh_present=d["veh_present"],
+            veh_footprint=d["veh_footprint"],
+            static_occluders=[xy[off[i] : off[i + 1]] for i in range(len(off) - 1)],
+            seed=int(d["seed"]),
+            net=str(d["net"]),
+            meta=json.loads(str(d["meta_json"])),
+        )
+
+
+RECORDING_FORMAT_VERSION = 1  #: version written by :meth:`Recording.save_npz`
+_RECORDING_KEYS = (
+    "t", "step_length", "ego_pose", "ego_footprint", "ped_ids", "ped_present", "ped_xy", "ped_speed", "ped_heading",
+    "veh_ids", "veh_present", "veh_footprint", "static_occluder_xy", "static_occluder_offsets", "seed", "net",
+    "meta_json",
+)  # fmt: skip
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Scans: what a tracker receives, plus the per-scan truth the metrics need (moved from soabench.sensor)
+
+
+@dataclass
+class Obstacles:
+    """Occluders O_k seen from the sensor at one scan (§3.1.1-3.1.2), world frame. N obstacles.
+
+    Attributes:
+        polygons: list of N convex (n_i, 2) vertex arrays (convex hull of each occluder).
+        kind: (N,) str, "building", "parked", or "vehicle".
+        centroid_range: (N,) r'_j (m).
+        centroid_bearing: (N,) alpha_c, world-frame direction of the centroid (rad).
+        theta_min, theta_max: (N,) world-frame tangent ray directions (rad), wrap-safe (T14).
+        r_min, r_max: (N,) tangent-point ranges r^b_min, r^b_max (m).
+    Obstacles containing the sensor are left out (T15); only those intersecting the r_max disk are included.
+    """
+
+    polygons: list[np.ndarray]
+    kind: np.ndarray
+    centroid_range: np.ndarray
+    centroid_bearing: np.ndarray
+    theta_min: np.ndarray
+    theta_max: np.ndarray
+    r_min: np.ndarray
+    r_max: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.polygons)
+
+    @classmethod
+    def empty(cls) -> Obstacles:
+        """No obstacles."""
+        z = np.zeros(0)
+        return cls([], np.zeros(0, dtype="<U8"), z, z.copy(), z.copy(), z.copy(), z.copy(), z.copy())
+
+
+@dataclass
+class Scan:
+    """What the filters receive at scan k (never the truth).
+
+    Attributes:
+        k: scan index; t: time (s).
+        ego: (3,) sensor pose x, y, theta (ego geometric centre, heading).
+        Z: (M, 2) measurements (range m, bearing rad relative to the ego heading, wrapped to (-pi, pi]).
+        obstacles: O_k.
+        occluders: shapely polygons of every occluder at k (buildings, parked cars, other vehicles) for
+            line-of-sight tests (the ``occlusion_pd`` option). Exact shapes (not hulls); only those within r_max
+            of the sensor, since no segment to a point in the FOV can meet any other.
+        visible_region: Omega_k = sidewalk within the FOV minus occluders and their shadows (shapely).
+    """
+
+    k: int
+    t: float
+    ego: np.ndarray
+    Z: np.ndarray
+    obstacles: Obstacles
+    occluders: list[BaseGeometry]
+    visible_region: BaseGeometry
+
+
+@dataclass
+class Scans:
+    """K scans plus the per-scan truth needed by the metrics. P pedestrians (same order as the Recording).
+
+    Attributes:
+        scans: list of K :class:`Scan` (filter inputs).
+        dt: sensor period (s).
+        source: list of K (M_k,) int arrays: pedestrian index of each measurement, or CLUTTER (-1).
+        truth_xy: (K, P, 2) true positions (NaN while absent).
+        present, in_fov, visible, detected: (K, P) bool flags (§5.1, §5.4).
+        ped_ids: (P,) pedestrian ids.
+        sensor: the :class:`~soabench.config.SensorConfig` that produced the scans (written into every exported
+            file).
+    """
+
+    scans: list[Scan]
+    dt: float
+    source: list[np.ndarray]
+    truth_xy: np.ndarray
+    present: np.ndarray
+    in_fov: np.ndarray
+    visible: np.ndarray
+    detected: np.ndarray
+    ped_ids: np.ndarray
+    sensor: SensorConfig | None = None
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+    def save_npz(self, path: str | Path) -> None:
+        """Write the Scans as a compressed .npz without pickles (format: README, "Scans format"), with the sensor
+        parameters and their units (:func:`sensor_arrays`): a tracker reading the file needs R, p_D and kappa."""
+        require(
+            self.sensor is not None,
+            "these Scans carry no SensorConfig (Scans.sensor); set it before exporting: the file must say how it "
+            "was measured",
+        )
+        np.savez_compressed(Path(path), **_scans_to_arrays(self), **sensor_arrays(self.sensor))
+
+    @classmethod
+    def load_npz(cls, path: str | Path) -> Scans:
+        """Read Scans written by :meth:`save_npz`."""
+        p = Path(path)
+        require(p.is_file(), f"scans file {str(p)!r} does not exist")
+        with np.load(p, allow_pickle=False) as data:
+            arrays = {name: data[name] for name in data.files}
+        return _scans_from_arrays(arrays, str(p))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# .npz round trip (README, "Scans format")
+
+
+def _offsets(counts: Sequence[int]) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(np.asarray(counts, dtype=np.int64))]).astype(np.int64)
+
+
+def _wkb_pack(geoms: Sequence[BaseGeometry]) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenated WKB bytes (uint8) and (n+1,) byte offsets."""
+    blobs = [shapely.to_wkb(g) for g in geoms]
+    data = np.frombuffer(b"".join(blobs), dtype=np.uint8) if blobs else np.zeros(0, dtype=np.uint8)
+    return data.copy(), _offsets([len(b) for b in blobs])
+
+
+def _wkb_unpack(data: np.ndarray, offsets: np.ndarray) -> list[BaseGeometry]:
+    raw = data.tobytes()
+    return [shapely.from_wkb(raw[a:b]) for a, b in zip(offsets[:-1], offsets[1:], strict=True)]
+
+
+def _scans_to_arrays(scans: Scans) -> dict[str, np.ndarray]:
+    s = scans.scans
+    obstacles = [sc.obstacles for sc in s]
+    all_polys = [p for o in obstacles for p in o.polygons]
+    occluders = [g for sc in s for g in sc.occluders]
+    occ_wkb, occ_wkb_off = _wkb_pack(occluders)
+    reg_wkb, reg_wkb_off = _wkb_pack([sc.visible_region for sc in s])
+
+    def cat(name: str) -> np.ndarray:
+        parts = [getattr(o, name) for o in obstacles]
+        return np.concatenate(parts).astype(float) if parts else np.zeros(0)
+
+    return {
+        "format_version": np.int64(SCANS_FORMAT_VERSION),
+        "dt": np.float64(scans.dt),
+        "k": np.array([sc.k for sc in s], dtype=np.int64),
+        "t": np.array([sc.t for sc in s], dtype=float),
+        "ego": np.array([sc.ego for sc in s], dtype=float).reshape(-1, 3),
+        "z_offsets": _offsets([len(sc.Z) for sc in s]),
+        "Z": np.concatenate([sc.Z for sc in s]).reshape(-1, 2) if s else np.zeros((0, 2)),
+        "source": np.concatenate(scans.source).astype(np.int64) if s else np.zeros(0, dtype=np.int64),
+        "ped_ids": np.asarray(scans.ped_ids, dtype=str),
+        "truth_xy": np.asarray(scans.truth_xy, dtype=float),
+        "present": np.asarray(scans.present, dtype=bool),
+        "in_fov": np.asarray(scans.in_fov, dtype=bool),
+        "visible": np.asarray(scans.visible, dtype=bool),
+        "detected": np.asarray(scans.detected, dtype=bool),
+        "obst_offsets": _offsets([len(o) for o in obstacles]),
+        "obst_kind": np.concatenate([o.kind for o in obstacles]).astype("<U8") if s else np.zeros(0, "<U8"),
+        "obst_centroid_range": cat("centroid_range"),
+        "obst_centroid_bearing": cat("centroid_bearing"),
+        "obst_theta_min": cat("theta_min"),
+        "obst_theta_max": cat("theta_max"),
+        "obst_r_min": cat("r_min"),
+        "obst_r_max": cat("r_max"),
+        "obst_vertex_offsets": _offsets([len(p) for p in all_polys]),
+        "obst_vertices": np.concatenate(all_polys).reshape(-1, 2) if all_polys else np.zeros((0, 2)),
+        "occluder_offsets": _offsets([len(sc.occluders) for sc in s]),
+        "occluder_wkb": occ_wkb,
+        "occluder_wkb_offsets": occ_wkb_off,
+        "region_wkb": reg_wkb,
+        "region_wkb_offsets": reg_wkb_off,
+    }
+
+
+def _scans_from_arrays(a: dict[str, np.ndarray], where: str) -> Scans:
+    require(
+        "format_version" in a and int(a["format_version"]) == SCANS_FORMAT_VERSION,
+        f"{where} is not a soabench Scans file of format version {SCANS_FORMAT_VERSION}",
+    )
+    zo, oo, vo, co = a["z_offsets"], a["obst_offsets"], a["obst_vertex_offsets"], a["occluder_offsets"]
+    verts = [a["obst_vertices"][p:q] for p, q in zip(vo[:-1], vo[1:], strict=True)]
+    occluders = _wkb_unpack(a["occluder_wkb"], a["occluder_wkb_offsets"])
+    regions = _wkb_unpack(a["region_wkb"], a["region_wkb_offsets"])
+    scans, sources = [], []
+    for i in range(len(a["k"])):
+        sl = slice(oo[i], oo[i + 1])
+        obstacles = Obstacles(
+            polygons=verts[sl],
+            kind=a["obst_kind"][sl],
+            centroid_range=a["obst_centroid_range"][sl],
+            centroid_bearing=a["obst_centroid_bearing"][sl],
+            theta_min=a["obst_theta_min"][sl],
+            theta_max=a["obst_theta_max"][sl],
+            r_min=a["obst_r_min"][sl],
+            r_max=a["obst_r_max"][sl],
+        )
+        z_sl = slice(zo[i], zo[i + 1])
+        scan = Scan(
+            int(a["k"][i]),
+            float(a["t"][i]),
+            a["ego"][i],
+            a["Z"][z_sl],
+            obstacles,
+            occluders[co[i] : co[i + 1]],
+            regions[i],
+        )
+        scans.append(scan)
+        sources.append(a["source"][z_sl])
+    return Scans(
+        scans=scans,
+        dt=float(a["dt"]),
+        source=sources,
+        truth_xy=a["truth_xy"],
+        present=a["present"],
+        in_fov=a["in_fov"],
+        visible=a["visible"],
+        detected=a["detected"],
+        ped_ids=a["ped_ids"],
+        sensor=_sensor_from_arrays(a, where),
+    )
+
+
+#: unit of each sensor parameter written into a scans file (README, "Scans format")
+SENSOR_UNITS: dict[str, str] = {
+    "dt": "s",
+    "sigma_r": "m",
+    "sigma_b": "rad",
+    "p_D": "1",
+    "lambda_c": "1/scan",
+    "r_min": "m",
+    "r_max": "m",
+    "fov": "rad",
+}
+
+
+def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
+    """The sensor parameters of a scans file: one float64 scalar per parameter in SI units and radians
+    (``sigma_r``, ``sigma_b``, ``p_D``, ``lambda_c``, ``r_min``, ``r_max``, ``fov``; ``dt`` is written with the
+    scans) and ``sensor_json``: every :class:`SensorConfig` field as configured (degrees where the config uses them)
+    plus the units of the scalars."""
+    values = {
+        "sigma_r": cfg.sigma_r,
+        "sigma_b": cfg.sigma_b,
+        "p_D": cfg.p_D,
+        "lambda_c": cfg.lambda_c,
+        "r_min": cfg.r_min,
+        "r_max": cfg.r_max,
+        "fov": cfg.fov,
+    }
+    meta = {"config": dataclasses.asdict(cfg), "units": SENSOR_UNITS}
+    out = {k: np.float64(v) for k, v in values.items()}
+    out["sensor_json"] = np.array(json.dumps(meta, sort_keys=True))
+    return out
+
+
+def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
+    from soabench.config import SensorConfig
+
+    if "sensor_json" not in a:
+        return None
+    try:
+        return SensorConfig(**json.loads(str(a["sensor_json"]))["config"])
+    except (ValueError, TypeError, KeyError) as exc:
+        raise SoabenchError(f"{where}: sensor_json is not a soabench sensor configuration ({exc})") from None
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Births: what a birth model hands the GM-PHD filter (moved from soabench.birth.base; docs/method.md §2.11, §3.0)
+
+# source codes of birth components (Births.source), for figures and diagnostics
+SOURCE_OCCL, SOURCE_SEM, SOURCE_FOV, SOURCE_GRID, SOURCE_GM, SOURCE_MEAS = range(6)
+SOURCE_NAMES = ("occl", "sem", "fov", "grid", "gm", "meas")
+
+
+@dataclass
+class NewbornTerms:
+    """Measurement-driven newborn terms of scan k, one per measurement, in Z_k order (§3.2, §3.4).
+
+    Attributes:
+        m: (M, 4) newborn means (inverse measurement, zero velocity).
+        P: (M, 4, 4) newborn covariances blkdiag(J R J^T, sigma_v^2 I).
+        beta: callable ``beta(A, kappa) -> (M,)``: the additive term beta_l of each normaliser
+            L_l = kappa_l + A_l + beta_l, given the persistent support A_l = sum_j p_D,j w_j q_jl and the clutter
+            intensity kappa_l. The newborn posterior weight is beta_l / L_l, its mean/cov (m_l, P_l), and it gets
+            no missed-detection term.
+    """
+
+    m: np.ndarray
+    P: np.ndarray
+    beta: Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass
+class Births:
+    """Birth of one scan: appended Gaussian components (J of them, J may be 0) and optional newborn terms."""
+
+    w: np.ndarray  #: (J,) weights
+    m: np.ndarray  #: (J, 4) means [p_x, p_y, v_x, v_y]
+    P: np.ndarray  #: (J, 4, 4) covariances
+    source: np.ndarray  #: (J,) int source codes (SOURCE_*)
+    newborn: NewbornTerms | None = None
+
+    @classmethod
+    def empty(cls) -> Births:
+        return cls(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int8))
+
+    def __len__(self) -> int:
+        return len(self.w)
+
+
+@dataclass
+class BirthContext:
+    """What a birth model may look at when scan k arrives (time alignment: everything is at k, §2.12 item 10)."""
+
+    scan: Scan  #: ego pose, Z_k, obstacles O_k, occluders, visible semantic region at k
+    prev: StepResult | None  #: the filter's result at k-1 (None at k = 0); ATBM prev-scan reads it
+    p_D_b: float = 0.98  #: detection probability of a newborn (filter p_D; Beta prior mean in dynamic mode)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# What a tracker returns per scan
+
+
+@dataclass
+class Estimates:
+    """What any tracker returns at scan k: its estimated target states and, optionally, cost figures.
+
+    Attributes:
+        X: (n, 2) positions [p_x, p_y] or (n, 4) states [p_x, p_y, v_x, v_y], world frame (m, m/s); n may be 0.
+            The metrics read the positions only. One row per estimated target (repeat a row for two targets).
+        w: optional (n,) non-negative confidence of each estimate (a PHD weight, a track score); stored with
+            ``--save-estimates``, never used by the metrics.
+        n_components: optional cost figure: hypotheses, components or tracks kept after the step. Without it the
+            harness reports the number of estimates.
+        cardinality: optional expected number of targets (a PHD's sum of weights); without it NaN.
+    """
+
+    X: np.ndarray
+    w: np.ndarray | None = None
+    n_components: int | None = None
+    cardinality: float | None = None
+
+    @classmethod
+    def empty(cls) -> Estimates:
+        """No target at this scan."""
+        return cls(np.zeros((0, 4)))
+
+    def __len__(self) -> int:
+        return len(self.X)
+
+
+@dataclass
+class StepResult:
+    """Output and diagnostics of one GM-PHD filter cycle at scan k (§2.10, §5.7): a richer :class:`Estimates`.
+
+    Attributes:
+        k: scan index.
+        X: (n, 4) extracted states, with multiplicity (floor(w + 0.5) copies).
+        X_w: (n,) weight of the component each estimate came from.
+        sum_w: posterior mass N_k|k after the update (before reduction).
+        sum_w_reduced: mass after prune/merge/cap.
+        n_predicted: components after prediction and birth (plus newborn terms, if any).
+        n_updated: components after the update.
+        n_reduced: components after prune/merge/cap (the paper's "posterior components").
+        cap_hit: J_max was hit.
+        t_predict, t_update, t_reduce: wall time of each stage (s).
+        mean_pD: weight-averaged p_D estimate (dynamic mode; p_D otherwise).
+        A: (M,) persistent support of each measurement, sum_j p_D,j w_j q_jl.
+        kappa: (M,) clutter intensity of each measurement.
+    """
+
+    k: int
+    X: np.ndarray
+    X_w: np.ndarray
+    sum_w: float
+    sum_w_reduced: float
+    n_predicted: int
+    n_updated: int
+    n_reduced: int
+    cap_hit: bool
+    t_predict: float
+    t_update: float
+    t_reduce: float
+    mean_pD: float
+    A: np.ndarray
+    kappa: np.ndarray
+    n_pruned: int = 0  #: components after pruning (before merging)
+    n_merged: int = 0  #: components after merging (before the cap)
+    n_pairs: int = 0  #: detection (j, l) pairs built in the update (q > 0)
+    n_newborn: int = 0  #: measurement-driven newborn components built in the update
+    n_dropped: int = 0  #: non-finite measurements dropped (``filter.nonfinite = "drop"``; all if the pose was)
+    n_dropped_births: int = 0  #: birth components dropped for a non-finite or negative value

@@ -1,0 +1,108 @@
+"""Plugins for the tests, named by import path (``plugin_fixtures:Name``): well-behaved and broken ones.
+
+Module-level classes so worker processes can import them (pytest puts tests/ on sys.path; forked workers inherit it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from soabench.api import Births, Estimates, NewbornTerms, births_from, isotropic
+
+
+class OneBirth:
+    """A birth component 10 m ahead of the ego at every scan (weight N_hat); options: ``ahead`` (m)."""
+
+    name = "one"
+
+    def __init__(self, cfg, sensor, scene, rng, ahead: float = 10.0) -> None:
+        self.cfg, self.ahead = cfg, ahead
+
+    def __call__(self, ctx) -> Births:
+        x, y, th = ctx.scan.ego
+        p = np.array([[x + self.ahead * np.cos(th), y + self.ahead * np.sin(th)]])
+        return births_from(p, isotropic(2.0, 1), [self.cfg.N_hat], [0], 1.0)
+
+
+class RaiseAtScan3(OneBirth):
+    def __call__(self, ctx) -> Births:
+        if ctx.scan.k == 3:
+            raise RuntimeError("boom at three")
+        return super().__call__(ctx)
+
+
+class NaNWeights(OneBirth):
+    def __call__(self, ctx) -> Births:
+        b = super().__call__(ctx)
+        if ctx.scan.k == 2:
+            b.w = np.array([np.nan])
+        return b
+
+
+class NegativeWeights(OneBirth):
+    def __call__(self, ctx) -> Births:
+        b = super().__call__(ctx)
+        b.w = -b.w
+        return b
+
+
+class WrongShape(OneBirth):
+    def __call__(self, ctx) -> Births:
+        b = super().__call__(ctx)
+        b.m = b.m[:, :2]
+        return b
+
+
+class ReturnsNone(OneBirth):
+    def __call__(self, ctx):
+        return None
+
+
+class NegativeNewborn(OneBirth):
+    """Newborn terms whose beta is negative: caught when the update calls it."""
+
+    def __call__(self, ctx) -> Births:
+        M = len(ctx.scan.Z)
+        nb = NewbornTerms(np.zeros((M, 4)), np.tile(np.eye(4), (M, 1, 1)), lambda A, kappa: -np.ones(len(A)))
+        b = Births.empty()
+        b.newborn = nb
+        return b
+
+
+class BadInit(OneBirth):
+    def __init__(self, cfg, sensor, scene, rng) -> None:
+        raise ImportError("a dependency of this plugin is missing")
+
+
+class EchoTracker:
+    """Reports every measurement as a target (positions only): a deliberately poor but valid tracker."""
+
+    name = "echo"
+
+    def __init__(self, setup, scale: float = 1.0) -> None:
+        self.scale = scale
+
+    def step(self, scan) -> Estimates:
+        Z = np.asarray(scan.Z, dtype=float).reshape(-1, 2)
+        x, y, th = scan.ego
+        p = np.column_stack([x + Z[:, 0] * np.cos(Z[:, 1] + th), y + Z[:, 0] * np.sin(Z[:, 1] + th)])
+        return Estimates(p * self.scale if self.scale != 1.0 else p, w=np.ones(len(p)), n_components=len(p))
+
+
+class SilentTracker(EchoTracker):
+    def step(self, scan):
+        return None
+
+
+class NaNTracker(EchoTracker):
+    def step(self, scan) -> Estimates:
+        return Estimates(np.full((1, 2), np.nan))
+
+
+class StringTracker(EchoTracker):
+    def step(self, scan) -> Estimates:
+        return Estimates(np.array([["a", "b"]]))
+
+
+class NotATracker:
+    """No step method."""
