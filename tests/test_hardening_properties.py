@@ -25,8 +25,10 @@ from soabench.sensor import Scan
 SETTINGS = settings(max_examples=60, deadline=None)
 
 # ------------------------------------------------------------------------------------------------ config loader
-FIELDS = {
-    sec.name: {f.name: f for f in dataclasses.fields(getattr(Config(), sec.name))} for sec in dataclasses.fields(Config)
+FIELDS = {  # the parameter sections ([plugins.<name>] tables belong to their plugins)
+    sec.name: {f.name: f for f in dataclasses.fields(getattr(Config(), sec.name))}
+    for sec in dataclasses.fields(Config)
+    if dataclasses.is_dataclass(getattr(Config(), sec.name))
 }
 SCALARS = st.one_of(
     st.booleans(),
