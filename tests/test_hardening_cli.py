@@ -155,6 +155,24 @@ def test_ctrl_c_with_pool_workers_prints_one_line_and_no_worker_traceback(tmp_pa
     assert len(lines) == 1 and f"finish with: soabench run --resume {out}" in lines[0], err
 
 
+def test_ctrl_c_with_dask_local_workers_prints_one_line_and_no_worker_traceback(tmp_path):
+    out = tmp_path / "run"
+    proc = _driver(
+        ["run", "--trials", "30", "--duration", "10", "--dask", "local", "--workers", "2", "--out", str(out)]
+    )
+    try:
+        _wait_for(out, 2, proc, timeout=120)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130
+    err = "\n".join(line for line in err.splitlines() if not line.startswith(("INFO", "WARNING")))
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert f"finish with: soabench run --resume {out}" in err.strip().splitlines()[-1]
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_pool_workers_die_with_a_killed_driver(tmp_path):
     out = tmp_path / "run"
