@@ -248,3 +248,41 @@ def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, command,
     assert "Traceback" not in err, (argv, err)
     if code == 2 and err.startswith("soabench: error"):
         assert len(err.strip().splitlines()) == 1, (argv, err)
+
+
+@pytest.fixture
+def fake_everything(monkeypatch):
+    import soabench.experiment.report as report
+
+    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
+    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+
+
+def _ctrl_c(*a, **k):
+    raise KeyboardInterrupt
+
+
+def test_ctrl_c_in_the_sweep_report_names_the_sweep_resume(tmp_path, capsys, monkeypatch, fake_everything):
+    import soabench.experiment.sweep as sweep
+
+    monkeypatch.setattr(sweep, "write_sweep_report", _ctrl_c)
+    out = tmp_path / "sw"
+    argv = ["sweep", "births", "--offsets", "0,1", "--trials", "1", "--duration", "10", "--workers", "1"]
+    assert main([*argv, "--out", str(out)]) == 130
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and f"finish with: soabench sweep births --resume {out}" in lines[0], lines
+
+
+def test_ctrl_c_in_the_study_comparison_names_the_study_rerun(tmp_path, capsys, monkeypatch, fake_everything):
+    import soabench.experiment.study as study
+    import soabench.experiment.sweep as sweep
+
+    monkeypatch.setattr(sweep, "write_sweep_report", lambda d: "sweep")
+    monkeypatch.setattr(study, "write_comparison", _ctrl_c)
+    out = tmp_path / "study"
+    argv = ["study", "--trials", "1", "--births-trials", "1", "--duration", "10", "--workers", "1"]
+    assert main([*argv, "--out", str(out)]) == 130
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and f"finish with: soabench study --out {out}" in lines[0], lines
+    assert not (out / ".lock").exists()
