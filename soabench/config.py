@@ -32,7 +32,7 @@ BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "atbm", "gmbm")
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
 
 
-MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 10^5 trials of 100 s are ~6 months of CPU
+MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
 
 

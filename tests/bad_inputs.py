@@ -125,6 +125,7 @@ CASES: list[Case] = [
     ("--scheduler port 0", lambda t: _run(t, "--scheduler", "tcp://127.0.0.1:0"), "tcp://HOST:PORT"),
     ("--scheduler port 99999", lambda t: _run(t, "--scheduler", "127.0.0.1:99999"), "tcp://HOST:PORT"),
     ("--scheduler http", lambda t: _run(t, "--scheduler", "http://127.0.0.1:8786"), "tcp://HOST:PORT"),
+    ("--scheduler refused port", lambda t: _run(t, "--scheduler", "tcp://127.0.0.1:1"), "cannot connect"),
     # files
     ("config not UTF-8", _not_utf8, "not UTF-8"),
     ("config is a folder", lambda t: _run(t, "--config", str(t)), "does not exist"),

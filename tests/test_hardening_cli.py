@@ -160,6 +160,24 @@ def test_ctrl_c_with_pool_workers_prints_one_line_and_no_worker_traceback(tmp_pa
     assert len(lines) == 1 and f"finish with: soabench run --resume {out}" in lines[0], err
 
 
+def test_ctrl_c_with_dask_local_workers_prints_one_line_and_no_worker_traceback(tmp_path):
+    out = tmp_path / "run"
+    proc = _driver(
+        ["run", "--trials", "30", "--duration", "10", "--dask", "local", "--workers", "2", "--out", str(out)]
+    )
+    try:
+        _wait_for(out, 2, proc, timeout=120)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130
+    err = "\n".join(line for line in err.splitlines() if not line.startswith(("INFO", "WARNING")))
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert f"finish with: soabench run --resume {out}" in err.strip().splitlines()[-1]
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_pool_workers_die_with_a_killed_driver(tmp_path):
     out = tmp_path / "run"
@@ -235,3 +253,41 @@ def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, command,
     assert "Traceback" not in err, (argv, err)
     if code == 2 and err.startswith("soabench: error"):
         assert len(_messages(err)) == 1, (argv, err)
+
+
+@pytest.fixture
+def fake_everything(monkeypatch):
+    import soabench.experiment.report as report
+
+    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
+    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+
+
+def _ctrl_c(*a, **k):
+    raise KeyboardInterrupt
+
+
+def test_ctrl_c_in_the_sweep_report_names_the_sweep_resume(tmp_path, capsys, monkeypatch, fake_everything):
+    import soabench.experiment.sweep as sweep
+
+    monkeypatch.setattr(sweep, "write_sweep_report", _ctrl_c)
+    out = tmp_path / "sw"
+    argv = ["sweep", "births", "--offsets", "0,1", "--trials", "1", "--duration", "10", "--workers", "1"]
+    assert main([*argv, "--out", str(out)]) == 130
+    lines = capsys.readouterr()._messages(err)
+    assert len(lines) == 1 and f"finish with: soabench sweep births --resume {out}" in lines[0], lines
+
+
+def test_ctrl_c_in_the_study_comparison_names_the_study_rerun(tmp_path, capsys, monkeypatch, fake_everything):
+    import soabench.experiment.study as study
+    import soabench.experiment.sweep as sweep
+
+    monkeypatch.setattr(sweep, "write_sweep_report", lambda d: "sweep")
+    monkeypatch.setattr(study, "write_comparison", _ctrl_c)
+    out = tmp_path / "study"
+    argv = ["study", "--trials", "1", "--births-trials", "1", "--duration", "10", "--workers", "1"]
+    assert main([*argv, "--out", str(out)]) == 130
+    lines = capsys.readouterr()._messages(err)
+    assert len(lines) == 1 and f"finish with: soabench study --out {out}" in lines[0], lines
+    assert not (out / ".lock").exists()

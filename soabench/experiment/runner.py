@@ -49,7 +49,7 @@ from soabench.experiment.store import (
     to_jsonable,
     write_json_atomic,
 )
-from soabench.experiment.workers import init_worker
+from soabench.experiment.workers import init_worker, sigint_ignored_by_children
 from soabench.seeding import trial_seeds
 
 TrialFn = Callable[..., Any]
@@ -268,13 +268,14 @@ class DaskExecutor:
             import logging
 
             n = int(local_workers or os.cpu_count() or 1)
-            self._cluster = distributed.LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                silence_logs=logging.ERROR,
-            )
+            with sigint_ignored_by_children():  # Ctrl-C is the driver's: no worker tracebacks
+                self._cluster = distributed.LocalCluster(
+                    n_workers=n,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    silence_logs=logging.ERROR,
+                )
             self.address = self._cluster.scheduler_address
             self.name = f"dask-local({n})"
         else:

@@ -3,7 +3,9 @@
 Layout of a run folder (``results/<net>/<UTC timestamp>/``)::
 
     run.json                 written once at start: resolved config (Config.to_dict()), net, polys, scenario,
-                             trial count, save_estimates, trial function, package versions
+                             trial count, save_estimates, trial kind and scene loader (registered names, never
+                             import paths: :mod:`soabench.experiment.registry`), package versions
+    .lock                    while a process works the folder (:mod:`soabench.experiment.ownership`)
     trials/trial_00042.json  one record per finished trial (status "ok"): rows, episodes, steps, timing
     failed/trial_00042.json  one record per failed trial: seed, sumo_seed, error, traceback (retried by --resume)
     estimates/trial_00042.json.gz   with --save-estimates: gzipped JSON {"trial": n, "estimates": [...]}, the

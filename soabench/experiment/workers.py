@@ -7,16 +7,20 @@
   the parent pid once a second and exits the worker when it changes;
 * it ignores SIGINT: Ctrl-C reaches the whole foreground process group, and only the driver should act on it (it
   stops the pool and prints one line with the resume hint), so no worker prints a KeyboardInterrupt traceback.
+
+A Dask LocalCluster's worker processes are started inside :func:`sigint_ignored_by_children` for the same reason.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator
 
 PR_SET_PDEATHSIG = 1  #: from <linux/prctl.h>
 
@@ -48,3 +52,18 @@ def init_worker(parent: int | None = None) -> None:
         os._exit(1)
     if not armed:
         threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="soabench-parent-watch").start()
+
+
+@contextlib.contextmanager
+def sigint_ignored_by_children() -> Iterator[None]:
+    """Ignore SIGINT while worker processes are started (e.g. a Dask LocalCluster's), so they inherit the ignored
+    disposition (it survives fork and exec, and Python then installs no KeyboardInterrupt handler): Ctrl-C stays
+    the driver's business, and no worker prints a traceback. Restored on exit; a no-op outside the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -60,8 +60,10 @@ def _subset_beta(beta, keep: np.ndarray):
 
 def check_step_inputs(k: int, Z: np.ndarray, ego: np.ndarray, births: Births, policy: str) -> StepInputs:
     """Check (and with ``policy == "drop"`` clean) the inputs of scan ``k``; see the module docstring."""
+    if ego.shape != (3,):
+        raise SoabenchError(f"scan {k}: the ego pose has shape {ego.shape}; expected (x, y, theta)")
     nb = births.newborn
-    ok_z, ok_ego = _finite(Z), _finite(ego) and ego.shape == (3,)
+    ok_z, ok_ego = _finite(Z), _finite(ego)
     ok_b = _finite(births.w) and _finite(births.m) and _finite(births.P) and bool((births.w >= 0).all())
     ok_nb = nb is None or (_finite(np.asarray(nb.m, dtype=float)) and _finite(np.asarray(nb.P, dtype=float)))
     if ok_z and ok_ego and ok_b and ok_nb:
