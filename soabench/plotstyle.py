@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import weakref
 import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -114,7 +115,7 @@ def mode_style(mode: str) -> Style:
 
 def panel_title(ax, letter: str | None, text: str) -> None:
     """Title a panel ``"(a) text"`` (the package's one title scheme); no letter for a single-panel figure."""
-    ax.set_title(f"({letter}) {text}" if letter else text)
+    ax.set_title(f"({letter}) {text}" if letter else text, loc="left", fontsize=RC["axes.titlesize"])
 
 
 def letters(n: int, start: str = "a") -> list[str]:
@@ -219,3 +220,51 @@ def legend_below(fig: Figure, handles: Sequence, labels: Sequence[str] | None = 
         handler_map={tuple: HandlerTuple(ndivide=None, pad=0.4)},
         **kw,
     )
+
+
+# ------------------------------------------------------------------------------------------------ maps
+def fill_geometry(ax, geom, **style) -> list:
+    """Fill every polygon of a shapely geometry on ``ax`` with its holes left open (one path per polygon, the
+    interiors as inner rings), so what lies under a hole (a road inside a ring of sidewalk) stays visible.
+    Returns the added patches."""
+    import numpy as np
+    import shapely
+    from matplotlib.patches import PathPatch
+    from matplotlib.path import Path as MplPath
+
+    if geom is None or geom.is_empty:
+        return []
+    patches = []
+    for part in shapely.get_parts(shapely.get_parts(np.asarray([geom], dtype=object))):
+        if part.is_empty or part.geom_type != "Polygon":
+            continue
+        rings = [np.asarray(part.exterior.coords)[:, :2]] + [np.asarray(r.coords)[:, :2] for r in part.interiors]
+        codes = []
+        for ring in rings:
+            codes += [MplPath.MOVETO] + [MplPath.LINETO] * (len(ring) - 2) + [MplPath.CLOSEPOLY]
+        patches.append(ax.add_patch(PathPatch(MplPath(np.concatenate(rings), codes), **style)))
+    return patches
+
+
+_LEGENDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def extend_legend(ax, handles: Sequence, ncol: int = 4):
+    """Add ``handles`` to the one legend under a map ``ax`` (scene, sensor and birth layers each add theirs);
+    a handle whose label is already listed is not repeated. Returns the legend."""
+    from matplotlib.transforms import offset_copy
+
+    held = _LEGENDS.setdefault(ax, [])
+    labels = {h.get_label() for h in held}
+    held += [h for h in handles if h.get_label() not in labels]
+    if ax.get_legend() is not None:
+        ax.get_legend().remove()
+    with style():
+        return ax.legend(
+            handles=held,
+            loc="upper center",
+            bbox_to_anchor=(0.5, 0.0),  # 28 pt under the map: below the x tick labels and axis label
+            bbox_transform=offset_copy(ax.transAxes, ax.figure, y=-28, units="points"),
+            ncol=min(ncol, len(held)) or 1,
+            frameon=False,
+        )
