@@ -44,7 +44,7 @@ def _run_tables() -> RunTables:
                     row = dict(trial=tr, clutter=lam, model=model, mode=mode, delay_mean=mean,
                                delay_std=2.0 if model == "atbm" else 0.4, card_err=1.0 + rng.random(),
                                ospa=30 + 10 * rng.random(), precision=rng.uniform(0.5, 1.0),
-                               mean_components=20 + tr)  # fmt: skip
+                               mean_components=20 + 2 * tr)  # fmt: skip
                     for c, v in row.items():
                         trials[c].append(v)
                     for k in range(N_STEPS):
@@ -193,7 +193,7 @@ def test_fig6_and_fig7_per_mode_panels(tables, tmp_path):
     _rendered(fig, tmp_path, "fig7")
     for ax in fig.axes:
         assert len(ax.lines) == len(MODELS) and "(s)" in ax.get_xlabel()  # one mean curve per model, vs time
-        assert any(lab.startswith("S-OA (run mean") for lab in [t.get_text() for t in ax.get_legend().get_texts()])
+    assert "S-OA: run mean 25 static, 25 dynamic" in _legend_labels(fig)  # mean_components = 20 + 2 trial
     assert [line.get_linestyle() for line in fig.axes[1].lines] == ["--"] * len(MODELS)
 
 

@@ -288,7 +288,16 @@ def precision_figure(tables: RunTables) -> Figure:
                 ax = axes[i, j]
                 for model in models:
                     k, p = cumulative_precision(tables, lam, model, mode)
-                    ax.plot(k * dt, p, ps.mode_style(mode).linestyle, color=ps.model_style(model).color)
+                    st = ps.model_style(model)
+                    ax.plot(
+                        k * dt,
+                        p,
+                        ps.mode_style(mode).linestyle,
+                        color=st.color,
+                        marker=st.marker,
+                        ms=2.5,
+                        markevery=max(1, k.size // 8),
+                    )  # fmt: skip  (markers tell overlapping curves apart)
                 ps.panel_title(ax, None, f"{mode}, λ = {lam:g}")
                 ax.set_ylim(0, 1.02)
                 if i == len(modes) - 1:
@@ -297,7 +306,7 @@ def precision_figure(tables: RunTables) -> Figure:
                     ax.set_ylabel("cumulative precision")
         fig.suptitle("(h) cumulative precision ΣTP / Σ(TP + FP) up to time t, mean over trials", x=0.0, ha="left")
         fig.legend(
-            handles=ps.model_handles(models, marker=False) + ps.mode_handles(modes),
+            handles=ps.model_handles(models) + ps.mode_handles(modes),
             loc="outside lower center",
             ncol=len(models) + len(modes),
         )
@@ -339,7 +348,7 @@ def precision_trials_figure(tables: RunTables) -> Figure:
             ax.grid(axis="x", visible=False)
             ps.panel_title(ax, letter, f"per-trial precision, {mode}")
         axes[0].set_ylabel("precision per trial")
-        fig.legend(handles=ps.model_handles(models), loc="outside lower center", ncol=len(models))
+        fig.legend(handles=ps.model_handles(models, marker=False), loc="outside lower center", ncol=len(models))
     return fig
 
 
@@ -420,19 +429,19 @@ def components_figure(tables: RunTables, clutter: float) -> Figure:
     with ps.style():
         fig = ps.figure("double", 3.0)
         axes = fig.subplots(1, len(modes), squeeze=False, sharey=True)[0]
+        run_means: dict[str, list[str]] = {model: [] for model in models}
         for ax, mode, letter in zip(axes, modes, ps.letters(len(modes)), strict=False):
-            handles = []
             for model in models:
                 st = ps.model_style(model)
                 k, mean, lo, hi = components_over_time(tables, clutter, model, mode)
-                (line,) = ax.plot(k * dt, mean, ps.mode_style(mode).linestyle, color=st.color)
+                ax.plot(k * dt, mean, ps.mode_style(mode).linestyle, color=st.color)
                 ax.fill_between(k * dt, lo, hi, color=st.color, alpha=0.15, lw=0)
                 avg, _ = mean_ci(t["mean_components"][select(t, clutter=clutter, model=model, mode=mode)])
-                line.set_label(f"{ps.model_label(model)} (run mean {avg:.0f})")
-                handles.append(line)
+                run_means[model].append(f"{avg:.0f} {mode}")
             ax.set_xlabel("time (s)")
             ps.panel_title(ax, letter, f"{mode}, λ = {clutter:g}")
-            ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3)
+        labels = [f"{ps.model_label(m)}: run mean {', '.join(run_means[m])}" for m in models]
+        ps.legend_below(fig, ps.model_handles(models, marker=False), labels, ncol=3)  # the panel titles name the mode
         axes[0].set_ylabel("posterior components J")
         axes[0].set_ylim(0, None)
         fig.suptitle("posterior components after pruning and merging: mean over trials, 10–90 % band", x=0.0, ha="left")
