@@ -118,9 +118,9 @@ def panel_title(ax, letter: str | None, text: str) -> None:
     ax.set_title(f"({letter}) {text}" if letter else text, loc="left", fontsize=RC["axes.titlesize"])
 
 
-def letters(n: int, start: str = "a") -> list[str]:
-    """The panel letters ``a, b, c, ...`` of an ``n``-panel figure."""
-    return [chr(ord(start) + i) for i in range(n)]
+def letters(n: int, start: str = "a") -> list[str | None]:
+    """The panel letters ``a, b, c, ...`` of an ``n``-panel figure (a figure of one panel has none)."""
+    return [None] if n == 1 else [chr(ord(start) + i) for i in range(n)]
 
 
 @contextlib.contextmanager
