@@ -1,4 +1,4 @@
-"""A finished run's CSV files as columns: the data the report and the figures both read (ALGORITHMS.md §5.8).
+"""A finished run's CSV files as columns: the data the report and the figures both read (docs/method.md §5.8).
 
 Both :mod:`soabench.experiment.report` (summary tables) and :mod:`soabench.experiment.plots` (figures) import from
 here, so neither imports the other's module to get at the data.
