@@ -327,23 +327,18 @@ def _prepare_out(path: str) -> Path:
 
 
 def _save_figure(fig, out: Path) -> None:
-    tmp = out.with_name(out.name + ".tmp" + out.suffix)
-    fig.savefig(tmp, dpi=150, bbox_inches="tight")
-    tmp.replace(out)
+    from soabench.plotstyle import save_png
+
+    save_png(fig, out)
 
 
 # ----------------------------------------------------------------------------------------------------- commands
 def cmd_scene(args: argparse.Namespace) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from soabench.scenario.plots import plot_scene
+    from soabench.scenario.plots import plot_scene, scene_figure
 
     out = _prepare_out(args.out)
     scene, _, cfg, seeds, recording = _snapshot(args, args.time, include_end=True)
-    fig, ax = plt.subplots(figsize=(11, 6.8))
+    fig, ax = scene_figure(scene, legend_rows=6 if args.sensor else 3)
     if args.sensor:
         from soabench.sensor_plot import draw_sensor_overlay
 
@@ -353,7 +348,6 @@ def cmd_scene(args: argparse.Namespace) -> int:
     else:
         plot_scene(scene, recording, time=args.time, ax=ax)
     _save_figure(fig, out)
-    plt.close(fig)
     print(f"wrote {out}")
     return 0
 
@@ -375,16 +369,13 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 
 def cmd_birth(args: argparse.Namespace) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from soabench import plugins
+    from soabench.birth import LABEL
     from soabench.birth.base import BirthContext
     from soabench.birth.plots import draw_births
     from soabench.gmphd.filter import GMPHDFilter
-    from soabench.scenario.plots import plot_scene
+    from soabench.plotstyle import panel_title
+    from soabench.scenario.plots import plot_scene, scene_figure
 
     out = _prepare_out(args.out)
     plugins.allow_import_paths([args.model])
@@ -401,13 +392,13 @@ def cmd_birth(args: argparse.Namespace) -> int:
     for scan in scans.scans:  # run the filter up to the snapshot so stateful models see their history
         births = model(BirthContext(scan, prev, p_D_b))
         prev = filt.step(scan, births)
-    fig, ax = plt.subplots(figsize=(11, 6.8))
+    fig, ax = scene_figure(scene, legend_rows=5)
     plot_scene(scene, recording, time=scans.scans[-1].t, ax=ax)
     draw_births(ax, births, scans.scans[-1])
     n_new = 0 if births.newborn is None else len(births.newborn.m)
-    ax.set_title(f"{args.model}: {len(births)} birth components, {n_new} newborn terms, t = {scans.scans[-1].t:g} s")
+    what = f"{LABEL.get(args.model, args.model)}: {len(births)} birth components, {n_new} newborn terms"
+    panel_title(ax, None, f"{ax.get_title(loc='left')}; {what}")
     _save_figure(fig, out)
-    plt.close(fig)
     print(f"wrote {out} ({len(births)} components, {n_new} newborn terms)")
     return 0
 

@@ -8,13 +8,11 @@ or red dashed (blocked); measurements from targets blue dots, clutter orange cro
 from __future__ import annotations
 
 import numpy as np
-import shapely
 from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
-from matplotlib.patches import Patch, PathPatch
-from matplotlib.path import Path as MplPath
-from shapely.geometry.base import BaseGeometry
+from matplotlib.patches import Patch
 
+from soabench import plotstyle as ps
 from soabench.config import SensorConfig
 from soabench.geometry import polar_to_world
 from soabench.sensor import CLUTTER, Scans, fov_polygon, shadow_polygons
@@ -29,22 +27,23 @@ _Z_CLUTTER = "tab:orange"
 
 
 def draw_sensor_overlay(ax: Axes, scans: Scans, k: int, cfg: SensorConfig) -> None:
-    """Draw scan ``k`` of ``scans`` on ``ax`` (which may already show the scene) and add a legend.
+    """Draw scan ``k`` of ``scans`` on ``ax`` (which may already show the scene) and add its entries to the legend
+    under the map.
 
     Layers sit above :func:`soabench.scenario.plots.plot_scene` (zorder <= 9): Omega_k just above the sidewalks,
     shadows above buildings and cars, rays, sight lines and measurements on top.
     """
     scan = scans.scans[k]
     ego = np.asarray(scan.ego, dtype=float)
-    _draw_geometry(ax, scan.visible_region, facecolor=_VISIBLE_REGION, edgecolor="none", alpha=0.45, zorder=2.5)
+    ps.fill_geometry(ax, scan.visible_region, facecolor=_VISIBLE_REGION, edgecolor="none", alpha=0.45, zorder=2.5)
     for shadow in shadow_polygons(ego[:2], scan.obstacles, cfg.r_max):
-        _draw_geometry(ax, shadow.intersection(fov_polygon(ego, cfg)), facecolor=_SHADOW, alpha=0.3, zorder=4.5)
+        ps.fill_geometry(ax, shadow.intersection(fov_polygon(ego, cfg)), facecolor=_SHADOW, alpha=0.3, zorder=4.5)
     _draw_tangent_rays(ax, ego, scans, k, cfg)
-    _draw_geometry(ax, fov_polygon(ego, cfg), facecolor="none", edgecolor="k", linestyle="--", lw=0.8, zorder=10)
+    ps.fill_geometry(ax, fov_polygon(ego, cfg), facecolor="none", edgecolor="k", linestyle="--", lw=0.8, zorder=10)
     _draw_sight_lines(ax, ego, scans, k)
     _draw_measurements(ax, ego, scans, k)
     _draw_ego(ax, ego)
-    ax.legend(handles=_legend_handles(), loc="upper right", fontsize="small", framealpha=0.85)
+    ps.extend_legend(ax, _legend_handles())
     ax.set_aspect("equal")
 
 
@@ -87,18 +86,6 @@ def _draw_measurements(ax: Axes, ego: np.ndarray, scans: Scans, k: int) -> None:
     ax.plot(world[clutter, 0], world[clutter, 1], "x", color=_Z_CLUTTER, ms=6, zorder=12)
 
 
-def _draw_geometry(ax: Axes, geom: BaseGeometry, **style: object) -> None:
-    """Fill every polygon part of ``geom`` (holes respected)."""
-    for part in shapely.get_parts(np.asarray([geom], dtype=object)):
-        if part.is_empty or part.geom_type != "Polygon":
-            continue
-        rings = [np.asarray(part.exterior.coords)] + [np.asarray(r.coords) for r in part.interiors]
-        codes = []
-        for ring in rings:
-            codes += [MplPath.MOVETO] + [MplPath.LINETO] * (len(ring) - 2) + [MplPath.CLOSEPOLY]
-        ax.add_patch(PathPatch(MplPath(np.concatenate(rings), codes), **style))
-
-
 def _legend_handles() -> list:
     return [
         Patch(facecolor=_VISIBLE_REGION, alpha=0.45, label="visible sidewalk $\\Omega_k$"),
@@ -109,4 +96,6 @@ def _legend_handles() -> list:
         Line2D([], [], color=_Z_TARGET, marker=".", ls="none", label="measurement (target)"),
         Line2D([], [], color=_Z_CLUTTER, marker="x", ls="none", label="measurement (clutter)"),
         Line2D([], [], color="k", ls="--", lw=0.8, label="field of view"),
+        Line2D([], [], color="k", marker="o", ls="none", label="sensor origin (arrow: heading)"),
+        Line2D([], [], color="k", marker="o", mfc="none", ls="none", ms=7, label="present pedestrian"),
     ]

@@ -41,7 +41,7 @@ def test_files_exist_and_rows_are_trials_x_models_x_modes(run_dir):
         (str(t), m, p) for t in range(2) for m in MODELS for p in MODES
     }
     figures = sorted(p.name for p in (run_dir / "figures").glob("*.png"))
-    assert len(figures) == 10 and all(p.stat().st_size > 10_000 for p in (run_dir / "figures").glob("*.png"))
+    assert len(figures) == 11 and all(p.stat().st_size > 10_000 for p in (run_dir / "figures").glob("*.png"))
 
 
 def test_metrics_are_finite_where_defined(run_dir):

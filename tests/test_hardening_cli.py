@@ -275,7 +275,7 @@ def test_ctrl_c_in_the_sweep_report_names_the_sweep_resume(tmp_path, capsys, mon
     out = tmp_path / "sw"
     argv = ["sweep", "births", "--offsets", "0,1", "--trials", "1", "--duration", "10", "--workers", "1"]
     assert main([*argv, "--out", str(out)]) == 130
-    lines = capsys.readouterr()._messages(err)
+    lines = _messages(capsys.readouterr().err)
     assert len(lines) == 1 and f"finish with: soabench sweep births --resume {out}" in lines[0], lines
 
 
@@ -288,6 +288,6 @@ def test_ctrl_c_in_the_study_comparison_names_the_study_rerun(tmp_path, capsys, 
     out = tmp_path / "study"
     argv = ["study", "--trials", "1", "--births-trials", "1", "--duration", "10", "--workers", "1"]
     assert main([*argv, "--out", str(out)]) == 130
-    lines = capsys.readouterr()._messages(err)
+    lines = _messages(capsys.readouterr().err)
     assert len(lines) == 1 and f"finish with: soabench study --out {out}" in lines[0], lines
     assert not (out / ".lock").exists()

@@ -267,7 +267,7 @@ def test_scene_figure(shipped, rec, tmp_path):
     ax = plot_scene(scene, rec, time=50.0)
     assert ax.get_xlim() == (-50.0, 120.0) and ax.get_ylim() == (-50.0, 50.0)
     assert len(ax.patches) > 4 + 17 + 1  # buildings, parked cars, ego, vehicles, regions
-    assert "t = 50.0 s" in ax.get_title()
+    assert "t = 50.0 s" in ax.get_title(loc="left")  # panel titles sit on the left (soabench.plotstyle)
     out = tmp_path / "scene.png"
     ax.figure.savefig(out, dpi=60)
     assert out.stat().st_size > 10_000

@@ -498,6 +498,8 @@ def test_sensor_overlay_draws_sight_lines_cones_and_measurements(run, tmp_path):
     markers = {line.get_marker(): len(line.get_xdata()) for line in ax.lines if line.get_linestyle() == "None"}
     assert markers["x"] == int((scans.source[k] == CLUTTER).sum())
     assert markers["."] == int((scans.source[k] != CLUTTER).sum())
+    legend = {t.get_text() for t in ax.get_legend().get_texts()}  # every overlay symbol is explained
+    assert {"line of sight: blocked", "measurement (clutter)", "field of view", "obstacle + shadow"} <= legend
     out = tmp_path / "overlay.png"
     fig.savefig(out, dpi=50)
     plt.close(fig)

@@ -13,6 +13,7 @@ import numpy as np
 from matplotlib.collections import EllipseCollection, LineCollection
 from matplotlib.lines import Line2D
 
+from soabench import plotstyle as ps
 from soabench.birth.base import SOURCE_MEAS, SOURCE_NAMES, Births
 
 if TYPE_CHECKING:
@@ -42,7 +43,8 @@ def draw_births(ax: Axes, births: Births, scan: Scan | None = None) -> None:
 
     Appended components use their ``source`` colour; newborn terms (PUBM/ATBM, ``births.newborn``) are drawn from
     ``newborn.m`` / ``newborn.P`` as measurement newborns. With ``scan``, the ego pose and the obstacles' tangent
-    rays (thin dotted lines from the sensor to r_max) are drawn too. A legend lists the sources present.
+    rays (thin dotted lines from the sensor to r_max) are drawn too. The legend under the map lists the sources
+    present.
     """
     m = [np.asarray(births.m, dtype=float).reshape(-1, 4)]
     P = [np.asarray(births.P, dtype=float).reshape(-1, 4, 4)]
@@ -78,8 +80,7 @@ def draw_births(ax: Axes, births: Births, scan: Scan | None = None) -> None:
         label = SOURCE_LABELS[code] if code < len(SOURCE_LABELS) else SOURCE_NAMES[code]
         handles.append(Line2D([], [], color=colour, marker="o", mfc="none", ls="", label=f"{label} ({sel.sum()})"))
     if handles:
-        previous, _ = ax.get_legend_handles_labels()  # keep the scene's own labelled artists in the legend
-        ax.legend(handles=[*previous, *handles], loc="upper right", fontsize=7, framealpha=0.85)
+        ps.extend_legend(ax, handles)  # one legend under the map, after the scene's own entries
 
 
 def _draw_scan(ax: Axes, scan: Scan) -> list[Line2D]:
@@ -92,5 +93,8 @@ def _draw_scan(ax: Axes, scan: Scan) -> list[Line2D]:
         ends = e[:2] + r_end[:, None] * np.column_stack([np.cos(theta), np.sin(theta)])
         segs = np.stack([np.broadcast_to(e[:2], ends.shape), ends], axis=1)
         ax.add_collection(LineCollection(segs, linestyles=":", linewidths=0.6, colors="0.35", zorder=3))
-    ax.plot(e[0], e[1], marker=(3, 0, np.degrees(e[2]) - 90.0), color="tab:cyan", ms=10, mec="k", zorder=6)
-    return [Line2D([], [], color="0.35", ls=":", label="tangent rays")]
+    ax.plot(e[0], e[1], marker=(3, 0, np.degrees(e[2]) - 90.0), color="tab:cyan", ms=10, mec="k", zorder=8)
+    return [
+        Line2D([], [], color="0.35", ls=":", label="tangent rays"),
+        Line2D([], [], color="tab:cyan", marker=(3, 0, 0), mec="k", ls="", ms=7, label="sensor pose"),
+    ]

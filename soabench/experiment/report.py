@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,68 +32,8 @@ from soabench.birth import BASELINES, LABEL
 from soabench.errors import SoabenchError
 from soabench.experiment.paper import percent_reduction
 from soabench.experiment.provenance import REPRODUCTION_TOLERANCE
-from soabench.experiment.store import RunStore, read_csv, write_json_atomic, write_text_atomic
-
-
-@dataclass
-class RunTables:
-    """The merged CSV files of a run, as columns (numeric columns are float arrays)."""
-
-    trials: dict[str, np.ndarray]
-    episodes: dict[str, np.ndarray]
-    steps: dict[str, np.ndarray]
-    timing: dict[str, np.ndarray]
-    meta: dict
-
-    @property
-    def models(self) -> list[str]:
-        present = set(self.trials.get("model", []))
-        return [m for m in tables_models(self.meta["config"]["experiment"]) if m in present]
-
-    @property
-    def modes(self) -> list[str]:
-        present = set(self.trials.get("mode", []))
-        return [p for p in self.meta["config"]["experiment"]["probabilities"] if p in present]
-
-    @property
-    def clutters(self) -> list[float]:
-        return sorted({float(c) for c in self.trials.get("clutter", [])})
-
-
-def tables_models(exp: dict) -> list[str]:
-    """Every model and tracker a run's experiment section names, in order (birth models, then trackers)."""
-    return [*exp["models"], *exp.get("trackers", ())]
-
-
-def _empty(columns: Sequence[str]) -> dict[str, np.ndarray]:
-    return {c: np.array([]) for c in columns}
-
-
-def load_tables(run_dir: Path) -> RunTables:
-    """Read a run's merged CSV files and its run.json."""
-    run_dir = Path(run_dir)
-    meta = RunStore(run_dir).meta()
-    path = run_dir / "trials.csv"
-    if not path.is_file():
-        raise SoabenchError(f"{str(run_dir)!r} has no trials.csv (the run is not finished: soabench run --resume)")
-    tables = {}
-    for name in ("trials", "episodes", "steps", "timing"):
-        p = run_dir / f"{name}.csv"
-        tables[name] = read_csv(p) if p.is_file() else _empty(())
-    for name in ("trials", "episodes", "steps", "timing"):  # a table with no rows reads as no columns
-        tables[name] = {k: v for k, v in tables[name].items()}
-    return RunTables(meta=meta, **tables)
-
-
-def select(table: dict[str, np.ndarray], **where: Any) -> np.ndarray:
-    """Boolean mask of the rows where every ``column == value``."""
-    n = len(next(iter(table.values()))) if table else 0
-    mask = np.ones(n, dtype=bool)
-    for col, val in where.items():
-        if col not in table:
-            return np.zeros(n, dtype=bool)
-        mask &= table[col] == val
-    return mask
+from soabench.experiment.store import RunStore, write_json_atomic, write_text_atomic
+from soabench.experiment.tables import RunTables, load_tables, select, tables_models  # noqa: F401 (shared)
 
 
 def _nanmean(x: np.ndarray) -> float:

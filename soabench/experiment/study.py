@@ -158,52 +158,11 @@ def _ratio_table(rows: list[dict]) -> str:
 
 
 def key_figure(main_rows: list[dict], clutter_rows: list[dict], path: Path) -> Path:
-    """The README's key figure: mean delay (± mean per-trial sigma), cardinality error and precision vs lambda."""
-    import numpy as np
+    """The README's key figure (:func:`soabench.experiment.study_plots.key_figure`), written to ``path``."""
+    from soabench.experiment.study_plots import key_figure as draw
+    from soabench.plotstyle import save_png
 
-    from soabench.experiment.plots import MODEL_COLOR, _figure, _save
-
-    models = ["soa", *paper.BASELINES]
-    modes = ("static", "dynamic")
-    fig = _figure(15.0, 4.2)
-    ax_delay, ax_card, ax_prec = fig.subplots(1, 3)
-    x = np.arange(len(models))
-    for j, (mode, hatch) in enumerate(zip(modes, ("", "//"), strict=True)):
-
-        def col(metric: str, model: str, mode: str = mode) -> np.ndarray:
-            v = np.array([float(r[metric]) for r in main_rows if r["model"] == model and r["mode"] == mode])
-            return v[np.isfinite(v)]
-
-        delay = [col("delay_mean", m).mean() for m in models]
-        sigma = [0.5 * col("delay_std", m).mean() for m in models]
-        card = [col("card_err", m).mean() for m in models]
-        card_sd = [col("card_err", m).std() for m in models]
-        colors = [MODEL_COLOR[m] for m in models]
-        kw = dict(width=0.38, color=colors, hatch=hatch, edgecolor="k", linewidth=0.5)
-        ax_delay.bar(x + (j - 0.5) * 0.4, delay, yerr=sigma, capsize=3, label=mode, **kw)
-        ax_card.bar(x + (j - 0.5) * 0.4, card, yerr=card_sd, capsize=3, label=mode, **kw)
-    for ax, title in (
-        (ax_delay, "mean tracking delay (± 0.5 σ̄), λ = 3"),
-        (ax_card, "mean abs. cardinality error (± σ)"),
-    ):
-        ax.set_xticks(x, [paper.LABEL[m] for m in models])
-        ax.set_title(title)
-        ax.grid(alpha=0.3, axis="y")
-        ax.legend(title="probabilities (plain / hatched)", fontsize=8)
-    ax_delay.set_ylabel("s")
-    prec = paper.precision_by_clutter(clutter_rows)
-    for m in models:
-        lams = sorted(k[2] for k in prec if k[:2] == ("static", m))
-        if lams:
-            ax_prec.plot(
-                lams, [prec[("static", m, lam)] for lam in lams], "o-", color=MODEL_COLOR[m], label=paper.LABEL[m]
-            )
-    ax_prec.set_xlabel("clutter rate λ (per scan)")
-    ax_prec.set_ylabel("mean per-trial precision")
-    ax_prec.set_title("precision under clutter (static probabilities)")
-    ax_prec.grid(alpha=0.3)
-    ax_prec.legend(fontsize=8)
-    return _save(fig, path)
+    return save_png(draw(main_rows, clutter_rows), path)
 
 
 def write_comparison(root: Path) -> str:

@@ -34,7 +34,6 @@ from soabench.birth import LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config
 from soabench.errors import Interrupted, require
 from soabench.experiment.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
-from soabench.experiment.plots import MODEL_COLOR, _figure, _save
 from soabench.experiment.report import fmt
 from soabench.experiment.runmeta import check_requested, flatten_config, validate_sweep_meta
 from soabench.experiment.runner import (
@@ -313,27 +312,10 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     for r in table:
         lines.append(f"| {r['N_tot']} | {r['N_hat']:.4g} | " + " | ".join(fmt(r["delay"][c]) for c in cols) + " |")
     lines.append("| std over N_tot | | " + " | ".join(fmt(std[c]) for c in cols) + " |")
-    fig = _figure(6.5, 4.0)
-    ax = fig.add_subplot()
-    styles = ["-", "--", ":"]
-    for i, mode in enumerate(modes):
-        for model in models:
-            ax.plot(
-                [r["N_tot"] for r in table],
-                [r["delay"][f"{model}/{mode}"] for r in table],
-                styles[i % 3],
-                color=MODEL_COLOR.get(model, "k"),
-                marker="o",
-                ms=3,
-                label=f"{LABEL.get(model, model)} {mode} (std {fmt(std[f'{model}/{mode}'], 2)} s)",
-            )
-    ax.axvline(meta["n_true"], color="k", lw=0.8, alpha=0.5)
-    ax.set_xlabel("expected births per run N_tot")
-    ax.set_ylabel("mean tracking delay k̄ (s)")
-    ax.set_title("Average delay vs N̂ (paper §V.C)")
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
-    _save(fig, sweep_dir / "sweep_births.png")
+    from soabench.experiment.study_plots import births_figure
+    from soabench.plotstyle import save_png
+
+    save_png(births_figure(table, models, modes, meta["n_true"]), sweep_dir / "sweep_births.png")
     lines += ["", "Figure: `sweep_births.png`"]
     return {"kind": "births", "table": table, "std_over_N_tot": std}, "\n".join(lines) + "\n"
 
@@ -360,25 +342,13 @@ def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
             f"| {r['clutter']:g} | {LABEL.get(r['model'], r['model'])} | {r['mode']} | {fmt(r['precision_mean'])} "
             f"| {fmt(r['recall_mean'])} | {fmt(r['card_err_mean'])} | {fmt(r['ospa_mean'])} | {fmt(r['delay_mean'])} |"
         )
-    fig = _figure(6.5, 4.0)
-    ax = fig.add_subplot()
-    keys = list(dict.fromkeys((r["model"], r["mode"]) for r in rows))
-    for model, mode in keys:
-        sub = [r for r in rows if r["model"] == model and r["mode"] == mode]
-        ax.plot(
-            [r["clutter"] for r in sub],
-            [r["precision_mean"] for r in sub],
-            "--" if mode != "static" else "-",
-            color=MODEL_COLOR.get(model, "k"),
-            marker="o",
-            label=f"{LABEL.get(model, model)} {mode}",
-        )
-    ax.set_xlabel("clutter rate λ (per scan)")
-    ax.set_ylabel("mean precision over trials")
-    ax.set_title("Precision vs clutter (paper Fig. 5h; dashed: dynamic)")
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
-    ax.grid(alpha=0.3)
-    _save(fig, sweep_dir / "sweep_clutter.png")
+    from soabench.experiment.paper import read_rows
+    from soabench.experiment.study_plots import clutter_figure
+    from soabench.plotstyle import save_png
+
+    exp = meta["points"][0]["config"]["experiment"]
+    trial_rows = read_rows(run_dir / "trials.csv")
+    save_png(clutter_figure(trial_rows, exp["models"], exp["probabilities"]), sweep_dir / "sweep_clutter.png")
     lines += ["", f"Figures: `sweep_clutter.png`, `points/{meta['points'][0]['name']}/figures/fig5h_precision.png`"]
     return {"kind": "clutter", "table": rows}, "\n".join(lines) + "\n"
 

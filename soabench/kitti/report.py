@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from soabench.birth import LABEL
-from soabench.experiment.plots import MODEL_COLOR
 from soabench.experiment.store import write_bytes_atomic, write_csv, write_json_atomic, write_text_atomic
+from soabench.plotstyle import model_style
 
 if TYPE_CHECKING:
     from soabench.kitti.protocol import KittiSpec
@@ -40,7 +40,7 @@ def _label(m: str) -> str:
 
 
 def _color(m: str) -> str | None:
-    return MODEL_COLOR.get(m)
+    return model_style(m).color
 
 
 # ---------------------------------------------------------------------------------------------------------------------

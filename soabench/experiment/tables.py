@@ -1,0 +1,78 @@
+"""A finished run's CSV files as columns: the data the report and the figures both read (docs/method.md §5.8).
+
+Both :mod:`soabench.experiment.report` (summary tables) and :mod:`soabench.experiment.plots` (figures) import from
+here, so neither imports the other's module to get at the data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from soabench.errors import SoabenchError
+from soabench.experiment.store import RunStore, read_csv
+
+
+@dataclass
+class RunTables:
+    """The merged CSV files of a run, as columns (numeric columns are float arrays)."""
+
+    trials: dict[str, np.ndarray]
+    episodes: dict[str, np.ndarray]
+    steps: dict[str, np.ndarray]
+    timing: dict[str, np.ndarray]
+    meta: dict
+
+    @property
+    def models(self) -> list[str]:
+        present = set(self.trials.get("model", []))
+        return [m for m in tables_models(self.meta["config"]["experiment"]) if m in present]
+
+    @property
+    def modes(self) -> list[str]:
+        present = set(self.trials.get("mode", []))
+        return [p for p in self.meta["config"]["experiment"]["probabilities"] if p in present]
+
+    @property
+    def clutters(self) -> list[float]:
+        return sorted({float(c) for c in self.trials.get("clutter", [])})
+
+
+def _empty(columns: Sequence[str]) -> dict[str, np.ndarray]:
+    return {c: np.array([]) for c in columns}
+
+
+def load_tables(run_dir: Path) -> RunTables:
+    """Read a run's merged CSV files and its run.json."""
+    run_dir = Path(run_dir)
+    meta = RunStore(run_dir).meta()
+    path = run_dir / "trials.csv"
+    if not path.is_file():
+        raise SoabenchError(f"{str(run_dir)!r} has no trials.csv (the run is not finished: soabench run --resume)")
+    tables = {}
+    for name in ("trials", "episodes", "steps", "timing"):
+        p = run_dir / f"{name}.csv"
+        tables[name] = read_csv(p) if p.is_file() else _empty(())
+    for name in ("trials", "episodes", "steps", "timing"):  # a table with no rows reads as no columns
+        tables[name] = {k: v for k, v in tables[name].items()}
+    return RunTables(meta=meta, **tables)
+
+
+def select(table: dict[str, np.ndarray], **where: Any) -> np.ndarray:
+    """Boolean mask of the rows where every ``column == value``."""
+    n = len(next(iter(table.values()))) if table else 0
+    mask = np.ones(n, dtype=bool)
+    for col, val in where.items():
+        if col not in table:
+            return np.zeros(n, dtype=bool)
+        mask &= table[col] == val
+    return mask
+
+
+def tables_models(exp: dict) -> list[str]:
+    """Every model and tracker a run's experiment section names, in order (birth models, then trackers)."""
+    return [*exp["models"], *exp.get("trackers", ())]
