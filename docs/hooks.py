@@ -2,7 +2,14 @@
 
 * ``<!-- soabench:parameters -->`` becomes the table of every configuration key with its default and meaning, read
   from the dataclasses of :mod:`soabench.config` (the ``#:`` comment after each field is its description);
+* ``<!-- soabench:scenario-keys -->`` becomes the table of every scenario TOML key, read from
+  :class:`soabench.scenario.config.ScenarioConfig` (defaults, and the ``Attributes:`` section of its docstring);
+* ``<!-- soabench:readme HEADING -->`` becomes the README section whose ``## `` heading starts with HEADING (down to
+  the next ``## `` heading), so that text both need (file formats, cluster use) has one source;
 * ``<!-- soabench:help COMMAND -->`` becomes the ``soabench COMMAND --help`` text of :func:`soabench.cli.build_parser`.
+
+Docstrings and README text cite pages as plain text ("docs/method.md §3.1.4"): :func:`on_page_content` turns every
+such citation into a link to that page and section, for the API reference and the included README sections.
 
 Only our own package is imported; nothing is read from user files.
 """
@@ -10,11 +17,14 @@ Only our own package is imported; nothing is read from user files.
 from __future__ import annotations
 
 import ast
+from pathlib import Path
 import dataclasses
 import inspect
 import re
 
 _PARAMS = "<!-- soabench:parameters -->"
+_SCENARIO = "<!-- soabench:scenario-keys -->"
+_README = re.compile(r"<!-- soabench:readme ([^>]*?) -->")
 _HELP = re.compile(r"<!-- soabench:help ([a-z]*) -->")
 
 # where each section's formulas and decisions are explained (docs/method.md)
@@ -77,6 +87,47 @@ def parameter_table() -> str:
     return "\n".join(parts)
 
 
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """``{attribute: text}`` from the Google-style ``Attributes:`` section of a class docstring."""
+    doc = inspect.getdoc(cls) or ""
+    out: dict[str, str] = {}
+    in_attrs, last = False, None
+    for line in doc.splitlines():
+        if line.strip() == "Attributes:":
+            in_attrs = True
+            continue
+        if not in_attrs:
+            continue
+        if line and not line.startswith(" "):
+            break
+        m = re.match(r"^    ([A-Za-z_][\w, ]*):\s*(.*)$", line)
+        if m:
+            last = [n.strip() for n in m.group(1).split(",")]
+            for n in last:
+                out[n] = m.group(2)
+        elif last and line.strip():
+            for n in last:
+                out[n] += " " + line.strip()
+    return out
+
+
+def scenario_table() -> str:
+    """Markdown: every ``[section] key`` of a scenario TOML with its default and meaning."""
+    from soabench.scenario.config import _KEYS, ScenarioConfig
+
+    cfg = ScenarioConfig()
+    docs = _attribute_docs(ScenarioConfig)
+    rows = ["| section | key | default | meaning |", "|---|---|---|---|"]
+    for section, keys in _KEYS.items():
+        for key, attr in keys.items():
+            default = getattr(cfg, attr)
+            shown = "derived from the network" if default in ("", [], None) and attr != "ego_start_x" else None
+            rows.append(
+                f"| `[{section}]` | `{key}` | {shown or _fmt_default(default)} | {_escape(docs.get(attr, ''))} |"
+            )
+    return "\n".join(rows) + "\n"
+
+
 def cli_help(command: str) -> str:
     """``soabench COMMAND --help`` (``soabench --help`` for an empty command) as a fenced block."""
     import argparse
@@ -92,7 +143,47 @@ def cli_help(command: str) -> str:
     return "```text\n" + parser.format_help().rstrip() + "\n```"
 
 
+def readme_section(heading: str) -> str:
+    """The README section ``## HEADING...`` (without the next section); a missing heading fails the build."""
+    lines = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8").splitlines()
+    start = next((i for i, line in enumerate(lines) if line.startswith("## " + heading)), None)
+    if start is None:
+        raise ValueError(f"README.md has no section starting with '## {heading}' (docs include)")
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+    return "\n".join(lines[start:end]).rstrip() + "\n"
+
+
 def on_page_markdown(markdown: str, **kwargs) -> str:
     if _PARAMS in markdown:
         markdown = markdown.replace(_PARAMS, parameter_table())
+    markdown = _README.sub(lambda m: readme_section(m.group(1)), markdown)
+    if _SCENARIO in markdown:
+        markdown = markdown.replace(_SCENARIO, scenario_table())
     return _HELP.sub(lambda m: cli_help(m.group(1)), markdown)
+
+
+_CITE = re.compile(r"docs/((?:user-guide/)?[\w-]+)\.md(?:(?:\s|&nbsp;)+§(\d+(?:\.\d+)*))?")
+_DOCS = Path(__file__).resolve().parent
+
+
+def _method_ids() -> set[str]:
+    return set(re.findall(r'<a id="(s[\w.-]+)"></a>', (_DOCS / "method.md").read_text(encoding="utf-8")))
+
+
+def on_page_content(html: str, page, **kwargs) -> str:
+    """Link plain-text citations "docs/PAGE.md [§X.Y]" to the page (and section, when it exists)."""
+    prefix = "../" * page.url.count("/")
+    ids = _method_ids()
+
+    def link(m: re.Match) -> str:
+        name, sec = m.group(1), m.group(2)
+        if not (_DOCS / f"{name}.md").is_file():
+            return m.group(0)
+        target = f"{prefix}{name}/"
+        while sec and f"s{sec}" not in ids and "." in sec:
+            sec = sec.rsplit(".", 1)[0]
+        if sec and f"s{sec}" in ids:
+            target += f"#s{sec}"
+        return f'<a href="{target}">{m.group(0)}</a>'
+
+    return _CITE.sub(link, html)
