@@ -17,10 +17,10 @@ Only our own package is imported; nothing is read from user files.
 from __future__ import annotations
 
 import ast
-from pathlib import Path
 import dataclasses
 import inspect
 import re
+from pathlib import Path
 
 _PARAMS = "<!-- soabench:parameters -->"
 _SCENARIO = "<!-- soabench:scenario-keys -->"
@@ -143,20 +143,37 @@ def cli_help(command: str) -> str:
     return "```text\n" + parser.format_help().rstrip() + "\n```"
 
 
-def readme_section(heading: str) -> str:
-    """The README section ``## HEADING...`` (without the next section); a missing heading fails the build."""
+def readme_section(heading: str, page_src: str = "index.md") -> str:
+    """The README section ``## HEADING...`` (without the next section); a missing heading fails the build.
+
+    Relative links of the README (written from the repository root) are rebased for the page ``page_src`` (its
+    path under docs/): ``docs/x.md`` becomes a link to that page, anything else a link to the file on disk would
+    leave the site, so it is an error.
+    """
     lines = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8").splitlines()
     start = next((i for i, line in enumerate(lines) if line.startswith("## " + heading)), None)
     if start is None:
         raise ValueError(f"README.md has no section starting with '## {heading}' (docs include)")
     end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
-    return "\n".join(lines[start:end]).rstrip() + "\n"
+    text = "\n".join(lines[start:end]).rstrip() + "\n"
+    up = "../" * page_src.count("/")
+
+    def rebase(m: re.Match) -> str:
+        target = m.group(1)
+        if target.startswith("docs/"):
+            return f"]({up}{target[len('docs/') :]})"
+        if re.match(r"^[a-z]+://|^#", target):
+            return m.group(0)
+        raise ValueError(f"README section '{heading}' links to {target!r}, outside docs/: cannot include it")
+
+    return re.sub(r"\]\(([^)\s]+)\)", rebase, text)
 
 
 def on_page_markdown(markdown: str, **kwargs) -> str:
     if _PARAMS in markdown:
         markdown = markdown.replace(_PARAMS, parameter_table())
-    markdown = _README.sub(lambda m: readme_section(m.group(1)), markdown)
+    src = kwargs["page"].file.src_uri
+    markdown = _README.sub(lambda m: readme_section(m.group(1), src), markdown)
     if _SCENARIO in markdown:
         markdown = markdown.replace(_SCENARIO, scenario_table())
     return _HELP.sub(lambda m: cli_help(m.group(1)), markdown)
