@@ -6,6 +6,9 @@
   :class:`soabench.scenario.config.ScenarioConfig` (defaults, and the ``Attributes:`` section of its docstring);
 * ``<!-- soabench:readme HEADING -->`` becomes the README section whose ``## `` heading starts with HEADING (down to
   the next ``## `` heading), so that text both need (file formats, cluster use) has one source;
+* ``<!-- soabench:api -->`` becomes one mkdocstrings ``::: module`` block per public module of the package (and of
+  the repository's ``baselines`` package while it is a top-level one), grouped by subpackage, so that a new or moved
+  module is documented without editing the page;
 * ``<!-- soabench:help COMMAND -->`` becomes the ``soabench COMMAND --help`` text of :func:`soabench.cli.build_parser`.
 
 Docstrings and README text cite pages as plain text ("docs/method.md §3.1.4"): :func:`on_page_content` turns every
@@ -24,6 +27,7 @@ from pathlib import Path
 
 _PARAMS = "<!-- soabench:parameters -->"
 _SCENARIO = "<!-- soabench:scenario-keys -->"
+_API = "<!-- soabench:api -->"
 _README = re.compile(r"<!-- soabench:readme ([^>]*?) -->")
 _HELP = re.compile(r"<!-- soabench:help ([a-z]*) -->")
 
@@ -169,9 +173,48 @@ def readme_section(heading: str, page_src: str = "index.md") -> str:
     return re.sub(r"\]\(([^)\s]+)\)", rebase, text)
 
 
+_GROUPS = {
+    "": "Top level: configuration, errors, seeds, geometry, sensor, metrics, command line",
+    "scenario": "Scenario (SUMO)",
+    "gmphd": "GM-PHD filter",
+    "birth": "Birth models",
+    "baselines": "Baseline birth models",
+    "experiment": "Experiments: trials, runs, sweeps, reports",
+}
+
+
+def api_blocks() -> str:
+    """Markdown: a section per subpackage with a ``::: module`` block for each public module."""
+    import pkgutil
+
+    import soabench
+
+    mods = ["soabench"] + [
+        m.name for m in pkgutil.walk_packages(soabench.__path__, "soabench.") if not m.name.rsplit(".", 1)[-1][0] == "_"
+    ]
+    if (_DOCS.parent / "baselines" / "__init__.py").is_file():
+        mods += ["baselines"] + [f"baselines.{p.stem}" for p in sorted((_DOCS.parent / "baselines").glob("[!_]*.py"))]
+    groups: dict[str, list[str]] = {}
+    for name in mods:
+        parts = name.split(".")
+        key = parts[0] if parts[0] == "baselines" else (parts[1] if len(parts) > 2 or name in _SUBPACKAGES else "")
+        groups.setdefault(key if key in _GROUPS else "", []).append(name)
+    out = []
+    for key, title in _GROUPS.items():
+        if key in groups:
+            out.append(f"## {title}\n")
+            out += [f"::: {name}\n" for name in groups[key]]
+    return "\n".join(out)
+
+
+_SUBPACKAGES = {"soabench.scenario", "soabench.gmphd", "soabench.birth", "soabench.baselines", "soabench.experiment"}
+
+
 def on_page_markdown(markdown: str, **kwargs) -> str:
     if _PARAMS in markdown:
         markdown = markdown.replace(_PARAMS, parameter_table())
+    if _API in markdown:
+        markdown = markdown.replace(_API, api_blocks())
     src = kwargs["page"].file.src_uri
     markdown = _README.sub(lambda m: readme_section(m.group(1), src), markdown)
     if _SCENARIO in markdown:
@@ -203,4 +246,18 @@ def on_page_content(html: str, page, **kwargs) -> str:
             target += f"#s{sec}"
         return f'<a href="{target}">{m.group(0)}</a>'
 
-    return _CITE.sub(link, html)
+    html = _CITE.sub(link, html)
+    return _ROLE.sub(lambda m: _role(m, set(re.findall(r'id="([\w.]+)"', html))), html)
+
+
+# Sphinx cross-reference roles in docstrings (":class:`~soabench.errors.SoabenchError`"), which mkdocstrings shows
+# verbatim: the role is dropped, "~" shortens the name, and a full name documented on the page becomes a link.
+_ROLE = re.compile(r":(?:class|func|meth|mod|data|attr|exc|obj):<code>(~?)([\w.]+)</code>")
+
+
+def _role(m: re.Match, ids: set[str]) -> str:
+    name = m.group(2)
+    shown = name.rsplit(".", 1)[-1] if m.group(1) else name
+    if name in ids:
+        return f'<a href="#{name}"><code>{shown}</code></a>'
+    return f"<code>{shown}</code>"
