@@ -69,6 +69,16 @@ def _escape(text: str) -> str:
     return text.replace("|", "\\|").replace("<", "&lt;")
 
 
+def _link_sections(text: str, method_url: str) -> str:
+    """Bare "§X.Y" in a description -> a link to that section of the method page (when it exists)."""
+    ids = _method_ids()
+    return re.sub(
+        r"§(\d+(?:\.\d+)*)",
+        lambda m: f"[§{m.group(1)}]({method_url}#s{m.group(1)})" if f"s{m.group(1)}" in ids else m.group(0),
+        text,
+    )
+
+
 def parameter_table() -> str:
     """Markdown: one table per config section (``[section]`` of a TOML file)."""
     from soabench.config import Config
@@ -86,7 +96,8 @@ def parameter_table() -> str:
         parts.append("| key | default | meaning |\n|---|---|---|")
         for f in dataclasses.fields(cls):
             default = getattr(obj, f.name)
-            parts.append(f"| `{f.name}` | {_fmt_default(default)} | {_escape(comments.get(f.name, ''))} |")
+            meaning = _link_sections(_escape(comments.get(f.name, "")), "../method.md")
+            parts.append(f"| `{f.name}` | {_fmt_default(default)} | {meaning} |")
         parts.append("")
     return "\n".join(parts)
 
