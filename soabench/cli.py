@@ -1,4 +1,4 @@
-"""The ``soabench`` command line: thin handlers over the pipeline (DESIGN.md).
+"""The ``soabench`` command line: thin handlers over the pipeline (docs/development.md).
 
 Subcommands: ``scene`` (Fig. 3 bird's-eye view, optional sensor overlay), ``record`` (ground truth and scans to
 .npz), ``birth`` (birth components of one model over the scene), ``run`` (the Monte Carlo protocol), ``sweep``
@@ -68,7 +68,7 @@ def _add_net_args(p: argparse.ArgumentParser) -> None:
         "--poly", action="append", default=[], metavar="FILE", help="polygon file (buildings, obstacles); repeatable"
     )
     p.add_argument("--scenario", metavar="FILE.toml", help="scenario file (default: the shipped net's own)")
-    p.add_argument("--config", metavar="FILE.toml", help="parameters (ALGORITHMS.md §7), section by section")
+    p.add_argument("--config", metavar="FILE.toml", help="parameters (docs/method.md §7), section by section")
 
 
 def _add_snapshot_args(p: argparse.ArgumentParser, need_out: bool = True) -> None:

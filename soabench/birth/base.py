@@ -1,4 +1,4 @@
-"""The BirthModel protocol and what a birth model hands the filter (DESIGN.md; ALGORITHMS.md §2.11, §3.0).
+"""The BirthModel protocol and what a birth model hands the filter (docs/development.md; docs/method.md §2.11, §3.0).
 
 CONTRACT: the data classes and the protocol below are fixed; the shared builder and FOV rule are implemented by
 the birth owner in this module.
@@ -89,7 +89,7 @@ class BirthModel(Protocol):
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# Shared builder and FOV-only rule (ALGORITHMS.md §3.0). Everything below is array code over all candidate means.
+# Shared builder and FOV-only rule (docs/method.md §3.0). Everything below is array code over all candidate means.
 # ---------------------------------------------------------------------------------------------------------------------
 
 

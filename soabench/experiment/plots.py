@@ -1,4 +1,4 @@
-"""The paper's result figures from a run's CSV files (Fig. 5 a–h, Fig. 6, Fig. 7; ALGORITHMS.md §5.4–5.7).
+"""The paper's result figures from a run's CSV files (Fig. 5 a–h, Fig. 6, Fig. 7; docs/method.md §5.4–5.7).
 
 Figures are drawn on ``matplotlib.figure.Figure`` with the Agg canvas (no pyplot, no global backend state), and
 saved atomically under ``figures/``:
