@@ -1,4 +1,4 @@
-"""Adaptive Target Birth Model (ATBM) of Ristic, Clark, Vo & Vo (IEEE TAES 2012), GM form (ALGORITHMS.md §3.4).
+"""Adaptive Target Birth Model (ATBM) of Ristic, Clark, Vo & Vo (IEEE TAES 2012), GM form (docs/method.md §3.4).
 
 ``atbm = same_scan`` (default): one newborn term per measurement of Z_k (inverse-measurement mean and covariance,
 as PUBM), entering only the detection update of that measurement: beta_l = p_D,b nu_l q_b with

@@ -1,4 +1,4 @@
-"""Partially Uniform Birth Model (PUBM) of Beard, Vo, Vo & Arulampalam (FUSION 2012) (ALGORITHMS.md §3.2, row 15).
+"""Partially Uniform Birth Model (PUBM) of Beard, Vo, Vo & Arulampalam (FUSION 2012) (docs/method.md §3.2, row 15).
 
 The birth intensity is uniform over the measurement-space FOV V_z and Gaussian in velocity; with a position-observing
 sensor its update is measurement-driven. Each scan hands the filter one newborn term per measurement

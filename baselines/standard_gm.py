@@ -1,9 +1,10 @@
-"""Standard GM birth model (GMBM) of Vo & Ma (2006): fixed, predefined Gaussians (ALGORITHMS.md §3.5, row 18).
+"""Standard GM birth model (GMBM) of Vo & Ma (2006): fixed, predefined Gaussians (docs/method.md §3.5, row 18).
 
 The J_GM entry points are derived from the network, not typed in:
 
 * sidewalk exits: every point where a sidewalk or crossing centre line (``scene.sidewalk_lines``) crosses the
-  world-box boundary (the arms extend beyond the box, SUMO_NOTES.md), points closer than ``MERGE_DIST`` merged;
+  world-box boundary (the arms extend beyond the box, docs/user-guide/sumo.md), points closer than ``MERGE_DIST``
+  merged;
 * building accesses: every door of ``scene.doors`` (where pedestrians enter and leave buildings).
 
 Each component has P_p = sigma_gm^2 I and the fixed weight N_hat / J_GM. Components outside the FOV at k are

@@ -1,4 +1,4 @@
-"""Uniform Birth Model (UBM): Gaussians spread uniformly across the workspace (ALGORITHMS.md §3.3, register row 16).
+"""Uniform Birth Model (UBM): Gaussians spread uniformly across the workspace (docs/method.md §3.3, register row 16).
 
 A regular grid of spacing d_u over the world box, node centres at (x_min + (i + 1/2) d_u, y_min + (j + 1/2) d_u),
 built once per trial with its time-invariant part of the FOV-only rule (§3.0). Each scan instantiates the nodes in

@@ -1,6 +1,6 @@
 """soabench: a SUMO-driven benchmark of GM-PHD birth models (S-OA and four baselines).
 
-Pipeline (DESIGN.md): scenario -> Recording -> sensor -> Scans -> gmphd + birth -> Estimates -> metrics
+Pipeline (docs/development.md): scenario -> Recording -> sensor -> Scans -> gmphd + birth -> Estimates -> metrics
 -> TrialResult -> experiment (trials, sweeps, tables, figures).
 
 Subpackages that live in their own folders of the repository: :mod:`soabench.baselines` (``baselines/``, the four

@@ -1,4 +1,4 @@
-"""The ``soabench`` command line: thin handlers over the pipeline (DESIGN.md).
+"""The ``soabench`` command line: thin handlers over the pipeline (docs/development.md).
 
 Subcommands: ``scene`` (Fig. 3 bird's-eye view, optional sensor overlay), ``record`` (ground truth and scans to
 .npz), ``birth`` (birth components of one model over the scene), ``run`` (the Monte Carlo protocol), ``sweep``

@@ -1,4 +1,4 @@
-"""Every tunable parameter with its default (ALGORITHMS.md §1.2 and the decision register §7).
+"""Every tunable parameter with its default (docs/method.md §1.2 and the decision register §7).
 
 Defaults are the register's bold options. A TOML file may set any of them, section by section::
 
@@ -97,7 +97,7 @@ def _check_type(name: str, default: Any, value: Any) -> Any:
 
 @dataclass
 class SensorConfig:
-    """Synthetic range-bearing sensor (ALGORITHMS.md §2.3; register rows 3, 4, 7)."""
+    """Synthetic range-bearing sensor (docs/method.md §2.3; register rows 3, 4, 7)."""
 
     dt: float = 1.0  #: sensor/filter period (s), a multiple of the SUMO step
     r_min: float = 0.5  #: minimum range (m)
@@ -147,7 +147,7 @@ class SensorConfig:
 
 @dataclass
 class FilterConfig:
-    """GM-PHD filter (ALGORITHMS.md §2, §4; register rows 1, 4, 20, 21, 25)."""
+    """GM-PHD filter (docs/method.md §2, §4; register rows 1, 4, 20, 21, 25)."""
 
     form: str = "ekf"  #: "ekf" or "ukf" (equal-weight cubature points, §2.7)
     sigma_a: float = 0.5  #: CV process noise (m/s^2); 0.5 for SUMO pedestrians (§1.2)
@@ -199,7 +199,7 @@ class FilterConfig:
 
 @dataclass
 class BirthConfig:
-    """Birth models (ALGORITHMS.md §3; register rows 9-19, 24, 26)."""
+    """Birth models (docs/method.md §3; register rows 9-19, 24, 26)."""
 
     N_hat: float = 0.06  #: expected births per step [P]
     sigma_v_birth: float = 1.0  #: velocity prior std per axis (m/s), §3.0
@@ -281,7 +281,7 @@ class BirthConfig:
 
 @dataclass
 class MetricsConfig:
-    """Evaluation (ALGORITHMS.md §5; register rows 5, 6, 22, 23)."""
+    """Evaluation (docs/method.md §5; register rows 5, 6, 22, 23)."""
 
     ospa_c: float = 100.0  #: OSPA cut-off c [P]
     ospa_p: float = 1.0  #: OSPA order p [P]
@@ -309,7 +309,7 @@ class MetricsConfig:
 
 @dataclass
 class ExperimentConfig:
-    """The Monte Carlo protocol (ALGORITHMS.md §5.8)."""
+    """The Monte Carlo protocol (docs/method.md §5.8)."""
 
     trials: int = 100  #: Monte Carlo trials
     duration: float = 100.0  #: seconds simulated per trial
@@ -415,7 +415,7 @@ class Config:
 
 
 def filter_config_for_mode(cfg: FilterConfig, mode: str) -> tuple[FilterConfig, str, float]:
-    """Filter settings of a probability mode (ALGORITHMS.md §4.6): ``(filter_cfg, filter_mode, p_D_b)``.
+    """Filter settings of a probability mode (docs/method.md §4.6): ``(filter_cfg, filter_mode, p_D_b)``.
 
     ``static`` and ``dynamic`` use ``cfg`` as given; ``dynamic+occ`` is ``dynamic`` with the line-of-sight gate
     (``occlusion_pd``). ``p_D_b`` is the detection probability of a newborn term: p_D in static mode, the Beta prior

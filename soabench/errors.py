@@ -1,6 +1,6 @@
 """One exception type for every error a user can cause (bad path, bad value, bad network).
 
-The CLI prints its message on one line without a traceback and exits with status 2 (DESIGN.md, habits).
+The CLI prints its message on one line without a traceback and exits with status 2 (docs/development.md, habits).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Shared sensor geometry (ALGORITHMS.md §2.1, §2.3): one definition used by the simulator, the filter and the
+"""Shared sensor geometry (docs/method.md §2.1, §2.3): one definition used by the simulator, the filter and the
 birth models, so that "the filter model equals the simulator model".
 """
 

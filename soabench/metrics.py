@@ -1,4 +1,4 @@
-"""Evaluation of one filter run against the truth (ALGORITHMS.md §5; register rows 5, 6, 20, 22, 23).
+"""Evaluation of one filter run against the truth (docs/method.md §5; register rows 5, 6, 20, 22, 23).
 
 Building blocks (pure functions of point sets, all distances 2-D Euclidean in metres):
 

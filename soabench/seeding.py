@@ -1,4 +1,4 @@
-"""Random streams of one trial (ALGORITHMS.md §2.12 item 11, §5.8: common random numbers).
+"""Random streams of one trial (docs/method.md §2.12 item 11, §5.8: common random numbers).
 
 Every stage draws from its own ``numpy.random.Generator`` spawned from the trial's ``SeedSequence``, so every
 (birth model x probability mode x clutter) filter of trial n sees the same truth and the same measurements, and a

@@ -1,4 +1,4 @@
-"""Synthetic range-bearing sensor: Recording -> Scans (ALGORITHMS.md §2.3, §3.1.1-3.1.2, §3.1.4, §5.1, §5.4).
+"""Synthetic range-bearing sensor: Recording -> Scans (docs/method.md §2.3, §3.1.1-3.1.2, §3.1.4, §5.1, §5.4).
 
 The stage contract (:class:`Scan`, :class:`Scans`, :class:`Obstacles`) lives in :mod:`soabench.types`. Here:
 

@@ -1,5 +1,5 @@
 """Sensor overlay for the scene figure (``soabench scene ... --sensor``): FOV, Omega_k, obstacle cones, sight lines
-and measurements of one scan (ALGORITHMS.md §2.3, §3.1.2, §3.1.4).
+and measurements of one scan (docs/method.md §2.3, §3.1.2, §3.1.4).
 
 Colours: visible region light green; obstacle shadows grey with tangent rays dark grey; sight lines green (visible)
 or red dashed (blocked); measurements from targets blue dots, clutter orange crosses; ego black triangle.

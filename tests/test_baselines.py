@@ -1,4 +1,4 @@
-"""Baseline birth models PUBM, UBM, ATBM, GMBM (ALGORITHMS.md §3.2-3.5; tests T18, T20, T21)."""
+"""Baseline birth models PUBM, UBM, ATBM, GMBM (docs/method.md §3.2-3.5; tests T18, T20, T21)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Semantic placement samplers (ALGORITHMS.md §3.1.4, paper eq. 14; test T19)."""
+"""Semantic placement samplers (docs/method.md §3.1.4, paper eq. 14; test T19)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""S-OA birth model (ALGORITHMS.md §3.0-3.1; tests T12-T15, T18; paper eqs. 8-17) on small synthetic scenes."""
+"""S-OA birth model (docs/method.md §3.0-3.1; tests T12-T15, T18; paper eqs. 8-17) on small synthetic scenes."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Config defaults (ALGORITHMS.md §1.2, §7), TOML overlay and validation messages."""
+"""Config defaults (docs/method.md §1.2, §7), TOML overlay and validation messages."""
 
 from __future__ import annotations
 

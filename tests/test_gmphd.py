@@ -1,4 +1,4 @@
-"""GM-PHD core (ALGORITHMS.md §2; tests T1-T11, T16, T17 of §6) and the filter cycle (§2.11)."""
+"""GM-PHD core (docs/method.md §2; tests T1-T11, T16, T17 of §6) and the filter cycle (§2.11)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Property tests of the GM-PHD core (ALGORITHMS.md §2.6-2.9, §2.12): for random mixtures and measurement sets,
+"""Property tests of the GM-PHD core (docs/method.md §2.6-2.9, §2.12): for random mixtures and measurement sets,
 including targets at r -> 0, far outside the FOV, empty measurement sets and empty mixtures, weights stay
 non-negative, covariances symmetric positive definite, and nothing is NaN."""
 

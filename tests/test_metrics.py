@@ -1,4 +1,4 @@
-"""Metrics (ALGORITHMS.md §5; tests T24, T25, T26 of §6)."""
+"""Metrics (docs/method.md §5; tests T24, T25, T26 of §6)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Detection/survival probabilities (ALGORITHMS.md §4; tests T22, T23 of §6)."""
+"""Detection/survival probabilities (docs/method.md §4; tests T22, T23 of §6)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Report and store: statistics in the paper's terms from CSV files alone (ALGORITHMS.md §5.8)."""
+"""Report and store: statistics in the paper's terms from CSV files alone (docs/method.md §5.8)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of the synthetic sensor (ALGORITHMS.md §2.3, §3.1.1-3.1.2, §3.1.4; T12-T15, T28)."""
+"""Tests of the synthetic sensor (docs/method.md §2.3, §3.1.1-3.1.2, §3.1.4; T12-T15, T28)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Statistical tests of the synthetic sensor with fixed seeds (ALGORITHMS.md §2.3): Poisson clutter uniform over the
+"""Statistical tests of the synthetic sensor with fixed seeds (docs/method.md §2.3): Poisson clutter uniform over the
 FOV, Gaussian measurement noise with the configured sigmas, detection rate p_D of visible targets."""
 
 from __future__ import annotations

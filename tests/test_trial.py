@@ -1,4 +1,4 @@
-"""One Monte Carlo trial (ALGORITHMS.md §5.8; T28 of §6).
+"""One Monte Carlo trial (docs/method.md §5.8; T28 of §6).
 
 The first tests drive :func:`run_trial` with small fakes of the simulator, the sensor, the filter and the birth models
 injected through its keyword arguments; the last ones run the real pipeline.

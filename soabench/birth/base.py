@@ -1,4 +1,4 @@
-"""The shared birth builder and FOV rule (ALGORITHMS.md §3.0); the birth contract is re-exported from the bottom layer.
+"""The shared birth builder and FOV rule (docs/method.md §3.0); the birth contract is re-exported from the bottom layer.
 
 The data classes (:class:`Births`, :class:`NewbornTerms`, :class:`BirthContext`) live in :mod:`soabench.types` and
 the :class:`BirthModel` protocol in :mod:`soabench.protocols` (both public through :mod:`soabench.api`).
@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from soabench.types import Scan
 
 # ---------------------------------------------------------------------------------------------------------------------
-# Shared builder and FOV-only rule (ALGORITHMS.md §3.0). Everything below is array code over all candidate means.
+# Shared builder and FOV-only rule (docs/method.md §3.0). Everything below is array code over all candidate means.
 # ---------------------------------------------------------------------------------------------------------------------
 
 

@@ -1,4 +1,4 @@
-"""Figure support: birth components over a scene, coloured like the paper's Fig. 2 (ALGORITHMS.md §3.1, §3.6).
+"""Figure support: birth components over a scene, coloured like the paper's Fig. 2 (docs/method.md §3.1, §3.6).
 
 Occlusion terms are black, semantic terms green and FOV-boundary terms red, as in the paper; the baselines' grid,
 fixed GM and measurement-driven (newborn) components get their own colours. Each component is drawn as the 2-sigma

@@ -1,4 +1,4 @@
-"""Placement of semantic birth means in a region Omega (ALGORITHMS.md §3.1.4, paper eq. 14).
+"""Placement of semantic birth means in a region Omega (docs/method.md §3.1.4, paper eq. 14).
 
 Four placements, each a pure function of the region (shapely geometry) and, where random, a
 ``numpy.random.Generator`` (the trial's placement stream, §2.12 item 11):

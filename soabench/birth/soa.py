@@ -1,6 +1,6 @@
 """The S-OA birth model of Menezes & Campbell: gamma_k = gamma_occl + gamma_sem + gamma_fov (paper eqs. 7-17).
 
-ALGORITHMS.md §3.1. Three sources of Gaussian birth components, all passed through the FOV-only rule of §3.0:
+docs/method.md §3.1. Three sources of Gaussian birth components, all passed through the FOV-only rule of §3.0:
 
 * occlusion terms (§3.1.2-3.1.3, eqs. 8-11): L layers at spacing delta_r behind the tangent point of both tangent
   rays of every obstacle, with covariance sigma_par^2 u u^T + sigma_perp^2 u_perp u_perp^T aligned with the ray,

@@ -1,4 +1,4 @@
-"""The paper's headline numbers (ALGORITHMS.md §5.9) side by side with ours, with paired statistics.
+"""The paper's headline numbers (docs/method.md §5.9) side by side with ours, with paired statistics.
 
 For every comparison "S-OA vs X" this module reports the paper's number, ours, a paired Wilcoxon signed-rank test
 over trials and a paired bootstrap confidence interval (percentile, trials resampled with replacement, fixed seed).

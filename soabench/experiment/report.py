@@ -1,4 +1,4 @@
-"""Summary of a finished run in the paper's terms, from its CSV files only (ALGORITHMS.md §5.8, §5.9).
+"""Summary of a finished run in the paper's terms, from its CSV files only (docs/method.md §5.8, §5.9).
 
 ``write_report(run_dir)`` reads ``run.json`` (config), ``trials.csv``, ``episodes.csv``, ``steps.csv``,
 ``timing.csv`` and the failure records, and writes ``summary.json``, ``summary.md`` and ``figures/*.png``, so a
@@ -343,7 +343,7 @@ def paper_section(run_dir: Path, tables: RunTables, clutter: float = 3.0) -> str
     rows = [r for r in paper.read_rows(run_dir / "trials.csv") if r["mode"] in ("static", "dynamic")]
     with np.errstate(invalid="ignore"):  # percentiles of all-NaN bootstrap samples (trials without episodes)
         body = paper.markdown(rows, clutter)
-    return f"## Against the paper (ALGORITHMS.md §5.9), λ = {clutter:g}\n\n{body}\n"
+    return f"## Against the paper (docs/method.md §5.9), λ = {clutter:g}\n\n{body}\n"
 
 
 def write_report(run_dir: Path, figures: bool = True) -> str:

@@ -1,9 +1,9 @@
-"""The Monte Carlo harness: trials on process workers or Dask, persisted per trial, resumable (ALGORITHMS.md §5.8).
+"""The Monte Carlo harness: trials on process workers or Dask, persisted per trial, resumable (docs/method.md §5.8).
 
 ``run_experiment`` runs trials ``0 .. trials-1`` of a config; trial n's seeds depend only on ``(seed, n)``
 (:mod:`soabench.seeding`), never on the worker or the order, so serial, process-pool and Dask runs write
-bit-identical ``trials.csv``/``episodes.csv``/``steps.csv``. libsumo is a process singleton (SUMO_NOTES.md): every
-executor runs one trial at a time per process (a lock guards a worker that was started with several threads).
+bit-identical ``trials.csv``/``episodes.csv``/``steps.csv``. libsumo is a process singleton (docs/user-guide/sumo.md):
+every executor runs one trial at a time per process (a lock guards a worker that was started with several threads).
 
 Executors: ``workers=1`` runs in this process; ``workers=N`` a ``ProcessPoolExecutor`` of N processes; ``scheduler``
 an existing Dask scheduler; ``dask_local`` a Dask ``LocalCluster(processes=True, threads_per_worker=1)``.

@@ -23,7 +23,7 @@ record. Appending CSV lines would need a commit marker and a torn-line repair on
 Determinism: records store floats through ``json`` (``float.__repr__``, exact round trip) and the CSVs write
 ``repr`` of every float, rows sorted by (trial, clutter, model, mode[, target/k]) in the config's order. Wall-clock
 columns (``t_*`` and the per-trial SUMO/sensor seconds) go to ``timing.csv`` so that ``trials.csv``,
-``episodes.csv`` and ``steps.csv`` are bit-identical for the same seed on any executor (ALGORITHMS.md §6 T28).
+``episodes.csv`` and ``steps.csv`` are bit-identical for the same seed on any executor (docs/method.md §6 T28).
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ FORMAT_VERSION = 1
 KEY_COLUMNS = ROW_ID_KEYS
 #: wall-clock columns of a row (seconds), written to ``timing.csv``
 TIMING_COLUMNS = ROW_TIME_KEYS
-#: metric columns of ``trials.csv`` (ALGORITHMS.md §5.2-5.7)
+#: metric columns of ``trials.csv`` (docs/method.md §5.2-5.7)
 METRIC_COLUMNS = tuple(k for k in ROW_KEYS if k not in KEY_COLUMNS + TIMING_COLUMNS)
 TRIAL_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
 EPISODE_COLUMNS = EPISODE_KEYS

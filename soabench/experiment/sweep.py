@@ -1,4 +1,4 @@
-"""Parameter sweeps over clutter rate and expected births N̂ (ALGORITHMS.md §5.5, §5.8; paper Fig. 5h, §V.C).
+"""Parameter sweeps over clutter rate and expected births N̂ (docs/method.md §5.5, §5.8; paper Fig. 5h, §V.C).
 
 * ``clutter`` (values such as 0.5, 3, 5): one run with ``experiment.clutter = values``; every trial's truth and
   detections are shared across lambda (common random numbers, :mod:`soabench.seeding`), so one run gives the

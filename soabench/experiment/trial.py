@@ -1,6 +1,6 @@
 """One Monte Carlo trial: seed -> Recording -> Scans -> every (birth model x probability mode) filter -> metrics.
 
-Common random numbers (ALGORITHMS.md §5.8, DESIGN.md): one SUMO run per trial; per clutter rate lambda one
+Common random numbers (docs/method.md §5.8, docs/development.md): one SUMO run per trial; per clutter rate lambda one
 :class:`~soabench.sensor.Scans`, observed with freshly created sensor generators so detections and noise are identical
 across lambda; every filter run of that lambda consumes the very same Scans, and every filter run re-creates the
 placement generator, so all runs see the same birth-placement stream.

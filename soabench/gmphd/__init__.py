@@ -1,4 +1,4 @@
-"""Vectorised GM-PHD filter (ALGORITHMS.md §2, §4): mixture arrays, CV/range-bearing models, EKF/UKF update with
+"""Vectorised GM-PHD filter (docs/method.md §2, §4): mixture arrays, CV/range-bearing models, EKF/UKF update with
 log-domain likelihoods and measurement-driven newborn terms, Vo-Ma reduction and extraction, static and Beta
 ("dynamic") probabilities.
 

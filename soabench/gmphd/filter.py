@@ -1,4 +1,4 @@
-"""GM-PHD filter cycle (ALGORITHMS.md §2.11). CONTRACT: ``GMPHDFilter`` and ``StepResult`` signatures are fixed.
+"""GM-PHD filter cycle (docs/method.md §2.11). CONTRACT: ``GMPHDFilter`` and ``StepResult`` signatures are fixed.
 
 Usage per trial and (birth model x probability mode)::
 

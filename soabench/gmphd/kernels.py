@@ -1,4 +1,4 @@
-"""Compiled inner loops of the GM-PHD update and of Vo-Ma merging (ALGORITHMS.md §2.6, §2.8, §2.9).
+"""Compiled inner loops of the GM-PHD update and of Vo-Ma merging (docs/method.md §2.6, §2.8, §2.9).
 
 Each kernel is the formula written once per component or per (j, l) pair, compiled by numba. Why compiled: a
 filter step is a few hundred small array operations, and at the mixture sizes of a trial (tens of components) numpy's

@@ -1,4 +1,4 @@
-"""The Gaussian mixture as arrays, with per-component metadata (ALGORITHMS.md §2.4).
+"""The Gaussian mixture as arrays, with per-component metadata (docs/method.md §2.4).
 
 A mixture of J components is ``w (J,)``, ``m (J, 4)``, ``P (J, 4, 4)`` plus
 

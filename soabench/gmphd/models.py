@@ -1,4 +1,4 @@
-"""Motion and measurement models and the GM-PHD predict/update (ALGORITHMS.md §2.2, §2.3, §2.5-2.8, §3.2, §3.4).
+"""Motion and measurement models and the GM-PHD predict/update (docs/method.md §2.2, §2.3, §2.5-2.8, §3.2, §3.4).
 
 The per-component and per-(j, l) formulas (EKF terms, log-likelihoods, Kalman posteriors) are compiled loops in
 :mod:`soabench.gmphd.kernels`; this module holds the models and the update's bookkeeping as array code. The

@@ -1,4 +1,4 @@
-"""Detection and survival probabilities: the static mode and the Beta "dynamic" mode (ALGORITHMS.md §4).
+"""Detection and survival probabilities: the static mode and the Beta "dynamic" mode (docs/method.md §4).
 
 * :func:`detection_gate` is g(x) of §4.1/§4.4 at the component means: the FOV indicator, times the line-of-sight
   indicator when ``occlusion_pd`` is on.

@@ -1,4 +1,4 @@
-"""Pruning, merging, capping (Vo & Ma 2006, Table II) and state extraction (Table III) (ALGORITHMS.md §2.9, §2.10).
+"""Pruning, merging, capping (Vo & Ma 2006, Table II) and state extraction (Table III) (docs/method.md §2.9, §2.10).
 
 Exactly Vo & Ma: prune w <= T (no renormalisation); greedy merge around the heaviest remaining component j* of
 every i with (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U (P_i of the candidate); no weight cap, no redistribution;

@@ -1,4 +1,5 @@
-"""SUMO scenarios: networks -> :class:`SceneMap`, libsumo runs -> :class:`Recording` (DESIGN.md pipeline, stage 1).
+"""SUMO scenarios: networks -> :class:`SceneMap`, libsumo runs -> :class:`Recording` (docs/development.md pipeline,
+stage 1).
 
 Public API: :func:`load` (network + polygons + scenario TOML) and :func:`simulate` (one run with libsumo).
 """

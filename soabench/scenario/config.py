@@ -1,4 +1,4 @@
-"""Scenario configuration: what SUMO simulates on a network (ALGORITHMS.md §1.1 scene, paper Section IV-A).
+"""Scenario configuration: what SUMO simulates on a network (docs/method.md §1.1 scene, paper Section IV-A).
 
 A scenario TOML has these sections (every key optional; paths are relative to the TOML file)::
 

@@ -1,4 +1,5 @@
-"""SUMO network + polygon files -> :class:`SceneMap` (ALGORITHMS.md §2.1(c), SUMO_NOTES.md "Semantic regions").
+"""SUMO network + polygon files -> :class:`SceneMap` (docs/method.md §2.1(c), docs/user-guide/sumo.md "Semantic
+regions").
 
 Every region is shapely geometry in world (= SUMO network) coordinates, clipped to the world box W:
 
@@ -199,7 +200,7 @@ def load_scene(
     name: str | None = None,
     net=None,
 ) -> SceneMap:
-    """Build the :class:`SceneMap` of a network (ALGORITHMS.md §2.1(c)).
+    """Build the :class:`SceneMap` of a network (docs/method.md §2.1(c)).
 
     Args:
         net_file: SUMO ``.net.xml``.

@@ -1,7 +1,7 @@
 """The scene map: static geometry of one network, in world (= SUMO network) coordinates, metres.
 
 Built by :func:`soabench.scenario.network.load_scene`. Every region is shapely geometry so the sensor, the birth
-models and the figures share one definition (ALGORITHMS.md §2.1(c), SUMO_NOTES.md "Semantic regions").
+models and the figures share one definition (docs/method.md §2.1(c), docs/user-guide/sumo.md "Semantic regions").
 """
 
 from __future__ import annotations

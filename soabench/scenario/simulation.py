@@ -1,4 +1,4 @@
-"""Run one scenario with libsumo and record the ground truth (ALGORITHMS.md §1.1, §2.1(a)-(b), §2.3 last bullet).
+"""Run one scenario with libsumo and record the ground truth (docs/method.md §1.1, §2.1(a)-(b), §2.3 last bullet).
 
 What SUMO simulates (paper Section IV-A):
 
@@ -48,7 +48,7 @@ class _Pedestrian:
     going_in: bool = False  #: the last appended walk ends at a door
     inside: bool = False  #: removed by SUMO at a door, waiting to exit
     exit_time: float = math.inf
-    fresh: bool = True  #: inserted and not yet seen moving: samples are dropped (SUMO_NOTES.md)
+    fresh: bool = True  #: inserted and not yet seen moving: samples are dropped (docs/user-guide/sumo.md)
     walks: int = 0
     lost_at: tuple[str, float] | None = None  #: where to re-insert a person SUMO removed away from a door
 
