@@ -285,6 +285,7 @@ def test_ctrl_c_in_the_study_comparison_names_the_study_rerun(tmp_path, capsys, 
 
     monkeypatch.setattr(sweep, "write_sweep_report", lambda d: "sweep")
     monkeypatch.setattr(study, "write_comparison", _ctrl_c)
+    monkeypatch.setattr(study, "paper_protocol_mismatch", lambda meta: None)  # reach the comparison stage
     out = tmp_path / "study"
     argv = ["study", "--trials", "1", "--births-trials", "1", "--duration", "10", "--workers", "1"]
     assert main([*argv, "--out", str(out)]) == 130
