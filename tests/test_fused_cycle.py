@@ -163,3 +163,17 @@ def test_ukf_form_takes_the_array_path():
 
     assert not GMPHDFilter(FilterConfig(form="ukf"), SensorConfig()).fused
     assert GMPHDFilter(FilterConfig(), SensorConfig()).fused
+
+
+def test_first_use_notice_is_one_line_once(capsys):
+    import time
+
+    from soabench.gmphd import notice
+
+    with notice.first_use_notice("test-slow", delay=0.01):
+        time.sleep(0.3)
+    with notice.first_use_notice("test-fast", delay=5.0):
+        pass
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("soabench: compiling") and notice.ready("test-slow")
+    assert notice.ready("test-fast") and not notice.ready("never-run")

@@ -29,7 +29,7 @@ from soabench.birth.base import SOURCE_MEAS, Births
 from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import require
 from soabench.geometry import clutter_intensity
-from soabench.gmphd import cycle, reduction
+from soabench.gmphd import cycle, notice, reduction
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
@@ -149,6 +149,13 @@ class GMPHDFilter:
     def step(self, scan: Scan, births: Births) -> StepResult:
         """One cycle of §2.11: predict (dt), append ``births``, update with ``scan.Z`` (incl. ``births.newborn``)
         relative to ``scan.ego``, prune/merge/cap, extract."""
+        kind = (self.fused, births.newborn is not None)
+        if not notice.ready(kind):  # the first step of a kind may compile kernels: never a silent pause
+            with notice.first_use_notice(kind):
+                return self._step(scan, births)
+        return self._step(scan, births)
+
+    def _step(self, scan: Scan, births: Births) -> StepResult:
         if self.fused:
             return self._step_fused(scan, births)
         cfg = self.cfg
