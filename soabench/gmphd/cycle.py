@@ -1,5 +1,5 @@
 """The fused GM-PHD cycle (docs/method.md §2.11): predict, gate, update, prune, merge, cap and extract as compiled
-loops over arrays, three calls per scan (EKF, both probability modes).
+loops over arrays, three calls per scan (EKF and UKF, both probability modes).
 
 Why: at the mixture sizes of a trial (tens of components, a handful of measurements) the array path of
 :mod:`soabench.gmphd.models` and :mod:`soabench.gmphd.reduction` is about 60 small numpy calls per step, each
@@ -13,7 +13,8 @@ algebra, log-sum-exp, the Kalman kernels of :mod:`soabench.gmphd.kernels`, which
 and sums that numpy hands to BLAS or pairwise summation can differ in the last bits, so the two paths agree to
 1e-12 (``tests/test_fused_cycle.py`` runs both on recorded scans), not bit for bit. Arithmetic is IEEE (no
 ``fastmath``), so the fused path itself is bit-reproducible. The array path stays callable as the reference:
-``GMPHDFilter(..., fused=False)``; the UKF form always takes it.
+``GMPHDFilter(..., fused=False)``. The UKF form takes it for a step in which a covariance is not positive
+definite (its jitter retry perturbs every component of the batch, a rule kept in one place).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-from soabench.gmphd.kernels import ekf_terms, merge_groups, merge_moments, posterior_pairs, wrap
+from soabench.gmphd.kernels import _cholesky4, ekf_terms, merge_groups, merge_moments, posterior_pairs, wrap
 
 _TINY = 1e-300  #: as :data:`soabench.gmphd.probabilities._TINY`
 _LOG2 = math.log(2.0)
@@ -135,12 +136,98 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, p_S, pars, bw, bm, b
 
 
 @njit(cache=True)
-def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa):
+def _sum8(x):
+    """numpy's pairwise sum of 8 values (its unrolled block), so that means match ``np.mean(axis=-1)``."""
+    return ((x[0] + x[1]) + (x[2] + x[3])) + ((x[4] + x[5]) + (x[6] + x[7]))
+
+
+@njit(cache=True)
+def ukf_terms(m, P, ego, R, r_min):
+    """Equal-weight cubature terms (§2.7), as :func:`soabench.gmphd.models.ukf_terms`: 8 points m +- 2 L columns
+    (L = chol(sym P)), weights 1/8, circular bearing mean, wrapped differences; a component with a point inside
+    r_min is undetectable. Returns the tuple of :func:`soabench.gmphd.kernels.ekf_terms` (with an empty H) and
+    ``ok``: False if some P is not positive definite, where the array path's jitter retry (which perturbs every
+    component) must decide instead.
+    """
+    J = m.shape[0]
+    eta = np.empty((J, 2))
+    S = np.empty((J, 2, 2))
+    Sinv = np.empty((J, 2, 2))
+    logdet = np.empty(J)
+    C = np.zeros((J, 4, 2))
+    H = np.zeros((0, 2, 4))
+    valid = np.empty(J, dtype=np.bool_)
+    L = np.zeros((J, 4, 4))
+    Ps = np.empty((4, 4))
+    for j in range(J):
+        for a in range(4):
+            for b in range(4):
+                Ps[a, b] = 0.5 * (P[j, a, b] + P[j, b, a])
+        if not _cholesky4(Ps, L[j]):
+            return eta, S, Sinv, logdet, C, H, valid, False
+    X = np.empty((8, 4))
+    rr = np.empty(8)
+    bb = np.empty(8)
+    sn = np.empty(8)
+    cs = np.empty(8)
+    D = np.empty((8, 2))
+    w0 = 1.0 / 8.0
+    r_lo = max(r_min, 1e-9)
+    for j in range(J):
+        for i in range(4):
+            for a in range(4):
+                X[i, a] = 2.0 * L[j, a, i]
+                X[i + 4, a] = -X[i, a]
+        rmin = np.inf
+        for i in range(8):
+            dx = m[j, 0] + X[i, 0] - ego[0]
+            dy = m[j, 1] + X[i, 1] - ego[1]
+            rr[i] = math.hypot(dx, dy)
+            bb[i] = math.atan2(dy, dx) - ego[2]
+            sn[i] = math.sin(bb[i])
+            cs[i] = math.cos(bb[i])
+            rmin = min(rmin, rr[i])
+        zr = _sum8(rr) / 8.0
+        zb = math.atan2(_sum8(sn) / 8.0, _sum8(cs) / 8.0)
+        for i in range(8):
+            D[i, 0] = rr[i] - zr
+            D[i, 1] = wrap(bb[i] - zb)
+        for a in range(2):
+            for b in range(2):
+                acc = 0.0
+                for i in range(8):
+                    acc += (w0 * D[i, a]) * D[i, b]
+                S[j, a, b] = acc + R[a, b]
+        s01 = 0.5 * (S[j, 0, 1] + S[j, 1, 0])
+        S[j, 0, 1] = S[j, 1, 0] = s01
+        for a in range(4):
+            for b in range(2):
+                acc = 0.0
+                for i in range(8):
+                    acc += (w0 * X[i, a]) * D[i, b]
+                C[j, a, b] = acc
+        sa, sb, sd = S[j, 0, 0], 0.5 * (S[j, 0, 1] + S[j, 1, 0]), S[j, 1, 1]
+        det = sa * sd - sb * sb
+        good = det > 0.0 and math.isfinite(det)
+        if not good:
+            det = 1.0
+        Sinv[j, 0, 0], Sinv[j, 1, 1] = sd / det, sa / det
+        Sinv[j, 0, 1] = Sinv[j, 1, 0] = -sb / det
+        logdet[j] = np.log(det)
+        eta[j, 0], eta[j, 1] = zr, wrap(zb)
+        valid[j] = rmin >= r_lo and good
+    return eta, S, Sinv, logdet, C, H, valid, True
+
+
+@njit(cache=True)
+def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False):
     """First half of the update (§2.6, §2.8, §3.4): p_D,j (static p_D g, dynamic g sD/(sD+tD)), the EKF terms of
     the detectable components, log p_D w q (J_d, M), and per measurement log(kappa_l + A_l) and A_l.
 
-    Returns (p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A). Components with r < r_min or
-    det S <= 0 get p_D = g = 0 (§2.12); without measurements or detectable components log_t has no rows.
+    Returns (p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, ok). Components with r < r_min or
+    det S <= 0 get p_D = g = 0 (§2.12); without measurements or detectable components log_t has no rows. ``ukf``
+    selects the cubature terms (:func:`ukf_terms`); ``ok`` is False when one of their covariances is not positive
+    definite: the caller then runs the step on the array path.
     """
     J = w.shape[0]
     M = Z.shape[0]
@@ -163,7 +250,11 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa):
     for k in range(n_d):
         m_d[k] = m[det_idx[k]]
         P_d[k] = P[det_idx[k]]
-    eta, S, Sinv, logdet, C, H, valid = ekf_terms(m_d, P_d, ego, R, r_min)
+    if ukf:
+        eta, S, Sinv, logdet, C, H, valid, ok = ukf_terms(m_d, P_d, ego, R, r_min)
+    else:
+        eta, S, Sinv, logdet, C, H, valid = ekf_terms(m_d, P_d, ego, R, r_min)
+        ok = True
     for k in range(n_d):
         if not valid[k]:
             p_D[det_idx[k]] = 0.0
@@ -198,7 +289,7 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa):
             log_A = (np.log(acc) if acc > 0.0 else -np.inf) + shift
             log_L[ll] = _logaddexp(log_L[ll], log_A)
             A[ll] = math.exp(log_A)
-    return p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A
+    return p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, ok
 
 
 @njit(cache=True)
@@ -208,7 +299,7 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
 
     Returns (w, m, P, origin, n_det, age, beta) of the posterior and (n_pairs, n_newborn).
     """
-    p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A = sup
+    p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, _ = sup
     J = w.shape[0]
     M = log_L.shape[0]
     dyn = beta.shape[1] == 4
@@ -298,12 +389,12 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
 
 
 @njit(cache=True)
-def update(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa):
-    """:func:`support` then :func:`posterior` without newborn terms, in one call."""
-    sup = support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa)
+def update(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False):
+    """:func:`support` then :func:`posterior` without newborn terms, in one call; returns (posterior, A, ok)."""
+    sup = support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
     no_nb = np.empty(0)
     out = posterior(w, m, P, origin, n_det, age, beta, sup, R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)), no_nb, 0)
-    return out, sup[11]
+    return out, sup[11], sup[12]
 
 
 @njit(cache=True)

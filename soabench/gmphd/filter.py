@@ -87,9 +87,9 @@ class GMPHDFilter:
         filter_cfg: filter settings (form, p_S, p_D, T, U, J_max, gate, extraction, Beta parameters, ...).
         sensor_cfg: sensor model (dt, FOV, R, clutter rate) shared with the simulator (§2.3).
         mode: "static", "dynamic" or "dynamic+occ" (§4.6).
-        fused: run the cycle as compiled calls over arrays (:mod:`soabench.gmphd.cycle`, EKF form); False, or the
-            UKF form, takes the array path of :mod:`soabench.gmphd.models` and :mod:`soabench.gmphd.reduction`,
-            which is the reference the fused cycle is tested against (same results to 1e-12).
+        fused: run the cycle as compiled calls over arrays (:mod:`soabench.gmphd.cycle`); False takes the array
+            path of :mod:`soabench.gmphd.models` and :mod:`soabench.gmphd.reduction`, which is the reference the
+            fused cycle is tested against (same results to 1e-12).
 
     Attributes:
         mixture: the current posterior (after reduction); empty at k = 0.
@@ -118,7 +118,8 @@ class GMPHDFilter:
             self.beta_newborn = self.beta0.copy()
             self.beta_newborn[0] += 1.0
         self.mixture = Mixture.empty(self.dynamic)
-        self.fused = bool(fused) and filter_cfg.form == "ekf"
+        self.fused = bool(fused)
+        self._ukf = filter_cfg.form == "ukf"
         c = filter_cfg
         self._pars = np.array([c.beta_factor, c.theta_min, c.p_S_max], dtype=float)
         limited = sensor_cfg.fov_deg < 360.0
@@ -158,6 +159,10 @@ class GMPHDFilter:
     def _step(self, scan: Scan, births: Births) -> StepResult:
         if self.fused:
             return self._step_fused(scan, births)
+        return self._step_array(scan, births)
+
+    def _step_array(self, scan: Scan, births: Births) -> StepResult:
+        """:meth:`step` on the array path (:mod:`soabench.gmphd.models`, :mod:`soabench.gmphd.reduction`)."""
         cfg = self.cfg
         ego = np.asarray(scan.ego, dtype=float)
         Z = np.asarray(scan.Z, dtype=float).reshape(-1, 2)
@@ -223,7 +228,7 @@ class GMPHDFilter:
         )
 
     def _step_fused(self, scan: Scan, births: Births) -> StepResult:
-        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`), EKF form."""
+        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`)."""
         cfg = self.cfg
         ego = np.ascontiguousarray(scan.ego, dtype=float)
         Z = np.ascontiguousarray(scan.Z, dtype=float).reshape(-1, 2)
@@ -263,9 +268,13 @@ class GMPHDFilter:
         kappa = np.ascontiguousarray(clutter_intensity(Z, self.sensor), dtype=float)
         args = (self.R, float(self.sensor.r_min), float(self.gate_thr), kappa)
         if newborn is None:
-            post, A = cycle.update(*pred[:7], g, float(cfg.p_D), Z, ego, *args)
+            post, A, ok = cycle.update(*pred[:7], g, float(cfg.p_D), Z, ego, *args, self._ukf)
+            if not ok:  # UKF with a covariance that is not positive definite: the array path's jitter rule
+                return self._step_array(scan, births)
         else:
-            sup = cycle.support(pred[0], pred[1], pred[2], pred[6], g, float(cfg.p_D), Z, ego, *args)
+            sup = cycle.support(pred[0], pred[1], pred[2], pred[6], g, float(cfg.p_D), Z, ego, *args, self._ukf)
+            if not sup[12]:
+                return self._step_array(scan, births)
             A = sup[11]
             M = len(Z)
             beta_nb = np.zeros(0)
