@@ -204,10 +204,13 @@ def test_first_use_notice_is_one_line_once(capsys):
 
     from soabench.gmphd import notice
 
+    notice._printed.clear()
     with notice.first_use_notice("test-slow", delay=0.01):
         time.sleep(0.3)
     with notice.first_use_notice("test-fast", delay=5.0):
         pass
+    with notice.first_use_notice("test-slow-again", delay=0.01):  # a second pause: no second line
+        time.sleep(0.3)
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("soabench: compiling") and notice.ready("test-slow")
     assert notice.ready("test-fast") and not notice.ready("never-run")
