@@ -1,5 +1,5 @@
-"""A one-line notice on stderr while the compiled filter kernels are prepared the first time (DESIGN: no silent
-pauses).
+"""A one-line notice on stderr while the compiled filter kernels are prepared the first time, instead of a silent
+pause.
 
 The GM-PHD kernels (:mod:`soabench.gmphd.kernels`, :mod:`soabench.gmphd.cycle`) are compiled by numba on their
 first call after installation (tens of seconds) and loaded from numba's cache afterwards (about a second). The
