@@ -383,7 +383,7 @@ def merge_groups_tree(m, P, order, U):
     return label, centres[:G]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _retire(k, salive, leaf_of, count, rmax2, sreach2, lo, hi, left, right, parent):
     """Mark tree slot k merged; update the unmerged counts and largest reaches from its leaf up to the root."""
     salive[k] = False
