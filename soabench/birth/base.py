@@ -11,6 +11,7 @@ inside each measurement's normaliser with no missed-detection term (PUBM, ATBM s
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -89,13 +90,45 @@ def isotropic(sigma: float | np.ndarray, n: int) -> np.ndarray:
     return s2[:, None, None] * np.eye(2)[None]
 
 
+_TREES: OrderedDict[int, tuple[Sequence[BaseGeometry], tuple[BaseGeometry, ...], STRtree]] = OrderedDict()
+_N_TREES = 256  #: geometry lists kept indexed (least recently used dropped first)
+
+
+def geometry_index(geoms: Sequence[BaseGeometry]) -> STRtree:
+    """The STRtree of ``geoms``, built once per geometry list and reused while the list holds the same objects.
+
+    A trial runs its 15 filters (birth model x probability mode) one after the other over the same scans, and each
+    birth model asks which candidate means lie inside ``scan.occluders``; the tree of a scan's occluders is built
+    on the first of those calls only. The cache keeps the ``_N_TREES`` most recently used lists (a trial's scans at
+    one clutter rate fit); each entry holds a strong reference to its list, so the identity used as key cannot be
+    reused, and a snapshot of the member objects, compared by identity on every hit, so an edited list is indexed
+    anew.
+    """
+    hit = _TREES.get(id(geoms))
+    if hit is not None:
+        lst, snap, tree = hit
+        if lst is geoms and len(snap) == len(geoms) and all(a is b for a, b in zip(snap, geoms, strict=True)):
+            _TREES.move_to_end(id(geoms))
+            return tree
+    snap = tuple(geoms)
+    tree = STRtree(list(snap))
+    _TREES[id(geoms)] = (geoms, snap, tree)
+    _TREES.move_to_end(id(geoms))
+    while len(_TREES) > _N_TREES:
+        _TREES.popitem(last=False)
+    return tree
+
+
 def inside_any(geoms: Sequence[BaseGeometry] | STRtree | None, xy: np.ndarray) -> np.ndarray:
-    """(J,) True where a point of ``xy`` (J, 2) lies in the interior of any geometry (one vectorised tree query)."""
+    """(J,) True where a point of ``xy`` (J, 2) lies in the interior of any geometry (one vectorised tree query;
+    the tree of a geometry list is built once, :func:`geometry_index`)."""
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     out = np.zeros(len(xy), dtype=bool)
     if geoms is None or len(xy) == 0:
         return out
-    tree = geoms if isinstance(geoms, STRtree) else STRtree(list(geoms))
+    if not isinstance(geoms, STRtree) and len(geoms) == 0:
+        return out
+    tree = geoms if isinstance(geoms, STRtree) else geometry_index(geoms)
     if len(tree.geometries) == 0:
         return out
     hit = tree.query(shapely.points(xy), predicate="within")[0]

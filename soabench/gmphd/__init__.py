@@ -3,7 +3,8 @@ log-domain likelihoods and measurement-driven newborn terms, Vo-Ma reduction and
 ("dynamic") probabilities.
 
 Modules: :mod:`.mixture` (the arrays), :mod:`.models` (predict, update), :mod:`.probabilities` (p_D gate, Beta),
-:mod:`.reduction` (prune/merge/cap, extract), :mod:`.filter` (the cycle of §2.11).
+:mod:`.reduction` (prune/merge/cap, extract), :mod:`.filter` (the cycle of §2.11), :mod:`.kernels` and
+:mod:`.cycle` (the compiled loops and the fused cycle).
 """
 
 from soabench.gmphd.filter import GMPHDFilter, StepResult

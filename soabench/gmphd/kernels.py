@@ -179,10 +179,238 @@ def _cholesky4(P, L):
     return True
 
 
+_LEAF = 8  #: components per k-d tree leaf
+_SLACK = 1.0 + 1e-8  #: relative slack of the reach radius (rounding of Cholesky and substitution is ~1e-15)
+
+
+@njit(cache=True)
+def _select(perm, key, a, b, k):
+    """Reorder perm[a:b] so that key[perm[k]] is the (k - a)-th smallest, smaller-or-equal keys before it and
+    larger-or-equal after it (Hoare's quickselect with the median of three as pivot; O(b - a) on average)."""
+    lo, hi = a, b - 1
+    while hi > lo:
+        mid = (lo + hi) // 2
+        p0, p1, p2 = key[perm[lo]], key[perm[mid]], key[perm[hi]]
+        pivot = max(min(p0, p1), min(max(p0, p1), p2))
+        i, j = lo, hi
+        while i <= j:
+            while key[perm[i]] < pivot:
+                i += 1
+            while key[perm[j]] > pivot:
+                j -= 1
+            if i <= j:
+                perm[i], perm[j] = perm[j], perm[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            return
+
+
+@njit(cache=True)
+def _kdtree(x, y, perm):
+    """Static 2-d tree over the points (x[perm], y[perm]), median splits on the wider side, ``_LEAF`` per leaf.
+
+    Reorders ``perm`` in place so that every node owns the contiguous range perm[lo:hi]. Children get larger node
+    ids than their parent (so a reverse sweep is bottom-up). Returns (lo, hi, left, right, parent, box (n, 4)).
+    """
+    n = perm.shape[0]
+    cap = 2 * (n // _LEAF + 1) * 2 + 1
+    lo = np.empty(cap, dtype=np.int64)
+    hi = np.empty(cap, dtype=np.int64)
+    left = np.full(cap, -1, dtype=np.int64)
+    right = np.full(cap, -1, dtype=np.int64)
+    parent = np.full(cap, -1, dtype=np.int64)
+    box = np.empty((cap, 4))
+    lo[0], hi[0] = 0, n
+    n_nodes = 1
+    stack = np.empty(cap, dtype=np.int64)
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        nd = stack[top]
+        a, b = lo[nd], hi[nd]
+        x0, x1, y0, y1 = np.inf, -np.inf, np.inf, -np.inf
+        for k in range(a, b):
+            i = perm[k]
+            x0, x1 = min(x0, x[i]), max(x1, x[i])
+            y0, y1 = min(y0, y[i]), max(y1, y[i])
+        box[nd, 0], box[nd, 1], box[nd, 2], box[nd, 3] = x0, x1, y0, y1
+        if b - a <= _LEAF:
+            continue
+        mid = (a + b) // 2
+        _select(perm, x if x1 - x0 >= y1 - y0 else y, a, b, mid)
+        lo[n_nodes], hi[n_nodes], lo[n_nodes + 1], hi[n_nodes + 1] = a, mid, mid, b
+        parent[n_nodes] = parent[n_nodes + 1] = nd
+        left[nd], right[nd] = n_nodes, n_nodes + 1
+        stack[top], stack[top + 1] = n_nodes, n_nodes + 1
+        top += 2
+        n_nodes += 2
+    return lo[:n_nodes], hi[:n_nodes], left[:n_nodes], right[:n_nodes], parent[:n_nodes], box[:n_nodes]
+
+
+_SMALL_MERGE = 96  #: up to this many components the x-sorted window is faster than building the tree
+
+
 @njit(cache=True)
 def merge_groups(m, P, order, U):
     """Vo-Ma greedy merge groups (Table II, §2.9), literally: pass g takes j* = the next component of ``order``
     (heaviest first) still unmerged, and absorbs every unmerged i with (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U.
+
+    Both search structures give exactly the same groups (the same quadratic form, evaluated the same way, on a
+    superset of the candidates that can merge): :func:`merge_groups_window` for small mixtures, where its O(J x
+    groups) is a few microseconds, :func:`merge_groups_tree` (about O(J log J)) above ``_SMALL_MERGE`` components.
+    Returns (label (J,), centres (G,)): the group of each component and the j* of each group, in creation order.
+    """
+    if m.shape[0] <= _SMALL_MERGE:
+        return merge_groups_window(m, P, order, U)
+    return merge_groups_tree(m, P, order, U)
+
+
+@njit(cache=True)
+def merge_groups_tree(m, P, order, U):
+    """:func:`merge_groups` with a spatial index over the positions.
+
+    The quadratic form is |y|^2 with y = L_i^-1 d by forward substitution (L_i the Cholesky factor of P_i), exactly
+    as in :func:`merge_groups_window`, so the groups are identical. Candidates are found with a spatial index: since
+    |y|^2 >= y_0^2 + y_1^2 = d_xy^T P_i,xy^-1 d_xy >= |d_xy|^2 / lambda_max(P_i,xy), only an i whose position lies
+    within its own reach rho_i = sqrt(U lambda_max(P_i,xy)) of m_j* can merge. A 2-d tree over the positions keeps,
+    per node, the bounding box of its positions, the largest reach and the number of unmerged members; a pass
+    descends only into nodes with unmerged members whose box lies within their largest reach of m_j*, and each
+    merge updates the counts and reaches on its leaf-to-root path. A few wide components only widen the reach of
+    their own ancestors, so a pass costs about O(log J + its group) instead of the window's O(J), and the whole
+    merge about O(J log J). A covariance that is not positive definite never joins another component's group;
+    a centre or candidate with a non-finite position merges with nothing (its quadratic form is NaN or inf).
+    Returns (label (J,), centres (G,)): the group of each component and the j* of each group, in creation order.
+    """
+    J = m.shape[0]
+    L = np.zeros((J, 4, 4))
+    reach2 = np.empty(J)  # rho_i^2 with slack; -1 for components outside the index
+    n_idx = 0
+    for i in range(J):
+        ok = _cholesky4(P[i], L[i]) and math.isfinite(m[i, 0]) and math.isfinite(m[i, 1])
+        if ok:
+            a, b, d = P[i, 0, 0], P[i, 1, 0], P[i, 1, 1]
+            lam = 0.5 * (a + d) + math.sqrt(0.25 * (a - d) * (a - d) + b * b)
+            reach2[i] = U * lam * _SLACK
+            n_idx += 1
+        else:
+            reach2[i] = -1.0
+    perm = np.empty(n_idx, dtype=np.int64)
+    k = 0
+    for i in range(J):
+        if reach2[i] >= 0.0:
+            perm[k] = i
+            k += 1
+    lo, hi, left, right, parent, box = _kdtree(np.ascontiguousarray(m[:, 0]), np.ascontiguousarray(m[:, 1]), perm)
+    n_nodes = lo.shape[0]
+    # slot k of the tree holds component perm[k]; leaves own contiguous slots, so a leaf is read from one place
+    slot_of = np.full(J, -1, dtype=np.int64)
+    sm = np.empty((n_idx, 4))
+    sL = np.empty((n_idx, 4, 4))
+    sreach2 = np.empty(n_idx)
+    salive = np.ones(n_idx, dtype=np.bool_)
+    for k in range(n_idx):
+        i = perm[k]
+        slot_of[i] = k
+        sm[k] = m[i]
+        sL[k] = L[i]
+        sreach2[k] = reach2[i]
+    count = np.zeros(n_nodes, dtype=np.int64)  # unmerged indexed members
+    rmax2 = np.full(n_nodes, -1.0)  # largest reach^2 among them
+    leaf_of = np.full(n_idx, -1, dtype=np.int64)
+    for nd in range(n_nodes - 1, -1, -1):
+        if left[nd] < 0:
+            for k in range(lo[nd], hi[nd]):
+                leaf_of[k] = nd
+                rmax2[nd] = max(rmax2[nd], sreach2[k])
+            count[nd] = hi[nd] - lo[nd]
+        else:
+            count[nd] = count[left[nd]] + count[right[nd]]
+            rmax2[nd] = max(rmax2[left[nd]], rmax2[right[nd]])
+
+    alive = np.ones(J, dtype=np.bool_)
+    label = np.empty(J, dtype=np.int64)
+    centres = np.empty(J, dtype=np.int64)
+    stack = np.empty(n_nodes + 1, dtype=np.int64)
+    y = np.empty(4)
+    mc = np.empty(4)
+    G = 0
+    for c in order:
+        if not alive[c]:
+            continue
+        alive[c] = False
+        label[c] = G
+        centres[G] = c
+        if slot_of[c] >= 0:
+            _retire(slot_of[c], salive, leaf_of, count, rmax2, sreach2, lo, hi, left, right, parent)
+        for a in range(4):
+            mc[a] = m[c, a]
+        px, py = mc[0], mc[1]
+        top = 0
+        if math.isfinite(px) and math.isfinite(py) and n_nodes > 0 and count[0] > 0:
+            stack[0] = 0
+            top = 1
+        while top > 0:
+            top -= 1
+            nd = stack[top]
+            if count[nd] == 0:
+                continue
+            dx = max(box[nd, 0] - px, 0.0, px - box[nd, 1])
+            dy = max(box[nd, 2] - py, 0.0, py - box[nd, 3])
+            if dx * dx + dy * dy > rmax2[nd]:
+                continue
+            if left[nd] >= 0:
+                stack[top] = left[nd]
+                stack[top + 1] = right[nd]
+                top += 2
+                continue
+            for k in range(lo[nd], hi[nd]):
+                if not salive[k]:
+                    continue
+                q = 0.0
+                for a in range(4):  # y = L_i^-1 d by forward substitution
+                    s = sm[k, a] - mc[a]
+                    for b in range(a):
+                        s -= sL[k, a, b] * y[b]
+                    y[a] = s / sL[k, a, a]
+                    q += y[a] * y[a]
+                if q <= U:
+                    i = perm[k]
+                    alive[i] = False
+                    label[i] = G
+                    _retire(k, salive, leaf_of, count, rmax2, sreach2, lo, hi, left, right, parent)
+        G += 1
+    return label, centres[:G]
+
+
+@njit(cache=True, inline="always")
+def _retire(k, salive, leaf_of, count, rmax2, sreach2, lo, hi, left, right, parent):
+    """Mark tree slot k merged; update the unmerged counts and largest reaches from its leaf up to the root."""
+    salive[k] = False
+    nd = leaf_of[k]
+    r = -1.0
+    for kk in range(lo[nd], hi[nd]):
+        if salive[kk]:
+            r = max(r, sreach2[kk])
+    rmax2[nd] = r
+    count[nd] -= 1
+    nd = parent[nd]
+    while nd >= 0:
+        count[nd] -= 1
+        rmax2[nd] = max(rmax2[left[nd]], rmax2[right[nd]])
+        nd = parent[nd]
+
+
+@njit(cache=True)
+def merge_groups_window(m, P, order, U):
+    """:func:`merge_groups` with an x-sorted window (the only search structure before the tree; it is also the
+    baseline of ``benchmarks/bench_merge_scaling.py``). Each pass scans every component in the window, merged or
+    not: O(J x groups) once the widest covariance makes the window wide.
 
     The quadratic form is |L_i^-1 d|^2 with L_i the Cholesky factor of P_i. Candidates are looked up in a window
     of the x-sorted means: d^T P_i^-1 d >= dx^2 / P_i,xx, so only |dx| <= sqrt(U max_i P_i,xx) can merge. A

@@ -5,7 +5,8 @@ every i with (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U (P_i of the candidate); no 
 then keep the J_max heaviest (logged when hit).
 
 The greedy merge and the moment matching are compiled loops (:mod:`soabench.gmphd.kernels`): Table II literally,
-with an x-sorted window so that a pass only visits the candidates whose x alone does not already exceed U.
+with a spatial index (a 2-d tree over the positions, or an x-sorted window for small mixtures) so that a pass only
+visits the candidates whose position alone does not already exceed U: about O(J log J) instead of O(J x groups).
 """
 
 from __future__ import annotations

@@ -1,0 +1,506 @@
+"""The fused GM-PHD cycle (docs/method.md §2.11): predict, gate, update, prune, merge, cap and extract as compiled
+loops over arrays, three calls per scan (EKF and UKF, both probability modes).
+
+Why: at the mixture sizes of a trial (tens of components, a handful of measurements) the array path of
+:mod:`soabench.gmphd.models` and :mod:`soabench.gmphd.reduction` is about 60 small numpy calls per step, each
+costing microseconds of fixed overhead; here a step is three calls (:func:`predict_append`, :func:`update` or
+:func:`support` + :func:`posterior` when a birth model adds measurement-driven newborn terms, :func:`reduce`), so
+``StepResult`` can still time the three stages. Between the calls stays in Python only what needs Python: the
+line-of-sight gate (shapely) of the occlusion-aware mode and the newborn terms' ``beta(A, kappa)``.
+
+Each formula is the one of the array path, evaluated in the same order where that order is ours (elementwise Beta
+algebra, log-sum-exp, the Kalman kernels of :mod:`soabench.gmphd.kernels`, which both paths share); matrix products
+and sums that numpy hands to BLAS or pairwise summation can differ in the last bits, so the two paths agree to
+1e-12 (``tests/test_fused_cycle.py`` runs both on recorded scans), not bit for bit. Arithmetic is IEEE (no
+``fastmath``), so the fused path itself is bit-reproducible. The array path stays callable as the reference:
+``GMPHDFilter(..., fused=False)``. The UKF form takes it for a step in which a covariance is not positive
+definite (its jitter retry perturbs every component of the batch, a rule kept in one place).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from soabench.gmphd.kernels import _cholesky4, ekf_terms, merge_groups, merge_moments, posterior_pairs, wrap
+
+_TINY = 1e-300  #: as :data:`soabench.gmphd.probabilities._TINY`
+_LOG2 = math.log(2.0)
+
+
+@njit(cache=True)
+def _beta_inflate(s, t, f, theta_min):
+    """§4.2, as :func:`soabench.gmphd.probabilities.beta_inflate` for one component."""
+    mu = s / (s + t)
+    v = mu * (1.0 - mu)
+    n = s + t
+    var = s * t / (n * n * (n + 1.0))
+    theta = v / max(min(f * var, v), _TINY) - 1.0
+    theta = max(theta, theta_min)
+    return theta * mu, theta * (1.0 - mu)
+
+
+@njit(cache=True)
+def _logaddexp(x, y):
+    """numpy's ``logaddexp`` for two scalars (same branches)."""
+    if x == y:
+        return x + _LOG2
+    d = x - y
+    if d > 0.0:
+        return x + math.log1p(math.exp(-d))
+    if d <= 0.0:
+        return y + math.log1p(math.exp(d))
+    return d  # NaN
+
+
+@njit(cache=True)
+def predict_append(w, m, P, origin, n_det, age, beta, F, Q, p_S, pars, bw, bm, bP, bsrc, beta0, ego, fov):
+    """Steps 1-2 of §2.11 and the FOV gate: predict (§2.5; Beta prediction §4.2, §4.3 when ``beta`` has rows),
+    append the birth components (n_det = age = 0, Beta prior ``beta0``), and g_j = 1[m_j in FOV_k] (§4.1).
+
+    ``pars`` = (beta_factor, theta_min, p_S_max); ``fov`` = (r_min, r_max, Theta/2 + 1e-12, limited FOV 0/1).
+    Returns (w, m, P, origin, n_det, age, beta, g) of the J + J_b predicted components. Throughout this module a
+    static-mode mixture carries a (0, 0) ``beta`` and a dynamic one a (J, 4) ``beta``.
+    """
+    J0 = w.shape[0]
+    Jb = bw.shape[0]
+    J = J0 + Jb
+    dyn = beta.shape[1] == 4
+    w2 = np.empty(J)
+    m2 = np.empty((J, 4))
+    P2 = np.empty((J, 4, 4))
+    origin2 = np.empty(J, dtype=np.int8)
+    n_det2 = np.empty(J, dtype=np.int32)
+    age2 = np.empty(J, dtype=np.int32)
+    beta2 = np.empty((J, 4) if dyn else (0, 0))
+    T = np.empty((4, 4))
+    for j in range(J0):
+        factor = p_S
+        if dyn:
+            beta2[j, 0], beta2[j, 1] = _beta_inflate(beta[j, 0], beta[j, 1], pars[0], pars[1])
+            sS, tS = beta[j, 2], beta[j, 3]
+            factor = sS / (sS + tS)
+            s, t = _beta_inflate(sS + 1.0, tS, pars[0], pars[1])
+            n = s + t
+            if s > pars[2] * n:
+                s, t = pars[2] * n, (1.0 - pars[2]) * n
+            beta2[j, 2], beta2[j, 3] = s, t
+        w2[j] = w[j] * factor
+        for a in range(4):
+            acc = 0.0
+            for b in range(4):
+                acc += m[j, b] * F[a, b]
+            m2[j, a] = acc
+        for a in range(4):  # T = F P
+            for b in range(4):
+                acc = 0.0
+                for c in range(4):
+                    acc += F[a, c] * P[j, c, b]
+                T[a, b] = acc
+        for a in range(4):  # F P F^T + Q
+            for b in range(4):
+                acc = 0.0
+                for c in range(4):
+                    acc += T[a, c] * F[b, c]
+                P2[j, a, b] = acc + Q[a, b]
+        for a in range(4):
+            for b in range(a, 4):
+                s = 0.5 * (P2[j, a, b] + P2[j, b, a])
+                P2[j, a, b] = s
+                P2[j, b, a] = s
+        origin2[j] = origin[j]
+        n_det2[j] = n_det[j]
+        age2[j] = age[j] + 1
+    for k in range(Jb):
+        j = J0 + k
+        w2[j] = bw[k]
+        m2[j] = bm[k]
+        P2[j] = bP[k]
+        origin2[j] = bsrc[k]
+        n_det2[j] = 0
+        age2[j] = 0
+        if dyn:
+            beta2[j] = beta0
+    g = np.empty(J)
+    for j in range(J):
+        dx = m2[j, 0] - ego[0]
+        dy = m2[j, 1] - ego[1]
+        r = math.hypot(dx, dy)
+        ok = r >= fov[0] and r <= fov[1]
+        if ok and fov[3] > 0.0:
+            ok = abs(wrap(math.atan2(dy, dx) - ego[2])) <= fov[2]
+        g[j] = 1.0 if ok else 0.0
+    return w2, m2, P2, origin2, n_det2, age2, beta2, g
+
+
+@njit(cache=True)
+def _sum8(x):
+    """numpy's pairwise sum of 8 values (its unrolled block), so that means match ``np.mean(axis=-1)``."""
+    return ((x[0] + x[1]) + (x[2] + x[3])) + ((x[4] + x[5]) + (x[6] + x[7]))
+
+
+@njit(cache=True)
+def ukf_terms(m, P, ego, R, r_min):
+    """Equal-weight cubature terms (§2.7), as :func:`soabench.gmphd.models.ukf_terms`: 8 points m +- 2 L columns
+    (L = chol(sym P)), weights 1/8, circular bearing mean, wrapped differences; a component with a point inside
+    r_min is undetectable. Returns the tuple of :func:`soabench.gmphd.kernels.ekf_terms` (with an empty H) and
+    ``ok``: False if some P is not positive definite, where the array path's jitter retry (which perturbs every
+    component) must decide instead.
+    """
+    J = m.shape[0]
+    eta = np.empty((J, 2))
+    S = np.empty((J, 2, 2))
+    Sinv = np.empty((J, 2, 2))
+    logdet = np.empty(J)
+    C = np.zeros((J, 4, 2))
+    H = np.zeros((0, 2, 4))
+    valid = np.empty(J, dtype=np.bool_)
+    L = np.zeros((J, 4, 4))
+    Ps = np.empty((4, 4))
+    for j in range(J):
+        for a in range(4):
+            for b in range(4):
+                Ps[a, b] = 0.5 * (P[j, a, b] + P[j, b, a])
+        if not _cholesky4(Ps, L[j]):
+            return eta, S, Sinv, logdet, C, H, valid, False
+    X = np.empty((8, 4))
+    rr = np.empty(8)
+    bb = np.empty(8)
+    sn = np.empty(8)
+    cs = np.empty(8)
+    D = np.empty((8, 2))
+    w0 = 1.0 / 8.0
+    r_lo = max(r_min, 1e-9)
+    for j in range(J):
+        for i in range(4):
+            for a in range(4):
+                X[i, a] = 2.0 * L[j, a, i]
+                X[i + 4, a] = -X[i, a]
+        rmin = np.inf
+        for i in range(8):
+            dx = m[j, 0] + X[i, 0] - ego[0]
+            dy = m[j, 1] + X[i, 1] - ego[1]
+            rr[i] = math.hypot(dx, dy)
+            bb[i] = math.atan2(dy, dx) - ego[2]
+            sn[i] = math.sin(bb[i])
+            cs[i] = math.cos(bb[i])
+            rmin = min(rmin, rr[i])
+        zr = _sum8(rr) / 8.0
+        zb = math.atan2(_sum8(sn) / 8.0, _sum8(cs) / 8.0)
+        for i in range(8):
+            D[i, 0] = rr[i] - zr
+            D[i, 1] = wrap(bb[i] - zb)
+        for a in range(2):
+            for b in range(2):
+                acc = 0.0
+                for i in range(8):
+                    acc += (w0 * D[i, a]) * D[i, b]
+                S[j, a, b] = acc + R[a, b]
+        s01 = 0.5 * (S[j, 0, 1] + S[j, 1, 0])
+        S[j, 0, 1] = S[j, 1, 0] = s01
+        for a in range(4):
+            for b in range(2):
+                acc = 0.0
+                for i in range(8):
+                    acc += (w0 * X[i, a]) * D[i, b]
+                C[j, a, b] = acc
+        sa, sb, sd = S[j, 0, 0], 0.5 * (S[j, 0, 1] + S[j, 1, 0]), S[j, 1, 1]
+        det = sa * sd - sb * sb
+        good = det > 0.0 and math.isfinite(det)
+        if not good:
+            det = 1.0
+        Sinv[j, 0, 0], Sinv[j, 1, 1] = sd / det, sa / det
+        Sinv[j, 0, 1] = Sinv[j, 1, 0] = -sb / det
+        logdet[j] = np.log(det)
+        eta[j, 0], eta[j, 1] = zr, wrap(zb)
+        valid[j] = rmin >= r_lo and good
+    return eta, S, Sinv, logdet, C, H, valid, True
+
+
+@njit(cache=True)
+def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False):
+    """First half of the update (§2.6, §2.8, §3.4): p_D,j (static p_D g, dynamic g sD/(sD+tD)), the EKF terms of
+    the detectable components, log p_D w q (J_d, M), and per measurement log(kappa_l + A_l) and A_l.
+
+    Returns (p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, ok). Components with r < r_min or
+    det S <= 0 get p_D = g = 0 (§2.12); without measurements or detectable components log_t has no rows. ``ukf``
+    selects the cubature terms (:func:`ukf_terms`); ``ok`` is False when one of their covariances is not positive
+    definite: the caller then runs the step on the array path.
+    """
+    J = w.shape[0]
+    M = Z.shape[0]
+    dyn = beta.shape[1] == 4
+    p_D = np.empty(J)
+    g = g.copy()
+    n_d = 0
+    for j in range(J):
+        p_D[j] = g[j] * (beta[j, 0] / (beta[j, 0] + beta[j, 1]) if dyn else p_D0)
+        if p_D[j] > 0.0:
+            n_d += 1
+    det_idx = np.empty(n_d, dtype=np.int64)
+    k = 0
+    for j in range(J):
+        if p_D[j] > 0.0:
+            det_idx[k] = j
+            k += 1
+    m_d = np.empty((n_d, 4))
+    P_d = np.empty((n_d, 4, 4))
+    for k in range(n_d):
+        m_d[k] = m[det_idx[k]]
+        P_d[k] = P[det_idx[k]]
+    if ukf:
+        eta, S, Sinv, logdet, C, H, valid, ok = ukf_terms(m_d, P_d, ego, R, r_min)
+    else:
+        eta, S, Sinv, logdet, C, H, valid = ekf_terms(m_d, P_d, ego, R, r_min)
+        ok = True
+    for k in range(n_d):
+        if not valid[k]:
+            p_D[det_idx[k]] = 0.0
+            g[det_idx[k]] = 0.0
+    log_L = np.log(kappa)
+    A = np.zeros(M)
+    n_rows = n_d if M > 0 else 0
+    log_t = np.empty((n_rows, M))
+    nu_r = np.empty((n_rows, M))
+    nu_b = np.empty((n_rows, M))
+    if n_rows > 0:
+        for k in range(n_d):  # log_likelihood of kernels, fused with log p_D w
+            j = det_idx[k]
+            a, b, d = Sinv[k, 0, 0], Sinv[k, 0, 1], Sinv[k, 1, 1]
+            c = -math.log(2.0 * math.pi) - 0.5 * logdet[k]
+            lpw = np.log(p_D[j] * w[j])
+            for ll in range(M):
+                r = Z[ll, 0] - eta[k, 0]
+                t = wrap(Z[ll, 1] - eta[k, 1])
+                nu_r[k, ll] = r
+                nu_b[k, ll] = t
+                d2 = a * r * r + 2.0 * b * r * t + d * t * t
+                log_t[k, ll] = lpw + (-0.5 * d2 + c if d2 <= gate_thr else -np.inf)
+        for ll in range(M):  # logsumexp over rows, then log L = logaddexp(log kappa, log A)
+            mx = -np.inf
+            for k in range(n_d):
+                mx = max(mx, log_t[k, ll])
+            shift = mx if math.isfinite(mx) else 0.0
+            acc = 0.0
+            for k in range(n_d):
+                acc += math.exp(log_t[k, ll] - shift)
+            log_A = (np.log(acc) if acc > 0.0 else -np.inf) + shift
+            log_L[ll] = _logaddexp(log_L[ll], log_A)
+            A[ll] = math.exp(log_A)
+    return p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, ok
+
+
+@njit(cache=True)
+def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin):
+    """Second half of the update (§2.6, §3.4, §4.2): missed-detection terms (all J), detection pairs (j, l) with
+    w p_D q / L > 0 in (j, l) order, newborn terms with beta_l / L_l > 0 (``beta_nb`` has M rows, else none).
+
+    Returns (w, m, P, origin, n_det, age, beta) of the posterior and (n_pairs, n_newborn).
+    """
+    p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, _ = sup
+    J = w.shape[0]
+    M = log_L.shape[0]
+    dyn = beta.shape[1] == 4
+    has_nb = beta_nb.shape[0] == M and M > 0
+    log_L = log_L.copy()
+    log_nb = np.empty(beta_nb.shape[0])
+    if has_nb:
+        for ll in range(M):
+            log_nb[ll] = np.log(beta_nb[ll])
+            log_L[ll] = _logaddexp(log_L[ll], log_nb[ll])
+    for ll in range(M):
+        if not math.isfinite(log_L[ll]):
+            log_L[ll] = 0.0  # L_l = 0: every term of L_l is 0, so w = 0
+    n_rows = log_t.shape[0]
+    w_det = np.empty((n_rows, M))
+    n_pairs = 0
+    for k in range(n_rows):
+        for ll in range(M):
+            w_det[k, ll] = math.exp(log_t[k, ll] - log_L[ll])
+            if w_det[k, ll] > 0.0:
+                n_pairs += 1
+    jj = np.empty(n_pairs, dtype=np.int64)
+    lj = np.empty(n_pairs, dtype=np.int64)
+    p = 0
+    for k in range(n_rows):
+        for ll in range(M):
+            if w_det[k, ll] > 0.0:
+                jj[p] = k
+                lj[p] = ll
+                p += 1
+    n_det_rows = det_idx.shape[0]
+    m_d = np.empty((n_det_rows, 4))
+    P_d = np.empty((n_det_rows, 4, 4))
+    for k in range(n_det_rows):
+        m_d[k] = m[det_idx[k]]
+        P_d[k] = P[det_idx[k]]
+    m_new, P_new = posterior_pairs(m_d, P_d, C, Sinv, S, H, R, jj, lj, nu_r, nu_b)
+    w_nb = np.empty(M if has_nb else 0)
+    n_nb = 0
+    for ll in range(w_nb.shape[0]):
+        w_nb[ll] = math.exp(log_nb[ll] - log_L[ll])
+        if w_nb[ll] > 0.0:
+            n_nb += 1
+    n = J + n_pairs + n_nb
+    wo = np.empty(n)
+    mo = np.empty((n, 4))
+    Po = np.empty((n, 4, 4))
+    oo = np.empty(n, dtype=np.int8)
+    no = np.empty(n, dtype=np.int32)
+    ao = np.empty(n, dtype=np.int32)
+    bo = np.empty((n, 4) if dyn else (0, 0))
+    for j in range(J):
+        wo[j] = w[j] * (1.0 - p_D[j])
+        mo[j] = m[j]
+        Po[j] = P[j]
+        oo[j] = origin[j]
+        no[j] = n_det[j]
+        ao[j] = age[j]
+        if dyn:
+            bo[j] = beta[j]
+            bo[j, 1] += g[j]
+    for p in range(n_pairs):
+        q = J + p
+        src = det_idx[jj[p]]
+        wo[q] = w_det[jj[p], lj[p]]
+        mo[q] = m_new[p]
+        Po[q] = P_new[p]
+        oo[q] = origin[src]
+        no[q] = n_det[src] + 1
+        ao[q] = age[src]
+        if dyn:
+            bo[q] = beta[src]
+            bo[q, 0] += 1.0
+    q = J + n_pairs
+    for ll in range(w_nb.shape[0]):
+        if w_nb[ll] > 0.0:
+            wo[q] = w_nb[ll]
+            mo[q] = nb_m[ll]
+            Po[q] = nb_P[ll]
+            oo[q] = nb_origin
+            no[q] = 1
+            ao[q] = 0
+            if dyn:
+                bo[q] = nb_beta
+            q += 1
+    return wo, mo, Po, oo, no, ao, bo, n_pairs, n_nb
+
+
+@njit(cache=True)
+def update(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False):
+    """:func:`support` then :func:`posterior` without newborn terms, in one call; returns (posterior, A, ok)."""
+    sup = support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
+    no_nb = np.empty(0)
+    out = posterior(w, m, P, origin, n_det, age, beta, sup, R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)), no_nb, 0)
+    return out, sup[11], sup[12]
+
+
+@njit(cache=True)
+def _take(w, m, P, origin, n_det, age, beta, keep):
+    """The components where ``keep`` (bool, J) is True, in order."""
+    n = 0
+    for j in range(keep.shape[0]):
+        if keep[j]:
+            n += 1
+    idx = np.empty(n, dtype=np.int64)
+    k = 0
+    for j in range(keep.shape[0]):
+        if keep[j]:
+            idx[k] = j
+            k += 1
+    return _select(w, m, P, origin, n_det, age, beta, idx)
+
+
+@njit(cache=True)
+def _select(w, m, P, origin, n_det, age, beta, idx):
+    n = idx.shape[0]
+    dyn = beta.shape[1] == 4
+    bo = np.empty((n, 4) if dyn else (0, 0))
+    wo, mo, Po = np.empty(n), np.empty((n, 4)), np.empty((n, 4, 4))
+    oo, no, ao = np.empty(n, dtype=np.int8), np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
+    for k in range(n):
+        i = idx[k]
+        wo[k], mo[k], Po[k], oo[k], no[k], ao[k] = w[i], m[i], P[i], origin[i], n_det[i], age[i]
+        if dyn:
+            bo[k] = beta[i]
+    return wo, mo, Po, oo, no, ao, bo
+
+
+@njit(cache=True)
+def reduce(w, m, P, origin, n_det, age, beta, max_age, T, U, J_max, theta_min, extract_thr, vo_ma):
+    """§2.9-2.10 and §4.5: drop undetected births older than ``max_age`` (< 0: off), prune w > T, Vo-Ma merge
+    (Table II, moment matching, Beta moment matching of multi-member groups), keep the J_max heaviest, extract
+    (``vo_ma``: w > thr, floor(w + 0.5) copies; otherwise no extraction here).
+
+    Returns ((w, m, P, origin, n_det, age, beta), X, X_w, (sum_w, n_pruned, n_merged, cap_hit)).
+    """
+    J = w.shape[0]
+    sum_w = 0.0
+    for j in range(J):
+        sum_w += w[j]
+    keep = np.empty(J, dtype=np.bool_)
+    for j in range(J):
+        keep[j] = w[j] > T and not (max_age >= 0 and n_det[j] == 0 and age[j] > max_age)
+    w, m, P, origin, n_det, age, beta = _take(w, m, P, origin, n_det, age, beta, keep)
+    n_pruned = w.shape[0]
+    dyn = beta.shape[1] == 4
+    if n_pruned > 0:
+        order = np.argsort(-w, kind="mergesort")
+        label, centres = merge_groups(m, P, order, U)
+        G = centres.shape[0]
+        if G == n_pruned:
+            w, m, P, origin, n_det, age, beta = _select(w, m, P, origin, n_det, age, beta, centres)
+        else:
+            W, mt, Pt, nd, ag, counts = merge_moments(label, centres, w, m, P, n_det, age)
+            bo = np.empty((G, 4) if dyn else (0, 0))
+            if dyn:
+                for g in range(G):
+                    bo[g] = beta[centres[g]]
+                wmu = np.zeros((G, 2))
+                wsec = np.zeros((G, 2))
+                for i in range(n_pruned):
+                    g = label[i]
+                    if counts[g] > 1:
+                        for h in range(2):
+                            s, t = beta[i, 2 * h], beta[i, 2 * h + 1]
+                            mu = s / (s + t)
+                            n = s + t
+                            sec = s * t / (n * n * (n + 1.0)) + mu * mu
+                            wmu[g, h] += w[i] * mu
+                            wsec[g, h] += w[i] * sec
+                for g in range(G):
+                    if counts[g] > 1:
+                        for h in range(2):
+                            mu = wmu[g, h] / W[g]
+                            v = max(wsec[g, h] / W[g] - mu * mu, _TINY)
+                            theta = max(mu * (1.0 - mu) / v - 1.0, theta_min)
+                            bo[g, 2 * h], bo[g, 2 * h + 1] = theta * mu, theta * (1.0 - mu)
+            oo = np.empty(G, dtype=np.int8)
+            for g in range(G):
+                oo[g] = origin[centres[g]]
+            w, m, P, origin, n_det, age, beta = W, mt, Pt, oo, nd, ag, bo
+    n_merged = w.shape[0]
+    cap_hit = n_merged > J_max
+    if cap_hit:
+        top = np.argsort(-w, kind="mergesort")[:J_max]
+        keep = np.zeros(n_merged, dtype=np.bool_)
+        keep[top] = True
+        w, m, P, origin, n_det, age, beta = _take(w, m, P, origin, n_det, age, beta, keep)
+    n_x = 0
+    if vo_ma:
+        for j in range(w.shape[0]):
+            if w[j] > extract_thr:
+                n_x += int(math.floor(w[j] + 0.5))
+    X = np.empty((n_x, 4))
+    X_w = np.empty(n_x)
+    k = 0
+    if vo_ma:
+        for j in range(w.shape[0]):
+            if w[j] > extract_thr:
+                for _ in range(int(math.floor(w[j] + 0.5))):
+                    X[k] = m[j]
+                    X_w[k] = w[j]
+                    k += 1
+    return (w, m, P, origin, n_det, age, beta), X, X_w, (sum_w, n_pruned, n_merged, cap_hit)

@@ -1,0 +1,49 @@
+"""A one-line notice on stderr while the compiled filter kernels are prepared the first time, instead of a silent
+pause.
+
+The GM-PHD kernels (:mod:`soabench.gmphd.kernels`, :mod:`soabench.gmphd.cycle`) are compiled by numba on their
+first call after installation (tens of seconds) and loaded from numba's cache afterwards (about a second). The
+first filter step of each kind (fused or array path, with or without newborn terms) in a process runs inside
+:func:`first_use_notice`: if it has not returned after ``delay`` seconds, one line says what is happening (once
+per process). A step that loads cached code in time prints nothing.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Hashable, Iterator
+from contextlib import contextmanager
+
+MESSAGE = (
+    "soabench: compiling the GM-PHD filter kernels with numba (once after installation, one to two minutes; "
+    "cached afterwards) ..."
+)
+DELAY = 3.0  #: seconds of silence before the notice (loading cached kernels takes about 1.5 s)
+_done: set[Hashable] = set()
+_printed = threading.Event()  #: the notice is printed at most once per process
+
+
+def _print_once() -> None:
+    if not _printed.is_set():
+        _printed.set()
+        print(MESSAGE, file=sys.stderr, flush=True)
+
+
+def ready(key: Hashable) -> bool:
+    """True once a step of kind ``key`` has completed in this process."""
+    return key in _done
+
+
+@contextmanager
+def first_use_notice(key: Hashable, delay: float | None = None) -> Iterator[None]:
+    """Run the block; print :data:`MESSAGE` to stderr if it is still running after ``delay`` seconds (at most
+    once per process)."""
+    timer = threading.Timer(DELAY if delay is None else delay, _print_once)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        _done.add(key)
