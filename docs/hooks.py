@@ -87,6 +87,15 @@ def parameter_table() -> str:
     cfg = Config()
     for sec in dataclasses.fields(Config):
         obj = getattr(cfg, sec.name)
+        if not dataclasses.is_dataclass(obj):  # [plugins.<name>] tables: each plugin's own options
+            parts.append(f"### `[{sec.name}]` {{#{sec.name}}}\n")
+            parts.append(
+                "One table `[plugins.<name>]` per plugin birth model or tracker (an entry-point name or the "
+                "`module:Class` you typed); its keys are passed to the plugin's constructor as keyword arguments, "
+                "and an option the plugin does not take stops the run before any trial. No defaults here: each "
+                "plugin documents its own.\n"
+            )
+            continue
         cls = type(obj)
         comments = _field_comments(cls)
         doc = (inspect.getdoc(cls) or "").splitlines()[0]

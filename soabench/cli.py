@@ -103,7 +103,8 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--trackers",
         type=_csv_list("tracker"),
-        help="whole trackers beside them: stonesoup-gmphd, stonesoup-gnn, installed plugins, or module:Class",
+        help="whole trackers beside them: stonesoup-gmphd, stonesoup-gnn, installed plugins, or module:Class "
+        "(default: none)",
     )
     p.add_argument(
         "--probabilities",

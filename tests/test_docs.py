@@ -57,6 +57,8 @@ def test_parameter_page_lists_every_config_key_with_its_default(site):
     cfg = Config()
     for sec in dataclasses.fields(Config):
         assert f"[{sec.name}]" in html
+        if not dataclasses.is_dataclass(getattr(cfg, sec.name)):  # [plugins.<name>]: options of each plugin
+            continue
         for f in dataclasses.fields(getattr(cfg, sec.name)):
             row = re.search(rf"<td><code>{re.escape(f.name)}</code></td>\s*<td>(.*?)</td>", html)
             assert row, f"{sec.name}.{f.name} missing from the parameter table"
