@@ -414,10 +414,24 @@ def _join_negative_values(argv: Sequence[str]) -> list[str]:
     return out
 
 
+def _say_derived() -> None:
+    """Print the scene loader's info line (what it derived from a network) to stderr, once."""
+    import logging
+
+    log = logging.getLogger("soabench")
+    if not any(getattr(h, "_soabench", False) for h in log.handlers):
+        h = logging.StreamHandler(sys.stderr)
+        h.setFormatter(logging.Formatter("soabench: %(message)s"))
+        h._soabench = True  # type: ignore[attr-defined]
+        log.addHandler(h)
+        log.setLevel(logging.INFO)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``soabench`` console script."""
     parser = build_parser()
     args = parser.parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
+    _say_derived()
     try:
         return COMMANDS[args.command](args)
     except BrokenPipeError:  # e.g. `soabench run | head`: the reader left; say nothing more
