@@ -63,7 +63,11 @@ def _offsets(text: str) -> tuple[int, ...]:
 
 
 def _add_net_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--net", default="intersection", help="shipped network name or path to a .net.xml")
+    p.add_argument(
+        "--net",
+        default="intersection",
+        help="shipped scene name, 'all' (every shipped scene), a scene folder or a path to a .net.xml",
+    )
     p.add_argument(
         "--poly", action="append", default=[], metavar="FILE", help="polygon file (buildings, obstacles); repeatable"
     )
@@ -138,9 +142,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run")
 
     p = sub.add_parser("sweep", help="parameter sweeps: clutter rate or expected births N_hat")
-    p.add_argument("kind", choices=["clutter", "births"])
+    p.add_argument("kind", choices=["clutter", "births", "occlusion"])
     _add_run_args(p)
-    p.add_argument("--values", type=_float_list, help="clutter rates for `sweep clutter` (default 0.5,3,5)")
+    p.add_argument(
+        "--values",
+        type=_float_list,
+        help="clutter rates for `sweep clutter` (default 0.5,3,5); parked cars per 100 m of kerb for "
+        "`sweep occlusion` (default 0,4,8,12)",
+    )
     p.add_argument("--offsets", type=_offsets, help="N_tot offsets for `sweep births` (default -10:10)")
     p.add_argument("--clutter", type=_float_list, help="clutter rate for `sweep births` (default 3)")
     p.add_argument("--resume", type=Path, metavar="SWEEP_DIR", help="finish the missing trials of an earlier sweep")
@@ -151,6 +160,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_args(p)
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
+
+    sub.add_parser("scenes", help="the shipped scenes: size, lanes, pedestrians, occluders, what each tests")
+    p = sub.add_parser("import", help="turn an OpenStreetMap extract into a scene folder for --net")
+    p.add_argument("kind", choices=["osm"])
+    p.add_argument("file", metavar="FILE.osm")
+    p.add_argument("--out", required=True, help="scene folder to write")
     return parser
 
 
@@ -352,8 +367,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.kind == "clutter":
         require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep clutter`")
         values = args.values or (0.5, 3.0, 5.0)
+    elif args.kind == "occlusion":
+        require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep occlusion`")
+        values = args.values or (0.0, 4.0, 8.0, 12.0)
     else:
-        require(args.values is None, "--values belongs to `sweep clutter`; use --offsets for `sweep births`")
+        require(
+            args.values is None,
+            "--values belongs to `sweep clutter` and `sweep occlusion`; use --offsets for `sweep births`",
+        )
         values = args.offsets if args.offsets is not None else tuple(range(-10, 11))
     cfg = _config_from_args(args)
     from soabench.experiment.sweep import run_sweep
@@ -381,7 +402,24 @@ def cmd_study(args: argparse.Namespace) -> int:
     return _report_outcome(outcome)
 
 
+def cmd_scenes(args: argparse.Namespace) -> int:
+    from soabench.scenario.suite import scenes_table
+
+    print(scenes_table())
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from soabench.scenario.osm import import_osm
+
+    toml = import_osm(args.file, args.out)
+    print(f"wrote scene folder {toml.parent} (use: soabench run --net {toml.parent})")
+    return 0
+
+
 COMMANDS = {
+    "scenes": cmd_scenes,
+    "import": cmd_import,
     "scene": cmd_scene,
     "record": cmd_record,
     "birth": cmd_birth,
@@ -433,6 +471,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
     _say_derived()
     try:
+        if getattr(args, "net", None) == "all":
+            from soabench.scenario.suite import run_on_all
+
+            return run_on_all(args, COMMANDS[args.command], args.command)
         return COMMANDS[args.command](args)
     except BrokenPipeError:  # e.g. `soabench run | head`: the reader left; say nothing more
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -81,7 +81,8 @@ def load(
         if scenario is None or not cfg.net_file:
             if not cfg.net_file:
                 nets = sorted(folder.glob("*.net.xml"))
-                require(len(nets) == 1, f"scene folder {str(folder)!r} must hold exactly one .net.xml, found {len(nets)}")
+                n = len(nets)
+                require(n == 1, f"scene folder {str(folder)!r} must hold exactly one .net.xml, found {n}")
                 cfg.net_file = str(nets[0])
             if scenario is not None:  # a user scenario on a scene folder keeps the folder's own polygons
                 cfg.poly_files = load_scenario(own).poly_files + cfg.poly_files

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+import shapely.ops
 from shapely.geometry import LineString, MultiLineString, Point, Polygon, box
 from shapely.geometry.base import BaseGeometry
 
@@ -327,8 +328,11 @@ def _hull_nodes(net, tol: float = 1.0) -> set[str]:
 
 def vclass_graph(net, vclass: str = "passenger"):
     """(edge ids, sparse matrix): arc i -> j (weight = length of edge j) for every connection between ``vclass``
-    lanes of normal edges i and j, turnarounds included (a route may use them)."""
+    lanes of normal edges i and j, except turnarounds (the ego drives through, it does not U-turn)."""
     from scipy.sparse import csr_matrix
+    from sumolib.net.connection import Connection
+
+    turns = (Connection.LINKDIR_TURN, Connection.LINKDIR_TURN_LEFTHAND)
 
     edges = sorted(
         (e for e in net.getEdges(withInternal=False) if e.getFunction() == "" and e.allows(vclass)),
@@ -339,7 +343,11 @@ def vclass_graph(net, vclass: str = "passenger"):
     for e in edges:
         for other, cs in e.getOutgoing().items():
             j = index.get(other.getID())
-            if j is None or not any(c.getFromLane().allows(vclass) and c.getToLane().allows(vclass) for c in cs):
+            ok = any(
+                c.getFromLane().allows(vclass) and c.getToLane().allows(vclass) and c.getDirection() not in turns
+                for c in cs
+            )
+            if j is None or not ok:
                 continue
             rows.append(index[e.getID()])
             cols.append(j)

@@ -46,7 +46,7 @@ def kerbside_parking(net, world: Polygon, density: float) -> tuple[list[Polygon]
     lanes = parking_lanes(net)
     require(
         density == 0 or bool(lanes),
-        f"parking.density = {density!r} needs parking lanes (normal-edge lanes such as allow=\"custom1\" that carry "
+        f'parking.density = {density!r} needs parking lanes (normal-edge lanes such as allow="custom1" that carry '
         "neither passenger cars nor pedestrians); this network has none, so set parking.density = 0",
     )
     cars: list[Polygon] = []
