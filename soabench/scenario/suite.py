@@ -20,17 +20,21 @@ def scene_rows() -> list[dict]:
         from soabench.scenario.network import read_net
 
         net = read_net(cfg.net_file)
+        from shapely.geometry import LineString
+
         lanes = sum(
             1
             for e in net.getEdges(withInternal=False)
             for ln in e.getLanes()
-            if ln.allows("passenger") and e.getFunction() == ""
+            if ln.allows("passenger")
+            and e.getFunction() == ""
+            and LineString(ln.getShape()).intersects(scene.world_box)
         )
         rows.append(
             {
                 "name": name,
                 "size": f"{x1 - x0:.0f} x {y1 - y0:.0f} m",
-                "lanes": lanes,
+                "lanes": lanes,  # car lanes crossing the world box
                 "pedestrians": cfg.n_pedestrians,
                 "doors": len(scene.doors),
                 "buildings": len(scene.buildings),
