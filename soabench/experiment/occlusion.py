@@ -139,10 +139,11 @@ def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
             "|---|---|---|---|---|---|---|",
         ]
         for c in comps:
+            frac = c["episode_le_fraction"]
             lines.append(
                 f"| {c['density']:g} | {c['mode']} | {LABEL.get(c['baseline'], c['baseline'])} "
                 f"| {c['wins']} / {c['ties']} / {c['losses']} / {c['na']} | {fmt_pct(c['card_reduction'])} "
-                f"| {fmt_pct(c['ospa_reduction'])} | {fmt_pct(c['episode_le_fraction'])} |"
+                f"| {fmt_pct(c['ospa_reduction'])} | {fmt_pct(100 * frac if math.isfinite(frac) else frac)} |"
             )
     _figure_occlusion(sweep_dir, rows)
     lines += ["", "Figure: `sweep_occlusion.png`"]
@@ -150,31 +151,39 @@ def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
 
 
 def _figure_occlusion(sweep_dir: Path, rows: list[dict]) -> None:
-    fig = _figure(11.0, 3.6)
+    fig = _figure(12.0, 3.8)
+    fig.set_layout_engine("constrained")
     axes = fig.subplots(1, 3)
-    keys = list(dict.fromkeys((r["model"], r["mode"]) for r in rows))
+    models = list(dict.fromkeys(r["model"] for r in rows))
     modes = list(dict.fromkeys(r["mode"] for r in rows))
+    styles = ["-", "--", ":"]
     panels = (
         ("delay_mean", "mean tracking delay k̄ (s)"),
         ("card_err_mean", "mean cardinality error"),
         ("ospa_mean", "mean OSPA (m)"),
     )
     for ax, (col, ylabel) in zip(axes, panels, strict=True):
-        for model, mode in keys:
-            sub = [r for r in rows if r["model"] == model and r["mode"] == mode]
-            ax.plot(
-                [r["density"] for r in sub],
-                [r[col] for r in sub],
-                ["-", "--", ":"][modes.index(mode) % 3],
-                color=MODEL_COLOR.get(model, "k"),
-                marker="o",
-                ms=4,
-                label=f"{LABEL.get(model, model)}" + (f" {mode}" if len(modes) > 1 else ""),
-            )
+        for model in models:
+            for i, mode in enumerate(modes):
+                sub = [r for r in rows if r["model"] == model and r["mode"] == mode]
+                ax.plot(
+                    [r["density"] for r in sub],
+                    [r[col] for r in sub],
+                    styles[i % 3],
+                    color=MODEL_COLOR.get(model, "k"),
+                    marker="o",
+                    ms=4,
+                    label=LABEL.get(model, model) if i == 0 else None,
+                )
         ax.set_xlabel("parked cars per 100 m of kerb")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
-    mode_txt = modes[0] if len(modes) == 1 else ", ".join(modes) + " (solid, dashed, dotted)"
-    axes[0].legend(fontsize=8)
-    fig.suptitle(f"Tracking quality vs occluder density (probabilities: {mode_txt})", fontsize=10)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if len(modes) > 1:
+        from matplotlib.lines import Line2D
+
+        handles += [Line2D([], [], color="k", ls=styles[i % 3]) for i in range(len(modes))]
+        labels += [f"probabilities: {m}" for m in modes]
+    fig.legend(handles, labels, loc="outside right center", fontsize=8)
+    fig.suptitle("Tracking quality vs occluder density (parked cars on the kerb)", fontsize=11)
     _save(fig, sweep_dir / "sweep_occlusion.png")
