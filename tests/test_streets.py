@@ -49,20 +49,26 @@ def nets(tmp_path_factory) -> dict[str, Path]:
     )
     _tool("netconvert", "-n", str(d / "h.nod.xml"), "-e", str(d / "h.edg.xml"), "--crossings.guess",
           "-o", str(d / "hand.net.xml"))  # fmt: skip
-    # footways only: car-only roads, pedestrians on separate footway edges that meet at the junction
+    # footways only: car-only roads; pedestrians walk on separate footway edges on both sides that meet at the
+    # junction, joined by two crossings over the road
     (d / "f.nod.xml").write_text(
         '<nodes><node id="c" x="0" y="0" type="priority"/><node id="w" x="-150" y="0"/><node id="e" x="150" y="0"/>'
-        '<node id="fw" x="-150" y="12"/><node id="fe" x="150" y="12"/></nodes>'
+        '<node id="fw" x="-150" y="12"/><node id="fe" x="150" y="12"/><node id="gw" x="-150" y="-12"/>'
+        '<node id="ge" x="150" y="-12"/></nodes>'
     )
+    road = 'numLanes="1" speed="13.9" disallow="pedestrian"'
+    foot = 'numLanes="1" speed="2" allow="pedestrian" width="2.5"'
     (d / "f.edg.xml").write_text(
-        '<edges><edge id="wc" from="w" to="c" numLanes="1" speed="13.9" disallow="pedestrian"/>'
-        '<edge id="cw" from="c" to="w" numLanes="1" speed="13.9" disallow="pedestrian"/>'
-        '<edge id="ce" from="c" to="e" numLanes="1" speed="13.9" disallow="pedestrian"/>'
-        '<edge id="ec" from="e" to="c" numLanes="1" speed="13.9" disallow="pedestrian"/>'
-        '<edge id="foot1" from="fw" to="c" numLanes="1" speed="2" allow="pedestrian" width="2.5"/>'
-        '<edge id="foot2" from="c" to="fe" numLanes="1" speed="2" allow="pedestrian" width="2.5"/></edges>'
+        f'<edges><edge id="wc" from="w" to="c" {road}/><edge id="cw" from="c" to="w" {road}/>'
+        f'<edge id="ce" from="c" to="e" {road}/><edge id="ec" from="e" to="c" {road}/>'
+        f'<edge id="foot1" from="fw" to="c" {foot}/><edge id="foot2" from="c" to="fe" {foot}/>'
+        f'<edge id="foot3" from="gw" to="c" {foot}/><edge id="foot4" from="c" to="ge" {foot}/></edges>'
     )
-    _tool("netconvert", "-n", str(d / "f.nod.xml"), "-e", str(d / "f.edg.xml"), "--crossings.guess",
+    (d / "f.con.xml").write_text(
+        '<connections><crossing node="c" edges="wc cw" priority="true"/>'
+        '<crossing node="c" edges="ce ec" priority="true"/></connections>'
+    )
+    _tool("netconvert", "-n", str(d / "f.nod.xml"), "-e", str(d / "f.edg.xml"), "-x", str(d / "f.con.xml"),
           "--walkingareas", "-o", str(d / "footways.net.xml"))  # fmt: skip
     return {k: d / f"{k}.net.xml" for k in ("grid", "spider", "rand", "hand", "footways")}
 
@@ -88,6 +94,28 @@ def test_user_net_runs_with_derived_defaults(nets, kind, caplog):
     assert "derived ego route" in caplog.text and "no polygon files" in caplog.text
     rec = simulate(scene, sc, trial_seeds(0, 0), duration=3.0)
     assert rec.ped_present.any() and not np.isnan(rec.ego_pose).any()
+
+
+def test_footway_net_has_crossings_and_no_sidewalk_lanes(nets):
+    scene, _ = load(str(nets["footways"]), quiet=True)
+    assert scene.crossings.area > 20.0 and scene.walking_areas.area > 20.0
+    net = read_net(nets["footways"])
+    assert all(not ln.allows("pedestrian") for e in ("wc", "cw", "ce", "ec") for ln in net.getEdge(e).getLanes())
+
+
+def test_buildings_without_doors_say_so_and_continue(nets, tmp_path, caplog):
+    caplog.set_level("INFO", logger="soabench")
+    far = tmp_path / "far.poly.xml"  # a building 500 m from any sidewalk: no door is derived
+    far.write_text(
+        '<additional><poly id="b" type="building" color="255,200,0" '
+        'shape="500,500 540,500 540,540 500,540 500,500"/></additional>'
+    )
+    scene, sc = load(str(nets["hand"]), polys=[str(far)])
+    assert len(scene.buildings) == 1 and len(scene.doors) == 0
+    rec = simulate(scene, sc, trial_seeds(0, 0), duration=2.0)
+    assert rec.ped_present.any() and rec.meta["n_enter"] == 0
+    said = [r.getMessage() for r in caplog.records if "derived" in r.getMessage()]
+    assert len(said) == 1 and "0 door(s) from" in said[0]
 
 
 def test_net_without_pedestrian_lane_names_netconvert_options(tmp_path, nets, capsys):
