@@ -255,6 +255,9 @@ def cmd_scene(args: argparse.Namespace) -> int:
         draw_sensor_overlay(ax, scans, len(scans) - 1, cfg.sensor)
     else:
         plot_scene(scene, recording, time=args.time, ax=ax)
+    from soabench.scenario.key import add_scene_key
+
+    add_scene_key(ax)
     _save_figure(fig, out)
     plt.close(fig)
     print(f"wrote {out}")

@@ -133,6 +133,8 @@ def test_cli_commands_on_a_generated_net(nets, tmp_path):
     args = ["--net", net, "--trials", "1", "--duration", "3", "--models", "soa,pubm", "--workers", "1", "--no-progress"]
     assert main(["run", *args, "--out", str(tmp_path / "run")]) == 0
     assert (tmp_path / "run" / "summary.json").is_file()
+    assert main(["sweep", "clutter", *args, "--values", "1,3", "--out", str(tmp_path / "sw")]) == 0
+    assert (tmp_path / "sw" / "sweep.md").is_file()
 
 
 # ----------------------------------------------------------------------------------------------------- OSM
