@@ -180,6 +180,24 @@ def test_suite_has_four_scenes_with_sources_and_package_data():
         assert (Path(__file__).resolve().parents[1] / "docs" / "scenes" / f"{n}.png").is_file()
 
 
+def test_scene_files_match_the_package_data_globs():
+    """Every shipped scene file travels with a non-editable install (pyproject package-data for the nets)."""
+    import fnmatch
+    import sys
+
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    pyproject = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    data = pyproject["tool"]["setuptools"]["package-data"]
+    globs = [g.rsplit("/", 1)[-1] for key, gs in data.items() if "nets" in key for g in gs]
+    assert globs
+    for n in shipped_nets():
+        for f in (shipped_root() / n).iterdir():
+            assert any(fnmatch.fnmatch(f.name, g) for g in globs), f"{n}/{f.name} is not package data"
+
+
 def test_scenes_table(capsys):
     assert main(["scenes"]) == 0
     out = capsys.readouterr().out
