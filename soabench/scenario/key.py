@@ -5,6 +5,7 @@ from __future__ import annotations
 from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
+from matplotlib.transforms import ScaledTranslation
 
 from soabench.scenario import plots
 
@@ -25,4 +26,6 @@ def add_scene_key(ax: Axes) -> None:
         ),
         Line2D([], [], ls="none", marker="o", markerfacecolor="none", color="k", label="entry point"),
     ]
-    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=5, fontsize=8, frameon=False)
+    # anchored 0.5 inch below the axes (under the tick labels and x label, whatever the axes' aspect)
+    below = ax.transAxes + ScaledTranslation(0.0, -0.5, ax.figure.dpi_scale_trans)
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, ncol=5, fontsize=8)

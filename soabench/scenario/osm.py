@@ -21,7 +21,7 @@ NETCONVERT_OPTIONS = (
     "--sidewalks.guess", "--crossings.guess", "--walkingareas", "--osm.sidewalks", "--osm.crossings",
     "--geometry.remove", "--junctions.join", "--roundabouts.guess", "--remove-edges.isolated",
     "--keep-edges.by-vclass", "passenger,pedestrian",
-    "--offset.disable-normalization", "false", "--no-turnarounds.except-deadend", "--no-warnings",
+    "--no-turnarounds.except-deadend", "--no-warnings",
 )  # fmt: skip
 
 #: OSM ``highway`` values people may walk on (a file with none of them has no walkable way).
