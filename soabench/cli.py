@@ -2,7 +2,9 @@
 
 Subcommands: ``scene`` (Fig. 3 bird's-eye view, optional sensor overlay), ``record`` (ground truth and scans to
 .npz), ``birth`` (birth components of one model over the scene), ``run`` (the Monte Carlo protocol), ``sweep``
-(clutter or N_hat sensitivity). Any error a user can cause prints one line and exits with status 2.
+(clutter, N_hat or occluder-density sensitivity), ``scenes`` (the shipped scenes), ``import osm`` (an OpenStreetMap
+extract as a scene folder). ``--net all`` runs a command on every shipped scene. Any error a user can cause prints
+one line and exits with status 2.
 """
 
 from __future__ import annotations
@@ -64,7 +66,11 @@ def _offsets(text: str) -> tuple[int, ...]:
 
 
 def _add_net_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--net", default="intersection", help="shipped network name or path to a .net.xml")
+    p.add_argument(
+        "--net",
+        default="intersection",
+        help="shipped scene name, 'all' (every shipped scene), a scene folder or a path to a .net.xml",
+    )
     p.add_argument(
         "--poly",
         action="append",
@@ -184,9 +190,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     p = sub.add_parser("sweep", help="parameter sweeps: clutter rate or expected births N_hat")
-    p.add_argument("kind", choices=["clutter", "births"])
+    p.add_argument("kind", choices=["clutter", "births", "occlusion"])
     _add_run_args(p)
-    p.add_argument("--values", type=_float_list, help="clutter rates for `sweep clutter` (default 0.5,3,5)")
+    p.add_argument(
+        "--values",
+        type=_float_list,
+        help="clutter rates for `sweep clutter` (default 0.5,3,5); parked cars per 100 m of kerb for "
+        "`sweep occlusion` (default 0,4,8,12)",
+    )
     p.add_argument("--offsets", type=_offsets, help="N_tot offsets for `sweep births` (default -10:10)")
     p.add_argument("--clutter", type=_float_list, help="clutter rate for `sweep births` (default 3)")
     p.add_argument(
@@ -256,6 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="MODULE:CLASS",
         help="allow this import-path plugin named by the suite (entry points need nothing); repeatable",
     )
+
+    sub.add_parser("scenes", help="the shipped scenes: size, lanes, pedestrians, occluders, what each tests")
+    p = sub.add_parser("import", help="turn an OpenStreetMap extract into a scene folder for --net")
+    p.add_argument("kind", choices=["osm"])
+    p.add_argument("file", metavar="FILE.osm")
+    p.add_argument("--out", required=True, help="scene folder to write")
     for command in sub.choices.values():  # subparsers do not inherit the formatter
         command.formatter_class = DefaultsHelpFormatter
     return parser
@@ -473,8 +490,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.kind == "clutter":
         require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep clutter`")
         values = args.values or (0.5, 3.0, 5.0)
+    elif args.kind == "occlusion":
+        require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep occlusion`")
+        values = args.values or (0.0, 4.0, 8.0, 12.0)
     else:
-        require(args.values is None, "--values belongs to `sweep clutter`; use --offsets for `sweep births`")
+        require(
+            args.values is None,
+            "--values belongs to `sweep clutter` and `sweep occlusion`; use --offsets for `sweep births`",
+        )
         values = args.offsets if args.offsets is not None else tuple(range(-10, 11))
     cfg = _config_from_args(args)
     from soabench.experiment.sweep import run_sweep
@@ -541,9 +564,26 @@ def cmd_check(args: argparse.Namespace) -> int:
     return run_check(args.suite, args.out, update_baseline=args.update_baseline, workers=args.workers)
 
 
+def cmd_scenes(args: argparse.Namespace) -> int:
+    from soabench.scenario.suite import scenes_table
+
+    print(scenes_table())
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from soabench.scenario.osm import import_osm
+
+    toml = import_osm(args.file, args.out)
+    print(f"wrote scene folder {toml.parent} (use: soabench run --net {toml.parent})")
+    return 0
+
+
 COMMANDS = {
     "kitti": cmd_kitti,
     "export": cmd_export,
+    "scenes": cmd_scenes,
+    "import": cmd_import,
     "scene": cmd_scene,
     "record": cmd_record,
     "birth": cmd_birth,
@@ -577,13 +617,31 @@ def _join_negative_values(argv: Sequence[str]) -> list[str]:
     return out
 
 
+def _say_derived() -> None:
+    """Print the scene loader's info line (what it derived from a network) to stderr, once."""
+    import logging
+
+    log = logging.getLogger("soabench")
+    if not any(getattr(h, "_soabench", False) for h in log.handlers):
+        h = logging.StreamHandler(sys.stderr)
+        h.setFormatter(logging.Formatter("soabench: %(message)s"))
+        h._soabench = True  # type: ignore[attr-defined]
+        log.addHandler(h)
+        log.setLevel(logging.INFO)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``soabench`` console script."""
     parser = build_parser()
     argv = _join_negative_values(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     args.explicit = cli_checks.explicit_dests(parser, argv)
+    _say_derived()
     try:
+        if getattr(args, "net", None) == "all":
+            from soabench.scenario.suite import run_on_all
+
+            return run_on_all(args, COMMANDS[args.command], args.command)
         return COMMANDS[args.command](args)
     except BrokenPipeError:  # e.g. `soabench run | head`: the reader left; say nothing more
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from soabench.config import MAX_TRIALS, Config
@@ -161,6 +162,13 @@ def validate_sweep_meta(meta: Any, where: str, kinds: tuple[str, ...]) -> dict:
             Config.from_dict(p.get("config")).validate()
         except SoabenchError as exc:
             raise SoabenchError(f"{where}: point {name}: {exc}") from None
+        if p.get("scenario") is not None:  # an occlusion point's own scenario file: inside the sweep folder only
+            sc = p["scenario"]
+            folder = Path(where).resolve().parent
+            require(
+                isinstance(sc, str) and Path(sc).resolve().is_relative_to(folder / "points"),
+                f"{where}: point {name}: scenario {sc!r} is not a file of the sweep's points/ folder",
+            )
     values = meta.get("values", [])
     require(
         isinstance(values, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values),

@@ -50,7 +50,7 @@ from soabench.experiment.runner import (
 from soabench.experiment.store import read_csv, read_json, write_json_atomic, write_text_atomic
 
 SWEEP_FILE = "sweep.json"
-KINDS = ("clutter", "births")
+KINDS = ("clutter", "births", "occlusion")
 BIRTHS_MODELS = ("soa", "pubm", "ubm")
 N_TRUE = 6
 
@@ -82,6 +82,11 @@ def sweep_points(
     base = Config.from_dict(config.to_dict())
     if models is not None:
         base.experiment = dataclasses.replace(base.experiment, models=tuple(models))
+    if kind == "occlusion":  # soabench/experiment/occlusion.py: one point per parked-car density
+        from soabench.experiment.occlusion import occlusion_points
+
+        base.validate()
+        return occlusion_points(values, base.to_dict())
     if kind == "clutter":
         vals = tuple(float(v) for v in values)
         base.experiment = dataclasses.replace(base.experiment, clutter=vals)
@@ -172,6 +177,10 @@ def run_sweep(
             check_new_folder(sweep_dir, SWEEP_FILE, "sweep", hint)
             locks.append(FolderLock(sweep_dir, "sweep folder").acquire())
             check_new_folder(sweep_dir, SWEEP_FILE, "sweep", hint)
+            if kind == "occlusion":  # one scenario file per density point, written into the sweep folder
+                from soabench.experiment.occlusion import write_point_scenarios
+
+                write_point_scenarios(sweep_dir, points, net, scenario)
             meta = {
                 "kind": kind,
                 "values": [float(v) for v in values],
@@ -234,11 +243,12 @@ def _run_points(
                 executor=exe,
                 figures=figures,
             )
+            sc = p.get("scenario", scenario)  # occlusion points carry their own scenario
             if (pdir / "run.json").is_file():
                 req = {"experiment.trials": more} if more is not None else None
-                o = run_experiment(None, net, polys, scenario, resume=pdir, requested=req, **kwargs)
+                o = run_experiment(None, net, polys, sc, resume=pdir, requested=req, **kwargs)
             else:
-                o = run_experiment(Config.from_dict(p["config"]), net, polys, scenario, out=pdir, **kwargs)
+                o = run_experiment(Config.from_dict(p["config"]), net, polys, sc, out=pdir, **kwargs)
             outcomes.append(o)
             if not o.summary_markdown:  # the point did not attempt every trial (--fail-fast stopped it)
                 stopped = True
@@ -357,7 +367,10 @@ def write_sweep_report(sweep_dir: Path) -> str:
     """Write sweep.md, sweep_summary.json and the sweep figure from the points' CSV files; return the Markdown."""
     sweep_dir = Path(sweep_dir)
     meta = read_json(sweep_dir / SWEEP_FILE)
-    data, md = (births_report if meta["kind"] == "births" else clutter_report)(sweep_dir, meta)
+    from soabench.experiment.occlusion import occlusion_report
+
+    report = {"births": births_report, "clutter": clutter_report, "occlusion": occlusion_report}[meta["kind"]]
+    data, md = report(sweep_dir, meta)
     write_json_atomic(sweep_dir / "sweep_summary.json", data)
     write_text_atomic(sweep_dir / "sweep.md", md)
     return md

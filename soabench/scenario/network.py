@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+import shapely.ops
 from shapely.geometry import LineString, MultiLineString, Point, Polygon, box
 from shapely.geometry.base import BaseGeometry
 
@@ -70,8 +71,11 @@ def read_net(net_file: str | os.PathLike):  # -> sumolib.net.Net
     return net
 
 
-def read_polygons(poly_files: Sequence[str | os.PathLike]) -> tuple[list[Polygon], list[Polygon]]:
-    """Buildings and static occluders from SUMO polygon files (``<poly type=.. shape=..>``), in file order."""
+def read_polygons(
+    poly_files: Sequence[str | os.PathLike], skip_parked: bool = False
+) -> tuple[list[Polygon], list[Polygon]]:
+    """Buildings and static occluders from SUMO polygon files (``<poly type=.. shape=..>``), in file order.
+    ``skip_parked``: leave out occluders whose type contains "parked" (``[parking] density`` replaces them)."""
     import sumolib
 
     buildings: list[Polygon] = []
@@ -100,7 +104,7 @@ def read_polygons(poly_files: Sequence[str | os.PathLike]) -> tuple[list[Polygon
                 geom = max(getattr(geom, "geoms", [geom]), key=lambda g: g.area)
             if "building" in kind:
                 buildings.append(geom)
-            elif any(k in kind for k in OCCLUDER_TYPES):
+            elif any(k in kind for k in OCCLUDER_TYPES) and not (skip_parked and "parked" in kind):
                 occluders.append(geom)
     return buildings, occluders
 
@@ -199,6 +203,7 @@ def load_scene(
     doors: np.ndarray | None = None,
     name: str | None = None,
     net=None,
+    skip_parked: bool = False,
 ) -> SceneMap:
     """Build the :class:`SceneMap` of a network (docs/method.md §2.1(c)).
 
@@ -210,6 +215,7 @@ def load_scene(
             nearest sidewalk centre line.
         name: map name; default: the file stem.
         net: an already read sumolib network (skips re-reading ``net_file``).
+        skip_parked: leave out the polygon files' parked cars (see :func:`read_polygons`).
     """
     import shapely.ops  # noqa: F401  (nearest_points)
 
@@ -217,15 +223,15 @@ def load_scene(
     regions = net_regions(net)
     require(
         not regions["sidewalk"].is_empty,
-        f"network {str(net_file)!r} has no pedestrian lanes (sidewalks); it needs normal-edge lanes with "
-        'allow="pedestrian" (e.g. netconvert --sidewalks.guess)',
+        f"network {str(net_file)!r} has no pedestrian lanes (sidewalks or footways); rebuild it with netconvert "
+        "--sidewalks.guess --crossings.guess --walkingareas",
     )
     if world_box is None:
         world_box = tuple(float(v) for v in net.getBoundary())
     x0, y0, x1, y1 = (float(v) for v in world_box)
     require(x1 > x0 and y1 > y0, f"world_box = {list(world_box)!r} must be [x_min, y_min, x_max, y_max] with min < max")
     world = box(x0, y0, x1, y1)
-    buildings, occluders = read_polygons(poly_files)
+    buildings, occluders = read_polygons(poly_files, skip_parked)
     sidewalk = _clip(regions["sidewalk"], world)
     require(
         not sidewalk.is_empty,
@@ -270,32 +276,110 @@ def _sidewalk_only_lines(net, world: Polygon) -> list[LineString]:
     return out
 
 
-def fringe_edges(net, vclass: str = "passenger") -> tuple[list[str], list[str]]:
-    """(sources, sinks): edges allowing ``vclass`` with no incoming / no outgoing ``vclass`` edge, sorted by id."""
-    sources, sinks = [], []
-    for e in net.getEdges(withInternal=False):
-        if not e.allows(vclass):
+def _non_turn_connections(conns: dict, vclass: str) -> bool:
+    """True if ``conns`` ({edge: [Connection]}) holds a connection between two ``vclass`` lanes of normal edges that
+    is not a turnaround (sumolib's ``Edge.is_fringe`` semantics, restricted to ``vclass``)."""
+    from sumolib.net.connection import Connection
+
+    turns = (Connection.LINKDIR_TURN, Connection.LINKDIR_TURN_LEFTHAND)
+    for other, cs in conns.items():
+        if other.getFunction() != "":
             continue
-        inc = [i for i in e.getIncoming() if i.allows(vclass)]
-        out = [o for o in e.getOutgoing() if o.allows(vclass)]
-        if not inc:
+        for c in cs:
+            if c.getDirection() in turns:
+                continue
+            if c.getFromLane().allows(vclass) and c.getToLane().allows(vclass):
+                return True
+    return False
+
+
+def fringe_edges(net, vclass: str = "passenger") -> tuple[list[str], list[str]]:
+    """(sources, sinks): normal edges allowing ``vclass`` with no incoming / no outgoing ``vclass`` connection other
+    than a turnaround (sumolib's ``Edge.is_fringe``: a dead end with a turnaround is still a fringe), sorted by id.
+
+    A net without any dead end (e.g. a ``netgenerate --grid`` net) has no fringe in this sense; then the edges that
+    start / end at a node on the convex hull of the network's nodes are used (the streets at its border)."""
+    sources, sinks = [], []
+    edges = [e for e in net.getEdges(withInternal=False) if e.getFunction() == "" and e.allows(vclass)]
+    for e in edges:
+        if not _non_turn_connections(e.getIncoming(), vclass):
             sources.append(e.getID())
-        if not out:
+        if not _non_turn_connections(e.getOutgoing(), vclass):
             sinks.append(e.getID())
+    if not sources or not sinks:
+        hull_nodes = _hull_nodes(net)
+        if not sources:
+            sources = [e.getID() for e in edges if e.getFromNode().getID() in hull_nodes]
+        if not sinks:
+            sinks = [e.getID() for e in edges if e.getToNode().getID() in hull_nodes]
     return sorted(sources), sorted(sinks)
 
 
-def default_ego_route(net, max_fringe: int = 40) -> list[str]:
-    """The longest shortest route between a source and a sink fringe edge (user networks without a scenario)."""
-    sources, sinks = fringe_edges(net)
-    require(bool(sources) and bool(sinks), "network has no fringe edges for passenger cars; give an ego route")
-    best: tuple[float, list[str]] = (-1.0, [])
-    for s in sources[:max_fringe]:
-        for t in sinks[:max_fringe]:
-            if s == t:
+def _hull_nodes(net, tol: float = 1.0) -> set[str]:
+    """Ids of the nodes lying on (within ``tol`` m of) the convex hull of all node positions."""
+    nodes = [n for n in net.getNodes() if n.getType() != "internal"]
+    if len(nodes) < 3:
+        return {n.getID() for n in nodes}
+    pts = shapely.points([n.getCoord()[:2] for n in nodes])
+    hull = shapely.convex_hull(shapely.multipoints(pts))
+    ring = hull.exterior if hull.geom_type == "Polygon" else hull
+    d = shapely.distance(ring, pts)
+    return {n.getID() for n, di in zip(nodes, d, strict=True) if di <= tol}
+
+
+def vclass_graph(net, vclass: str = "passenger"):
+    """(edge ids, sparse matrix): arc i -> j (weight = length of edge j) for every connection between ``vclass``
+    lanes of normal edges i and j, except turnarounds (the ego drives through, it does not U-turn)."""
+    from scipy.sparse import csr_matrix
+    from sumolib.net.connection import Connection
+
+    turns = (Connection.LINKDIR_TURN, Connection.LINKDIR_TURN_LEFTHAND)
+
+    edges = sorted(
+        (e for e in net.getEdges(withInternal=False) if e.getFunction() == "" and e.allows(vclass)),
+        key=lambda e: e.getID(),
+    )
+    index = {e.getID(): i for i, e in enumerate(edges)}
+    rows, cols, w = [], [], []
+    for e in edges:
+        for other, cs in e.getOutgoing().items():
+            j = index.get(other.getID())
+            ok = any(
+                c.getFromLane().allows(vclass) and c.getToLane().allows(vclass) and c.getDirection() not in turns
+                for c in cs
+            )
+            if j is None or not ok:
                 continue
-            path, cost = net.getShortestPath(net.getEdge(s), net.getEdge(t), vClass="passenger")
-            if path and cost is not None and cost > best[0]:
-                best = (cost, [e.getID() for e in path])
-    require(bool(best[1]), "no route for passenger cars connects two fringe edges of the network; give an ego route")
-    return best[1]
+            rows.append(index[e.getID()])
+            cols.append(j)
+            w.append(max(other.getLength(), 1e-3))
+    n = len(edges)
+    return [e.getID() for e in edges], csr_matrix((w, (rows, cols)), shape=(n, n))
+
+
+def default_ego_route(net, vclass: str = "passenger") -> list[str]:
+    """The longest of the shortest ``vclass`` routes from a source to a sink fringe edge (:func:`fringe_edges`),
+    for user networks without a scenario. One Dijkstra per source (scipy), so large OSM nets stay fast."""
+    from scipy.sparse.csgraph import dijkstra
+
+    ids, graph = vclass_graph(net, vclass)
+    require(
+        bool(ids),
+        "network has no edge for passenger cars, so the ego has nowhere to drive; give a net with a road "
+        "(footways alone are not enough) or an ego route in a scenario file",
+    )
+    sources, sinks = fringe_edges(net, vclass)
+    index = {e: i for i, e in enumerate(ids)}
+    src = np.array([index[s] for s in sources], dtype=int)
+    dst = np.array([index[t] for t in sinks], dtype=int)
+    require(src.size > 0 and dst.size > 0, "network has no fringe edges for passenger cars; give an ego route")
+    dist, pred = dijkstra(graph, directed=True, indices=src, return_predecessors=True)
+    d = dist[:, dst] + np.array([net.getEdge(s).getLength() for s in sources])[:, None]
+    d[~np.isfinite(d)] = -1.0
+    d[src[:, None] == dst[None, :]] = -1.0
+    i, j = np.unravel_index(int(np.argmax(d)), d.shape)
+    require(d[i, j] > 0, "no route for passenger cars connects two fringe edges of the network; give an ego route")
+    path = [int(dst[j])]
+    while path[-1] != src[i]:
+        path.append(int(pred[i, path[-1]]))
+    return [ids[k] for k in reversed(path)]

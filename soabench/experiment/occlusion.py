@@ -1,0 +1,189 @@
+"""``soabench sweep occlusion``: occluder density as an experimental axis (issue 16; paper §V on occlusion).
+
+Each point is an ordinary run on the same scene with ``[parking] density = v`` parked cars per 100 m of parking lane
+(:mod:`soabench.scenario.parking`); trial n of every point uses the same seeds (:mod:`soabench.seeding`), so the
+points differ only in the parked cars. The report draws mean tracking delay, cardinality error and OSPA per birth
+model against density, and tabulates the paired statistics of the main run (S-OA vs each baseline: trial wins /
+ties / losses, card. and OSPA reductions, share of episodes with S-OA's delay <= the baseline's) per point.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+from soabench.birth import LABEL
+from soabench.errors import require
+from soabench.experiment.plots import MODEL_COLOR, _figure, _save
+from soabench.experiment.report import fmt, fmt_pct
+from soabench.experiment.store import read_json
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} to TOML")
+
+
+def dump_toml(data: dict) -> str:
+    """A scenario-shaped dict (sections of scalars and lists) as TOML text."""
+    lines = []
+    for section, table in data.items():
+        lines.append(f"[{section}]")
+        lines += [f"{k} = {_toml_value(v)}" for k, v in table.items()]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def base_scenario(net: str, scenario: str | None) -> dict:
+    """The scenario dict a sweep point starts from (the user's TOML, else the scene folder's own, else empty),
+    with ``[files]`` paths made absolute so the point's TOML may live anywhere."""
+    from soabench.scenario import scene_folder
+
+    path = Path(scenario) if scenario is not None else None
+    if path is None:
+        folder = scene_folder(net)
+        path = folder / "scenario.toml" if folder is not None else None
+    if path is None:
+        return {}
+    from soabench.scenario import load_scenario
+
+    load_scenario(path)  # validates (one-line errors)
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    files = data.get("files", {})
+    if "net" in files:
+        files["net"] = str((path.parent / files["net"]).resolve())
+    elif scene_folder(net) is not None:
+        nets = sorted(scene_folder(net).glob("*.net.xml"))
+        if len(nets) == 1:
+            files["net"] = str(nets[0].resolve())
+    if "polys" in files:
+        files["polys"] = [str((path.parent / f).resolve()) for f in files["polys"]]
+    if files:
+        data["files"] = files
+    return data
+
+
+def write_point_scenarios(sweep_dir: Path, points: list[dict], net: str, scenario: str | None) -> None:
+    """Write ``points/<name>.scenario.toml`` (base scenario + ``[parking] density``) and store its path per point."""
+    base = base_scenario(net, scenario)
+    (sweep_dir / "points").mkdir(parents=True, exist_ok=True)
+    for p in points:
+        data = {k: dict(v) for k, v in base.items()}
+        data.setdefault("parking", {})["density"] = float(p["value"])
+        path = sweep_dir / "points" / f"{p['name']}.scenario.toml"
+        path.write_text(dump_toml(data), encoding="utf-8")
+        p["scenario"] = str(path.resolve())
+
+
+def occlusion_points(values, base_config: dict) -> list[dict]:
+    """One point per density value (parked cars per 100 m of kerb), sorted, duplicates dropped."""
+    from soabench.scenario.config import MAX_PARKING_DENSITY
+
+    vals = sorted({float(v) for v in values})
+    for v in vals:
+        require(
+            0.0 <= v <= MAX_PARKING_DENSITY and math.isfinite(v),
+            f"occlusion density {v!r} is out of range; allowed: parked cars per 100 m of kerb in [0, "
+            f"{MAX_PARKING_DENSITY:g}]",
+        )
+    return [{"name": f"density_{v:05.2f}", "value": v, "config": base_config} for v in vals]
+
+
+def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
+    """Delay, cardinality error and OSPA per model vs density, and S-OA's paired statistics per point."""
+    rows, comps = [], []
+    for p in meta["points"]:
+        s = read_json(sweep_dir / "points" / p["name"] / "summary.json")
+        res = s["results"][0]
+        for m in res["models"]:
+            rows.append({"density": p["value"], "clutter": res["clutter"], **m})
+        for c in res["vs_soa"]:
+            comps.append({"density": p["value"], **c})
+    exp = meta["points"][0]["config"]["experiment"]
+    lines = [
+        f"# Occlusion sweep: {meta.get('net_name')}",
+        "",
+        f"Parked cars per 100 m of parking lane vs tracking quality; λ = {float(exp['clutter'][0]):g}, "
+        f"{exp['trials']} trials per point (same seeds at every point). "
+        "Per-point details in `points/<name>/summary.md`.",
+        "",
+        "| parked / 100 m | model | mode | k̄ delay (s) | card. error | OSPA (m) | precision | recall |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['density']:g} | {LABEL.get(r['model'], r['model'])} | {r['mode']} | {fmt(r['delay_mean'])} "
+            f"| {fmt(r['card_err_mean'])} | {fmt(r['ospa_mean'])} | {fmt(r['precision_mean'])} "
+            f"| {fmt(r['recall_mean'])} |"
+        )
+    if comps:
+        lines += [
+            "",
+            "Paired S-OA vs baseline (per trial: wins / ties / losses / n/a on mean delay; reductions of the means; "
+            "share of episodes with delay_S-OA <= delay_X):",
+            "",
+            "| parked / 100 m | mode | baseline | W / T / L / n/a | card. reduction | OSPA reduction | episodes <= |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for c in comps:
+            frac = c["episode_le_fraction"]
+            lines.append(
+                f"| {c['density']:g} | {c['mode']} | {LABEL.get(c['baseline'], c['baseline'])} "
+                f"| {c['wins']} / {c['ties']} / {c['losses']} / {c['na']} | {fmt_pct(c['card_reduction'])} "
+                f"| {fmt_pct(c['ospa_reduction'])} | {fmt_pct(100 * frac if math.isfinite(frac) else frac)} |"
+            )
+    _figure_occlusion(sweep_dir, rows)
+    lines += ["", "Figure: `sweep_occlusion.png`"]
+    return {"kind": "occlusion", "table": rows, "vs_soa": comps}, "\n".join(lines) + "\n"
+
+
+def _figure_occlusion(sweep_dir: Path, rows: list[dict]) -> None:
+    fig = _figure(12.0, 3.8)
+    fig.set_layout_engine("constrained")
+    axes = fig.subplots(1, 3)
+    models = list(dict.fromkeys(r["model"] for r in rows))
+    modes = list(dict.fromkeys(r["mode"] for r in rows))
+    styles = ["-", "--", ":"]
+    panels = (
+        ("delay_mean", "mean tracking delay k̄ (s)"),
+        ("card_err_mean", "mean cardinality error"),
+        ("ospa_mean", "mean OSPA (m)"),
+    )
+    for ax, (col, ylabel) in zip(axes, panels, strict=True):
+        for model in models:
+            for i, mode in enumerate(modes):
+                sub = [r for r in rows if r["model"] == model and r["mode"] == mode]
+                ax.plot(
+                    [r["density"] for r in sub],
+                    [r[col] for r in sub],
+                    styles[i % 3],
+                    color=MODEL_COLOR.get(model, "k"),
+                    marker="o",
+                    ms=4,
+                    label=LABEL.get(model, model) if i == 0 else None,
+                )
+        ax.set_xlabel("parked cars per 100 m of kerb")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if len(modes) > 1:
+        from matplotlib.lines import Line2D
+
+        handles += [Line2D([], [], color="k", ls=styles[i % 3]) for i in range(len(modes))]
+        labels += [f"probabilities: {m}" for m in modes]
+    fig.legend(handles, labels, loc="outside right center", fontsize=8)
+    fig.suptitle("Tracking quality vs occluder density (parked cars on the kerb)", fontsize=11)
+    _save(fig, sweep_dir / "sweep_occlusion.png")
