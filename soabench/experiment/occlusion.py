@@ -15,7 +15,6 @@ from pathlib import Path
 
 from soabench.birth import LABEL
 from soabench.errors import require
-from soabench.experiment.plots import MODEL_COLOR, _figure, _save
 from soabench.experiment.report import fmt, fmt_pct
 from soabench.experiment.store import read_json
 
@@ -151,39 +150,36 @@ def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
 
 
 def _figure_occlusion(sweep_dir: Path, rows: list[dict]) -> None:
-    fig = _figure(12.0, 3.8)
-    fig.set_layout_engine("constrained")
-    axes = fig.subplots(1, 3)
+    """Delay, cardinality error and OSPA per birth model and mode against the parked-car density (one style module)."""
+    from soabench import plotstyle as ps
+
     models = list(dict.fromkeys(r["model"] for r in rows))
     modes = list(dict.fromkeys(r["mode"] for r in rows))
-    styles = ["-", "--", ":"]
     panels = (
         ("delay_mean", "mean tracking delay k̄ (s)"),
-        ("card_err_mean", "mean cardinality error"),
+        ("card_err_mean", "mean cardinality error (targets)"),
         ("ospa_mean", "mean OSPA (m)"),
     )
-    for ax, (col, ylabel) in zip(axes, panels, strict=True):
-        for model in models:
-            for i, mode in enumerate(modes):
-                sub = [r for r in rows if r["model"] == model and r["mode"] == mode]
-                ax.plot(
-                    [r["density"] for r in sub],
-                    [r[col] for r in sub],
-                    styles[i % 3],
-                    color=MODEL_COLOR.get(model, "k"),
-                    marker="o",
-                    ms=4,
-                    label=LABEL.get(model, model) if i == 0 else None,
-                )
-        ax.set_xlabel("parked cars per 100 m of kerb")
-        ax.set_ylabel(ylabel)
-        ax.grid(alpha=0.3)
-    handles, labels = axes[0].get_legend_handles_labels()
-    if len(modes) > 1:
-        from matplotlib.lines import Line2D
-
-        handles += [Line2D([], [], color="k", ls=styles[i % 3]) for i in range(len(modes))]
-        labels += [f"probabilities: {m}" for m in modes]
-    fig.legend(handles, labels, loc="outside right center", fontsize=8)
-    fig.suptitle("Tracking quality vs occluder density (parked cars on the kerb)", fontsize=11)
-    _save(fig, sweep_dir / "sweep_occlusion.png")
+    with ps.style():
+        fig = ps.figure("double", 2.6)
+        axes = fig.subplots(1, 3, sharex=True)  # one density axis (a point without episodes has no delay)
+        for ax, letter, (col, ylabel) in zip(axes, ps.letters(3), panels, strict=True):
+            for model in models:
+                st = ps.model_style(model)
+                for mode in modes:
+                    sub = [r for r in rows if r["model"] == model and r["mode"] == mode]
+                    ax.plot(
+                        [r["density"] for r in sub],
+                        [r[col] for r in sub],
+                        ls=ps.mode_style(mode).linestyle,
+                        marker=st.marker,
+                        ms=3,
+                        color=st.color,
+                        mfc=st.color if mode == "static" else "white",
+                    )
+            ax.set_xlabel("parked cars per 100 m of kerb")
+            ax.set_ylabel(ylabel)
+            ax.set_ylim(bottom=0)
+            ps.panel_title(ax, letter, ylabel.split(" (")[0])
+        ps.legend_below(fig, ps.model_handles(models) + ps.mode_handles(modes), ncol=4)
+        ps.save_png(fig, sweep_dir / "sweep_occlusion.png")
