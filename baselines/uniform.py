@@ -8,6 +8,8 @@ w = N_hat / J_u,k and P_p = sigma_u^2 I, so the birth mass is exactly N_hat.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from soabench.birth.base import SOURCE_GRID, BirthContext, Births, FOVRule, build_components, inside_any
@@ -52,3 +54,14 @@ class UniformBirth:
             return Births.empty()
         w = np.full(J, self.cfg.N_hat / J)
         return Births(w, self.m_all[idx], self.P_all[idx], np.full(J, SOURCE_GRID, dtype=np.int8))
+
+
+class WorkspaceUniformBirth(UniformBirth):
+    """The paper's UBM (§3.3, register row 16): the same grid spread uniformly across the whole workspace, every scan,
+    not clipped to the field of view (``ubm_extent = "workspace"`` whatever the config says). ``ubm`` is the
+    field-of-view variant, a stronger baseline; the headline table reports both (docs/method.md §3.3)."""
+
+    name = "ubm-ws"
+
+    def __init__(self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator) -> None:
+        super().__init__(dataclasses.replace(cfg, ubm_extent="workspace"), sensor, scene, rng)

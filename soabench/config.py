@@ -28,7 +28,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "atbm", "gmbm")
+BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
 
 

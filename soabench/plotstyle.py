@@ -80,6 +80,7 @@ MODEL_STYLES: dict[str, Style] = {
     "soa": Style("tab:green", "o"),
     "pubm": Style("tab:blue", "s"),
     "ubm": Style("tab:purple", "^"),
+    "ubm-ws": Style("tab:pink", "P"),
     "atbm": Style("tab:red", "D"),
     "gmbm": Style("tab:gray", "v"),
 }

@@ -17,9 +17,9 @@ from soabench.seeding import trial_seeds
 
 FAIL_TRIALS = frozenset({2})
 #: per-model delay scale: ATBM fastest, GMBM slowest (the paper's ordering, §5.9)
-DELAY_SCALE = {"atbm": 0.5, "soa": 1.0, "pubm": 1.3, "ubm": 2.0, "gmbm": 6.0}
+DELAY_SCALE = {"atbm": 0.5, "soa": 1.0, "pubm": 1.3, "ubm": 2.0, "ubm-ws": 2.5, "gmbm": 6.0}
 #: per-model false-alarm rate growth with clutter
-FP_RATE = {"atbm": 0.15, "soa": 0.01, "pubm": 0.03, "ubm": 0.05, "gmbm": 0.02}
+FP_RATE = {"atbm": 0.15, "soa": 0.01, "pubm": 0.03, "ubm": 0.05, "ubm-ws": 0.04, "gmbm": 0.02}
 
 
 @dataclass

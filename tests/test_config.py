@@ -20,7 +20,7 @@ def test_defaults_are_the_registers_bold_options():
     assert (cfg.birth.d_u, cfg.birth.sigma_u, cfg.birth.atbm, cfg.birth.sigma_gm) == (5.0, 2.5, "same_scan", 3.0)
     assert (cfg.metrics.ospa_c, cfg.metrics.ospa_p, cfg.metrics.d_gate, cfg.metrics.gt_set) == (100.0, 1.0, 5.0, "fov")
     assert (cfg.experiment.trials, cfg.experiment.duration, cfg.experiment.clutter) == (100, 100.0, (3.0,))
-    assert cfg.experiment.models == ("soa", "pubm", "ubm", "atbm", "gmbm")
+    assert cfg.experiment.models == ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
     assert cfg.experiment.probabilities == ("static", "dynamic")
 
 

@@ -1,4 +1,4 @@
-"""The real pipeline through the CLI, as a user runs it: SUMO -> sensor -> five birth models x two modes -> files.
+"""The real pipeline through the CLI, as a user runs it: SUMO -> sensor -> six birth models x two modes -> files.
 
 40 s trials: in the first ~20 s the ego sits at the western edge of the box and sees almost no pedestrian, so a
 20 s run has no delay episode to score.
@@ -15,7 +15,7 @@ import pytest
 
 from soabench.cli import main
 
-MODELS = ("soa", "pubm", "ubm", "atbm", "gmbm")
+MODELS = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
 MODES = ("static", "dynamic")
 
 
@@ -41,7 +41,7 @@ def test_files_exist_and_rows_are_trials_x_models_x_modes(run_dir):
         (str(t), m, p) for t in range(2) for m in MODELS for p in MODES
     }
     figures = sorted(p.name for p in (run_dir / "figures").glob("*.png"))
-    assert len(figures) == 11 and all(p.stat().st_size > 10_000 for p in (run_dir / "figures").glob("*.png"))
+    assert len(figures) == 12 and all(p.stat().st_size > 10_000 for p in (run_dir / "figures").glob("*.png"))
 
 
 def test_metrics_are_finite_where_defined(run_dir):

@@ -110,16 +110,17 @@ def _rendered(fig, tmp_path, name: str) -> None:
 
 
 def test_plotstyle_models_modes_and_titles():
-    assert [ps.model_label(m) for m in ("soa", "pubm", "ubm", "atbm", "gmbm")] == [
+    assert [ps.model_label(m) for m in ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")] == [
         "S-OA",
         "PUBM",
-        "UBM",
+        "UBM (FOV)",
+        "UBM (workspace)",
         "ATBM",
         "GMBM",
     ]
     assert ps.model_label("myplugin") == "myplugin"
     assert ps.model_style("myplugin") == ps.model_style("myplugin")  # stable across calls
-    assert len({ps.model_style(m).color for m in ("soa", "pubm", "ubm", "atbm", "gmbm")}) == 5
+    assert len({ps.model_style(m).color for m in ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")}) == 6
     assert ps.mode_style("static").linestyle == "-" and ps.mode_style("dynamic").linestyle == "--"
     with ps.style():
         fig = ps.figure("single", 2.0)

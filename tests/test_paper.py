@@ -13,7 +13,7 @@ def _rows(n=40, seed=0):
     rng = np.random.default_rng(seed)
     rows = []
     for t in range(n):
-        for m, mu in {"soa": 1.0, "pubm": 1.5, "ubm": 1.0, "atbm": 0.4, "gmbm": 4.0}.items():
+        for m, mu in {"soa": 1.0, "pubm": 1.5, "ubm": 1.0, "ubm-ws": 2.0, "atbm": 0.4, "gmbm": 4.0}.items():
             rows.append(
                 dict(
                     trial=t,
@@ -55,7 +55,10 @@ def test_missing_delays_are_not_counted_as_wins():
 
 def test_markdown_has_every_baseline_and_sigma_bar():
     md = paper.markdown(_rows())
-    for label in ("PUBM", "UBM", "ATBM", "GMBM"):
+    for label in ("PUBM", "UBM (FOV)", "UBM (workspace)", "ATBM", "GMBM"):
         assert f"| {label} |" in md
+    # the paper's UBM is the workspace grid: its numbers stand beside ubm-ws, the FOV variant has none
+    assert "| without dyn. p | UBM (workspace) | 100 | 40 of 40 " in md
+    assert "| without dyn. p | UBM (FOV) | n/a | " in md and "| without dyn. p | UBM (FOV) | - | " in md
     assert "1.65 / 1.00" in md  # paper sigma-bar of S-OA vs ours (delay_std = 1.0 in every trial)
     assert paper.component_ratios(_rows())[("static", "gmbm")] == 4.0

@@ -80,10 +80,10 @@ def test_committed_study_is_complete():
         assert (RESULTS / part / "trials.csv").is_file(), part
     assert (RESULTS / "births" / "sweep.md").is_file()
     assert (RESULTS / "comparison.md").is_file()
-    assert len(_committed(RESULTS / "main")) == 100 * 5 * 2
+    assert len(_committed(RESULTS / "main")) == 100 * 6 * 2
 
 
-@pytest.mark.parametrize(("trials", "models"), [((0,), ("soa", "atbm")), ((57,), ("pubm", "ubm", "gmbm"))])
+@pytest.mark.parametrize(("trials", "models"), [((0,), ("soa", "atbm")), ((57,), ("pubm", "ubm", "ubm-ws", "gmbm"))])
 def test_main_protocol_rows_are_reproduced(trials, models):
     _assert_reproduced(RESULTS / "main", trials, models, ("static", "dynamic"))
 

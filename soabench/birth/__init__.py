@@ -15,13 +15,21 @@ REGISTRY: dict[str, str] = {
     "soa": "soabench.birth.soa:SOABirth",
     "pubm": "soabench.baselines.partially_uniform:PartiallyUniformBirth",
     "ubm": "soabench.baselines.uniform:UniformBirth",
+    "ubm-ws": "soabench.baselines.uniform:WorkspaceUniformBirth",
     "atbm": "soabench.baselines.adaptive:AdaptiveBirth",
     "gmbm": "soabench.baselines.standard_gm:StandardGMBirth",
 }
 
 
 #: display names of the registered models (tables and figures)
-LABEL: dict[str, str] = {"soa": "S-OA", "pubm": "PUBM", "ubm": "UBM", "atbm": "ATBM", "gmbm": "GMBM"}
+LABEL: dict[str, str] = {
+    "soa": "S-OA",
+    "pubm": "PUBM",
+    "ubm": "UBM (FOV)",
+    "ubm-ws": "UBM (workspace)",
+    "atbm": "ATBM",
+    "gmbm": "GMBM",
+}
 #: the four baselines S-OA is compared against (§5.8)
 BASELINES: tuple[str, ...] = tuple(name for name in REGISTRY if name != "soa")
 

@@ -31,7 +31,8 @@ from matplotlib.figure import Figure
 from soabench import plotstyle as ps
 from soabench.experiment.tables import RunTables, select
 
-LETTER = {"soa": "a", "pubm": "b", "ubm": "c", "gmbm": "d", "atbm": "e"}
+#: the paper's Fig. 5 panels (its UBM is the workspace grid); other models are drawn as fig5x_delay_<model>.png
+LETTER = {"soa": "a", "pubm": "b", "ubm-ws": "c", "gmbm": "d", "atbm": "e"}
 
 
 # ------------------------------------------------------------------------------------------------------- helpers
