@@ -104,7 +104,7 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--models",
         type=_csv_list("model"),
-        help="birth models: soa,pubm,ubm,atbm,gmbm (default: all five), installed plugins, or module:Class",
+        help="birth models: soa,pubm,ubm,ubm-ws,atbm,gmbm (default: all six), installed plugins, or module:Class",
     )
     p.add_argument(
         "--trackers",
@@ -516,9 +516,9 @@ def cmd_study(args: argparse.Namespace) -> int:
     require(args.probabilities is None, "`study` runs the paper's probability modes")
     from soabench import plugins
 
-    extra = tuple(args.models or ())  # plugins ride along with the paper's five (--trackers too)
+    extra = tuple(args.models or ())  # plugins ride along with the built-in six (--trackers too)
     bad = [m for m in extra if plugins.is_builtin_birth(m)]
-    require(not bad, f"`study` runs the paper's five models; --models {','.join(bad)} adds plugins only")
+    require(not bad, f"`study` runs the six built-in models; --models {','.join(bad)} adds plugins only")
     args.models = None
     cfg = _config_from_args(args)
     if extra:

@@ -75,7 +75,7 @@ class Style:
     hatch: str = ""
 
 
-#: the five built-in birth models (colours of the paper's Fig. 2 where it has one: S-OA green)
+#: the six built-in birth models (colours of the paper's Fig. 2 where it has one: S-OA green)
 MODEL_STYLES: dict[str, Style] = {
     "soa": Style("tab:green", "o"),
     "pubm": Style("tab:blue", "s"),

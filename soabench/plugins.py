@@ -2,7 +2,7 @@
 
 The registry is a closed list, rebuilt in every process from three sources:
 
-1. the built-ins: the five birth models (:data:`soabench.birth.REGISTRY`) and the Stone Soup bridges
+1. the built-ins: the six birth models (:data:`soabench.birth.REGISTRY`) and the Stone Soup bridges
    (:data:`BUILTIN_TRACKERS`, usable when Stone Soup is installed);
 2. the installed entry points of the groups ``soabench.birth_models`` and ``soabench.trackers`` (a package's
    ``pyproject.toml`` declares them; the entry point's name is the model's name in every table);
@@ -85,7 +85,7 @@ def names(kind: str) -> list[str]:
 
 
 def is_builtin_birth(name: str) -> bool:
-    """One of the five built-in birth models (run unguarded: an error there is a bug of soabench)."""
+    """One of the six built-in birth models (run unguarded: an error there is a bug of soabench)."""
     return name in _builtin_birth()
 
 

@@ -5,7 +5,8 @@ model, static solid / dynamic dashed or hatched, panels titled "(a) ...") and sa
 
 * ``fig5{a..e}_delay_<model>.png``: the per-trial mean delay k̄ of every trial as a marker with its ±0.5σ bounds
   (clipped at 0 s), the mean over trials with its 95% confidence interval, and a box plot per mode; one y-range
-  for all five models (a S-OA, b PUBM, c UBM, d GMBM, e ATBM, the paper's order);
+  for the paper's five models (a S-OA, b PUBM, c UBM over the workspace, d GMBM, e ATBM, the paper's order; UBM
+  clipped to the FOV and plugins as fig5x_delay_<model>.png);
 * ``fig5f_cardinality.png``, ``fig5g_ospa.png``: mean ± σ over trials per model and mode, with every trial as a
   dot; Fig. 5g marks the OSPA cut-off c;
 * ``fig5h_precision.png``: cumulative precision vs time, mean over trials, every model, one panel per mode and

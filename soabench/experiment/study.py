@@ -2,7 +2,7 @@
 
 Three parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (default ``results/<net>/``):
 
-* ``main/``: the main protocol (docs/method.md §5.8): five birth models x {static, dynamic}, lambda = 3;
+* ``main/``: the main protocol (docs/method.md §5.8): six birth models x {static, dynamic}, lambda = 3;
 * ``clutter/``: the clutter sweep lambda in {0.5, 3, 5} with precision curves (paper Fig. 5h);
 * ``births/``: the N_hat sensitivity sweep N_tot = N_true + {-10..10} (clipped at 1) for S-OA, PUBM and UBM.
 
