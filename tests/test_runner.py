@@ -121,7 +121,7 @@ def test_end_to_end_files_agree(tmp_path):
     u = (tr["model"] == "ubm") & (tr["mode"] == "static") & (tr["clutter"] == lam)
     wins = int(np.sum(tr["delay_mean"][s] < tr["delay_mean"][u]))
     red = 100 * (tr["card_err"][u].mean() - tr["card_err"][s].mean()) / tr["card_err"][u].mean()
-    row = next(ln for ln in section.splitlines() if ln.startswith("| static | UBM |"))
+    row = next(ln for ln in section.splitlines() if ln.startswith(f"| static | {LABEL['ubm']} |"))
     assert f"| {wins} / {exp.trials} |" in row and fmt_pct(float(red)) in row
 
 

@@ -1,0 +1,11 @@
+"""Test-session setup shared by every test module."""
+
+from __future__ import annotations
+
+import signal
+
+# A test run started from a background shell (`pytest &`, some CI runners) inherits SIGINT ignored, and an ignored
+# disposition survives fork and exec: every driver process the Ctrl-C tests start would then ignore the Ctrl-C they
+# send. Python's own handler (reset to the default on exec) gives the children what a terminal gives them.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
