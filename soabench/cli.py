@@ -213,6 +213,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_args(p)
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
+    p.add_argument(
+        "--sensitivity-trials", type=int, help="trials of each sensitivity run (default: the main run's trials)"
+    )
 
     p = sub.add_parser("kitti", help="the paper's KITTI protocol (k-fold N_hat, Table I, Figs. 6-8)")
     p.add_argument(
@@ -508,7 +511,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def cmd_study(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
-    for flag in ("sweep_trials", "births_trials"):
+    for flag in ("sweep_trials", "births_trials", "sensitivity_trials"):
         value = getattr(args, flag)
         require(value is None or value >= 1, f"--{flag.replace('_', '-')} {value} must be >= 1")
     require(not args.save_estimates, "--save-estimates is not offered by `study`; use `run`")
@@ -530,13 +533,15 @@ def cmd_study(args: argparse.Namespace) -> int:
     for key in ("save_estimates", "fail_fast"):
         kwargs.pop(key)
     explicit = getattr(args, "explicit", set())
-    keys = cli_checks.requested_keys(args, explicit) | {k for k in ("sweep_trials", "births_trials") if k in explicit}
+    parts = ("sweep_trials", "births_trials", "sensitivity_trials")
+    keys = cli_checks.requested_keys(args, explicit) | {k for k in parts if k in explicit}
     outcome = run_study(
         cfg,
         args.net,
         out=args.out,
         sweep_trials=args.sweep_trials,
         births_trials=args.births_trials,
+        sensitivity_trials=args.sensitivity_trials,
         explicit=keys,
         **kwargs,
     )
