@@ -80,6 +80,15 @@ def test_an_unchanged_number_says_so():
     assert wins.sentence.startswith("Unchanged at 2/4")
 
 
+def test_no_counted_episode_is_not_a_win_count():
+    delay = dict(BASE_DELAY, soa=[float("nan")] * 4)
+    rows = _by_name(sens.build_rows({"default": _rows(BASE_CARD, delay)}))
+    wins = rows["wins vs ATBM, static"]
+    assert wins.values["default"].text("wins") == "n/a" and wins.values["default"].n == 0
+    assert wins.sentence == "No value under the default setting."
+    assert rows["k̄ S-OA, static"].values["default"].text("delay") == "n/a"
+
+
 def test_sign_flips_are_called_out_and_the_largest_move_comes_first():
     visible = dict(BASE_CARD, atbm=[2.0] * 4)  # S-OA vs ATBM: -25 % (worse) -> +50 % (better)
     gate_off = dict(BASE_CARD, atbm=[0.9] * 4)  # -11.11 %: moves less, no flip

@@ -156,7 +156,8 @@ def headline_numbers(rows: Sequence[dict], clutter: float = 3.0) -> dict[tuple[s
         for base in [b for b in BASELINES if b in models]:
             s, b = paper.paired(rows, "delay_mean", "soa", base, mode, clutter)
             ok = np.isfinite(s) & np.isfinite(b)
-            out[("wins", base, mode)] = Value(float(np.sum(s[ok] < b[ok])), int(ok.sum()))
+            n = int(ok.sum())  # no trial with a counted episode for both: no win count (n/a, not 0/0)
+            out[("wins", base, mode)] = Value(float(np.sum(s[ok] < b[ok])) if n else math.nan, n)
             for metric in ("card_err", "ospa"):
                 s, b = paper.paired(rows, metric, "soa", base, mode, clutter)
                 ok = np.isfinite(s) & np.isfinite(b)
@@ -294,8 +295,9 @@ def write_sensitivity(out_dir: Path, main_dir: Path, variants: Mapping[str, Path
     header = [
         "# Sensitivity of the headline numbers to the gate, the truth set and the probability mode",
         "",
-        f"Generated from `trials.csv` of the main run and of one run per setting; {len(trials)} trials common to "
-        f"every setting (same seeds), clutter λ = {clutter:g}. Columns: "
+        f"Generated from `trials.csv` of the main run and of one run per setting; {len(trials)} "
+        f"trial{'' if len(trials) == 1 else 's'} common to every setting (same seeds), clutter λ = {clutter:g}. "
+        "Columns: "
         + "; ".join(f"**{SETTINGS[s]}**" for s in settings)
         + ". The probability mode is in each row's name; the sentence also weighs the other mode's value under the "
         "default setting. A number is unchanged when it prints the same. Why the switches move what they move: "
