@@ -217,6 +217,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--sensitivity-trials", type=int, help="trials of each sensitivity run (default: the main run's trials)"
     )
 
+    p = sub.add_parser(
+        "sensitivity", help="a finished run again with the gate off and with visible truth, and the sensitivity table"
+    )
+    p.add_argument("--main", type=Path, required=True, metavar="RUN_DIR", help="the finished run (default: none)")
+    p.add_argument("--out", type=Path, help="folder of the variant runs and the table (default RUN_DIR_sensitivity)")
+    p.add_argument("--trials", type=int, help="trials of each variant run (default: the main run's)")
+    p.add_argument("--workers", type=int, help="process workers (default: every core)")
+    p.add_argument("--no-progress", action="store_true", help="no progress report")
+
     p = sub.add_parser("kitti", help="the paper's KITTI protocol (k-fold N_hat, Table I, Figs. 6-8)")
     p.add_argument(
         "--root",
@@ -548,6 +557,17 @@ def cmd_study(args: argparse.Namespace) -> int:
     return _report_outcome(outcome, "soabench study --out {dir}")
 
 
+def cmd_sensitivity(args: argparse.Namespace) -> int:
+    require(args.trials is None or args.trials >= 1, f"--trials {args.trials} must be >= 1")
+    require(args.workers is None or args.workers >= 1, f"--workers {args.workers} must be >= 1")
+    from soabench.experiment.sensitivity_runs import run_sensitivity
+
+    outcome = run_sensitivity(
+        args.main, args.out, trials=args.trials, workers=args.workers, progress=not args.no_progress
+    )
+    return _report_outcome(outcome, f"soabench sensitivity --main {args.main} --out {{dir}}")
+
+
 def cmd_kitti(args: argparse.Namespace) -> int:
     from soabench.kitti.commands import cmd_kitti as run
 
@@ -595,6 +615,7 @@ COMMANDS = {
     "run": cmd_run,
     "sweep": cmd_sweep,
     "study": cmd_study,
+    "sensitivity": cmd_sensitivity,
     "check": cmd_check,
 }
 

@@ -228,3 +228,50 @@ def test_bad_sensitivity_trials_is_one_line(tmp_path, capsys):
         len(err) == 1 and "--sensitivity-trials 0 must be >= 1" in err[0]
     )
     assert not (tmp_path / "s").exists()
+
+
+# ------------------------------------------------------------------------------------------------ soabench sensitivity
+RUN = ["run", "--trials", "2", "--duration", "10", "--workers", "1", "--no-progress", "--models", "soa,gmbm,atbm"]
+
+
+def test_sensitivity_command_on_a_finished_run(tmp_path, capsys, fake_study):
+    run = tmp_path / "run"
+    assert main([*RUN, "--out", str(run)]) == 0
+    assert main(["sensitivity", "--main", str(run), "--workers", "1", "--no-progress"]) == 0
+    out = tmp_path / "run_sensitivity"
+    assert (out / "sensitivity.md").is_file() and (out / "sensitivity.csv").is_file()
+    gate = json.loads((out / "gate_off" / "run.json").read_text())
+    assert gate["config"]["filter"]["gate"] is False and gate["config"]["experiment"]["models"] == [
+        "soa",
+        "gmbm",
+        "atbm",
+    ]
+    with open(out / "sensitivity.csv", newline="", encoding="utf-8") as fh:
+        table = {r["number"]: r for r in csv.DictReader(fh)}
+    assert set(table) >= {"wins vs GMBM, static", "k̄ ATBM, dynamic"} and "wins vs PUBM, static" not in table
+    # more trials extend the variants; fewer are refused in one line; the main run is left as it was
+    assert main(["sensitivity", "--main", str(run), "--trials", "3", "--workers", "1", "--no-progress"]) == 0
+    assert json.loads((out / "visible" / "run.json").read_text())["trials"] == 3
+    capsys.readouterr()
+    assert main(["sensitivity", "--main", str(run), "--trials", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "would drop finished ones" in err[0], err
+    assert json.loads((run / "run.json").read_text())["trials"] == 2
+
+
+def test_a_variant_of_another_main_protocol_is_refused(tmp_path, capsys, fake_study):
+    run, other = tmp_path / "run", tmp_path / "other"
+    assert main([*RUN, "--out", str(run)]) == 0
+    assert main([*RUN, "--seed", "3", "--out", str(other)]) == 0
+    out = tmp_path / "sens"
+    assert main(["sensitivity", "--main", str(other), "--out", str(out), "--workers", "1", "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["sensitivity", "--main", str(run), "--out", str(out), "--workers", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "made from another main protocol" in err[0] and "experiment.seed" in err[0], err
+
+
+def test_sensitivity_command_needs_a_finished_run(tmp_path, capsys):
+    assert main(["sensitivity", "--main", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a run folder" in err[0], err

@@ -18,7 +18,6 @@ on an interrupted one it finishes the missing trials.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,16 +27,15 @@ from soabench.experiment import paper
 from soabench.experiment import sensitivity as sens
 from soabench.experiment.ownership import FolderLock, check_writable_target, resolve
 from soabench.experiment.report import paper_protocol_mismatch
-from soabench.experiment.runmeta import flatten_config, validate_run_meta
+from soabench.experiment.runmeta import flatten_config
 from soabench.experiment.runner import RunOutcome, net_name, run_experiment
+from soabench.experiment.sensitivity_runs import VARIANTS, run_variants
 from soabench.experiment.store import RunStore, write_text_atomic
 from soabench.experiment.sweep import SweepOutcome, run_sweep
 
 CLUTTER_VALUES = (0.5, 3.0, 5.0)
 BIRTH_OFFSETS = tuple(range(-10, 11))
 BIRTH_MODELS = ("soa", "pubm", "ubm")
-#: the variant runs of the sensitivity part (settings of :mod:`soabench.experiment.sensitivity`)
-SENSITIVITY_VARIANTS = ("gate_off", "visible")
 
 
 @dataclass
@@ -134,14 +132,17 @@ def run_study(
             else:
                 births = run_sweep("births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, **exe)
 
-            sensitivity = _sensitivity_part(root, main_dir, sensitivity_trials, requested, explicit, exe)
+            follow = sensitivity_trials is None and "experiment.trials" in explicit  # like the clutter sweep
+            sensitivity = run_variants(
+                root / "sensitivity", main_dir, trials=sensitivity_trials, follow_main=follow, **exe
+            )
 
             md = ""
             if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
                 mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
                 md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
             if main.complete and all(o.complete for o in sensitivity):
-                variants = {k: root / "sensitivity" / k for k in SENSITIVITY_VARIANTS}
+                variants = {k: root / "sensitivity" / k for k in VARIANTS}
                 sens.write_sensitivity(root / "sensitivity", main_dir, variants)
                 where = root / "sensitivity" / "sensitivity.md"
                 md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
@@ -150,42 +151,6 @@ def run_study(
                 f"interrupted: the study in {root} is incomplete (finished trials are on disk); {hint}"
             ) from None
     return StudyOutcome(root, main, clutter, births, md, tuple(sensitivity))
-
-
-def _sensitivity_part(
-    root: Path,
-    main_dir: Path,
-    trials: int | None,
-    requested: Callable[..., dict],
-    explicit: set[str],
-    exe: dict,
-) -> list[RunOutcome]:
-    """Run (or finish) the variant runs of ``sensitivity/``: the main run's protocol with one setting changed.
-
-    A new variant copies the main run's stored configuration, net and scene files (so it pairs trial by trial with
-    it) and changes one option (:data:`soabench.experiment.sensitivity.SETTING_CHANGE`); ``trials`` defaults to the
-    main run's. An existing variant is resumed like the other parts.
-    """
-    meta = validate_run_meta(RunStore(main_dir).meta(), str(main_dir / "run.json"))
-    out = []
-    for key in SENSITIVITY_VARIANTS:
-        section, name, value = sens.SETTING_CHANGE[key]
-        cfg = Config.from_dict(meta.config.to_dict())
-        setattr(cfg, section, dataclasses.replace(getattr(cfg, section), **{name: value}))
-        cfg.experiment = dataclasses.replace(cfg.experiment, trials=trials or meta.trials)
-        cfg.validate()
-        run_dir = root / "sensitivity" / key
-        if (run_dir / "run.json").is_file():
-            trials_key = "experiment.trials" if "sensitivity_trials" in explicit else None
-            if trials is None and "experiment.trials" in explicit:
-                stored = RunStore(run_dir).meta().get("trials")
-                if isinstance(stored, int) and meta.trials > stored:
-                    trials_key = "experiment.trials"  # follows the main run when it grew (never asks for fewer)
-            req = requested(cfg, trials_key, skip=(f"{section}.{name}",))
-            out.append(run_experiment(None, meta.net, resume=run_dir, requested=req, **exe))
-        else:
-            out.append(run_experiment(cfg, meta.net, meta.polys, meta.scenario, out=run_dir, **exe))
-    return out
 
 
 def _precision_table(rows: list[dict]) -> str:
