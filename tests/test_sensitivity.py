@@ -130,6 +130,10 @@ def test_write_sensitivity_files_pair_the_common_trials_and_check_the_filter(tmp
     vis2 = _write(tmp_path, "visible2", _rows(BASE_CARD, BASE_DELAY, comps=99.0))
     md = sens.write_sensitivity(tmp_path / "main", main_dir, {"visible": vis2})
     assert "differ from the default run's" in md
+    # a variant with fewer modes is compared on what both hold
+    static_only = _write(tmp_path, "static_only", [r for r in _rows(BASE_CARD, BASE_DELAY) if r["mode"] == "static"])
+    md = sens.write_sensitivity(tmp_path / "main", main_dir, {"visible": static_only})
+    assert "filters are the default run's" in md and "| k̄ S-OA, dynamic | 1.000 s | n/a |" in md
 
 
 def test_unknown_setting_is_refused(tmp_path):

@@ -30,9 +30,10 @@ models, both modes, one run per setting; larger gate numbers in docs/method.md �
   against S-OA's 2): under the default truth they partly cancel the under-count that every model has with
   occluded pedestrians in the truth, under visible truth they are plain errors. So S-OA's reductions against
   ATBM (and GMBM) grow most. An estimate that the default truth matched to an occluded pedestrian now counts as
-  false (a few per trial for PUBM, UBM, ATBM). The delay numbers did not move in the check runs: delay episodes
-  follow the visible runs of each target whatever the truth set (docs/method.md §5.4), only their association
-  could change.
+  false (a few per trial for PUBM, UBM, ATBM). The delays move little: delay episodes follow the visible runs of
+  each target whatever the truth set (docs/method.md §5.4); only the matching changes, since an estimate no longer
+  matched to an occluded pedestrian may now initiate a visible one (none moved in the 3-trial check runs; on 30
+  trials, static, S-OA's k̄ went from 1.171 s to 1.165 s with identical posteriors).
 * **Gate.** Without the χ² gate every component takes part in every update. In the check runs this changed the
   component counts and OSPA of every model slightly, but the extracted estimates (delays, cardinality error,
   TP/FP/FN) only of GMBM: its birth components sit at fixed doors and boundary exits, far from most measurements;
@@ -239,7 +240,7 @@ FILTER_COLUMNS = ("mean_components", "max_components", "mean_predicted", "mean_u
 
 def same_filter_output(a: Sequence[dict], b: Sequence[dict]) -> bool | None:
     """Whether two runs' filters produced the same posteriors (equal :data:`FILTER_COLUMNS` per trial x model x
-    mode x clutter); None when the rows hold none of those columns."""
+    mode x clutter that both hold); None when they share no such row or column."""
     cols = [c for c in FILTER_COLUMNS if a and b and c in a[0] and c in b[0]]
     if not cols:
         return None
@@ -247,7 +248,9 @@ def same_filter_output(a: Sequence[dict], b: Sequence[dict]) -> bool | None:
     def key(rows):
         return {(int(r["trial"]), r["model"], r["mode"], float(r["clutter"])): tuple(r[c] for c in cols) for r in rows}
 
-    return key(a) == key(b)
+    ka, kb = key(a), key(b)
+    common = ka.keys() & kb.keys()  # a variant may hold fewer models or modes
+    return all(ka[k] == kb[k] for k in common) if common else None
 
 
 def to_markdown(rows: Sequence[Row], settings: Sequence[str], header: str) -> str:
@@ -310,7 +313,7 @@ def write_sensitivity(out_dir: Path, main_dir: Path, variants: Mapping[str, Path
         elif same:
             check = (
                 "the visible-truth run's filters are the default run's (posterior component counts agree on every "
-                "trial, model and mode), so every change in that column comes from the truth set."
+                "trial, model and mode both runs hold), so every change in that column comes from the truth set."
             )
         else:
             check = (
