@@ -208,7 +208,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     p = sub.add_parser(
-        "study", help="the paper's whole simulation study: main protocol, clutter sweep, N_hat sweep, comparison"
+        "study",
+        help="the paper's whole simulation study: main protocol, clutter sweep, N_hat sweep, sensitivity, comparison",
     )
     _add_run_args(p)
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
