@@ -208,11 +208,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     p = sub.add_parser(
-        "study", help="the paper's whole simulation study: main protocol, clutter sweep, N_hat sweep, comparison"
+        "study",
+        help="the paper's whole simulation study: main protocol, clutter sweep, N_hat sweep, sensitivity, comparison",
     )
     _add_run_args(p)
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
+    p.add_argument(
+        "--sensitivity-trials", type=int, help="trials of each sensitivity run (default: the main run's trials)"
+    )
+
+    p = sub.add_parser(
+        "sensitivity", help="a finished run again with the gate off and with visible truth, and the sensitivity table"
+    )
+    p.add_argument("--main", type=Path, required=True, metavar="RUN_DIR", help="the finished run (default: none)")
+    p.add_argument("--out", type=Path, help="folder of the variant runs and the table (default RUN_DIR_sensitivity)")
+    p.add_argument("--trials", type=int, help="trials of each variant run (default: the main run's)")
+    p.add_argument("--workers", type=int, help="process workers (default: every core)")
+    p.add_argument("--no-progress", action="store_true", help="no progress report")
 
     p = sub.add_parser("kitti", help="the paper's KITTI protocol (k-fold N_hat, Table I, Figs. 6-8)")
     p.add_argument(
@@ -508,7 +521,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def cmd_study(args: argparse.Namespace) -> int:
     kwargs = _executor_kwargs(args)
-    for flag in ("sweep_trials", "births_trials"):
+    for flag in ("sweep_trials", "births_trials", "sensitivity_trials"):
         value = getattr(args, flag)
         require(value is None or value >= 1, f"--{flag.replace('_', '-')} {value} must be >= 1")
     require(not args.save_estimates, "--save-estimates is not offered by `study`; use `run`")
@@ -530,17 +543,30 @@ def cmd_study(args: argparse.Namespace) -> int:
     for key in ("save_estimates", "fail_fast"):
         kwargs.pop(key)
     explicit = getattr(args, "explicit", set())
-    keys = cli_checks.requested_keys(args, explicit) | {k for k in ("sweep_trials", "births_trials") if k in explicit}
+    parts = ("sweep_trials", "births_trials", "sensitivity_trials")
+    keys = cli_checks.requested_keys(args, explicit) | {k for k in parts if k in explicit}
     outcome = run_study(
         cfg,
         args.net,
         out=args.out,
         sweep_trials=args.sweep_trials,
         births_trials=args.births_trials,
+        sensitivity_trials=args.sensitivity_trials,
         explicit=keys,
         **kwargs,
     )
     return _report_outcome(outcome, "soabench study --out {dir}")
+
+
+def cmd_sensitivity(args: argparse.Namespace) -> int:
+    require(args.trials is None or args.trials >= 1, f"--trials {args.trials} must be >= 1")
+    require(args.workers is None or args.workers >= 1, f"--workers {args.workers} must be >= 1")
+    from soabench.experiment.sensitivity_runs import run_sensitivity
+
+    outcome = run_sensitivity(
+        args.main, args.out, trials=args.trials, workers=args.workers, progress=not args.no_progress
+    )
+    return _report_outcome(outcome, f"soabench sensitivity --main {args.main} --out {{dir}}")
 
 
 def cmd_kitti(args: argparse.Namespace) -> int:
@@ -590,6 +616,7 @@ COMMANDS = {
     "run": cmd_run,
     "sweep": cmd_sweep,
     "study": cmd_study,
+    "sensitivity": cmd_sensitivity,
     "check": cmd_check,
 }
 

@@ -1,10 +1,14 @@
 """The paper's simulation study as one command (issue 8): ``soabench study``.
 
-Three parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (default ``results/<net>/``):
+Four parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (default ``results/<net>/``):
 
 * ``main/``: the main protocol (docs/method.md §5.8): six birth models x {static, dynamic}, lambda = 3;
 * ``clutter/``: the clutter sweep lambda in {0.5, 3, 5} with precision curves (paper Fig. 5h);
-* ``births/``: the N_hat sensitivity sweep N_tot = N_true + {-10..10} (clipped at 1) for S-OA, PUBM and UBM.
+* ``births/``: the N_hat sensitivity sweep N_tot = N_true + {-10..10} (clipped at 1) for S-OA, PUBM and UBM;
+* ``sensitivity/``: the main protocol again (same trials, duration, seed, models, modes and clutter, read from
+  ``main/run.json``) once with the χ² gate off (``gate_off/``) and once scored against visible pedestrians
+  (``visible/``), then ``sensitivity.md`` / ``sensitivity.csv``: every headline number under each setting
+  (:mod:`soabench.experiment.sensitivity`).
 
 ``comparison.md`` then puts every headline number of the paper (§5.9) beside ours with paired Wilcoxon tests and
 bootstrap intervals (:mod:`soabench.experiment.paper`). Re-running the command on a finished folder re-reports it;
@@ -20,10 +24,12 @@ from pathlib import Path
 from soabench.config import Config
 from soabench.errors import Interrupted
 from soabench.experiment import paper
+from soabench.experiment import sensitivity as sens
 from soabench.experiment.ownership import FolderLock, check_writable_target, resolve
 from soabench.experiment.report import paper_protocol_mismatch
 from soabench.experiment.runmeta import flatten_config
 from soabench.experiment.runner import RunOutcome, net_name, run_experiment
+from soabench.experiment.sensitivity_runs import VARIANTS, run_variants
 from soabench.experiment.store import RunStore, write_text_atomic
 from soabench.experiment.sweep import SweepOutcome, run_sweep
 
@@ -41,14 +47,16 @@ class StudyOutcome:
     clutter: SweepOutcome
     births: SweepOutcome
     summary_markdown: str
+    sensitivity: tuple[RunOutcome, ...] = ()
 
     @property
     def complete(self) -> bool:
-        return self.main.complete and self.clutter.complete and self.births.complete
+        parts = (self.main, self.clutter, self.births, *self.sensitivity)
+        return all(p.complete for p in parts)
 
     @property
     def n_missing(self) -> int:
-        return self.main.n_missing + self.clutter.n_missing + self.births.n_missing
+        return sum(p.n_missing for p in (self.main, self.clutter, self.births, *self.sensitivity))
 
 
 def _with_experiment(cfg: Config, **changes) -> Config:
@@ -64,6 +72,7 @@ def run_study(
     out: Path | None = None,
     sweep_trials: int | None = None,
     births_trials: int = 30,
+    sensitivity_trials: int | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     dask_local: bool = False,
@@ -74,6 +83,7 @@ def run_study(
 
     ``sweep_trials``: trials of the clutter sweep (default: as many as the main protocol). ``births_trials``: trials
     per N_tot point of the N_hat sweep, static probabilities only (21 offsets make it the costliest part).
+    ``sensitivity_trials``: trials of each sensitivity run (default: as many as the main run has).
     ``explicit``: the dotted config keys the user asked for (command-line flags, config file keys; ``trials`` of
     a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
     refuses differences, except more trials (see :mod:`~soabench.experiment.runmeta`); None compares nothing.
@@ -122,15 +132,25 @@ def run_study(
             else:
                 births = run_sweep("births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, **exe)
 
+            follow = sensitivity_trials is None and "experiment.trials" in explicit  # like the clutter sweep
+            sensitivity = run_variants(
+                root / "sensitivity", main_dir, trials=sensitivity_trials, follow_main=follow, **exe
+            )
+
             md = ""
             if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
                 mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
                 md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
+            if main.complete and all(o.complete for o in sensitivity):
+                variants = {k: root / "sensitivity" / k for k in VARIANTS}
+                sens.write_sensitivity(root / "sensitivity", main_dir, variants)
+                where = root / "sensitivity" / "sensitivity.md"
+                md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
         except KeyboardInterrupt:
             raise Interrupted(
                 f"interrupted: the study in {root} is incomplete (finished trials are on disk); {hint}"
             ) from None
-    return StudyOutcome(root, main, clutter, births, md)
+    return StudyOutcome(root, main, clutter, births, md, tuple(sensitivity))
 
 
 def _precision_table(rows: list[dict]) -> str:
