@@ -27,8 +27,8 @@ SOURCE_COLORS = ("0.15", "tab:green", "tab:red", "tab:blue", "tab:purple", "tab:
 SOURCE_WORDS = ("occlusion", "semantic", "FOV boundary", "uniform grid", "fixed GM", "measurement-driven")
 SURVIVING_COLOR = "0.78"
 SURVIVING_LABEL = "surviving (born at an earlier scan)"
-UNSOURCED_COLOR = "white"
-UNSOURCED_LABEL = "no birth source (tracker)"
+UNSOURCED_COLOR = "wheat"
+UNSOURCED_LABEL = "no known birth source"
 
 _BORN = [f"n_born_{s}" for s in SOURCE_NAMES]
 _SURV = [f"n_surv_{s}" for s in SOURCE_NAMES]
@@ -98,10 +98,12 @@ def components_origin_figure(tables: RunTables, clutter: float) -> Figure:
                     )
                     total = sum(np.nan_to_num(v) for _, _, v in layers)
                     born = sum(np.nan_to_num(series[c]) for c in _BORN)
+                    sourced = np.mean(total) > np.mean(np.nan_to_num(series["n_unsourced"]))
+                    note = f", born this scan {np.mean(born):.1f}" if sourced else " (origins unknown)"
                     ax.text(
                         0.99,
                         0.95,
-                        f"mean J = {np.mean(total):.1f}, born this scan {np.mean(born):.1f}",
+                        f"mean J = {np.mean(total):.1f}{note}",
                         transform=ax.transAxes,
                         ha="right",
                         va="top",
