@@ -354,3 +354,12 @@ def test_fig7b_is_skipped_for_a_run_without_origin_columns(tables, tmp_path):
     old = dataclasses.replace(tables, steps={c: v for c, v in tables.steps.items() if c not in ORIGIN_KEYS})
     assert fig_components_origin(old, 3.0, tmp_path / "fig7b.png") is None and not (tmp_path / "fig7b.png").exists()
     assert not any(p.name.startswith("fig7b") for p in plots.make_figures(old, tmp_path / "figures"))
+
+
+def test_fig7b_draws_a_run_whose_posteriors_stay_empty(tables, tmp_path):
+    """Every origin count 0 (a short run that never keeps a component): the panels stay empty, nothing fails."""
+    steps = {c: np.zeros_like(v) if c in ORIGIN_KEYS else v for c, v in tables.steps.items()}
+    fig = components_origin_figure(dataclasses.replace(tables, steps=steps), 3.0)
+    assert ps.save_png(fig, tmp_path / "fig7b_empty.png").stat().st_size > 5_000
+    assert not any(ax.collections for ax in fig.axes)
+    assert "mean J = 0.0, born this scan 0.0" in [t.get_text() for t in fig.axes[0].texts]

@@ -76,7 +76,7 @@ def components_origin_figure(tables: RunTables, clutter: float) -> Figure:
     present: dict[str, str] = {}  # label -> colour of every layer that is non-zero somewhere, in stacking order
     for _, series in data.values():
         for label, colour, v in _layers(series):
-            if v.size and np.nanmax(v) > 0:
+            if np.any(np.nan_to_num(v) > 0):
                 present.setdefault(label, colour)
     order = [lab for lab, _, _ in _layers({c: np.zeros(1) for c in ORIGIN_KEYS})]
     with ps.style():
@@ -89,17 +89,18 @@ def components_origin_figure(tables: RunTables, clutter: float) -> Figure:
                 k, series = data[(model, mode)]
                 layers = [(lab, col, v) for lab, col, v in _layers(series) if lab in present]
                 if k.size:
-                    ax.stackplot(
-                        k * dt,
-                        *[np.nan_to_num(v) for _, _, v in layers],
-                        colors=[col for _, col, _ in layers],
-                        edgecolor="0.3",
-                        linewidth=0.2,
-                    )
-                    total = sum(np.nan_to_num(v) for _, _, v in layers)
+                    if layers:  # none when every count of the run is 0 (an empty posterior throughout)
+                        ax.stackplot(
+                            k * dt,
+                            *[np.nan_to_num(v) for _, _, v in layers],
+                            colors=[col for _, col, _ in layers],
+                            edgecolor="0.3",
+                            linewidth=0.2,
+                        )
+                    total = sum(np.nan_to_num(series[c]) for c in ORIGIN_KEYS)
                     born = sum(np.nan_to_num(series[c]) for c in _BORN)
-                    sourced = np.mean(total) > np.mean(np.nan_to_num(series["n_unsourced"]))
-                    note = f", born this scan {np.mean(born):.1f}" if sourced else " (origins unknown)"
+                    unknown = np.mean(total) > 0 and np.mean(total) == np.mean(np.nan_to_num(series["n_unsourced"]))
+                    note = " (origins unknown)" if unknown else f", born this scan {np.mean(born):.1f}"
                     ax.text(
                         0.99,
                         0.95,
@@ -115,8 +116,8 @@ def components_origin_figure(tables: RunTables, clutter: float) -> Figure:
                 if i == len(models) - 1:
                     ax.set_xlabel("time (s)")
             axes[i, 0].set_ylabel("components J")
-        tops = [np.nanmax(sum(np.nan_to_num(series[c]) for c in ORIGIN_KEYS)) for k, series in data.values() if k.size]
-        axes[0, 0].set_ylim(0, 1.3 * max(tops, default=1.0))  # headroom for the mean-J note
+        tops = [np.max(sum(np.nan_to_num(series[c]) for c in ORIGIN_KEYS)) for k, series in data.values() if k.size]
+        axes[0, 0].set_ylim(0, 1.3 * max([*tops, 1.0]))  # headroom for the mean-J note
         axes[0, 0].set_xlim(0, None)
         from matplotlib.patches import Patch
 
