@@ -24,6 +24,7 @@ from scipy.optimize import linear_sum_assignment
 
 from soabench.errors import require
 from soabench.geometry import fov_mask
+from soabench.origins import ORIGIN_KEYS, origin_counts_of
 
 if TYPE_CHECKING:
     from soabench.config import MetricsConfig, SensorConfig
@@ -78,6 +79,7 @@ SERIES_KEYS = (
     "card_err",
     "sum_w",
     "n_components",
+    *ORIGIN_KEYS,  # n_components split by birth origin and age (soabench.origins, §5.7)
 )
 
 
@@ -382,6 +384,7 @@ def evaluate(
     s = {key: np.zeros(K) for key in SERIES_KEYS}
     ospa_parts = np.zeros((K, 3))
     gospa_parts = np.zeros((K, 4))
+    origins = np.zeros((K, len(ORIGIN_KEYS)), dtype=np.int64)
     for k, (scan, res) in enumerate(zip(scans.scans, results, strict=True)):
         gt_idx = np.flatnonzero(gt[k])
         G = scans.truth_xy[k, gt_idx]
@@ -392,6 +395,8 @@ def evaluate(
         gospa_parts[k] = gospa(G, E, cfg.gospa_c, cfg.gospa_p)
         s["n_gt"][k], s["n_est"][k], s["tp"][k] = len(G), len(E), len(pairs)
         s["sum_w"][k], s["n_components"][k] = res.sum_w, res.n_reduced
+        origins[k] = origin_counts_of(res)
+    s.update(zip(ORIGIN_KEYS, origins.T, strict=True))
     s["fp"] = s["n_est"] - s["tp"]
     s["fn"] = s["n_gt"] - s["tp"]
     s["ospa"], s["gospa"] = ospa_parts[:, 0], gospa_parts[:, 0]

@@ -537,3 +537,6 @@ class StepResult:
     n_newborn: int = 0  #: measurement-driven newborn components built in the update
     n_dropped: int = 0  #: non-finite measurements dropped (``filter.nonfinite = "drop"``; all if the pose was)
     n_dropped_births: int = 0  #: birth components dropped for a non-finite or negative value
+    #: posterior components (after reduction) by birth origin and age, in the order of
+    #: :data:`soabench.origins.ORIGIN_KEYS` (docs/method.md §5.7); None: origins unknown (a foreign tracker)
+    origin_counts: np.ndarray | None = None

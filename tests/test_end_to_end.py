@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from soabench.cli import main
+from soabench.origins import ORIGIN_KEYS
 
 MODELS = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
 MODES = ("static", "dynamic")
@@ -41,7 +42,8 @@ def test_files_exist_and_rows_are_trials_x_models_x_modes(run_dir):
         (str(t), m, p) for t in range(2) for m in MODELS for p in MODES
     }
     figures = sorted(p.name for p in (run_dir / "figures").glob("*.png"))
-    assert len(figures) == 12 and all(p.stat().st_size > 10_000 for p in (run_dir / "figures").glob("*.png"))
+    assert len(figures) == 13 and "fig7b_components_origin.png" in figures
+    assert all(p.stat().st_size > 10_000 for p in (run_dir / "figures").glob("*.png"))
 
 
 def test_metrics_are_finite_where_defined(run_dir):
@@ -72,6 +74,10 @@ def test_episodes_and_steps_agree_with_trials(run_dir):
         assert len(st) == 40  # one row per scan
         assert sum(int(s["tp"]) for s in st) == int(r["tp"])
         assert np.isclose(np.mean([float(s["ospa"]) for s in st]), float(r["ospa"]))
+        # the posterior count by origin adds up to it at every scan and to the run's mean (§5.7)
+        split = [sum(int(s[c]) for c in ORIGIN_KEYS) for s in st]
+        assert split == [int(s["n_components"]) for s in st]
+        assert np.isclose(np.mean(split), float(r["mean_components"]))
 
 
 def test_summary_matches_the_csv(run_dir):

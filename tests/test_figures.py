@@ -8,6 +8,7 @@ these tests fast; nothing here runs SUMO.
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
@@ -18,13 +19,29 @@ from shapely.geometry import Point, Polygon, box
 
 from soabench import plotstyle as ps
 from soabench.experiment import plots
+from soabench.experiment.origin_plots import components_origin_figure, fig_components_origin
 from soabench.experiment.study_plots import births_figure, clutter_figure, key_figure
 from soabench.experiment.tables import RunTables
+from soabench.origins import ORIGIN_KEYS
 
 MODELS = ("soa", "atbm", "myplugin")
 MODES = ("static", "dynamic")
 CLUTTERS = (0.5, 3.0)
 N_TRIALS, N_STEPS = 6, 12
+STEP_BASE = ("trial", "clutter", "model", "mode", "k", "tp", "fp", "n_components")
+
+
+def _origin_split(model: str, n: int) -> dict[str, int]:
+    """A made-up split of ``n`` posterior components by origin: S-OA 3 occlusion + 2 semantic newborns, ATBM one
+    measurement-driven newborn, the rest surviving; the plugin's components have no source."""
+    c = dict.fromkeys(ORIGIN_KEYS, 0)
+    if model == "soa":
+        c.update(n_born_occl=3, n_born_sem=2, n_surv_occl=n - 5)
+    elif model == "atbm":
+        c.update(n_born_meas=1, n_surv_meas=n - 1)
+    else:
+        c.update(n_unsourced=n)
+    return c
 
 
 def _run_tables() -> RunTables:
@@ -32,7 +49,7 @@ def _run_tables() -> RunTables:
     rng = np.random.default_rng(1)
     trials: dict[str, list] = {c: [] for c in ("trial", "clutter", "model", "mode", "delay_mean", "delay_std",
                                               "card_err", "ospa", "precision", "mean_components")}  # fmt: skip
-    steps: dict[str, list] = {c: [] for c in ("trial", "clutter", "model", "mode", "k", "tp", "fp", "n_components")}
+    steps: dict[str, list] = {c: [] for c in (*STEP_BASE, *ORIGIN_KEYS)}
     episodes: dict[str, list] = {c: [] for c in ("trial", "clutter", "model", "mode", "delay", "censored")}
     for lam in CLUTTERS:
         for model in MODELS:
@@ -48,7 +65,9 @@ def _run_tables() -> RunTables:
                     for c, v in row.items():
                         trials[c].append(v)
                     for k in range(N_STEPS):
-                        for c, v in zip(steps, (tr, lam, model, mode, k, 1, k % 2, 10 + k), strict=True):
+                        for c, v in zip(STEP_BASE, (tr, lam, model, mode, k, 1, k % 2, 10 + k), strict=True):
+                            steps[c].append(v)
+                        for c, v in _origin_split(model, 10 + k).items():  # n_components by origin (Fig. 7b)
                             steps[c].append(v)
                     for d in (0.0, 1.0, 2.0, 14.0):
                         for c, v in zip(episodes, (tr, lam, model, mode, d, 0), strict=True):
@@ -100,6 +119,7 @@ def _rendered(fig, tmp_path, name: str) -> None:
         "cumulative precision",
         "precision per trial",
         "posterior components J",
+        "components J",
     )
     ylabels = [ax.get_ylabel() for ax in data_axes]
     assert any("(" in y or y in dimensionless for y in ylabels), f"{name}: no y label with a unit in {ylabels}"
@@ -154,7 +174,8 @@ def test_make_figures_shares_the_delay_axis_across_models(tables, tmp_path):
     paths = plots.make_figures(tables, tmp_path / "figures")
     names = {p.name for p in paths}
     assert {"fig5a_delay_soa_lam3.png", "fig5e_delay_atbm_lam3.png", "fig5g_ospa_lam0.5.png",
-            "fig5h_precision.png", "fig5h_precision_trials.png", "fig7_components_lam3.png"} <= names  # fmt: skip
+            "fig5h_precision.png", "fig5h_precision_trials.png", "fig7_components_lam3.png",
+            "fig7b_components_origin_lam3.png", "fig7b_components_origin_lam0.5.png"} <= names  # fmt: skip
     assert all(p.stat().st_size > 5_000 for p in paths)
 
 
@@ -310,3 +331,35 @@ def test_birth_overlay_extends_the_scene_legend(tmp_path):
     labels = _legend_labels(fig)
     assert "road" in labels and "occlusion (1)" in labels and "semantic (1)" in labels
     assert len(fig.legends) + sum(a.get_legend() is not None for a in fig.axes) == 1  # one legend, extended
+
+
+def test_fig7b_components_by_origin(tables, tmp_path):
+    fig = components_origin_figure(tables, 3.0)
+    _rendered(fig, tmp_path, "fig7b")
+    panels = [ax for ax in fig.axes if ax.get_title(loc="left")]
+    assert [ax.get_title(loc="left") for ax in panels[:3]] == ["(a) S-OA, static", "(b) S-OA, dynamic",
+                                                               "(c) ATBM, static"]  # fmt: skip
+    assert len(panels) == len(MODELS) * len(MODES) and len({ax.get_ylim() for ax in panels}) == 1  # one y-axis
+    labels = [lab for lab in _legend_labels(fig) if lab]  # only the origins present in the run, in words
+    assert sorted(labels) == sorted(["surviving (born at an earlier scan)", "born this scan: occlusion",
+                                     "born this scan: semantic", "born this scan: measurement-driven",
+                                     "no known birth source"])  # fmt: skip
+    # the stacked layers of S-OA add up to its component count 10 + k (drawn against time k dt, dt = 1 s)
+    top = max(panels[0].collections, key=lambda c: c.get_paths()[0].vertices[:, 1].max())
+    assert top.get_paths()[0].vertices[:, 1].max() == pytest.approx(10 + N_STEPS - 1)
+    assert "mean J = 15.5, born this scan 5.0" in [t.get_text() for t in panels[0].texts]
+
+
+def test_fig7b_is_skipped_for_a_run_without_origin_columns(tables, tmp_path):
+    old = dataclasses.replace(tables, steps={c: v for c, v in tables.steps.items() if c not in ORIGIN_KEYS})
+    assert fig_components_origin(old, 3.0, tmp_path / "fig7b.png") is None and not (tmp_path / "fig7b.png").exists()
+    assert not any(p.name.startswith("fig7b") for p in plots.make_figures(old, tmp_path / "figures"))
+
+
+def test_fig7b_draws_a_run_whose_posteriors_stay_empty(tables, tmp_path):
+    """Every origin count 0 (a short run that never keeps a component): the panels stay empty, nothing fails."""
+    steps = {c: np.zeros_like(v) if c in ORIGIN_KEYS else v for c, v in tables.steps.items()}
+    fig = components_origin_figure(dataclasses.replace(tables, steps=steps), 3.0)
+    assert ps.save_png(fig, tmp_path / "fig7b_empty.png").stat().st_size > 5_000
+    assert not any(ax.collections for ax in fig.axes)
+    assert "mean J = 0.0, born this scan 0.0" in [t.get_text() for t in fig.axes[0].texts]

@@ -70,6 +70,8 @@ def assert_same_step(a, b, tol: dict = TOL) -> None:
     for f in ("sum_w", "sum_w_reduced"):
         assert getattr(a, f) == pytest.approx(getattr(b, f), rel=tol["rtol"], abs=tol["atol"]), f
     assert a.mean_pD == pytest.approx(b.mean_pD, rel=1e-9), "mean_pD"  # reads the merged Beta parameters
+    np.testing.assert_array_equal(a.origin_counts, b.origin_counts, err_msg="origin_counts")  # §5.7 by origin
+    assert a.origin_counts.sum() == a.n_reduced
 
 
 @pytest.mark.parametrize("model", list(REGISTRY))

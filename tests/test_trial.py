@@ -28,7 +28,9 @@ from soabench.experiment.trial import (
 )
 from soabench.geometry import fov_mask, polar_to_world, range_bearing
 from soabench.gmphd.filter import StepResult
+from soabench.origins import ORIGIN_KEYS
 from soabench.sensor import CLUTTER, Scan, Scans
+from soabench.types import SOURCE_NAMES
 
 # ---------------------------------------------------------------------------------------------------------------------
 # fakes
@@ -304,6 +306,14 @@ def test_real_short_trial(intersection) -> None:
         assert r["mean_pD"] == pytest.approx(0.98, abs=0.05)
     K = len(res.steps) // 8
     assert K == 20 and all(tuple(s) == STEP_KEYS for s in res.steps)
+    # the posterior count split by birth origin and age (§5.7) adds up at every scan, and S-OA's newborns come
+    # from its own sources (occlusion, semantic, FOV), ATBM's from measurements only
+    assert all(sum(s[c] for c in ORIGIN_KEYS) == s["n_components"] for s in res.steps)
+    assert all(s["n_unsourced"] == 0 for s in res.steps)
+    for model, own in (("soa", ("occl", "sem", "fov")), ("atbm", ("meas",))):
+        steps = [s for s in res.steps if s["model"] == model]
+        born = {src: sum(s[f"n_born_{src}"] + s[f"n_surv_{src}"] for s in steps) for src in SOURCE_NAMES}
+        assert sum(born[src] for src in own) > 0 and all(born[src] == 0 for src in SOURCE_NAMES if src not in own)
     assert res.timing["sumo"] > 0 and res.timing["sensor"] > 0
 
 

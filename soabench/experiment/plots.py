@@ -13,9 +13,12 @@ model, static solid / dynamic dashed or hatched, panels titled "(a) ...") and sa
   clutter rate; ``fig5h_precision_trials.png``: the per-trial precision per model and clutter rate (§5.5);
 * ``fig6_delay_hist.png``: share of counted episodes per delay, per model, one panel per mode;
 * ``fig7_components.png``: posterior component count vs time, mean over trials with the 10–90 % band across trials,
-  one panel per mode.
+  one panel per mode;
+* ``fig7b_components_origin.png``: the same counts by origin (born this scan per birth source, or surviving),
+  stacked, mean over trials, one panel per model and mode (:mod:`soabench.experiment.origin_plots`; not drawn for
+  a run written before ``steps.csv`` had the origin columns).
 
-With several clutter rates, figures 5a–g, 6 and 7 are drawn per rate with a ``_lam<λ>`` suffix.
+With several clutter rates, figures 5a–g, 6, 7 and 7b are drawn per rate with a ``_lam<λ>`` suffix.
 
 Each ``*_figure`` function returns the :class:`~matplotlib.figure.Figure`; each ``fig_*`` function writes it.
 """
@@ -30,6 +33,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from soabench import plotstyle as ps
+from soabench.experiment.origin_plots import fig_components_origin
 from soabench.experiment.tables import RunTables, select
 
 #: the paper's Fig. 5 panels (its UBM is the workspace grid); other models are drawn as fig5x_delay_<model>.png
@@ -483,6 +487,8 @@ def make_figures(tables: RunTables, out_dir: Path) -> list[Path]:
         paths.append(fig_bars(tables, "ospa", "mean OSPA (m)", "OSPA", lam, out_dir / f"fig5g_ospa{sfx}.png", "g"))
         paths.append(fig_delay_hist(tables, lam, out_dir / f"fig6_delay_hist{sfx}.png"))
         paths.append(fig_components(tables, lam, out_dir / f"fig7_components{sfx}.png"))
+        origin_fig = fig_components_origin(tables, lam, out_dir / f"fig7b_components_origin{sfx}.png")
+        paths += [origin_fig] if origin_fig is not None else []
     paths.append(fig_precision(tables, out_dir / "fig5h_precision.png"))
     paths.append(fig_precision_trials(tables, out_dir / "fig5h_precision_trials.png"))
     return paths

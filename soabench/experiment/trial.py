@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 from soabench.config import filter_config_for_mode
 from soabench.errors import require
 from soabench.metrics import SERIES_KEYS, SUMMARY_KEYS, TrialMetrics, evaluate
+from soabench.origins import ORIGIN_KEYS
 from soabench.seeding import TrialSeeds, trial_seeds
 from soabench.trackers import TrackerRun as FilterRun  # the step results and times of one run
 
@@ -61,7 +62,7 @@ ESTIMATE_KEYS = ("trial", "clutter", "model", "mode", "k", "x", "y", "w")
 #: keys of :attr:`TrialResult.timing` (seconds per trial; "sensor" sums every clutter rate)
 TIMING_KEYS = ("sumo", "sensor")
 
-_INT_STEP_KEYS = frozenset({"n_gt", "n_est", "tp", "fp", "fn", "card_err", "n_components"})
+_INT_STEP_KEYS = frozenset({"n_gt", "n_est", "tp", "fp", "fn", "card_err", "n_components", *ORIGIN_KEYS})
 
 
 @dataclass

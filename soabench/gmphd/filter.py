@@ -34,6 +34,7 @@ from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
 from soabench.gmphd.reduction import extract, prune_merge_cap
+from soabench.origins import origin_counts
 from soabench.types import SOURCE_MEAS, Births, StepResult  # StepResult re-exported: old import path
 
 if TYPE_CHECKING:
@@ -204,6 +205,7 @@ class GMPHDFilter:
             n_newborn=up.n_newborn,
             n_dropped=checked.n_dropped,
             n_dropped_births=checked.n_dropped_births,
+            origin_counts=origin_counts(red.mix.origin, red.mix.age),
         )
 
     def _step_fused(self, scan: Scan, births: Births) -> StepResult:
@@ -316,6 +318,7 @@ class GMPHDFilter:
             n_merged=int(n_merged),
             n_pairs=n_pairs,
             n_newborn=n_newborn,
+            origin_counts=origin_counts(self.mixture.origin, self.mixture.age),
         )
 
 
