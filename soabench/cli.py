@@ -214,6 +214,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
 
+    p = sub.add_parser("results", help="regenerate all of results/: study, ablations, every scene, summary, KITTI")
+    from soabench.experiment.results_suite import add_arguments as add_results_arguments
+
+    add_results_arguments(p, _csv_list)
+
     p = sub.add_parser("kitti", help="the paper's KITTI protocol (k-fold N_hat, Table I, Figs. 6-8)")
     p.add_argument(
         "--root",
@@ -543,6 +548,12 @@ def cmd_study(args: argparse.Namespace) -> int:
     return _report_outcome(outcome, "soabench study --out {dir}")
 
 
+def cmd_results(args: argparse.Namespace) -> int:
+    from soabench.experiment.results_suite import cmd_results as run
+
+    return run(args)
+
+
 def cmd_kitti(args: argparse.Namespace) -> int:
     from soabench.kitti.commands import cmd_kitti as run
 
@@ -590,6 +601,7 @@ COMMANDS = {
     "run": cmd_run,
     "sweep": cmd_sweep,
     "study": cmd_study,
+    "results": cmd_results,
     "check": cmd_check,
 }
 

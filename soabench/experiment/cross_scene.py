@@ -57,7 +57,6 @@ def advantage_rows(scene: str, density: Mapping[str, Any], rows: Sequence[Mappin
             if (mode, base, "wins") not in comps:
                 continue
             w, card, ospa = (comps[(mode, base, m)] for m in ("wins", "card_err", "ospa"))
-            pct = (lambda v: 100.0 * v / w.n) if w.n else (lambda v: math.nan)  # noqa: E731
             out.append(
                 {
                     "scene": scene,
@@ -69,9 +68,9 @@ def advantage_rows(scene: str, density: Mapping[str, Any], rows: Sequence[Mappin
                     "trials": n_trials,
                     "delay_wins": int(w.ours),
                     "delay_trials": w.n,
-                    "delay_win_pct": pct(w.ours),
-                    "delay_win_ci_low": pct(w.ci_low),
-                    "delay_win_ci_high": pct(w.ci_high),
+                    "delay_win_pct": _share(w.ours, w.n),
+                    "delay_win_ci_low": _share(w.ci_low, w.n),
+                    "delay_win_ci_high": _share(w.ci_high, w.n),
                     "delay_p": w.p_value,
                     "card_reduction": card.ours,
                     "card_ci_low": card.ci_low,
@@ -84,6 +83,11 @@ def advantage_rows(scene: str, density: Mapping[str, Any], rows: Sequence[Mappin
                 }
             )
     return out
+
+
+def _share(count: float, n: int) -> float:
+    """``count`` of ``n`` trials in percent (NaN for no trials)."""
+    return 100.0 * count / n if n else math.nan
 
 
 def _f(x: float, nd: int = 1) -> str:
@@ -200,7 +204,8 @@ def figure(rows: Sequence[Mapping]):
                     top.set_xticks(xs, labels=scenes, rotation=30, ha="left", fontsize=6.5)
                     top.tick_params(length=2, pad=1)
                 ps.panel_title(ax, next(letters), f"{title}, {paper.MODE_LABEL.get(mode, mode)}")
-        axes[-1, len(PANELS) // 2].set_xlabel("occlusion density: occluded share of the sidewalk in the field of view (%)")
+        xlabel = "occlusion density: occluded share of the sidewalk in the field of view (%)"
+        axes[-1, len(PANELS) // 2].set_xlabel(xlabel)
         ps.legend_below(fig, ps.model_handles(bases) + ps.mode_handles(modes), ncol=len(bases) + len(modes))
     return fig
 
