@@ -23,6 +23,7 @@ import argparse
 import dataclasses
 import shutil
 import sys
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -90,6 +91,7 @@ class ResultsOutcome:
 
     run_dir: Path
     parts: dict[str, str] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)  #: wall-clock time per part
     n_missing: int = 0
     summary_markdown: str = ""
 
@@ -235,6 +237,19 @@ def _ablation_toml(name: str) -> str:
     return f"# Ablation: {ABLATION_NOTES[name]}\n" + dump_toml(ABLATIONS[name][0])
 
 
+def _ablation_part(root: Path, name: str, s: Settings, exe: dict, log: Callable[[str], None]) -> tuple[str, int]:
+    """One ablation run in ``intersection/ablations/<name>/`` beside its ``<name>.toml`` (the overrides)."""
+    from soabench.experiment.store import write_text_atomic
+
+    folder = root / "intersection" / "ablations"
+    folder.mkdir(parents=True, exist_ok=True)
+    toml = folder / f"{name}.toml"
+    if not toml.is_file() or toml.read_text(encoding="utf-8") != _ablation_toml(name):
+        write_text_atomic(toml, _ablation_toml(name))
+    keys = [f"{sec}.{k}" for sec, d in ABLATIONS[name][0].items() for k in d]
+    return _run_part(folder / name, _ablation_config(s, name), "intersection", exe, log, keys)
+
+
 def _kitti_want(scene: str, s: Settings) -> dict[str, Any]:
     return {
         "net": scene,
@@ -320,7 +335,6 @@ def run_results(
     """Make (or finish) every part of results/ in ``out``; see the module docstring."""
     from soabench.experiment.occlusion_density import write_density
     from soabench.experiment.ownership import FolderLock, check_writable_target, resolve
-    from soabench.experiment.store import write_text_atomic
     from soabench.scenario import shipped_nets
 
     shipped = shipped_nets()
@@ -335,58 +349,61 @@ def run_results(
     outcome = ResultsOutcome(root)
     part = "start"
 
-    def record(name: str, result: tuple[str, int]) -> None:
-        outcome.parts[name] = result[0]
-        outcome.n_missing += result[1]
+    def step(name: str, work: Callable[[], tuple[str, int]], banner: bool = True) -> None:
+        nonlocal part
+        part = name
+        if banner:
+            log(f"== {name} ==")
+        t0 = time.perf_counter()
+        status, missing = work()
+        outcome.parts[name] = status
+        outcome.seconds[name] = time.perf_counter() - t0
+        outcome.n_missing += missing
 
     with FolderLock(root, "results folder"):
         for scene in s.kitti_scenes:  # cheap checks first: refuse a mismatch before hours of work
             kitti_settings_check(root / "kitti" / scene, _kitti_want(scene, s))
         try:
-            mains: dict[str, Path] = {}
+            mains = {n: root / n / "main" for n in scenes}
             if "intersection" in scenes:
-                part = "intersection study"
-                log(f"== {part} ==")
-                record(part, _study_part(root / "intersection", s, exe, log))
-                mains["intersection"] = root / "intersection" / "main"
+                step("intersection study", lambda: _study_part(root / "intersection", s, exe, log))
                 for name in ABLATIONS:
-                    part = f"ablation {name}"
-                    log(f"== {part} ==")
-                    folder = root / "intersection" / "ablations"
-                    folder.mkdir(parents=True, exist_ok=True)
-                    toml = folder / f"{name}.toml"
-                    if not toml.is_file() or toml.read_text(encoding="utf-8") != _ablation_toml(name):
-                        write_text_atomic(toml, _ablation_toml(name))
-                    keys = [f"{sec}.{k}" for sec, d in ABLATIONS[name][0].items() for k in d]
-                    cfg = _ablation_config(s, name)
-                    record(part, _run_part(folder / name, cfg, "intersection", exe, log, keys))
+                    step(f"ablation {name}", lambda name=name: _ablation_part(root, name, s, exe, log))
             for scene in (n for n in scenes if n != "intersection"):
-                part = f"{scene} main protocol"
-                log(f"== {part} ==")
-                record(part, _run_part(root / scene / "main", _base_config(s, s.scene_trials), scene, exe, log))
-                mains[scene] = root / scene / "main"
-            densities = {}
-            for scene in scenes:
-                part = f"{scene} occlusion density"
-                density, kept = write_density(
-                    root / "scenes" / "density" / f"{scene}.json", scene, _base_config(s, 1), s.density_trials
+                cfg = _base_config(s, s.scene_trials)
+                step(
+                    f"{scene} main protocol", lambda scene=scene, cfg=cfg: _run_part(mains[scene], cfg, scene, exe, log)
                 )
-                log(f"{'kept' if kept else 'wrote'} {part}: {100 * density['occluded_sidewalk']:.1f} % of the sidewalk")
-                densities[scene] = density
-                outcome.parts[part] = "kept" if kept else "done"
-            part = "cross-scene summary"
-            ready = [n for n in scenes if run_complete(mains[n])]
-            if ready:
+            densities: dict[str, dict] = {}
+            for scene in scenes:
+
+                def measure(scene: str = scene) -> tuple[str, int]:
+                    path = root / "scenes" / "density" / f"{scene}.json"
+                    densities[scene], kept = write_density(path, scene, _base_config(s, 1), s.density_trials)
+                    share = 100 * densities[scene]["occluded_sidewalk"]
+                    log(
+                        f"{'kept' if kept else 'wrote'} the occlusion density of {scene}: {share:.1f} % of the sidewalk"
+                    )
+                    return ("kept" if kept else "done"), 0
+
+                step(f"{scene} occlusion density", measure, banner=False)
+
+            def summary() -> tuple[str, int]:
                 from soabench.experiment.cross_scene import write_summary
 
-                triples = [(n, densities[n], mains[n] / "trials.csv") for n in ready]
-                outcome.summary_markdown = write_summary(root / "scenes", triples, clutter=3.0)
-                log(f"wrote {root / 'scenes' / 'summary.md'} ({len(ready)} of {len(scenes)} scenes)")
-            outcome.parts[part] = "done" if len(ready) == len(scenes) else "incomplete"
+                ready = [n for n in scenes if run_complete(mains[n])]
+                if ready:
+                    triples = [(n, densities[n], mains[n] / "trials.csv") for n in ready]
+                    outcome.summary_markdown = write_summary(root / "scenes", triples, clutter=3.0)
+                    log(f"wrote {root / 'scenes' / 'summary.md'} ({len(ready)} of {len(scenes)} scenes)")
+                return ("done" if len(ready) == len(scenes) else "incomplete"), 0
+
+            step("cross-scene summary", summary, banner=False)
             for scene in s.kitti_scenes:
-                part = f"{scene} KITTI export and protocol"
-                log(f"== {part} ==")
-                record(part, _kitti_part(root / "kitti" / scene, scene, s, log, progress))
+                step(
+                    f"{scene} KITTI export and protocol",
+                    lambda scene=scene: _kitti_part(root / "kitti" / scene, scene, s, log, progress),
+                )
         except KeyboardInterrupt:
             raise Interrupted(
                 f"interrupted during the {part}: finished parts and trials are on disk in {root}; {hint}"
@@ -437,7 +454,8 @@ def cmd_results(args: argparse.Namespace) -> int:
         kitti_folds=args.kitti_folds,
     )
     o = run_results(args.out, settings, workers=args.workers, progress=not args.no_progress)
-    print("\n".join(["| part | result |", "|---|---|"] + [f"| {k} | {v} |" for k, v in o.parts.items()]))
+    rows = [f"| {k} | {v} | {o.seconds.get(k, 0.0):.0f} |" for k, v in o.parts.items()]
+    print("\n".join(["| part | result | wall time (s) |", "|---|---|---:|", *rows]))
     if o.complete:
         print(f"results in {o.run_dir}")
         return 0
