@@ -230,3 +230,22 @@ def test_results_command_is_listed_in_the_help(capsys):
     with pytest.raises(SystemExit):
         main(["results", "--help"])
     assert "--scene-trials" in capsys.readouterr().out
+
+
+def test_a_study_is_kept_only_when_every_part_folder_is_complete(suite, tmp_path):
+    """A part the study gained later (a run or sweep folder beside main/, clutter/, births/) must be complete too."""
+    import shutil
+
+    from soabench.experiment.results_suite import Settings, study_kept
+
+    root = tmp_path / "intersection"
+    shutil.copytree(suite.out / "intersection", root)
+    tiny = Settings(trials=2, duration=10.0, births_trials=1)
+    assert study_kept(root, tiny)
+    assert not study_kept(root, Settings(trials=3, duration=10.0, births_trials=1))  # more trials: resumed
+    assert not study_kept(root, Settings(trials=2, duration=10.0, births_trials=2))
+    extra = root / "sensitivity"
+    shutil.copytree(root / "main", extra)
+    assert study_kept(root, tiny)
+    (extra / "summary.json").unlink()
+    assert not study_kept(root, tiny)

@@ -171,7 +171,7 @@ def figure(rows: Sequence[Mapping]):
     dens = {r["scene"]: 100.0 * float(r["occluded_sidewalk"]) for r in rows}
     xs = np.array([dens[s] for s in scenes])
     span = float(xs.max() - xs.min()) if len(xs) > 1 else 10.0
-    step = 0.018 * span
+    step = 0.025 * span
     with ps.style():
         fig = ps.figure("double", 1.2 + 2.0 * len(modes))
         axes = np.atleast_2d(fig.subplots(len(modes), len(PANELS), sharex=True))
