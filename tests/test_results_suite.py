@@ -249,3 +249,23 @@ def test_a_study_is_kept_only_when_every_part_folder_is_complete(suite, tmp_path
     assert study_kept(root, tiny)
     (extra / "summary.json").unlink()
     assert not study_kept(root, tiny)
+
+
+def test_a_part_made_with_other_models_is_refused_with_the_way_out(suite, tmp_path):
+    """E.g. results committed before a sixth birth model joined the defaults: refused, never silently kept."""
+    import json
+    import shutil
+
+    from soabench.errors import SoabenchError
+    from soabench.experiment.results_suite import Settings, _base_config, same_settings
+
+    run = tmp_path / "main"
+    shutil.copytree(suite.out / "tjunction" / "main", run)
+    cfg = _base_config(Settings(duration=10.0), 2)
+    assert same_settings(run, cfg) is True
+    assert same_settings(run, _base_config(Settings(duration=10.0), 3)) is False  # more trials: extended
+    meta = json.loads((run / "run.json").read_text())
+    meta["config"]["experiment"]["models"] = ["soa", "pubm"]
+    (run / "run.json").write_text(json.dumps(meta))
+    with pytest.raises(SoabenchError, match=r"experiment.models: stored \['soa', 'pubm'\].*remove that folder"):
+        same_settings(run, cfg)

@@ -136,16 +136,14 @@ def part_complete(folder: Path) -> bool:
     return False
 
 
-def _stored_experiment(run_dir: Path) -> dict:
-    meta = _json(run_dir / "run.json")
-    exp = meta.get("config", {}).get("experiment", {}) if isinstance(meta, dict) else {}
-    return exp if isinstance(exp, dict) else {}
-
-
-def _same_run(run_dir: Path, want: dict[str, Any]) -> bool:
-    """The stored run's experiment settings equal ``want`` (trials, duration, seed, ...)."""
-    exp = _stored_experiment(run_dir)
-    return all(_equal(exp.get(k), v) for k, v in want.items())
+#: the settings a stored run is compared on (besides an ablation's own keys)
+SIZE_KEYS = (
+    "experiment.trials",
+    "experiment.duration",
+    "experiment.seed",
+    "experiment.models",
+    "experiment.probabilities",
+)
 
 
 def _equal(a: Any, b: Any) -> bool:
@@ -156,22 +154,56 @@ def _equal(a: Any, b: Any) -> bool:
     return a == b
 
 
+def same_settings(run_dir: Path, cfg, keys: Sequence[str] = SIZE_KEYS) -> bool:
+    """Compare a stored run with the requested ``cfg`` on ``keys``: True when equal, False when only more trials
+    are requested (the run is extended); any other difference is refused with one line."""
+    from soabench.experiment.runmeta import flatten_config
+
+    meta = _json(run_dir / "run.json")
+    config = meta.get("config") if isinstance(meta, dict) else None
+    stored = flatten_config(config) if isinstance(config, dict) else {}
+    want = flatten_config(cfg.to_dict())
+    diffs, more = [], False
+    for k in keys:
+        old, new = stored.get(k), want.get(k)
+        if _equal(old, new):
+            continue
+        if k == "experiment.trials" and isinstance(old, int) and isinstance(new, int) and new > old:
+            more = True
+        else:
+            diffs.append(f"{k}: stored {old!r}, requested {new!r}")
+    if diffs:
+        fewer = (
+            " (fewer trials would drop finished ones)" if any(d.startswith("experiment.trials") for d in diffs) else ""
+        )
+        raise SoabenchError(
+            f"{run_dir} was made with other settings: {'; '.join(diffs)}{fewer}; remove that folder to make it "
+            "again with these settings, or give the options it was made with"
+        )
+    return not more
+
+
 def study_kept(root: Path, s: Settings) -> bool:
     """The study in ``root`` is complete with these settings: every part of :data:`STUDY_PARTS` (and any other
-    part folder it holds) complete, main protocol and N_hat sweep with the requested sizes."""
-    if not all(part_complete(root / p) for p in STUDY_PARTS):
+    part folder it holds) complete, its main protocol and sweep points made with the requested settings. A part
+    made with other settings is refused (:func:`same_settings`); more trials are not "kept" (the study extends)."""
+    from soabench.experiment.study import BIRTH_MODELS
+
+    main_cfg = _base_config(s, s.trials)
+    births_cfg = _base_config(s, s.births_trials, models=BIRTH_MODELS, probabilities=("static",))
+    same = True
+    if (root / "main" / "run.json").is_file():
+        same &= same_settings(root / "main", main_cfg)
+    for part, cfg in (("clutter", main_cfg), ("births", births_cfg)):
+        meta = _json(root / part / "sweep.json")
+        for p in meta.get("points", []) if isinstance(meta, dict) else []:
+            point = root / part / "points" / str(p.get("name") if isinstance(p, dict) else "")
+            if (point / "run.json").is_file():
+                same &= same_settings(point, cfg)
+    if not same or not all(part_complete(root / p) for p in STUDY_PARTS):
         return False
     others = [d for d in root.iterdir() if d.is_dir() and d.name not in STUDY_PARTS and d.name != "ablations"]
-    if not all(part_complete(d) for d in others if (d / "run.json").is_file() or (d / "sweep.json").is_file()):
-        return False
-    if not _same_run(root / "main", {"trials": s.trials, "duration": s.duration, "seed": s.seed}):
-        return False
-    births = _json(root / "births" / "sweep.json")
-    points = births.get("points") if isinstance(births, dict) else None
-    return isinstance(points, list) and all(
-        isinstance(p, dict) and _same_run(root / "births" / "points" / str(p.get("name")), {"trials": s.births_trials})
-        for p in points
-    )
+    return all(part_complete(d) for d in others if (d / "run.json").is_file() or (d / "sweep.json").is_file())
 
 
 # ------------------------------------------------------------------------------------------------ parts
@@ -191,14 +223,12 @@ def _run_part(
     from soabench.experiment.runmeta import flatten_config
     from soabench.experiment.runner import run_experiment
 
-    exp = cfg.experiment
-    want = {"trials": exp.trials, "duration": exp.duration, "seed": exp.seed}
     if (run_dir / "run.json").is_file():
-        if run_complete(run_dir) and _same_run(run_dir, want):
+        keys = (*SIZE_KEYS, *keys)
+        if same_settings(run_dir, cfg, keys) and run_complete(run_dir):
             log(f"kept {run_dir} (complete)")
             return "kept", 0
         flat = flatten_config(cfg.to_dict())
-        keys = ("experiment.trials", "experiment.duration", "experiment.seed", "experiment.models", *keys)
         requested = {"net": net, **{k: flat[k] for k in keys}}
         o = run_experiment(None, net, resume=run_dir, requested=requested, **exe)
     else:
@@ -212,7 +242,7 @@ def _study_part(root: Path, s: Settings, exe: dict, log: Callable[[str], None]) 
     if root.is_dir() and study_kept(root, s):
         log(f"kept {root} (the study is complete)")
         return "kept", 0
-    explicit = {"experiment.trials", "experiment.duration", "experiment.seed", "births_trials"}
+    explicit = {*SIZE_KEYS, "births_trials"}
     o = run_study(
         _base_config(s, s.trials), "intersection", out=root, births_trials=s.births_trials, explicit=explicit, **exe
     )
