@@ -490,7 +490,8 @@ def cmd_results(args: argparse.Namespace) -> int:
         print(f"results in {o.run_dir}")
         return 0
     print(
-        f"results incomplete ({o.n_missing} trial(s) missing); finish with: soabench results --out {o.run_dir}",
+        f"results incomplete ({o.n_missing} trial(s) missing); finish with: soabench results --out {o.run_dir} "
+        "(and the same options)",
         file=sys.stderr,
     )
     return 1
