@@ -227,6 +227,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, help="process workers (default: every core)")
     p.add_argument("--no-progress", action="store_true", help="no progress report")
 
+    p = sub.add_parser("results", help="regenerate all of results/: study, every scene, summary, KITTI")
+    from soabench.experiment.results_suite import add_arguments as add_results_arguments
+
+    add_results_arguments(p, _csv_list)
+
     p = sub.add_parser("kitti", help="the paper's KITTI protocol (k-fold N_hat, Table I, Figs. 6-8)")
     p.add_argument(
         "--root",
@@ -569,6 +574,12 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     return _report_outcome(outcome, f"soabench sensitivity --main {args.main} --out {{dir}}")
 
 
+def cmd_results(args: argparse.Namespace) -> int:
+    from soabench.experiment.results_suite import cmd_results as run
+
+    return run(args)
+
+
 def cmd_kitti(args: argparse.Namespace) -> int:
     from soabench.kitti.commands import cmd_kitti as run
 
@@ -617,6 +628,7 @@ COMMANDS = {
     "sweep": cmd_sweep,
     "study": cmd_study,
     "sensitivity": cmd_sensitivity,
+    "results": cmd_results,
     "check": cmd_check,
 }
 

@@ -52,9 +52,8 @@ def stale_message(run_dir: Path, diffs: list[str]) -> str:
         f"differ beyond the tolerance (rel {REPRODUCTION_TOLERANCE['rel']:g}, abs {REPRODUCTION_TOLERANCE['abs']:g}):"
         "\n  " + "\n  ".join(diffs[:12]) + ("\n  ..." if len(diffs) > 12 else "") + "\n"
         "generated with / running on: " + ("; ".join(changed) or "the same versions and CPU") + "\n"
-        "regenerate the committed results: remove results/intersection/{main,clutter,births,sensitivity} "
-        f"(an existing part is resumed, not recomputed), then run `{REGENERATE_COMMAND}` and the ablations' "
-        "commands of results/README.md"
+        "regenerate the committed results: remove the stale part folders of results/ (a complete part is kept, "
+        f"not recomputed), then run `{REGENERATE_COMMAND}` (results/README.md)"
     )
 
 

@@ -22,7 +22,7 @@ from typing import Any
 REPRODUCTION_TOLERANCE: dict[str, float] = {"rel": 1e-6, "abs": 1e-9}
 
 #: the command that regenerates the committed results (results/README.md)
-REGENERATE_COMMAND = "soabench study --net intersection --out results/intersection"
+REGENERATE_COMMAND = "soabench results --out results"
 
 
 def cpu_model() -> str:
