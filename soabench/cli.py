@@ -245,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sequences", help="e.g. 0000-0020 or 0,3,5 (default: every labelled sequence)")
     p.add_argument("--folds", type=int, default=7, help="cross-validation folds (default 7; at most one per sequence)")
     p.add_argument("--nhat-sweep", type=_offsets, help="N_hat offsets per sequence, e.g. -10:10 (default: no sweep)")
-    p.add_argument("--models", type=_csv_list("model", BIRTH_MODEL_NAMES), help="default soa,pubm,ubm")
+    p.add_argument("--models", type=_csv_list("model", BIRTH_MODEL_NAMES), help="default soa,pubm,ubm,ubm-ws")
     p.add_argument("--probability", choices=PROBABILITY_MODES, help="probability mode (default static)")
     p.add_argument(
         "--config",

@@ -123,14 +123,14 @@ def test_kitti_protocol_end_to_end_and_resume(exported, tmp_path, capsys):
     assert folds[0]["N_hat"] == pytest.approx(targets("0001") / frames("0001"))
     assert folds[1]["N_hat"] == pytest.approx(targets("0000") / frames("0000"))
     t1 = summary["table1"]
-    assert set(t1) == {"soa", "pubm", "ubm"}
+    assert set(t1) == {"soa", "pubm", "ubm", "ubm-ws"}
     assert t1["soa"]["steps"] == frames("0000") + frames("0001")
     for m in t1.values():
         assert 0 <= m["card_err_mean"] and 0 <= m["ospa_mean"] <= 10.0 and m["ospa_std"] > 0
-    assert set(summary["pairwise"]) == {"pubm", "ubm"}
+    assert set(summary["pairwise"]) == {"pubm", "ubm", "ubm-ws"}
     assert all(v["n"] > 0 and 0 <= v["share"] <= 100 for v in summary["pairwise"].values())
     assert summary["sweep"]["soa"]["offsets"] == [-1, 0]
-    assert len(_rows(run / "sequences.csv")) == 3 * 2 * 3  # (cv + 2 offsets) x 2 sequences x 3 models
+    assert len(_rows(run / "sequences.csv")) == 3 * 2 * 4  # (cv + 2 offsets) x 2 sequences x 4 models
     report = (run / "report.md").read_text()
     assert "6.5565 ± 4.4513" in report and "70.3 %" in report and "not KITTI data" in report
     for name in ("fig6_delay_hist.png", "fig7_components.png", "fig8_nhat_sweep.png"):

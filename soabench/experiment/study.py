@@ -4,7 +4,7 @@ Four parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (defa
 
 * ``main/``: the main protocol (docs/method.md §5.8): six birth models x {static, dynamic}, lambda = 3;
 * ``clutter/``: the clutter sweep lambda in {0.5, 3, 5} with precision curves (paper Fig. 5h);
-* ``births/``: the N_hat sensitivity sweep N_tot = N_true + {-10..10} (clipped at 1) for S-OA, PUBM and UBM;
+* ``births/``: the N_hat sensitivity sweep N_tot = N_true + {-10..10} (clipped at 1) for S-OA, PUBM and both UBMs;
 * ``sensitivity/``: the main protocol again (same trials, duration, seed, models, modes and clutter, read from
   ``main/run.json``) once with the χ² gate off (``gate_off/``) and once scored against visible pedestrians
   (``visible/``), then ``sensitivity.md`` / ``sensitivity.csv``: every headline number under each setting
@@ -31,11 +31,11 @@ from soabench.experiment.runmeta import flatten_config
 from soabench.experiment.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.sensitivity_runs import VARIANTS, run_variants
 from soabench.experiment.store import RunStore, write_text_atomic
+from soabench.experiment.sweep import BIRTHS_MODELS as BIRTH_MODELS  # the N_hat sweep's models
 from soabench.experiment.sweep import SweepOutcome, run_sweep
 
 CLUTTER_VALUES = (0.5, 3.0, 5.0)
 BIRTH_OFFSETS = tuple(range(-10, 11))
-BIRTH_MODELS = ("soa", "pubm", "ubm")
 
 
 @dataclass

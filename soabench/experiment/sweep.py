@@ -4,8 +4,8 @@
   detections are shared across lambda (common random numbers, :mod:`soabench.seeding`), so one run gives the
   precision curves and every metric per lambda.
 * ``births`` (offsets such as -10..10): one run per ``N_tot = max(1, N_true + o)`` (duplicates after clipping
-  dropped), with ``N̂_k = N_tot / K`` and ``K = duration / dt`` scans (register row 24); models S-OA, PUBM and UBM
-  unless ``models`` is given or the config names other than all five. The table reports k̄_delay over all counted
+  dropped), with ``N̂_k = N_tot / K`` and ``K = duration / dt`` scans (register row 24); models S-OA, PUBM, both UBMs
+  unless ``models`` is given or the config names other than all six. The table reports k̄_delay over all counted
   episodes vs N_tot per model and mode, and the std of those means (population, ddof = 0) as in the paper's §V.C.
 
 Layout (``results/<net>/sweep-<kind>-<UTC timestamp>/``)::
@@ -51,7 +51,7 @@ from soabench.experiment.store import read_csv, read_json, write_json_atomic, wr
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births", "occlusion")
-BIRTHS_MODELS = ("soa", "pubm", "ubm")
+BIRTHS_MODELS = ("soa", "pubm", "ubm", "ubm-ws")  # the paper's three (its UBM is ubm-ws) and UBM over the FOV
 N_TRUE = 6
 
 

@@ -60,7 +60,9 @@ def kitti_base_config() -> Config:
     cfg = Config()
     cfg.sensor = dataclasses.replace(cfg.sensor, dt=0.1)
     cfg.metrics = dataclasses.replace(cfg.metrics, ospa_c=10.0, d_gate=2.0)
-    cfg.experiment = dataclasses.replace(cfg.experiment, models=("soa", "pubm", "ubm"), probabilities=("static",))
+    cfg.experiment = dataclasses.replace(
+        cfg.experiment, models=("soa", "pubm", "ubm", "ubm-ws"), probabilities=("static",)
+    )
     return cfg
 
 
