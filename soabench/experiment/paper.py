@@ -195,6 +195,11 @@ def _pct(x: float) -> str:
     return "-" if not math.isfinite(x) else f"{x:.2f}%"
 
 
+def _paper(x: float, nd: int) -> str:
+    """A paper cell: "-" where the paper has no such number (e.g. for UBM clipped to the FOV)."""
+    return "-" if not math.isfinite(x) else f"{x:.{nd}f}"
+
+
 def _p(x: float) -> str:
     if not np.isfinite(x):
         return "n/a"
@@ -218,7 +223,7 @@ def markdown(rows: Sequence[dict], clutter: float = 3.0) -> str:
     for c in comps:
         if c.metric == "wins":
             lines.append(
-                f"| {MODE_LABEL[c.mode]} | {LABEL[c.baseline]} | {_fmt(c.paper, 0)} | {c.ours:.0f} of {c.n} "
+                f"| {MODE_LABEL[c.mode]} | {LABEL[c.baseline]} | {_paper(c.paper, 0)} | {c.ours:.0f} of {c.n} "
                 f"| [{_fmt(c.ci_low, 0)}, {_fmt(c.ci_high, 0)}] | {c.n} | {_p(c.p_value)} |"
             )
     lines.append("")
@@ -229,7 +234,7 @@ def markdown(rows: Sequence[dict], clutter: float = 3.0) -> str:
     lines.append("|---|" + "---:|" * len(models))
     for mode in [m for m in PAPER_SIGMA if any(r["mode"] == m for r in rows)]:
         cells = [
-            f"{_fmt(PAPER_SIGMA[mode].get(m, math.nan), 2)} / {_fmt(sigma_bar(rows, mode, m, clutter), 2)}"
+            f"{_paper(PAPER_SIGMA[mode].get(m, math.nan), 2)} / {_fmt(sigma_bar(rows, mode, m, clutter), 2)}"
             for m in models
         ]
         lines.append(f"| {MODE_LABEL[mode]} | " + " | ".join(cells) + " |")
