@@ -139,3 +139,46 @@ def test_grouped_births_sweep_equals_point_by_point_and_resumes(tmp_path):
     for p in points:
         assert _same(_csvs(tmp_path / "grouped" / "points" / p), ref[p]), p
     assert (tmp_path / "grouped" / "sweep.md").is_file()
+
+
+def _exact(v) -> object:
+    """A comparable exact form: geometries as WKB, arrays as (dtype, shape, bytes), containers element-wise."""
+    import numpy as np
+    import shapely
+
+    if isinstance(v, shapely.Geometry):
+        return shapely.to_wkb(v)
+    if isinstance(v, np.ndarray) and v.dtype != object:
+        return (str(v.dtype), v.shape, v.tobytes())
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_exact(x) for x in v]
+    if dataclasses.is_dataclass(v):
+        return {f.name: _exact(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    return repr(v)
+
+
+def _scan_data(scans) -> object:
+    """Every field of every scan and the truth arrays of the Scans, exactly."""
+    return _exact(scans)
+
+
+def test_sensor_geometry_once_for_every_clutter_rate(intersection):
+    from soabench.scenario import simulate
+    from soabench.seeding import trial_seeds
+    from soabench.sensor import observe
+
+    scene, scenario = intersection
+    cfg = config()
+    seeds = trial_seeds(cfg.experiment.seed, 3)
+    recording = simulate(scene, scenario, seeds, duration=cfg.experiment.duration)
+    geometry: dict = {}
+    for lam in (0.5, 5.0, 0.0):
+        sensor = dataclasses.replace(cfg.sensor, lambda_c=lam)
+        fresh = observe(recording, scene, sensor, seeds.sensor_rngs())
+        reused = observe(recording, scene, sensor, seeds.sensor_rngs(), geometry=geometry)
+        assert _scan_data(fresh) == _scan_data(reused), lam
+    assert len(geometry["steps"]) == len(fresh.scans)
+    # another setting than lambda_c starts the geometry afresh
+    narrow = dataclasses.replace(cfg.sensor, r_max=cfg.sensor.r_max / 2)
+    a = observe(recording, scene, narrow, seeds.sensor_rngs(), geometry=geometry)
+    assert _scan_data(a) == _scan_data(observe(recording, scene, narrow, seeds.sensor_rngs()))

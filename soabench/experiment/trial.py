@@ -5,11 +5,12 @@ Common random numbers (docs/method.md §5.8, docs/development.md): one SUMO run 
 across lambda; every filter run of that lambda consumes the very same Scans, and every filter run re-creates the
 placement generator, so all runs see the same birth-placement stream.
 
-Work done once (docs/development.md): a birth model whose births read only the scan (class attribute
+Work done once (docs/method.md §5.8): a birth model whose births read only the scan (class attribute
 ``mode_free = True``: S-OA, UBM, UBM (workspace), GMBM) is built once per (lambda, model) and called once per scan;
 every probability mode of that lambda reuses the same births (PUBM and ATBM scale by p_D,b or read the previous
-step, so they run per mode). A :class:`TrialShare` carries the SUMO recording, the scans per sensor setting and
-the finished filter runs of one trial index across the run folders of a study or sweep
+step, so they run per mode). The sensor's geometry of each scan (line of sight, O_k, Omega_k) is computed once for
+every lambda. A :class:`TrialShare` carries the SUMO recording, the scans per sensor setting and the finished
+filter runs of one trial index across the run folders of a study or sweep
 (:mod:`soabench.experiment.grouped`), so each is computed once.
 
 The result is a :class:`TrialResult` of plain Python scalars (cheap to pickle, ready to be written as CSV rows).
@@ -113,6 +114,8 @@ class TrialShare:
 
     recordings: dict[tuple, Any] = field(default_factory=dict)
     scans: dict[tuple, Any] = field(default_factory=dict)
+    #: recording key -> the sensor's lambda-independent geometry of every scan (``soabench.sensor.observe``)
+    geometry: dict[tuple, dict] = field(default_factory=dict)
     #: run key -> (row, episodes, steps, estimates) of a finished built-in (model x mode) run
     runs: dict[tuple, tuple] = field(default_factory=dict)
     #: what was computed and what was reused (recording, scans, runs), for tests and benchmarks
@@ -304,7 +307,12 @@ def run_trial(
             scans = share.scans[scans_key]
             share.count("scans_reused")
         else:
-            scans = share.scans[scans_key] = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs())
+            if fn_key[1] == "default":  # the real sensor: its geometry is computed once for every lambda
+                geometry = share.geometry.setdefault(rec_key, {})
+                scans = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs(), geometry=geometry)
+            else:
+                scans = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs())
+            share.scans[scans_key] = scans
             share.count("scans")
         out.timing["sensor"] += time.perf_counter() - t0
         for model in exp.models:
