@@ -9,10 +9,10 @@ In one process, on the same short protocol, one after another:
 3. the study as now: the parts' trials together (SUMO once per trial, the sensor once per clutter rate, each filter
    run once across parts) and mode-free births once per scan.
 
-It prints each wall time, the ratios study / main run (before, after) and checks that both studies wrote the same
-trials.csv, episodes.csv and steps.csv in every folder. Figures are not drawn (``figures=False`` for the parts is not
-exposed by ``run_study``: the reports' figures are included in every wall time). Serial (``--workers 1``) by default
-so that the before/after switch of ``births_once`` reaches the trials. Example::
+It prints each wall time split into trials (the sessions' wall time) and reports (summaries and figures of every
+folder, timed around ``write_report``), the ratios study / main run (before, after) and checks that both studies
+wrote the same trials.csv, episodes.csv and steps.csv in every folder. Serial (``--workers 1``) by default so that
+the before/after switch of ``births_once`` reaches the trials. Example::
 
     nice -n 10 python benchmarks/bench_study.py --trials 4 --duration 30 --births-trials 4
 """
@@ -21,11 +21,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import tempfile
 import time
 from pathlib import Path
 
 from soabench.config import Config
+from soabench.experiment import report as report_module
 from soabench.experiment import trial as trial_module
 from soabench.experiment.runner import run_experiment
 from soabench.experiment.study import run_study
@@ -55,6 +57,41 @@ def timed(fn, *args, **kwargs) -> float:
     return time.perf_counter() - t0
 
 
+def trial_seconds(root: Path) -> float:
+    """Wall time spent running trials under ``root``: the sessions' wall time, a grouped session counted once."""
+    total, seen = 0.0, set()
+    for f in root.rglob("sessions/*.json"):
+        s = json.loads(f.read_text())
+        if "grouped" in str(s.get("executor", "")):
+            if s.get("started") in seen:
+                continue
+            seen.add(s.get("started"))
+        total += float(s.get("wall_s", 0.0))
+    return total
+
+
+class ReportClock:
+    """Seconds spent in ``write_report`` (summaries and figures), summed over the folders (serial runs)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self._orig = report_module.write_report
+
+    def __enter__(self) -> ReportClock:
+        def timed_report(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return self._orig(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - t0
+
+        report_module.write_report = timed_report
+        return self
+
+    def __exit__(self, *exc) -> None:
+        report_module.write_report = self._orig
+
+
 def main(argv=None) -> int:
     a = parse_args(argv)
     cfg = Config()
@@ -64,22 +101,32 @@ def main(argv=None) -> int:
     kw = dict(workers=a.workers, progress=False)
     study_kw = dict(births_trials=a.births_trials, **kw)
 
-    t_main = timed(run_experiment, cfg, a.net, out=root / "main_alone", **kw)
+    with ReportClock() as r_main:
+        t_main = timed(run_experiment, cfg, a.net, out=root / "main_alone", **kw)
     defaults = trial_module.run_trial.__kwdefaults__
     defaults["births_once"] = False  # "before": births per (model, mode); reaches the trials of a serial run only
     try:
-        t_before = timed(run_study, cfg, a.net, out=root / "study_before", grouped=False, **study_kw)
+        with ReportClock() as r_before:
+            t_before = timed(run_study, cfg, a.net, out=root / "study_before", grouped=False, **study_kw)
     finally:
         defaults["births_once"] = True
-    t_after = timed(run_study, cfg, a.net, out=root / "study_after", **study_kw)
+    with ReportClock() as r_after:
+        t_after = timed(run_study, cfg, a.net, out=root / "study_after", **study_kw)
 
     before, after = result_files(root / "study_before"), result_files(root / "study_after")
     same = before == after and len(before) > 0
     print(f"protocol: {a.trials} trials x {a.duration:g} s (N̂ sweep {a.births_trials} trials), workers {a.workers}")
-    print(f"main run alone         {t_main:8.1f} s")
-    print(f"study before           {t_before:8.1f} s   study / main = {t_before / t_main:.2f}")
-    print(f"study after            {t_after:8.1f} s   study / main = {t_after / t_main:.2f}")
-    print(f"speed-up of the study  {t_before / t_after:.2f}x")
+    tr = {k: trial_seconds(root / k) for k in ("main_alone", "study_before", "study_after")}
+    print("                        wall (s)  trials (s)  reports (s)  wall / main  trials / main trials")
+    for name, t, r, k in (
+        ("main run alone", t_main, r_main.seconds, "main_alone"),
+        ("study before", t_before, r_before.seconds, "study_before"),
+        ("study after", t_after, r_after.seconds, "study_after"),
+    ):
+        print(f"{name:22s} {t:9.1f} {tr[k]:11.1f} {r:12.1f} {t / t_main:12.2f} {tr[k] / tr['main_alone']:20.2f}")
+    print(
+        f"speed-up of the study: wall {t_before / t_after:.2f}x, trials {tr['study_before'] / tr['study_after']:.2f}x"
+    )
     print(f"identical results      {same} ({len(after)} CSV files compared)")
     print(f"folders under {root}")
     return 0 if same else 1

@@ -182,3 +182,35 @@ def test_sensor_geometry_once_for_every_clutter_rate(intersection):
     narrow = dataclasses.replace(cfg.sensor, r_max=cfg.sensor.r_max / 2)
     a = observe(recording, scene, narrow, seeds.sensor_rngs(), geometry=geometry)
     assert _scan_data(a) == _scan_data(observe(recording, scene, narrow, seeds.sensor_rngs()))
+
+
+def test_grouped_sweep_fail_fast_then_resume(tmp_path, monkeypatch):
+    """A trial failing in one folder of a group: that folder records the failure, --fail-fast stops the group with
+    every finished record on disk, and the resume gives the folders of a run that never failed."""
+    import soabench.experiment.trial as trial_mod
+
+    cfg = config(models=("soa", "pubm"), probabilities=("static",), trials=3, duration=4.0)
+    kw = dict(workers=1, progress=False, figures=False, n_true=2)
+    real = trial_mod.run_trial
+
+    def failing(trial, config, *args, **kwargs):
+        if trial == 1 and config.birth.N_hat > 0.03:  # trial 1 of the second point (N_hat = 2 / 40)
+            raise RuntimeError("injected")
+        return real(trial, config, *args, **kwargs)
+
+    monkeypatch.setattr(trial_mod, "run_trial", failing)
+    sw = tmp_path / "sw"
+    o = run_sweep("births", (-1, 0), cfg, "intersection", out=sw, fail_fast=True, **kw)
+    assert not o.complete and o.summary_markdown == "" and not (sw / "sweep.md").exists()
+    first, second = sw / "points" / "ntot_001", sw / "points" / "ntot_002"
+    assert sorted(p.name for p in (first / "trials").iterdir()) == ["trial_00000.json", "trial_00001.json"]
+    assert sorted(p.name for p in (second / "trials").iterdir()) == ["trial_00000.json"]
+    assert [p.name for p in (second / "failed").iterdir()] == ["trial_00001.json"]
+    assert "injected" in (second / "failed" / "trial_00001.json").read_text()
+
+    monkeypatch.setattr(trial_mod, "run_trial", real)
+    o2 = run_sweep("births", (), None, "intersection", resume=sw, **kw)
+    assert o2.complete and o2.n_done == 6 and (sw / "sweep.md").is_file()
+    run_sweep("births", (-1, 0), cfg, "intersection", out=tmp_path / "ref", grouped=False, **kw)
+    for p in ("ntot_001", "ntot_002"):
+        assert _csvs(sw / "points" / p) == _csvs(tmp_path / "ref" / "points" / p), p

@@ -121,9 +121,9 @@ def run_study(
         if (births_dir / "sweep.json").is_file():
             trials_key = "experiment.trials" if "births_trials" in explicit else None
             req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
-            births = run_sweep("births", (), None, net, resume=births_dir, requested=req, **exe, **kw)
+            births = run_sweep("births", (), None, net, resume=births_dir, requested=req, grouped=grouped, **exe, **kw)
         else:
-            births = run_sweep("births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, **exe, **kw)
+            births = run_sweep("births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, grouped=grouped, **exe, **kw)
         return main, clutter, births
 
     with FolderLock(root, "study folder"):

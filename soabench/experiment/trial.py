@@ -126,16 +126,22 @@ class TrialShare:
 
 
 class _BirthsOnce:
-    """A mode-free birth model called once per scan; every probability mode's run reads the same births."""
+    """A mode-free birth model called once per scan; every probability mode's run reads the same births.
 
-    def __init__(self, model: Callable[[BirthContext], Any]) -> None:
-        self.model = model
+    The model is built on the first call (a lambda whose runs all come from a :class:`TrialShare` builds none).
+    """
+
+    def __init__(self, build: Callable[[], Callable[[BirthContext], Any]]) -> None:
+        self.build = build
+        self.model: Callable[[BirthContext], Any] | None = None
         self._births: dict[int, Any] = {}
         self._scans: list[Any] = []  # keeps the scans alive: ids are unique while they are held
 
     def __call__(self, ctx: BirthContext) -> Any:
         key = id(ctx.scan)
         if key not in self._births:
+            if self.model is None:
+                self.model = self.build()
             self._births[key] = self.model(ctx)
             self._scans.append(ctx.scan)
         return self._births[key]
@@ -362,7 +368,7 @@ def _births_once(
     cls = birth_factory(model)
     if not getattr(cls, "mode_free", False):
         return None
-    return _BirthsOnce(cls(config.birth, sensor_cfg, scene, seeds.placement_rng()))
+    return _BirthsOnce(lambda: cls(config.birth, sensor_cfg, scene, seeds.placement_rng()))
 
 
 def _replay(cached: tuple, out: TrialResult) -> None:
