@@ -2,7 +2,8 @@
 
 In one process, on the same short protocol, one after another:
 
-1. the main run alone (``run_experiment``, six birth models x {static, dynamic}, λ = 3), the ratio's denominator;
+1. the main run alone (``run_experiment``, six birth models x {static, dynamic}, λ = 3), the ratio's denominator,
+   and once more with births per (model, mode) as before;
 2. the study as before: its parts one after another (the clutter sweep reruns the main run's λ = 3 filter runs, the
    N̂ sweep runs SUMO and the sensor once per point) and births per (model, mode) (``run_study(grouped=False)`` with
    ``run_trial(births_once=False)``);
@@ -106,6 +107,8 @@ def main(argv=None) -> int:
     defaults = trial_module.run_trial.__kwdefaults__
     defaults["births_once"] = False  # "before": births per (model, mode); reaches the trials of a serial run only
     try:
+        with ReportClock() as r_main_before:
+            t_main_before = timed(run_experiment, cfg, a.net, out=root / "main_before", **kw)
         with ReportClock() as r_before:
             t_before = timed(run_study, cfg, a.net, out=root / "study_before", grouped=False, **study_kw)
     finally:
@@ -115,18 +118,19 @@ def main(argv=None) -> int:
 
     before, after = result_files(root / "study_before"), result_files(root / "study_after")
     same = before == after and len(before) > 0
+    same = same and result_files(root / "main_alone") == result_files(root / "main_before")
     print(f"protocol: {a.trials} trials x {a.duration:g} s (N̂ sweep {a.births_trials} trials), workers {a.workers}")
-    tr = {k: trial_seconds(root / k) for k in ("main_alone", "study_before", "study_after")}
+    tr = {k: trial_seconds(root / k) for k in ("main_alone", "main_before", "study_before", "study_after")}
     print("                        wall (s)  trials (s)  reports (s)  wall / main  trials / main trials")
-    for name, t, r, k in (
-        ("main run alone", t_main, r_main.seconds, "main_alone"),
-        ("study before", t_before, r_before.seconds, "study_before"),
-        ("study after", t_after, r_after.seconds, "study_after"),
+    for name, t, r, k, t_ref, k_ref in (
+        ("main run before", t_main_before, r_main_before.seconds, "main_before", t_main_before, "main_before"),
+        ("main run after", t_main, r_main.seconds, "main_alone", t_main, "main_alone"),
+        ("study before", t_before, r_before.seconds, "study_before", t_main_before, "main_before"),
+        ("study after", t_after, r_after.seconds, "study_after", t_main, "main_alone"),
     ):
-        print(f"{name:22s} {t:9.1f} {tr[k]:11.1f} {r:12.1f} {t / t_main:12.2f} {tr[k] / tr['main_alone']:20.2f}")
-    print(
-        f"speed-up of the study: wall {t_before / t_after:.2f}x, trials {tr['study_before'] / tr['study_after']:.2f}x"
-    )
+        print(f"{name:22s} {t:9.1f} {tr[k]:11.1f} {r:12.1f} {t / t_ref:12.2f} {tr[k] / tr[k_ref]:20.2f}")
+    gain = tr["study_before"] / tr["study_after"]
+    print(f"speed-up of the study: wall {t_before / t_after:.2f}x, trials {gain:.2f}x")
     print(f"identical results      {same} ({len(after)} CSV files compared)")
     print(f"folders under {root}")
     return 0 if same else 1
