@@ -19,7 +19,7 @@ import pytest
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
 from soabench.experiment.store import read_csv
-from soabench.experiment.sweep import run_sweep
+from soabench.experiment.sweep import run_sweep, scans_per_run
 from soabench.experiment.trial import ROW_TIME_KEYS, TrialShare, run_trial
 
 MODELS = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
@@ -192,9 +192,10 @@ def test_grouped_sweep_fail_fast_then_resume(tmp_path, monkeypatch):
     cfg = config(models=("soa", "pubm"), probabilities=("static",), trials=3, duration=4.0)
     kw = dict(workers=1, progress=False, figures=False, n_true=2)
     real = trial_mod.run_trial
+    second = 2 / scans_per_run(cfg)  # N_hat of point ntot_002
 
     def failing(trial, config, *args, **kwargs):
-        if trial == 1 and config.birth.N_hat > 0.03:  # trial 1 of the second point (N_hat = 2 / 40)
+        if trial == 1 and config.birth.N_hat == second:
             raise RuntimeError("injected")
         return real(trial, config, *args, **kwargs)
 

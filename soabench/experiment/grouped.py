@@ -49,14 +49,16 @@ def run_group_task(trial: int, group: GroupSpec) -> dict:
     Returns ``{"status": "group", "trial", "records": {folder index: trial record}, "shared": counts}``; a folder's
     failure is its own failure record (the others keep theirs). Folders with a custom trial kind run unshared.
     """
+    from soabench.experiment import registry
     from soabench.experiment.trial import TrialShare, run_trial
 
+    builtin = registry.trial_kind(registry.DEFAULT_TRIAL_KIND) is registry._builtin_trial
     share = TrialShare()
     records: dict[int, dict] = {}
     for i, spec in enumerate(group.members):
         if trial not in group.todo[i]:
             continue
-        if spec.trial_fn is None:  # the built-in trial kind: run_trial, with the share
+        if spec.trial_fn is None and builtin:  # the built-in trial kind: run_trial, with the share
             spec = dataclasses.replace(spec, trial_fn=functools.partial(run_trial, share=share))
         records[i] = run_trial_task(trial, spec)
     return {"status": "group", "trial": int(trial), "records": records, "shared": dict(share.counts)}
