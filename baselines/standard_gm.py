@@ -58,6 +58,8 @@ class StandardGMBirth:
     """
 
     name = "gmbm"
+    #: births read only the scan (not ``ctx.prev`` nor ``ctx.p_D_b``): one call per scan serves every probability mode
+    mode_free = True
 
     def __init__(
         self,

@@ -29,6 +29,8 @@ class UniformBirth:
     """UBM (§3.3). ``UniformBirth(cfg, sensor, scene, rng)(ctx) -> Births``; ``rng`` is unused (deterministic)."""
 
     name = "ubm"
+    #: births read only the scan (not ``ctx.prev`` nor ``ctx.p_D_b``): one call per scan serves every probability mode
+    mode_free = True
 
     def __init__(self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator) -> None:
         cfg.validate()

@@ -387,14 +387,26 @@ def observe(
     scene: SceneMap,
     cfg: SensorConfig,
     rngs: tuple[np.random.Generator, np.random.Generator],
+    geometry: dict | None = None,
 ) -> Scans:
     """Recording -> Scans (§2.3): one scan every ``cfg.dt`` from t = 0, at the recording step with that time.
 
     Per scan: FOV test, line of sight through buildings, parked cars and other vehicles, detection with p_D,
     (range, bearing) + N(0, R) with the bearing relative to the ego heading and wrapped, Poisson clutter, source
     ids, a shuffle of the measurement order (detection rng), O_k and Omega_k. Pure given ``rngs``.
+
+    ``geometry``: a dict that keeps each scan's geometry (ego, truth, FOV and line-of-sight tests, O_k, Omega_k),
+    which does not depend on the clutter rate: the first call fills it, a later call with the same recording, scene
+    and settings other than ``lambda_c`` reuses it (another recording, scene or setting starts it afresh). The scans
+    are the same as without it (docs/method.md §5.8: the detection and clutter streams are drawn as before).
     """
     cfg.validate(recording.step_length)
+    if geometry is not None:
+        key = (id(recording), id(scene), repr(dataclasses.replace(cfg, lambda_c=0.0)))
+        if geometry.get("key") != key:
+            geometry.clear()
+            geometry.update(key=key, recording=recording, scene=scene, steps={})  # held: their ids stay unique
+        geometry = geometry["steps"]
     steps = scan_steps(recording.t, recording.step_length, cfg.dt)
     n_peds = len(recording.ped_ids)
     draws = _draw(rngs, cfg, len(steps), n_peds)
@@ -406,7 +418,7 @@ def observe(
     sources: list[np.ndarray] = []
     for k, idx in enumerate(steps):
         scan, source = _observe_step(
-            recording, int(idx), k, cfg, draws, static_geoms, static_kinds, region, rngs[0], out
+            recording, int(idx), k, cfg, draws, static_geoms, static_kinds, region, rngs[0], out, geometry
         )
         scans.append(scan)
         sources.append(source)
@@ -446,8 +458,44 @@ def _observe_step(
     region: BaseGeometry,
     det_rng: np.random.Generator,
     out: dict[str, np.ndarray],
+    geometry: dict | None = None,
 ) -> tuple[Scan, np.ndarray]:
-    """One scan k at recording step ``idx``; fills row k of the truth arrays in ``out``."""
+    """One scan k at recording step ``idx``; fills row k of the truth arrays in ``out``. ``geometry``: the
+    lambda-independent part of each scan by k, read if present, else computed and stored (:func:`observe`)."""
+    if geometry is not None and k in geometry:
+        ego, xy, present, in_fov, visible, obstacles, occ, omega = geometry[k]
+    else:
+        ego, xy, present, in_fov, visible, obstacles, occ, omega = _scan_geometry(
+            recording, idx, cfg, static_geoms, static_kinds, region
+        )
+        if geometry is not None:
+            geometry[k] = (ego, xy, present, in_fov, visible, obstacles, occ, omega)
+    detected = visible & (draws.u_detect[k] < cfg.p_D)
+
+    r, b = range_bearing(xy[detected], ego)
+    z_targets = np.column_stack([r, b]) + draws.noise[k, detected]
+    z_targets[:, 1] = wrap(z_targets[:, 1])
+    Z = np.concatenate([z_targets, draws.clutter[k]]).reshape(-1, 2)
+    source = np.concatenate([np.flatnonzero(detected), np.full(len(draws.clutter[k]), CLUTTER)]).astype(np.int64)
+    perm = det_rng.permutation(len(Z))
+
+    for name, value in (("truth_xy", xy), ("present", present), ("in_fov", in_fov), ("visible", visible)):
+        out[name][k] = value
+    out["detected"][k] = detected
+    scan = Scan(k, k * float(cfg.dt), ego, Z[perm], obstacles, list(occ), omega)
+    return scan, source[perm]
+
+
+def _scan_geometry(
+    recording: Recording,
+    idx: int,
+    cfg: SensorConfig,
+    static_geoms: np.ndarray,
+    static_kinds: np.ndarray,
+    region: BaseGeometry,
+) -> tuple:
+    """The part of a scan that does not depend on the clutter rate: ego pose, truth, FOV and line-of-sight tests,
+    obstacles O_k, occluders and Omega_k (§2.3)."""
     ego = np.asarray(recording.ego_pose[idx], dtype=float)
     xy = np.asarray(recording.ped_xy[idx], dtype=float).reshape(-1, 2)
     present = np.asarray(recording.ped_present[idx], dtype=bool) & np.isfinite(xy).all(axis=1)
@@ -463,21 +511,7 @@ def _observe_step(
 
     visible = in_fov.copy()
     visible[in_fov] = target_visibility(ego, xy[in_fov], occ, cfg.visibility_points, cfg.visibility_offset)
-    detected = visible & (draws.u_detect[k] < cfg.p_D)
-
-    r, b = range_bearing(xy[detected], ego)
-    z_targets = np.column_stack([r, b]) + draws.noise[k, detected]
-    z_targets[:, 1] = wrap(z_targets[:, 1])
-    Z = np.concatenate([z_targets, draws.clutter[k]]).reshape(-1, 2)
-    source = np.concatenate([np.flatnonzero(detected), np.full(len(draws.clutter[k]), CLUTTER)]).astype(np.int64)
-    perm = det_rng.permutation(len(Z))
-
     obstacles = obstacles_from_geoms(occ, occ_kinds, ego[:2], cfg.r_max)
     inside = occ[shapely.intersects(shapely.convex_hull(occ), ego_pt)] if len(occ) else occ  # no cone: cut as is
     omega = _omega(region, ego, obstacles, cfg, list(inside))
-
-    for name, value in (("truth_xy", xy), ("present", present), ("in_fov", in_fov), ("visible", visible)):
-        out[name][k] = value
-    out["detected"][k] = detected
-    scan = Scan(k, k * float(cfg.dt), ego, Z[perm], obstacles, list(occ), omega)
-    return scan, source[perm]
+    return ego, xy, present, in_fov, visible, obstacles, occ, omega

@@ -250,6 +250,8 @@ class SOABirth:
     """
 
     name = "soa"
+    #: births read only the scan (not ``ctx.prev`` nor ``ctx.p_D_b``): one call per scan serves every probability mode
+    mode_free = True
 
     def __init__(self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator) -> None:
         cfg.validate()

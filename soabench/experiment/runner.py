@@ -168,6 +168,12 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     return record
 
 
+def task_fn(spec: Any) -> Callable[[int, Any], dict]:
+    """What an executor runs per trial: ``spec.task_fn`` if the spec names one (a group of run folders,
+    :mod:`soabench.experiment.grouped`), else :func:`run_trial_task`."""
+    return getattr(spec, "task_fn", None) or run_trial_task
+
+
 # ------------------------------------------------------------------------------------------------ executors
 class SerialExecutor:
     """Trials one after another in this process."""
@@ -177,7 +183,7 @@ class SerialExecutor:
 
     def results(self, spec: TaskSpec, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
         for t in trials:
-            yield t, run_trial_task(t, spec)
+            yield t, task_fn(spec)(t, spec)
 
     def close(self, abort: bool = False) -> None:
         pass
@@ -212,10 +218,10 @@ class PoolExecutor:
                         exhausted = True
                         break
                     try:
-                        fut = self._get_pool().submit(run_trial_task, t, spec)
+                        fut = self._get_pool().submit(task_fn(spec), t, spec)
                     except BrokenProcessPool:  # the pool broke since the last submit: start a fresh one
                         self.close(abort=True)
-                        fut = self._get_pool().submit(run_trial_task, t, spec)
+                        fut = self._get_pool().submit(task_fn(spec), t, spec)
                     pending[fut] = (t, self._generation)
                 done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
                 for fut in sorted(done, key=lambda f: pending[f][0]):
@@ -299,7 +305,7 @@ class DaskExecutor:
         def submit_next() -> None:
             t = next(queue, None)
             if t is not None:
-                f = self.client.submit(run_trial_task, t, spec, key=f"soabench-trial-{t:05d}-{token}", pure=False)
+                f = self.client.submit(task_fn(spec), t, spec, key=f"soabench-trial-{t:05d}-{token}", pure=False)
                 futures[f.key] = (f, t)
                 done_iter.add(f)
 
@@ -445,6 +451,17 @@ def _scenario_info(scenario_cfg: Any) -> Any:
 
 
 # ------------------------------------------------------------------------------------------------ the run
+@dataclass
+class DeferredRun:
+    """A checked run folder whose trials ``todo`` are to be run by :mod:`soabench.experiment.grouped`."""
+
+    store: RunStore
+    spec: TaskSpec
+    todo: frozenset[int]
+    n_trials: int
+    config: Config
+
+
 def run_experiment(
     config: Config | None,
     net: str,
@@ -464,6 +481,8 @@ def run_experiment(
     executor: Any = None,
     figures: bool = True,
     requested: dict[str, Any] | None = None,
+    defer: list | None = None,
+    run_trials: bool = True,
 ) -> RunOutcome:
     """Run (or finish, with ``resume``) the Monte Carlo protocol of ``config`` on ``net``.
 
@@ -490,6 +509,9 @@ def run_experiment(
         requested: with ``resume``, what the caller asked for (dotted keys such as ``experiment.clutter``, ``net``,
             ``polys``, ``scenario``); every value that differs from the stored run is refused, except more
             ``experiment.trials``, which extends the run (see :mod:`~soabench.experiment.runmeta`).
+        defer: a list: create (or check) the folder, append its :class:`DeferredRun` (the trials to run) instead of
+            running them, and return (:mod:`soabench.experiment.grouped` runs several folders' trials together).
+        run_trials: False: run no trial; write the report if every trial was attempted (after a grouped run).
 
     Returns:
         A :class:`RunOutcome`. The summary (Markdown) is written and returned only once every trial was attempted.
@@ -532,7 +554,7 @@ def run_experiment(
             store, config, net, tuple(str(p) for p in polys), scenario, resume is not None, locks,
             workers=workers, scheduler=scheduler, dask_local=dask_local, fail_fast=fail_fast,
             save_estimates=save_estimates, progress=progress, trial_fn=trial_fn, load_fn=load_fn,
-            executor=executor, figures=figures,
+            executor=executor, figures=figures, defer=defer, run_trials=run_trials,
         )  # fmt: skip
     finally:
         for lock in locks:
@@ -558,6 +580,8 @@ def _run_locked(
     load_fn: LoadFn | None,
     executor: Any,
     figures: bool,
+    defer: list | None = None,
+    run_trials: bool = True,
 ) -> RunOutcome:
     """The body of :func:`run_experiment` once the folder is checked (and, for a resume, locked)."""
     plugins.preflight(config)  # a plugin that cannot be imported or configured stops the run before any trial
@@ -572,9 +596,9 @@ def _run_locked(
     done = set(store.done_trials()) if resumed else set()
     foreign = sorted(t for t in done if t >= n_trials)
     require(not foreign, f"{str(store.run_dir)!r} holds trial {foreign[:1]} beyond its {n_trials} trials: foreign")
-    todo = TodoTrials(n_trials, done)
+    todo = TodoTrials(n_trials, done) if run_trials else TodoTrials(0, set())
     # connect to the executor before creating the run folder (an unreachable scheduler leaves nothing behind)
-    own_executor = executor is None and len(todo) > 0
+    own_executor = executor is None and len(todo) > 0 and defer is None
     exe = open_executor(workers, scheduler, dask_local, n_trials=len(todo)) if own_executor else executor
     interrupted = stopped = False
     try:
@@ -599,6 +623,13 @@ def _run_locked(
                     "reproduction_tolerance": REPRODUCTION_TOLERANCE,
                 }
             )
+        if len(todo) and defer is not None:  # run later, together with other folders' trials
+            spec = TaskSpec(
+                config.to_dict(), str(net), polys, scenario, bool(save_estimates), trial_fn, load_fn,
+                plugins.session_import_paths(),
+            )  # fmt: skip
+            defer.append(DeferredRun(store, spec, frozenset(todo), n_trials, config))
+            return RunOutcome(store.run_dir, False, len(done), n_trials - len(done), store.failures(), "")
         if len(todo):
             spec = TaskSpec(
                 config.to_dict(),

@@ -13,6 +13,10 @@ Four parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (defa
 ``comparison.md`` then puts every headline number of the paper (§5.9) beside ours with paired Wilcoxon tests and
 bootstrap intervals (:mod:`soabench.experiment.paper`). Re-running the command on a finished folder re-reports it;
 on an interrupted one it finishes the missing trials.
+
+The three parts run together (:mod:`soabench.experiment.grouped`): trial n runs SUMO once, the sensor once per
+clutter rate and every filter run once for all parts (the clutter sweep's λ = 3 runs are the main run's), then
+writes each part's record into its own folder, so every folder is what running the parts one after another gives.
 """
 
 from __future__ import annotations
@@ -78,6 +82,7 @@ def run_study(
     dask_local: bool = False,
     progress: bool = True,
     explicit: set[str] | None = None,
+    grouped: bool = True,
 ) -> StudyOutcome:
     """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
 
@@ -87,6 +92,7 @@ def run_study(
     ``explicit``: the dotted config keys the user asked for (command-line flags, config file keys; ``trials`` of
     a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
     refuses differences, except more trials (see :mod:`~soabench.experiment.runmeta`); None compares nothing.
+    ``grouped``: False runs the parts one after another (the same results, slower; for benchmarks).
     """
     root = resolve(out if out is not None else Path("results") / net_name(net))
     check_writable_target(root, "study folder")
@@ -105,32 +111,50 @@ def run_study(
         return {k: flat[k] for k in keys if k in flat}
 
     exe = dict(workers=workers, scheduler=scheduler, dask_local=dask_local, progress=progress)
+    main_dir, clutter_dir, births_dir = root / "main", root / "clutter", root / "births"
+
+    def parts(**kw) -> tuple[RunOutcome, SweepOutcome, SweepOutcome]:
+        """The three parts (each created, checked and resumed as usual; ``kw``: defer or run_trials)."""
+        if (main_dir / "run.json").is_file():
+            req = requested(main_cfg, "experiment.trials")
+            main = run_experiment(None, net, resume=main_dir, requested=req, **exe, **kw)
+        else:
+            main = run_experiment(main_cfg, net, out=main_dir, **exe, **kw)
+        if (clutter_dir / "sweep.json").is_file():
+            trials_key = "experiment.trials" if "sweep_trials" in explicit else None
+            if sweep_trials is None and "experiment.trials" in explicit:
+                trials_key = "experiment.trials"  # the clutter sweep follows --trials by default
+            req = requested(clutter_cfg, trials_key, skip=("experiment.clutter",))
+            clutter = run_sweep("clutter", (), None, net, resume=clutter_dir, requested=req, **exe, **kw)
+        else:
+            clutter = run_sweep("clutter", CLUTTER_VALUES, clutter_cfg, net, out=clutter_dir, **exe, **kw)
+        if (births_dir / "sweep.json").is_file():
+            trials_key = "experiment.trials" if "births_trials" in explicit else None
+            req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
+            births = run_sweep("births", (), None, net, resume=births_dir, requested=req, grouped=grouped, **exe, **kw)
+        else:
+            births = run_sweep("births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, grouped=grouped, **exe, **kw)
+        return main, clutter, births
+
     with FolderLock(root, "study folder"):
         try:
-            main_dir = root / "main"
-            if (main_dir / "run.json").is_file():
-                req = requested(main_cfg, "experiment.trials")
-                main = run_experiment(None, net, resume=main_dir, requested=req, **exe)
-            else:
-                main = run_experiment(main_cfg, net, out=main_dir, **exe)
+            if grouped:
+                deferred: list = []
+                parts(defer=deferred)
+                from soabench.experiment.grouped import group_trials, run_group
+                from soabench.experiment.runner import open_executor
 
-            clutter_dir = root / "clutter"
-            if (clutter_dir / "sweep.json").is_file():
-                trials_key = "experiment.trials" if "sweep_trials" in explicit else None
-                if sweep_trials is None and "experiment.trials" in explicit:
-                    trials_key = "experiment.trials"  # the clutter sweep follows --trials by default
-                req = requested(clutter_cfg, trials_key, skip=("experiment.clutter",))
-                clutter = run_sweep("clutter", (), None, net, resume=clutter_dir, requested=req, **exe)
+                if deferred:
+                    pool = open_executor(workers, scheduler, dask_local, n_trials=len(group_trials(deferred)))
+                    aborted = True
+                    try:
+                        run_group(deferred, pool, progress=progress, label=root.name)
+                        aborted = False
+                    finally:
+                        pool.close(abort=aborted)
+                main, clutter, births = parts(run_trials=False)  # the reports of the parts that attempted every trial
             else:
-                clutter = run_sweep("clutter", CLUTTER_VALUES, clutter_cfg, net, out=clutter_dir, **exe)
-
-            births_dir = root / "births"
-            if (births_dir / "sweep.json").is_file():
-                trials_key = "experiment.trials" if "births_trials" in explicit else None
-                req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
-                births = run_sweep("births", (), None, net, resume=births_dir, requested=req, **exe)
-            else:
-                births = run_sweep("births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, **exe)
+                main, clutter, births = parts()
 
             follow = sensitivity_trials is None and "experiment.trials" in explicit  # like the clutter sweep
             sensitivity = run_variants(

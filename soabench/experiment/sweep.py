@@ -17,6 +17,10 @@ Layout (``results/<net>/sweep-<kind>-<UTC timestamp>/``)::
     sweep_<kind>.png        the sweep figure
 
 ``run_sweep(..., resume=SWEEP_DIR)`` resumes every unfinished point and starts the ones never started.
+
+An N̂ sweep with the built-in trial kind runs its points together (:mod:`soabench.experiment.grouped`): trial n
+runs SUMO and the sensor once and every N_tot point's filters on them, then writes each point's record into its
+own folder; the results are those of running the points one after another.
 """
 
 from __future__ import annotations
@@ -129,6 +133,9 @@ def run_sweep(
     n_true: int = N_TRUE,
     figures: bool = True,
     requested: dict[str, Any] | None = None,
+    defer: list | None = None,
+    run_trials: bool = True,
+    grouped: bool = True,
 ) -> SweepOutcome:
     """Run (or resume) a ``clutter`` or ``births`` sweep; each point is its own run folder under ``points/``.
 
@@ -137,6 +144,9 @@ def run_sweep(
     The folder is resolved, checked and locked like a run folder; on ``resume``, every value of ``sweep.json`` is
     validated and ``requested`` (dotted config keys, ``net``, ``polys``, ``scenario``, ``values``, ``kind``) is
     compared with it: differences are refused except more ``experiment.trials``, which extends every point.
+    ``defer`` and ``run_trials`` are those of :func:`~soabench.experiment.runner.run_experiment`, for every point.
+    ``grouped``: an N̂ sweep runs its points' trials together (module docstring); False runs point after point
+    (the same results, slower; for benchmarks).
     """
     locks: list[FolderLock] = []
     try:
@@ -199,6 +209,7 @@ def run_sweep(
             sweep_dir, kind, points, net, polys, scenario, more,
             workers=workers, scheduler=scheduler, dask_local=dask_local, fail_fast=fail_fast,
             save_estimates=save_estimates, progress=progress, trial_fn=trial_fn, load_fn=load_fn, figures=figures,
+            defer=defer, run_trials=run_trials, grouped=grouped,
         )  # fmt: skip
     finally:
         for lock in locks:
@@ -223,12 +234,40 @@ def _run_points(
     trial_fn: TrialFn | None,
     load_fn: LoadFn | None,
     figures: bool,
+    defer: list | None = None,
+    run_trials: bool = True,
+    grouped: bool = True,
 ) -> SweepOutcome:
-    """The points of a checked, locked sweep folder, one after another on one executor."""
+    """The points of a checked, locked sweep folder, one after another on one executor, or together
+    (:mod:`soabench.experiment.grouped`): an N̂ sweep of the built-in trial kind, or any sweep given ``defer``."""
     hint = f"finish with: soabench sweep {kind} --resume {sweep_dir}"
     n_trials_total = sum(int(p["config"]["experiment"]["trials"]) for p in points)
+    grouped = grouped and defer is None and run_trials and kind == "births" and trial_fn is None and len(points) > 1
+    if grouped:
+        deferred: list = []
+        _run_points(
+            sweep_dir, kind, points, net, polys, scenario, more, workers=workers, scheduler=scheduler,
+            dask_local=dask_local, fail_fast=fail_fast, save_estimates=save_estimates, progress=progress,
+            trial_fn=trial_fn, load_fn=load_fn, figures=figures, defer=deferred,
+        )  # fmt: skip
+        if deferred:
+            from soabench.experiment.grouped import group_trials, run_group
+
+            exe = open_executor(workers, scheduler, dask_local, n_trials=len(group_trials(deferred)))
+            aborted = True
+            try:
+                stopped, _ = run_group(deferred, exe, fail_fast=fail_fast, progress=progress, label=sweep_dir.name)
+                aborted = stopped
+            except KeyboardInterrupt:
+                raise Interrupted(f"interrupted: sweep {sweep_dir} is incomplete; {hint}") from None
+            finally:
+                exe.close(abort=aborted)
+            if stopped:
+                return _sweep_outcome(sweep_dir, points, [_stopped_outcome(d) for d in deferred])
+        more, run_trials = None, False  # every trial is attempted: the points' reports and the sweep's
+    deferring = defer is not None or not run_trials
     outcomes: list[RunOutcome] = []
-    exe = open_executor(workers, scheduler, dask_local, n_trials=n_trials_total)
+    exe = None if deferring else open_executor(workers, scheduler, dask_local, n_trials=n_trials_total)
     stopped = False
     aborted = True  # until the loop ends normally (Ctrl-C, errors): terminate the workers on the way out
     try:
@@ -242,6 +281,8 @@ def _run_points(
                 load_fn=load_fn,
                 executor=exe,
                 figures=figures,
+                defer=defer,
+                run_trials=run_trials,
             )
             sc = p.get("scenario", scenario)  # occlusion points carry their own scenario
             if (pdir / "run.json").is_file():
@@ -250,7 +291,7 @@ def _run_points(
             else:
                 o = run_experiment(Config.from_dict(p["config"]), net, polys, sc, out=pdir, **kwargs)
             outcomes.append(o)
-            if not o.summary_markdown:  # the point did not attempt every trial (--fail-fast stopped it)
+            if not o.summary_markdown and defer is None:  # the point did not attempt every trial (--fail-fast)
                 stopped = True
                 break
         aborted = stopped
@@ -258,8 +299,10 @@ def _run_points(
         done = sum(o.n_done for o in outcomes)
         raise Interrupted(f"interrupted: sweep {sweep_dir} is incomplete ({done}+ trials on disk); {hint}") from None
     finally:
-        exe.close(abort=aborted)
-
+        if exe is not None:
+            exe.close(abort=aborted)
+    if defer is not None:
+        return _sweep_outcome(sweep_dir, points, outcomes)
     failures = [{"point": p["name"], **f} for p, o in zip(points, outcomes, strict=False) for f in o.failures]
     n_done = sum(o.n_done for o in outcomes)
     n_missing = n_trials_total - n_done
@@ -271,6 +314,20 @@ def _run_points(
     except KeyboardInterrupt:
         raise Interrupted(f"interrupted while writing the sweep report of {sweep_dir}; {hint}") from None
     return outcome
+
+
+def _stopped_outcome(d: Any) -> RunOutcome:
+    """The outcome of a deferred point after a group stopped by ``--fail-fast``."""
+    n_done = len(d.store.done_trials())
+    return RunOutcome(d.store.run_dir, False, n_done, d.n_trials - n_done, d.store.failures())
+
+
+def _sweep_outcome(sweep_dir: Path, points: list[dict], outcomes: list[RunOutcome]) -> SweepOutcome:
+    """A sweep outcome without a report (its points are deferred or were stopped)."""
+    n_total = sum(int(p["config"]["experiment"]["trials"]) for p in points)
+    n_done = sum(o.n_done for o in outcomes)
+    failures = [{"point": p["name"], **f} for p, o in zip(points, outcomes, strict=False) for f in o.failures]
+    return SweepOutcome(sweep_dir, False, n_done, n_total - n_done, failures, "", outcomes)
 
 
 # ------------------------------------------------------------------------------------------------ sweep report

@@ -5,6 +5,14 @@ Common random numbers (docs/method.md §5.8, docs/development.md): one SUMO run 
 across lambda; every filter run of that lambda consumes the very same Scans, and every filter run re-creates the
 placement generator, so all runs see the same birth-placement stream.
 
+Work done once (docs/method.md §5.8): a birth model whose births read only the scan (class attribute
+``mode_free = True``: S-OA, UBM, UBM (workspace), GMBM) is built once per (lambda, model) and called once per scan;
+every probability mode of that lambda reuses the same births (PUBM and ATBM scale by p_D,b or read the previous
+step, so they run per mode). The sensor's geometry of each scan (line of sight, O_k, Omega_k) is computed once for
+every lambda. A :class:`TrialShare` carries the SUMO recording, the scans per sensor setting and the finished
+filter runs of one trial index across the run folders of a study or sweep
+(:mod:`soabench.experiment.grouped`), so each is computed once.
+
 The result is a :class:`TrialResult` of plain Python scalars (cheap to pickle, ready to be written as CSV rows).
 Its schemas are the module constants :data:`ROW_KEYS`, :data:`EPISODE_KEYS`, :data:`STEP_KEYS`,
 :data:`ESTIMATE_KEYS` and :data:`TIMING_KEYS`.
@@ -13,6 +21,7 @@ Its schemas are the module constants :data:`ROW_KEYS`, :data:`EPISODE_KEYS`, :da
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -94,8 +103,56 @@ class RunKey:
         return {"trial": self.trial, "clutter": self.clutter, "model": self.model, "mode": self.mode}
 
 
-# ---------------------------------------------------------------------------------------------------------------------
-# probability modes (§4.6)
+@dataclass
+class TrialShare:
+    """Work of one trial index shared by several configs (the run folders of a study or a sweep).
+
+    A config's trial reads the recording, the scans and the finished filter runs from here when an earlier config
+    of the same trial index computed them with identical inputs; the keys hold every input the value depends on
+    (seed, trial, duration; the sensor setting; the full config except ``experiment``), so a hit is bit-identical
+    to recomputing it (common random numbers, :mod:`soabench.seeding`).
+    """
+
+    recordings: dict[tuple, Any] = field(default_factory=dict)
+    scans: dict[tuple, Any] = field(default_factory=dict)
+    #: recording key -> the sensor's lambda-independent geometry of every scan (``soabench.sensor.observe``)
+    geometry: dict[tuple, dict] = field(default_factory=dict)
+    #: run key -> (row, episodes, steps, estimates) of a finished built-in (model x mode) run
+    runs: dict[tuple, tuple] = field(default_factory=dict)
+    #: what was computed and what was reused (recording, scans, runs), for tests and benchmarks
+    counts: dict[str, int] = field(default_factory=dict)
+
+    def count(self, what: str) -> None:
+        self.counts[what] = self.counts.get(what, 0) + 1
+
+
+class _BirthsOnce:
+    """A mode-free birth model called once per scan; every probability mode's run reads the same births.
+
+    The model is built on the first call (a lambda whose runs all come from a :class:`TrialShare` builds none).
+    """
+
+    def __init__(self, build: Callable[[], Callable[[BirthContext], Any]]) -> None:
+        self.build = build
+        self.model: Callable[[BirthContext], Any] | None = None
+        self._births: dict[int, Any] = {}
+        self._scans: list[Any] = []  # keeps the scans alive: ids are unique while they are held
+
+    def __call__(self, ctx: BirthContext) -> Any:
+        key = id(ctx.scan)
+        if key not in self._births:
+            if self.model is None:
+                self.model = self.build()
+            self._births[key] = self.model(ctx)
+            self._scans.append(ctx.scan)
+        return self._births[key]
+
+
+def _config_key(config: Config) -> str:
+    """Every config section a filter run depends on (all but ``experiment``), as canonical text."""
+    d = config.to_dict()
+    d.pop("experiment", None)
+    return json.dumps(d, sort_keys=True, default=repr)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -211,6 +268,8 @@ def run_trial(
     observe_fn: Callable[..., Scans] | None = None,
     filter_cls: type | None = None,
     birth_factory: Callable[[str], type] | None = None,
+    share: TrialShare | None = None,
+    births_once: bool = True,
 ) -> TrialResult:
     """Trial ``trial`` of the protocol (§5.8) with ``config.experiment`` models, probabilities, clutter, seed, duration.
 
@@ -219,8 +278,14 @@ def run_trial(
     ``birth_factory(model)(birth_cfg, sensor_cfg, scene, seeds.placement_rng())`` and a fresh
     ``filter_cls(filter_cfg, sensor_cfg, mode)``, then :func:`soabench.metrics.evaluate`. The keyword-only
     callables default to the real pipeline; tests inject fakes through them.
+
+    ``births_once``: a mode-free birth model is called once per scan for every probability mode (module docstring);
+    False builds one per (model, mode) as before (the results are the same; tests compare both). ``share``: a
+    :class:`TrialShare` to read and fill (the runs of a study or sweep); None computes everything here.
     """
     require(isinstance(trial, int) and trial >= 0, f"trial = {trial!r} must be an integer >= 0")
+    # the injected callables are part of the share keys; the defaults are one key whatever object builds them
+    fn_key = tuple("default" if f is None else f for f in (simulate_fn, observe_fn, filter_cls, birth_factory))
     simulate_fn = simulate_fn or _default_simulate()
     observe_fn = observe_fn or _default_observe()
     filter_cls = filter_cls or _default_filter_cls()
@@ -229,24 +294,92 @@ def run_trial(
     seeds = trial_seeds(exp.seed, trial)
     out = TrialResult(trial, seeds.base_seed, seeds.sumo_seed, estimates=[] if save_estimates else None)
 
+    share = share if share is not None else TrialShare()
+    rec_key = (seeds.base_seed, trial, float(exp.duration), id(scene), id(scenario), fn_key[0])
     t0 = time.perf_counter()
-    recording = simulate_fn(scene, scenario, seeds, duration=exp.duration)
+    if rec_key in share.recordings:
+        recording = share.recordings[rec_key]
+        share.count("recording_reused")
+    else:
+        recording = share.recordings[rec_key] = simulate_fn(scene, scenario, seeds, duration=exp.duration)
+        share.count("recording")
     out.timing["sumo"] = time.perf_counter() - t0
     out.timing["sensor"] = 0.0
+    cfg_key = _config_key(config)
     for lam in exp.clutter:
         sensor_cfg = dataclasses.replace(config.sensor, lambda_c=float(lam))
+        scans_key = (rec_key, repr(sensor_cfg), fn_key[1])
         t0 = time.perf_counter()
-        scans = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs())
+        if scans_key in share.scans:
+            scans = share.scans[scans_key]
+            share.count("scans_reused")
+        else:
+            if fn_key[1] == "default":  # the real sensor: its geometry is computed once for every lambda
+                geometry = share.geometry.setdefault(rec_key, {})
+                scans = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs(), geometry=geometry)
+            else:
+                scans = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs())
+            share.scans[scans_key] = scans
+            share.count("scans")
         out.timing["sensor"] += time.perf_counter() - t0
         for model in exp.models:
+            births = _births_once(model, config, sensor_cfg, scene, seeds, birth_factory) if births_once else None
             for mode in exp.probabilities:
                 key = RunKey(trial, float(lam), model, mode)
-                _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out)
+                run_key = (scans_key, cfg_key, model, mode, save_estimates, *fn_key[2:])
+                cached = share.runs.get(run_key)
+                if cached is not None:
+                    _replay(cached, out)
+                    share.count("runs_reused")
+                    continue
+                n = (len(out.rows), len(out.episodes), len(out.steps), len(out.estimates or ()), len(out.failures))
+                _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out, births)
+                share.count("runs")
+                if len(out.failures) == n[4] and len(out.rows) == n[0] + 1:  # a finished built-in run: reusable
+                    share.runs[run_key] = (
+                        out.rows[n[0]],
+                        out.episodes[n[1] :],
+                        out.steps[n[2] :],
+                        None if out.estimates is None else out.estimates[n[3] :],
+                    )
         for tracker in exp.trackers:
             for mode in exp.probabilities:
                 key = RunKey(trial, float(lam), tracker, mode)
                 _run_one_tracker(key, config, sensor_cfg, scene, scans, seeds, out)
     return out
+
+
+def _births_once(
+    model: str,
+    config: Config,
+    sensor_cfg: SensorConfig,
+    scene: SceneMap,
+    seeds: TrialSeeds,
+    birth_factory: Callable[[str], type],
+) -> _BirthsOnce | None:
+    """One birth model for every probability mode of a lambda, if it is a built-in whose births read only the scan.
+
+    It gets a fresh placement generator like every per-mode model would (:mod:`soabench.seeding`), so its births
+    are those each mode's own model would draw.
+    """
+    from soabench import plugins
+
+    if not plugins.is_builtin_birth(model):
+        return None
+    cls = birth_factory(model)
+    if not getattr(cls, "mode_free", False):
+        return None
+    return _BirthsOnce(lambda: cls(config.birth, sensor_cfg, scene, seeds.placement_rng()))
+
+
+def _replay(cached: tuple, out: TrialResult) -> None:
+    """Append a finished run's row, episodes, steps (and estimates) from a :class:`TrialShare` to ``out``."""
+    row, episodes, steps, estimates = cached
+    out.rows.append(dict(row))
+    out.episodes.extend(dict(e) for e in episodes)
+    out.steps.extend(dict(s) for s in steps)
+    if out.estimates is not None and estimates is not None:
+        out.estimates.extend(dict(e) for e in estimates)
 
 
 def _run_one(
@@ -259,8 +392,11 @@ def _run_one(
     filter_cls: type,
     birth_factory: Callable[[str], type],
     out: TrialResult,
+    births: _BirthsOnce | None = None,
 ) -> None:
     """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``.
+
+    ``births``: the model's births shared by every probability mode (:func:`_births_once`); None builds the model.
 
     A built-in birth model runs unguarded (an exception fails the trial: a bug of soabench). A plugin is checked at
     every scan (:mod:`soabench.experiment.guard`); if it fails, the run is recorded in ``out.failures`` and the
@@ -271,7 +407,11 @@ def _run_one(
 
     filter_cfg, filter_mode, p_D_b = filter_config_for_mode(config.filter, key.mode)
     if plugins.is_builtin_birth(key.model):
-        birth_model = birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
+        birth_model = (
+            births
+            if births is not None
+            else birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
+        )
         filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
         run = run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
     else:

@@ -1,0 +1,143 @@
+"""Wall time of ``soabench study`` relative to its main run, with and without the work done once (issue 19 item 3).
+
+In one process, on the same short protocol, one after another:
+
+1. the main run alone (``run_experiment``, six birth models x {static, dynamic}, λ = 3), the ratio's denominator,
+   and once more with births per (model, mode) as before;
+2. the study as before: its parts one after another (the clutter sweep reruns the main run's λ = 3 filter runs, the
+   N̂ sweep runs SUMO and the sensor once per point) and births per (model, mode) (``run_study(grouped=False)`` with
+   ``run_trial(births_once=False)``);
+3. the study as now: the parts' trials together (SUMO once per trial, the sensor once per clutter rate, each filter
+   run once across parts) and mode-free births once per scan.
+
+It prints each wall time split into trials (the sessions' wall time) and reports (summaries and figures of every
+folder, timed around ``write_report``), the ratios study / main run (before, after) and checks that both studies
+wrote the same trials.csv, episodes.csv and steps.csv in every folder. Serial (``--workers 1``) by default so that
+the before/after switch of ``births_once`` reaches the trials. Example::
+
+    nice -n 10 python benchmarks/bench_study.py --trials 4 --duration 30 --births-trials 4
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import tempfile
+import time
+from pathlib import Path
+
+from soabench.config import Config
+from soabench.experiment import report as report_module
+from soabench.experiment import trial as trial_module
+from soabench.experiment.runner import run_experiment
+from soabench.experiment.study import run_study
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--net", default="intersection")
+    p.add_argument("--trials", type=int, default=4)
+    p.add_argument("--duration", type=float, default=30.0)
+    p.add_argument("--births-trials", type=int, default=4)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--out", type=Path, default=None, help="folder for the three runs (default: a temporary one)")
+    return p.parse_args(argv)
+
+
+def result_files(root: Path) -> dict[str, str]:
+    """Every trials/episodes/steps CSV under ``root`` (they hold no wall-clock column), by relative path."""
+    names = ("trials.csv", "episodes.csv", "steps.csv")
+    return {str(p.relative_to(root)): p.read_text() for p in sorted(root.rglob("*.csv")) if p.name in names}
+
+
+def timed(fn, *args, **kwargs) -> float:
+    t0 = time.perf_counter()
+    fn(*args, **kwargs)
+    return time.perf_counter() - t0
+
+
+def trial_seconds(root: Path) -> float:
+    """Wall time spent running trials under ``root``: the sessions' wall time, a grouped session counted once."""
+    total, seen = 0.0, set()
+    for f in root.rglob("sessions/*.json"):
+        s = json.loads(f.read_text())
+        if "grouped" in str(s.get("executor", "")):
+            if s.get("started") in seen:
+                continue
+            seen.add(s.get("started"))
+        total += float(s.get("wall_s", 0.0))
+    return total
+
+
+class ReportClock:
+    """Seconds spent in ``write_report`` (summaries and figures), summed over the folders (serial runs)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self._orig = report_module.write_report
+
+    def __enter__(self) -> ReportClock:
+        def timed_report(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return self._orig(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - t0
+
+        report_module.write_report = timed_report
+        return self
+
+    def __exit__(self, *exc) -> None:
+        report_module.write_report = self._orig
+
+
+def main(argv=None) -> int:
+    a = parse_args(argv)
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(cfg.experiment, trials=a.trials, duration=a.duration, seed=a.seed)
+    cfg.validate()
+    root = Path(a.out) if a.out else Path(tempfile.mkdtemp(prefix="bench_study_"))
+    kw = dict(workers=a.workers, progress=False)
+    study_kw = dict(births_trials=a.births_trials, **kw)
+
+    warm = Config.from_dict(cfg.to_dict())  # imports, scene, compiled kernels: paid here, by no measured run
+    warm.experiment = dataclasses.replace(warm.experiment, trials=1)
+    run_experiment(warm, a.net, out=root / "warm_up", figures=False, **kw)
+    with ReportClock() as r_main:
+        t_main = timed(run_experiment, cfg, a.net, out=root / "main_alone", **kw)
+    defaults = trial_module.run_trial.__kwdefaults__
+    defaults["births_once"] = False  # "before": births per (model, mode); reaches the trials of a serial run only
+    try:
+        with ReportClock() as r_main_before:
+            t_main_before = timed(run_experiment, cfg, a.net, out=root / "main_before", **kw)
+        with ReportClock() as r_before:
+            t_before = timed(run_study, cfg, a.net, out=root / "study_before", grouped=False, **study_kw)
+    finally:
+        defaults["births_once"] = True
+    with ReportClock() as r_after:
+        t_after = timed(run_study, cfg, a.net, out=root / "study_after", **study_kw)
+
+    before, after = result_files(root / "study_before"), result_files(root / "study_after")
+    same = before == after and len(before) > 0
+    same = same and result_files(root / "main_alone") == result_files(root / "main_before")
+    print(f"protocol: {a.trials} trials x {a.duration:g} s (N̂ sweep {a.births_trials} trials), workers {a.workers}")
+    tr = {k: trial_seconds(root / k) for k in ("main_alone", "main_before", "study_before", "study_after")}
+    print("                        wall (s)  trials (s)  reports (s)  wall / main  trials / main trials")
+    for name, t, r, k, t_ref, k_ref in (
+        ("main run before", t_main_before, r_main_before.seconds, "main_before", t_main_before, "main_before"),
+        ("main run after", t_main, r_main.seconds, "main_alone", t_main, "main_alone"),
+        ("study before", t_before, r_before.seconds, "study_before", t_main_before, "main_before"),
+        ("study after", t_after, r_after.seconds, "study_after", t_main, "main_alone"),
+    ):
+        print(f"{name:22s} {t:9.1f} {tr[k]:11.1f} {r:12.1f} {t / t_ref:12.2f} {tr[k] / tr[k_ref]:20.2f}")
+    gain = tr["study_before"] / tr["study_after"]
+    print(f"speed-up of the study: wall {t_before / t_after:.2f}x, trials {gain:.2f}x")
+    print(f"identical results      {same} ({len(after)} CSV files compared)")
+    print(f"folders under {root}")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
