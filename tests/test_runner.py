@@ -217,7 +217,7 @@ def test_births_sweep_points():
     assert n_tots == list(range(1, 17))  # N_true = 6, clipped at 1, duplicates dropped
     K = 50
     assert all(math.isclose(p["config"]["birth"]["N_hat"], p["value"] / K) for p in pts)
-    assert all(p["config"]["experiment"]["models"] == ["soa", "pubm", "ubm"] for p in pts)
+    assert all(p["config"]["experiment"]["models"] == ["soa", "pubm", "ubm", "ubm-ws"] for p in pts)
     (c,) = sweep_points("clutter", (0.5, 3, 5), cfg)
     assert c["config"]["experiment"]["clutter"] == [0.5, 3.0, 5.0]
     with pytest.raises(SoabenchError):
