@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import os
 import shutil
 
 import numpy as np
@@ -133,6 +134,9 @@ def test_kitti_protocol_end_to_end_and_resume(exported, tmp_path, capsys):
     assert len(_rows(run / "sequences.csv")) == 3 * 2 * 4  # (cv + 2 offsets) x 2 sequences x 4 models
     report = (run / "report.md").read_text()
     assert "6.5565 ± 4.4513" in report and "70.3 %" in report and "not KITTI data" in report
+    # data paths relative to the report (a committed report reads the same on every machine)
+    rel = os.path.relpath(exported.resolve(), run.resolve())
+    assert f"Data: `{rel}`" in report and str(exported) not in report
     for name in ("fig6_delay_hist.png", "fig7_components.png", "fig8_nhat_sweep.png"):
         assert (run / "figures" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -274,18 +275,28 @@ def write_outputs(
         "figures": figs,
     }
     write_json_atomic(out / "summary.json", summary)
-    md = _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, stationary, infos)
+    md = _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, stationary, infos, out)
     write_text_atomic(out / "report.md", md)
     return md
 
 
-def _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, stationary, infos) -> str:
+def _shown(path, out: Path) -> str:
+    """A data path as the report shows it: relative to the report's folder where it lies beside it (a report
+    committed with its export reads the same on every machine), else as given."""
+    try:
+        return os.path.relpath(Path(path).resolve(), Path(out).resolve())
+    except ValueError:  # another drive (Windows)
+        return str(path)
+
+
+def _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, stationary, infos, out) -> str:
     m = spec.config.metrics
+    det = _shown(spec.detections, out) if spec.detections else "(root)/detections"
     L = [
         "# KITTI protocol (paper §V)",
         "",
-        f"Data: `{spec.root}`, detections `{spec.detections or '(root)/detections'}`"
-        + (f", semantics `{spec.semantics}`" if spec.semantics else ", no semantics")
+        f"Data: `{_shown(spec.root, out)}`, detections `{det}`"
+        + (f", semantics `{_shown(spec.semantics, out)}`" if spec.semantics else ", no semantics")
         + ".",
         f"{len(infos)} sequences in {len(folds)} folds; probability mode `{spec.config.experiment.probabilities[0]}`; "
         f"OSPA c = {m.ospa_c:g} m, p = {m.ospa_p:g}; delay gate {m.d_gate:g} m; "
