@@ -101,6 +101,12 @@ def model_label(name: str) -> str:
     return LABEL.get(name, name)
 
 
+def tick_label(name: str) -> str:
+    """A model's display name for a category axis: a qualifier on its own line ("UBM (FOV)" -> "UBM\n(FOV)"), so
+    that six neighbouring labels do not run into each other."""
+    return model_label(name).replace(" (", "\n(")
+
+
 def model_style(name: str) -> Style:
     """Colour and marker of a birth model, the same in every figure."""
     if name in MODEL_STYLES:

@@ -92,7 +92,7 @@ def _bars(ax, slots: list[str], modes: list[str], values, models_for_color: list
             if v.size:
                 x = i + off + rng.uniform(-0.25, 0.25, v.size) * width
                 ax.plot(x, v, ".", color=st.color, mec="k", mew=0.2, ms=2.5, alpha=0.8, zorder=3)
-    ax.set_xticks(np.arange(len(slots)), [ps.model_label(s) for s in slots])
+    ax.set_xticks(np.arange(len(slots)), [ps.tick_label(s) for s in slots])
     ax.grid(axis="x", visible=False)
 
 
