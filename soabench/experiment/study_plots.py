@@ -144,7 +144,7 @@ def key_figure(main_rows: Sequence[Mapping], clutter_rows: Sequence[Mapping], cl
                     error_kw={"elinewidth": 0.8, "capsize": 2},
                 )
         for ax in (ax_delay, ax_card):
-            ax.set_xticks(x, [ps.tick_label(m) for m in models])
+            ax.set_xticks(x, [ps.model_label(m) for m in models], rotation=30, ha="right", rotation_mode="anchor")
             ax.grid(axis="x", visible=False)
             ax.set_ylim(bottom=0)
         ax_delay.set_ylabel("mean tracking delay k̄ (s)")
