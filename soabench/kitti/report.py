@@ -155,7 +155,7 @@ def fig6(records: dict, models: list[str], dt: float, path: Path) -> str:
     ax.set_xlabel("tracking delay $k_{delay}$ (s)")
     ax.set_ylabel("number of targets")
     ax.set_title("tracking delays of all target episodes (paper Fig. 6)")
-    ax.legend()
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False)  # below: never over a bar
     ax.grid(axis="y", alpha=0.3)
     return _save(fig, path)
 
