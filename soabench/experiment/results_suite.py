@@ -4,7 +4,8 @@ Parts, in order, under ``OUT`` (default ``results/``):
 
 * ``intersection/``: the paper's study (:mod:`soabench.experiment.study`: main protocol, clutter sweep, N_hat
   sweep, comparison with the paper) on the shipped intersection;
-* ``<scene>/main/``: the main protocol on every other shipped scene (``--scene-trials`` trials);
+* ``<scene>/``: the same study on every other shipped scene (``--scene-trials`` trials of its main protocol; no
+  comparison with the paper, whose numbers belong to its own protocol on the intersection);
 * ``scenes/density/<scene>.json``: each scene's occlusion density (:mod:`.occlusion_density`);
 * ``scenes/``: the cross-scene summary (:mod:`.cross_scene`): S-OA's advantage against occlusion density;
 * ``kitti/<scene>/``: SUMO trials exported in the KITTI tracking layout (``export/``) and the KITTI protocol on them
@@ -171,13 +172,14 @@ def same_settings(run_dir: Path, cfg, keys: Sequence[str] = SIZE_KEYS) -> bool:
     return not more
 
 
-def study_kept(root: Path, s: Settings) -> bool:
+def study_kept(root: Path, s: Settings, trials: int | None = None) -> bool:
     """The study in ``root`` is complete with these settings: every part of :data:`STUDY_PARTS` (and any other
     part folder it holds) complete, its main protocol and sweep points made with the requested settings. A part
-    made with other settings is refused (:func:`same_settings`); more trials are not "kept" (the study extends)."""
+    made with other settings is refused (:func:`same_settings`); more trials are not "kept" (the study extends).
+    ``trials``: of the main protocol and clutter sweep (default ``s.trials``; the other scenes' ``s.scene_trials``)."""
     from soabench.experiment.study import BIRTH_MODELS
 
-    main_cfg = _base_config(s, s.trials)
+    main_cfg = _base_config(s, trials or s.trials)
     births_cfg = _base_config(s, s.births_trials, models=BIRTH_MODELS, probabilities=("static",))
     same = True
     if (root / "main" / "run.json").is_file():
@@ -208,37 +210,19 @@ def _base_config(s: Settings, trials: int, **experiment: Any):
     return cfg.validate()
 
 
-def _run_part(
-    run_dir: Path, cfg, net: str, exe: dict, log: Callable[[str], None], keys: Sequence[str] = ()
+def _study_part(
+    root: Path, s: Settings, exe: dict, log: Callable[[str], None], net: str = "intersection", trials: int | None = None
 ) -> tuple[str, int]:
-    """One run folder: kept when complete with these settings, else resumed (``keys``: dotted config keys compared
-    with the stored run besides the experiment's sizes) or started."""
-    from soabench.experiment.runmeta import flatten_config
-    from soabench.experiment.runner import run_experiment
-
-    if (run_dir / "run.json").is_file():
-        keys = (*SIZE_KEYS, *keys)
-        if same_settings(run_dir, cfg, keys) and run_complete(run_dir):
-            log(f"kept {run_dir} (complete)")
-            return "kept", 0
-        flat = flatten_config(cfg.to_dict())
-        requested = {"net": net, **{k: flat[k] for k in keys}}
-        o = run_experiment(None, net, resume=run_dir, requested=requested, **exe)
-    else:
-        o = run_experiment(cfg, net, out=run_dir, **exe)
-    return ("done" if o.complete else "incomplete"), o.n_missing
-
-
-def _study_part(root: Path, s: Settings, exe: dict, log: Callable[[str], None]) -> tuple[str, int]:
+    """The study (:func:`soabench.experiment.study.run_study`) of scene ``net`` in ``root``: kept when complete with
+    these settings, else resumed or started; ``trials`` of its main protocol (default ``s.trials``)."""
     from soabench.experiment.study import run_study
 
-    if root.is_dir() and study_kept(root, s):
+    if root.is_dir() and study_kept(root, s, trials):
         log(f"kept {root} (the study is complete)")
         return "kept", 0
     explicit = {*SIZE_KEYS, "births_trials"}
-    o = run_study(
-        _base_config(s, s.trials), "intersection", out=root, births_trials=s.births_trials, explicit=explicit, **exe
-    )
+    cfg = _base_config(s, trials or s.trials)
+    o = run_study(cfg, net, out=root, births_trials=s.births_trials, explicit=explicit, **exe)
     return ("done" if o.complete else "incomplete"), o.n_missing
 
 
@@ -360,9 +344,9 @@ def run_results(
             if "intersection" in scenes:
                 step("intersection study", lambda: _study_part(root / "intersection", s, exe, log))
             for scene in (n for n in scenes if n != "intersection"):
-                cfg = _base_config(s, s.scene_trials)
                 step(
-                    f"{scene} main protocol", lambda scene=scene, cfg=cfg: _run_part(mains[scene], cfg, scene, exe, log)
+                    f"{scene} study",
+                    lambda scene=scene: _study_part(root / scene, s, exe, log, net=scene, trials=s.scene_trials),
                 )
             densities: dict[str, dict] = {}
             for scene in scenes:
@@ -410,7 +394,12 @@ def add_arguments(p: argparse.ArgumentParser, csv_list: Callable[[str], Callable
     p.add_argument("--duration", type=float, default=d.duration, help="seconds per SUMO trial")
     p.add_argument("--seed", type=int, default=d.seed, help="base seed of every part")
     p.add_argument("--births-trials", type=int, default=d.births_trials, help="trials per point of the N_hat sweep")
-    p.add_argument("--scene-trials", type=int, default=d.scene_trials, help="main-protocol trials per other scene")
+    p.add_argument(
+        "--scene-trials",
+        type=int,
+        default=d.scene_trials,
+        help="trials of the main protocol of each other scene's study",
+    )
     p.add_argument("--density-trials", type=int, default=d.density_trials, help="trials per scene for its density")
     p.add_argument(
         "--kitti-scenes",
