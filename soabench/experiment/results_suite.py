@@ -37,7 +37,7 @@ SETTINGS_FILE = "settings.json"  #: what a KITTI part was made with (sequences, 
 
 @dataclass(frozen=True)
 class Settings:
-    """Sizes of every part (the defaults keep the whole command at about 20 minutes on 2 cores)."""
+    """Sizes of every part (the defaults take about an hour on a shared 2-core machine)."""
 
     scenes: tuple[str, ...] | None = None  #: shipped scenes of the summary (None: every shipped scene)
     trials: int = 100  #: main protocol and clutter sweep of the intersection study (the paper's 100)
