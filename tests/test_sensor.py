@@ -604,11 +604,12 @@ def test_shadow_is_exactly_the_occluded_set_for_random_obstacles():
     assert tested > 100 and beyond > 10
 
 
-def test_visible_region_matches_a_brute_force_ray_test_on_the_shipped_scene():
-    """Omega_k on scans of the shipped intersection agrees point by point with casting rays (T19b, SUMO scans)."""
+@pytest.mark.parametrize("net", ["intersection", "tjunction", "grid_block", "arterial"])
+def test_visible_region_matches_a_brute_force_ray_test_on_the_shipped_scenes(net):
+    """Omega_k on scans of every shipped scene agrees point by point with casting rays (T19b, SUMO scans)."""
     from soabench.scenario import load, simulate
 
-    scene, scenario = load("intersection")
+    scene, scenario = load(net)
     seeds = trial_seeds(0, 0)
     rec = simulate(scene, scenario, seeds, duration=20.0)
     cfg = SensorConfig()
