@@ -134,6 +134,15 @@ class GMPHDFilter:
             return res
         return self._step_array(scan, checked)
 
+    def _mean_pD(self) -> float:
+        """The posterior's weighted mean detection probability: the Beta means in dynamic mode (§4.2; mu_D0 for an
+        empty mixture), p_D otherwise. Both paths read it from ``self.mixture`` after the reduction."""
+        cfg = self.cfg
+        if not self.dynamic:
+            return cfg.p_D
+        w = self.mixture.w
+        return float(w @ beta_mean(self.mixture.sD, self.mixture.tD) / w.sum()) if w.sum() > 0 else cfg.mu_D0
+
     def _step_array(self, scan: Scan, checked: StepInputs) -> StepResult:
         """:meth:`step` on the array path (:mod:`soabench.gmphd.models`, :mod:`soabench.gmphd.reduction`)."""
         cfg = self.cfg
@@ -179,10 +188,6 @@ class GMPHDFilter:
         w = red.mix.w
         if not (np.isfinite(w).all() and np.isfinite(X).all()):  # finite inputs must give a finite posterior
             raise SoabenchError(f"scan {scan.k}: the filter produced a non-finite posterior from finite inputs")
-        if self.dynamic:
-            mean_pD = float(w @ beta_mean(red.mix.sD, red.mix.tD) / w.sum()) if w.sum() > 0 else cfg.mu_D0
-        else:
-            mean_pD = cfg.p_D
         return StepResult(
             k=scan.k,
             X=X,
@@ -196,7 +201,7 @@ class GMPHDFilter:
             t_predict=t1 - t0,
             t_update=t2 - t1,
             t_reduce=t3 - t2,
-            mean_pD=mean_pD,
+            mean_pD=self._mean_pD(),
             A=up.A,
             kappa=np.asarray(kappa, dtype=float),
             n_pruned=red.n_pruned,
@@ -294,10 +299,6 @@ class GMPHDFilter:
         t3 = time.perf_counter()
 
         w = self.mixture.w
-        if self.dynamic:
-            mean_pD = float(w @ beta_mean(self.mixture.sD, self.mixture.tD) / w.sum()) if w.sum() > 0 else cfg.mu_D0
-        else:
-            mean_pD = cfg.p_D
         return StepResult(
             k=scan.k,
             X=X,
@@ -311,7 +312,7 @@ class GMPHDFilter:
             t_predict=t1 - t0,
             t_update=t2 - t1,
             t_reduce=t3 - t2,
-            mean_pD=mean_pD,
+            mean_pD=self._mean_pD(),
             A=A,
             kappa=kappa,
             n_pruned=int(n_pruned),
