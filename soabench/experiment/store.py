@@ -65,8 +65,13 @@ TRIAL_TIMING_KEYS = TIMING_KEYS
 
 
 # --------------------------------------------------------------------------------------------- JSON and files
+_PLAIN = frozenset({int, float, str, bool, type(None)})  #: types ``json`` writes as they are
+
+
 def to_jsonable(obj: Any) -> Any:
     """Plain Python values for ``json``: numpy scalars and arrays, tuples, dataclass-free containers."""
+    if type(obj) in _PLAIN:
+        return obj
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -136,8 +141,13 @@ def write_text_atomic(path: Path, text: str) -> None:
     write_bytes_atomic(path, text.encode("utf-8"))
 
 
-def write_json_atomic(path: Path, obj: Any) -> None:
-    write_text_atomic(path, json.dumps(to_jsonable(obj), indent=1, allow_nan=True) + "\n")
+def write_json_atomic(path: Path, obj: Any, compact: bool = False) -> None:
+    """``obj`` as JSON (``compact``: no indentation or spaces, for the large per-trial records)."""
+    if compact:
+        text = json.dumps(to_jsonable(obj), allow_nan=True, separators=(",", ":"))
+    else:
+        text = json.dumps(to_jsonable(obj), indent=1, allow_nan=True)
+    write_text_atomic(path, text + "\n")
 
 
 def read_json(path: Path) -> Any:
@@ -153,7 +163,11 @@ def pack_table(rows: Sequence[dict], columns: Sequence[str]) -> dict:
     cols = list(columns)
     extra = sorted({k for r in rows for k in r} - set(cols))
     cols += extra
-    return {"columns": cols, "rows": [[to_jsonable(r.get(c)) for c in cols] for r in rows]}
+    plain = _PLAIN
+    return {
+        "columns": cols,
+        "rows": [[v if type(v) in plain else to_jsonable(v) for v in map(r.get, cols)] for r in rows],
+    }
 
 
 def unpack_table(table: dict | None) -> list[dict]:
@@ -177,19 +191,27 @@ def format_value(v: Any) -> str:
     return str(v)
 
 
+def _csv_cell(v: Any) -> str:
+    """One CSV cell: :func:`format_value`, quoted when it holds a comma, a quote or a newline (fast path for the
+    plain ints and floats that make up most cells)."""
+    t = type(v)
+    if t is float:
+        return "nan" if v != v else repr(v)
+    if t is int:
+        return str(v)
+    s = format_value(v)
+    if any(ch in s for ch in ',"\n'):
+        s = '"' + s.replace('"', '""') + '"'
+    return s
+
+
 def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
     """Atomically write ``rows`` (dicts) with ``columns`` (plus any extra keys, sorted) as a CSV file."""
     rows = list(rows)
     cols = list(columns) + sorted({k for r in rows for k in r} - set(columns))
     lines = [",".join(cols)]
-    for r in rows:
-        cells = []
-        for c in cols:
-            s = format_value(r.get(c))
-            if any(ch in s for ch in ',"\n'):
-                s = '"' + s.replace('"', '""') + '"'
-            cells.append(s)
-        lines.append(",".join(cells))
+    cell = _csv_cell
+    lines.extend(",".join([cell(r.get(c)) for c in cols]) for r in rows)
     write_text_atomic(path, "\n".join(lines) + "\n")
 
 
@@ -262,7 +284,7 @@ class RunStore:
             write_bytes_atomic(
                 self.run_dir / ESTIMATES_DIR / f"{trial_name(trial)}.json.gz", gzip.compress(payload, mtime=0)
             )
-        write_json_atomic(self._record_path(TRIALS_DIR, trial), record)
+        write_json_atomic(self._record_path(TRIALS_DIR, trial), record, compact=True)
         failed = self._record_path(FAILED_DIR, trial)
         if failed.exists():
             failed.unlink()

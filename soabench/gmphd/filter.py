@@ -19,8 +19,8 @@ measurement-driven newborn (PUBM/ATBM) is born *from* a detection, so it carries
 
 from __future__ import annotations
 
-import dataclasses
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,7 +29,7 @@ from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle, notice, reduction
-from soabench.gmphd.inputs import StepInputs, check_step_inputs
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
@@ -114,13 +114,10 @@ class GMPHDFilter:
 
         Non-finite inputs raise :class:`~soabench.errors.SoabenchError` or are dropped and counted, as
         ``filter.nonfinite`` says (:mod:`soabench.gmphd.inputs`); a result never holds a NaN."""
-        checked = check_step_inputs(
-            scan.k,
-            np.asarray(scan.Z, dtype=float).reshape(-1, 2),
-            np.asarray(scan.ego, dtype=float),
-            births,
-            self.cfg.nonfinite,
-        )
+        once = getattr(scan, "once", None)  # a Scan keeps what depends on it alone for every run over it
+        make = _scan_inputs_of(scan)
+        Z, ego, finite, _ = make() if once is None else once(("filter.scan_inputs", id(scan.Z), id(scan.ego)), make)
+        checked = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
         kind = (self.fused, births.newborn is not None)
         if not notice.ready(kind):  # the first step of a kind may compile kernels: never a silent pause
             with notice.first_use_notice(kind):
@@ -129,7 +126,7 @@ class GMPHDFilter:
 
     def _step(self, scan: Scan, checked: StepInputs) -> StepResult:
         if self.fused and checked.ego is not None:  # a dropped scan (no pose) takes the array path
-            res = self._step_fused(dataclasses.replace(scan, Z=checked.Z, ego=checked.ego), checked.births)
+            res = self._step_fused(scan, checked.Z, checked.ego, checked.births)
             res.n_dropped, res.n_dropped_births = checked.n_dropped, checked.n_dropped_births
             return res
         return self._step_array(scan, checked)
@@ -213,11 +210,11 @@ class GMPHDFilter:
             origin_counts=origin_counts(red.mix.origin, red.mix.age),
         )
 
-    def _step_fused(self, scan: Scan, births: Births) -> StepResult:
-        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`)."""
+    def _step_fused(self, scan: Scan, Z: np.ndarray, ego: np.ndarray, births: Births) -> StepResult:
+        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`) on the checked ``Z`` and ``ego``."""
         cfg = self.cfg
-        ego = np.ascontiguousarray(scan.ego, dtype=float)
-        Z = np.ascontiguousarray(scan.Z, dtype=float).reshape(-1, 2)
+        ego = np.ascontiguousarray(ego, dtype=float)
+        Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
         mix = self.mixture
         t0 = time.perf_counter()
         pred = cycle.predict_append(
@@ -256,11 +253,11 @@ class GMPHDFilter:
         if newborn is None:
             post, A, ok = cycle.update(*pred[:7], g, float(cfg.p_D), Z, ego, *args, self._ukf)
             if not ok:  # UKF with a covariance that is not positive definite: the array path's jitter rule
-                return self._step_array(scan, StepInputs(scan.Z, scan.ego, births, 0, 0))
+                return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
         else:
             sup = cycle.support(pred[0], pred[1], pred[2], pred[6], g, float(cfg.p_D), Z, ego, *args, self._ukf)
             if not sup[12]:
-                return self._step_array(scan, StepInputs(scan.Z, scan.ego, births, 0, 0))
+                return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
             A = sup[11]
             M = len(Z)
             beta_nb = np.zeros(0)
@@ -321,6 +318,12 @@ class GMPHDFilter:
             n_newborn=n_newborn,
             origin_counts=origin_counts(self.mixture.origin, self.mixture.age),
         )
+
+
+def _scan_inputs_of(scan: Scan) -> Callable[[], tuple]:
+    """``make()`` -> :func:`soabench.gmphd.inputs.scan_inputs` of ``scan`` plus the scan's own Z and ego arrays,
+    held with the result so that the ids in its cache key (:meth:`soabench.types.Scan.once`) stay theirs."""
+    return lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego))
 
 
 _NO_BETA = np.empty((0, 0))  #: the ``beta`` of a static-mode mixture in :mod:`soabench.gmphd.cycle`
