@@ -199,10 +199,20 @@ def _csv_cell(v: Any) -> str:
         return "nan" if v != v else repr(v)
     if t is int:
         return str(v)
-    s = format_value(v)
-    if any(ch in s for ch in ',"\n'):
+    s = v if t is str else format_value(v)
+    if "," in s or '"' in s or "\n" in s:
         s = '"' + s.replace('"', '""') + '"'
     return s
+
+
+def _csv_line(row: Sequence[Any]) -> str:
+    """One CSV line of cells (:func:`_csv_cell`), with the float and int cells formatted inline."""
+    return ",".join(
+        [
+            (repr(v) if v == v else "nan") if type(v) is float else str(v) if type(v) is int else _csv_cell(v)
+            for v in row
+        ]
+    )
 
 
 def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
@@ -210,8 +220,7 @@ def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
     rows = list(rows)
     cols = list(columns) + sorted({k for r in rows for k in r} - set(columns))
     lines = [",".join(cols)]
-    cell = _csv_cell
-    lines.extend(",".join([cell(r.get(c)) for c in cols]) for r in rows)
+    lines.extend(_csv_line([r.get(c) for c in cols]) for r in rows)
     write_text_atomic(path, "\n".join(lines) + "\n")
 
 
@@ -335,26 +344,30 @@ class RunStore:
         m_idx = {m: i for i, m in enumerate(models)}
         p_idx = {p: i for i, p in enumerate(modes)}
 
-        def key(r: dict) -> tuple:
+        def key_of(trial: Any, clutter: Any, model: Any, mode: Any) -> tuple:
             return (
-                int(r["trial"]),
-                float(r["clutter"]),
-                m_idx.get(r["model"], len(m_idx)),
-                str(r["model"]),
-                p_idx.get(r["mode"], len(p_idx)),
-                str(r["mode"]),
+                int(trial),
+                float(clutter),
+                m_idx.get(model, len(m_idx)),
+                str(model),
+                p_idx.get(mode, len(p_idx)),
+                str(mode),
             )
+
+        def key(r: dict) -> tuple:
+            return key_of(r["trial"], r["clutter"], r["model"], r["mode"])
 
         rows: list[dict] = []
         episodes: list[dict] = []
-        steps: list[dict] = []
+        step_tables: list[dict] = []
         timing: list[dict] = []
         for t in self.done_trials():
             rec = self.load_trial(t)
             rrows = unpack_table(rec.get("rows"))
             rows += rrows
             episodes += unpack_table(rec.get("episodes"))
-            steps += unpack_table(rec.get("steps"))
+            if rec.get("steps"):
+                step_tables.append(rec["steps"])
             tt = rec.get("timing") or {}
             for r in rrows:
                 timing.append(
@@ -369,14 +382,16 @@ class RunStore:
         episodes.sort(
             key=lambda r: (*key(r), float(r["target"]) if _is_num(r["target"]) else 0, str(r["target"]), r["k0"])
         )
-        steps.sort(key=lambda r: (*key(r), r["k"]))
+        step_cols, steps = _rows_of(step_tables, STEP_COLUMNS)
+        it, ic, im, ip, ik = (step_cols.index(c) for c in ("trial", "clutter", "model", "mode", "k"))
+        steps.sort(key=lambda r: (*key_of(r[it], r[ic], r[im], r[ip]), r[ik]))
         write_csv(
             self.run_dir / "trials.csv",
             [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows],
             TRIAL_COLUMNS,
         )
         write_csv(self.run_dir / "episodes.csv", episodes, EPISODE_COLUMNS)
-        write_csv(self.run_dir / "steps.csv", steps, STEP_COLUMNS)
+        _write_csv_lists(self.run_dir / "steps.csv", step_cols, steps)
         write_csv(
             self.run_dir / "timing.csv",
             timing,
@@ -398,6 +413,34 @@ class RunStore:
             p = self.run_dir / name
             if p.exists():
                 p.unlink()
+
+
+def _rows_of(tables: Sequence[dict], columns: Sequence[str]) -> tuple[list[str], list[list]]:
+    """The rows of packed tables (:func:`pack_table`) as lists over one column list: ``columns`` plus every other
+    key a row holds, sorted; a cell a row lacks is None. What :func:`unpack_table` then :func:`write_csv` would
+    write, without a dict per row (the merge of a run's step tables)."""
+    present: set[str] = set()
+    for tab in tables:
+        cols, n = tab["columns"], {len(r) for r in tab["rows"]}
+        present.update(cols[: max(n)] if n else ())
+    out_cols = list(columns) + sorted(present - set(columns))
+    rows: list[list] = []
+    for tab in tables:
+        cols = tab["columns"]
+        if cols == out_cols and all(len(r) == len(cols) for r in tab["rows"]):
+            rows.extend(tab["rows"])
+            continue
+        where = {c: i for i, c in enumerate(cols)}  # the last of a repeated column, as dict(zip(...)) keeps it
+        idx = [where.get(c, -1) for c in out_cols]
+        rows.extend([r[i] if 0 <= i < len(r) else None for i in idx] for r in tab["rows"])
+    return out_cols, rows
+
+
+def _write_csv_lists(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
+    """:func:`write_csv` for rows already given as lists over ``columns``."""
+    lines = [",".join(columns)]
+    lines.extend(map(_csv_line, rows))
+    write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 def _is_num(v: Any) -> bool:
