@@ -258,8 +258,10 @@ def shadow_polygons(ego_xy: np.ndarray, obstacles: Obstacles, r_far: float) -> n
 
 def _padded(polygons: Sequence[np.ndarray]) -> np.ndarray:
     """(N, n_max, 2) vertex array, each polygon padded by repeating its first vertex (harmless for hulls)."""
-    n_max = max(len(p) for p in polygons)
-    return np.stack([np.concatenate([p, np.repeat(p[:1], n_max - len(p), axis=0)]) for p in polygons])
+    lens = np.fromiter((len(p) for p in polygons), dtype=np.intp, count=len(polygons))
+    starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
+    j = np.arange(lens.max())
+    return np.concatenate(polygons)[starts[:, None] + np.where(j < lens[:, None], j, 0)]
 
 
 def visible_region(

@@ -27,7 +27,7 @@ import numpy as np
 
 from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import SoabenchError, require
-from soabench.geometry import clutter_intensity
+from soabench.geometry import clutter_intensity, fov_area, measurement_volume
 from soabench.gmphd import cycle, notice, reduction
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
 from soabench.gmphd.mixture import Mixture
@@ -86,7 +86,18 @@ class GMPHDFilter:
         limited = sensor_cfg.fov_deg < 360.0
         self._fov = np.array([sensor_cfg.r_min, sensor_cfg.r_max, 0.5 * sensor_cfg.fov + 1e-12, float(limited)])
         self._beta0 = self.beta0 if self.dynamic else np.empty(0)
+        # kappa(z) of §2.3 as geometry.clutter_intensity computes it, its constants taken once per run
+        self._kappa_polar = sensor_cfg.clutter_space == "polar"
+        self._kappa_const = (
+            sensor_cfg.lambda_c / measurement_volume(sensor_cfg) if self._kappa_polar else fov_area(sensor_cfg)
+        )
         self._nb_beta = self.beta_newborn if self.dynamic else np.empty(0)
+
+    def _kappa(self, Z: np.ndarray) -> np.ndarray:
+        """:func:`soabench.geometry.clutter_intensity` of the (M, 2) measurements (same values, §2.3)."""
+        if self._kappa_polar:
+            return np.full(len(Z), self._kappa_const)
+        return np.ascontiguousarray(self.sensor.lambda_c * Z[:, 0] / self._kappa_const, dtype=float)
 
     def reset(self) -> None:
         """Forget the posterior (next step is k = 0 again)."""
@@ -248,7 +259,7 @@ class GMPHDFilter:
             idx = np.flatnonzero(g)
             vis = np.asarray(line_of_sight(ego[:2], pred[1][idx, :2], scan.occluders), dtype=bool)
             g[idx] = vis.reshape(-1)
-        kappa = np.ascontiguousarray(clutter_intensity(Z, self.sensor), dtype=float)
+        kappa = self._kappa(Z)
         args = (self.R, float(self.sensor.r_min), float(self.gate_thr), kappa)
         if newborn is None:
             post, A, ok = cycle.update(*pred[:7], g, float(cfg.p_D), Z, ego, *args, self._ukf)
