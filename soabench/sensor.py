@@ -163,15 +163,32 @@ def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[B
     """
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     targets = np.asarray(targets, dtype=float).reshape(-1, 2)
+    if len(targets) == 0:
+        return np.ones(0, dtype=bool)
+    return line_of_sight_past(ego_xy, targets, sight_blockers(ego_xy, occluders))
+
+
+def sight_blockers(ego_xy: np.ndarray, occluders: Sequence[BaseGeometry]) -> np.ndarray:
+    """The occluders that can hide a point from ``ego_xy`` (those not containing the sensor in their interior),
+    prepared: what :func:`line_of_sight` tests against, computed once per scan by a caller that tests many point
+    sets from the same pose (:func:`line_of_sight_past`)."""
+    ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     occ = np.asarray(list(occluders), dtype=object).reshape(-1)
-    if len(targets) == 0 or len(occ) == 0:
-        return np.ones(len(targets), dtype=bool)
-    occ = occ[~shapely.contains(occ, shapely.points(ego_xy))]
     if len(occ) == 0:
-        return np.ones(len(targets), dtype=bool)
+        return occ
+    occ = occ[~shapely.contains(occ, shapely.points(ego_xy))]
     shapely.prepare(occ)
+    return occ
+
+
+def line_of_sight_past(ego_xy: np.ndarray, targets: np.ndarray, blockers: np.ndarray) -> np.ndarray:
+    """:func:`line_of_sight` given the scan's :func:`sight_blockers` (same result)."""
+    ego_xy = np.asarray(ego_xy, dtype=float)[:2]
+    targets = np.asarray(targets, dtype=float).reshape(-1, 2)
+    if len(targets) == 0 or len(blockers) == 0:
+        return np.ones(len(targets), dtype=bool)
     lines = shapely.linestrings(np.stack([np.broadcast_to(ego_xy, targets.shape), targets], axis=1))
-    return ~_blocked_pairs(lines, occ).any(axis=1)
+    return ~_blocked_pairs(lines, blockers).any(axis=1)
 
 
 def _blocked_pairs(lines: np.ndarray, occ: np.ndarray) -> np.ndarray:

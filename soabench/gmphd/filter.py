@@ -254,10 +254,14 @@ class GMPHDFilter:
         t1 = time.perf_counter()
 
         if self.occlusion and scan.occluders and g.any():  # line-of-sight gate (§4.4), as detection_gate
-            from soabench.sensor import line_of_sight
+            from soabench.sensor import line_of_sight_past, sight_blockers
 
             idx = np.flatnonzero(g)
-            vis = np.asarray(line_of_sight(ego[:2], pred[1][idx, :2], scan.occluders), dtype=bool)
+            make = lambda: (sight_blockers(ego[:2], scan.occluders), scan.occluders)  # noqa: E731
+            once = getattr(scan, "once", None)  # the blockers depend on the scan alone: once for every run
+            key = ("filter.sight_blockers", id(scan.occluders), len(scan.occluders), ego[0], ego[1])
+            blockers = (make() if once is None else once(key, make))[0]
+            vis = np.asarray(line_of_sight_past(ego[:2], pred[1][idx, :2], blockers), dtype=bool)
             g[idx] = vis.reshape(-1)
         kappa = self._kappa(Z)
         args = (self.R, float(self.sensor.r_min), float(self.gate_thr), kappa)
