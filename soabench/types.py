@@ -224,7 +224,8 @@ class Scan:
     def once(self, key: Hashable, make: Callable[[], Any]) -> Any:
         """``make()`` computed on the first call with ``key`` and kept on the scan (e.g. the filter's input check
         of Z_k and the ego pose, identical for every run over this scan). ``key`` must name every input besides
-        the scan that the value depends on."""
+        the scan that the value depends on. A scan's arrays are read, never written, by every stage: a caller that
+        edits them in place after a filter step must build a new Scan (``dataclasses.replace``)."""
         cache = self.__dict__.setdefault("_once", {})
         if key not in cache:
             cache[key] = make()

@@ -91,10 +91,10 @@ def _births(w) -> Births:
     return Births(np.asarray(w, dtype=float), np.zeros((J, 4)), np.tile(np.eye(4), (J, 1, 1)), np.zeros(J, np.int8))
 
 
-def test_births_check_is_kept_per_object_and_redone_for_new_arrays():
+def test_births_check():
     b = _births([0.1, 0.2])
     assert births_finite(b) is True
-    b.w = np.array([0.1, np.nan])  # replaced array: checked anew
+    b.w = np.array([0.1, np.nan])
     assert births_finite(b) is False
     b.w = np.array([0.1, -0.2])
     assert births_finite(b) is False

@@ -70,19 +70,10 @@ def scan_inputs(k: int, Z_in: np.ndarray, ego_in: np.ndarray) -> tuple[np.ndarra
 
 
 def births_finite(births: Births) -> bool:
-    """Every weight, mean and covariance of ``births`` (and of its newborn terms) finite, every weight >= 0.
-
-    Kept on the Births object for its arrays (a mode-free birth model hands the same Births to every probability
-    mode's run, :mod:`soabench.experiment.trial`); a Births whose arrays were replaced is checked anew."""
+    """Every weight, mean and covariance of ``births`` (and of its newborn terms) finite, every weight >= 0."""
     nb = births.newborn
-    arrays = (births.w, births.m, births.P, None if nb is None else nb.m, None if nb is None else nb.P)
-    hit = births.__dict__.get("_finite")
-    if hit is not None and all(a is b for a, b in zip(hit[0], arrays, strict=True)):
-        return hit[1]
     ok = _finite(births.w) and _finite(births.m) and _finite(births.P) and bool((births.w >= 0).all())
-    ok = ok and (nb is None or (_finite(np.asarray(nb.m, dtype=float)) and _finite(np.asarray(nb.P, dtype=float))))
-    births.__dict__["_finite"] = (arrays, ok)
-    return ok
+    return ok and (nb is None or (_finite(np.asarray(nb.m, dtype=float)) and _finite(np.asarray(nb.P, dtype=float))))
 
 
 def check_step_inputs(
