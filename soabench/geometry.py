@@ -11,8 +11,15 @@ from soabench.config import SensorConfig
 
 def wrap(a: np.ndarray | float) -> np.ndarray:
     """Map angles to (-pi, pi] (§2.1 ``wrap``)."""
-    out = np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
-    return np.where(out == -np.pi, np.pi, out)
+    a = np.asarray(a, dtype=float)
+    if a.ndim == 0:
+        out = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+        return np.where(out == -np.pi, np.pi, out)
+    out = a + np.pi  # the same operations as above, in place on one new array
+    np.mod(out, 2.0 * np.pi, out=out)
+    out -= np.pi
+    out[out == -np.pi] = np.pi
+    return out
 
 
 def range_bearing(xy: np.ndarray, ego: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -25,10 +32,13 @@ def range_bearing(xy: np.ndarray, ego: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def fov_mask(xy: np.ndarray, ego: np.ndarray, cfg: SensorConfig, inset: float = 0.0) -> np.ndarray:
     """FOV_k membership (§2.3): r_min + inset <= r <= r_max - inset and |b| <= Theta/2, for points (..., 2)."""
+    if cfg.fov_deg >= 360.0:  # the range alone decides (the bearing of range_bearing is not needed)
+        d = np.asarray(xy, dtype=float)[..., :2] - np.asarray(ego[:2], dtype=float)
+        r = np.hypot(d[..., 0], d[..., 1])
+        return (r >= cfg.r_min + inset) & (r <= cfg.r_max - inset)
     r, b = range_bearing(xy, ego)
     ok = (r >= cfg.r_min + inset) & (r <= cfg.r_max - inset)
-    if cfg.fov_deg < 360.0:
-        ok &= np.abs(b) <= 0.5 * cfg.fov + 1e-12
+    ok &= np.abs(b) <= 0.5 * cfg.fov + 1e-12
     return ok
 
 

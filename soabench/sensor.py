@@ -81,13 +81,17 @@ def compute_obstacles(polygons: list[np.ndarray], kinds: Sequence[str], ego_xy: 
     return obstacles_from_geoms(_polygons_from_arrays(polygons), np.asarray(kinds, dtype=str), ego_xy, r_max)
 
 
-def obstacles_from_geoms(geoms: np.ndarray, kinds: np.ndarray, ego_xy: np.ndarray, r_max: float) -> Obstacles:
-    """:func:`compute_obstacles` for an object array of shapely geometries (the fast path of :func:`observe`)."""
+def obstacles_from_geoms(
+    geoms: np.ndarray, kinds: np.ndarray, ego_xy: np.ndarray, r_max: float, hulls: np.ndarray | None = None
+) -> Obstacles:
+    """:func:`compute_obstacles` for an object array of shapely geometries (the fast path of :func:`observe`).
+
+    ``hulls``: the counter-clockwise convex hulls of ``geoms`` (:func:`oriented_hulls`) when already known."""
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     if len(geoms) == 0:
         return Obstacles.empty()
     ego_pt = shapely.points(ego_xy)
-    hulls = shapely.orient_polygons(shapely.convex_hull(np.asarray(geoms, dtype=object)))  # counter-clockwise
+    hulls = oriented_hulls(geoms) if hulls is None else hulls
     keep = ~shapely.is_empty(hulls) & shapely.dwithin(hulls, ego_pt, r_max) & ~shapely.intersects(hulls, ego_pt)
     hulls, kinds = hulls[keep], np.asarray(kinds, dtype=str)[keep]
     if len(hulls) == 0:
@@ -111,6 +115,11 @@ def obstacles_from_geoms(geoms: np.ndarray, kinds: np.ndarray, ego_xy: np.ndarra
         r_min=r_v[i_min],
         r_max=r_v[i_max],
     )
+
+
+def oriented_hulls(geoms: np.ndarray) -> np.ndarray:
+    """Counter-clockwise convex hull of each geometry (object array in, object array out)."""
+    return shapely.orient_polygons(shapely.convex_hull(np.asarray(geoms, dtype=object)))
 
 
 def _hull_vertices(hulls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -154,15 +163,32 @@ def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[B
     """
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     targets = np.asarray(targets, dtype=float).reshape(-1, 2)
+    if len(targets) == 0:
+        return np.ones(0, dtype=bool)
+    return line_of_sight_past(ego_xy, targets, sight_blockers(ego_xy, occluders))
+
+
+def sight_blockers(ego_xy: np.ndarray, occluders: Sequence[BaseGeometry]) -> np.ndarray:
+    """The occluders that can hide a point from ``ego_xy`` (those not containing the sensor in their interior),
+    prepared: what :func:`line_of_sight` tests against, computed once per scan by a caller that tests many point
+    sets from the same pose (:func:`line_of_sight_past`)."""
+    ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     occ = np.asarray(list(occluders), dtype=object).reshape(-1)
-    if len(targets) == 0 or len(occ) == 0:
-        return np.ones(len(targets), dtype=bool)
-    occ = occ[~shapely.contains(occ, shapely.points(ego_xy))]
     if len(occ) == 0:
-        return np.ones(len(targets), dtype=bool)
+        return occ
+    occ = occ[~shapely.contains(occ, shapely.points(ego_xy))]
     shapely.prepare(occ)
+    return occ
+
+
+def line_of_sight_past(ego_xy: np.ndarray, targets: np.ndarray, blockers: np.ndarray) -> np.ndarray:
+    """:func:`line_of_sight` given the scan's :func:`sight_blockers` (same result)."""
+    ego_xy = np.asarray(ego_xy, dtype=float)[:2]
+    targets = np.asarray(targets, dtype=float).reshape(-1, 2)
+    if len(targets) == 0 or len(blockers) == 0:
+        return np.ones(len(targets), dtype=bool)
     lines = shapely.linestrings(np.stack([np.broadcast_to(ego_xy, targets.shape), targets], axis=1))
-    return ~_blocked_pairs(lines, occ).any(axis=1)
+    return ~_blocked_pairs(lines, blockers).any(axis=1)
 
 
 def _blocked_pairs(lines: np.ndarray, occ: np.ndarray) -> np.ndarray:
@@ -249,8 +275,10 @@ def shadow_polygons(ego_xy: np.ndarray, obstacles: Obstacles, r_far: float) -> n
 
 def _padded(polygons: Sequence[np.ndarray]) -> np.ndarray:
     """(N, n_max, 2) vertex array, each polygon padded by repeating its first vertex (harmless for hulls)."""
-    n_max = max(len(p) for p in polygons)
-    return np.stack([np.concatenate([p, np.repeat(p[:1], n_max - len(p), axis=0)]) for p in polygons])
+    lens = np.fromiter((len(p) for p in polygons), dtype=np.intp, count=len(polygons))
+    starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
+    j = np.arange(lens.max())
+    return np.concatenate(polygons)[starts[:, None] + np.where(j < lens[:, None], j, 0)]
 
 
 def visible_region(
@@ -410,16 +438,14 @@ def observe(
     steps = scan_steps(recording.t, recording.step_length, cfg.dt)
     n_peds = len(recording.ped_ids)
     draws = _draw(rngs, cfg, len(steps), n_peds)
-    static_geoms, static_kinds = _prepared(*_static_occluder_arrays(recording, scene))
+    static = _StaticOccluders(*_prepared(*_static_occluder_arrays(recording, scene)))
     region = scene.sidewalk
     shapely.prepare(region)
     out = _empty_truth(len(steps), n_peds)
     scans: list[Scan] = []
     sources: list[np.ndarray] = []
     for k, idx in enumerate(steps):
-        scan, source = _observe_step(
-            recording, int(idx), k, cfg, draws, static_geoms, static_kinds, region, rngs[0], out, geometry
-        )
+        scan, source = _observe_step(recording, int(idx), k, cfg, draws, static, region, rngs[0], out, geometry)
         scans.append(scan)
         sources.append(source)
     return Scans(
@@ -442,6 +468,16 @@ def _prepared(polys: list[np.ndarray], kinds: list[str]) -> tuple[np.ndarray, np
     return geoms, np.asarray(kinds, dtype="<U8")
 
 
+class _StaticOccluders:
+    """The occluders fixed for a whole recording (buildings, parked cars): prepared geometries, kinds, and their
+    oriented convex hulls, computed once per :func:`observe` instead of once per scan."""
+
+    def __init__(self, geoms: np.ndarray, kinds: np.ndarray) -> None:
+        self.geoms = geoms
+        self.kinds = kinds
+        self.hulls = oriented_hulls(geoms) if len(geoms) else geoms[:0]
+
+
 def _empty_truth(n_scans: int, n_peds: int) -> dict[str, np.ndarray]:
     flags = {name: np.zeros((n_scans, n_peds), dtype=bool) for name in ("present", "in_fov", "visible", "detected")}
     return {"truth_xy": np.full((n_scans, n_peds, 2), np.nan), **flags}
@@ -453,8 +489,7 @@ def _observe_step(
     k: int,
     cfg: SensorConfig,
     draws: _Draws,
-    static_geoms: np.ndarray,
-    static_kinds: np.ndarray,
+    static: _StaticOccluders,
     region: BaseGeometry,
     det_rng: np.random.Generator,
     out: dict[str, np.ndarray],
@@ -465,9 +500,7 @@ def _observe_step(
     if geometry is not None and k in geometry:
         ego, xy, present, in_fov, visible, obstacles, occ, omega = geometry[k]
     else:
-        ego, xy, present, in_fov, visible, obstacles, occ, omega = _scan_geometry(
-            recording, idx, cfg, static_geoms, static_kinds, region
-        )
+        ego, xy, present, in_fov, visible, obstacles, occ, omega = _scan_geometry(recording, idx, cfg, static, region)
         if geometry is not None:
             geometry[k] = (ego, xy, present, in_fov, visible, obstacles, occ, omega)
     detected = visible & (draws.u_detect[k] < cfg.p_D)
@@ -490,8 +523,7 @@ def _scan_geometry(
     recording: Recording,
     idx: int,
     cfg: SensorConfig,
-    static_geoms: np.ndarray,
-    static_kinds: np.ndarray,
+    static: _StaticOccluders,
     region: BaseGeometry,
 ) -> tuple:
     """The part of a scan that does not depend on the clutter rate: ego pose, truth, FOV and line-of-sight tests,
@@ -503,15 +535,20 @@ def _scan_geometry(
     in_fov = present & fov_mask(xy, ego, cfg)
 
     vehicles = _vehicle_arrays(recording, idx)
-    geoms = np.concatenate([static_geoms, shapely.polygons(vehicles) if len(vehicles) else static_geoms[:0]])
-    kinds = np.concatenate([static_kinds, np.full(len(vehicles), "vehicle", dtype="<U8")])
+    if len(vehicles):
+        veh = shapely.polygons(vehicles)
+        geoms = np.concatenate([static.geoms, veh])
+        hulls = np.concatenate([static.hulls, oriented_hulls(veh)])
+        kinds = np.concatenate([static.kinds, np.full(len(vehicles), "vehicle", dtype="<U8")])
+    else:
+        geoms, hulls, kinds = static.geoms, static.hulls, static.kinds
     ego_pt = shapely.points(ego[:2])
     near = shapely.dwithin(geoms, ego_pt, cfg.r_max)
-    occ, occ_kinds = geoms[near], kinds[near]
+    occ, occ_kinds, occ_hulls = geoms[near], kinds[near], hulls[near]
 
     visible = in_fov.copy()
     visible[in_fov] = target_visibility(ego, xy[in_fov], occ, cfg.visibility_points, cfg.visibility_offset)
-    obstacles = obstacles_from_geoms(occ, occ_kinds, ego[:2], cfg.r_max)
-    inside = occ[shapely.intersects(shapely.convex_hull(occ), ego_pt)] if len(occ) else occ  # no cone: cut as is
+    obstacles = obstacles_from_geoms(occ, occ_kinds, ego[:2], cfg.r_max, occ_hulls)
+    inside = occ[shapely.intersects(occ_hulls, ego_pt)] if len(occ) else occ  # no cone: cut as is
     omega = _omega(region, ego, obstacles, cfg, list(inside))
     return ego, xy, present, in_fov, visible, obstacles, occ, omega

@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Callable, Sequence
+import operator
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import shapely
@@ -203,6 +204,35 @@ class Scan:
     obstacles: Obstacles
     occluders: list[BaseGeometry]
     visible_region: BaseGeometry
+
+    # Work done once per scan (docs/method.md §5.8): every filter run of a trial reads the same Scan, so what depends
+    # on the scan alone is computed on first use and kept on the instance (not a field: equality, ``replace``, the
+    # .npz format and pickles ignore it; an edited ``occluders`` list is indexed anew).
+
+    def occluder_index(self) -> shapely.STRtree:
+        """The STRtree of :attr:`occluders`, built on the first call (birth models ask which candidate means lie
+        inside an occluder of the scan, :func:`soabench.birth.base.inside_any`)."""
+        occ = self.occluders
+        hit = self.__dict__.get("_occluder_index")
+        if hit is not None and hit[0] is occ and len(hit[1]) == len(occ) and all(map(operator.is_, hit[1], occ)):
+            return hit[2]
+        snap = tuple(occ)
+        tree = shapely.STRtree(list(snap))
+        self.__dict__["_occluder_index"] = (occ, snap, tree)
+        return tree
+
+    def once(self, key: Hashable, make: Callable[[], Any]) -> Any:
+        """``make()`` computed on the first call with ``key`` and kept on the scan (e.g. the filter's input check
+        of Z_k and the ego pose, identical for every run over this scan). ``key`` must name every input besides
+        the scan that the value depends on. A scan's arrays are read, never written, by every stage: a caller that
+        edits them in place after a filter step must build a new Scan (``dataclasses.replace``)."""
+        cache = self.__dict__.setdefault("_once", {})
+        if key not in cache:
+            cache[key] = make()
+        return cache[key]
+
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k not in ("_occluder_index", "_once")}
 
 
 @dataclass

@@ -65,8 +65,13 @@ TRIAL_TIMING_KEYS = TIMING_KEYS
 
 
 # --------------------------------------------------------------------------------------------- JSON and files
+_PLAIN = frozenset({int, float, str, bool, type(None)})  #: types ``json`` writes as they are
+
+
 def to_jsonable(obj: Any) -> Any:
     """Plain Python values for ``json``: numpy scalars and arrays, tuples, dataclass-free containers."""
+    if type(obj) in _PLAIN:
+        return obj
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -136,8 +141,13 @@ def write_text_atomic(path: Path, text: str) -> None:
     write_bytes_atomic(path, text.encode("utf-8"))
 
 
-def write_json_atomic(path: Path, obj: Any) -> None:
-    write_text_atomic(path, json.dumps(to_jsonable(obj), indent=1, allow_nan=True) + "\n")
+def write_json_atomic(path: Path, obj: Any, compact: bool = False) -> None:
+    """``obj`` as JSON (``compact``: no indentation or spaces, for the large per-trial records)."""
+    if compact:
+        text = json.dumps(to_jsonable(obj), allow_nan=True, separators=(",", ":"))
+    else:
+        text = json.dumps(to_jsonable(obj), indent=1, allow_nan=True)
+    write_text_atomic(path, text + "\n")
 
 
 def read_json(path: Path) -> Any:
@@ -153,7 +163,11 @@ def pack_table(rows: Sequence[dict], columns: Sequence[str]) -> dict:
     cols = list(columns)
     extra = sorted({k for r in rows for k in r} - set(cols))
     cols += extra
-    return {"columns": cols, "rows": [[to_jsonable(r.get(c)) for c in cols] for r in rows]}
+    plain = _PLAIN
+    return {
+        "columns": cols,
+        "rows": [[v if type(v) in plain else to_jsonable(v) for v in map(r.get, cols)] for r in rows],
+    }
 
 
 def unpack_table(table: dict | None) -> list[dict]:
@@ -177,19 +191,36 @@ def format_value(v: Any) -> str:
     return str(v)
 
 
+def _csv_cell(v: Any) -> str:
+    """One CSV cell: :func:`format_value`, quoted when it holds a comma, a quote or a newline (fast path for the
+    plain ints and floats that make up most cells)."""
+    t = type(v)
+    if t is float:
+        return "nan" if v != v else repr(v)
+    if t is int:
+        return str(v)
+    s = v if t is str else format_value(v)
+    if "," in s or '"' in s or "\n" in s:
+        s = '"' + s.replace('"', '""') + '"'
+    return s
+
+
+def _csv_line(row: Sequence[Any]) -> str:
+    """One CSV line of cells (:func:`_csv_cell`), with the float and int cells formatted inline."""
+    return ",".join(
+        [
+            (repr(v) if v == v else "nan") if type(v) is float else str(v) if type(v) is int else _csv_cell(v)
+            for v in row
+        ]
+    )
+
+
 def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
     """Atomically write ``rows`` (dicts) with ``columns`` (plus any extra keys, sorted) as a CSV file."""
     rows = list(rows)
     cols = list(columns) + sorted({k for r in rows for k in r} - set(columns))
     lines = [",".join(cols)]
-    for r in rows:
-        cells = []
-        for c in cols:
-            s = format_value(r.get(c))
-            if any(ch in s for ch in ',"\n'):
-                s = '"' + s.replace('"', '""') + '"'
-            cells.append(s)
-        lines.append(",".join(cells))
+    lines.extend(_csv_line([r.get(c) for c in cols]) for r in rows)
     write_text_atomic(path, "\n".join(lines) + "\n")
 
 
@@ -262,7 +293,7 @@ class RunStore:
             write_bytes_atomic(
                 self.run_dir / ESTIMATES_DIR / f"{trial_name(trial)}.json.gz", gzip.compress(payload, mtime=0)
             )
-        write_json_atomic(self._record_path(TRIALS_DIR, trial), record)
+        write_json_atomic(self._record_path(TRIALS_DIR, trial), record, compact=True)
         failed = self._record_path(FAILED_DIR, trial)
         if failed.exists():
             failed.unlink()
@@ -313,26 +344,30 @@ class RunStore:
         m_idx = {m: i for i, m in enumerate(models)}
         p_idx = {p: i for i, p in enumerate(modes)}
 
-        def key(r: dict) -> tuple:
+        def key_of(trial: Any, clutter: Any, model: Any, mode: Any) -> tuple:
             return (
-                int(r["trial"]),
-                float(r["clutter"]),
-                m_idx.get(r["model"], len(m_idx)),
-                str(r["model"]),
-                p_idx.get(r["mode"], len(p_idx)),
-                str(r["mode"]),
+                int(trial),
+                float(clutter),
+                m_idx.get(model, len(m_idx)),
+                str(model),
+                p_idx.get(mode, len(p_idx)),
+                str(mode),
             )
+
+        def key(r: dict) -> tuple:
+            return key_of(r["trial"], r["clutter"], r["model"], r["mode"])
 
         rows: list[dict] = []
         episodes: list[dict] = []
-        steps: list[dict] = []
+        step_tables: list[dict] = []
         timing: list[dict] = []
         for t in self.done_trials():
             rec = self.load_trial(t)
             rrows = unpack_table(rec.get("rows"))
             rows += rrows
             episodes += unpack_table(rec.get("episodes"))
-            steps += unpack_table(rec.get("steps"))
+            if rec.get("steps"):
+                step_tables.append(rec["steps"])
             tt = rec.get("timing") or {}
             for r in rrows:
                 timing.append(
@@ -347,14 +382,16 @@ class RunStore:
         episodes.sort(
             key=lambda r: (*key(r), float(r["target"]) if _is_num(r["target"]) else 0, str(r["target"]), r["k0"])
         )
-        steps.sort(key=lambda r: (*key(r), r["k"]))
+        step_cols, steps = _rows_of(step_tables, STEP_COLUMNS)
+        it, ic, im, ip, ik = (step_cols.index(c) for c in ("trial", "clutter", "model", "mode", "k"))
+        steps.sort(key=lambda r: (*key_of(r[it], r[ic], r[im], r[ip]), r[ik]))
         write_csv(
             self.run_dir / "trials.csv",
             [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows],
             TRIAL_COLUMNS,
         )
         write_csv(self.run_dir / "episodes.csv", episodes, EPISODE_COLUMNS)
-        write_csv(self.run_dir / "steps.csv", steps, STEP_COLUMNS)
+        _write_csv_lists(self.run_dir / "steps.csv", step_cols, steps)
         write_csv(
             self.run_dir / "timing.csv",
             timing,
@@ -376,6 +413,34 @@ class RunStore:
             p = self.run_dir / name
             if p.exists():
                 p.unlink()
+
+
+def _rows_of(tables: Sequence[dict], columns: Sequence[str]) -> tuple[list[str], list[list]]:
+    """The rows of packed tables (:func:`pack_table`) as lists over one column list: ``columns`` plus every other
+    key a row holds, sorted; a cell a row lacks is None. What :func:`unpack_table` then :func:`write_csv` would
+    write, without a dict per row (the merge of a run's step tables)."""
+    present: set[str] = set()
+    for tab in tables:
+        cols, n = tab["columns"], {len(r) for r in tab["rows"]}
+        present.update(cols[: max(n)] if n else ())
+    out_cols = list(columns) + sorted(present - set(columns))
+    rows: list[list] = []
+    for tab in tables:
+        cols = tab["columns"]
+        if cols == out_cols and all(len(r) == len(cols) for r in tab["rows"]):
+            rows.extend(tab["rows"])
+            continue
+        where = {c: i for i, c in enumerate(cols)}  # the last of a repeated column, as dict(zip(...)) keeps it
+        idx = [where.get(c, -1) for c in out_cols]
+        rows.extend([r[i] if 0 <= i < len(r) else None for i in idx] for r in tab["rows"])
+    return out_cols, rows
+
+
+def _write_csv_lists(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
+    """:func:`write_csv` for rows already given as lists over ``columns``."""
+    lines = [",".join(columns)]
+    lines.extend(map(_csv_line, rows))
+    write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 def _is_num(v: Any) -> bool:

@@ -27,6 +27,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from soabench.config import filter_config_for_mode
 from soabench.errors import require
 from soabench.metrics import SERIES_KEYS, SUMMARY_KEYS, TrialMetrics, evaluate
@@ -209,13 +211,22 @@ def step_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
     """One row of :data:`STEP_KEYS` per scan k."""
     base = key.as_dict()
     K = len(metrics.series["n_gt"]) if metrics.series else 0
-    cols = {k: metrics.series[k].tolist() for k in STEP_KEYS[5:]}
-    rows = []
-    for k in range(K):
-        row = {**base, "k": k}
-        row.update({c: int(v[k]) if c in _INT_STEP_KEYS else float(v[k]) for c, v in cols.items()})
-        rows.append(row)
-    return rows
+    names = STEP_KEYS[5:]
+    # each series as a list of Python ints or floats (tolist() of a cast array: the values int() / float() give)
+    cols = [
+        [int(v) for v in metrics.series[c].tolist()] if c in _INT_STEP_KEYS else _float_list(metrics.series[c])
+        for c in names
+    ]
+    keys = ("k", *names)
+    return [{**base, **dict(zip(keys, vals, strict=True))} for vals in zip(range(K), *cols, strict=False)]
+
+
+def _float_list(series: Any) -> list[float]:
+    """The series' values as Python floats, as ``float(v)`` of each element gives them."""
+    a = np.asarray(series)
+    if a.dtype == np.float64:
+        return a.tolist()
+    return [float(v) for v in a.tolist()]
 
 
 def estimate_rows(key: RunKey, results: Sequence[StepResult]) -> list[dict[str, Any]]:

@@ -19,17 +19,17 @@ measurement-driven newborn (PUBM/ATBM) is born *from* a detection, so it carries
 
 from __future__ import annotations
 
-import dataclasses
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import SoabenchError, require
-from soabench.geometry import clutter_intensity
+from soabench.geometry import clutter_intensity, fov_area, measurement_volume
 from soabench.gmphd import cycle, notice, reduction
-from soabench.gmphd.inputs import StepInputs, check_step_inputs
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
@@ -86,7 +86,18 @@ class GMPHDFilter:
         limited = sensor_cfg.fov_deg < 360.0
         self._fov = np.array([sensor_cfg.r_min, sensor_cfg.r_max, 0.5 * sensor_cfg.fov + 1e-12, float(limited)])
         self._beta0 = self.beta0 if self.dynamic else np.empty(0)
+        # kappa(z) of §2.3 as geometry.clutter_intensity computes it, its constants taken once per run
+        self._kappa_polar = sensor_cfg.clutter_space == "polar"
+        self._kappa_const = (
+            sensor_cfg.lambda_c / measurement_volume(sensor_cfg) if self._kappa_polar else fov_area(sensor_cfg)
+        )
         self._nb_beta = self.beta_newborn if self.dynamic else np.empty(0)
+
+    def _kappa(self, Z: np.ndarray) -> np.ndarray:
+        """:func:`soabench.geometry.clutter_intensity` of the (M, 2) measurements (same values, §2.3)."""
+        if self._kappa_polar:
+            return np.full(len(Z), self._kappa_const)
+        return np.ascontiguousarray(self.sensor.lambda_c * Z[:, 0] / self._kappa_const, dtype=float)
 
     def reset(self) -> None:
         """Forget the posterior (next step is k = 0 again)."""
@@ -114,13 +125,10 @@ class GMPHDFilter:
 
         Non-finite inputs raise :class:`~soabench.errors.SoabenchError` or are dropped and counted, as
         ``filter.nonfinite`` says (:mod:`soabench.gmphd.inputs`); a result never holds a NaN."""
-        checked = check_step_inputs(
-            scan.k,
-            np.asarray(scan.Z, dtype=float).reshape(-1, 2),
-            np.asarray(scan.ego, dtype=float),
-            births,
-            self.cfg.nonfinite,
-        )
+        once = getattr(scan, "once", None)  # a Scan keeps what depends on it alone for every run over it
+        make = _scan_inputs_of(scan)
+        Z, ego, finite, _ = make() if once is None else once(("filter.scan_inputs", id(scan.Z), id(scan.ego)), make)
+        checked = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
         kind = (self.fused, births.newborn is not None)
         if not notice.ready(kind):  # the first step of a kind may compile kernels: never a silent pause
             with notice.first_use_notice(kind):
@@ -129,7 +137,7 @@ class GMPHDFilter:
 
     def _step(self, scan: Scan, checked: StepInputs) -> StepResult:
         if self.fused and checked.ego is not None:  # a dropped scan (no pose) takes the array path
-            res = self._step_fused(dataclasses.replace(scan, Z=checked.Z, ego=checked.ego), checked.births)
+            res = self._step_fused(scan, checked.Z, checked.ego, checked.births)
             res.n_dropped, res.n_dropped_births = checked.n_dropped, checked.n_dropped_births
             return res
         return self._step_array(scan, checked)
@@ -213,11 +221,11 @@ class GMPHDFilter:
             origin_counts=origin_counts(red.mix.origin, red.mix.age),
         )
 
-    def _step_fused(self, scan: Scan, births: Births) -> StepResult:
-        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`)."""
+    def _step_fused(self, scan: Scan, Z: np.ndarray, ego: np.ndarray, births: Births) -> StepResult:
+        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`) on the checked ``Z`` and ``ego``."""
         cfg = self.cfg
-        ego = np.ascontiguousarray(scan.ego, dtype=float)
-        Z = np.ascontiguousarray(scan.Z, dtype=float).reshape(-1, 2)
+        ego = np.ascontiguousarray(ego, dtype=float)
+        Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
         mix = self.mixture
         t0 = time.perf_counter()
         pred = cycle.predict_append(
@@ -246,21 +254,25 @@ class GMPHDFilter:
         t1 = time.perf_counter()
 
         if self.occlusion and scan.occluders and g.any():  # line-of-sight gate (§4.4), as detection_gate
-            from soabench.sensor import line_of_sight
+            from soabench.sensor import line_of_sight_past, sight_blockers
 
             idx = np.flatnonzero(g)
-            vis = np.asarray(line_of_sight(ego[:2], pred[1][idx, :2], scan.occluders), dtype=bool)
+            make = lambda: (sight_blockers(ego[:2], scan.occluders), scan.occluders)  # noqa: E731
+            once = getattr(scan, "once", None)  # the blockers depend on the scan alone: once for every run
+            key = ("filter.sight_blockers", id(scan.occluders), len(scan.occluders), ego[0], ego[1])
+            blockers = (make() if once is None else once(key, make))[0]
+            vis = np.asarray(line_of_sight_past(ego[:2], pred[1][idx, :2], blockers), dtype=bool)
             g[idx] = vis.reshape(-1)
-        kappa = np.ascontiguousarray(clutter_intensity(Z, self.sensor), dtype=float)
+        kappa = self._kappa(Z)
         args = (self.R, float(self.sensor.r_min), float(self.gate_thr), kappa)
         if newborn is None:
             post, A, ok = cycle.update(*pred[:7], g, float(cfg.p_D), Z, ego, *args, self._ukf)
             if not ok:  # UKF with a covariance that is not positive definite: the array path's jitter rule
-                return self._step_array(scan, StepInputs(scan.Z, scan.ego, births, 0, 0))
+                return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
         else:
             sup = cycle.support(pred[0], pred[1], pred[2], pred[6], g, float(cfg.p_D), Z, ego, *args, self._ukf)
             if not sup[12]:
-                return self._step_array(scan, StepInputs(scan.Z, scan.ego, births, 0, 0))
+                return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
             A = sup[11]
             M = len(Z)
             beta_nb = np.zeros(0)
@@ -321,6 +333,12 @@ class GMPHDFilter:
             n_newborn=n_newborn,
             origin_counts=origin_counts(self.mixture.origin, self.mixture.age),
         )
+
+
+def _scan_inputs_of(scan: Scan) -> Callable[[], tuple]:
+    """``make()`` -> :func:`soabench.gmphd.inputs.scan_inputs` of ``scan`` plus the scan's own Z and ego arrays,
+    held with the result so that the ids in its cache key (:meth:`soabench.types.Scan.once`) stay theirs."""
+    return lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego))
 
 
 _NO_BETA = np.empty((0, 0))  #: the ``beta`` of a static-mode mixture in :mod:`soabench.gmphd.cycle`

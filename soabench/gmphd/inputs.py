@@ -58,16 +58,38 @@ def _subset_beta(beta, keep: np.ndarray):
     return sub
 
 
-def check_step_inputs(k: int, Z: np.ndarray, ego: np.ndarray, births: Births, policy: str) -> StepInputs:
-    """Check (and with ``policy == "drop"`` clean) the inputs of scan ``k``; see the module docstring."""
+def scan_inputs(k: int, Z_in: np.ndarray, ego_in: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(Z, ego, finite)``: the measurements as (M, 2) floats, the pose as (3,) floats, and whether both are
+    finite. Depends on the scan alone, so the filter computes it once per scan for all its runs
+    (:meth:`soabench.types.Scan.once`). A pose that is not (x, y, theta) raises."""
+    Z = np.asarray(Z_in, dtype=float).reshape(-1, 2)
+    ego = np.asarray(ego_in, dtype=float)
+    if ego.shape != (3,):
+        raise SoabenchError(f"scan {k}: the ego pose has shape {ego.shape}; expected (x, y, theta)")
+    return Z, ego, _finite(Z) and _finite(ego)
+
+
+def births_finite(births: Births) -> bool:
+    """Every weight, mean and covariance of ``births`` (and of its newborn terms) finite, every weight >= 0."""
+    nb = births.newborn
+    ok = _finite(births.w) and _finite(births.m) and _finite(births.P) and bool((births.w >= 0).all())
+    return ok and (nb is None or (_finite(np.asarray(nb.m, dtype=float)) and _finite(np.asarray(nb.P, dtype=float))))
+
+
+def check_step_inputs(
+    k: int, Z: np.ndarray, ego: np.ndarray, births: Births, policy: str, scan_finite: bool | None = None
+) -> StepInputs:
+    """Check (and with ``policy == "drop"`` clean) the inputs of scan ``k``; see the module docstring.
+
+    ``scan_finite``: whether Z and ego are known finite (:func:`scan_inputs`, computed once per scan); None checks
+    them here."""
     if ego.shape != (3,):
         raise SoabenchError(f"scan {k}: the ego pose has shape {ego.shape}; expected (x, y, theta)")
     nb = births.newborn
-    ok_z, ok_ego = _finite(Z), _finite(ego)
-    ok_b = _finite(births.w) and _finite(births.m) and _finite(births.P) and bool((births.w >= 0).all())
-    ok_nb = nb is None or (_finite(np.asarray(nb.m, dtype=float)) and _finite(np.asarray(nb.P, dtype=float)))
-    if ok_z and ok_ego and ok_b and ok_nb:
+    ok_scan = (_finite(Z) and _finite(ego)) if scan_finite is None else scan_finite
+    if ok_scan and births_finite(births):
         return StepInputs(Z, ego, births, 0, 0)
+    ok_ego = _finite(ego)
 
     M, J = len(Z), len(births)
     keep_z = _rows_finite(Z, M) if M else np.zeros(0, dtype=bool)

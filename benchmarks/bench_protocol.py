@@ -1,0 +1,183 @@
+"""The paper protocol against its SUMO floor: wall time, SUMO seconds / cores, and peak memory.
+
+Runs ``soabench run --net intersection`` (default: the paper protocol, 100 trials x 100 s, every default birth model
+x {static, dynamic}, lambda = 3, one worker per core) as a child process and prints
+
+* the SUMO floor: the SUMO seconds of its trials (``timing.csv``, ``t_sumo``) divided by the workers: the wall time
+  of a run that did nothing but SUMO, perfectly parallel;
+* the trials phase (the session's ``wall_s``: first trial submitted to last trial on disk) and the whole command
+  (start-up, scene, trials, merge, summary and figures) against that floor;
+* the CPU seconds inside trials per stage (SUMO, sensor, filters incl. births, metrics);
+* peak memory: the largest resident set of the driver and of any one worker (``ru_maxrss`` of RUSAGE_CHILDREN), and
+  the largest sum over the process tree (sampled from /proc every 0.2 s).
+
+``--pythonpath DIR`` runs another checkout (e.g. ``git worktree add /tmp/base <commit>``) so that before and after
+are measured side by side in one session; its compiled kernels are warmed first by a one-trial run (not timed).
+Examples::
+
+    python benchmarks/bench_protocol.py                       # the paper protocol, this checkout
+    python benchmarks/bench_protocol.py --pythonpath /tmp/base
+    python benchmarks/bench_protocol.py --trials 4 --duration 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+_CLI = "import sys; from soabench.cli import main; sys.exit(main())"
+#: the command run in a child that reports its own and its (waited) workers' ru_maxrss to the file in argv[1]
+_CLI_RUSAGE = (
+    "import json, resource, sys\n"
+    "from soabench.cli import main\n"
+    "path = sys.argv.pop(1)\n"
+    "try:\n"
+    "    rc = main()\n"
+    "finally:\n"
+    "    ru = [resource.getrusage(w).ru_maxrss for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]\n"
+    "    open(path, 'w').write(json.dumps(ru))\n"
+    "sys.exit(rc)\n"
+)
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--net", default="intersection")
+    p.add_argument("--trials", type=int, default=100)
+    p.add_argument("--duration", type=float, default=100.0)
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    p.add_argument("--pythonpath", type=Path, default=None, help="checkout to run instead of the installed soabench")
+    p.add_argument("--out", type=Path, default=None, help="run folder (default: a new temporary folder)")
+    return p.parse_args(argv)
+
+
+def _tree_rss(root: int) -> int:
+    """Resident set (bytes) summed over ``root`` and its descendants, from /proc (0 where unreadable)."""
+    children: dict[int, list[int]] = {}
+    rss: dict[int, int] = {}
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/stat") as fh:
+                fields = fh.read().rsplit(")", 1)[1].split()
+            ppid, pages = int(fields[1]), int(fields[21])
+        except (OSError, IndexError, ValueError):
+            continue
+        children.setdefault(ppid, []).append(int(d))
+        rss[int(d)] = pages * os.sysconf("SC_PAGE_SIZE")
+    total, todo = 0, [root]
+    while todo:
+        pid = todo.pop()
+        total += rss.get(pid, 0)
+        todo.extend(children.get(pid, ()))
+    return total
+
+
+def run_command(cmd: list[str], env: dict, rusage_file: Path) -> tuple[float, int, int, int]:
+    """Run ``cmd``; (wall s, largest tree RSS sum, ru_maxrss of the driver and of its largest worker) in bytes."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL)
+    peak = [0]
+    done = threading.Event()
+
+    def sample() -> None:
+        while not done.wait(0.2):
+            peak[0] = max(peak[0], _tree_rss(proc.pid))
+
+    th = threading.Thread(target=sample, daemon=True)
+    th.start()
+    rc = proc.wait()
+    wall = time.perf_counter() - t0
+    done.set()
+    th.join()
+    if rc != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed with exit code {rc}")
+    driver, worker = json.loads(rusage_file.read_text())
+    return wall, peak[0], driver * 1024, worker * 1024
+
+
+def summarise(run_dir: Path, wall_cmd: float, peak_tree: int, maxrss_driver: int, maxrss_worker: int) -> dict:
+    """The numbers of one finished run folder (timing.csv, the session record) and the measured wall and memory."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from soabench.experiment.store import read_csv
+
+    tm = read_csv(run_dir / "timing.csv")
+    first = np.unique(tm["trial"], return_index=True)[1]
+    sessions = [json.loads(p.read_text()) for p in sorted((run_dir / "sessions").glob("*.json"))]
+    workers = max(int(s.get("n_workers", 1)) for s in sessions)
+    wall_trials = sum(float(s["wall_s"]) for s in sessions)
+    sumo = float(np.nansum(tm["t_sumo"][first]))
+    sensor = float(np.nansum(tm["t_sensor"][first]))
+    filters = float(np.nansum(tm["t_filter_total"]))
+    births = float(np.nansum(tm["t_birth"]))
+    metrics = float(np.nansum(tm["t_metrics"]))
+    floor = sumo / workers
+    return {
+        "trials": int(len(first)),
+        "workers": workers,
+        "sumo_s": sumo,
+        "floor_s": floor,
+        "trials_wall_s": wall_trials,
+        "command_wall_s": wall_cmd,
+        "trials_ratio": wall_trials / floor,
+        "command_ratio": wall_cmd / floor,
+        "sensor_s": sensor,
+        "filters_s": filters,
+        "births_s": births,
+        "metrics_s": metrics,
+        "rest_s": wall_trials * workers - (sumo + sensor + filters + metrics),
+        "peak_tree_mb": peak_tree / 2**20,
+        "maxrss_driver_mb": maxrss_driver / 2**20,
+        "maxrss_worker_mb": maxrss_worker / 2**20,
+    }
+
+
+def report(s: dict) -> str:
+    return "\n".join(
+        [
+            f"{s['trials']} trials on {s['workers']} worker(s): SUMO {s['sumo_s']:.1f} CPU-s -> floor "
+            f"{s['floor_s']:.1f} s",
+            f"trials phase  {s['trials_wall_s']:7.1f} s  = {s['trials_ratio']:.2f}x the floor",
+            f"whole command {s['command_wall_s']:7.1f} s  = {s['command_ratio']:.2f}x the floor",
+            f"CPU-s inside trials: SUMO {s['sumo_s']:.1f}, sensor {s['sensor_s']:.1f}, filters {s['filters_s']:.1f} "
+            f"(births {s['births_s']:.1f}), metrics {s['metrics_s']:.1f}; rest of workers x trials wall "
+            f"{s['rest_s']:.1f} (worker start-up, rows, transport, idle)",
+            f"peak memory: process tree {s['peak_tree_mb']:.0f} MB (sampled every 0.2 s); ru_maxrss driver "
+            f"{s['maxrss_driver_mb']:.0f} MB, largest worker {s['maxrss_worker_mb']:.0f} MB",
+        ]
+    )
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    env = dict(os.environ)
+    if args.pythonpath is not None:
+        env["PYTHONPATH"] = str(args.pythonpath.resolve())
+        with tempfile.TemporaryDirectory(prefix="soabench-warm-") as tmp:  # compile or load its kernels (untimed)
+            warm = [sys.executable, "-c", _CLI, "run", "--net", args.net, "--trials", "1", "--duration", "5"]
+            subprocess.run([*warm, "--workers", "1", "--no-progress", "--out", f"{tmp}/run"], env=env, check=True)
+    out = args.out or Path(tempfile.mkdtemp(prefix="soabench-protocol-")) / "run"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rusage_file = out.parent / f"{out.name}.rusage.json"
+    cmd = [sys.executable, "-c", _CLI_RUSAGE, str(rusage_file), "run", "--net", args.net, "--trials", str(args.trials)]
+    cmd += ["--duration", str(args.duration), "--workers", str(args.workers), "--no-progress", "--out", str(out)]
+    wall, peak, driver, worker = run_command(cmd, env, rusage_file)
+    s = summarise(out, wall, peak, driver, worker)
+    print(f"soabench from {args.pythonpath or 'this environment'}; run folder {out}")
+    print(report(s))
+    print(json.dumps(s))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
