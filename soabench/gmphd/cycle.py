@@ -28,6 +28,8 @@ from soabench.gmphd.kernels import _cholesky4, ekf_terms, merge_groups, merge_mo
 
 _TINY = 1e-300  #: as :data:`soabench.gmphd.probabilities._TINY`
 _LOG2 = math.log(2.0)
+#: relative slack of the range-only gate test in :func:`support` (d2 and Sinv round to ~1e-12 relative at worst: R keeps S well conditioned)
+_RANGE_SLACK = 1.0 + 1e-4
 
 
 @njit(cache=True)
@@ -271,22 +273,37 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False
             a, b, d = Sinv[k, 0, 0], Sinv[k, 0, 1], Sinv[k, 1, 1]
             c = -math.log(2.0 * math.pi) - 0.5 * logdet[k]
             lpw = np.log(p_D[j] * w[j])
+            # a pair beyond the gate in range alone is -inf without its bearing (no wrap, no quadratic form):
+            # min over t of d2(r, t) = r^2 / S_rr, so r^2 > gate_thr S_rr (with slack for rounding) means d2 > gate_thr
+            r2_out = gate_thr * S[k, 0, 0] * _RANGE_SLACK if (S[k, 0, 0] > 0.0 and lpw > -np.inf) else np.inf
             for ll in range(M):
                 r = Z[ll, 0] - eta[k, 0]
+                if r * r > r2_out:
+                    log_t[k, ll] = -np.inf  # nu_r, nu_b of a -inf pair are never read
+                    continue
                 t = wrap(Z[ll, 1] - eta[k, 1])
                 nu_r[k, ll] = r
                 nu_b[k, ll] = t
                 d2 = a * r * r + 2.0 * b * r * t + d * t * t
                 log_t[k, ll] = lpw + (-0.5 * d2 + c if d2 <= gate_thr else -np.inf)
-        for ll in range(M):  # logsumexp over rows, then log L = logaddexp(log kappa, log A)
-            mx = -np.inf
-            for k in range(n_d):
-                mx = max(mx, log_t[k, ll])
-            shift = mx if math.isfinite(mx) else 0.0
-            acc = 0.0
-            for k in range(n_d):
-                acc += math.exp(log_t[k, ll] - shift)
-            log_A = (np.log(acc) if acc > 0.0 else -np.inf) + shift
+        # logsumexp over rows per measurement, then log L = logaddexp(log kappa, log A); row-major passes, each
+        # column still reduced in row order k = 0, 1, ... (max, then the sum of exp), so the sums are those of a
+        # column loop; a -inf term adds exp(-inf) = 0 exactly and is skipped
+        mx = np.full(M, -np.inf)
+        for k in range(n_d):
+            for ll in range(M):
+                mx[ll] = max(mx[ll], log_t[k, ll])
+        for ll in range(M):
+            if not math.isfinite(mx[ll]):
+                mx[ll] = 0.0
+        acc = np.zeros(M)
+        for k in range(n_d):
+            for ll in range(M):
+                v = log_t[k, ll]
+                if v > -np.inf:
+                    acc[ll] += math.exp(v - mx[ll])
+        for ll in range(M):
+            log_A = (np.log(acc[ll]) if acc[ll] > 0.0 else -np.inf) + mx[ll]
             log_L[ll] = _logaddexp(log_L[ll], log_A)
             A[ll] = math.exp(log_A)
     return p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, ok
@@ -318,9 +335,13 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
     n_pairs = 0
     for k in range(n_rows):
         for ll in range(M):
-            w_det[k, ll] = math.exp(log_t[k, ll] - log_L[ll])
-            if w_det[k, ll] > 0.0:
-                n_pairs += 1
+            v = log_t[k, ll]
+            if v > -np.inf:  # exp(-inf - log L) = 0 exactly: a gated pair is skipped
+                w_det[k, ll] = math.exp(v - log_L[ll])
+                if w_det[k, ll] > 0.0:
+                    n_pairs += 1
+            else:
+                w_det[k, ll] = 0.0
     jj = np.empty(n_pairs, dtype=np.int64)
     lj = np.empty(n_pairs, dtype=np.int64)
     p = 0
