@@ -28,7 +28,8 @@ from soabench.gmphd.kernels import _cholesky4, ekf_terms, merge_groups, merge_mo
 
 _TINY = 1e-300  #: as :data:`soabench.gmphd.probabilities._TINY`
 _LOG2 = math.log(2.0)
-#: relative slack of the range-only gate test in :func:`support` (d2 and Sinv round to ~1e-12 relative at worst: R keeps S well conditioned)
+#: relative slack of the range-only gate test in :func:`support` (d2 and Sinv round to ~1e-12 relative at
+#: worst: R keeps S well conditioned)
 _RANGE_SLACK = 1.0 + 1e-4
 
 
