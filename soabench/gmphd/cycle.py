@@ -33,6 +33,15 @@ _LOG2 = math.log(2.0)
 _RANGE_SLACK = 1.0 + 1e-4
 
 
+@njit(cache=True, inline="always")
+def _copy_state(mo, Po, q, m, P, j):
+    """mo[q] = m[j], Po[q] = P[j] element by element (cheaper than numba's row slice assignment)."""
+    for a in range(4):
+        mo[q, a] = m[j, a]
+        for b in range(4):
+            Po[q, a, b] = P[j, a, b]
+
+
 @njit(cache=True)
 def _beta_inflate(s, t, f, theta_min):
     """§4.2, as :func:`soabench.gmphd.probabilities.beta_inflate` for one component."""
@@ -251,8 +260,7 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False
     m_d = np.empty((n_d, 4))
     P_d = np.empty((n_d, 4, 4))
     for k in range(n_d):
-        m_d[k] = m[det_idx[k]]
-        P_d[k] = P[det_idx[k]]
+        _copy_state(m_d, P_d, k, m, P, det_idx[k])
     if ukf:
         eta, S, Sinv, logdet, C, H, valid, ok = ukf_terms(m_d, P_d, ego, R, r_min)
     else:
@@ -356,8 +364,7 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
     m_d = np.empty((n_det_rows, 4))
     P_d = np.empty((n_det_rows, 4, 4))
     for k in range(n_det_rows):
-        m_d[k] = m[det_idx[k]]
-        P_d[k] = P[det_idx[k]]
+        _copy_state(m_d, P_d, k, m, P, det_idx[k])
     m_new, P_new = posterior_pairs(m_d, P_d, C, Sinv, S, H, R, jj, lj, nu_r, nu_b)
     w_nb = np.empty(M if has_nb else 0)
     n_nb = 0
@@ -375,8 +382,7 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
     bo = np.empty((n, 4) if dyn else (0, 0))
     for j in range(J):
         wo[j] = w[j] * (1.0 - p_D[j])
-        mo[j] = m[j]
-        Po[j] = P[j]
+        _copy_state(mo, Po, j, m, P, j)
         oo[j] = origin[j]
         no[j] = n_det[j]
         ao[j] = age[j]
@@ -387,8 +393,7 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
         q = J + p
         src = det_idx[jj[p]]
         wo[q] = w_det[jj[p], lj[p]]
-        mo[q] = m_new[p]
-        Po[q] = P_new[p]
+        _copy_state(mo, Po, q, m_new, P_new, p)
         oo[q] = origin[src]
         no[q] = n_det[src] + 1
         ao[q] = age[src]
@@ -444,7 +449,8 @@ def _select(w, m, P, origin, n_det, age, beta, idx):
     oo, no, ao = np.empty(n, dtype=np.int8), np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
     for k in range(n):
         i = idx[k]
-        wo[k], mo[k], Po[k], oo[k], no[k], ao[k] = w[i], m[i], P[i], origin[i], n_det[i], age[i]
+        wo[k], oo[k], no[k], ao[k] = w[i], origin[i], n_det[i], age[i]
+        _copy_state(mo, Po, k, m, P, i)
         if dyn:
             bo[k] = beta[i]
     return wo, mo, Po, oo, no, ao, bo

@@ -554,7 +554,6 @@ def merge_groups_grid(m, P, order, U):
     alive = np.ones(J, dtype=np.bool_)
     label = np.empty(J, dtype=np.int64)
     centres = np.empty(J, dtype=np.int64)
-    y = np.empty(4)
     mc = np.empty(4)
     G = 0
     for c in order:
@@ -584,14 +583,19 @@ def merge_groups_grid(m, P, order, U):
                             if ex * ex + ey * ey > sreach2[k]:  # beyond its own reach: q > U
                                 k += 1
                                 continue
-                            q = 0.0
-                            for a in range(4):  # y = L_i^-1 d by forward substitution
-                                s = sm[k, a] - mc[a]
-                                r0 = a * (a + 1) // 2
-                                for b in range(a):
-                                    s -= sL[k, r0 + b] * y[b]
-                                y[a] = s / sL[k, r0 + a]
-                                q += y[a] * y[a]
+                            # y = L_i^-1 d by forward substitution, q = |y|^2 summed in the order of the
+                            # window's loop; q only grows, so past U after the position rows it is out
+                            u0 = (sm[k, 0] - mc[0]) / sL[k, 0]
+                            q = 0.0 + u0 * u0
+                            u1 = ((sm[k, 1] - mc[1]) - sL[k, 1] * u0) / sL[k, 2]
+                            q += u1 * u1
+                            if q > U:
+                                k += 1
+                                continue
+                            u2 = (((sm[k, 2] - mc[2]) - sL[k, 3] * u0) - sL[k, 4] * u1) / sL[k, 5]
+                            q += u2 * u2
+                            u3 = ((((sm[k, 3] - mc[3]) - sL[k, 6] * u0) - sL[k, 7] * u1) - sL[k, 8] * u2) / sL[k, 9]
+                            q += u3 * u3
                             if q <= U:
                                 i = sidx[k]
                                 alive[i] = False
