@@ -43,6 +43,49 @@ def _copy_state(mo, Po, q, m, P, j):
 
 
 @njit(cache=True)
+def _order_heaviest_first(w):
+    """``np.argsort(-w, kind="mergesort")`` for finite weights: the indices by decreasing w, ties in index order.
+
+    A stable sort has one result, so an LSD radix sort (8 passes of 8 bits over keys that order as -w does,
+    -0.0 taken as 0.0) gives the same permutation in O(J) instead of O(J log J). Non-finite weights (never in a
+    posterior that passed the filter's checks) take numpy's sort.
+    """
+    J = w.shape[0]
+    for j in range(J):
+        if not math.isfinite(w[j]):
+            return np.argsort(-w, kind="mergesort")
+    neg = np.empty(J)
+    for j in range(J):
+        neg[j] = -w[j] if w[j] != 0.0 else 0.0  # -0.0 and 0.0 compare equal: one key
+    keys = neg.view(np.uint64)
+    sign = np.uint64(1) << np.uint64(63)
+    for j in range(J):
+        b = keys[j]
+        keys[j] = ~b if b & sign else b | sign  # unsigned order of the keys = order of the floats
+    idx = np.arange(J)
+    tmp = np.empty(J, dtype=np.int64)
+    tmpk = np.empty(J, dtype=np.uint64)
+    count = np.empty(257, dtype=np.int64)
+    for shift in range(0, 64, 8):
+        sh = np.uint64(shift)
+        count[:] = 0
+        for j in range(J):
+            count[((keys[j] >> sh) & np.uint64(255)) + 1] += 1
+        if count.max() == J:  # every key has the same byte here: the pass would not move anything
+            continue
+        for d in range(256):
+            count[d + 1] += count[d]
+        for j in range(J):
+            d = (keys[j] >> sh) & np.uint64(255)
+            tmp[count[d]] = idx[j]
+            tmpk[count[d]] = keys[j]
+            count[d] += 1
+        idx, tmp = tmp, idx
+        keys, tmpk = tmpk, keys
+    return idx
+
+
+@njit(cache=True)
 def _beta_inflate(s, t, f, theta_min):
     """§4.2, as :func:`soabench.gmphd.probabilities.beta_inflate` for one component."""
     mu = s / (s + t)
@@ -276,6 +319,7 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False
     log_t = np.empty((n_rows, M))
     nu_r = np.empty((n_rows, M))
     nu_b = np.empty((n_rows, M))
+    mx = np.full(M, -np.inf)  # per measurement, the largest term (max over rows in row order)
     if n_rows > 0:
         for k in range(n_d):  # log_likelihood of kernels, fused with log p_D w
             j = det_idx[k]
@@ -294,14 +338,12 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False
                 nu_r[k, ll] = r
                 nu_b[k, ll] = t
                 d2 = a * r * r + 2.0 * b * r * t + d * t * t
-                log_t[k, ll] = lpw + (-0.5 * d2 + c if d2 <= gate_thr else -np.inf)
+                v = lpw + (-0.5 * d2 + c if d2 <= gate_thr else -np.inf)
+                log_t[k, ll] = v
+                mx[ll] = max(mx[ll], v)
         # logsumexp over rows per measurement, then log L = logaddexp(log kappa, log A); row-major passes, each
         # column still reduced in row order k = 0, 1, ... (max, then the sum of exp), so the sums are those of a
-        # column loop; a -inf term adds exp(-inf) = 0 exactly and is skipped
-        mx = np.full(M, -np.inf)
-        for k in range(n_d):
-            for ll in range(M):
-                mx[ll] = max(mx[ll], log_t[k, ll])
+        # column loop; a -inf term (max(x, -inf) = x, and exp(-inf) = 0 exactly) is skipped
         for ll in range(M):
             if not math.isfinite(mx[ll]):
                 mx[ll] = 0.0
@@ -475,7 +517,7 @@ def reduce(w, m, P, origin, n_det, age, beta, max_age, T, U, J_max, theta_min, e
     n_pruned = w.shape[0]
     dyn = beta.shape[1] == 4
     if n_pruned > 0:
-        order = np.argsort(-w, kind="mergesort")
+        order = _order_heaviest_first(w)
         label, centres = merge_groups(m, P, order, U)
         G = centres.shape[0]
         if G == n_pruned:
@@ -512,7 +554,7 @@ def reduce(w, m, P, origin, n_det, age, beta, max_age, T, U, J_max, theta_min, e
     n_merged = w.shape[0]
     cap_hit = n_merged > J_max
     if cap_hit:
-        top = np.argsort(-w, kind="mergesort")[:J_max]
+        top = _order_heaviest_first(w)[:J_max]
         keep = np.zeros(n_merged, dtype=np.bool_)
         keep[top] = True
         w, m, P, origin, n_det, age, beta = _take(w, m, P, origin, n_det, age, beta, keep)
