@@ -129,8 +129,8 @@ def main() -> int:
     configs += [(6, float(x)) for x in args.clutter.split(",") if x and (6, float(x)) not in configs]
     sides = [("new", None)] + ([("baseline", str(Path(args.baseline).resolve()))] if args.baseline else [])
     print(f"one {args.duration:g} s trial of the intersection, twelve filter runs (6 birth models x static/dynamic)")
-    print("| peds | lam | mean M | max J | side | trial s | SUMO s | trial / SUMO | CPU ratio | filters s | metrics s |")
-    print("|-----:|----:|-------:|------:|------|--------:|-------:|-------------:|----------:|----------:|----------:|")
+    print("| peds | lam | mean M | max J | side | trial s | SUMO s | trial / SUMO | CPU ratio | filters s | metric s |")
+    print("|-----:|----:|-------:|------:|------|--------:|-------:|-------------:|----------:|----------:|---------:|")
     results: dict[str, list[dict]] = {name: [] for name, _ in sides}
     identical = True
     for peds, lam in configs:
@@ -140,7 +140,7 @@ def main() -> int:
             print(
                 f"| {peds:4d} | {lam:4g} | {r['M']:6.1f} | {r['J']:5d} | {name} | {r['wall']:7.1f} | {r['sumo']:6.1f}"
                 f" | {r['wall'] / r['sumo']:12.2f} | {r['cpu'] / r['sumo_cpu']:9.2f} | {r['filters']:9.2f}"
-                f" | {r['metrics']:9.2f} |",
+                f" | {r['metrics']:8.2f} |",
                 flush=True,
             )
         if len(sides) == 2 and results["new"][-1]["digest"] != results["baseline"][-1]["digest"]:
@@ -198,11 +198,20 @@ def plot(saved: dict, out: Path) -> None:
     ax = axes[2]
     rows = sorted((r for r in new if r["lam"] == 3.0), key=lambda r: r["peds"])
     brows = sorted((r for r in base if r["lam"] == 3.0), key=lambda r: r["peds"])
-    ax.semilogx([r["peds"] for r in rows], [r["wall"] / r["sumo"] for r in rows], "o-", color="tab:blue", ms=4,
-                label="now")
+    ax.semilogx(
+        [r["peds"] for r in rows], [r["wall"] / r["sumo"] for r in rows], "o-", color="tab:blue", ms=4, label="now"
+    )
     if brows:
-        ax.semilogx([r["peds"] for r in brows], [r["wall"] / r["sumo"] for r in brows], "o--", color="tab:blue",
-                    ms=3, mfc="none", alpha=0.7, label="before")
+        ax.semilogx(
+            [r["peds"] for r in brows],
+            [r["wall"] / r["sumo"] for r in brows],
+            "o--",
+            color="tab:blue",
+            ms=3,
+            mfc="none",
+            alpha=0.7,
+            label="before",
+        )
     ax.axhline(2.0, color="tab:red", lw=1, ls=":", label="target 2x")
     ax.set_xlabel("pedestrians (clutter λ = 3)", fontsize=8)
     ax.set_ylabel("whole trial / its SUMO time", fontsize=8)
