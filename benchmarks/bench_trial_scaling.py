@@ -196,23 +196,16 @@ def plot(saved: dict, out: Path) -> None:
         labels.append("dashed, open: before")
     axes[0].legend(handles, labels, fontsize=6.5, loc="upper left")
     ax = axes[2]
-    rows = sorted((r for r in new if r["lam"] == 3.0), key=lambda r: r["peds"])
-    brows = sorted((r for r in base if r["lam"] == 3.0), key=lambda r: r["peds"])
-    ax.semilogx(
-        [r["peds"] for r in rows], [r["wall"] / r["sumo"] for r in rows], "o-", color="tab:blue", ms=4, label="now"
-    )
-    if brows:
+    for rows, side, color, mfc, ls in ((new, "now", "tab:blue", None, "-"), (base, "before", "0.45", "none", "--")):
+        rows = sorted((r for r in rows if r["lam"] == 3.0), key=lambda r: r["peds"])
+        if not rows:
+            continue
+        x = [r["peds"] for r in rows]
         ax.semilogx(
-            [r["peds"] for r in brows],
-            [r["wall"] / r["sumo"] for r in brows],
-            "o--",
-            color="tab:blue",
-            ms=3,
-            mfc="none",
-            alpha=0.7,
-            label="before",
+            x, [r["wall"] / r["sumo"] for r in rows], "o" + ls, color=color, ms=4, mfc=mfc, label=f"{side}, wall"
         )
-    ax.axhline(2.0, color="tab:red", lw=1, ls=":", label="target 2x")
+        ax.semilogx(x, [r["cpu"] / r["sumo_cpu"] for r in rows], "x:", color=color, ms=4, label=f"{side}, CPU")
+    ax.axhline(2.0, color="tab:red", lw=1, ls="--", label="target 2x")
     ax.set_xlabel("pedestrians (clutter λ = 3)", fontsize=8)
     ax.set_ylabel("whole trial / its SUMO time", fontsize=8)
     ax.set_ylim(bottom=1.0)
@@ -221,8 +214,9 @@ def plot(saved: dict, out: Path) -> None:
     ax.tick_params(labelsize=7)
     ax.legend(fontsize=6.5)
     fig.suptitle(
-        "One trial of the intersection, S-OA, PUBM, UBM (FOV), UBM (workspace), ATBM, GMBM x static/dynamic"
-        " (shared 2-core machine, one run per point)",
+        f"One {saved['duration']:g} s trial of the intersection: S-OA, PUBM, UBM (FOV), UBM (workspace), ATBM, GMBM"
+        " x static/dynamic\n"
+        "(shared 2-core machine, one run per point; dashed / grey: the code before, same run)",
         fontsize=7.5,
     )
     out.parent.mkdir(parents=True, exist_ok=True)

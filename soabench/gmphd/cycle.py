@@ -31,6 +31,7 @@ _LOG2 = math.log(2.0)
 #: relative slack of the range-only gate test in :func:`support` (d2 and Sinv round to ~1e-12 relative at
 #: worst: R keeps S well conditioned)
 _RANGE_SLACK = 1.0 + 1e-4
+_RADIX_MIN = 1500  #: from this many weights on, the radix sort is faster than numba's mergesort
 
 
 @njit(cache=True, inline="always")
@@ -48,9 +49,12 @@ def _order_heaviest_first(w):
 
     A stable sort has one result, so an LSD radix sort (8 passes of 8 bits over keys that order as -w does,
     -0.0 taken as 0.0) gives the same permutation in O(J) instead of O(J log J). Non-finite weights (never in a
-    posterior that passed the filter's checks) take numpy's sort.
+    posterior that passed the filter's checks) and small mixtures (below ``_RADIX_MIN``, where the comparison sort is
+    faster) take numpy's sort.
     """
     J = w.shape[0]
+    if J < _RADIX_MIN:
+        return np.argsort(-w, kind="mergesort")
     for j in range(J):
         if not math.isfinite(w[j]):
             return np.argsort(-w, kind="mergesort")
