@@ -1,9 +1,10 @@
-"""Scaling of the Vo-Ma merge (docs/method.md §2.9): 2-d tree against the x-sorted window (plain script, not a test).
+"""Scaling of the Vo-Ma merge (docs/method.md §2.9): grid, 2-d tree and x-sorted window (plain script, not a test).
 
     python benchmarks/bench_merge_scaling.py [--quick] [--out benchmarks/figures/merge_scaling.png]
 
-Both kernels of ``soabench/gmphd/kernels.py`` get the same mixtures, and the script checks that they return the
-same groups before it times them (best of several repetitions, so a loaded machine inflates both alike). Mixtures of
+The three kernels of ``soabench/gmphd/kernels.py`` get the same mixtures, and the script checks that they return
+the same groups before it times them (best of several repetitions, the three alternated, so a loaded machine inflates
+all alike). ``merge_groups`` uses the window up to 96 components and the grid above. Mixtures of
 J = 100 to 5000 components at constant density: ``clustered`` (blobs of about 40 components around detections, as
 after an update) and ``spread`` (uniform), each plain and with 1 % wide components (position variance x 10 to 400,
 like coasting or birth components), which widen the window of every pass.
@@ -45,17 +46,15 @@ def mixture(J: int, layout: str, wide: float, seed: int) -> tuple[np.ndarray, np
     return m, P, np.argsort(-w, kind="stable")
 
 
-def best_of_pair(fa, fb, reps: int) -> tuple[float, float]:
-    """Best time of each of two calls, alternated so that a load spike on the shared machine hits both."""
-    ta = tb = math.inf
+def best_of(fs, reps: int) -> list[float]:
+    """Best time of each call, alternated so that a load spike on the shared machine hits all of them."""
+    best = [math.inf] * len(fs)
     for _ in range(reps):
-        t0 = time.perf_counter()
-        fa()
-        t1 = time.perf_counter()
-        fb()
-        t2 = time.perf_counter()
-        ta, tb = min(ta, t1 - t0), min(tb, t2 - t1)
-    return ta, tb
+        for i, f in enumerate(fs):
+            t0 = time.perf_counter()
+            f()
+            best[i] = min(best[i], time.perf_counter() - t0)
+    return best
 
 
 def main() -> int:
@@ -65,26 +64,35 @@ def main() -> int:
     ap.add_argument("--out", default="benchmarks/figures/merge_scaling.png", help="figure path")
     args = ap.parse_args()
     sizes = [J for J in SIZES if not args.quick or J <= 1000]
-    res: dict[tuple[str, float], list[tuple[int, float, float, int]]] = {c: [] for c in CASES}
-    print("|  case               |    J | groups | window ms | tree ms | window / tree |")
-    print("|---------------------|------|--------|-----------|---------|---------------|")
+    res: dict[tuple[str, float], list[tuple[int, float, float, int, float]]] = {c: [] for c in CASES}
+    print("|  case               |    J | groups | window ms | tree ms | grid ms | window / grid | tree / grid |")
+    print("|---------------------|------|--------|-----------|---------|---------|---------------|-------------|")
     for case in CASES:
         for J in sizes:
             m, P, order = mixture(J, *case, seed=J)
             lab_w, cen_w = kernels.merge_groups_window(m, P, order, 4.0)
             lab_t, cen_t = kernels.merge_groups_tree(m, P, order, 4.0)
-            if not (np.array_equal(lab_w, lab_t) and np.array_equal(cen_w, cen_t)):
+            lab_g, cen_g = kernels.merge_groups_grid(m, P, order, 4.0)
+            same = all(
+                np.array_equal(lab_w, lab) and np.array_equal(cen_w, cen)
+                for lab, cen in ((lab_t, cen_t), (lab_g, cen_g))
+            )
+            if not same:
                 print(f"DIFFERENT GROUPS at {case}, J = {J}", file=sys.stderr)
                 return 1
-            t_w, t_t = best_of_pair(
-                lambda m=m, P=P, o=order: kernels.merge_groups_window(m, P, o, 4.0),
-                lambda m=m, P=P, o=order: kernels.merge_groups_tree(m, P, o, 4.0),
+            t_w, t_t, t_g = best_of(
+                [
+                    lambda m=m, P=P, o=order: kernels.merge_groups_window(m, P, o, 4.0),
+                    lambda m=m, P=P, o=order: kernels.merge_groups_tree(m, P, o, 4.0),
+                    lambda m=m, P=P, o=order: kernels.merge_groups_grid(m, P, o, 4.0),
+                ],
                 args.reps,
             )
-            res[case].append((J, t_w, t_t, len(cen_t)))
+            res[case].append((J, t_w, t_t, len(cen_t), t_g))
             name = f"{case[0]}{', 1 % wide' if case[1] else ''}"
             print(
-                f"| {name:19s} | {J:4d} | {len(cen_t):6d} | {t_w * 1e3:9.3f} | {t_t * 1e3:7.3f} | {t_w / t_t:13.1f} |"
+                f"| {name:19s} | {J:4d} | {len(cen_t):6d} | {t_w * 1e3:9.3f} | {t_t * 1e3:7.3f} | {t_g * 1e3:7.3f}"
+                f" | {t_w / t_g:13.1f} | {t_t / t_g:11.1f} |"
             )
     plot(res, Path(args.out))
     print(f"\nfigure: {args.out}")
@@ -107,9 +115,10 @@ def plot(res: dict, out: Path) -> None:
             tag = " (1 % wide)" if wide else ""
             ax.loglog(J, [r[1] * 1e3 for r in rows], ls, color="tab:red", marker="s", ms=4, label=f"x-window{tag}")
             ax.loglog(J, [r[2] * 1e3 for r in rows], ls, color="tab:blue", marker="o", ms=4, label=f"2-d tree{tag}")
+            ax.loglog(J, [r[4] * 1e3 for r in rows], ls, color="tab:green", marker="^", ms=4, label=f"grid{tag}")
         rows = res[(layout, 0.0)]
         J = np.array([r[0] for r in rows], dtype=float)
-        t0 = rows[0][2] * 1e3
+        t0 = rows[0][4] * 1e3
         ax.loglog(J, t0 * (J * np.log(J)) / (J[0] * np.log(J[0])), ":", color="0.4", lw=1, label="∝ J log J")
         ax.loglog(J, t0 * (J / J[0]) ** 2, "-.", color="0.6", lw=1, label="∝ J²")
         ax.set_title(f"{layout} mixtures")
@@ -117,7 +126,7 @@ def plot(res: dict, out: Path) -> None:
         ax.grid(True, which="major", alpha=0.3)
     axes[0].set_ylabel("merge time per call (ms)")
     axes[1].legend(fontsize=7, loc="upper left")
-    fig.suptitle("Vo-Ma merge (U = 4): same groups, x-sorted window vs 2-d tree (best of reps)", fontsize=9)
+    fig.suptitle("Vo-Ma merge (U = 4): same groups, x-sorted window, 2-d tree and grid (best of reps)", fontsize=9)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=150)
 

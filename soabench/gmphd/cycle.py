@@ -28,6 +28,65 @@ from soabench.gmphd.kernels import _cholesky4, ekf_terms, merge_groups, merge_mo
 
 _TINY = 1e-300  #: as :data:`soabench.gmphd.probabilities._TINY`
 _LOG2 = math.log(2.0)
+#: relative slack of the range-only gate test in :func:`support` (d2 and Sinv round to ~1e-12 relative at
+#: worst: R keeps S well conditioned)
+_RANGE_SLACK = 1.0 + 1e-4
+_RADIX_MIN = 1500  #: from this many weights on, the radix sort is faster than numba's mergesort
+
+
+@njit(cache=True, inline="always")
+def _copy_state(mo, Po, q, m, P, j):
+    """mo[q] = m[j], Po[q] = P[j] element by element (cheaper than numba's row slice assignment)."""
+    for a in range(4):
+        mo[q, a] = m[j, a]
+        for b in range(4):
+            Po[q, a, b] = P[j, a, b]
+
+
+@njit(cache=True)
+def _order_heaviest_first(w):
+    """``np.argsort(-w, kind="mergesort")`` for finite weights: the indices by decreasing w, ties in index order.
+
+    A stable sort has one result, so an LSD radix sort (8 passes of 8 bits over keys that order as -w does,
+    -0.0 taken as 0.0) gives the same permutation in O(J) instead of O(J log J). Non-finite weights (never in a
+    posterior that passed the filter's checks) and small mixtures (below ``_RADIX_MIN``, where the comparison sort is
+    faster) take numpy's sort.
+    """
+    J = w.shape[0]
+    if J < _RADIX_MIN:
+        return np.argsort(-w, kind="mergesort")
+    for j in range(J):
+        if not math.isfinite(w[j]):
+            return np.argsort(-w, kind="mergesort")
+    neg = np.empty(J)
+    for j in range(J):
+        neg[j] = -w[j] if w[j] != 0.0 else 0.0  # -0.0 and 0.0 compare equal: one key
+    keys = neg.view(np.uint64)
+    sign = np.uint64(1) << np.uint64(63)
+    for j in range(J):
+        b = keys[j]
+        keys[j] = ~b if b & sign else b | sign  # unsigned order of the keys = order of the floats
+    idx = np.arange(J)
+    tmp = np.empty(J, dtype=np.int64)
+    tmpk = np.empty(J, dtype=np.uint64)
+    count = np.empty(257, dtype=np.int64)
+    for shift in range(0, 64, 8):
+        sh = np.uint64(shift)
+        count[:] = 0
+        for j in range(J):
+            count[((keys[j] >> sh) & np.uint64(255)) + 1] += 1
+        if count.max() == J:  # every key has the same byte here: the pass would not move anything
+            continue
+        for d in range(256):
+            count[d + 1] += count[d]
+        for j in range(J):
+            d = (keys[j] >> sh) & np.uint64(255)
+            tmp[count[d]] = idx[j]
+            tmpk[count[d]] = keys[j]
+            count[d] += 1
+        idx, tmp = tmp, idx
+        keys, tmpk = tmpk, keys
+    return idx
 
 
 @njit(cache=True)
@@ -248,8 +307,7 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False
     m_d = np.empty((n_d, 4))
     P_d = np.empty((n_d, 4, 4))
     for k in range(n_d):
-        m_d[k] = m[det_idx[k]]
-        P_d[k] = P[det_idx[k]]
+        _copy_state(m_d, P_d, k, m, P, det_idx[k])
     if ukf:
         eta, S, Sinv, logdet, C, H, valid, ok = ukf_terms(m_d, P_d, ego, R, r_min)
     else:
@@ -265,28 +323,42 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False
     log_t = np.empty((n_rows, M))
     nu_r = np.empty((n_rows, M))
     nu_b = np.empty((n_rows, M))
+    mx = np.full(M, -np.inf)  # per measurement, the largest term (max over rows in row order)
     if n_rows > 0:
         for k in range(n_d):  # log_likelihood of kernels, fused with log p_D w
             j = det_idx[k]
             a, b, d = Sinv[k, 0, 0], Sinv[k, 0, 1], Sinv[k, 1, 1]
             c = -math.log(2.0 * math.pi) - 0.5 * logdet[k]
             lpw = np.log(p_D[j] * w[j])
+            # a pair beyond the gate in range alone is -inf without its bearing (no wrap, no quadratic form):
+            # min over t of d2(r, t) = r^2 / S_rr, so r^2 > gate_thr S_rr (with slack for rounding) means d2 > gate_thr
+            r2_out = gate_thr * S[k, 0, 0] * _RANGE_SLACK if (S[k, 0, 0] > 0.0 and lpw > -np.inf) else np.inf
             for ll in range(M):
                 r = Z[ll, 0] - eta[k, 0]
+                if r * r > r2_out:
+                    log_t[k, ll] = -np.inf  # nu_r, nu_b of a -inf pair are never read
+                    continue
                 t = wrap(Z[ll, 1] - eta[k, 1])
                 nu_r[k, ll] = r
                 nu_b[k, ll] = t
                 d2 = a * r * r + 2.0 * b * r * t + d * t * t
-                log_t[k, ll] = lpw + (-0.5 * d2 + c if d2 <= gate_thr else -np.inf)
-        for ll in range(M):  # logsumexp over rows, then log L = logaddexp(log kappa, log A)
-            mx = -np.inf
-            for k in range(n_d):
-                mx = max(mx, log_t[k, ll])
-            shift = mx if math.isfinite(mx) else 0.0
-            acc = 0.0
-            for k in range(n_d):
-                acc += math.exp(log_t[k, ll] - shift)
-            log_A = (np.log(acc) if acc > 0.0 else -np.inf) + shift
+                v = lpw + (-0.5 * d2 + c if d2 <= gate_thr else -np.inf)
+                log_t[k, ll] = v
+                mx[ll] = max(mx[ll], v)
+        # logsumexp over rows per measurement, then log L = logaddexp(log kappa, log A); row-major passes, each
+        # column still reduced in row order k = 0, 1, ... (max, then the sum of exp), so the sums are those of a
+        # column loop; a -inf term (max(x, -inf) = x, and exp(-inf) = 0 exactly) is skipped
+        for ll in range(M):
+            if not math.isfinite(mx[ll]):
+                mx[ll] = 0.0
+        acc = np.zeros(M)
+        for k in range(n_d):
+            for ll in range(M):
+                v = log_t[k, ll]
+                if v > -np.inf:
+                    acc[ll] += math.exp(v - mx[ll])
+        for ll in range(M):
+            log_A = (np.log(acc[ll]) if acc[ll] > 0.0 else -np.inf) + mx[ll]
             log_L[ll] = _logaddexp(log_L[ll], log_A)
             A[ll] = math.exp(log_A)
     return p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, ok
@@ -318,9 +390,13 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
     n_pairs = 0
     for k in range(n_rows):
         for ll in range(M):
-            w_det[k, ll] = math.exp(log_t[k, ll] - log_L[ll])
-            if w_det[k, ll] > 0.0:
-                n_pairs += 1
+            v = log_t[k, ll]
+            if v > -np.inf:  # exp(-inf - log L) = 0 exactly: a gated pair is skipped
+                w_det[k, ll] = math.exp(v - log_L[ll])
+                if w_det[k, ll] > 0.0:
+                    n_pairs += 1
+            else:
+                w_det[k, ll] = 0.0
     jj = np.empty(n_pairs, dtype=np.int64)
     lj = np.empty(n_pairs, dtype=np.int64)
     p = 0
@@ -334,8 +410,7 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
     m_d = np.empty((n_det_rows, 4))
     P_d = np.empty((n_det_rows, 4, 4))
     for k in range(n_det_rows):
-        m_d[k] = m[det_idx[k]]
-        P_d[k] = P[det_idx[k]]
+        _copy_state(m_d, P_d, k, m, P, det_idx[k])
     m_new, P_new = posterior_pairs(m_d, P_d, C, Sinv, S, H, R, jj, lj, nu_r, nu_b)
     w_nb = np.empty(M if has_nb else 0)
     n_nb = 0
@@ -353,8 +428,7 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
     bo = np.empty((n, 4) if dyn else (0, 0))
     for j in range(J):
         wo[j] = w[j] * (1.0 - p_D[j])
-        mo[j] = m[j]
-        Po[j] = P[j]
+        _copy_state(mo, Po, j, m, P, j)
         oo[j] = origin[j]
         no[j] = n_det[j]
         ao[j] = age[j]
@@ -365,8 +439,7 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
         q = J + p
         src = det_idx[jj[p]]
         wo[q] = w_det[jj[p], lj[p]]
-        mo[q] = m_new[p]
-        Po[q] = P_new[p]
+        _copy_state(mo, Po, q, m_new, P_new, p)
         oo[q] = origin[src]
         no[q] = n_det[src] + 1
         ao[q] = age[src]
@@ -422,7 +495,8 @@ def _select(w, m, P, origin, n_det, age, beta, idx):
     oo, no, ao = np.empty(n, dtype=np.int8), np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
     for k in range(n):
         i = idx[k]
-        wo[k], mo[k], Po[k], oo[k], no[k], ao[k] = w[i], m[i], P[i], origin[i], n_det[i], age[i]
+        wo[k], oo[k], no[k], ao[k] = w[i], origin[i], n_det[i], age[i]
+        _copy_state(mo, Po, k, m, P, i)
         if dyn:
             bo[k] = beta[i]
     return wo, mo, Po, oo, no, ao, bo
@@ -447,7 +521,7 @@ def reduce(w, m, P, origin, n_det, age, beta, max_age, T, U, J_max, theta_min, e
     n_pruned = w.shape[0]
     dyn = beta.shape[1] == 4
     if n_pruned > 0:
-        order = np.argsort(-w, kind="mergesort")
+        order = _order_heaviest_first(w)
         label, centres = merge_groups(m, P, order, U)
         G = centres.shape[0]
         if G == n_pruned:
@@ -484,7 +558,7 @@ def reduce(w, m, P, origin, n_det, age, beta, max_age, T, U, J_max, theta_min, e
     n_merged = w.shape[0]
     cap_hit = n_merged > J_max
     if cap_hit:
-        top = np.argsort(-w, kind="mergesort")[:J_max]
+        top = _order_heaviest_first(w)[:J_max]
         keep = np.zeros(n_merged, dtype=np.bool_)
         keep[top] = True
         w, m, P, origin, n_det, age, beta = _take(w, m, P, origin, n_det, age, beta, keep)

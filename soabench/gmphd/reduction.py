@@ -5,8 +5,9 @@ every i with (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U (P_i of the candidate); no 
 then keep the J_max heaviest (logged when hit).
 
 The greedy merge and the moment matching are compiled loops (:mod:`soabench.gmphd.kernels`): Table II literally,
-with a spatial index (a 2-d tree over the positions, or an x-sorted window for small mixtures) so that a pass only
-visits the candidates whose position alone does not already exceed U: about O(J log J) instead of O(J x groups).
+with a spatial index (uniform grids over the positions, one per reach class, or an x-sorted window for small
+mixtures) so that a pass only visits the candidates whose position alone does not already exceed U: about O(J) plus
+each pass's neighbouring cells instead of O(J x groups).
 """
 
 from __future__ import annotations
