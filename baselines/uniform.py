@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 
-from soabench.birth.base import SOURCE_GRID, BirthContext, Births, FOVRule, build_components, inside_any
+from soabench.birth.base import SOURCE_GRID, BirthContext, Births, FOVRule, build_components
 from soabench.config import BirthConfig, SensorConfig
 from soabench.scenario.scene import SceneMap
 
@@ -50,7 +50,7 @@ class UniformBirth:
         else:
             ok = np.ones(len(self.nodes), dtype=bool)
         idx = np.flatnonzero(ok)
-        idx = idx[~inside_any(scan.occluders, self.nodes[idx])]
+        idx = idx[~self.rule.in_occluder(self.nodes[idx], scan)]
         J = len(idx)
         if J == 0:
             return Births.empty()

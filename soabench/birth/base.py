@@ -159,6 +159,13 @@ class FOVRule:
         """(J,) inside a building or static occluder of the scene."""
         return inside_any(self.static_tree, xy)
 
+    @staticmethod
+    def occluder_index(scan: Scan) -> STRtree:
+        """The STRtree of ``scan.occluders``: the scan's own (built once per scan), or the LRU's for a duck-typed
+        scan without :meth:`soabench.types.Scan.occluder_index`."""
+        index = getattr(scan, "occluder_index", None)
+        return index() if index is not None else geometry_index(scan.occluders)
+
     def in_occluder(self, xy: np.ndarray, scan: Scan) -> np.ndarray:
         """(J,) inside an occluder of scan k (vehicles, parked cars, buildings as the sensor lists them); the
         scan's occluder index is built once per scan and carried on it (:meth:`soabench.types.Scan.occluder_index`)."""

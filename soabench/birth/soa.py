@@ -316,7 +316,7 @@ class SOABirth:
             if len(cand) and scan.occluders:
                 e = np.broadcast_to(scan.ego[:2], (len(cand), 2))
                 sight = shapely.linestrings(np.stack([e, xy[cand]], axis=1))
-                blocked = np.unique(STRtree(scan.occluders).query(sight, predicate="intersects")[0])
+                blocked = np.unique(self.rule.occluder_index(scan).query(sight, predicate="intersects")[0])
                 cand = np.delete(cand, blocked)
             ok[cand] = True
         return ok
