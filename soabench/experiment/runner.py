@@ -672,7 +672,7 @@ def _run_locked(
     outcome = RunOutcome(store.run_dir, n_missing == 0, len(done), n_missing, failures, "")
     if interrupted:
         raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
-    if unattempted or stopped:
+    if unattempted or stopped or defer is not None:  # deferring: the report follows the group (run_trials=False)
         return outcome
     from soabench.experiment.report import write_report
 

@@ -1,0 +1,107 @@
+"""A run's figures drawn in parallel (issue 19: fixed costs): one task per figure on a local process pool.
+
+A report's figures (:func:`soabench.experiment.plots.figure_jobs`) are independent: each is a builder called with
+the run's tables and a few arguments, then written atomically (:func:`soabench.plotstyle.save_png`). Inside
+``with parallel(executor):`` :func:`draw_all` hands them to the executor's worker processes, one figure per task;
+each worker reads the run folder's tables itself (cached per folder, keyed by the files' sizes and times) and draws
+the figure exactly as the serial path does, so the PNG files are byte for byte the same however many processes
+draw them. :func:`draw_all` returns only once every figure is on disk (the report's ``summary.json`` is written
+after it, so a report is never passed off as complete with a figure missing); a figure that fails raises.
+
+Only a local :class:`~soabench.experiment.runner.PoolExecutor` draws (a Dask worker may not see the run folder);
+without one, and for tables not read from a folder, the figures are drawn here one after another.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+#: the executor figures are drawn on (innermost :func:`parallel`), or None: serial
+_ACTIVE: list[Any] = []
+
+
+@dataclass(frozen=True)
+class FigureJob:
+    """One figure: ``build(tables, *args)`` returns the :class:`~matplotlib.figure.Figure` written to ``path``."""
+
+    path: Path
+    build: Callable[..., Any]
+    args: tuple = ()
+
+    def draw(self, tables: Any) -> Path:
+        from soabench.plotstyle import save_png
+
+        return save_png(self.build(tables, *self.args), self.path)
+
+
+@dataclass(frozen=True)
+class FigureBatch:
+    """The figures of one run folder as an executor task spec (small and picklable: the tables stay on disk)."""
+
+    run_dir: str
+    jobs: tuple[FigureJob, ...]
+    config: dict = field(default_factory=dict)  # read by the executors for a failure record's seed
+
+    @property
+    def task_fn(self) -> Callable[[int, FigureBatch], dict]:
+        return draw_task
+
+
+def _stamp(run_dir: str) -> tuple:
+    """The names, sizes and modification times of the folder's files: a changed table changes the stamp."""
+    with os.scandir(run_dir) as it:
+        return tuple(sorted((e.name, e.stat().st_size, e.stat().st_mtime_ns) for e in it if e.is_file()))
+
+
+_TABLES: dict[str, tuple[tuple, Any]] = {}  # per worker process: run folder -> (stamp, tables)
+
+
+def _tables(run_dir: str) -> Any:
+    from soabench.experiment.tables import load_tables
+
+    stamp = _stamp(run_dir)
+    hit = _TABLES.get(run_dir)
+    if hit is None or hit[0] != stamp:
+        _TABLES.clear()  # one folder at a time: a study's reports come folder by folder
+        hit = _TABLES[run_dir] = (stamp, load_tables(Path(run_dir)))
+    return hit[1]
+
+
+def draw_task(i: int, batch: FigureBatch) -> dict:
+    """Worker side: draw figure ``i`` of ``batch``."""
+    path = batch.jobs[i].draw(_tables(batch.run_dir))
+    return {"status": "ok", "path": str(path)}
+
+
+@contextlib.contextmanager
+def parallel(executor: Any) -> Iterator[None]:
+    """Draw the figures of every report written inside the block on ``executor`` (a local process pool with more
+    than one worker; anything else draws serially)."""
+    from soabench.experiment.runner import PoolExecutor
+
+    usable = isinstance(executor, PoolExecutor) and executor.n_workers > 1
+    _ACTIVE.append(executor if usable else None)
+    try:
+        yield
+    finally:
+        _ACTIVE.pop()
+
+
+def draw_all(jobs: Sequence[FigureJob], tables: Any) -> list[Path]:
+    """Draw ``jobs`` (on the pool of :func:`parallel` if one is open and ``tables`` came from a run folder);
+    return their paths in order once every one is written. A failed figure raises :class:`RuntimeError`."""
+    exe = _ACTIVE[-1] if _ACTIVE else None
+    run_dir = getattr(tables, "run_dir", None)
+    if exe is None or run_dir is None or len(jobs) < 2:
+        return [job.draw(tables) for job in jobs]
+    batch = FigureBatch(str(run_dir), tuple(jobs))
+    with contextlib.closing(exe.results(batch, range(len(jobs)))) as results:  # closing cancels the rest
+        for i, rec in results:
+            if rec.get("status") != "ok":
+                raise RuntimeError(f"figure {jobs[i].path} failed: {rec.get('error')}\n{rec.get('traceback', '')}")
+    return [Path(job.path) for job in jobs]
