@@ -32,6 +32,9 @@ class FigureJob:
     path: Path
     build: Callable[..., Any]
     args: tuple = ()
+    #: the drawing time relative to a one-panel figure: the costliest are submitted first, so no worker is left
+    #: drawing a large figure alone at the end of a report (the order of the written files does not matter)
+    weight: float = 1.0
 
     def draw(self, tables: Any) -> Path:
         from soabench.plotstyle import save_png
@@ -92,6 +95,29 @@ def parallel(executor: Any) -> Iterator[None]:
         _ACTIVE.pop()
 
 
+@contextlib.contextmanager
+def report_pool(workers: int | None, executor: Any = None) -> Iterator[None]:
+    """The figures of a report written inside the block in parallel: on ``executor`` when it is a local process
+    pool, else (unless an enclosing :func:`parallel` decides already) on a pool of ``workers`` processes (None: one
+    per core) opened here and closed on the way out, terminated if the block is left by an exception (Ctrl-C)."""
+    from soabench.experiment.runner import PoolExecutor
+
+    if isinstance(executor, PoolExecutor) or _ACTIVE:
+        with parallel(executor if isinstance(executor, PoolExecutor) else _ACTIVE[-1]):
+            yield
+        return
+    n = int(workers or os.cpu_count() or 1)
+    pool = PoolExecutor(n) if n > 1 else None  # its processes start at the first figure
+    ok = False
+    try:
+        with parallel(pool):
+            yield
+        ok = True
+    finally:
+        if pool is not None:
+            pool.close(abort=not ok)
+
+
 def draw_all(jobs: Sequence[FigureJob], tables: Any) -> list[Path]:
     """Draw ``jobs`` (on the pool of :func:`parallel` if one is open and ``tables`` came from a run folder);
     return their paths in order once every one is written. A failed figure raises :class:`RuntimeError`."""
@@ -100,7 +126,8 @@ def draw_all(jobs: Sequence[FigureJob], tables: Any) -> list[Path]:
     if exe is None or run_dir is None or len(jobs) < 2:
         return [job.draw(tables) for job in jobs]
     batch = FigureBatch(str(run_dir), tuple(jobs))
-    with contextlib.closing(exe.results(batch, range(len(jobs)))) as results:  # closing cancels the rest
+    order = sorted(range(len(jobs)), key=lambda i: -jobs[i].weight)  # stable: equal weights keep their order
+    with contextlib.closing(exe.results(batch, order)) as results:  # closing cancels the rest
         for i, rec in results:
             if rec.get("status") != "ok":
                 raise RuntimeError(f"figure {jobs[i].path} failed: {rec.get('error')}\n{rec.get('traceback', '')}")
