@@ -16,7 +16,9 @@ one after another also draw their figures on ``--workers`` processes (``soabench
 compare only the ratios printed by one invocation.
 
 It prints each wall time split into trials (the sessions' wall time) and reports (summaries and figures of every
-folder, timed around ``write_report``), the ratios study / main run (before, now) and checks that both studies
+folder, timed around ``write_report``), the CPU seconds of each call (this process and its finished worker
+processes: unlike wall time hardly changed by other work on a shared machine), the ratios study / main run
+(before, now) and checks that both studies
 wrote the same trials.csv, episodes.csv and steps.csv in every folder. The ``births_once`` switch reaches the trials
 of a serial run only (``--workers 1``, the default). Example::
 
@@ -28,6 +30,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -57,9 +60,20 @@ def result_files(root: Path) -> dict[str, str]:
     return {str(p.relative_to(root)): p.read_text() for p in sorted(root.rglob("*.csv")) if p.name in names}
 
 
-def timed(fn, *args, **kwargs) -> float:
-    t0 = time.perf_counter()
+def cpu_seconds() -> float:
+    """CPU seconds (user + system) of this process and of its finished child processes (the pool workers, reaped
+    when a pool closes): unlike wall time, hardly changed by other work on a shared machine."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+CPU: dict[str, float] = {}  # name -> CPU seconds of a timed call
+
+
+def timed(fn, *args, cpu_key: str = "", **kwargs) -> float:
+    t0, c0 = time.perf_counter(), cpu_seconds()
     fn(*args, **kwargs)
+    CPU[cpu_key] = cpu_seconds() - c0
     return time.perf_counter() - t0
 
 
@@ -112,36 +126,44 @@ def main(argv=None) -> int:
     warm.experiment = dataclasses.replace(warm.experiment, trials=1)
     run_experiment(warm, a.net, out=root / "warm_up", figures=False, **kw)
     with ReportClock() as r_main:
-        t_main = timed(run_experiment, cfg, a.net, out=root / "main_alone", **kw)
+        t_main = timed(run_experiment, cfg, a.net, out=root / "main_alone", cpu_key="main_alone", **kw)
     defaults = trial_module.run_trial.__kwdefaults__
     defaults["births_once"] = False  # "before": births per (model, mode); reaches the trials of a serial run only
     try:
         with ReportClock() as r_main_before:
-            t_main_before = timed(run_experiment, cfg, a.net, out=root / "main_before", **kw)
+            t_main_before = timed(run_experiment, cfg, a.net, out=root / "main_before", cpu_key="main_before", **kw)
         with ReportClock() as r_before:
-            t_before = timed(run_study, cfg, a.net, out=root / "study_before", grouped=False, **study_kw)
+            t_before = timed(
+                run_study, cfg, a.net, out=root / "study_before", grouped=False, cpu_key="study_before", **study_kw
+            )
     finally:
         defaults["births_once"] = True
     with ReportClock() as r_after:
-        t_after = timed(run_study, cfg, a.net, out=root / "study_after", **study_kw)
+        t_after = timed(run_study, cfg, a.net, out=root / "study_after", cpu_key="study_after", **study_kw)
 
     before, after = result_files(root / "study_before"), result_files(root / "study_after")
     same = before == after and len(before) > 0
     same = same and result_files(root / "main_alone") == result_files(root / "main_before")
     print(f"protocol: {a.trials} trials x {a.duration:g} s (N̂ sweep {a.births_trials} trials), workers {a.workers}")
     tr = {k: trial_seconds(root / k) for k in ("main_alone", "main_before", "study_before", "study_after")}
-    print("                        wall (s)  trials (s)  reports (s)  wall / main  trials / main trials")
+    print("                        wall (s)  trials (s)  reports (s)  CPU (s)  wall / main  CPU / main  trials / main")
     for name, t, r, k, t_ref, k_ref in (
         ("main run before", t_main_before, r_main_before.seconds, "main_before", t_main_before, "main_before"),
         ("main run now", t_main, r_main.seconds, "main_alone", t_main, "main_alone"),
         ("study before", t_before, r_before.seconds, "study_before", t_main_before, "main_before"),
         ("study now", t_after, r_after.seconds, "study_after", t_main, "main_alone"),
     ):
-        print(f"{name:22s} {t:9.1f} {tr[k]:11.1f} {r:12.1f} {t / t_ref:12.2f} {tr[k] / tr[k_ref]:20.2f}")
+        print(
+            f"{name:22s} {t:9.1f} {tr[k]:11.1f} {r:12.1f} {CPU[k]:8.1f} {t / t_ref:12.2f} {CPU[k] / CPU[k_ref]:11.2f}"
+            f" {tr[k] / tr[k_ref]:14.2f}"
+        )
     gain = tr["study_before"] / tr["study_after"]
     print(f"speed-up of the study: wall {t_before / t_after:.2f}x, trials {gain:.2f}x")
-    print(f"study / main run now: wall {t_after / t_main:.2f}x (target <= 3x); of the study's {t_after:.1f} s, trials")
-    print(f"  {tr['study_after']:.1f} s, reports and figures {r_after.seconds:.1f} s")
+    print(
+        f"study / main run now: wall {t_after / t_main:.2f}x, CPU {CPU['study_after'] / CPU['main_alone']:.2f}x "
+        f"(target: wall <= 3x); of the study's {t_after:.1f} s wall, trials {tr['study_after']:.1f} s, reports and "
+        f"figures {r_after.seconds:.1f} s"
+    )
     print(f"identical results      {same} ({len(after)} CSV files compared)")
     print(f"folders under {root}")
     return 0 if same else 1
