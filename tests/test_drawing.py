@@ -27,9 +27,22 @@ def run_dir(tmp_path_factory) -> Path:
     return out
 
 
-def test_parallel_figures_are_the_serial_ones_byte_for_byte(run_dir, tmp_path):
+def test_tables_travel_as_plain_arrays(run_dir, tmp_path):
+    tables = load_tables(run_dir)
+    assert drawing.save_arrays(tables, tmp_path / "t.npz")
+    back = drawing.load_arrays(str(tmp_path / "t.npz"), str(run_dir))
+    assert back.meta == tables.meta and back.run_dir == run_dir
+    for part in ("trials", "episodes", "steps", "timing"):
+        a, b = getattr(tables, part), getattr(back, part)
+        assert list(a) == list(b) and all(a[c].dtype == b[c].dtype and a[c].tobytes() == b[c].tobytes() for c in a)
+
+
+@pytest.mark.parametrize("arrays", [True, False], ids=["arrays", "workers-read-the-folder"])
+def test_parallel_figures_are_the_serial_ones_byte_for_byte(run_dir, tmp_path, monkeypatch, arrays):
     tables = load_tables(run_dir)
     serial = plots.make_figures(tables, tmp_path / "serial")
+    if not arrays:  # a column that is not plain numbers or text: each worker reads the run folder
+        monkeypatch.setattr(drawing, "save_arrays", lambda tables, path: False)
     exe = PoolExecutor(2)
     try:
         with drawing.parallel(exe):
