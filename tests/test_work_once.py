@@ -100,6 +100,31 @@ def test_share_across_configs_equals_each_config_alone(intersection):
     assert c["runs"] == 6 + 6 + 3  # another N_hat is another filter run
 
 
+def test_sensitivity_variants_share_the_recording_and_rescore_the_filter_runs(intersection):
+    """The study's sensitivity runs in one share with the main run: the gate-off run reuses the recording and the
+    scans; the visible-truth run (another metrics config only) scores the main run's filter runs again instead of
+    running the filters, with exactly the results of running it alone."""
+    from soabench.experiment.grouped import rescored
+    from soabench.experiment.runner import TaskSpec
+
+    scene, scenario = intersection
+    main = config(models=("soa", "pubm"))
+    gate_off = dataclasses.replace(main, filter=dataclasses.replace(main.filter, gate=False))
+    visible = dataclasses.replace(main, metrics=dataclasses.replace(main.metrics, gt_set="visible"))
+    configs = (main, gate_off, visible)
+    spec = lambda c: TaskSpec(c.to_dict(), "intersection", (), None, False, None, None, ())  # noqa: E731
+    assert rescored([spec(main), spec(visible)]) and not rescored([spec(main), spec(gate_off)])
+    alone = [run_trial(1, c, scene, scenario) for c in configs]
+    share = TrialShare(keep_filter_runs=True)
+    shared = [run_trial(1, c, scene, scenario, share=share) for c in configs]
+    for x, y in zip(alone, shared, strict=True):
+        assert results(x) == results(y)
+    assert results(alone[0]) != results(alone[2])  # the truth set does change the scores
+    c = share.counts
+    assert c["recording"] == 1 and c["recording_reused"] == 2 and c["scans"] == 1 and c["scans_reused"] == 2
+    assert c["runs"] == 4 + 4 and c["runs_rescored"] == 4  # main and gate-off run the filters, visible scores
+
+
 def _csvs(run_dir: Path) -> dict[str, str]:
     """The result files as text (they hold no wall-clock column: those are in timing.csv)."""
     out = {name: (run_dir / name).read_text() for name in ("trials.csv", "episodes.csv", "steps.csv")}

@@ -53,7 +53,7 @@ def run_group_task(trial: int, group: GroupSpec) -> dict:
     from soabench.experiment.trial import TrialShare, run_trial
 
     builtin = registry.trial_kind(registry.DEFAULT_TRIAL_KIND) is registry._builtin_trial
-    share = TrialShare()
+    share = TrialShare(keep_filter_runs=rescored(group.members))
     records: dict[int, dict] = {}
     for i, spec in enumerate(group.members):
         if trial not in group.todo[i]:
@@ -62,6 +62,16 @@ def run_group_task(trial: int, group: GroupSpec) -> dict:
             spec = dataclasses.replace(spec, trial_fn=functools.partial(run_trial, share=share))
         records[i] = run_trial_task(trial, spec)
     return {"status": "group", "trial": int(trial), "records": records, "shared": dict(share.counts)}
+
+
+def rescored(members: Sequence[TaskSpec]) -> bool:
+    """True when two folders' configs differ only in ``metrics`` (the study's visible-truth run and its main run):
+    their filter runs are then kept and scored per folder instead of run twice (memory only where it pays)."""
+    from soabench.experiment.trial import _config_key
+
+    full = {_config_key(m.config) for m in members}
+    filters = {_config_key(m.config, without=("metrics",)) for m in members}
+    return len(full) > len(filters)
 
 
 def group_trials(deferred: Sequence[DeferredRun]) -> list[int]:

@@ -672,13 +672,15 @@ def _run_locked(
     outcome = RunOutcome(store.run_dir, n_missing == 0, len(done), n_missing, failures, "")
     if interrupted:
         raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
-    if unattempted or stopped:
+    if unattempted or stopped or defer is not None:  # deferring: the report follows the group (run_trials=False)
         return outcome
+    from soabench.experiment.drawing import report_pool
     from soabench.experiment.report import write_report
 
     try:
         store.merge((*config.experiment.models, *config.experiment.trackers), config.experiment.probabilities)
-        outcome.summary_markdown = write_report(store.run_dir, figures=figures)
+        with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
+            outcome.summary_markdown = write_report(store.run_dir, figures=figures)
     except KeyboardInterrupt:
         raise Interrupted(
             f"interrupted while writing the report of {store.run_dir} (all {len(done)} trials are on disk); {hint}"

@@ -75,6 +75,29 @@ def run_variants(
     return outcomes
 
 
+def _run_variants_grouped(root: Path, main_dir: Path, trials: int | None, exe: dict) -> list[RunOutcome]:
+    """:func:`run_variants` with the variants' trials together (:mod:`soabench.experiment.grouped`: SUMO and the
+    sensor once per trial; each variant runs its own filters, the main run's are not at hand), then their reports,
+    figures drawn on the same worker processes."""
+    from soabench.experiment.drawing import parallel
+    from soabench.experiment.grouped import run_group
+    from soabench.experiment.runner import open_executor
+
+    deferred: list = []
+    run_variants(root, main_dir, trials=trials, defer=deferred, **exe)
+    pool = open_executor(exe.get("workers"), exe.get("scheduler"), bool(exe.get("dask_local")))
+    aborted = True
+    try:
+        if deferred:
+            run_group(deferred, pool, progress=exe.get("progress", True), label=root.name)
+        with parallel(pool):
+            runs = run_variants(root, main_dir, trials=trials, run_trials=False, **exe)
+        aborted = False
+    finally:
+        pool.close(abort=aborted)
+    return runs
+
+
 @dataclass
 class SensitivityOutcome:
     """The variant runs of a main run and the table written from them (``soabench sensitivity``)."""
@@ -110,7 +133,7 @@ def run_sensitivity(main_dir: Path, out: Path | None = None, *, trials: int | No
     check_writable_target(root, "sensitivity folder")
     with FolderLock(root, "sensitivity folder"):
         try:
-            runs = run_variants(root, main_dir, trials=trials, **exe)
+            runs = _run_variants_grouped(root, main_dir, trials, exe)
             md = ""
             if all(r.complete for r in runs):
                 md = sens.write_sensitivity(root, main_dir, {k: root / k for k in VARIANTS})

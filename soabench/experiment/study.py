@@ -14,9 +14,11 @@ Four parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (defa
 bootstrap intervals (:mod:`soabench.experiment.paper`). Re-running the command on a finished folder re-reports it;
 on an interrupted one it finishes the missing trials.
 
-The three parts run together (:mod:`soabench.experiment.grouped`): trial n runs SUMO once, the sensor once per
-clutter rate and every filter run once for all parts (the clutter sweep's λ = 3 runs are the main run's), then
-writes each part's record into its own folder, so every folder is what running the parts one after another gives.
+The four parts run together (:mod:`soabench.experiment.grouped`): trial n runs SUMO once, the sensor once per
+clutter rate and every filter run once for all parts (the clutter sweep's λ = 3 runs are the main run's; the
+sensitivity runs share the recording and the scans), then writes each part's record into its own folder, so every
+folder is what running the parts one after another gives. The reports of all folders are then drawn on the same
+worker processes, one figure per task (:mod:`soabench.experiment.drawing`).
 """
 
 from __future__ import annotations
@@ -138,37 +140,41 @@ def run_study(
 
     with FolderLock(root, "study folder"):
         try:
+            follow = sensitivity_trials is None and "experiment.trials" in explicit  # like the clutter sweep
+            sens_dir = root / "sensitivity"
             if grouped:
                 deferred: list = []
                 parts(defer=deferred)
-                from soabench.experiment.grouped import group_trials, run_group
+                run_variants(sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, defer=deferred, **exe)
+                from soabench.experiment.drawing import parallel
+                from soabench.experiment.grouped import run_group
                 from soabench.experiment.runner import open_executor
 
-                if deferred:
-                    pool = open_executor(workers, scheduler, dask_local, n_trials=len(group_trials(deferred)))
-                    aborted = True
-                    try:
+                pool = open_executor(workers, scheduler, dask_local)  # the trials', then the figures' workers
+                aborted = True
+                try:
+                    if deferred:
                         run_group(deferred, pool, progress=progress, label=root.name)
-                        aborted = False
-                    finally:
-                        pool.close(abort=aborted)
-                main, clutter, births = parts(run_trials=False)  # the reports of the parts that attempted every trial
+                    with parallel(pool):  # the reports of the parts that attempted every trial
+                        main, clutter, births = parts(run_trials=False)
+                        sensitivity = run_variants(
+                            sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, run_trials=False, **exe
+                        )
+                    aborted = False
+                finally:
+                    pool.close(abort=aborted)
             else:
                 main, clutter, births = parts()
-
-            follow = sensitivity_trials is None and "experiment.trials" in explicit  # like the clutter sweep
-            sensitivity = run_variants(
-                root / "sensitivity", main_dir, trials=sensitivity_trials, follow_main=follow, **exe
-            )
+                sensitivity = run_variants(sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, **exe)
 
             md = ""
             if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
                 mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
                 md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
             if main.complete and all(o.complete for o in sensitivity):
-                variants = {k: root / "sensitivity" / k for k in VARIANTS}
-                sens.write_sensitivity(root / "sensitivity", main_dir, variants)
-                where = root / "sensitivity" / "sensitivity.md"
+                variants = {k: sens_dir / k for k in VARIANTS}
+                sens.write_sensitivity(sens_dir, main_dir, variants)
+                where = sens_dir / "sensitivity.md"
                 md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
         except KeyboardInterrupt:
             raise Interrupted(

@@ -26,6 +26,8 @@ class RunTables:
     steps: dict[str, np.ndarray]
     timing: dict[str, np.ndarray]
     meta: dict
+    #: the run folder the tables were read from (None for tables built in memory)
+    run_dir: Path | None = None
 
     @property
     def models(self) -> list[str]:
@@ -59,7 +61,7 @@ def load_tables(run_dir: Path) -> RunTables:
         tables[name] = read_csv(p) if p.is_file() else _empty(())
     for name in ("trials", "episodes", "steps", "timing"):  # a table with no rows reads as no columns
         tables[name] = {k: v for k, v in tables[name].items()}
-    return RunTables(meta=meta, **tables)
+    return RunTables(meta=meta, run_dir=run_dir, **tables)
 
 
 def select(table: dict[str, np.ndarray], **where: Any) -> np.ndarray:

@@ -121,6 +121,11 @@ class TrialShare:
     geometry: dict[tuple, dict] = field(default_factory=dict)
     #: run key -> (row, episodes, steps, estimates) of a finished built-in (model x mode) run
     runs: dict[tuple, tuple] = field(default_factory=dict)
+    #: keep every finished filter run (its step results) so a config that differs only in ``metrics`` scores it
+    #: again instead of re-running the filter (set by a group whose folders differ only there)
+    keep_filter_runs: bool = False
+    #: filter key (the run key without the metrics config) -> the finished filter run (``keep_filter_runs``)
+    filter_runs: dict[tuple, Any] = field(default_factory=dict)
     #: what was computed and what was reused (recording, scans, runs), for tests and benchmarks
     counts: dict[str, int] = field(default_factory=dict)
 
@@ -150,10 +155,15 @@ class _BirthsOnce:
         return self._births[key]
 
 
-def _config_key(config: Config) -> str:
-    """Every config section a filter run depends on (all but ``experiment``), as canonical text."""
-    d = config.to_dict()
-    d.pop("experiment", None)
+def _config_key(config: Config | dict, without: tuple[str, ...] = ()) -> str:
+    """Every config section a run depends on (all but ``experiment`` and ``without``), as canonical text.
+
+    A filter run does not read ``metrics`` (only its scoring does, :func:`soabench.metrics.evaluate`), so
+    ``without=("metrics",)`` keys the filter run alone.
+    """
+    d = dict(config if isinstance(config, dict) else config.to_dict())
+    for section in ("experiment", *without):
+        d.pop(section, None)
     return json.dumps(d, sort_keys=True, default=repr)
 
 
@@ -317,6 +327,7 @@ def run_trial(
     out.timing["sumo"] = time.perf_counter() - t0
     out.timing["sensor"] = 0.0
     cfg_key = _config_key(config)
+    filter_cfg_key = _config_key(config, without=("metrics",))
     for lam in exp.clutter:
         sensor_cfg = dataclasses.replace(config.sensor, lambda_c=float(lam))
         scans_key = (rec_key, repr(sensor_cfg), fn_key[1])
@@ -344,8 +355,17 @@ def run_trial(
                     share.count("runs_reused")
                     continue
                 n = (len(out.rows), len(out.episodes), len(out.steps), len(out.estimates or ()), len(out.failures))
-                _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out, births)
-                share.count("runs")
+                filter_key = (scans_key, filter_cfg_key, model, mode, *fn_key[2:])
+                kept = share.filter_runs.get(filter_key)
+                if kept is not None:  # the same filter run under another metrics config: score it only
+                    _record(key, config, sensor_cfg, scans, seeds, kept, out)
+                    share.count("runs_rescored")
+                else:
+                    keep: list | None = [] if share.keep_filter_runs else None
+                    _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out, births, keep)
+                    share.count("runs")
+                    if keep:
+                        share.filter_runs[filter_key] = keep[0]
                 if len(out.failures) == n[4] and len(out.rows) == n[0] + 1:  # a finished built-in run: reusable
                     share.runs[run_key] = (
                         out.rows[n[0]],
@@ -404,10 +424,12 @@ def _run_one(
     birth_factory: Callable[[str], type],
     out: TrialResult,
     births: _BirthsOnce | None = None,
+    keep: list | None = None,
 ) -> None:
     """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``.
 
     ``births``: the model's births shared by every probability mode (:func:`_births_once`); None builds the model.
+    ``keep``: a list that receives the finished run of a built-in model (:attr:`TrialShare.filter_runs`).
 
     A built-in birth model runs unguarded (an exception fails the trial: a bug of soabench). A plugin is checked at
     every scan (:mod:`soabench.experiment.guard`); if it fails, the run is recorded in ``out.failures`` and the
@@ -425,6 +447,8 @@ def _run_one(
         )
         filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
         run = run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
+        if keep is not None:
+            keep.append(run)
     else:
         from soabench.experiment import guard
 
