@@ -240,3 +240,12 @@ def test_grouped_sweep_fail_fast_then_resume(tmp_path, monkeypatch):
     run_sweep("births", (-1, 0), cfg, "intersection", out=tmp_path / "ref", grouped=False, **kw)
     for p in ("ntot_001", "ntot_002"):
         assert _csvs(sw / "points" / p) == _csvs(tmp_path / "ref" / "points" / p), p
+
+
+def test_a_second_session_of_the_same_name_is_kept_and_sorts_after(tmp_path):
+    from soabench.experiment.store import RunStore
+
+    store = RunStore(tmp_path)
+    for i in range(3):
+        store.write_session("20261123T000000Z-1", {"i": i})
+    assert [s["i"] for s in store.sessions()] == [0, 1, 2]

@@ -332,7 +332,13 @@ class RunStore:
         return read_json(self._record_path(TRIALS_DIR, trial))
 
     def write_session(self, name: str, info: dict) -> None:
-        write_json_atomic(self.run_dir / SESSIONS_DIR / f"session_{name}.json", info)
+        """Record one session as ``sessions/session_<name>.json``; a second session of the same name (same second,
+        same process: a resume right after a fast run) gets a numbered suffix instead of replacing the first."""
+        d = self.run_dir / SESSIONS_DIR
+        path, n = d / f"session_{name}.json", 1
+        while path.exists():
+            path, n = d / f"session_{name}_{n:03d}.json", n + 1  # sorts after the first
+        write_json_atomic(path, info)
 
     def sessions(self) -> list[dict]:
         d = self.run_dir / SESSIONS_DIR
