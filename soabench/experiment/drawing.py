@@ -10,7 +10,7 @@ worker draws the figure exactly as the serial path does, so the PNG files are by
 processes draw them. :func:`draw_all` returns only once every figure is on disk (the report's ``summary.json`` is
 written after it, so a report is never passed off as complete with a figure missing); a figure that fails raises.
 
-Only a local :class:`~soabench.experiment.runner.PoolExecutor` draws (a Dask worker may not see the run folder);
+Only a local :class:`~soabench.experiment.executors.PoolExecutor` draws (a Dask worker may not see the run folder);
 without one, and for tables not read from a folder, the figures are drawn here one after another.
 """
 
@@ -24,6 +24,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from soabench.experiment.executors import PoolExecutor
 
 #: the executor figures are drawn on (innermost :func:`parallel`), or None: serial
 _ACTIVE: list[Any] = []
@@ -123,8 +125,6 @@ def draw_task(i: int, batch: FigureBatch) -> dict:
 def parallel(executor: Any) -> Iterator[None]:
     """Draw the figures of every report written inside the block on ``executor`` (a local process pool with more
     than one worker; anything else draws serially)."""
-    from soabench.experiment.runner import PoolExecutor
-
     usable = isinstance(executor, PoolExecutor) and executor.n_workers > 1
     _ACTIVE.append(executor if usable else None)
     try:
@@ -138,8 +138,6 @@ def report_pool(workers: int | None, executor: Any = None) -> Iterator[None]:
     """The figures of a report written inside the block in parallel: on ``executor`` when it is a local process
     pool, else (unless an enclosing :func:`parallel` decides already) on a pool of ``workers`` processes (None: one
     per core) opened here and closed on the way out, terminated if the block is left by an exception (Ctrl-C)."""
-    from soabench.experiment.runner import PoolExecutor
-
     if isinstance(executor, PoolExecutor) or _ACTIVE:
         with parallel(executor if isinstance(executor, PoolExecutor) else _ACTIVE[-1]):
             yield

@@ -22,18 +22,23 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 from soabench import plugins
-from soabench.cli_checks import check_scheduler_address
 from soabench.config import Config
-from soabench.errors import Interrupted, SoabenchError, require
+from soabench.errors import Interrupted, require
 from soabench.experiment import registry
+from soabench.experiment.executors import (  # noqa: F401  (re-exported: the executors' old import path)
+    MAX_WORKERS,
+    DaskExecutor,
+    PoolExecutor,
+    SerialExecutor,
+    failure_record,
+    open_executor,
+)
 from soabench.experiment.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.progress import Progress
 from soabench.experiment.provenance import REPRODUCTION_TOLERANCE, platform_info
@@ -49,7 +54,6 @@ from soabench.experiment.store import (
     to_jsonable,
     write_json_atomic,
 )
-from soabench.experiment.workers import init_worker, sigint_ignored_by_children
 from soabench.seeding import trial_seeds
 
 TrialFn = Callable[..., Any]
@@ -92,8 +96,12 @@ class TaskSpec:
     #: import paths of plugins typed on the driver's command line (soabench.plugins: the closed list)
     plugin_paths: tuple[str, ...] = ()
 
+    @property
+    def task_fn(self) -> Callable[[int, TaskSpec], dict]:
+        """What an executor runs per trial (:mod:`soabench.experiment.executors`)."""
+        return run_trial_task
 
-MAX_WORKERS = 1024  #: upper bound of --workers (processes or LocalCluster workers on one machine)
+
 _SCENES: dict[tuple, tuple[Any, Any]] = {}
 _SUMO_LOCK = threading.Lock()
 
@@ -117,19 +125,6 @@ def load_scene_cached(net: str, polys: Sequence[str], scenario: str | None, load
 
 def _where() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
-
-
-def failure_record(trial: int, base_seed: int, error: str, tb: str = "") -> dict:
-    """A failed trial: its seeds (to reproduce it with ``--seed S --trial N``) and the error."""
-    seeds = trial_seeds(base_seed, trial)
-    return {
-        "trial": int(trial),
-        "status": "failed",
-        "seed": int(base_seed),
-        "sumo_seed": int(seeds.sumo_seed),
-        "error": error,
-        "traceback": tb,
-    }
 
 
 def run_trial_task(trial: int, spec: TaskSpec) -> dict:
@@ -166,205 +161,6 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     if spec.save_estimates and est is not None:
         record["estimates"] = to_jsonable(est)
     return record
-
-
-def task_fn(spec: Any) -> Callable[[int, Any], dict]:
-    """What an executor runs per trial: ``spec.task_fn`` if the spec names one (a group of run folders,
-    :mod:`soabench.experiment.grouped`), else :func:`run_trial_task`."""
-    return getattr(spec, "task_fn", None) or run_trial_task
-
-
-# ------------------------------------------------------------------------------------------------ executors
-class SerialExecutor:
-    """Trials one after another in this process."""
-
-    name = "serial"
-    n_workers = 1
-
-    def results(self, spec: TaskSpec, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
-        for t in trials:
-            yield t, task_fn(spec)(t, spec)
-
-    def close(self, abort: bool = False) -> None:
-        pass
-
-
-class PoolExecutor:
-    """A ``ProcessPoolExecutor`` of one-thread processes; at most ``2 * workers`` trials in flight."""
-
-    name = "process-pool"
-
-    def __init__(self, workers: int):
-        self.n_workers = int(workers)
-        self._pool: ProcessPoolExecutor | None = None
-        self._generation = 0  # incremented whenever a broken pool is replaced
-
-    def _get_pool(self) -> ProcessPoolExecutor:
-        if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.n_workers, initializer=init_worker)
-        return self._pool
-
-    def results(self, spec: TaskSpec, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
-        base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
-        queue = iter(trials)  # consumed lazily: a huge to-do list is never built in memory
-        pending: dict = {}  # future -> (trial, pool generation)
-        lost = "worker process died (BrokenProcessPool)"
-        exhausted = False
-        try:
-            while not exhausted or pending:
-                while not exhausted and len(pending) < 2 * self.n_workers:
-                    t = next(queue, None)
-                    if t is None:
-                        exhausted = True
-                        break
-                    try:
-                        fut = self._get_pool().submit(task_fn(spec), t, spec)
-                    except BrokenProcessPool:  # the pool broke since the last submit: start a fresh one
-                        self.close(abort=True)
-                        fut = self._get_pool().submit(task_fn(spec), t, spec)
-                    pending[fut] = (t, self._generation)
-                done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
-                for fut in sorted(done, key=lambda f: pending[f][0]):
-                    t, gen = pending.pop(fut)
-                    try:
-                        rec = fut.result()
-                    except BrokenProcessPool:  # a worker died: every trial in flight on that pool is lost
-                        rec = failure_record(t, base_seed, lost)
-                        if gen == self._generation:
-                            self.close(abort=True)
-                    except Exception as exc:
-                        rec = failure_record(t, base_seed, f"{type(exc).__name__}: {exc}", traceback.format_exc())
-                    yield t, rec
-        finally:
-            for fut in pending:
-                fut.cancel()
-
-    def close(self, abort: bool = False) -> None:
-        pool, self._pool = self._pool, None
-        if pool is None:
-            return
-        self._generation += 1
-        if abort:
-            procs = list(getattr(pool, "_processes", {}).values())  # the pool's own children, by process object
-            pool.shutdown(wait=False, cancel_futures=True)
-            for p in procs:
-                if p.is_alive():
-                    p.terminate()
-            for p in procs:
-                p.join(timeout=5)
-        else:
-            pool.shutdown(wait=True)
-
-
-class DaskExecutor:
-    """Trials as Dask futures on a distributed cluster (existing scheduler or a LocalCluster we start)."""
-
-    name = "dask"
-
-    def __init__(self, scheduler: str | None = None, local_workers: int | None = None):
-        try:
-            import distributed
-        except ImportError:
-            raise SoabenchError(
-                "--scheduler/--dask need Dask distributed, which is not installed: pip install soabench[dask]"
-            ) from None
-        self._distributed = distributed
-        self._cluster = None
-        if scheduler is None:
-            import logging
-
-            n = int(local_workers or os.cpu_count() or 1)
-            with sigint_ignored_by_children():  # Ctrl-C is the driver's: no worker tracebacks
-                self._cluster = distributed.LocalCluster(
-                    n_workers=n,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=None,
-                    silence_logs=logging.ERROR,
-                )
-            self.address = self._cluster.scheduler_address
-            self.name = f"dask-local({n})"
-        else:
-            self.address = scheduler
-            self.name = f"dask({scheduler})"
-            _probe_scheduler(scheduler)
-        try:
-            self.client = distributed.Client(self.address, timeout="30s", set_as_default=False)
-        except OSError as exc:
-            self.close()
-            raise SoabenchError(f"cannot connect to the Dask scheduler {self.address!r}: {exc}") from None
-        self.n_workers = max(1, len(self.client.scheduler_info().get("workers", {})))
-
-    def results(self, spec: TaskSpec, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
-        base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
-        token = f"{os.getpid()}-{time.time_ns()}"
-        futures = {}
-        queue = iter(trials)  # submitted in a window of 4 per worker: a huge to-do list is never built in memory
-        done_iter = self._distributed.as_completed(loop=self.client.loop)
-
-        def submit_next() -> None:
-            t = next(queue, None)
-            if t is not None:
-                f = self.client.submit(task_fn(spec), t, spec, key=f"soabench-trial-{t:05d}-{token}", pure=False)
-                futures[f.key] = (f, t)
-                done_iter.add(f)
-
-        for _ in range(max(8, 4 * self.n_workers)):
-            submit_next()
-        try:
-            for fut in done_iter:
-                _, t = futures.pop(fut.key)
-                submit_next()
-                try:
-                    rec = fut.result()
-                except Exception as exc:  # KilledWorker, lost connection, ...
-                    rec = failure_record(t, base_seed, f"{type(exc).__name__}: {exc}")
-                yield t, rec
-        finally:
-            left = [f for f, _ in futures.values()]
-            if left:
-                try:
-                    self.client.cancel(left)
-                except Exception:  # pragma: no cover - best effort on shutdown
-                    pass
-
-    def close(self, abort: bool = False) -> None:
-        client = getattr(self, "client", None)
-        if client is not None:
-            client.close()
-            self.client = None
-        if self._cluster is not None:
-            self._cluster.close()
-            self._cluster = None
-
-
-def _probe_scheduler(address: str, timeout: float = 10.0) -> None:
-    """A plain TCP connect to a ``tcp://`` scheduler first: a refused or unroutable address fails in a moment
-    with one line, instead of Dask's connection retries until its timeout."""
-    scheme, _, rest = address.rpartition("://")
-    if scheme not in ("", "tcp"):
-        return
-    host, _, port = rest.rpartition(":")
-    try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
-    except (OSError, ValueError) as exc:
-        raise SoabenchError(f"cannot connect to the Dask scheduler {address!r}: {exc}") from None
-
-
-def open_executor(workers: int | None = None, scheduler: str | None = None, dask_local: bool = False, n_trials=None):
-    """The executor for the given options (see the module docstring); the caller must ``close()`` it."""
-    require(not (scheduler and dask_local), "--scheduler and --dask local are alternatives; give one of them")
-    require(
-        workers is None or (isinstance(workers, int) and 1 <= workers <= MAX_WORKERS),
-        f"workers = {workers!r} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
-    )
-    check_scheduler_address(scheduler)
-    if scheduler or dask_local:
-        return DaskExecutor(scheduler=scheduler, local_workers=workers)
-    n = workers or os.cpu_count() or 1
-    if n_trials is not None:
-        n = min(n, max(1, n_trials))
-    return SerialExecutor() if n == 1 else PoolExecutor(n)
 
 
 # ------------------------------------------------------------------------------------------------ metadata

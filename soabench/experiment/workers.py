@@ -1,6 +1,6 @@
 """Process-pool workers die with their driver and leave Ctrl-C to it.
 
-:func:`init_worker` runs first in every worker process of :class:`~soabench.experiment.runner.PoolExecutor`:
+:func:`init_worker` runs first in every worker process of :class:`~soabench.experiment.executors.PoolExecutor`:
 
 * on Linux it asks the kernel for SIGKILL when the parent dies (``prctl(PR_SET_PDEATHSIG)`` via ctypes), so a
   driver killed by SIGKILL (or the OOM killer) leaves no orphan simulating on; elsewhere a daemon thread polls
