@@ -120,17 +120,6 @@ def test_filter_scan_inputs_checked_once_per_scan_and_errors_still_raised():
     assert res.n_dropped == 1
 
 
-def test_kappa_of_the_filter_equals_clutter_intensity():
-    from soabench.geometry import clutter_intensity
-
-    Z = np.array([[3.0, 0.1], [40.0, -1.0], [17.3, 2.0]])
-    for space in ("polar", "cartesian"):
-        sensor = dataclasses.replace(SensorConfig(), clutter_space=space, lambda_c=2.7)
-        f = GMPHDFilter(FilterConfig(), sensor, "static")
-        np.testing.assert_array_equal(f._kappa(Z), clutter_intensity(Z, sensor))
-        assert f._kappa(Z[:0]).shape == (0,)
-
-
 def _slow_csv(rows, columns) -> str:
     """write_csv as it was written before its fast path."""
     cols = list(columns) + sorted({k for r in rows for k in r} - set(columns))

@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import SoabenchError, require
-from soabench.geometry import clutter_intensity, fov_area, measurement_volume
+from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle, notice, reduction
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
 from soabench.gmphd.mixture import Mixture
@@ -86,18 +86,7 @@ class GMPHDFilter:
         limited = sensor_cfg.fov_deg < 360.0
         self._fov = np.array([sensor_cfg.r_min, sensor_cfg.r_max, 0.5 * sensor_cfg.fov + 1e-12, float(limited)])
         self._beta0 = self.beta0 if self.dynamic else np.empty(0)
-        # kappa(z) of §2.3 as geometry.clutter_intensity computes it, its constants taken once per run
-        self._kappa_polar = sensor_cfg.clutter_space == "polar"
-        self._kappa_const = (
-            sensor_cfg.lambda_c / measurement_volume(sensor_cfg) if self._kappa_polar else fov_area(sensor_cfg)
-        )
         self._nb_beta = self.beta_newborn if self.dynamic else np.empty(0)
-
-    def _kappa(self, Z: np.ndarray) -> np.ndarray:
-        """:func:`soabench.geometry.clutter_intensity` of the (M, 2) measurements (same values, §2.3)."""
-        if self._kappa_polar:
-            return np.full(len(Z), self._kappa_const)
-        return np.ascontiguousarray(self.sensor.lambda_c * Z[:, 0] / self._kappa_const, dtype=float)
 
     def reset(self) -> None:
         """Forget the posterior (next step is k = 0 again)."""
@@ -125,9 +114,8 @@ class GMPHDFilter:
 
         Non-finite inputs raise :class:`~soabench.errors.SoabenchError` or are dropped and counted, as
         ``filter.nonfinite`` says (:mod:`soabench.gmphd.inputs`); a result never holds a NaN."""
-        once = getattr(scan, "once", None)  # a Scan keeps what depends on it alone for every run over it
-        make = _scan_inputs_of(scan)
-        Z, ego, finite, _ = make() if once is None else once(("filter.scan_inputs", id(scan.Z), id(scan.ego)), make)
+        key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))
+        Z, ego, finite, _ = _per_scan(scan, key, _scan_inputs_of(scan))
         checked = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
         kind = (self.fused, births.newborn is not None)
         if not notice.ready(kind):  # the first step of a kind may compile kernels: never a silent pause
@@ -258,12 +246,11 @@ class GMPHDFilter:
 
             idx = np.flatnonzero(g)
             make = lambda: (sight_blockers(ego[:2], scan.occluders), scan.occluders)  # noqa: E731
-            once = getattr(scan, "once", None)  # the blockers depend on the scan alone: once for every run
             key = ("filter.sight_blockers", id(scan.occluders), len(scan.occluders), ego[0], ego[1])
-            blockers = (make() if once is None else once(key, make))[0]
+            blockers = _per_scan(scan, key, make)[0]
             vis = np.asarray(line_of_sight_past(ego[:2], pred[1][idx, :2], blockers), dtype=bool)
             g[idx] = vis.reshape(-1)
-        kappa = self._kappa(Z)
+        kappa = np.ascontiguousarray(clutter_intensity(Z, self.sensor), dtype=float)
         args = (self.R, float(self.sensor.r_min), float(self.gate_thr), kappa)
         if newborn is None:
             post, A, ok = cycle.update(*pred[:7], g, float(cfg.p_D), Z, ego, *args, self._ukf)
@@ -333,6 +320,13 @@ class GMPHDFilter:
             n_newborn=n_newborn,
             origin_counts=origin_counts(self.mixture.origin, self.mixture.age),
         )
+
+
+def _per_scan(scan: Scan, key: tuple, make: Callable[[], Any]) -> Any:
+    """``make()`` computed once per scan for every filter run over it (:meth:`soabench.types.Scan.once`), or now
+    for a scan object that cannot keep it."""
+    once = getattr(scan, "once", None)
+    return make() if once is None else once(key, make)
 
 
 def _scan_inputs_of(scan: Scan) -> Callable[[], tuple]:
