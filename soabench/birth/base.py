@@ -169,10 +169,9 @@ class FOVRule:
     def in_occluder(self, xy: np.ndarray, scan: Scan) -> np.ndarray:
         """(J,) inside an occluder of scan k (vehicles, parked cars, buildings as the sensor lists them); the
         scan's occluder index is built once per scan and carried on it (:meth:`soabench.types.Scan.occluder_index`)."""
-        index = getattr(scan, "occluder_index", None)
-        if index is None or len(xy) == 0 or not scan.occluders:  # a duck-typed scan: the list (indexed by the LRU)
+        if len(xy) == 0 or not scan.occluders:
             return inside_any(scan.occluders, xy)
-        return inside_any(index(), xy)
+        return inside_any(self.occluder_index(scan), xy)
 
     def in_fov(self, xy: np.ndarray, scan: Scan) -> np.ndarray:
         """(J,) in FOV_k inset by delta_in."""
