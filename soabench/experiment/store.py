@@ -219,9 +219,7 @@ def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
     """Atomically write ``rows`` (dicts) with ``columns`` (plus any extra keys, sorted) as a CSV file."""
     rows = list(rows)
     cols = list(columns) + sorted({k for r in rows for k in r} - set(columns))
-    lines = [",".join(cols)]
-    lines.extend(_csv_line([r.get(c) for c in cols]) for r in rows)
-    write_text_atomic(path, "\n".join(lines) + "\n")
+    _write_csv_lists(path, cols, ([r.get(c) for c in cols] for r in rows))
 
 
 def read_csv(path: Path) -> dict[str, np.ndarray]:
