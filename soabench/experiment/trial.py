@@ -361,11 +361,10 @@ def run_trial(
                     _record(key, config, sensor_cfg, scans, seeds, kept, out)
                     share.count("runs_rescored")
                 else:
-                    keep: list | None = [] if share.keep_filter_runs else None
-                    _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out, births, keep)
+                    run = _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out, births)
                     share.count("runs")
-                    if keep:
-                        share.filter_runs[filter_key] = keep[0]
+                    if share.keep_filter_runs and run is not None:
+                        share.filter_runs[filter_key] = run
                 if len(out.failures) == n[4] and len(out.rows) == n[0] + 1:  # a finished built-in run: reusable
                     share.runs[run_key] = (
                         out.rows[n[0]],
@@ -424,12 +423,12 @@ def _run_one(
     birth_factory: Callable[[str], type],
     out: TrialResult,
     births: _BirthsOnce | None = None,
-    keep: list | None = None,
-) -> None:
+) -> FilterRun | None:
     """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``.
 
     ``births``: the model's births shared by every probability mode (:func:`_births_once`); None builds the model.
-    ``keep``: a list that receives the finished run of a built-in model (:attr:`TrialShare.filter_runs`).
+    Returns the finished run of a built-in model (a study may score it again, :attr:`TrialShare.filter_runs`),
+    None for a plugin's.
 
     A built-in birth model runs unguarded (an exception fails the trial: a bug of soabench). A plugin is checked at
     every scan (:mod:`soabench.experiment.guard`); if it fails, the run is recorded in ``out.failures`` and the
@@ -447,22 +446,21 @@ def _run_one(
         )
         filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
         run = run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
-        if keep is not None:
-            keep.append(run)
-    else:
-        from soabench.experiment import guard
+        _record(key, config, sensor_cfg, scans, seeds, run, out)
+        return run
+    from soabench.experiment import guard
 
-        def build() -> GMPHDTracker:
-            cls = birth_factory(key.model)
-            options = config.plugins.get(key.model, {})
-            birth_model = cls(config.birth, sensor_cfg, scene, seeds.placement_rng(), **options)
-            filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
-            return GMPHDTracker(birth_model, filt, p_D_b, check_births=guard.check_births)
+    def build() -> GMPHDTracker:
+        cls = birth_factory(key.model)
+        options = config.plugins.get(key.model, {})
+        birth_model = cls(config.birth, sensor_cfg, scene, seeds.placement_rng(), **options)
+        filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
+        return GMPHDTracker(birth_model, filt, p_D_b, check_births=guard.check_births)
 
-        run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out)
-        if run is None:
-            return
-    _record(key, config, sensor_cfg, scans, seeds, run, out)
+    run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out)
+    if run is not None:
+        _record(key, config, sensor_cfg, scans, seeds, run, out)
+    return None
 
 
 def _run_one_tracker(
