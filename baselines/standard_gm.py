@@ -13,6 +13,8 @@ skipped by the FOV-only rule (§3.0) without renormalisation, so the instantiate
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import shapely
 
@@ -83,6 +85,32 @@ class StandardGMBirth:
         """The fixed components that pass the FOV-only rule at k, weights N_hat / J_GM (not renormalised)."""
         if self.J_GM == 0:
             return Births.empty()
+        return self._births(self.candidates(ctx), self.w)
+
+    def candidates(self, ctx: BirthContext) -> GMCandidates:
+        """The fixed components that pass the FOV-only rule at k, before their weights. They read only the scan's
+        pose and occluders, so one set serves every probability mode, clutter rate and N_hat of a trial."""
+        if self.J_GM == 0:
+            return GMCandidates(np.zeros((0, 4)), np.zeros((0, 4, 4)), 0)
         idx = np.flatnonzero(self.rule.mask(self.points, ctx.scan, self.static_ok))
-        n = len(idx)
-        return Births(np.full(n, self.w), self.m_all[idx], self.P_all[idx], np.full(n, SOURCE_GM, dtype=np.int8))
+        return GMCandidates(self.m_all[idx], self.P_all[idx], self.J_GM)
+
+    @staticmethod
+    def weigh(cfg: BirthConfig, c: GMCandidates) -> Births:
+        """The fixed weights N_hat / J_GM (§3.5)."""
+        if c.J_GM == 0:
+            return Births.empty()
+        return StandardGMBirth._births(c, cfg.N_hat / c.J_GM)
+
+    @staticmethod
+    def _births(c: GMCandidates, w: float) -> Births:
+        n = len(c.m)
+        return Births(np.full(n, w), c.m, c.P, np.full(n, SOURCE_GM, dtype=np.int8))
+
+
+class GMCandidates(NamedTuple):
+    """GMBM's components of one scan before weighting (:meth:`StandardGMBirth.candidates`)."""
+
+    m: np.ndarray  #: (n, 4) means
+    P: np.ndarray  #: (n, 4, 4) covariances
+    J_GM: int  #: number of a-priori components (the weight's denominator)

@@ -9,6 +9,7 @@ w = N_hat / J_u,k and P_p = sigma_u^2 I, so the birth mass is exactly N_hat.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -44,6 +45,11 @@ class UniformBirth:
 
     def __call__(self, ctx: BirthContext) -> Births:
         """Grid nodes passing the FOV-only rule (``ubm_extent = fov``; ``workspace`` skips the FOV test)."""
+        return self.weigh(self.cfg, self.candidates(ctx))
+
+    def candidates(self, ctx: BirthContext) -> GridCandidates:
+        """The grid components that pass the FOV-only rule at k, before their weights. They read only the scan's
+        pose and occluders, so one set serves every probability mode, clutter rate and N_hat of a trial."""
         scan = ctx.scan
         if self.cfg.ubm_extent == "fov":
             ok = self.rule.in_fov(self.nodes, scan)
@@ -51,11 +57,23 @@ class UniformBirth:
             ok = np.ones(len(self.nodes), dtype=bool)
         idx = np.flatnonzero(ok)
         idx = idx[~self.rule.in_occluder(self.nodes[idx], scan)]
-        J = len(idx)
+        return GridCandidates(self.m_all[idx], self.P_all[idx])
+
+    @staticmethod
+    def weigh(cfg: BirthConfig, c: GridCandidates) -> Births:
+        """Equal weights w = N_hat / J_u,k (§3.3)."""
+        J = len(c.m)
         if J == 0:
             return Births.empty()
-        w = np.full(J, self.cfg.N_hat / J)
-        return Births(w, self.m_all[idx], self.P_all[idx], np.full(J, SOURCE_GRID, dtype=np.int8))
+        w = np.full(J, cfg.N_hat / J)
+        return Births(w, c.m, c.P, np.full(J, SOURCE_GRID, dtype=np.int8))
+
+
+class GridCandidates(NamedTuple):
+    """The grid's birth components of one scan before weighting (:meth:`UniformBirth.candidates`)."""
+
+    m: np.ndarray  #: (J, 4) means
+    P: np.ndarray  #: (J, 4, 4) covariances
 
 
 class WorkspaceUniformBirth(UniformBirth):

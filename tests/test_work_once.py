@@ -1,7 +1,7 @@
 """Work done once (issue 19 item 3): the shared paths give exactly the results of the paths that recompute.
 
 * births of a mode-free model (S-OA, UBM, UBM (workspace), GMBM) computed once per scan and shared by every
-  probability mode vs one birth model per (model, mode);
+  probability mode, clutter rate and N̂ (weight-free candidates, weighed per N̂) vs one birth model per run;
 * a :class:`TrialShare` across configs (the study's main run, clutter sweep and N̂ sweep) vs each config alone;
 * an N̂ sweep whose points run together (one SUMO run per trial) vs point after point, and its resume.
 
@@ -50,10 +50,19 @@ def counting_factory(calls: dict[str, int]):
     def factory(name: str) -> type:
         base = plugins.resolve(plugins.BIRTH, name)
 
-        class Counted(base):
-            def __call__(self, ctx):
-                calls[name] = calls.get(name, 0) + 1
-                return super().__call__(ctx)
+        if hasattr(base, "candidates"):  # a mode-free model's births are its weight-free candidates, weighed
+
+            class Counted(base):
+                def candidates(self, ctx):
+                    calls[name] = calls.get(name, 0) + 1
+                    return super().candidates(ctx)
+
+        else:
+
+            class Counted(base):
+                def __call__(self, ctx):
+                    calls[name] = calls.get(name, 0) + 1
+                    return super().__call__(ctx)
 
         return Counted
 
@@ -76,9 +85,9 @@ def test_births_once_equal_births_per_mode(intersection):
     assert results(a) == results(b)
     K = int(round(cfg.experiment.duration / cfg.sensor.dt))
     n_lam, n_modes = 2, 3
-    for name in MODELS:  # the shared path really called a mode-free model once per scan
+    for name in MODELS:  # a mode-free model's candidates once per scan for every lambda and mode; the rest per run
         assert per_mode[name] == n_lam * n_modes * K, name
-        assert once[name] == n_lam * (K if name in MODE_FREE else n_modes * K), name
+        assert once[name] == (K if name in MODE_FREE else n_lam * n_modes * K), name
 
 
 def test_share_across_configs_equals_each_config_alone(intersection):
@@ -98,6 +107,9 @@ def test_share_across_configs_equals_each_config_alone(intersection):
     assert c["scans"] == 2 and c["scans_reused"] == 2  # lambda = 3 observed once, lambda = 0.5 once
     assert c["runs_reused"] == 3 * 2  # the clutter config's lambda = 3 runs are the main config's
     assert c["runs"] == 6 + 6 + 3  # another N_hat is another filter run
+    # S-OA's weight-free candidates once per scan for lambda = 0.5 and 3 and both N_hat (only weighed per config)
+    K = int(round(main.experiment.duration / main.sensor.dt))
+    assert c["birth_candidates"] == K and c["birth_candidates_reused"] == 2 * K
 
 
 def test_sensitivity_variants_share_the_recording_and_rescore_the_filter_runs(intersection):

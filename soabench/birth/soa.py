@@ -19,6 +19,7 @@ components, so the birth mass is exactly N_hat.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 import shapely
@@ -365,6 +366,14 @@ class SOABirth:
 
     def __call__(self, ctx: BirthContext) -> Births:
         """gamma_k = gamma_occl + gamma_sem + gamma_fov (eq. 17) after the FOV-only rule, with total mass N_hat."""
+        return self.weigh(self.cfg, self.candidates(ctx))
+
+    def candidates(self, ctx: BirthContext) -> SOACandidates:
+        """The components of gamma_k before their weights (eq. 17 after the FOV-only rule and the de-duplication).
+
+        They read only the scan's geometry (pose, O_k, occluders, Omega_k), not Z_k nor N_hat, so one set serves
+        every probability mode, clutter rate and N_hat of a trial (:meth:`weigh`; docs/method.md §5.8).
+        """
         scan, cfg = ctx.scan, self.cfg
         p_o, P_o, v_o = self.occlusion(scan)
         p_s, P_s, ok_s = self.semantic(scan)
@@ -376,11 +385,25 @@ class SOABirth:
         keep = self.rule.mask(xy, scan, static_ok)
         occl = np.flatnonzero(keep[: len(p_o)])
         keep[occl[~dedup(p_o[occl], 0.5 * cfg.delta_r)]] = False
-        w = combined_weights(src[keep], cfg.rho, cfg.N_hat, cfg.rho_norm)
+        P_p = np.concatenate([P_o, P_s, P_f])[keep]
+        v = np.concatenate([v_o, np.zeros((len(p_s) + len(p_f), 2))])[keep]
+        return SOACandidates(xy[keep], P_p, v, src[keep])
+
+    @staticmethod
+    def weigh(cfg: BirthConfig, c: SOACandidates) -> Births:
+        """gamma_k from its candidates: weights N_hat rho_s(i) / sum_j rho_s(j) (eq. 16), zero weights dropped."""
+        w = combined_weights(c.source, cfg.rho, cfg.N_hat, cfg.rho_norm)
         nz = w > 0.0
-        P_p = np.concatenate([P_o, P_s, P_f])[keep][nz]
-        v = np.concatenate([v_o, np.zeros((len(p_s) + len(p_f), 2))])[keep][nz]
-        return births_from(xy[keep][nz], P_p, w[nz], src[keep][nz], cfg.sigma_v_birth, v)
+        return births_from(c.p[nz], c.P_p[nz], w[nz], c.source[nz], cfg.sigma_v_birth, c.v[nz])
+
+
+class SOACandidates(NamedTuple):
+    """S-OA's birth components of one scan before weighting (:meth:`SOABirth.candidates`)."""
+
+    p: np.ndarray  #: (J, 2) position means
+    P_p: np.ndarray  #: (J, 2, 2) position covariances
+    v: np.ndarray  #: (J, 2) velocity means (occlusion velocity prior; else 0)
+    source: np.ndarray  #: (J,) SOURCE_OCCL / SOURCE_SEM / SOURCE_FOV
 
 
 def _subset(obs: Obstacles, keep: np.ndarray) -> Obstacles:

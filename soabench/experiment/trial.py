@@ -6,9 +6,10 @@ across lambda; every filter run of that lambda consumes the very same Scans, and
 placement generator, so all runs see the same birth-placement stream.
 
 Work done once (docs/method.md §5.8): a birth model whose births read only the scan (class attribute
-``mode_free = True``: S-OA, UBM, UBM (workspace), GMBM) is built once per (lambda, model) and called once per scan;
-every probability mode of that lambda reuses the same births (PUBM and ATBM scale by p_D,b or read the previous
-step, so they run per mode). The sensor's geometry of each scan (line of sight, O_k, Omega_k) is computed once for
+``mode_free = True``: S-OA, UBM, UBM (workspace), GMBM) is called once per scan for every probability mode (PUBM
+and ATBM scale by p_D,b or read the previous step, so they run per mode). Such a model splits its births into
+weight-free ``candidates(ctx)``, which read only the scan's geometry, and ``weigh(cfg, candidates)``, which applies
+N_hat: the candidates of a scan are computed once for every clutter rate and N_hat of the trial. The sensor's geometry of each scan (line of sight, O_k, Omega_k) is computed once for
 every lambda. A :class:`TrialShare` carries the SUMO recording, the scans per sensor setting and the finished
 filter runs of one trial index across the run folders of a study or sweep
 (:mod:`soabench.experiment.grouped`), so each is computed once.
@@ -21,6 +22,7 @@ Its schemas are the module constants :data:`ROW_KEYS`, :data:`EPISODE_KEYS`, :da
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from collections.abc import Callable, Sequence
@@ -126,6 +128,9 @@ class TrialShare:
     keep_filter_runs: bool = False
     #: filter key (the run key without the metrics config) -> the finished filter run (``keep_filter_runs``)
     filter_runs: dict[tuple, Any] = field(default_factory=dict)
+    #: births key (the scans' geometry, the birth config but N_hat, the model) -> scan index -> the weight-free birth
+    #: candidates of a mode-free model (``candidates``/``weigh``): one set for every clutter rate and N_hat
+    birth_candidates: dict[tuple, dict[int, Any]] = field(default_factory=dict)
     #: what was computed and what was reused (recording, scans, runs), for tests and benchmarks
     counts: dict[str, int] = field(default_factory=dict)
 
@@ -136,21 +141,47 @@ class TrialShare:
 class _BirthsOnce:
     """A mode-free birth model called once per scan; every probability mode's run reads the same births.
 
-    The model is built on the first call (a lambda whose runs all come from a :class:`TrialShare` builds none).
+    The model is built on the first call that needs it (a lambda whose runs all come from a :class:`TrialShare`
+    builds none). With ``candidates`` (scan index -> weight-free candidates, shared through
+    :attr:`TrialShare.birth_candidates`), a model that splits its births into ``candidates(ctx)`` and the static
+    ``weigh(cfg, candidates)`` computes the candidates of a scan once for every clutter rate and N_hat of the trial
+    and only weighs them here with this config's N_hat; the result equals ``model(ctx)`` bit for bit.
     """
 
-    def __init__(self, build: Callable[[], Callable[[BirthContext], Any]]) -> None:
+    def __init__(
+        self,
+        build: Callable[[], Callable[[BirthContext], Any]],
+        weigh: Callable[[Any], Any] | None = None,
+        candidates: dict[int, Any] | None = None,
+        count: Callable[[str], None] | None = None,
+    ) -> None:
         self.build = build
         self.model: Callable[[BirthContext], Any] | None = None
+        self.weigh = weigh
+        self.candidates = candidates if weigh is not None else None
+        self.count = count or (lambda what: None)
         self._births: dict[int, Any] = {}
         self._scans: list[Any] = []  # keeps the scans alive: ids are unique while they are held
+
+    def _model(self) -> Any:
+        if self.model is None:
+            self.model = self.build()
+        return self.model
 
     def __call__(self, ctx: BirthContext) -> Any:
         key = id(ctx.scan)
         if key not in self._births:
-            if self.model is None:
-                self.model = self.build()
-            self._births[key] = self.model(ctx)
+            if self.candidates is not None and self.weigh is not None:
+                k = int(ctx.scan.k)
+                c = self.candidates.get(k)
+                if c is None:
+                    c = self.candidates[k] = self._model().candidates(ctx)
+                    self.count("birth_candidates")
+                else:
+                    self.count("birth_candidates_reused")
+                self._births[key] = self.weigh(c)
+            else:
+                self._births[key] = self._model()(ctx)
             self._scans.append(ctx.scan)
         return self._births[key]
 
@@ -328,6 +359,7 @@ def run_trial(
     out.timing["sensor"] = 0.0
     cfg_key = _config_key(config)
     filter_cfg_key = _config_key(config, without=("metrics",))
+    birth_key = _birth_key(config)
     for lam in exp.clutter:
         sensor_cfg = dataclasses.replace(config.sensor, lambda_c=float(lam))
         scans_key = (rec_key, repr(sensor_cfg), fn_key[1])
@@ -345,7 +377,13 @@ def run_trial(
             share.count("scans")
         out.timing["sensor"] += time.perf_counter() - t0
         for model in exp.models:
-            births = _births_once(model, config, sensor_cfg, scene, seeds, birth_factory) if births_once else None
+            births = None
+            if births_once:
+                # the sensor's geometry is the same for every lambda when the real sensor observed the scans
+                geometry_key = (rec_key, repr(dataclasses.replace(sensor_cfg, lambda_c=0.0)))
+                births_key = (geometry_key if fn_key[1] == "default" else scans_key, birth_key, model, fn_key[3])
+                candidates = share.birth_candidates.setdefault(births_key, {})
+                births = _births_once(model, config, sensor_cfg, scene, seeds, birth_factory, candidates, share.count)
             for mode in exp.probabilities:
                 key = RunKey(trial, float(lam), model, mode)
                 run_key = (scans_key, cfg_key, model, mode, save_estimates, *fn_key[2:])
@@ -386,11 +424,14 @@ def _births_once(
     scene: SceneMap,
     seeds: TrialSeeds,
     birth_factory: Callable[[str], type],
+    candidates: dict[int, Any] | None = None,
+    count: Callable[[str], None] | None = None,
 ) -> _BirthsOnce | None:
     """One birth model for every probability mode of a lambda, if it is a built-in whose births read only the scan.
 
     It gets a fresh placement generator like every per-mode model would (:mod:`soabench.seeding`), so its births
-    are those each mode's own model would draw.
+    are those each mode's own model would draw. ``candidates``: the trial's shared weight-free candidates of this
+    model (:attr:`TrialShare.birth_candidates`), used if the class has ``candidates`` and ``weigh``.
     """
     from soabench import plugins
 
@@ -399,7 +440,17 @@ def _births_once(
     cls = birth_factory(model)
     if not getattr(cls, "mode_free", False):
         return None
-    return _BirthsOnce(lambda: cls(config.birth, sensor_cfg, scene, seeds.placement_rng()))
+    weigh = None
+    if callable(getattr(cls, "candidates", None)) and callable(getattr(cls, "weigh", None)):
+        weigh = functools.partial(cls.weigh, config.birth)
+    return _BirthsOnce(lambda: cls(config.birth, sensor_cfg, scene, seeds.placement_rng()), weigh, candidates, count)
+
+
+def _birth_key(config: Config) -> str:
+    """The birth config as canonical text without ``N_hat`` (weight-free candidates do not read it)."""
+    d = dict(config.to_dict()["birth"])
+    d.pop("N_hat", None)
+    return json.dumps(d, sort_keys=True, default=repr)
 
 
 def _replay(cached: tuple, out: TrialResult) -> None:
