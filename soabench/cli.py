@@ -201,6 +201,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--offsets", type=_offsets, help="N_tot offsets for `sweep births` (default -10:10)")
     p.add_argument("--clutter", type=_float_list, help="clutter rate for `sweep births` (default 3)")
     p.add_argument(
+        "--point-figures",
+        action="store_true",
+        help="`sweep births`: also draw every N_tot point's own figures (default: sweep_births.png summarises them; "
+        "clutter and occlusion points always get theirs)",
+    )
+    p.add_argument(
         "--resume",
         type=Path,
         metavar="SWEEP_DIR",
@@ -216,6 +222,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
     p.add_argument(
         "--sensitivity-trials", type=int, help="trials of each sensitivity run (default: the main run's trials)"
+    )
+    p.add_argument(
+        "--point-figures",
+        action="store_true",
+        help="also draw the figures of every point of the N_hat sweep (default: births/sweep_births.png summarises "
+        "them)",
     )
 
     p = sub.add_parser(
@@ -503,7 +515,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         requested = {"kind": args.kind, **_requested(args, _config_from_args(args))}
         if args.values is not None or args.offsets is not None:
             requested["values"] = list(args.values if args.values is not None else args.offsets)
-        outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, requested=requested, **kwargs)
+        outcome = run_sweep(
+            args.kind, (), None, args.net, resume=args.resume, requested=requested, figures=_point_figures(args),
+            **kwargs,
+        )  # fmt: skip
         return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
     if args.kind == "clutter":
         require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep clutter`")
@@ -520,8 +535,22 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     cfg = _config_from_args(args)
     from soabench.experiment.sweep import run_sweep
 
-    outcome = run_sweep(args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out, **kwargs)
+    outcome = run_sweep(
+        args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out,
+        figures=_point_figures(args), **kwargs,
+    )  # fmt: skip
     return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
+
+
+def _point_figures(args: argparse.Namespace) -> bool | None:
+    """``--point-figures``: True; else None (each sweep kind's default, :func:`soabench.experiment.sweep.run_sweep`)."""
+    if args.point_figures:
+        require(
+            args.kind == "births",
+            "--point-figures belongs to `sweep births` (clutter and occlusion points always get their figures)",
+        )
+        return True
+    return None
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -558,6 +587,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         births_trials=args.births_trials,
         sensitivity_trials=args.sensitivity_trials,
         explicit=keys,
+        point_figures=args.point_figures,
         **kwargs,
     )
     return _report_outcome(outcome, "soabench study --out {dir}")

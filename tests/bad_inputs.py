@@ -118,6 +118,11 @@ CASES: list[Case] = [
         lambda t: ["sweep", "births", "--offsets", "0,1000000000", "--trials", "1", "--out", str(t / "sw")],
         "birth.N_hat",
     ),  # fmt: skip
+    (
+        "sweep clutter --point-figures",
+        lambda t: ["sweep", "clutter", "--point-figures", "--trials", "1", "--out", str(t / "sw")],
+        "--point-figures belongs to `sweep births`",
+    ),  # fmt: skip
     ("study --births-trials 0", lambda t: ["study", "--births-trials", "0", "--out", str(t / "st")], "--births-trials"),
     # scheduler address: refused at once, before any connection attempt
     ("--scheduler garbage", lambda t: _run(t, "--scheduler", "not an address"), "tcp://HOST:PORT"),

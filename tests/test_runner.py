@@ -251,6 +251,22 @@ def test_births_sweep_runs_and_tabulates(tmp_path):
     assert (tmp_path / "sw" / "sweep_births.png").is_file()
 
 
+def test_births_sweep_points_draw_their_figures_only_on_request(tmp_path):
+    """The N̂ sweep's points write tables and summaries; their own figures only with ``figures=True``
+    (``--point-figures``): ``sweep_births.png`` summarises them."""
+    cfg = small_config(trials=1, duration=10.0)
+    kw = dict(workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, models=("soa", "atbm"))
+    for name, figures in (("default", None), ("all", True)):
+        o = run_sweep("births", (-1, 0), cfg, "intersection", out=tmp_path / name, figures=figures, **kw)
+        assert o.complete and (tmp_path / name / "sweep_births.png").is_file()
+        for point in ("ntot_005", "ntot_006"):
+            pdir = tmp_path / name / "points" / point
+            summary = json.loads((pdir / "summary.json").read_text())
+            pngs = sorted(p.name for p in (pdir / "figures").glob("*.png"))
+            assert sorted(summary["figures"]) == ([f"figures/{p}" for p in pngs] if figures else []), (name, point)
+            assert ("fig5f_cardinality.png" in pngs) == bool(figures), (name, point)
+
+
 def test_clutter_sweep_one_run_per_sweep(tmp_path):
     cfg = small_config(trials=2)
     o = run_sweep(

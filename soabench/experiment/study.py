@@ -85,6 +85,7 @@ def run_study(
     progress: bool = True,
     explicit: set[str] | None = None,
     grouped: bool = True,
+    point_figures: bool = False,
 ) -> StudyOutcome:
     """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
 
@@ -95,6 +96,8 @@ def run_study(
     a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
     refuses differences, except more trials (see :mod:`~soabench.experiment.runmeta`); None compares nothing.
     ``grouped``: False runs the parts one after another (the same results, slower; for benchmarks).
+    ``point_figures``: also draw the figures of every N̂ point (``births/points/*/figures``; by default only
+    ``births/sweep_births.png`` summarises them).
     """
     root = resolve(out if out is not None else Path("results") / net_name(net))
     check_writable_target(root, "study folder")
@@ -113,6 +116,7 @@ def run_study(
         return {k: flat[k] for k in keys if k in flat}
 
     exe = dict(workers=workers, scheduler=scheduler, dask_local=dask_local, progress=progress)
+    births_figures = True if point_figures else None
     main_dir, clutter_dir, births_dir = root / "main", root / "clutter", root / "births"
 
     def parts(**kw) -> tuple[RunOutcome, SweepOutcome, SweepOutcome]:
@@ -133,9 +137,15 @@ def run_study(
         if (births_dir / "sweep.json").is_file():
             trials_key = "experiment.trials" if "births_trials" in explicit else None
             req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
-            births = run_sweep("births", (), None, net, resume=births_dir, requested=req, grouped=grouped, **exe, **kw)
+            births = run_sweep(
+                "births", (), None, net, resume=births_dir, requested=req, grouped=grouped, figures=births_figures,
+                **exe, **kw,
+            )  # fmt: skip
         else:
-            births = run_sweep("births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, grouped=grouped, **exe, **kw)
+            births = run_sweep(
+                "births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, grouped=grouped, figures=births_figures,
+                **exe, **kw,
+            )  # fmt: skip
         return main, clutter, births
 
     with FolderLock(root, "study folder"):

@@ -131,7 +131,7 @@ def run_sweep(
     load_fn: LoadFn | None = None,
     models: Sequence[str] | None = None,
     n_true: int = N_TRUE,
-    figures: bool = True,
+    figures: bool | None = None,
     requested: dict[str, Any] | None = None,
     defer: list | None = None,
     run_trials: bool = True,
@@ -146,8 +146,12 @@ def run_sweep(
     compared with it: differences are refused except more ``experiment.trials``, which extends every point.
     ``defer`` and ``run_trials`` are those of :func:`~soabench.experiment.runner.run_experiment`, for every point.
     ``grouped``: an N̂ sweep runs its points' trials together (module docstring); False runs point after point
-    (the same results, slower; for benchmarks).
+    (the same results, slower; for benchmarks). ``figures``: draw each point's own figures (its ``figures/``);
+    None draws them for the clutter and occlusion points and not for the N̂ sweep's, whose ``sweep_births.png``
+    summarises its 21 points (their tables and summaries are written either way).
     """
+    if figures is None:
+        figures = kind != "births"
     locks: list[FolderLock] = []
     try:
         if resume is not None:

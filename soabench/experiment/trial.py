@@ -9,9 +9,10 @@ Work done once (docs/method.md §5.8): a birth model whose births read only the 
 ``mode_free = True``: S-OA, UBM, UBM (workspace), GMBM) is called once per scan for every probability mode (PUBM
 and ATBM scale by p_D,b or read the previous step, so they run per mode). Such a model splits its births into
 weight-free ``candidates(ctx)``, which read only the scan's geometry, and ``weigh(cfg, candidates)``, which applies
-N_hat: the candidates of a scan are computed once for every clutter rate and N_hat of the trial. The sensor's geometry of each scan (line of sight, O_k, Omega_k) is computed once for
-every lambda. A :class:`TrialShare` carries the SUMO recording, the scans per sensor setting and the finished
-filter runs of one trial index across the run folders of a study or sweep
+N_hat: the candidates of a scan are computed once for every clutter rate and N_hat of the trial. The sensor's
+geometry of each scan (line of sight, O_k, Omega_k) is computed once for every lambda. A :class:`TrialShare`
+carries the SUMO recording, the scans per sensor setting and the finished filter runs of one trial index across
+the run folders of a study or sweep
 (:mod:`soabench.experiment.grouped`), so each is computed once.
 
 The result is a :class:`TrialResult` of plain Python scalars (cheap to pickle, ready to be written as CSV rows).
