@@ -6,10 +6,12 @@ In one process, on the same short protocol, one after another:
    and once more with births per (model, mode) as before;
 2. the study as before: its parts one after another (the clutter sweep reruns the main run's λ = 3 filter runs, the
    N̂ sweep runs SUMO and the sensor once per point, the sensitivity runs run SUMO, the sensor and every filter
-   again) and births per (model, mode) (``run_study(grouped=False)`` with ``run_trial(births_once=False)``);
+   again), births per (model, mode, clutter rate, N̂) and every N̂ point's own figures
+   (``run_study(grouped=False, all_figures=True)`` with ``run_trial(births_once=False)``);
 3. the study as now: the trials of all four parts together (SUMO once per trial, the sensor once per clutter rate,
-   each filter run once across parts, the visible-truth run scoring the main run's filter runs), mode-free births
-   once per scan, and every folder's figures drawn one per task on the study's ``--workers`` processes.
+   each filter run once across parts, the visible-truth run scoring the main run's filter runs), the weight-free
+   births of a mode-free model once per scan for every mode, clutter rate and N̂, the N̂ points without figures of
+   their own, and every folder's figures drawn one per task on the study's ``--workers`` processes.
 
 The "before" side is what can still be switched off in today's code, not main @ e59db79 as a whole: its parts
 one after another also draw their figures on ``--workers`` processes (``soabench run`` does since issue 19), so
@@ -134,7 +136,14 @@ def main(argv=None) -> int:
             t_main_before = timed(run_experiment, cfg, a.net, out=root / "main_before", cpu_key="main_before", **kw)
         with ReportClock() as r_before:
             t_before = timed(
-                run_study, cfg, a.net, out=root / "study_before", grouped=False, cpu_key="study_before", **study_kw
+                run_study,
+                cfg,
+                a.net,
+                out=root / "study_before",
+                grouped=False,
+                all_figures=True,
+                cpu_key="study_before",
+                **study_kw,
             )
     finally:
         defaults["births_once"] = True

@@ -201,7 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--offsets", type=_offsets, help="N_tot offsets for `sweep births` (default -10:10)")
     p.add_argument("--clutter", type=_float_list, help="clutter rate for `sweep births` (default 3)")
     p.add_argument(
-        "--point-figures",
+        "--all-figures",
         action="store_true",
         help="`sweep births`: also draw every N_tot point's own figures (default: sweep_births.png summarises them; "
         "clutter and occlusion points always get theirs)",
@@ -224,10 +224,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--sensitivity-trials", type=int, help="trials of each sensitivity run (default: the main run's trials)"
     )
     p.add_argument(
-        "--point-figures",
+        "--all-figures",
         action="store_true",
-        help="also draw the figures of every point of the N_hat sweep (default: births/sweep_births.png summarises "
-        "them)",
+        help="also draw the figures of the N_hat sweep's points and of the sensitivity runs (default: "
+        "births/sweep_births.png and sensitivity/sensitivity.md summarise them)",
     )
 
     p = sub.add_parser(
@@ -516,7 +516,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if args.values is not None or args.offsets is not None:
             requested["values"] = list(args.values if args.values is not None else args.offsets)
         outcome = run_sweep(
-            args.kind, (), None, args.net, resume=args.resume, requested=requested, figures=_point_figures(args),
+            args.kind, (), None, args.net, resume=args.resume, requested=requested, figures=_all_figures(args),
             **kwargs,
         )  # fmt: skip
         return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
@@ -537,17 +537,17 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     outcome = run_sweep(
         args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out,
-        figures=_point_figures(args), **kwargs,
+        figures=_all_figures(args), **kwargs,
     )  # fmt: skip
     return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
 
 
-def _point_figures(args: argparse.Namespace) -> bool | None:
-    """``--point-figures``: True; else None (each sweep kind's default, :func:`soabench.experiment.sweep.run_sweep`)."""
-    if args.point_figures:
+def _all_figures(args: argparse.Namespace) -> bool | None:
+    """``--all-figures``: True; else None (each sweep kind's default, :func:`soabench.experiment.sweep.run_sweep`)."""
+    if args.all_figures:
         require(
             args.kind == "births",
-            "--point-figures belongs to `sweep births` (clutter and occlusion points always get their figures)",
+            "--all-figures belongs to `sweep births` (clutter and occlusion points always get their figures)",
         )
         return True
     return None
@@ -587,7 +587,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         births_trials=args.births_trials,
         sensitivity_trials=args.sensitivity_trials,
         explicit=keys,
-        point_figures=args.point_figures,
+        all_figures=args.all_figures,
         **kwargs,
     )
     return _report_outcome(outcome, "soabench study --out {dir}")

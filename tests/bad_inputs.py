@@ -119,9 +119,9 @@ CASES: list[Case] = [
         "birth.N_hat",
     ),  # fmt: skip
     (
-        "sweep clutter --point-figures",
-        lambda t: ["sweep", "clutter", "--point-figures", "--trials", "1", "--out", str(t / "sw")],
-        "--point-figures belongs to `sweep births`",
+        "sweep clutter --all-figures",
+        lambda t: ["sweep", "clutter", "--all-figures", "--trials", "1", "--out", str(t / "sw")],
+        "--all-figures belongs to `sweep births`",
     ),  # fmt: skip
     ("study --births-trials 0", lambda t: ["study", "--births-trials", "0", "--out", str(t / "st")], "--births-trials"),
     # scheduler address: refused at once, before any connection attempt

@@ -253,7 +253,7 @@ def test_births_sweep_runs_and_tabulates(tmp_path):
 
 def test_births_sweep_points_draw_their_figures_only_on_request(tmp_path):
     """The N̂ sweep's points write tables and summaries; their own figures only with ``figures=True``
-    (``--point-figures``): ``sweep_births.png`` summarises them."""
+    (``--all-figures``): ``sweep_births.png`` summarises them."""
     cfg = small_config(trials=1, duration=10.0)
     kw = dict(workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, models=("soa", "atbm"))
     for name, figures in (("default", None), ("all", True)):

@@ -85,7 +85,7 @@ def run_study(
     progress: bool = True,
     explicit: set[str] | None = None,
     grouped: bool = True,
-    point_figures: bool = False,
+    all_figures: bool = False,
 ) -> StudyOutcome:
     """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
 
@@ -96,8 +96,9 @@ def run_study(
     a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
     refuses differences, except more trials (see :mod:`~soabench.experiment.runmeta`); None compares nothing.
     ``grouped``: False runs the parts one after another (the same results, slower; for benchmarks).
-    ``point_figures``: also draw the figures of every N̂ point (``births/points/*/figures``; by default only
-    ``births/sweep_births.png`` summarises them).
+    ``all_figures``: also draw the figures of every N̂ point and of both sensitivity runs (by default
+    ``births/sweep_births.png`` and ``sensitivity/sensitivity.md`` summarise those folders, which get tables and
+    summaries only).
     """
     root = resolve(out if out is not None else Path("results") / net_name(net))
     check_writable_target(root, "study folder")
@@ -116,7 +117,8 @@ def run_study(
         return {k: flat[k] for k in keys if k in flat}
 
     exe = dict(workers=workers, scheduler=scheduler, dask_local=dask_local, progress=progress)
-    births_figures = True if point_figures else None
+    births_figures = True if all_figures else None
+    sens_exe = dict(exe, figures=all_figures)
     main_dir, clutter_dir, births_dir = root / "main", root / "clutter", root / "births"
 
     def parts(**kw) -> tuple[RunOutcome, SweepOutcome, SweepOutcome]:
@@ -155,7 +157,9 @@ def run_study(
             if grouped:
                 deferred: list = []
                 parts(defer=deferred)
-                run_variants(sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, defer=deferred, **exe)
+                run_variants(
+                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, defer=deferred, **sens_exe
+                )
                 from soabench.experiment.drawing import parallel
                 from soabench.experiment.grouped import run_group
                 from soabench.experiment.runner import open_executor
@@ -168,14 +172,21 @@ def run_study(
                     with parallel(pool):  # the reports of the parts that attempted every trial
                         main, clutter, births = parts(run_trials=False)
                         sensitivity = run_variants(
-                            sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, run_trials=False, **exe
+                            sens_dir,
+                            main_dir,
+                            trials=sensitivity_trials,
+                            follow_main=follow,
+                            run_trials=False,
+                            **sens_exe,
                         )
                     aborted = False
                 finally:
                     pool.close(abort=aborted)
             else:
                 main, clutter, births = parts()
-                sensitivity = run_variants(sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, **exe)
+                sensitivity = run_variants(
+                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, **sens_exe
+                )
 
             md = ""
             if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection

@@ -148,7 +148,7 @@ def run_sweep(
     ``grouped``: an N̂ sweep runs its points' trials together (module docstring); False runs point after point
     (the same results, slower; for benchmarks). ``figures``: draw each point's own figures (its ``figures/``);
     None draws them for the clutter and occlusion points and not for the N̂ sweep's, whose ``sweep_births.png``
-    summarises its 21 points (their tables and summaries are written either way).
+    summarises its points (their tables and summaries are written either way).
     """
     if figures is None:
         figures = kind != "births"
