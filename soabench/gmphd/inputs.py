@@ -59,13 +59,14 @@ def _subset_beta(beta, keep: np.ndarray):
 
 
 def scan_inputs(k: int, Z_in: np.ndarray, ego_in: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """``(Z, ego, finite)``: the measurements as (M, 2) floats, the pose as (3,) floats, and whether both are
-    finite. Depends on the scan alone, so the filter computes it once per scan for all its runs
-    (:meth:`soabench.types.Scan.once`). A pose that is not (x, y, theta) raises."""
-    Z = np.asarray(Z_in, dtype=float).reshape(-1, 2)
+    """``(Z, ego, finite)``: the measurements as (M, 2) floats, the pose as (3,) floats (both contiguous, as the
+    compiled cycle takes them), and whether both are finite. Depends on the scan alone, so the filter computes it
+    once per scan for all its runs (:meth:`soabench.types.Scan.once`). A pose that is not (x, y, theta) raises."""
+    Z = np.ascontiguousarray(np.asarray(Z_in, dtype=float).reshape(-1, 2))
     ego = np.asarray(ego_in, dtype=float)
     if ego.shape != (3,):
         raise SoabenchError(f"scan {k}: the ego pose has shape {ego.shape}; expected (x, y, theta)")
+    ego = np.ascontiguousarray(ego)
     return Z, ego, _finite(Z) and _finite(ego)
 
 
