@@ -29,7 +29,7 @@ from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle, notice, reduction
-from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
@@ -39,7 +39,6 @@ from soabench.types import (  # StepResult re-exported: old import path
     SOURCE_MEAS,
     SOURCE_NAMES,
     Births,
-    NewbornTerms,
     StepResult,
 )
 
@@ -92,7 +91,8 @@ class GMPHDFilter:
     def _init_fused(self) -> None:
         """What every fused step passes to :mod:`soabench.gmphd.cycle` and needs no recomputing per step: the
         scalars of the prediction and of the reduction packed as the compiled calls take them (their ``PRED_*`` and
-        ``RED_*`` indices), empty birth arrays, and the clutter settings that key kappa's per-scan value."""
+        ``RED_*`` indices), empty birth arrays, and the clutter settings that key kappa's per-scan value. Like R and
+        the gate threshold they are read from the configurations once, here."""
         c, s = self.cfg, self.sensor
         pred = np.empty(8)
         pred[cycle.PRED_P_S] = c.p_S
@@ -168,7 +168,7 @@ class GMPHDFilter:
         if self.fused and checked.ego is not None:  # a dropped scan (no pose) takes the array path
             res = self._step_fused(scan, checked.Z, checked.ego, checked.births, kappa_once=False)
             if res is None:  # cannot happen: check_step_inputs kept only finite births with w >= 0
-                raise SoabenchError(f"scan {scan.k}: the checked birth components failed the filter's input check")
+                raise RuntimeError(f"scan {scan.k}: checked birth components failed the compiled input check")
             res.n_dropped, res.n_dropped_births = checked.n_dropped, checked.n_dropped_births
             return res
         return self._step_array(scan, checked)
@@ -377,15 +377,6 @@ def _scan_inputs_of(scan: Scan) -> Callable[[], tuple]:
     """``make()`` -> :func:`soabench.gmphd.inputs.scan_inputs` of ``scan`` plus the scan's own Z and ego arrays,
     held with the result so that the ids in its cache key (:meth:`soabench.types.Scan.once`) stay theirs."""
     return lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego))
-
-
-def newborn_finite(newborn: NewbornTerms | None) -> bool:
-    """The newborn terms' part of :func:`soabench.gmphd.inputs.births_finite` (True without newborn terms)."""
-    if newborn is None:
-        return True
-    return bool(
-        np.isfinite(np.asarray(newborn.m, dtype=float)).all() and np.isfinite(np.asarray(newborn.P, dtype=float)).all()
-    )
 
 
 def _birth_arrays(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
