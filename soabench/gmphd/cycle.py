@@ -6,7 +6,10 @@ Why: at the mixture sizes of a trial (tens of components, a handful of measureme
 costing microseconds of fixed overhead; here a step is three calls (:func:`predict_append`, :func:`update` or
 :func:`support` + :func:`posterior` when a birth model adds measurement-driven newborn terms, :func:`reduce`), so
 ``StepResult`` can still time the three stages. Between the calls stays in Python only what needs Python: the
-line-of-sight gate (shapely) of the occlusion-aware mode and the newborn terms' ``beta(A, kappa)``.
+line-of-sight gate (shapely) of the occlusion-aware mode and the newborn terms' ``beta(A, kappa)``. What used to
+be fixed Python cost around them is done inside: the birth components' input check (:func:`births_ok`, §2.12) and
+the posterior's origin counts (:func:`origin_counts`, §5.7); the settings of a call travel as one float array
+(``PRED_*``, ``RED_*`` name its entries) that the filter packs once instead of converting them on every step.
 
 Each formula is the one of the array path, evaluated in the same order where that order is ours (elementwise Beta
 algebra, log-sum-exp, the Kalman kernels of :mod:`soabench.gmphd.kernels`, which both paths share); matrix products
