@@ -6,7 +6,10 @@ Why: at the mixture sizes of a trial (tens of components, a handful of measureme
 costing microseconds of fixed overhead; here a step is three calls (:func:`predict_append`, :func:`update` or
 :func:`support` + :func:`posterior` when a birth model adds measurement-driven newborn terms, :func:`reduce`), so
 ``StepResult`` can still time the three stages. Between the calls stays in Python only what needs Python: the
-line-of-sight gate (shapely) of the occlusion-aware mode and the newborn terms' ``beta(A, kappa)``.
+line-of-sight gate (shapely) of the occlusion-aware mode and the newborn terms' ``beta(A, kappa)``. What used to
+be fixed Python cost around them is done inside: the birth components' input check (:func:`births_ok`, §2.12) and
+the posterior's origin counts (:func:`origin_counts`, §5.7); the settings of a call travel as one float array
+(``PRED_*``, ``RED_*`` name its entries) that the filter packs once instead of converting them on every step.
 
 Each formula is the one of the array path, evaluated in the same order where that order is ours (elementwise Beta
 algebra, log-sum-exp, the Kalman kernels of :mod:`soabench.gmphd.kernels`, which both paths share); matrix products
@@ -114,19 +117,60 @@ def _logaddexp(x, y):
     return d  # NaN
 
 
+#: indices of :func:`predict_append`'s ``pars``: p_S, then the Beta parameters beta_factor, theta_min, p_S_max
+#: (§4.2, §4.3), then the FOV r_min, r_max, Theta/2 + 1e-12 and 1.0 for a limited FOV (0.0 for 360 deg)
+PRED_P_S, PRED_BETA_FACTOR, PRED_THETA_MIN, PRED_P_S_MAX, PRED_R_MIN, PRED_R_MAX, PRED_HALF_FOV, PRED_LIMITED = range(8)
+
+
 @njit(cache=True)
-def predict_append(w, m, P, origin, n_det, age, beta, F, Q, p_S, pars, bw, bm, bP, bsrc, beta0, ego, fov):
+def births_ok(bw, bm, bP):
+    """Every birth weight, mean and covariance finite and every weight >= 0: the fused cycle's part of
+    :func:`soabench.gmphd.inputs.births_finite` (the newborn terms are checked before the cycle)."""
+    for k in range(bw.shape[0]):
+        if not (math.isfinite(bw[k]) and bw[k] >= 0.0):
+            return False
+        for a in range(4):
+            if not math.isfinite(bm[k, a]):
+                return False
+            for b in range(4):
+                if not math.isfinite(bP[k, a, b]):
+                    return False
+    return True
+
+
+@njit(cache=True)
+def predict_append(w, m, P, origin, n_det, age, beta, F, Q, pars, bw, bm, bP, bsrc, beta0, ego):
     """Steps 1-2 of §2.11 and the FOV gate: predict (§2.5; Beta prediction §4.2, §4.3 when ``beta`` has rows),
     append the birth components (n_det = age = 0, Beta prior ``beta0``), and g_j = 1[m_j in FOV_k] (§4.1).
 
-    ``pars`` = (beta_factor, theta_min, p_S_max); ``fov`` = (r_min, r_max, Theta/2 + 1e-12, limited FOV 0/1).
-    Returns (w, m, P, origin, n_det, age, beta, g) of the J + J_b predicted components. Throughout this module a
-    static-mode mixture carries a (0, 0) ``beta`` and a dynamic one a (J, 4) ``beta``.
+    ``pars``: the scalars named by the ``PRED_*`` indices (p_S, Beta parameters, FOV), one array so that a call
+    unboxes one argument for them. Returns (w, m, P, origin, n_det, age, beta, g) of the J + J_b predicted
+    components and :func:`births_ok` of the birth components; when that is False (a non-finite or negative birth
+    input, which the caller must raise on or drop, docs/method.md §2.12) nothing else is computed and the arrays
+    are empty. Throughout this module a static-mode mixture carries a (0, 0) ``beta`` and a dynamic one a (J, 4)
+    ``beta``.
     """
+    dyn = beta.shape[1] == 4
+    if not births_ok(bw, bm, bP):
+        z = np.empty(0)
+        return (
+            z,
+            np.empty((0, 4)),
+            np.empty((0, 4, 4)),
+            np.empty(0, dtype=np.int8),
+            np.empty(0, dtype=np.int32),
+            np.empty(0, dtype=np.int32),
+            np.empty((0, 4) if dyn else (0, 0)),
+            z,
+            False,
+        )
+    p_S = pars[PRED_P_S]
+    f_beta, theta_min, p_S_max = pars[PRED_BETA_FACTOR], pars[PRED_THETA_MIN], pars[PRED_P_S_MAX]
+    r_min, r_max, half_fov = pars[PRED_R_MIN], pars[PRED_R_MAX], pars[PRED_HALF_FOV]
+    limited = pars[PRED_LIMITED] > 0.0
     J0 = w.shape[0]
     Jb = bw.shape[0]
     J = J0 + Jb
-    dyn = beta.shape[1] == 4
     w2 = np.empty(J)
     m2 = np.empty((J, 4))
     P2 = np.empty((J, 4, 4))
@@ -138,13 +182,13 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, p_S, pars, bw, bm, b
     for j in range(J0):
         factor = p_S
         if dyn:
-            beta2[j, 0], beta2[j, 1] = _beta_inflate(beta[j, 0], beta[j, 1], pars[0], pars[1])
+            beta2[j, 0], beta2[j, 1] = _beta_inflate(beta[j, 0], beta[j, 1], f_beta, theta_min)
             sS, tS = beta[j, 2], beta[j, 3]
             factor = sS / (sS + tS)
-            s, t = _beta_inflate(sS + 1.0, tS, pars[0], pars[1])
+            s, t = _beta_inflate(sS + 1.0, tS, f_beta, theta_min)
             n = s + t
-            if s > pars[2] * n:
-                s, t = pars[2] * n, (1.0 - pars[2]) * n
+            if s > p_S_max * n:
+                s, t = p_S_max * n, (1.0 - p_S_max) * n
             beta2[j, 2], beta2[j, 3] = s, t
         w2[j] = w[j] * factor
         for a in range(4):
@@ -187,11 +231,11 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, p_S, pars, bw, bm, b
         dx = m2[j, 0] - ego[0]
         dy = m2[j, 1] - ego[1]
         r = math.hypot(dx, dy)
-        ok = r >= fov[0] and r <= fov[1]
-        if ok and fov[3] > 0.0:
-            ok = abs(wrap(math.atan2(dy, dx) - ego[2])) <= fov[2]
+        ok = r >= r_min and r <= r_max
+        if ok and limited:
+            ok = abs(wrap(math.atan2(dy, dx) - ego[2])) <= half_fov
         g[j] = 1.0 if ok else 0.0
-    return w2, m2, P2, origin2, n_det2, age2, beta2, g
+    return w2, m2, P2, origin2, n_det2, age2, beta2, g, True
 
 
 @njit(cache=True)
@@ -502,14 +546,38 @@ def _select(w, m, P, origin, n_det, age, beta, idx):
     return wo, mo, Po, oo, no, ao, bo
 
 
-@njit(cache=True)
-def reduce(w, m, P, origin, n_det, age, beta, max_age, T, U, J_max, theta_min, extract_thr, vo_ma):
-    """§2.9-2.10 and §4.5: drop undetected births older than ``max_age`` (< 0: off), prune w > T, Vo-Ma merge
-    (Table II, moment matching, Beta moment matching of multi-member groups), keep the J_max heaviest, extract
-    (``vo_ma``: w > thr, floor(w + 0.5) copies; otherwise no extraction here).
+#: indices of :func:`reduce`'s ``pars``: max_age (< 0: off), T, U, J_max, theta_min, the extraction threshold,
+#: 1.0 for Vo-Ma extraction (0.0: none here), the number of birth source codes (:data:`soabench.types.SOURCE_NAMES`)
+RED_MAX_AGE, RED_T, RED_U, RED_J_MAX, RED_THETA_MIN, RED_EXTRACT_THR, RED_VO_MA, RED_N_SOURCES = range(8)
 
-    Returns ((w, m, P, origin, n_det, age, beta), X, X_w, (sum_w, n_pruned, n_merged, cap_hit)).
+
+@njit(cache=True)
+def origin_counts(origin, age, n_sources):
+    """:func:`soabench.origins.origin_counts` (docs/method.md §5.7) in the compiled cycle: component j counts in bin
+    origin_j if age_j = 0, n_sources + origin_j if older, and in the last bin (2 n_sources) if origin_j is not a
+    source code in [0, n_sources)."""
+    counts = np.zeros(2 * n_sources + 1, dtype=np.int64)
+    for j in range(origin.shape[0]):
+        o = np.int64(origin[j])
+        if 0 <= o < n_sources:
+            counts[o + n_sources if age[j] > 0 else o] += 1
+        else:
+            counts[2 * n_sources] += 1
+    return counts
+
+
+@njit(cache=True)
+def reduce(w, m, P, origin, n_det, age, beta, pars):
+    """§2.9-2.10 and §4.5: drop undetected births older than max_age (< 0: off), prune w > T, Vo-Ma merge
+    (Table II, moment matching, Beta moment matching of multi-member groups), keep the J_max heaviest, extract
+    (Vo-Ma: w > thr, floor(w + 0.5) copies; otherwise no extraction here), count the posterior by origin (§5.7).
+
+    ``pars``: the scalars named by the ``RED_*`` indices, one array so that a call unboxes one argument for them.
+    Returns ((w, m, P, origin, n_det, age, beta), X, X_w, origin counts, (sum_w, n_pruned, n_merged, cap_hit)).
     """
+    max_age, T, U = int(pars[RED_MAX_AGE]), pars[RED_T], pars[RED_U]
+    J_max, theta_min, extract_thr = int(pars[RED_J_MAX]), pars[RED_THETA_MIN], pars[RED_EXTRACT_THR]
+    vo_ma, n_sources = pars[RED_VO_MA] > 0.0, int(pars[RED_N_SOURCES])
     J = w.shape[0]
     sum_w = 0.0
     for j in range(J):
@@ -577,4 +645,5 @@ def reduce(w, m, P, origin, n_det, age, beta, max_age, T, U, J_max, theta_min, e
                     X[k] = m[j]
                     X_w[k] = w[j]
                     k += 1
-    return (w, m, P, origin, n_det, age, beta), X, X_w, (sum_w, n_pruned, n_merged, cap_hit)
+    counts = origin_counts(origin, age, n_sources)
+    return (w, m, P, origin, n_det, age, beta), X, X_w, counts, (sum_w, n_pruned, n_merged, cap_hit)

@@ -29,13 +29,18 @@ from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle, notice, reduction
-from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
 from soabench.gmphd.reduction import extract, prune_merge_cap
 from soabench.origins import origin_counts
-from soabench.types import SOURCE_MEAS, Births, StepResult  # StepResult re-exported: old import path
+from soabench.types import (  # StepResult re-exported: old import path
+    SOURCE_MEAS,
+    SOURCE_NAMES,
+    Births,
+    StepResult,
+)
 
 if TYPE_CHECKING:
     from soabench.types import Scan
@@ -81,12 +86,38 @@ class GMPHDFilter:
         self.mixture = Mixture.empty(self.dynamic)
         self.fused = bool(fused)
         self._ukf = filter_cfg.form == "ukf"
-        c = filter_cfg
-        self._pars = np.array([c.beta_factor, c.theta_min, c.p_S_max], dtype=float)
-        limited = sensor_cfg.fov_deg < 360.0
-        self._fov = np.array([sensor_cfg.r_min, sensor_cfg.r_max, 0.5 * sensor_cfg.fov + 1e-12, float(limited)])
+        self._init_fused()
+
+    def _init_fused(self) -> None:
+        """What every fused step passes to :mod:`soabench.gmphd.cycle` and needs no recomputing per step: the
+        scalars of the prediction and of the reduction packed as the compiled calls take them (their ``PRED_*`` and
+        ``RED_*`` indices), empty birth arrays, and the clutter settings that key kappa's per-scan value. Like R and
+        the gate threshold they are read from the configurations once, here."""
+        c, s = self.cfg, self.sensor
+        pred = np.empty(8)
+        pred[cycle.PRED_P_S] = c.p_S
+        pred[cycle.PRED_BETA_FACTOR], pred[cycle.PRED_THETA_MIN], pred[cycle.PRED_P_S_MAX] = (
+            c.beta_factor,
+            c.theta_min,
+            c.p_S_max,
+        )
+        pred[cycle.PRED_R_MIN], pred[cycle.PRED_R_MAX] = s.r_min, s.r_max
+        pred[cycle.PRED_HALF_FOV], pred[cycle.PRED_LIMITED] = 0.5 * s.fov + 1e-12, float(s.fov_deg < 360.0)
+        self._pred_pars = pred
+        red = np.empty(8)
+        red[cycle.RED_MAX_AGE] = -1 if c.max_undetected_birth_age is None else int(c.max_undetected_birth_age)
+        red[cycle.RED_T], red[cycle.RED_U], red[cycle.RED_J_MAX] = c.prune_T, c.merge_U, int(c.J_max)
+        red[cycle.RED_THETA_MIN], red[cycle.RED_EXTRACT_THR] = c.theta_min, c.extract_thr
+        red[cycle.RED_VO_MA], red[cycle.RED_N_SOURCES] = float(c.extraction == "vo_ma"), len(SOURCE_NAMES)
+        self._red_pars = red
+        self._vo_ma = c.extraction == "vo_ma"
+        self._p_D = float(c.p_D)
+        self._r_min = float(s.r_min)
+        self._gate = float(self.gate_thr)
+        self._no_births = (np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int8))
         self._beta0 = self.beta0 if self.dynamic else np.empty(0)
         self._nb_beta = self.beta_newborn if self.dynamic else np.empty(0)
+        self._kappa_key = ("filter.kappa", s.clutter_space, s.lambda_c, s.r_min, s.r_max, s.fov_deg)
 
     def reset(self) -> None:
         """Forget the posterior (next step is k = 0 again)."""
@@ -116,16 +147,28 @@ class GMPHDFilter:
         ``filter.nonfinite`` says (:mod:`soabench.gmphd.inputs`); a result never holds a NaN."""
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))
         Z, ego, finite, _ = _per_scan(scan, key, _scan_inputs_of(scan))
-        checked = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
         kind = (self.fused, births.newborn is not None)
         if not notice.ready(kind):  # the first step of a kind may compile kernels: never a silent pause
             with notice.first_use_notice(kind):
-                return self._step(scan, checked)
-        return self._step(scan, checked)
+                return self._step(scan, Z, ego, finite, births)
+        return self._step(scan, Z, ego, finite, births)
 
-    def _step(self, scan: Scan, checked: StepInputs) -> StepResult:
+    def _step(self, scan: Scan, Z: np.ndarray, ego: np.ndarray, finite: bool, births: Births) -> StepResult:
+        """Check the inputs (:mod:`soabench.gmphd.inputs`) and run the cycle on the fused or the array path.
+
+        On the fused path with a finite scan the birth components are checked inside the compiled prediction
+        (:func:`soabench.gmphd.cycle.births_ok`) and the newborn terms here; only inputs that fail take
+        :func:`~soabench.gmphd.inputs.check_step_inputs`, which raises or drops exactly as it does for the array
+        path (the compiled check tests the same values: finite, weights >= 0)."""
+        if self.fused and finite and newborn_finite(births.newborn):
+            res = self._step_fused(scan, Z, ego, births)
+            if res is not None:  # None: a birth component is not finite or has a negative weight
+                return res
+        checked = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
         if self.fused and checked.ego is not None:  # a dropped scan (no pose) takes the array path
-            res = self._step_fused(scan, checked.Z, checked.ego, checked.births)
+            res = self._step_fused(scan, checked.Z, checked.ego, checked.births, kappa_once=False)
+            if res is None:  # cannot happen: check_step_inputs kept only finite births with w >= 0
+                raise RuntimeError(f"scan {scan.k}: checked birth components failed the compiled input check")
             res.n_dropped, res.n_dropped_births = checked.n_dropped, checked.n_dropped_births
             return res
         return self._step_array(scan, checked)
@@ -209,11 +252,15 @@ class GMPHDFilter:
             origin_counts=origin_counts(red.mix.origin, red.mix.age),
         )
 
-    def _step_fused(self, scan: Scan, Z: np.ndarray, ego: np.ndarray, births: Births) -> StepResult:
-        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`) on the checked ``Z`` and ``ego``."""
-        cfg = self.cfg
-        ego = np.ascontiguousarray(ego, dtype=float)
-        Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
+    def _step_fused(
+        self, scan: Scan, Z: np.ndarray, ego: np.ndarray, births: Births, kappa_once: bool = True
+    ) -> StepResult | None:
+        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`) on finite (checked) ``Z`` and ``ego``
+        (contiguous float arrays, :func:`~soabench.gmphd.inputs.scan_inputs`); None, having changed nothing, if a
+        birth component is not finite or has a negative weight.
+
+        ``kappa_once``: ``Z`` is the scan's own (not a subset left by dropping inputs), so kappa is computed once per
+        scan for every filter with the same clutter settings."""
         mix = self.mixture
         t0 = time.perf_counter()
         pred = cycle.predict_append(
@@ -226,16 +273,13 @@ class GMPHDFilter:
             _beta_array(mix.beta),
             self.F,
             self.Q,
-            float(cfg.p_S),
-            self._pars,
-            np.ascontiguousarray(births.w, dtype=float).reshape(-1),
-            np.ascontiguousarray(births.m, dtype=float).reshape(-1, 4),
-            np.ascontiguousarray(births.P, dtype=float).reshape(-1, 4, 4),
-            np.ascontiguousarray(births.source, dtype=np.int8).reshape(-1),
+            self._pred_pars,
+            *(_birth_arrays(births) if len(births) else self._no_births),
             self._beta0,
             ego,
-            self._fov,
         )
+        if not pred[8]:
+            return None
         g = pred[7]
         newborn = births.newborn
         n_predicted = len(g) + (len(Z) if newborn is not None else 0)
@@ -250,21 +294,26 @@ class GMPHDFilter:
             blockers = _per_scan(scan, key, make)[0]
             vis = np.asarray(line_of_sight_past(ego[:2], pred[1][idx, :2], blockers), dtype=bool)
             g[idx] = vis.reshape(-1)
-        kappa = np.ascontiguousarray(clutter_intensity(Z, self.sensor), dtype=float)
-        args = (self.R, float(self.sensor.r_min), float(self.gate_thr), kappa)
+        if kappa_once:  # the scan's Z is kept alive by its scan_inputs entry, so its id is a sound key
+            kappa = _per_scan(scan, (*self._kappa_key, id(Z)), lambda: self._kappa(Z))
+        else:
+            kappa = self._kappa(Z)
         if newborn is None:
-            post, A, ok = cycle.update(*pred[:7], g, float(cfg.p_D), Z, ego, *args, self._ukf)
+            post, A, ok = cycle.update(*pred[:8], self._p_D, Z, ego, self.R, self._r_min, self._gate, kappa, self._ukf)
             if not ok:  # UKF with a covariance that is not positive definite: the array path's jitter rule
                 return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
         else:
-            sup = cycle.support(pred[0], pred[1], pred[2], pred[6], g, float(cfg.p_D), Z, ego, *args, self._ukf)
+            sup = cycle.support(
+                pred[0], pred[1], pred[2], pred[6], g, self._p_D, Z, ego, self.R, self._r_min, self._gate, kappa,
+                self._ukf,
+            )  # fmt: skip
             if not sup[12]:
                 return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
             A = sup[11]
             M = len(Z)
             beta_nb = np.zeros(0)
-            if M:
-                beta_nb = np.asarray(newborn.beta(A, kappa), dtype=float).reshape(M)
+            if M:  # a copy of kappa: the newborn terms are caller code, and kappa is shared across filters
+                beta_nb = np.asarray(newborn.beta(A, kappa.copy()), dtype=float).reshape(M)
                 beta_nb = np.where(beta_nb > 0.0, beta_nb, 0.0)  # a newborn term is a non-negative intensity
             post = cycle.posterior(
                 *pred[:7],
@@ -276,50 +325,45 @@ class GMPHDFilter:
                 self._nb_beta,
                 SOURCE_MEAS,
             )
-        n_updated, n_pairs, n_newborn = len(post[0]), int(post[7]), int(post[8])
+        n_updated, n_pairs, n_newborn = len(post[0]), post[7], post[8]
         t2 = time.perf_counter()
 
-        max_age = -1 if cfg.max_undetected_birth_age is None else int(cfg.max_undetected_birth_age)
-        red, X, X_w, (sum_w, n_pruned, n_merged, cap_hit) = cycle.reduce(
-            *post[:7],
-            max_age,
-            float(cfg.prune_T),
-            float(cfg.merge_U),
-            int(cfg.J_max),
-            float(cfg.theta_min),
-            float(cfg.extract_thr),
-            cfg.extraction == "vo_ma",
-        )
+        red, X, X_w, counts, (sum_w, n_pruned, n_merged, cap_hit) = cycle.reduce(*post[:7], self._red_pars)
         if cap_hit:
+            cfg = self.cfg
             reduction.log.info("J_max = %d hit: %d components reduced to %d", cfg.J_max, n_merged, cfg.J_max)
         self.mixture = Mixture(*red[:6], red[6] if self.dynamic else None)
-        if cfg.extraction != "vo_ma":
-            X, X_w = extract(self.mixture, cfg.extract_thr, cfg.extraction)
+        if not self._vo_ma:
+            X, X_w = extract(self.mixture, self.cfg.extract_thr, self.cfg.extraction)
         t3 = time.perf_counter()
 
-        w = self.mixture.w
+        w = red[0]
         return StepResult(
             k=scan.k,
             X=X,
             X_w=X_w,
-            sum_w=float(sum_w),
+            sum_w=sum_w,
             sum_w_reduced=float(w.sum()),
             n_predicted=n_predicted,
             n_updated=n_updated,
             n_reduced=len(w),
-            cap_hit=bool(cap_hit),
+            cap_hit=cap_hit,
             t_predict=t1 - t0,
             t_update=t2 - t1,
             t_reduce=t3 - t2,
             mean_pD=self._mean_pD(),
             A=A,
             kappa=kappa,
-            n_pruned=int(n_pruned),
-            n_merged=int(n_merged),
+            n_pruned=n_pruned,
+            n_merged=n_merged,
             n_pairs=n_pairs,
             n_newborn=n_newborn,
-            origin_counts=origin_counts(self.mixture.origin, self.mixture.age),
+            origin_counts=counts,
         )
+
+    def _kappa(self, Z: np.ndarray) -> np.ndarray:
+        """kappa(z_l) of each measurement (§2.3, :func:`soabench.geometry.clutter_intensity`) as a contiguous array."""
+        return np.ascontiguousarray(clutter_intensity(Z, self.sensor), dtype=float)
 
 
 def _per_scan(scan: Scan, key: tuple, make: Callable[[], Any]) -> Any:
@@ -333,6 +377,17 @@ def _scan_inputs_of(scan: Scan) -> Callable[[], tuple]:
     """``make()`` -> :func:`soabench.gmphd.inputs.scan_inputs` of ``scan`` plus the scan's own Z and ego arrays,
     held with the result so that the ids in its cache key (:meth:`soabench.types.Scan.once`) stay theirs."""
     return lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego))
+
+
+def _birth_arrays(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The birth components as :func:`soabench.gmphd.cycle.predict_append` takes them: contiguous w (J_b,),
+    m (J_b, 4), P (J_b, 4, 4) float and source codes (J_b,) int8."""
+    return (
+        np.ascontiguousarray(births.w, dtype=float).reshape(-1),
+        np.ascontiguousarray(births.m, dtype=float).reshape(-1, 4),
+        np.ascontiguousarray(births.P, dtype=float).reshape(-1, 4, 4),
+        np.ascontiguousarray(births.source, dtype=np.int8).reshape(-1),
+    )
 
 
 _NO_BETA = np.empty((0, 0))  #: the ``beta`` of a static-mode mixture in :mod:`soabench.gmphd.cycle`

@@ -59,21 +59,28 @@ def _subset_beta(beta, keep: np.ndarray):
 
 
 def scan_inputs(k: int, Z_in: np.ndarray, ego_in: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """``(Z, ego, finite)``: the measurements as (M, 2) floats, the pose as (3,) floats, and whether both are
-    finite. Depends on the scan alone, so the filter computes it once per scan for all its runs
-    (:meth:`soabench.types.Scan.once`). A pose that is not (x, y, theta) raises."""
-    Z = np.asarray(Z_in, dtype=float).reshape(-1, 2)
+    """``(Z, ego, finite)``: the measurements as (M, 2) floats, the pose as (3,) floats (both contiguous, as the
+    compiled cycle takes them), and whether both are finite. Depends on the scan alone, so the filter computes it
+    once per scan for all its runs (:meth:`soabench.types.Scan.once`). A pose that is not (x, y, theta) raises."""
+    Z = np.ascontiguousarray(np.asarray(Z_in, dtype=float).reshape(-1, 2))
     ego = np.asarray(ego_in, dtype=float)
     if ego.shape != (3,):
         raise SoabenchError(f"scan {k}: the ego pose has shape {ego.shape}; expected (x, y, theta)")
+    ego = np.ascontiguousarray(ego)
     return Z, ego, _finite(Z) and _finite(ego)
 
 
+def newborn_finite(nb: NewbornTerms | None) -> bool:
+    """Every mean and covariance of the newborn terms ``nb`` finite (True without newborn terms)."""
+    return nb is None or (_finite(np.asarray(nb.m, dtype=float)) and _finite(np.asarray(nb.P, dtype=float)))
+
+
 def births_finite(births: Births) -> bool:
-    """Every weight, mean and covariance of ``births`` (and of its newborn terms) finite, every weight >= 0."""
-    nb = births.newborn
+    """Every weight, mean and covariance of ``births`` (and of its newborn terms) finite, every weight >= 0.
+    The fused filter cycle checks the birth components in compiled code instead
+    (:func:`soabench.gmphd.cycle.births_ok`, the same test) and the newborn terms with :func:`newborn_finite`."""
     ok = _finite(births.w) and _finite(births.m) and _finite(births.P) and bool((births.w >= 0).all())
-    return ok and (nb is None or (_finite(np.asarray(nb.m, dtype=float)) and _finite(np.asarray(nb.P, dtype=float))))
+    return ok and newborn_finite(births.newborn)
 
 
 def check_step_inputs(
