@@ -28,12 +28,15 @@ columns (``t_*`` and the per-trial SUMO/sensor seconds) go to ``timing.csv`` so 
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import gzip
+import io
 import json
 import math
 import os
 import tempfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -222,21 +225,66 @@ def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
     _write_csv_lists(path, cols, ([r.get(c) for c in cols] for r in rows))
 
 
+@contextlib.contextmanager
+def gc_paused() -> Iterator[None]:
+    """Pause the cyclic garbage collector (if it runs) while tables of millions of cells are built or written.
+
+    Those are lists and strings without reference cycles, but every few hundred allocations of containers start a
+    collection that walks all of them: reading or merging a study's step tables took 1.3 to 1.6 times as long.
+    """
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
 def read_csv(path: Path) -> dict[str, np.ndarray]:
-    """Read a CSV written by :func:`write_csv` into columns: float arrays where every cell parses, else str arrays."""
-    import csv
+    """Read a CSV written by :func:`write_csv` into columns: float arrays where every cell parses, else str arrays.
+
+    A file without quotes or carriage returns (every file soabench writes unless a cell holds a comma or a quote)
+    is split on newlines and commas directly, which reads what :mod:`csv` reads; any other file goes through
+    :mod:`csv`. Cells are parsed by ``float`` either way (an empty cell is NaN).
+    """
 
     with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.reader(fh)
+        text = fh.read()
+    with gc_paused():
+        return _columns(text, path)
+
+
+def _columns(text: str, path: Path) -> dict[str, np.ndarray]:
+    """:func:`read_csv` of the file's text."""
+    import csv
+
+    data: list | None = None
+    if '"' not in text and "\r" not in text:
+        lines = text.split("\n")
+        if lines and lines[-1] == "":
+            lines.pop()
+        if lines and all(lines):  # (csv reads a blank line as a row without cells)
+            header = lines[0].split(",")
+            data = [ln.split(",") for ln in lines[1:]]
+            if any(len(r) != len(header) for r in data):
+                data = None  # ragged rows: as the csv module reads them
+    if data is None:
+        reader = csv.reader(io.StringIO(text, newline=""))
         header = next(reader, None)
         if header is None:
             raise SoabenchError(f"{str(path)!r} is empty")
         data = list(reader)
+        columns = [[r[j] for r in data] for j in range(len(header))]
+    else:
+        columns = [list(c) for c in zip(*data, strict=True)] if data else [[] for _ in header]
     out: dict[str, np.ndarray] = {}
-    for j, name in enumerate(header):
-        col = [r[j] for r in data]
+    for name, col in zip(header, columns, strict=True):
         try:
-            out[name] = np.array([float(x) if x != "" else math.nan for x in col], dtype=float)
+            if "" in col:
+                out[name] = np.array([float(x) if x != "" else math.nan for x in col], dtype=float)
+            else:
+                out[name] = np.fromiter(map(float, col), dtype=float, count=len(col))
         except ValueError:
             out[name] = np.array(col, dtype=str)
     return out
@@ -345,6 +393,10 @@ class RunStore:
     # -- merge
     def merge(self, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
         """Write trials.csv, episodes.csv, steps.csv and timing.csv from the ok records; returns row counts."""
+        with gc_paused():
+            return self._merge(models, modes)
+
+    def _merge(self, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
         m_idx = {m: i for i, m in enumerate(models)}
         p_idx = {p: i for i, p in enumerate(modes)}
 

@@ -6,7 +6,7 @@ here, so neither imports the other's module to get at the data.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,7 +23,7 @@ class RunTables:
 
     trials: dict[str, np.ndarray]
     episodes: dict[str, np.ndarray]
-    steps: dict[str, np.ndarray]
+    steps: Mapping[str, np.ndarray]  #: a :class:`LazyTable` when read from a run folder
     timing: dict[str, np.ndarray]
     meta: dict
     #: the run folder the tables were read from (None for tables built in memory)
@@ -48,19 +48,45 @@ def _empty(columns: Sequence[str]) -> dict[str, np.ndarray]:
     return {c: np.array([]) for c in columns}
 
 
+class LazyTable(Mapping[str, np.ndarray]):
+    """A CSV file's columns (:func:`~soabench.experiment.store.read_csv`), read on first use.
+
+    steps.csv holds a row per scan of every filter run (up to hundreds of thousands of rows per run folder) and only
+    the figures read it: a report written without figures never parses it.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._columns: dict[str, np.ndarray] | None = None
+
+    @property
+    def columns(self) -> dict[str, np.ndarray]:
+        if self._columns is None:
+            self._columns = read_csv(self.path) if self.path.is_file() else {}
+        return self._columns
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return self.columns[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.columns)
+
+    def __len__(self) -> int:
+        return len(self.columns)
+
+
 def load_tables(run_dir: Path) -> RunTables:
-    """Read a run's merged CSV files and its run.json."""
+    """Read a run's merged CSV files and its run.json (steps.csv when first used, :class:`LazyTable`)."""
     run_dir = Path(run_dir)
     meta = RunStore(run_dir).meta()
     path = run_dir / "trials.csv"
     if not path.is_file():
         raise SoabenchError(f"{str(run_dir)!r} has no trials.csv (the run is not finished: soabench run --resume)")
-    tables = {}
-    for name in ("trials", "episodes", "steps", "timing"):
+    tables: dict[str, Any] = {}
+    for name in ("trials", "episodes", "timing"):
         p = run_dir / f"{name}.csv"
         tables[name] = read_csv(p) if p.is_file() else _empty(())
-    for name in ("trials", "episodes", "steps", "timing"):  # a table with no rows reads as no columns
-        tables[name] = {k: v for k, v in tables[name].items()}
+    tables["steps"] = LazyTable(run_dir / "steps.csv")
     return RunTables(meta=meta, run_dir=run_dir, **tables)
 
 
