@@ -31,7 +31,6 @@ from __future__ import annotations
 import contextlib
 import gc
 import gzip
-import io
 import json
 import math
 import os
@@ -244,50 +243,53 @@ def gc_paused() -> Iterator[None]:
 def read_csv(path: Path) -> dict[str, np.ndarray]:
     """Read a CSV written by :func:`write_csv` into columns: float arrays where every cell parses, else str arrays.
 
-    A file without quotes or carriage returns (every file soabench writes unless a cell holds a comma or a quote)
-    is split on newlines and commas directly, which reads what :mod:`csv` reads; any other file goes through
-    :mod:`csv`. Cells are parsed by ``float`` either way (an empty cell is NaN).
+    Cells are parsed by ``float`` (an empty cell is NaN) with the garbage collector paused, and each column's cells
+    are dropped once parsed (a study's steps.csv has millions of cells).
     """
+    with gc_paused():
+        header, columns = _cells(path)
+        out: dict[str, np.ndarray] = {}
+        for j, name in enumerate(header):
+            col, columns[j] = columns[j], ()
+            try:
+                if "" in col:
+                    out[name] = np.array([float(x) if x != "" else math.nan for x in col], dtype=float)
+                else:
+                    out[name] = np.fromiter(map(float, col), dtype=float, count=len(col))
+            except ValueError:
+                out[name] = np.array(col, dtype=str)
+        return out
+
+
+def _cells(path: Path) -> tuple[list[str], list[Sequence[str]]]:
+    """The header and the columns of cells of a CSV file, as the csv module reads them.
+
+    A file without quotes or carriage returns (every file soabench writes unless a cell holds a comma or a quote)
+    is split on newlines and commas directly, which gives the same cells; any other file goes through :mod:`csv`.
+    """
+    import csv
 
     with open(path, newline="", encoding="utf-8") as fh:
         text = fh.read()
-    with gc_paused():
-        return _columns(text, path)
-
-
-def _columns(text: str, path: Path) -> dict[str, np.ndarray]:
-    """:func:`read_csv` of the file's text."""
-    import csv
-
-    data: list | None = None
     if '"' not in text and "\r" not in text:
         lines = text.split("\n")
+        del text
         if lines and lines[-1] == "":
             lines.pop()
         if lines and all(lines):  # (csv reads a blank line as a row without cells)
             header = lines[0].split(",")
-            data = [ln.split(",") for ln in lines[1:]]
-            if any(len(r) != len(header) for r in data):
-                data = None  # ragged rows: as the csv module reads them
-    if data is None:
-        reader = csv.reader(io.StringIO(text, newline=""))
+            rows = [ln.split(",") for ln in lines[1:]]
+            del lines
+            if all(len(r) == len(header) for r in rows):
+                columns: list[Sequence[str]] = list(zip(*rows, strict=True)) if rows else [() for _ in header]
+                return header, columns
+    with open(path, newline="", encoding="utf-8") as fh:  # quoted cells, blank lines, ragged rows
+        reader = csv.reader(fh)
         header = next(reader, None)
         if header is None:
             raise SoabenchError(f"{str(path)!r} is empty")
         data = list(reader)
-        columns = [[r[j] for r in data] for j in range(len(header))]
-    else:
-        columns = [list(c) for c in zip(*data, strict=True)] if data else [[] for _ in header]
-    out: dict[str, np.ndarray] = {}
-    for name, col in zip(header, columns, strict=True):
-        try:
-            if "" in col:
-                out[name] = np.array([float(x) if x != "" else math.nan for x in col], dtype=float)
-            else:
-                out[name] = np.fromiter(map(float, col), dtype=float, count=len(col))
-        except ValueError:
-            out[name] = np.array(col, dtype=str)
-    return out
+    return header, [[r[j] for r in data] for j in range(len(header))]
 
 
 # --------------------------------------------------------------------------------------------- the store
