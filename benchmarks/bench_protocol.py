@@ -11,6 +11,10 @@ x {static, dynamic}, lambda = 3, one worker per core) as a child process and pri
 * peak memory: the largest resident set of the driver and of any one worker (``ru_maxrss`` of RUSAGE_CHILDREN), and
   the largest sum over the process tree (sampled from /proc every 0.2 s).
 
+``--study`` then runs ``soabench study`` on the same protocol (its N̂ sweep at its default 30 trials per point) the
+same way and prints its wall time, CPU seconds (the child and its workers) and peak memory against the main run's,
+and checks that the study's ``main/`` tables are the main run's byte for byte.
+
 ``--pythonpath DIR`` runs another checkout (e.g. ``git worktree add /tmp/base <commit>``) so that before and after
 are measured side by side in one session; its compiled kernels are warmed first by a one-trial run (not timed).
 Examples::
@@ -18,6 +22,7 @@ Examples::
     python benchmarks/bench_protocol.py                       # the paper protocol, this checkout
     python benchmarks/bench_protocol.py --pythonpath /tmp/base
     python benchmarks/bench_protocol.py --trials 4 --duration 20
+    python benchmarks/bench_protocol.py --study               # and the study against this main run
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -57,7 +63,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     p.add_argument("--pythonpath", type=Path, default=None, help="checkout to run instead of the installed soabench")
     p.add_argument("--out", type=Path, default=None, help="run folder (default: a new temporary folder)")
+    p.add_argument("--study", action="store_true", help="then run `soabench study` and compare it with the run")
     return p.parse_args(argv)
+
+
+def children_cpu() -> float:
+    """CPU seconds (user + system) of this process's waited children and their waited children."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
 
 
 def _tree_rss(root: int) -> int:
@@ -171,12 +184,36 @@ def main(argv=None) -> int:
     rusage_file = out.parent / f"{out.name}.rusage.json"
     cmd = [sys.executable, "-c", _CLI_RUSAGE, str(rusage_file), "run", "--net", args.net, "--trials", str(args.trials)]
     cmd += ["--duration", str(args.duration), "--workers", str(args.workers), "--no-progress", "--out", str(out)]
+    cpu0 = children_cpu()
     wall, peak, driver, worker = run_command(cmd, env, rusage_file)
+    cpu_main = children_cpu() - cpu0
     s = summarise(out, wall, peak, driver, worker)
     print(f"soabench from {args.pythonpath or 'this environment'}; run folder {out}")
     print(report(s))
     print(json.dumps(s))
-    return 0
+    if not args.study:
+        return 0
+    study_dir = out.parent / f"{out.name}_study"
+    cmd = [sys.executable, "-c", _CLI_RUSAGE, str(rusage_file), "study", "--net", args.net, "--trials"]
+    cmd += [str(args.trials), "--duration", str(args.duration), "--workers", str(args.workers), "--no-progress"]
+    cpu0 = children_cpu()
+    wall_s, peak_s, driver_s, worker_s = run_command([*cmd, "--out", str(study_dir)], env, rusage_file)
+    cpu_study = children_cpu() - cpu0
+    sessions = [json.loads(p.read_text()) for p in study_dir.rglob("sessions/*.json")]
+    trials_s = sum(float(x["wall_s"]) for x in {x["started"]: x for x in sessions}.values())  # a group once
+    same = all((out / f).read_bytes() == (study_dir / "main" / f).read_bytes() for f in ("trials.csv", "episodes.csv"))
+    print(f"study folder {study_dir}")
+    print("                 wall (s)  trials (s)  CPU (s)  peak tree (MB)  largest process (MB)")
+    for name, w, t, c, p, m in (
+        ("main run", wall, s["trials_wall_s"], cpu_main, peak, max(driver, worker)),
+        ("study", wall_s, trials_s, cpu_study, peak_s, max(driver_s, worker_s)),
+    ):
+        print(f"{name:15s} {w:9.1f} {t:11.1f} {c:8.1f} {p / 2**20:15.0f} {m / 2**20:21.0f}")
+    print(
+        f"study / main run: wall {wall_s / wall:.2f}x (target <= 3x), trials {trials_s / s['trials_wall_s']:.2f}x, "
+        f"CPU {cpu_study / cpu_main:.2f}x; the study's main/ tables equal the main run's: {same}"
+    )
+    return 0 if same else 1
 
 
 if __name__ == "__main__":

@@ -29,13 +29,14 @@ columns (``t_*`` and the per-trial SUMO/sensor seconds) go to ``timing.csv`` so 
 from __future__ import annotations
 
 import contextlib
+import csv
 import gc
 import gzip
 import json
 import math
 import os
 import tempfile
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -119,6 +120,12 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
     The file gets the mode any other new file gets (0666 minus the user's umask): ``mkstemp`` creates its
     temporary file private (0600), which would otherwise survive the rename.
     """
+    write_chunks_atomic(path, (data,))
+
+
+def write_chunks_atomic(path: Path, chunks: Iterable[bytes]) -> None:
+    """:func:`write_bytes_atomic` of the concatenated ``chunks``, written one after another (a large file is never
+    held whole in memory)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -126,7 +133,8 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
         if hasattr(os, "fchmod"):  # POSIX
             os.fchmod(fd, 0o666 & ~current_umask())
         with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+            for chunk in chunks:
+                fh.write(chunk)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
@@ -243,53 +251,81 @@ def gc_paused() -> Iterator[None]:
 def read_csv(path: Path) -> dict[str, np.ndarray]:
     """Read a CSV written by :func:`write_csv` into columns: float arrays where every cell parses, else str arrays.
 
-    Cells are parsed by ``float`` (an empty cell is NaN) with the garbage collector paused, and each column's cells
-    are dropped once parsed (a study's steps.csv has millions of cells).
+    Cells are parsed by ``float`` (an empty cell is NaN). A file without quotes, carriage returns or blank lines
+    (every file soabench writes unless a cell holds a comma or a quote) is split on newlines and commas directly,
+    which gives the cells the :mod:`csv` module gives, a block of rows at a time, so that a study's steps.csv (millions
+    of cells) is never held as one Python string per cell; any other file goes through :mod:`csv`.
     """
     with gc_paused():
-        header, columns = _cells(path)
-        out: dict[str, np.ndarray] = {}
-        for j, name in enumerate(header):
-            col, columns[j] = columns[j], ()
-            try:
-                if "" in col:
-                    out[name] = np.array([float(x) if x != "" else math.nan for x in col], dtype=float)
-                else:
-                    out[name] = np.fromiter(map(float, col), dtype=float, count=len(col))
-            except ValueError:
-                out[name] = np.array(col, dtype=str)
-        return out
+        out = _read_plain(path)
+        if out is not None:
+            return out
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            if header is None:
+                raise SoabenchError(f"{str(path)!r} is empty")
+            data = list(reader)
+        return {name: _parse_column([r[j] for r in data]) for j, name in enumerate(header)}
 
 
-def _cells(path: Path) -> tuple[list[str], list[Sequence[str]]]:
-    """The header and the columns of cells of a CSV file, as the csv module reads them.
+def _parse_column(cells: Sequence[str]) -> np.ndarray:
+    """A float array if every cell parses (an empty cell is NaN), else a str array."""
+    try:
+        if "" in cells:
+            return np.array([float(x) if x != "" else math.nan for x in cells], dtype=float)
+        return np.fromiter(map(float, cells), dtype=float, count=len(cells))
+    except ValueError:
+        return np.array(cells, dtype=str)
 
-    A file without quotes or carriage returns (every file soabench writes unless a cell holds a comma or a quote)
-    is split on newlines and commas directly, which gives the same cells; any other file goes through :mod:`csv`.
-    """
-    import csv
 
+_BLOCK = 20_000  #: rows parsed at a time by :func:`_read_plain`
+
+
+def _read_plain(path: Path) -> dict[str, np.ndarray] | None:
+    """:func:`read_csv` of a file without quotes or carriage returns; None for any other file, or one with a blank
+    line or a row with another number of cells than the header (the csv module reads those)."""
     with open(path, newline="", encoding="utf-8") as fh:
         text = fh.read()
-    if '"' not in text and "\r" not in text:
-        lines = text.split("\n")
-        del text
-        if lines and lines[-1] == "":
-            lines.pop()
-        if lines and all(lines):  # (csv reads a blank line as a row without cells)
-            header = lines[0].split(",")
-            rows = [ln.split(",") for ln in lines[1:]]
-            del lines
-            if all(len(r) == len(header) for r in rows):
-                columns: list[Sequence[str]] = list(zip(*rows, strict=True)) if rows else [() for _ in header]
-                return header, columns
-    with open(path, newline="", encoding="utf-8") as fh:  # quoted cells, blank lines, ragged rows
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header is None:
-            raise SoabenchError(f"{str(path)!r} is empty")
-        data = list(reader)
-    return header, [[r[j] for r in data] for j in range(len(header))]
+    if '"' in text or "\r" in text:
+        return None
+    lines = text.split("\n")
+    del text
+    if lines and lines[-1] == "":
+        lines.pop()
+    if not lines or not all(lines):  # (csv reads a blank line as a row without cells)
+        return None
+    header, body = lines[0].split(","), lines[1:]
+    del lines
+    n = len(header)
+    floats: list[list[np.ndarray] | None] = [[] for _ in header]  # None once a cell of the column does not parse
+    for start in range(0, len(body), _BLOCK):
+        rows = [ln.split(",") for ln in body[start : start + _BLOCK]]
+        if any(len(r) != n for r in rows):
+            return None
+        for j, col in enumerate(zip(*rows, strict=True)):
+            parts = floats[j]
+            if parts is not None:
+                a = _parse_column(col)
+                if a.dtype == float:
+                    parts.append(a)
+                else:
+                    floats[j] = None
+    out: dict[str, np.ndarray] = {}
+    text_cols = [j for j, parts in enumerate(floats) if parts is None]
+    cells: dict[int, list[str]] = {j: [] for j in text_cols}
+    if text_cols:  # the columns of text, read again from the lines as they are
+        for start in range(0, len(body), _BLOCK):
+            rows = [ln.split(",") for ln in body[start : start + _BLOCK]]
+            for j in text_cols:
+                cells[j].extend(r[j] for r in rows)
+    for j, name in enumerate(header):
+        parts = floats[j]
+        if parts is None:
+            out[name] = np.array(cells.pop(j), dtype=str)
+        else:
+            out[name] = np.concatenate(parts) if parts else np.zeros(0)
+    return out
 
 
 # --------------------------------------------------------------------------------------------- the store
@@ -415,9 +451,13 @@ class RunStore:
         def key(r: dict) -> tuple:
             return key_of(r["trial"], r["clutter"], r["model"], r["mode"])
 
+        def step_key(cols: list[str]) -> Callable[[list], tuple]:
+            it, ic, im, ip, ik = (cols.index(c) for c in ("trial", "clutter", "model", "mode", "k"))
+            return lambda r: (*key_of(r[it], r[ic], r[im], r[ip]), r[ik])
+
         rows: list[dict] = []
         episodes: list[dict] = []
-        step_tables: list[dict] = []
+        steps = _SortedSteps(step_key)
         timing: list[dict] = []
         for t in self.done_trials():
             rec = self.load_trial(t)
@@ -425,7 +465,7 @@ class RunStore:
             rows += rrows
             episodes += unpack_table(rec.get("episodes"))
             if rec.get("steps"):
-                step_tables.append(rec["steps"])
+                steps.add(rec["steps"])
             tt = rec.get("timing") or {}
             for r in rrows:
                 timing.append(
@@ -440,22 +480,24 @@ class RunStore:
         episodes.sort(
             key=lambda r: (*key(r), float(r["target"]) if _is_num(r["target"]) else 0, str(r["target"]), r["k0"])
         )
-        step_cols, steps = _rows_of(step_tables, STEP_COLUMNS)
-        it, ic, im, ip, ik = (step_cols.index(c) for c in ("trial", "clutter", "model", "mode", "k"))
-        steps.sort(key=lambda r: (*key_of(r[it], r[ic], r[im], r[ip]), r[ik]))
+        if not steps.ok:  # records with other columns, or blocks out of key order: every row sorted at once
+            tables = [rec["steps"] for rec in map(self.load_trial, self.done_trials()) if rec.get("steps")]
+            step_cols, step_rows = _rows_of(tables, STEP_COLUMNS)
+            step_rows.sort(key=step_key(step_cols))
+            steps = _SortedSteps(step_key, step_cols, list(map(_csv_line, step_rows)))
         write_csv(
             self.run_dir / "trials.csv",
             [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows],
             TRIAL_COLUMNS,
         )
         write_csv(self.run_dir / "episodes.csv", episodes, EPISODE_COLUMNS)
-        _write_csv_lists(self.run_dir / "steps.csv", step_cols, steps)
+        steps.write(self.run_dir / "steps.csv")
         write_csv(
             self.run_dir / "timing.csv",
             timing,
             ("trial", "clutter", "model", "mode", *TIMING_COLUMNS, *(f"t_{k}" for k in TRIAL_TIMING_KEYS)),
         )
-        return {"trials": len(rows), "episodes": len(episodes), "steps": len(steps)}
+        return {"trials": len(rows), "episodes": len(episodes), "steps": len(steps.lines)}
 
     def clear_merged(self) -> None:
         """Remove merged outputs of an earlier session (they are rewritten when the run completes)."""
@@ -471,6 +513,57 @@ class RunStore:
             p = self.run_dir / name
             if p.exists():
                 p.unlink()
+
+
+class _SortedSteps:
+    """steps.csv of a merge, built record by record: each trial's step rows are sorted and formatted as CSV lines as
+    they arrive, so the merge holds text instead of every cell as a Python object (a study's clutter folder has
+    360 000 rows of 26 cells).
+
+    This equals :func:`_rows_of` over every record followed by one stable sort as long as every record has the same
+    columns and each record's sorted block starts at or after the end of the one before (the sort key starts with
+    the trial, and the records arrive by trial); otherwise ``ok`` turns False and the caller sorts every row at once.
+    """
+
+    def __init__(
+        self, key: Callable[[list[str]], Callable[[list], tuple]], cols: list[str] | None = None, lines=None
+    ) -> None:
+        self.key = key
+        self.cols = cols
+        self.lines: list[str] = lines if lines is not None else []
+        self.ok = True
+        self._last: tuple | None = None
+
+    def add(self, table: dict) -> None:
+        """Append one record's packed step table (:func:`pack_table`)."""
+        if not self.ok:
+            return
+        cols, rows = _rows_of([table], STEP_COLUMNS)
+        if self.cols is None:
+            self.cols = cols
+        if cols != self.cols:
+            self.ok = False
+            return
+        key = self.key(cols)
+        rows.sort(key=key)
+        if rows:
+            if self._last is not None and key(rows[0]) < self._last:
+                self.ok = False
+                return
+            self._last = key(rows[-1])
+        self.lines.extend(map(_csv_line, rows))
+
+    def write(self, path: Path) -> None:
+        """The file: the header and every line, written in chunks."""
+        cols = self.cols if self.cols is not None else list(STEP_COLUMNS)
+        lines, step = self.lines, 20_000
+
+        def chunks() -> Iterator[bytes]:
+            yield (",".join(cols) + "\n").encode("utf-8")
+            for i in range(0, len(lines), step):
+                yield ("\n".join(lines[i : i + step]) + "\n").encode("utf-8")
+
+        write_chunks_atomic(path, chunks())
 
 
 def _rows_of(tables: Sequence[dict], columns: Sequence[str]) -> tuple[list[str], list[list]]:
