@@ -9,7 +9,8 @@ x {static, dynamic}, lambda = 3, one worker per core) as a child process and pri
   (start-up, scene, trials, merge, summary and figures) against that floor;
 * the CPU seconds inside trials per stage (SUMO, sensor, filters incl. births, metrics);
 * peak memory: the largest resident set of the driver and of any one worker (``ru_maxrss`` of RUSAGE_CHILDREN), and
-  the largest sum over the process tree (sampled from /proc every 0.2 s).
+  the largest sum over the process tree (sampled from /proc every 0.2 s) of the proportional set sizes (each page
+  shared by forked processes counted once in all) and of the resident sets (shared pages counted in each).
 
 ``--study`` then runs ``soabench study`` on the same protocol (its N̂ sweep at its default 30 trials per point) the
 same way and prints its wall time, CPU seconds (the child and its workers) and peak memory against the main run's,
@@ -73,8 +74,11 @@ def children_cpu() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
-def _tree_rss(root: int) -> int:
-    """Resident set (bytes) summed over ``root`` and its descendants, from /proc (0 where unreadable)."""
+def _tree_memory(root: int) -> tuple[int, int]:
+    """Resident set and proportional set size (bytes) summed over ``root`` and its descendants, from /proc (0 where
+    unreadable). The resident sets of forked workers count the pages they share with the driver once per process;
+    the proportional set sizes (``smaps_rollup``) split each shared page among its processes, so their sum is the
+    memory the run really holds."""
     children: dict[int, list[int]] = {}
     rss: dict[int, int] = {}
     for d in os.listdir("/proc"):
@@ -88,24 +92,39 @@ def _tree_rss(root: int) -> int:
             continue
         children.setdefault(ppid, []).append(int(d))
         rss[int(d)] = pages * os.sysconf("SC_PAGE_SIZE")
-    total, todo = 0, [root]
+    total, pss, todo = 0, 0, [root]
     while todo:
         pid = todo.pop()
         total += rss.get(pid, 0)
+        pss += _pss(pid)
         todo.extend(children.get(pid, ()))
-    return total
+    return total, pss
 
 
-def run_command(cmd: list[str], env: dict, rusage_file: Path) -> tuple[float, int, int, int]:
-    """Run ``cmd``; (wall s, largest tree RSS sum, ru_maxrss of the driver and of its largest worker) in bytes."""
+def _pss(pid: int) -> int:
+    """The process's proportional set size (bytes), 0 where unreadable."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as fh:
+            for line in fh:
+                if line.startswith("Pss:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
+def run_command(cmd: list[str], env: dict, rusage_file: Path) -> tuple[float, int, int, int, int]:
+    """Run ``cmd``; (wall s, largest tree RSS sum, largest tree PSS sum, ru_maxrss of the driver and of its
+    largest worker) in bytes."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL)
-    peak = [0]
+    peak = [0, 0]
     done = threading.Event()
 
     def sample() -> None:
         while not done.wait(0.2):
-            peak[0] = max(peak[0], _tree_rss(proc.pid))
+            rss, pss = _tree_memory(proc.pid)
+            peak[0], peak[1] = max(peak[0], rss), max(peak[1], pss)
 
     th = threading.Thread(target=sample, daemon=True)
     th.start()
@@ -116,10 +135,12 @@ def run_command(cmd: list[str], env: dict, rusage_file: Path) -> tuple[float, in
     if rc != 0:
         raise SystemExit(f"{' '.join(cmd)} failed with exit code {rc}")
     driver, worker = json.loads(rusage_file.read_text())
-    return wall, peak[0], driver * 1024, worker * 1024
+    return wall, peak[0], peak[1], driver * 1024, worker * 1024
 
 
-def summarise(run_dir: Path, wall_cmd: float, peak_tree: int, maxrss_driver: int, maxrss_worker: int) -> dict:
+def summarise(
+    run_dir: Path, wall_cmd: float, peak_tree: int, peak_pss: int, maxrss_driver: int, maxrss_worker: int
+) -> dict:
     """The numbers of one finished run folder (timing.csv, the session record) and the measured wall and memory."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from soabench.experiment.store import read_csv
@@ -150,6 +171,7 @@ def summarise(run_dir: Path, wall_cmd: float, peak_tree: int, maxrss_driver: int
         "metrics_s": metrics,
         "rest_s": wall_trials * workers - (sumo + sensor + filters + metrics),
         "peak_tree_mb": peak_tree / 2**20,
+        "peak_tree_pss_mb": peak_pss / 2**20,
         "maxrss_driver_mb": maxrss_driver / 2**20,
         "maxrss_worker_mb": maxrss_worker / 2**20,
     }
@@ -165,8 +187,10 @@ def report(s: dict) -> str:
             f"CPU-s inside trials: SUMO {s['sumo_s']:.1f}, sensor {s['sensor_s']:.1f}, filters {s['filters_s']:.1f} "
             f"(births {s['births_s']:.1f}), metrics {s['metrics_s']:.1f}; rest of workers x trials wall "
             f"{s['rest_s']:.1f} (worker start-up, rows, transport, idle)",
-            f"peak memory: process tree {s['peak_tree_mb']:.0f} MB (sampled every 0.2 s); ru_maxrss driver "
-            f"{s['maxrss_driver_mb']:.0f} MB, largest worker {s['maxrss_worker_mb']:.0f} MB",
+            f"peak memory of the process tree (sampled every 0.2 s): {s['peak_tree_pss_mb']:.0f} MB proportional set "
+            f"size ({s['peak_tree_mb']:.0f} MB summing resident sets, which count pages shared with the forked "
+            f"workers in each); ru_maxrss driver {s['maxrss_driver_mb']:.0f} MB, largest worker "
+            f"{s['maxrss_worker_mb']:.0f} MB",
         ]
     )
 
@@ -185,9 +209,9 @@ def main(argv=None) -> int:
     cmd = [sys.executable, "-c", _CLI_RUSAGE, str(rusage_file), "run", "--net", args.net, "--trials", str(args.trials)]
     cmd += ["--duration", str(args.duration), "--workers", str(args.workers), "--no-progress", "--out", str(out)]
     cpu0 = children_cpu()
-    wall, peak, driver, worker = run_command(cmd, env, rusage_file)
+    wall, peak, pss, driver, worker = run_command(cmd, env, rusage_file)
     cpu_main = children_cpu() - cpu0
-    s = summarise(out, wall, peak, driver, worker)
+    s = summarise(out, wall, peak, pss, driver, worker)
     print(f"soabench from {args.pythonpath or 'this environment'}; run folder {out}")
     print(report(s))
     print(json.dumps(s))
@@ -197,18 +221,18 @@ def main(argv=None) -> int:
     cmd = [sys.executable, "-c", _CLI_RUSAGE, str(rusage_file), "study", "--net", args.net, "--trials"]
     cmd += [str(args.trials), "--duration", str(args.duration), "--workers", str(args.workers), "--no-progress"]
     cpu0 = children_cpu()
-    wall_s, peak_s, driver_s, worker_s = run_command([*cmd, "--out", str(study_dir)], env, rusage_file)
+    wall_s, peak_s, pss_s, driver_s, worker_s = run_command([*cmd, "--out", str(study_dir)], env, rusage_file)
     cpu_study = children_cpu() - cpu0
     sessions = [json.loads(p.read_text()) for p in study_dir.rglob("sessions/*.json")]
     trials_s = sum(float(x["wall_s"]) for x in {x["started"]: x for x in sessions}.values())  # a group once
     same = all((out / f).read_bytes() == (study_dir / "main" / f).read_bytes() for f in ("trials.csv", "episodes.csv"))
     print(f"study folder {study_dir}")
-    print("                 wall (s)  trials (s)  CPU (s)  peak tree (MB)  largest process (MB)")
-    for name, w, t, c, p, m in (
-        ("main run", wall, s["trials_wall_s"], cpu_main, peak, max(driver, worker)),
-        ("study", wall_s, trials_s, cpu_study, peak_s, max(driver_s, worker_s)),
+    print("                 wall (s)  trials (s)  CPU (s)  peak tree PSS (MB)  tree RSS (MB)  largest process (MB)")
+    for name, w, t, c, q, p, m in (
+        ("main run", wall, s["trials_wall_s"], cpu_main, pss, peak, max(driver, worker)),
+        ("study", wall_s, trials_s, cpu_study, pss_s, peak_s, max(driver_s, worker_s)),
     ):
-        print(f"{name:15s} {w:9.1f} {t:11.1f} {c:8.1f} {p / 2**20:15.0f} {m / 2**20:21.0f}")
+        print(f"{name:15s} {w:9.1f} {t:11.1f} {c:8.1f} {q / 2**20:19.0f} {p / 2**20:14.0f} {m / 2**20:21.0f}")
     print(
         f"study / main run: wall {wall_s / wall:.2f}x (target <= 3x), trials {trials_s / s['trials_wall_s']:.2f}x, "
         f"CPU {cpu_study / cpu_main:.2f}x; the study's main/ tables equal the main run's: {same}"
