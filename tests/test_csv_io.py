@@ -151,3 +151,24 @@ def test_merge_writes_steps_as_one_sort_of_every_row(tmp_path, kind):
     store._write_csv_lists(tmp_path / "reference.csv", cols, rows)
     assert (run.run_dir / "steps.csv").read_bytes() == (tmp_path / "reference.csv").read_bytes()
     assert counts["steps"] == 3 * 2 * 4 and ("n_plugin" in cols) == (kind == "extra column")
+
+
+def test_model_failures_after_a_merge_are_the_records_own(tmp_path, monkeypatch):
+    """The store that merged knows the model failures without reading the records again, until a record changes."""
+    from soabench.experiment import store
+
+    run = store.RunStore(tmp_path / "run")
+    for i, rec in enumerate(_records("regular")):
+        rec["model_failures"] = [{"trial": rec["trial"], "model": "plug", "k": i}] if i != 1 else []
+        run.write_trial(rec)
+    run.merge(("soa", "gmbm"), ("static",))
+    want = store.RunStore(run.run_dir).model_failures()  # a fresh store reads the records
+    assert [f["k"] for f in want] == [0, 2]
+    reads: list[int] = []
+    real = store.RunStore.load_trial
+    monkeypatch.setattr(store.RunStore, "load_trial", lambda self, t: reads.append(t) or real(self, t))
+    assert run.model_failures() == want and reads == []
+    rec = _records("regular")[1]
+    rec["model_failures"] = [{"trial": 1, "model": "plug", "k": 9}]
+    run.write_trial(rec)  # the records changed: read them again
+    assert [f["k"] for f in run.model_failures()] == [0, 9, 2] and reads == [0, 1, 2]

@@ -90,7 +90,7 @@ def test_report_stage_ctrl_c_is_one_line_with_the_resume_hint(tmp_path, capsys, 
     assert len(lines) == 1 and f"soabench run --resume {out}" in lines[0] and "report" in lines[0]
     monkeypatch.undo()
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
-    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
     assert main(["run", "--resume", str(out)]) == 0  # nothing left to run: the report is written now
 
 
@@ -228,7 +228,7 @@ def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, command,
 
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
-    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
     monkeypatch.setattr(soabench.scenario, "load", lambda *a, **k: (None, SimpleNamespace(step_length=0.1, duration=5)))
     monkeypatch.setattr(soabench.scenario, "simulate", lambda *a, **k: (_ for _ in ()).throw(Simulated()))
     tmp = tmp_path_factory.mktemp("fuzz")
@@ -261,7 +261,7 @@ def fake_everything(monkeypatch):
 
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
-    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
 
 
 def _ctrl_c(*a, **k):

@@ -74,7 +74,7 @@ def one_error_line(capsys) -> str:
 def report_stub(monkeypatch):
     import soabench.experiment.report as report
 
-    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
 
 
 # ------------------------------------------------------------------------------------------ 1. data, never code

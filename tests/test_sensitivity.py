@@ -165,7 +165,7 @@ def fake_study(monkeypatch):
 
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, switch_aware_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
-    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True: "summary")
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
     monkeypatch.setattr(sweep, "write_sweep_report", lambda d: "sweep")
 
 

@@ -24,9 +24,9 @@ def drawn(monkeypatch) -> dict[str, bool]:
     calls: dict[str, bool] = {}
     real = report.write_report
 
-    def write_report(run_dir, figures=True):  # the real summaries, without drawing
+    def write_report(run_dir, figures=True, store=None):  # the real summaries, without drawing
         calls[str(Path(run_dir))] = figures
-        return real(run_dir, figures=False)
+        return real(run_dir, figures=False, store=store)
 
     monkeypatch.setattr(report, "write_report", write_report)
     return calls

@@ -346,10 +346,13 @@ def paper_section(run_dir: Path, tables: RunTables, clutter: float = 3.0) -> str
     return f"## Against the paper (docs/method.md §5.9), λ = {clutter:g}\n\n{body}\n"
 
 
-def write_report(run_dir: Path, figures: bool = True) -> str:
-    """Write summary.json, summary.md and the figures of a run from its CSV files; return the Markdown."""
+def write_report(run_dir: Path, figures: bool = True, store: RunStore | None = None) -> str:
+    """Write summary.json, summary.md and the figures of a run from its CSV files; return the Markdown.
+
+    ``store``: the folder's :class:`RunStore` if the caller has one (the one that just merged it knows the model
+    failures without reading every trial record again)."""
     run_dir = Path(run_dir)
-    store = RunStore(run_dir)
+    store = store if store is not None else RunStore(run_dir)
     tables = load_tables(run_dir)
     summary = summarize(tables, store.failures(), store.sessions())
     fig_paths: list[str] = []

@@ -476,7 +476,7 @@ def _run_locked(
     try:
         store.merge((*config.experiment.models, *config.experiment.trackers), config.experiment.probabilities)
         with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
-            outcome.summary_markdown = write_report(store.run_dir, figures=figures)
+            outcome.summary_markdown = write_report(store.run_dir, figures=figures, store=store)
     except KeyboardInterrupt:
         raise Interrupted(
             f"interrupted while writing the report of {store.run_dir} (all {len(done)} trials are on disk); {hint}"

@@ -338,6 +338,8 @@ class RunStore:
 
     def __init__(self, run_dir: Path):
         self.run_dir = Path(run_dir)
+        #: (the finished trials, their model failures) as the last :meth:`merge` read them
+        self._merged_failures: tuple[tuple[int, ...], list[dict]] | None = None
 
     # -- run metadata
     @property
@@ -371,6 +373,7 @@ class RunStore:
     def write_trial(self, record: dict) -> None:
         """Persist a finished trial (status "ok") and drop an older failure record of it."""
         trial = int(record["trial"])
+        self._merged_failures = None
         est = record.pop("estimates", None)
         if est is not None:
             payload = json.dumps(to_jsonable({"trial": trial, "estimates": est}), allow_nan=True).encode()
@@ -409,8 +412,12 @@ class RunStore:
         return [read_json(self._record_path(FAILED_DIR, t)) for t in self.failed_trials()]
 
     def model_failures(self) -> list[dict]:
-        """Failed plugin runs inside finished trials (soabench.experiment.guard.FAILURE_KEYS), by trial."""
-        return [f for t in self.done_trials() for f in self.load_trial(t).get("model_failures") or ()]
+        """Failed plugin runs inside finished trials (soabench.experiment.guard.FAILURE_KEYS), by trial (as this
+        store's last :meth:`merge` read them if the finished trials are still the same, else from the records)."""
+        done = self.done_trials()
+        if self._merged_failures is not None and self._merged_failures[0] == tuple(done):
+            return [dict(f) for f in self._merged_failures[1]]
+        return [f for t in done for f in self.load_trial(t).get("model_failures") or ()]
 
     def load_trial(self, trial: int) -> dict:
         return read_json(self._record_path(TRIALS_DIR, trial))
@@ -459,8 +466,11 @@ class RunStore:
         episodes: list[dict] = []
         steps = _SortedSteps(step_key)
         timing: list[dict] = []
-        for t in self.done_trials():
+        failures: list[dict] = []
+        done = self.done_trials()
+        for t in done:
             rec = self.load_trial(t)
+            failures += [dict(f) for f in rec.get("model_failures") or ()]
             rrows = unpack_table(rec.get("rows"))
             rows += rrows
             episodes += unpack_table(rec.get("episodes"))
@@ -497,6 +507,7 @@ class RunStore:
             timing,
             ("trial", "clutter", "model", "mode", *TIMING_COLUMNS, *(f"t_{k}" for k in TRIAL_TIMING_KEYS)),
         )
+        self._merged_failures = (tuple(done), failures)
         return {"trials": len(rows), "episodes": len(episodes), "steps": len(steps.lines)}
 
     def clear_merged(self) -> None:
