@@ -298,33 +298,29 @@ def _read_plain(path: Path) -> dict[str, np.ndarray] | None:
     header, body = lines[0].split(","), lines[1:]
     del lines
     n = len(header)
-    floats: list[list[np.ndarray] | None] = [[] for _ in header]  # None once a cell of the column does not parse
+    floats: list[list[np.ndarray]] = [[] for _ in header]  # the parsed blocks of each column while all parse
+    text: dict[int, list[str]] = {}  # column -> its cells, from the block where one did not parse on
+    starts: dict[int, int] = {}  # column -> the first row of its cells in ``text``
     for start in range(0, len(body), _BLOCK):
         rows = [ln.split(",") for ln in body[start : start + _BLOCK]]
         if any(len(r) != n for r in rows):
             return None
         for j, col in enumerate(zip(*rows, strict=True)):
-            parts = floats[j]
-            if parts is not None:
-                a = _parse_column(col)
-                if a.dtype == float:
-                    parts.append(a)
-                else:
-                    floats[j] = None
+            if j in text:
+                text[j].extend(col)
+                continue
+            a = _parse_column(col)
+            if a.dtype == float:
+                floats[j].append(a)
+            else:
+                text[j], starts[j] = list(col), start
     out: dict[str, np.ndarray] = {}
-    text_cols = [j for j, parts in enumerate(floats) if parts is None]
-    cells: dict[int, list[str]] = {j: [] for j in text_cols}
-    if text_cols:  # the columns of text, read again from the lines as they are
-        for start in range(0, len(body), _BLOCK):
-            rows = [ln.split(",") for ln in body[start : start + _BLOCK]]
-            for j in text_cols:
-                cells[j].extend(r[j] for r in rows)
     for j, name in enumerate(header):
-        parts = floats[j]
-        if parts is None:
-            out[name] = np.array(cells.pop(j), dtype=str)
-        else:
-            out[name] = np.concatenate(parts) if parts else np.zeros(0)
+        if j not in text:
+            out[name] = np.concatenate(floats[j]) if floats[j] else np.zeros(0)
+            continue
+        earlier = [ln.split(",")[j] for ln in body[: starts[j]]]  # blocks that parsed before a later one did not
+        out[name] = np.array(earlier + text.pop(j), dtype=str)
     return out
 
 
@@ -491,7 +487,7 @@ class RunStore:
             key=lambda r: (*key(r), float(r["target"]) if _is_num(r["target"]) else 0, str(r["target"]), r["k0"])
         )
         if not steps.ok:  # records with other columns, or blocks out of key order: every row sorted at once
-            tables = [rec["steps"] for rec in map(self.load_trial, self.done_trials()) if rec.get("steps")]
+            tables = [rec["steps"] for rec in map(self.load_trial, done) if rec.get("steps")]
             step_cols, step_rows = _rows_of(tables, STEP_COLUMNS)
             step_rows.sort(key=step_key(step_cols))
             steps = _SortedSteps(step_key, step_cols, list(map(_csv_line, step_rows)))
@@ -565,16 +561,8 @@ class _SortedSteps:
         self.lines.extend(map(_csv_line, rows))
 
     def write(self, path: Path) -> None:
-        """The file: the header and every line, written in chunks."""
-        cols = self.cols if self.cols is not None else list(STEP_COLUMNS)
-        lines, step = self.lines, 20_000
-
-        def chunks() -> Iterator[bytes]:
-            yield (",".join(cols) + "\n").encode("utf-8")
-            for i in range(0, len(lines), step):
-                yield ("\n".join(lines[i : i + step]) + "\n").encode("utf-8")
-
-        write_chunks_atomic(path, chunks())
+        """The file: the header and every line (:func:`_write_lines`)."""
+        _write_lines(path, self.cols if self.cols is not None else list(STEP_COLUMNS), self.lines)
 
 
 def _rows_of(tables: Sequence[dict], columns: Sequence[str]) -> tuple[list[str], list[list]]:
@@ -600,9 +588,19 @@ def _rows_of(tables: Sequence[dict], columns: Sequence[str]) -> tuple[list[str],
 
 def _write_csv_lists(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
     """:func:`write_csv` for rows already given as lists over ``columns``."""
-    lines = [",".join(columns)]
-    lines.extend(map(_csv_line, rows))
-    write_text_atomic(path, "\n".join(lines) + "\n")
+    _write_lines(path, columns, list(map(_csv_line, rows)))
+
+
+def _write_lines(path: Path, columns: Sequence[str], lines: Sequence[str], block: int = 20_000) -> None:
+    """A CSV file of the header ``columns`` and the formatted ``lines``, written atomically a block of lines at a
+    time (the file's text is never held whole)."""
+
+    def chunks() -> Iterator[bytes]:
+        yield (",".join(columns) + "\n").encode("utf-8")
+        for i in range(0, len(lines), block):
+            yield ("\n".join(lines[i : i + block]) + "\n").encode("utf-8")
+
+    write_chunks_atomic(path, chunks())
 
 
 def _is_num(v: Any) -> bool:

@@ -158,8 +158,8 @@ class _BirthsOnce:
     ) -> None:
         self.build = build
         self.model: Callable[[BirthContext], Any] | None = None
-        self.weigh = weigh
-        self.candidates = candidates if weigh is not None else None
+        #: (weigh, the shared candidates) when both are given, else None: the model is called for each scan
+        self.shared = (weigh, candidates) if weigh is not None and candidates is not None else None
         self.count = count or (lambda what: None)
         self._births: dict[int, Any] = {}
         self._scans: list[Any] = []  # keeps the scans alive: ids are unique while they are held
@@ -172,15 +172,16 @@ class _BirthsOnce:
     def __call__(self, ctx: BirthContext) -> Any:
         key = id(ctx.scan)
         if key not in self._births:
-            if self.candidates is not None and self.weigh is not None:
+            if self.shared is not None:
+                weigh, candidates = self.shared
                 k = int(ctx.scan.k)
-                c = self.candidates.get(k)
+                c = candidates.get(k)
                 if c is None:
-                    c = self.candidates[k] = self._model().candidates(ctx)
+                    c = candidates[k] = self._model().candidates(ctx)
                     self.count("birth_candidates")
                 else:
                     self.count("birth_candidates_reused")
-                self._births[key] = self.weigh(c)
+                self._births[key] = weigh(c)
             else:
                 self._births[key] = self._model()(ctx)
             self._scans.append(ctx.scan)
@@ -377,12 +378,13 @@ def run_trial(
             share.scans[scans_key] = scans
             share.count("scans")
         out.timing["sensor"] += time.perf_counter() - t0
+        # the sensor's geometry is the same for every lambda when the real sensor observed the scans
+        geometry_key = (rec_key, repr(dataclasses.replace(sensor_cfg, lambda_c=0.0)))
+        candidates_key = geometry_key if fn_key[1] == "default" else scans_key
         for model in exp.models:
             births = None
             if births_once:
-                # the sensor's geometry is the same for every lambda when the real sensor observed the scans
-                geometry_key = (rec_key, repr(dataclasses.replace(sensor_cfg, lambda_c=0.0)))
-                births_key = (geometry_key if fn_key[1] == "default" else scans_key, birth_key, model, fn_key[3])
+                births_key = (candidates_key, birth_key, model, fn_key[3])
                 candidates = share.birth_candidates.setdefault(births_key, {})
                 births = _births_once(model, config, sensor_cfg, scene, seeds, birth_factory, candidates, share.count)
             for mode in exp.probabilities:
