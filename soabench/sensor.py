@@ -37,6 +37,7 @@ from soabench.types import (  # noqa: F401
     OCCLUDER_KINDS,
     SCANS_FORMAT_VERSION,
     SENSOR_UNITS,
+    DeferredRegion,
     Obstacles,
     Scan,
     Scans,
@@ -259,15 +260,23 @@ def shadow_polygons(ego_xy: np.ndarray, obstacles: Obstacles, r_far: float) -> n
     edge facing the sensor and the hull adds nothing in front of the obstacle. (An arc at r_far alone would, when a
     tangent point lies beyond r_far, also cover visible ground in front of a large building.)
     """
-    n_obs = len(obstacles)
-    if n_obs == 0:
+    return _shadows(ego_xy, obstacles.polygons, obstacles.theta_min, obstacles.theta_max, r_far)
+
+
+def _shadows(
+    ego_xy: np.ndarray, polygons: Sequence[np.ndarray], theta_min: np.ndarray, theta_max: np.ndarray, r_far: float
+) -> np.ndarray:
+    """:func:`shadow_polygons` of the obstacles given by their vertex arrays and tangent rays (each independent of
+    the others)."""
+    if len(polygons) == 0:
         return np.zeros(0, dtype=object)
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
-    verts = _padded(obstacles.polygons)
+    theta_min = np.asarray(theta_min, dtype=float)
+    verts = _padded(polygons)
     reach = np.maximum(r_far, np.hypot(*(verts - ego_xy).transpose(2, 0, 1)).max(axis=1))
-    width = np.mod(obstacles.theta_max - obstacles.theta_min, 2.0 * np.pi)
+    width = np.mod(np.asarray(theta_max, dtype=float) - theta_min, 2.0 * np.pi)
     s = np.linspace(0.0, 1.0, _SHADOW_ARC_POINTS)
-    phi = obstacles.theta_min[:, None] + width[:, None] * s[None, :]
+    phi = theta_min[:, None] + width[:, None] * s[None, :]
     radius = (reach * (1.0 + 1e-9) + 1e-6) / np.cos(0.5 * width / (_SHADOW_ARC_POINTS - 1))
     far = ego_xy + radius[:, None, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
     return shapely.convex_hull(shapely.multipoints(np.concatenate([verts, far], axis=1)))
@@ -311,6 +320,109 @@ def _omega(
     cut = np.concatenate([shadow_polygons(ego, obstacles, cfg.r_max), np.asarray(list(occluders), dtype=object)])
     cut = cut[shapely.intersects(cut, base)] if len(cut) else cut
     return base.difference(shapely.union_all(cut)) if len(cut) else base
+
+
+#: relative margin of the sure tests in :meth:`VisibleRegion.contains_xy` (far above rounding, far below any use)
+_SURE = 1e-9
+
+
+class VisibleRegion(DeferredRegion):
+    """Omega_k of one scan (§3.1.4), built only when read (docs/method.md §5.8): what the sensor puts in
+    ``Scan.visible_region``.
+
+    :meth:`build` is :func:`visible_region` (the same polygon overlay, bit for bit). :meth:`contains_xy` answers
+    which points lie in its interior from the overlay's inputs, without the overlay. A trial's birth models ask the
+    second question of a few dozen points per scan; the overlay (a union of the shadow polygons and a set
+    difference, about 2 ms per scan) is then computed only for a scan whose geometry is read (a figure, an
+    exported scans file, a birth model that samples in Omega_k itself).
+    """
+
+    def __init__(
+        self,
+        region: BaseGeometry,
+        ego: np.ndarray,
+        obstacles: Obstacles,
+        cfg: SensorConfig,
+        occluders: Sequence[BaseGeometry] = (),
+    ) -> None:
+        self.region, self.ego, self.obstacles, self.cfg = region, np.asarray(ego, dtype=float), obstacles, cfg
+        self.occluders = np.asarray(list(occluders), dtype=object).reshape(-1)
+
+    def build(self) -> BaseGeometry:
+        return _omega(self.region, self.ego, self.obstacles, self.cfg, list(self.occluders))
+
+    def contains_xy(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """(n,) points (x_i, y_i) in the interior of Omega_k = (region within FOV_k) minus the obstacles with their
+        shadows and the occluders containing the sensor:
+
+        * in the interior of the semantic region (``shapely.contains_xy``, the region is prepared once per trial);
+        * in the interior of FOV_k's polygon: decided from range and bearing where a point is farther than 1e-9
+          (relative) from the polygon's outline (inside the inscribed annulus of its chords), else by the polygon;
+        * not in any obstacle's closed shadow: the segment from the sensor to the point does not meet the obstacle's
+          convex hull (:func:`segment_meets_convex`). Within r_max this is the shadow polygon of
+          :func:`shadow_polygons` (its far arc lies beyond r_max, its other edges are the tangent rays and the
+          obstacle's sides facing the sensor);
+        * not in any occluder containing the sensor.
+        """
+        x = np.asarray(x, dtype=float).reshape(-1)
+        y = np.asarray(y, dtype=float).reshape(-1)
+        ok = shapely.contains_xy(self.region, x, y)
+        idx = np.flatnonzero(ok)
+        if len(idx):
+            ok[idx[~self._in_fov(x[idx], y[idx])]] = False
+            idx = np.flatnonzero(ok)
+        if len(idx) and len(self.obstacles):
+            hit = segment_meets_convex(self.ego[:2], np.column_stack([x[idx], y[idx]]), self.obstacles.polygons)
+            ok[idx[hit]] = False
+            idx = np.flatnonzero(ok)
+        if len(idx) and len(self.occluders):
+            hit = shapely.intersects_xy(self.occluders[:, None], x[idx][None, :], y[idx][None, :]).any(axis=0)
+            ok[idx[hit]] = False
+        return ok
+
+    def _in_fov(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """(n,) in the interior of :func:`fov_polygon`: sure from range and bearing, the polygon for the rest."""
+        cfg = self.cfg
+        span = 2.0 * np.pi if cfg.fov_deg >= 360.0 else np.radians(float(cfg.fov_deg))
+        step = span / (max(2, int(np.ceil(span / _FOV_ARC_STEP)) + 1) - 1)  # the arcs' spacing (_fov_template)
+        r_lo = float(cfg.r_min) * (1.0 + _SURE) + _SURE
+        r_hi = float(cfg.r_max) * np.cos(0.5 * step) * (1.0 - _SURE) - _SURE
+        dx, dy = x - self.ego[0], y - self.ego[1]
+        r = np.hypot(dx, dy)
+        sure = (r > r_lo) & (r < r_hi)
+        if cfg.fov_deg < 360.0:
+            sure &= np.abs(wrap(np.arctan2(dy, dx) - self.ego[2])) < 0.5 * span - _SURE
+        out = sure.copy()
+        rest = np.flatnonzero(~sure)
+        if len(rest):
+            out[rest] = shapely.contains_xy(fov_polygon(self.ego, cfg), x[rest], y[rest])
+        return out
+
+
+def segment_meets_convex(ego_xy: np.ndarray, points: np.ndarray, polygons: Sequence[np.ndarray]) -> np.ndarray:
+    """(n,) True where the closed segment from ``ego_xy`` to a point meets any closed convex polygon (the
+    counter-clockwise hulls of O_k): the point lies in that obstacle or in its shadow (§3.1.2, §3.1.4).
+
+    Cyrus-Beck clipping of each segment against each polygon's edges, over all (point, polygon, edge) at once:
+    with the outward normal n_i of edge i, the segment e + t d (0 <= t <= 1) stays inside the edge's half-plane
+    for t d.n_i <= (v_i - e).n_i; it meets the polygon where the largest entering t is at most the smallest leaving
+    t. Polygons are padded by repeating their first vertex (zero-length edges constrain nothing)."""
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(points) == 0 or len(polygons) == 0:
+        return np.zeros(len(points), dtype=bool)
+    e = np.asarray(ego_xy, dtype=float)[:2]
+    v = _padded(polygons) - e  # (O, V, 2) vertices relative to the sensor
+    edge = np.roll(v, -1, axis=1) - v
+    nx, ny = edge[..., 1], -edge[..., 0]  # outward normals of counter-clockwise polygons
+    num = nx * v[..., 0] + ny * v[..., 1]  # (O, V)
+    d = points - e
+    den = d[:, 0, None, None] * nx + d[:, 1, None, None] * ny  # (n, O, V)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = num / den
+    t_in = np.where(den < 0.0, t, 0.0).max(axis=2, initial=0.0)
+    t_out = np.where(den > 0.0, t, 1.0).min(axis=2, initial=1.0)
+    parallel_out = ((den == 0.0) & (num < 0.0)).any(axis=2)
+    return ((t_in <= t_out) & ~parallel_out).any(axis=1)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -550,5 +662,5 @@ def _scan_geometry(
     visible[in_fov] = target_visibility(ego, xy[in_fov], occ, cfg.visibility_points, cfg.visibility_offset)
     obstacles = obstacles_from_geoms(occ, occ_kinds, ego[:2], cfg.r_max, occ_hulls)
     inside = occ[shapely.intersects(occ_hulls, ego_pt)] if len(occ) else occ  # no cone: cut as is
-    omega = _omega(region, ego, obstacles, cfg, list(inside))
+    omega = VisibleRegion(region, ego, obstacles, cfg, list(inside))  # built only if read
     return ego, xy, present, in_fov, visible, obstacles, occ, omega

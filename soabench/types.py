@@ -182,6 +182,47 @@ class Obstacles:
         return cls([], np.zeros(0, dtype="<U8"), z, z.copy(), z.copy(), z.copy(), z.copy(), z.copy())
 
 
+class DeferredRegion:
+    """A region computed only when read (docs/method.md §5.8): what a :class:`Scan` may hold as its
+    ``visible_region`` instead of the geometry itself.
+
+    :meth:`build` returns the geometry; :meth:`contains_xy` answers which points lie in its interior without
+    building it (the sensor's Omega_k: birth models ask that of a few dozen points per scan, while the polygon
+    overlay behind the geometry costs more than the rest of the scan). The sensor's subclass is
+    :class:`soabench.sensor.VisibleRegion`.
+    """
+
+    def build(self) -> BaseGeometry:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def contains_xy(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def geometry(self) -> BaseGeometry:
+        """:meth:`build`, computed on the first call and kept."""
+        built = self.__dict__.get("_built")
+        if built is None:
+            built = self.__dict__["_built"] = self.build()
+        return built
+
+
+class _RegionField:
+    """The ``visible_region`` field of :class:`Scan`: holds a geometry or a :class:`DeferredRegion`, and reads
+    as the geometry either way (a deferred one is built on the first read and kept)."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.slot = "_" + name
+
+    def __get__(self, obj: Any, objtype: type | None = None) -> BaseGeometry:
+        if obj is None:  # class access: no default value for the dataclass field
+            raise AttributeError(self.slot[1:])
+        value = obj.__dict__[self.slot]
+        return value.geometry() if isinstance(value, DeferredRegion) else value
+
+    def __set__(self, obj: Any, value: BaseGeometry | DeferredRegion) -> None:
+        obj.__dict__[self.slot] = value
+
+
 @dataclass
 class Scan:
     """What the filters receive at scan k (never the truth).
@@ -194,7 +235,9 @@ class Scan:
         occluders: shapely polygons of every occluder at k (buildings, parked cars, other vehicles) for
             line-of-sight tests (the ``occlusion_pd`` option). Exact shapes (not hulls); only those within r_max
             of the sensor, since no segment to a point in the FOV can meet any other.
-        visible_region: Omega_k = sidewalk within the FOV minus occluders and their shadows (shapely).
+        visible_region: Omega_k = sidewalk within the FOV minus occluders and their shadows (shapely). It may be
+            given as a :class:`DeferredRegion` (the sensor does): it then reads as the geometry, built on the first
+            read; :meth:`in_visible_region` tests points without building it.
     """
 
     k: int
@@ -203,7 +246,21 @@ class Scan:
     Z: np.ndarray
     obstacles: Obstacles
     occluders: list[BaseGeometry]
-    visible_region: BaseGeometry
+    visible_region: BaseGeometry = _RegionField()  # type: ignore[assignment]  # no default: see _RegionField
+
+    def in_visible_region(self, xy: np.ndarray) -> np.ndarray:
+        """(J,) True where a point of ``xy`` (J, 2) lies in the interior of Omega_k (``shapely.contains_xy``).
+
+        A deferred region answers without building its geometry (:meth:`DeferredRegion.contains_xy`): the same
+        answer as the built polygon's except for points within rounding distance (about 1e-12 m) of its boundary,
+        where the overlay's computed vertices and the exact inputs may disagree. Which of the two answers a scan
+        gives depends only on how it was made, never on whether its geometry was read before (a copy made with
+        ``dataclasses.replace`` holds the built geometry, read through the field)."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        value = self.__dict__["_visible_region"]
+        if isinstance(value, DeferredRegion):
+            return np.asarray(value.contains_xy(xy[:, 0], xy[:, 1]), dtype=bool)
+        return shapely.contains_xy(value, xy[:, 0], xy[:, 1])
 
     # Work done once per scan (docs/method.md §5.8): every filter run of a trial reads the same Scan, so what depends
     # on the scan alone is computed on first use and kept on the instance (not a field: equality, ``replace``, the

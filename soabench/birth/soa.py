@@ -309,7 +309,7 @@ class SOABirth:
     def in_omega(self, xy: np.ndarray, scan: Scan, extra: np.ndarray | None = None) -> np.ndarray:
         """(J,) points of Omega_k: in ``scan.visible_region``, or (with crossings) in the extra region and in line
         of sight of the sensor (the sensor's visible region covers sidewalks only)."""
-        ok = shapely.contains_xy(scan.visible_region, xy[:, 0], xy[:, 1])
+        ok = _in_visible_region(scan, xy)
         if self.extra is not None and len(xy):
             if extra is None:
                 extra = shapely.contains_xy(self.extra, xy[:, 0], xy[:, 1])
@@ -404,6 +404,15 @@ class SOACandidates(NamedTuple):
     P_p: np.ndarray  #: (J, 2, 2) position covariances
     v: np.ndarray  #: (J, 2) velocity means (occlusion velocity prior; else 0)
     source: np.ndarray  #: (J,) SOURCE_OCCL / SOURCE_SEM / SOURCE_FOV
+
+
+def _in_visible_region(scan: Scan, xy: np.ndarray) -> np.ndarray:
+    """(J,) points in the interior of Omega_k: ``scan.in_visible_region`` (which does not build a deferred
+    region's polygon), or ``contains_xy`` on ``scan.visible_region`` for a duck-typed scan without it."""
+    test = getattr(scan, "in_visible_region", None)
+    if test is not None:
+        return test(xy)
+    return shapely.contains_xy(scan.visible_region, xy[:, 0], xy[:, 1])
 
 
 def _subset(obs: Obstacles, keep: np.ndarray) -> Obstacles:
