@@ -403,26 +403,30 @@ def segment_meets_convex(ego_xy: np.ndarray, points: np.ndarray, polygons: Seque
     """(n,) True where the closed segment from ``ego_xy`` to a point meets any closed convex polygon (the
     counter-clockwise hulls of O_k): the point lies in that obstacle or in its shadow (§3.1.2, §3.1.4).
 
-    Cyrus-Beck clipping of each segment against each polygon's edges, over all (point, polygon, edge) at once:
-    with the outward normal n_i of edge i, the segment e + t d (0 <= t <= 1) stays inside the edge's half-plane
-    for t d.n_i <= (v_i - e).n_i; it meets the polygon where the largest entering t is at most the smallest leaving
-    t. Polygons are padded by repeating their first vertex (zero-length edges constrain nothing)."""
+    Cyrus-Beck clipping of each segment against each polygon's edges, compiled
+    (:func:`soabench.geometry_kernels.segments_meet_convex`): with the outward normal n_i of edge i, the segment
+    e + t d (0 <= t <= 1) stays inside the edge's half-plane for t d.n_i <= (v_i - e).n_i; it meets the polygon
+    where the largest entering t is at most the smallest leaving t."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if len(points) == 0 or len(polygons) == 0:
         return np.zeros(len(points), dtype=bool)
-    e = np.asarray(ego_xy, dtype=float)[:2]
-    v = _padded(polygons) - e  # (O, V, 2) vertices relative to the sensor
-    edge = np.roll(v, -1, axis=1) - v
-    nx, ny = edge[..., 1], -edge[..., 0]  # outward normals of counter-clockwise polygons
-    num = nx * v[..., 0] + ny * v[..., 1]  # (O, V)
-    d = points - e
-    den = d[:, 0, None, None] * nx + d[:, 1, None, None] * ny  # (n, O, V)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = num / den
-    t_in = np.where(den < 0.0, t, 0.0).max(axis=2, initial=0.0)
-    t_out = np.where(den > 0.0, t, 1.0).min(axis=2, initial=1.0)
-    parallel_out = ((den == 0.0) & (num < 0.0)).any(axis=2)
-    return ((t_in <= t_out) & ~parallel_out).any(axis=1)
+    from soabench.geometry_kernels import segments_meet_convex
+
+    e = np.asarray(ego_xy, dtype=float)
+    counts = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))
+    starts = np.zeros_like(counts)
+    np.cumsum(counts[:-1], out=starts[1:])
+    v = np.concatenate(polygons).astype(float, copy=False)
+    return segments_meet_convex(
+        float(e[0]),
+        float(e[1]),
+        points[:, 0].copy(),
+        points[:, 1].copy(),
+        v[:, 0].copy(),
+        v[:, 1].copy(),
+        starts,
+        counts,
+    )
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -120,16 +120,12 @@ def occlusion_layers(
 
 def dedup(xy: np.ndarray, d_dup: float) -> np.ndarray:
     """(J,) keep-mask: greedy in order, a point within ``d_dup`` of an already kept point is dropped (§3.1.3)."""
-    J = len(xy)
-    keep = np.ones(J, dtype=bool)
-    if J < 2:
-        return keep
-    d2 = np.sum((xy[:, None, :] - xy[None, :, :]) ** 2, axis=-1)
-    close = np.triu(d2 < d_dup * d_dup, k=1)
-    for i in np.flatnonzero(close.any(axis=1)):  # only rows with a conflict
-        if keep[i]:
-            keep[close[i]] = False
-    return keep
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    if len(xy) < 2:
+        return np.ones(len(xy), dtype=bool)
+    from soabench.geometry_kernels import greedy_dedup  # compiled: one pass over the pairs
+
+    return greedy_dedup(xy[:, 0].copy(), xy[:, 1].copy(), float(d_dup))
 
 
 def visible_obstacles(obstacles: Obstacles, ego: np.ndarray, sensor: SensorConfig) -> np.ndarray:
@@ -380,9 +376,15 @@ class SOABirth:
         p_f = self.fov_boundary(scan)
         P_f = isotropic(cfg.sigma_fov, len(p_f))
         xy = np.concatenate([p_o, p_s, p_f])
-        static_ok = np.concatenate([self.rule.static_mask(p_o), ok_s, self.rule.static_mask(p_f)])
         src = np.repeat(np.array([SOURCE_OCCL, SOURCE_SEM, SOURCE_FOV]), [len(p_o), len(p_s), len(p_f)])
-        keep = self.rule.mask(xy, scan, static_ok)
+        # the FOV-only rule (FOVRule.mask): the semantic means carry their static part; the others' is asked only of
+        # those in FOV_k, in one query
+        keep = self.rule.in_fov(xy, scan)
+        sem = src == SOURCE_SEM
+        keep[sem] &= ok_s
+        ask = np.flatnonzero(keep & ~sem)
+        keep[ask] = self.rule.static_mask(xy[ask])
+        keep[keep] &= ~self.rule.in_occluder(xy[keep], scan)
         occl = np.flatnonzero(keep[: len(p_o)])
         keep[occl[~dedup(p_o[occl], 0.5 * cfg.delta_r)]] = False
         P_p = np.concatenate([P_o, P_s, P_f])[keep]
