@@ -23,17 +23,22 @@ def wrap(a: np.ndarray | float) -> np.ndarray:
 
 
 def range_bearing(xy: np.ndarray, ego: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """h(x) without noise (§2.3): range r and bearing b = wrap(atan2(dy, dx) - theta_e) of points ``xy`` (..., 2)."""
-    d = np.asarray(xy, dtype=float)[..., :2] - np.asarray(ego[:2], dtype=float)
+    """h(x) without noise (§2.3): range r and bearing b = wrap(atan2(dy, dx) - theta_e) of points ``xy`` (..., 2).
+
+    ``ego``: one pose (3,), or one pose per point (..., 3) broadcast against ``xy``."""
+    e = np.asarray(ego, dtype=float)
+    d = np.asarray(xy, dtype=float)[..., :2] - e[..., :2]
     r = np.hypot(d[..., 0], d[..., 1])
-    b = wrap(np.arctan2(d[..., 1], d[..., 0]) - float(ego[2]))
+    b = wrap(np.arctan2(d[..., 1], d[..., 0]) - e[..., 2])
     return r, b
 
 
 def fov_mask(xy: np.ndarray, ego: np.ndarray, cfg: SensorConfig, inset: float = 0.0) -> np.ndarray:
-    """FOV_k membership (§2.3): r_min + inset <= r <= r_max - inset and |b| <= Theta/2, for points (..., 2)."""
+    """FOV_k membership (§2.3): r_min + inset <= r <= r_max - inset and |b| <= Theta/2, for points (..., 2).
+
+    ``ego``: one pose (3,), or one pose per point (..., 3) broadcast against ``xy``."""
     if cfg.fov_deg >= 360.0:  # the range alone decides (the bearing of range_bearing is not needed)
-        d = np.asarray(xy, dtype=float)[..., :2] - np.asarray(ego[:2], dtype=float)
+        d = np.asarray(xy, dtype=float)[..., :2] - np.asarray(ego, dtype=float)[..., :2]
         r = np.hypot(d[..., 0], d[..., 1])
         return (r >= cfg.r_min + inset) & (r <= cfg.r_max - inset)
     r, b = range_bearing(xy, ego)

@@ -386,6 +386,8 @@ def evaluate(
     results: Sequence[StepResult],
     cfg: MetricsConfig,
     sensor_cfg: SensorConfig,
+    *,
+    compiled: bool = True,
 ) -> TrialMetrics:
     """All metrics of one filter run: ``results[k]`` is the filter output at ``scans.scans[k]`` (§5.1-5.7).
 
@@ -393,25 +395,21 @@ def evaluate(
     the cardinality error and its Σw variant (Σw = ``sum_w``, the posterior mass after the update). Per trial:
     means over all K steps (both-empty steps contribute 0), precision/recall from the summed counts, and the delay
     episodes built from ``scans.visible``, ``scans.detected`` and ``assoc``.
+
+    ``compiled``: with OSPA and GOSPA of order p = 1 (the defaults), the per-scan matchings of the whole run are one
+    compiled call (:func:`soabench.metrics_kernels.run_matchings`, the same numbers); False, or another order, runs
+    :func:`gated_assignment`, :func:`ospa` and :func:`gospa` scan by scan.
     """
     K = len(scans.scans)
     require(len(results) == K, f"{len(results)} filter results for {K} scans")
     gt = gt_mask(scans, cfg.gt_set)
-    assoc = np.zeros_like(gt)
     s = {key: np.zeros(K) for key in SERIES_KEYS}
-    ospa_parts = np.zeros((K, 3))
-    gospa_parts = np.zeros((K, 4))
+    if compiled and cfg.ospa_p == 1.0 and cfg.gospa_p == 1.0:
+        assoc, ospa_parts, gospa_parts = _matchings_compiled(scans, results, gt, cfg, sensor_cfg, s)
+    else:
+        assoc, ospa_parts, gospa_parts = _matchings(scans, results, gt, cfg, sensor_cfg, s)
     origins = np.zeros((K, len(ORIGIN_KEYS)), dtype=np.int64)
-    for k, (scan, res) in enumerate(zip(scans.scans, results, strict=True)):
-        gt_idx = np.flatnonzero(gt[k])
-        G = scans.truth_xy[k, gt_idx]
-        E = estimate_positions(res.X, scan.ego, sensor_cfg, cfg.gt_set)
-        D = pairwise_distances(_points(E), _points(G))  # once for the three matchings of the step
-        pairs = gated_assignment(E, G, cfg.d_gate, D)
-        assoc[k, gt_idx[pairs[:, 1]]] = True
-        ospa_parts[k] = ospa(E, G, cfg.ospa_c, cfg.ospa_p, D)
-        gospa_parts[k] = gospa(G, E, cfg.gospa_c, cfg.gospa_p, D.T)
-        s["n_gt"][k], s["n_est"][k], s["tp"][k] = len(G), len(E), len(pairs)
+    for k, res in enumerate(results):
         s["sum_w"][k], s["n_components"][k] = res.sum_w, res.n_reduced
         origins[k] = origin_counts_of(res)
     s.update(zip(ORIGIN_KEYS, origins.T, strict=True))
@@ -441,3 +439,71 @@ def evaluate(
     }
     series = {key: s[key].astype(float if key in ("ospa", "gospa", "sum_w") else int) for key in SERIES_KEYS}
     return TrialMetrics({key: summary[key] for key in SUMMARY_KEYS}, episodes, series)
+
+
+def _matchings(
+    scans: Scans,
+    results: Sequence[StepResult],
+    gt: np.ndarray,
+    cfg: MetricsConfig,
+    sensor_cfg: SensorConfig,
+    s: dict[str, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Scan by scan: GT_k, Est_k, the gated matching, OSPA and GOSPA; fills ``s`` (n_gt, n_est, tp) and returns
+    ``(assoc (K, P), ospa parts (K, 3), gospa parts (K, 4))``."""
+    K = len(results)
+    assoc = np.zeros_like(gt)
+    ospa_parts = np.zeros((K, 3))
+    gospa_parts = np.zeros((K, 4))
+    for k, (scan, res) in enumerate(zip(scans.scans, results, strict=True)):
+        gt_idx = np.flatnonzero(gt[k])
+        G = scans.truth_xy[k, gt_idx]
+        E = estimate_positions(res.X, scan.ego, sensor_cfg, cfg.gt_set)
+        D = pairwise_distances(_points(E), _points(G))  # once for the three matchings of the step
+        pairs = gated_assignment(E, G, cfg.d_gate, D)
+        assoc[k, gt_idx[pairs[:, 1]]] = True
+        ospa_parts[k] = ospa(E, G, cfg.ospa_c, cfg.ospa_p, D)
+        gospa_parts[k] = gospa(G, E, cfg.gospa_c, cfg.gospa_p, D.T)
+        s["n_gt"][k], s["n_est"][k], s["tp"][k] = len(G), len(E), len(pairs)
+    return assoc, ospa_parts, gospa_parts
+
+
+def _matchings_compiled(
+    scans: Scans,
+    results: Sequence[StepResult],
+    gt: np.ndarray,
+    cfg: MetricsConfig,
+    sensor_cfg: SensorConfig,
+    s: dict[str, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_matchings` for p = 1 as one compiled call: Est_k of every scan stacked (the FOV test of
+    :func:`estimate_positions` over all of them at once, each with its scan's pose)."""
+    from soabench.metrics_kernels import run_matchings
+
+    X = [_points(res.X) for res in results]
+    counts = np.fromiter((len(x) for x in X), dtype=np.int64, count=len(X))
+    E = np.concatenate(X) if len(X) else np.zeros((0, 2))
+    if cfg.gt_set != "scene" and len(E):
+        ego = np.repeat(np.array([scan.ego for scan in scans.scans], dtype=float).reshape(-1, 3), counts, axis=0)
+        keep = fov_mask(E, ego, sensor_cfg)
+        E = E[keep]
+        counts = np.bincount(np.repeat(np.arange(len(counts)), counts)[keep], minlength=len(counts))
+    e_off = np.zeros(len(counts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=e_off[1:])
+    G = np.ascontiguousarray(scans.truth_xy, dtype=float)
+    E = np.ascontiguousarray(E, dtype=float)
+    args = (float(cfg.d_gate), float(GATE_COST), float(cfg.ospa_c), float(cfg.gospa_c))
+    tp, assoc, ospa_parts, gospa_parts, redo = run_matchings(E, e_off, G, np.ascontiguousarray(gt, dtype=bool), *args)
+    for k in np.flatnonzero(redo):  # coinciding points: scipy's choice among the optimal assignments (_matchings)
+        gt_idx = np.flatnonzero(gt[k])
+        Gk, Ek = G[k, gt_idx], E[e_off[k] : e_off[k + 1]]
+        D = pairwise_distances(Ek, Gk)
+        pairs = gated_assignment(Ek, Gk, cfg.d_gate, D)
+        assoc[k, gt_idx[pairs[:, 1]]] = True
+        tp[k] = len(pairs)
+        ospa_parts[k] = ospa(Ek, Gk, cfg.ospa_c, cfg.ospa_p, D)
+        gospa_parts[k] = gospa(Gk, Ek, cfg.gospa_c, cfg.gospa_p, D.T)
+    s["n_gt"][:] = gt.sum(axis=1)
+    s["n_est"][:] = counts
+    s["tp"][:] = tp
+    return assoc, ospa_parts, gospa_parts
