@@ -9,6 +9,7 @@ w = N_hat / J_u,k and P_p = sigma_u^2 I, so the birth mass is exactly N_hat.
 from __future__ import annotations
 
 import dataclasses
+from collections import OrderedDict
 from typing import NamedTuple
 
 import numpy as np
@@ -26,6 +27,39 @@ def grid_nodes(bounds: tuple[float, float, float, float], d_u: float) -> np.ndar
     return np.column_stack([X.ravel(), Y.ravel()])
 
 
+#: per process: (scene, its static geometry, d_u, sigma_u, sigma_v_birth) -> (scene, nodes, m_all, P_all)
+_GRIDS: OrderedDict[tuple, tuple] = OrderedDict()
+_N_GRIDS = 8
+
+
+def _grid(scene: SceneMap, rule: FOVRule, cfg: BirthConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The grid nodes in the workspace and not inside a building or static occluder (the time-invariant part of the
+    FOV-only rule), with their birth components: the same for every trial of a scene, so a worker builds them once
+    (they are read-only; each scan selects copies). The key holds the scene object (so its id stays unique while
+    cached), the identity of every static polygon and the settings the grid reads."""
+    key = (
+        id(scene),
+        tuple(float(b) for b in scene.bounds),
+        tuple(map(id, scene.buildings)),
+        tuple(map(id, scene.static_occluders)),
+        float(cfg.d_u),
+        float(cfg.sigma_u),
+        float(cfg.sigma_v_birth),
+    )
+    hit = _GRIDS.get(key)
+    if hit is None:
+        nodes = grid_nodes(scene.bounds, cfg.d_u)
+        nodes = nodes[rule.static_mask(nodes)]  # in the workspace, not inside a building
+        m_all, P_all = build_components(nodes, cfg.sigma_u**2 * np.eye(2), cfg.sigma_v_birth)
+        for a in (nodes, m_all, P_all):
+            a.setflags(write=False)
+        hit = _GRIDS[key] = (scene, nodes, m_all, P_all)
+        while len(_GRIDS) > _N_GRIDS:
+            _GRIDS.popitem(last=False)
+    _GRIDS.move_to_end(key)
+    return hit[1], hit[2], hit[3]
+
+
 class UniformBirth:
     """UBM (§3.3). ``UniformBirth(cfg, sensor, scene, rng)(ctx) -> Births``; ``rng`` is unused (deterministic)."""
 
@@ -37,11 +71,8 @@ class UniformBirth:
         cfg.validate()
         self.cfg, self.sensor = cfg, sensor
         self.rule = FOVRule(cfg, sensor, scene)
-        nodes = grid_nodes(scene.bounds, cfg.d_u)
-        self.nodes = nodes[self.rule.static_mask(nodes)]  # in the workspace, not inside a building
-        self.m_all, self.P_all = build_components(
-            self.nodes, cfg.sigma_u**2 * np.eye(2), cfg.sigma_v_birth
-        )  # components built once, selected per scan
+        # the grid and its components, built once per scene and setting in a process, selected per scan
+        self.nodes, self.m_all, self.P_all = _grid(scene, self.rule, cfg)
 
     def __call__(self, ctx: BirthContext) -> Births:
         """Grid nodes passing the FOV-only rule (``ubm_extent = fov``; ``workspace`` skips the FOV test)."""

@@ -11,6 +11,8 @@ kernels (:mod:`soabench.cache`).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from soabench.cache import configure_numba_cache
@@ -80,3 +82,44 @@ def greedy_dedup(x, y, d_dup):  # pragma: no cover - compiled
                 if dx * dx + dy * dy < dd:
                     keep[j] = False
     return keep
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Bridson's Poisson-disk sampler (soabench.birth.sampling.poisson_disk): the background grid's look-ups and the
+# acceptance, with the random draws and the region test left to the caller (numpy's generator, GEOS)
+
+
+@njit(cache=True)
+def _is_free(P, grid, x0, y0, cell, d2, qx, qy):  # pragma: no cover - compiled
+    """No accepted sample within d_min of (qx, qy): the 5 x 5 cells around its cell of the padded grid."""
+    ci = np.int64(math.floor((qx - x0) / cell)) + 2
+    cj = np.int64(math.floor((qy - y0) / cell)) + 2
+    for di in range(-2, 3):
+        for dj in range(-2, 3):
+            j = grid[ci + di, cj + dj]
+            if j >= 0:
+                dx = P[j, 0] - qx
+                dy = P[j, 1] - qy
+                if dx * dx + dy * dy < d2:
+                    return False
+    return True
+
+
+@njit(cache=True)
+def poisson_accept(P, n, grid, x0, y0, cell, qx, qy):  # pragma: no cover - compiled
+    """Store (qx, qy) as sample n and mark its grid cell; returns n + 1."""
+    ci = np.int64(math.floor((qx - x0) / cell)) + 2
+    cj = np.int64(math.floor((qy - y0) / cell)) + 2
+    grid[ci, cj] = n
+    P[n, 0] = qx
+    P[n, 1] = qy
+    return n + 1
+
+
+@njit(cache=True)
+def poisson_first_free(P, grid, x0, y0, cell, d2, qx, qy, ok, start):  # pragma: no cover - compiled
+    """Index of the first point i >= ``start`` with ``ok[i]`` and no sample within d_min, or -1."""
+    for i in range(start, qx.shape[0]):
+        if ok[i] and _is_free(P, grid, x0, y0, cell, d2, qx[i], qy[i]):
+            return i
+    return -1

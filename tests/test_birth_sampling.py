@@ -146,3 +146,15 @@ def test_dbscan_labels_core_border_noise():
     pts = np.concatenate([chain, pair, far_border])
     labels = dbscan_labels(pts, eps=1.0, min_samples=3)
     assert list(labels) == [0, 0, 0, 0, 0, 0, -1, -1, 0]
+
+
+def test_poisson_disk_known_answer():
+    """The sampler's output for one region and seed, recorded from the numpy implementation before its grid
+    look-ups were compiled (the same random draws and arithmetic: equal here to rounding, bit for bit on the
+    machine it was recorded on)."""
+    region = shapely.union(shapely.box(0, 0, 30, 10), shapely.box(50, 0, 60, 40))
+    pts = poisson_disk(region, 2.0, np.random.default_rng(7), 30)
+    assert len(pts) == 126
+    ref = [[53.83282806, 9.86596296], [50.00606405, 9.58410625], [52.26372701, 6.73952194], [52.16037016, 39.9927563]]
+    assert np.allclose(pts[[0, 1, 2, 63]], ref, rtol=0.0, atol=1e-8)
+    assert np.allclose(pts[-1], [25.71426395, 9.99727502], rtol=0.0, atol=1e-8)

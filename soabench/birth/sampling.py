@@ -21,9 +21,6 @@ from shapely.geometry.base import BaseGeometry
 
 from soabench.errors import require
 
-#: neighbour offsets of Bridson's background grid (cell d/sqrt 2: a point's d-disk spans at most 5 x 5 cells)
-_NEIGHBOURS = np.array([(i, j) for i in range(-2, 3) for j in range(-2, 3)])
-
 
 def uniform_points(region: BaseGeometry, n: int, rng: np.random.Generator, batch: int | None = None) -> np.ndarray:
     """``n`` i.i.d. uniform points in ``region`` by rejection from its bounding box; (n, 2).
@@ -51,7 +48,9 @@ def uniform_points(region: BaseGeometry, n: int, rng: np.random.Generator, batch
 def poisson_disk(region: BaseGeometry, d_min: float, rng: np.random.Generator, k: int = 30) -> np.ndarray:
     """Poisson-disk sample of ``region`` with minimum distance ``d_min`` (eq. 14), Bridson's algorithm; (J, 2).
 
-    * Background grid of cell d_min/sqrt(2): at most one sample per cell, neighbours within 2 cells.
+    * Background grid of cell d_min/sqrt(2): at most one sample per cell, neighbours within 2 cells (a point's
+      d_min-disk spans at most 5 x 5 cells); its look-ups and the acceptance are compiled
+      (:mod:`soabench.geometry_kernels`), the random draws and the test "in Omega" are numpy's and GEOS's.
     * Each active point draws ``k`` candidates uniformly in the annulus [d_min, 2 d_min]; the first candidate in
       Omega with no sample within d_min is accepted, else the point retires.
     * Omega may be disconnected (§3.1.4): when the active list empties, ``n_seed = 30 area / d_min^2`` uniform
@@ -62,62 +61,49 @@ def poisson_disk(region: BaseGeometry, d_min: float, rng: np.random.Generator, k
     require(d_min > 0, f"d_min = {d_min!r} must be > 0")
     if region.is_empty or region.area <= 0.0:
         return np.zeros((0, 2))
+    from soabench.geometry_kernels import poisson_accept, poisson_first_free
+
     shapely.prepare(region)
     x0, y0, x1, y1 = region.bounds
     cell = d_min / math.sqrt(2.0)
     nx, ny = int((x1 - x0) / cell) + 1, int((y1 - y0) / cell) + 1
-    # padded grid: index [i + 2, j + 2] so that neighbour look-ups never leave the array
+    # padded grid: index [i + 2, j + 2] so that neighbour look-ups never leave the array; at most one sample a cell
     grid = np.full((nx + 4, ny + 4), -1, dtype=np.int64)
-    store = {"P": np.empty((256, 2)), "n": 0}
+    P = np.empty(((nx + 4) * (ny + 4), 2))
+    n = 0
     d2 = d_min * d_min
+    geo = (x0, y0, cell)
 
-    def cell_of(q: np.ndarray) -> np.ndarray:
-        return np.floor((q - (x0, y0)) / cell).astype(np.int64) + 2
-
-    def free(q: np.ndarray) -> np.ndarray:
-        """(n,) no accepted sample within d_min of each row of q (n, 2)."""
-        c = cell_of(q)
-        nb = grid[c[:, None, 0] + _NEIGHBOURS[None, :, 0], c[:, None, 1] + _NEIGHBOURS[None, :, 1]]
-        near = store["P"][np.maximum(nb, 0)]
-        dist2 = np.sum((near - q[:, None, :]) ** 2, axis=-1)
-        return ~np.any((nb >= 0) & (dist2 < d2), axis=1)
-
-    def accept(q: np.ndarray) -> int:
-        i = store["n"]
-        if i == len(store["P"]):
-            store["P"] = np.concatenate([store["P"], np.empty_like(store["P"])])
-        c = cell_of(q[None])[0]
-        grid[c[0], c[1]] = i
-        store["P"][i] = q
-        store["n"] = i + 1
-        return i
-
-    def grow(seed: np.ndarray) -> None:
-        active = [accept(seed)]
+    def grow(n: int, sx: float, sy: float) -> int:
+        active = [n]
+        n = poisson_accept(P, n, grid, *geo, sx, sy)
         while active:
             a = active[int(rng.integers(len(active)))]
             rad = np.sqrt(rng.uniform(d2, 4.0 * d2, k))  # uniform in the annulus area
             ang = rng.uniform(0.0, 2.0 * np.pi, k)
-            cand = store["P"][a] + np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
-            ok = (cand[:, 0] >= x0) & (cand[:, 0] <= x1) & (cand[:, 1] >= y0) & (cand[:, 1] <= y1)
-            ok[ok] = shapely.contains_xy(region, cand[ok, 0], cand[ok, 1])
-            ok[ok] = free(cand[ok])
-            if ok.any():
-                active.append(accept(cand[int(np.argmax(ok))]))
+            cx = P[a, 0] + rad * np.cos(ang)
+            cy = P[a, 1] + rad * np.sin(ang)
+            inside = shapely.contains_xy(region, cx, cy)  # in Omega (so inside its bounds and the grid)
+            i = poisson_first_free(P, grid, *geo, d2, cx, cy, inside, 0)  # the first free candidate, if any
+            if i >= 0:
+                active.append(n)
+                n = poisson_accept(P, n, grid, *geo, cx[i], cy[i])
             else:
                 active.remove(a)
+        return n
 
     n_seed = max(1, int(math.ceil(30.0 * region.area / d2)))
     seeds = uniform_points(region, n_seed, rng)
+    sx, sy = seeds[:, 0].copy(), seeds[:, 1].copy()
+    every = np.ones(len(seeds), dtype=bool)
     pos = 0
-    while pos < len(seeds):  # a seed that is not free stays not free: each is checked once, in chunks
-        ok = np.flatnonzero(free(seeds[pos : pos + 512]))
-        if len(ok) == 0:
-            pos += 512
-            continue
-        grow(seeds[pos + ok[0]])
-        pos += int(ok[0]) + 1
-    return store["P"][: store["n"]].copy()
+    while pos < len(seeds):  # a seed that is not free stays not free: each is checked once, in order
+        i = poisson_first_free(P, grid, *geo, d2, sx, sy, every, pos)
+        if i < 0:
+            break
+        n = grow(n, sx[i], sy[i])
+        pos = i + 1
+    return P[:n].copy()
 
 
 def hex_lattice(region: BaseGeometry, pitch: float) -> np.ndarray:
