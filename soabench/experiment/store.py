@@ -151,10 +151,33 @@ def write_text_atomic(path: Path, text: str) -> None:
     write_bytes_atomic(path, text.encode("utf-8"))
 
 
+def _json_default(obj: Any) -> Any:
+    """What ``json`` cannot write itself, as :func:`to_jsonable` converts it (numpy scalars and arrays, paths)."""
+    return to_jsonable(obj)
+
+
+def _compact_json(obj: Any) -> str:
+    """``obj`` as compact JSON, the text of ``json.dumps(to_jsonable(obj), ...)``: json's C encoder walks the plain
+    values itself (a trial record holds hundreds of thousands of them) and asks :func:`to_jsonable` only for the
+    others. Mappings whose keys are not all str take the walk through :func:`to_jsonable` (json would write a bool
+    or None key differently)."""
+    if not _str_keys(obj):
+        return json.dumps(to_jsonable(obj), allow_nan=True, separators=(",", ":"))
+    return json.dumps(obj, allow_nan=True, separators=(",", ":"), default=_json_default)
+
+
+def _str_keys(obj: Any) -> bool:
+    """True if every dict in the nested dicts of ``obj`` has str keys (lists are not searched: records keep their
+    tables as lists of plain rows)."""
+    if isinstance(obj, dict):
+        return all(type(k) is str and _str_keys(v) for k, v in obj.items())
+    return True
+
+
 def write_json_atomic(path: Path, obj: Any, compact: bool = False) -> None:
     """``obj`` as JSON (``compact``: no indentation or spaces, for the large per-trial records)."""
     if compact:
-        text = json.dumps(to_jsonable(obj), allow_nan=True, separators=(",", ":"))
+        text = _compact_json(obj)
     else:
         text = json.dumps(to_jsonable(obj), indent=1, allow_nan=True)
     write_text_atomic(path, text + "\n")
