@@ -51,7 +51,8 @@ _CLI_RUSAGE = (
     "    rc = main()\n"
     "finally:\n"
     "    ru = [resource.getrusage(w).ru_maxrss for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]\n"
-    "    open(path, 'w').write(json.dumps(ru))\n"
+    "    import soabench\n"
+    "    open(path, 'w').write(json.dumps([*ru, soabench.__file__]))\n"
     "sys.exit(rc)\n"
 )
 
@@ -117,7 +118,9 @@ def run_command(cmd: list[str], env: dict, rusage_file: Path) -> tuple[float, in
     """Run ``cmd``; (wall s, largest tree RSS sum, largest tree PSS sum, ru_maxrss of the driver and of its
     largest worker) in bytes."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL)
+    # run in the run folder's parent: ``python -c`` puts the working directory first on sys.path, so a child started
+    # in a checkout would import that checkout's soabench whatever PYTHONPATH says
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, cwd=rusage_file.parent)
     peak = [0, 0]
     done = threading.Event()
 
@@ -134,7 +137,8 @@ def run_command(cmd: list[str], env: dict, rusage_file: Path) -> tuple[float, in
     th.join()
     if rc != 0:
         raise SystemExit(f"{' '.join(cmd)} failed with exit code {rc}")
-    driver, worker = json.loads(rusage_file.read_text())
+    driver, worker, package = json.loads(rusage_file.read_text())
+    print(f"the command imported soabench from {Path(package).parent}", file=sys.stderr)
     return wall, peak[0], peak[1], driver * 1024, worker * 1024
 
 
@@ -202,8 +206,10 @@ def main(argv=None) -> int:
         env["PYTHONPATH"] = str(args.pythonpath.resolve())
         with tempfile.TemporaryDirectory(prefix="soabench-warm-") as tmp:  # compile or load its kernels (untimed)
             warm = [sys.executable, "-c", _CLI, "run", "--net", args.net, "--trials", "1", "--duration", "5"]
-            subprocess.run([*warm, "--workers", "1", "--no-progress", "--out", f"{tmp}/run"], env=env, check=True)
-    out = args.out or Path(tempfile.mkdtemp(prefix="soabench-protocol-")) / "run"
+            subprocess.run(
+                [*warm, "--workers", "1", "--no-progress", "--out", f"{tmp}/run"], env=env, check=True, cwd=tmp
+            )
+    out = (args.out or Path(tempfile.mkdtemp(prefix="soabench-protocol-")) / "run").resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     rusage_file = out.parent / f"{out.name}.rusage.json"
     cmd = [sys.executable, "-c", _CLI_RUSAGE, str(rusage_file), "run", "--net", args.net, "--trials", str(args.trials)]
