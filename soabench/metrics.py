@@ -478,6 +478,7 @@ def _matchings_compiled(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_matchings` for p = 1 as one compiled call: Est_k of every scan stacked (the FOV test of
     :func:`estimate_positions` over all of them at once, each with its scan's pose)."""
+    from soabench.gmphd.notice import announced
     from soabench.metrics_kernels import run_matchings
 
     X = [_points(res.X) for res in results]
@@ -493,7 +494,8 @@ def _matchings_compiled(
     G = np.ascontiguousarray(scans.truth_xy, dtype=float)
     E = np.ascontiguousarray(E, dtype=float)
     args = (float(cfg.d_gate), float(GATE_COST), float(cfg.ospa_c), float(cfg.gospa_c))
-    tp, assoc, ospa_parts, gospa_parts, redo = run_matchings(E, e_off, G, np.ascontiguousarray(gt, dtype=bool), *args)
+    gt_c = np.ascontiguousarray(gt, dtype=bool)
+    tp, assoc, ospa_parts, gospa_parts, redo = announced("metrics", run_matchings, E, e_off, G, gt_c, *args)
     for k in np.flatnonzero(redo):  # coinciding points: scipy's choice among the optimal assignments (_matchings)
         gt_idx = np.flatnonzero(gt[k])
         Gk, Ek = G[k, gt_idx], E[e_off[k] : e_off[k + 1]]

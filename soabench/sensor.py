@@ -411,13 +411,16 @@ def segment_meets_convex(ego_xy: np.ndarray, points: np.ndarray, polygons: Seque
     if len(points) == 0 or len(polygons) == 0:
         return np.zeros(len(points), dtype=bool)
     from soabench.geometry_kernels import segments_meet_convex
+    from soabench.gmphd.notice import announced
 
     e = np.asarray(ego_xy, dtype=float)
     counts = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))
     starts = np.zeros_like(counts)
     np.cumsum(counts[:-1], out=starts[1:])
     v = np.concatenate(polygons).astype(float, copy=False)
-    return segments_meet_convex(
+    return announced(
+        "geometry.segments",
+        segments_meet_convex,
         float(e[0]),
         float(e[1]),
         points[:, 0].copy(),

@@ -14,6 +14,7 @@ Four placements, each a pure function of the region (shapely geometry) and, wher
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import shapely
@@ -62,6 +63,10 @@ def poisson_disk(region: BaseGeometry, d_min: float, rng: np.random.Generator, k
     if region.is_empty or region.area <= 0.0:
         return np.zeros((0, 2))
     from soabench.geometry_kernels import poisson_accept, poisson_first_free
+    from soabench.gmphd.notice import announced, ready
+
+    if not ready("geometry.poisson"):  # the kernels' first call in a process may compile them
+        announced("geometry.poisson", _warm_poisson, poisson_accept, poisson_first_free)
 
     shapely.prepare(region)
     x0, y0, x1, y1 = region.bounds
@@ -104,6 +109,13 @@ def poisson_disk(region: BaseGeometry, d_min: float, rng: np.random.Generator, k
         n = grow(n, sx[i], sy[i])
         pos = i + 1
     return P[:n].copy()
+
+
+def _warm_poisson(accept: Callable[..., int], first_free: Callable[..., int]) -> None:
+    """Call the sampler's two kernels once on a one-cell grid (compiles or loads them)."""
+    P, grid = np.zeros((1, 2)), np.full((5, 5), -1, dtype=np.int64)
+    accept(P, 0, grid, 0.0, 0.0, 1.0, 0.5, 0.5)
+    first_free(P, grid, 0.0, 0.0, 1.0, 1.0, np.array([0.5]), np.array([0.5]), np.ones(1, dtype=bool), 0)
 
 
 def hex_lattice(region: BaseGeometry, pitch: float) -> np.ndarray:

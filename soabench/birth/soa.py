@@ -124,8 +124,9 @@ def dedup(xy: np.ndarray, d_dup: float) -> np.ndarray:
     if len(xy) < 2:
         return np.ones(len(xy), dtype=bool)
     from soabench.geometry_kernels import greedy_dedup  # compiled: one pass over the pairs
+    from soabench.gmphd.notice import announced
 
-    return greedy_dedup(xy[:, 0].copy(), xy[:, 1].copy(), float(d_dup))
+    return announced("geometry.dedup", greedy_dedup, xy[:, 0].copy(), xy[:, 1].copy(), float(d_dup))
 
 
 def visible_obstacles(obstacles: Obstacles, ego: np.ndarray, sensor: SensorConfig) -> np.ndarray:

@@ -2,22 +2,25 @@
 pause.
 
 The GM-PHD kernels (:mod:`soabench.gmphd.kernels`, :mod:`soabench.gmphd.cycle`) are compiled by numba on their
-first call after installation (tens of seconds) and loaded from numba's cache afterwards (about a second). The
-first filter step of each kind (fused or array path, with or without newborn terms) in a process runs inside
-:func:`first_use_notice`: if it has not returned after ``delay`` seconds, one line says what is happening (once
-per process). A step that loads cached code in time prints nothing.
+first call after installation (tens of seconds) and loaded from numba's cache afterwards (about a second); so are
+the metric and scan-geometry kernels (:mod:`soabench.metrics_kernels`, :mod:`soabench.geometry_kernels`, seconds).
+The first filter step of each kind (fused or array path, with or without newborn terms) and the first call of each
+of the others in a process run inside :func:`first_use_notice` (:func:`announced`): if it has not returned after
+``delay`` seconds, one line says what is happening (once per process). A call that loads cached code in time prints
+nothing.
 """
 
 from __future__ import annotations
 
 import sys
 import threading
-from collections.abc import Hashable, Iterator
+from collections.abc import Callable, Hashable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
 MESSAGE = (
-    "soabench: compiling the GM-PHD filter kernels with numba (once after installation, one to two minutes; "
-    "cached afterwards) ..."
+    "soabench: compiling the GM-PHD filter, metric and scan-geometry kernels with numba (once after installation, "
+    "one to two minutes; cached afterwards) ..."
 )
 DELAY = 3.0  #: seconds of silence before the notice (loading cached kernels takes about 1.5 s)
 _done: set[Hashable] = set()
@@ -47,3 +50,12 @@ def first_use_notice(key: Hashable, delay: float | None = None) -> Iterator[None
     finally:
         timer.cancel()
         _done.add(key)
+
+
+def announced(key: Hashable, fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)``, inside :func:`first_use_notice` until a call of kind ``key`` has completed in this process
+    (the compiled metric and scan-geometry kernels: their first call may compile them)."""
+    if key in _done:
+        return fn(*args)
+    with first_use_notice(key):
+        return fn(*args)
