@@ -456,16 +456,32 @@ def _matchings(
     ospa_parts = np.zeros((K, 3))
     gospa_parts = np.zeros((K, 4))
     for k, (scan, res) in enumerate(zip(scans.scans, results, strict=True)):
-        gt_idx = np.flatnonzero(gt[k])
-        G = scans.truth_xy[k, gt_idx]
         E = estimate_positions(res.X, scan.ego, sensor_cfg, cfg.gt_set)
-        D = pairwise_distances(_points(E), _points(G))  # once for the three matchings of the step
-        pairs = gated_assignment(E, G, cfg.d_gate, D)
-        assoc[k, gt_idx[pairs[:, 1]]] = True
-        ospa_parts[k] = ospa(E, G, cfg.ospa_c, cfg.ospa_p, D)
-        gospa_parts[k] = gospa(G, E, cfg.gospa_c, cfg.gospa_p, D.T)
-        s["n_gt"][k], s["n_est"][k], s["tp"][k] = len(G), len(E), len(pairs)
+        s["tp"][k] = _score_scan(k, E, scans.truth_xy, gt, cfg, assoc, ospa_parts, gospa_parts)
+        s["n_gt"][k], s["n_est"][k] = gt[k].sum(), len(E)
     return assoc, ospa_parts, gospa_parts
+
+
+def _score_scan(
+    k: int,
+    E: np.ndarray,
+    truth_xy: np.ndarray,
+    gt: np.ndarray,
+    cfg: MetricsConfig,
+    assoc: np.ndarray,
+    ospa_parts: np.ndarray,
+    gospa_parts: np.ndarray,
+) -> int:
+    """Scan k's gated matching, OSPA and GOSPA with numpy and scipy: fills row k of ``assoc``, ``ospa_parts`` and
+    ``gospa_parts``; returns the number of gated pairs (TP)."""
+    gt_idx = np.flatnonzero(gt[k])
+    G = truth_xy[k, gt_idx]
+    D = pairwise_distances(_points(E), _points(G))  # once for the three matchings of the step
+    pairs = gated_assignment(E, G, cfg.d_gate, D)
+    assoc[k, gt_idx[pairs[:, 1]]] = True
+    ospa_parts[k] = ospa(E, G, cfg.ospa_c, cfg.ospa_p, D)
+    gospa_parts[k] = gospa(G, E, cfg.gospa_c, cfg.gospa_p, D.T)
+    return len(pairs)
 
 
 def _matchings_compiled(
@@ -497,14 +513,7 @@ def _matchings_compiled(
     gt_c = np.ascontiguousarray(gt, dtype=bool)
     tp, assoc, ospa_parts, gospa_parts, redo = announced("metrics", run_matchings, E, e_off, G, gt_c, *args)
     for k in np.flatnonzero(redo):  # coinciding points: scipy's choice among the optimal assignments (_matchings)
-        gt_idx = np.flatnonzero(gt[k])
-        Gk, Ek = G[k, gt_idx], E[e_off[k] : e_off[k + 1]]
-        D = pairwise_distances(Ek, Gk)
-        pairs = gated_assignment(Ek, Gk, cfg.d_gate, D)
-        assoc[k, gt_idx[pairs[:, 1]]] = True
-        tp[k] = len(pairs)
-        ospa_parts[k] = ospa(Ek, Gk, cfg.ospa_c, cfg.ospa_p, D)
-        gospa_parts[k] = gospa(Gk, Ek, cfg.gospa_c, cfg.gospa_p, D.T)
+        tp[k] = _score_scan(k, E[e_off[k] : e_off[k + 1]], G, gt, cfg, assoc, ospa_parts, gospa_parts)
     s["n_gt"][:] = gt.sum(axis=1)
     s["n_est"][:] = counts
     s["tp"][:] = tp
