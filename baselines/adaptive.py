@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from soabench.baselines.partially_uniform import inverse_measurement_terms
+from soabench.baselines.partially_uniform import inverse_measurement_terms, scan_inverse_terms
 from soabench.birth.base import SOURCE_MEAS, BirthContext, Births, FOVRule, NewbornTerms
 from soabench.config import BirthConfig, SensorConfig
 from soabench.errors import require
@@ -92,7 +92,7 @@ class AdaptiveBirth:
         M = len(Z)
         if M == 0:
             return births
-        m, P = inverse_measurement_terms(Z, scan.ego, self.sensor, cfg.sigma_v_birth)
+        m, P = scan_inverse_terms(scan, self.sensor, cfg.sigma_v_birth)
         scale = 1.0 if cfg.atbm_raw_mass else ctx.p_D_b * self.q_b
         N_hat = cfg.N_hat
 

@@ -22,6 +22,7 @@ from soabench.birth.base import BirthContext, Births, NewbornTerms, build_compon
 from soabench.config import BirthConfig, SensorConfig
 from soabench.geometry import fov_area, inverse_measurement_cov, measurement_volume, polar_to_world
 from soabench.scenario.scene import SceneMap
+from soabench.types import Scan
 
 
 def inverse_measurement_terms(
@@ -30,6 +31,25 @@ def inverse_measurement_terms(
     """(m, P) of the newborn of each measurement: inverse-measurement mean and blkdiag(J R J^T, sigma_v^2 I) (§3.2)."""
     Z = np.asarray(Z, dtype=float).reshape(-1, 2)
     return build_components(polar_to_world(Z, ego), inverse_measurement_cov(Z, ego, sensor), sigma_v)
+
+
+def scan_inverse_terms(scan: Scan, sensor: SensorConfig, sigma_v: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`inverse_measurement_terms` of the scan's own Z_k and pose, computed once per scan for every run that
+    asks (PUBM and ATBM, static and dynamic: the same values, docs/method.md §5.8) and kept read-only on the scan
+    (:meth:`soabench.types.Scan.once`); computed here for a scan that cannot keep it."""
+
+    def make() -> tuple[np.ndarray, np.ndarray]:
+        m, P = inverse_measurement_terms(scan.Z, scan.ego, sensor, sigma_v)
+        m.setflags(write=False)
+        P.setflags(write=False)
+        return m, P
+
+    once = getattr(scan, "once", None)
+    if once is None:
+        return make()
+    key = ("birth.inverse_terms", id(scan.Z), id(scan.ego), float(sensor.sigma_r), float(sensor.sigma_b))
+    key += (float(sigma_v),)
+    return once(key, lambda: (*make(), scan.Z, scan.ego))[:2]  # held with Z and ego: their ids stay theirs
 
 
 class PartiallyUniformBirth:
@@ -52,7 +72,7 @@ class PartiallyUniformBirth:
         Z = np.asarray(scan.Z, dtype=float).reshape(-1, 2)
         if len(Z) == 0:
             return births
-        m, P = inverse_measurement_terms(Z, scan.ego, self.sensor, self.cfg.sigma_v_birth)
+        m, P = scan_inverse_terms(scan, self.sensor, self.cfg.sigma_v_birth)
         if self.cfg.pubm_space == "meas":
             beta = np.full(len(Z), ctx.p_D_b * self.w_PU / measurement_volume(self.sensor))
         else:

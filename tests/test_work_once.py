@@ -261,3 +261,27 @@ def test_a_second_session_of_the_same_name_is_kept_and_sorts_after(tmp_path):
     for i in range(3):
         store.write_session("20261123T000000Z-1", {"i": i})
     assert [s["i"] for s in store.sessions()] == [0, 1, 2]
+
+
+def test_inverse_measurement_terms_once_per_scan():
+    """PUBM and ATBM (static and dynamic) read one set of inverse-measurement newborn terms per scan: the same values
+    as computing them anew, read-only, and a setting that changes them keys another set."""
+    import numpy as np
+
+    from soabench.baselines.partially_uniform import inverse_measurement_terms, scan_inverse_terms
+    from soabench.config import SensorConfig
+    from soabench.types import Obstacles, Scan
+
+    sensor = SensorConfig()
+    Z = np.array([[10.0, 0.3], [25.0, -2.0], [3.0, 3.1]])
+    scan = Scan(4, 4.0, np.array([1.0, -2.0, 0.7]), Z, Obstacles.empty(), [], None)
+    m, P = scan_inverse_terms(scan, sensor, 0.8)
+    m_ref, P_ref = inverse_measurement_terms(Z, scan.ego, sensor, 0.8)
+    assert np.array_equal(m, m_ref) and np.array_equal(P, P_ref)
+    again = scan_inverse_terms(scan, sensor, 0.8)
+    assert again[0] is m and again[1] is P and not m.flags.writeable and not P.flags.writeable
+    other = scan_inverse_terms(scan, dataclasses.replace(sensor, sigma_r=2.0), 0.8)
+    assert not np.array_equal(other[1], P)
+    assert np.array_equal(
+        scan_inverse_terms(scan, sensor, 1.5)[1], inverse_measurement_terms(Z, scan.ego, sensor, 1.5)[1]
+    )
