@@ -123,3 +123,61 @@ def poisson_first_free(P, grid, x0, y0, cell, d2, qx, qy, ok, start):  # pragma:
         if ok[i] and _is_free(P, grid, x0, y0, cell, d2, qx[i], qy[i]):
             return i
     return -1
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# S-OA's occlusion layers (soabench.birth.soa.occlusion_layers, eqs. 9-11): the arithmetic after numpy's cos and sin
+
+
+@njit(cache=True)
+def occlusion_layer_arrays(ex, ey, c, s, rb, layers, sp2, sq2, speed, prior):  # pragma: no cover - compiled
+    """Means, covariances, velocity means and ranges of the occlusion components, obstacle-major, then ray, then
+    layer: r = r_b + l delta_r, p = e + r u, P = sigma_par^2 u u^T + sigma_perp^2 u_perp u_perp^T with
+    u = (c, s) = (cos theta_b, sin theta_b) and u_perp = (-s, c); v = speed x side x u_perp (side -1 at theta_min,
+    +1 at theta_max) if ``prior``, else 0. The same operations, in the same order, as the numpy form."""
+    N = c.shape[0]
+    L = layers.shape[0]
+    J = N * 2 * L
+    p = np.empty((J, 2))
+    P = np.empty((J, 2, 2))
+    v = np.zeros((J, 2))
+    r = np.empty(J)
+    i = 0
+    for j in range(N):
+        for b in range(2):
+            cj, sj = c[j, b], s[j, b]
+            ns = -sj
+            p00 = sp2 * (cj * cj) + sq2 * (ns * ns)
+            p01 = sp2 * (cj * sj) + sq2 * (ns * cj)
+            p10 = sp2 * (sj * cj) + sq2 * (cj * ns)
+            p11 = sp2 * (sj * sj) + sq2 * (cj * cj)
+            side = speed * (-1.0 if b == 0 else 1.0)
+            for lay in range(L):
+                rr = rb[j, b] + layers[lay]
+                r[i] = rr
+                p[i, 0] = ex + rr * cj
+                p[i, 1] = ey + rr * sj
+                P[i, 0, 0], P[i, 0, 1], P[i, 1, 0], P[i, 1, 1] = p00, p01, p10, p11
+                if prior:
+                    v[i, 0] = side * ns
+                    v[i, 1] = side * cj
+                i += 1
+    return p, P, v, r
+
+
+@njit(cache=True)
+def convex_contains(vx, vy, starts, counts, ex, ey, tol):  # pragma: no cover - compiled
+    """(N,) True where (ex, ey) is inside or on convex polygon j (either winding): the cross products of every edge
+    with the point share one sign within ``tol`` (:func:`soabench.birth.soa.ego_inside`)."""
+    N = starts.shape[0]
+    out = np.empty(N, dtype=np.bool_)
+    for j in range(N):
+        s0, n = starts[j], counts[j]
+        lo, hi = np.inf, -np.inf
+        for a in range(n):
+            b = s0 + a + 1 if a + 1 < n else s0
+            cross = (vx[b] - vx[s0 + a]) * (ey - vy[s0 + a]) - (vy[b] - vy[s0 + a]) * (ex - vx[s0 + a])
+            lo = min(lo, cross)
+            hi = max(hi, cross)
+        out[j] = lo >= -tol or hi <= tol
+    return out

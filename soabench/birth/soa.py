@@ -56,25 +56,24 @@ DBSCAN_GRID = 0.5
 def ego_inside(polygons: list[np.ndarray], e: np.ndarray) -> np.ndarray:
     """(N,) True where the sensor position ``e`` is inside or on convex polygon j (§3.1.2: skip such obstacles, T15).
 
-    One vectorised pass over all edges: ``e`` is inside a convex polygon iff the cross products of every edge with
-    ``e`` share one sign (zero allowed), whatever the winding.
+    ``e`` is inside a convex polygon iff the cross products of every edge with ``e`` share one sign (zero allowed,
+    within 1e-12 of the largest coordinate), whatever the winding: one compiled pass over all edges
+    (:func:`soabench.geometry_kernels.convex_contains`).
     """
     N = len(polygons)
     if N == 0:
         return np.zeros(0, dtype=bool)
-    n = np.array([len(v) for v in polygons])
+    from soabench.geometry_kernels import convex_contains
+    from soabench.gmphd.notice import announced
+
     V = np.concatenate([np.asarray(v, dtype=float).reshape(-1, 2) for v in polygons])
-    start = np.concatenate([[0], np.cumsum(n)[:-1]])
-    idx = np.arange(len(V))
-    nxt = idx + 1
-    nxt[np.cumsum(n) - 1] = start  # each polygon's last vertex closes to its first
-    edge = V[nxt] - V
-    to_e = np.asarray(e, dtype=float)[:2] - V
-    cross = edge[:, 0] * to_e[:, 1] - edge[:, 1] * to_e[:, 0]
+    counts = np.fromiter((len(v) for v in polygons), dtype=np.int64, count=N)
+    starts = np.zeros(N, dtype=np.int64)
+    np.cumsum(counts[:-1], out=starts[1:])
     tol = 1e-12 * max(1.0, float(np.abs(V).max()))
-    lo = np.minimum.reduceat(cross, start)
-    hi = np.maximum.reduceat(cross, start)
-    return (lo >= -tol) | (hi <= tol)
+    e = np.asarray(e, dtype=float)
+    x, y = V[:, 0].copy(), V[:, 1].copy()
+    return announced("geometry.convex", convex_contains, x, y, starts, counts, float(e[0]), float(e[1]), tol)
 
 
 def occlusion_layers(
@@ -103,19 +102,26 @@ def occlusion_layers(
     else:
         rb = np.column_stack([obstacles.r_min, obstacles.r_max])[keep]
     layers = cfg.delta_r * np.arange(1, cfg.L + 1)
-    r = rb[:, :, None] + layers[None, None, :]  # (N', 2, L)
-    u = np.stack([np.cos(theta), np.sin(theta)], axis=-1)  # (N', 2, 2): u(theta_b)
-    u_perp = np.stack([-u[..., 1], u[..., 0]], axis=-1)
-    p = e[:2] + r[..., None] * u[:, :, None, :]  # (N', 2, L, 2)
-    uu = u[..., :, None] * u[..., None, :]
-    vv = u_perp[..., :, None] * u_perp[..., None, :]
-    P2 = cfg.sigma_par**2 * uu + cfg.sigma_perp**2 * vv  # (N', 2, 2, 2): per obstacle and ray
-    P_p = np.broadcast_to(P2[:, :, None], (*r.shape, 2, 2))
-    v = np.zeros_like(p)
-    if cfg.occl_velocity_prior:
-        side = np.array([-1.0, 1.0])[None, :, None]  # out of the cone: clockwise of theta_min, CCW of theta_max
-        v = np.broadcast_to((OCCL_SPEED * side)[..., None] * u_perp[:, :, None, :], p.shape)
-    return p.reshape(-1, 2), P_p.reshape(-1, 2, 2), np.asarray(v).reshape(-1, 2), r.reshape(-1)
+    # u(theta_b) = (cos, sin) by numpy; r = r_b + l delta_r, p = e + r u, P_p = sigma_par^2 u u^T + sigma_perp^2
+    # u_perp u_perp^T with u_perp = (-sin, cos), and the velocity prior (out of the cone: clockwise of theta_min,
+    # counter-clockwise of theta_max) in one compiled pass (soabench.geometry_kernels.occlusion_layer_arrays)
+    from soabench.geometry_kernels import occlusion_layer_arrays
+    from soabench.gmphd.notice import announced
+
+    return announced(
+        "geometry.layers",
+        occlusion_layer_arrays,
+        float(e[0]),
+        float(e[1]),
+        np.ascontiguousarray(np.cos(theta)),
+        np.ascontiguousarray(np.sin(theta)),
+        np.ascontiguousarray(rb, dtype=float),
+        layers,
+        float(cfg.sigma_par**2),
+        float(cfg.sigma_perp**2),
+        float(OCCL_SPEED),
+        bool(cfg.occl_velocity_prior),
+    )
 
 
 def dedup(xy: np.ndarray, d_dup: float) -> np.ndarray:
