@@ -246,8 +246,9 @@ def make_row(
 def episode_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
     """One row of :data:`EPISODE_KEYS` per delay episode."""
     base = key.as_dict()
-    rows = [{**base, **dataclasses.asdict(e)} for e in metrics.episodes]
-    return [{k: _scalar(r[k]) for k in EPISODE_KEYS} for r in rows]
+    head = {k: _scalar(base[k]) for k in EPISODE_KEYS if k in base}
+    own = [k for k in EPISODE_KEYS if k not in base]  # the Episode's fields: scalars, read as they are
+    return [{**head, **{k: _scalar(getattr(e, k)) for k in own}} for e in metrics.episodes]
 
 
 def step_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
