@@ -494,8 +494,8 @@ def _matchings_compiled(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_matchings` for p = 1 as one compiled call: Est_k of every scan stacked (the FOV test of
     :func:`estimate_positions` over all of them at once, each with its scan's pose)."""
-    from soabench.gmphd.notice import announced
     from soabench.metrics_kernels import run_matchings
+    from soabench.notice import announced
 
     X = [_points(res.X) for res in results]
     counts = np.fromiter((len(x) for x in X), dtype=np.int64, count=len(X))

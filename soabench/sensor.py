@@ -411,7 +411,7 @@ def segment_meets_convex(ego_xy: np.ndarray, points: np.ndarray, polygons: Seque
     if len(points) == 0 or len(polygons) == 0:
         return np.zeros(len(points), dtype=bool)
     from soabench.geometry_kernels import segments_meet_convex
-    from soabench.gmphd.notice import announced
+    from soabench.notice import announced
 
     e = np.asarray(ego_xy, dtype=float)
     counts = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))

@@ -206,7 +206,7 @@ def test_fused_ukf_with_a_non_positive_definite_covariance_takes_the_array_path(
 def test_first_use_notice_is_one_line_once(capsys):
     import time
 
-    from soabench.gmphd import notice
+    from soabench import notice
 
     notice._printed.clear()
     with notice.first_use_notice("test-slow", delay=0.01):

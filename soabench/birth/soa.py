@@ -64,7 +64,7 @@ def ego_inside(polygons: list[np.ndarray], e: np.ndarray) -> np.ndarray:
     if N == 0:
         return np.zeros(0, dtype=bool)
     from soabench.geometry_kernels import convex_contains
-    from soabench.gmphd.notice import announced
+    from soabench.notice import announced
 
     V = np.concatenate([np.asarray(v, dtype=float).reshape(-1, 2) for v in polygons])
     counts = np.fromiter((len(v) for v in polygons), dtype=np.int64, count=N)
@@ -106,7 +106,7 @@ def occlusion_layers(
     # u_perp u_perp^T with u_perp = (-sin, cos), and the velocity prior (out of the cone: clockwise of theta_min,
     # counter-clockwise of theta_max) in one compiled pass (soabench.geometry_kernels.occlusion_layer_arrays)
     from soabench.geometry_kernels import occlusion_layer_arrays
-    from soabench.gmphd.notice import announced
+    from soabench.notice import announced
 
     return announced(
         "geometry.layers",
@@ -130,7 +130,7 @@ def dedup(xy: np.ndarray, d_dup: float) -> np.ndarray:
     if len(xy) < 2:
         return np.ones(len(xy), dtype=bool)
     from soabench.geometry_kernels import greedy_dedup  # compiled: one pass over the pairs
-    from soabench.gmphd.notice import announced
+    from soabench.notice import announced
 
     return announced("geometry.dedup", greedy_dedup, xy[:, 0].copy(), xy[:, 1].copy(), float(d_dup))
 

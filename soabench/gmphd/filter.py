@@ -25,10 +25,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from soabench import notice
 from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
-from soabench.gmphd import cycle, notice, reduction
+from soabench.gmphd import cycle, reduction
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
