@@ -183,7 +183,7 @@ class Obstacles:
 
 
 class DeferredRegion:
-    """A region computed only when read (docs/method.md §5.8): what a :class:`Scan` may hold as its
+    """A region computed only when read (docs/method.md §3.1.4): what a :class:`Scan` may hold as its
     ``visible_region`` instead of the geometry itself.
 
     :meth:`build` returns the geometry; :meth:`contains_xy` answers which points lie in its interior without
