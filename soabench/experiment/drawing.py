@@ -20,7 +20,7 @@ import contextlib
 import json
 import os
 import tempfile
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -92,14 +92,43 @@ def load_arrays(path: str, run_dir: str) -> Any:
 
     from soabench.experiment.tables import RunTables
 
-    parts: dict[str, dict] = {part: {} for part in _PARTS}
-    with np.load(path, allow_pickle=False) as z:
-        meta = json.loads(str(z["meta"]))
-        for key in z.files:
-            part, _, col = key.partition("/")
-            if col:
-                parts[part][col] = z[key]
+    parts: dict[str, Any] = {part: {} for part in _PARTS}
+    z = np.load(path, allow_pickle=False)
+    meta = json.loads(str(z["meta"]))
+    steps = []
+    for key in z.files:
+        part, _, col = key.partition("/")
+        if part == "steps":
+            steps.append(col)
+        elif col:
+            parts[part][col] = z[key]
+    parts["steps"] = _NpzColumns(z, "steps/", steps)
     return RunTables(meta=meta, run_dir=Path(run_dir), **parts)
+
+
+class _NpzColumns(Mapping[str, Any]):
+    """The step table's columns in an open ``.npz`` file, each read on first use: a worker drawing one figure reads
+    the few columns it plots, not all of a study folder's hundreds of thousands of rows (memory per worker)."""
+
+    def __init__(self, z: Any, prefix: str, columns: list[str]) -> None:
+        self._z, self._prefix, self._names = z, prefix, columns
+        self._read: dict[str, Any] = {}
+
+    def __getitem__(self, key: str) -> Any:
+        if key not in self._read:
+            if key not in self._names:
+                raise KeyError(key)
+            self._read[key] = self._z[self._prefix + key]
+        return self._read[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._names
 
 
 def _tables(batch: FigureBatch) -> Any:
