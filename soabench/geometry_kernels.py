@@ -22,6 +22,16 @@ configure_numba_cache()  # before numba is imported: compiled kernels go to the 
 from numba import njit  # noqa: E402
 
 
+def flat_polygons(polygons) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The (n_i, 2) vertex arrays of ``polygons`` as the kernels take them: x and y of every vertex one polygon after
+    another, and each polygon's start and vertex count."""
+    counts = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))
+    starts = np.zeros_like(counts)
+    np.cumsum(counts[:-1], out=starts[1:])
+    v = np.concatenate([np.asarray(p, dtype=float).reshape(-1, 2) for p in polygons])
+    return v[:, 0].copy(), v[:, 1].copy(), starts, counts
+
+
 @njit(cache=True)
 def segments_meet_convex(ex, ey, px, py, vx, vy, starts, counts):  # pragma: no cover - compiled
     """(n,) True where the closed segment from the sensor (ex, ey) to point i meets any closed convex polygon.

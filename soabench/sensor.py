@@ -260,23 +260,15 @@ def shadow_polygons(ego_xy: np.ndarray, obstacles: Obstacles, r_far: float) -> n
     edge facing the sensor and the hull adds nothing in front of the obstacle. (An arc at r_far alone would, when a
     tangent point lies beyond r_far, also cover visible ground in front of a large building.)
     """
-    return _shadows(ego_xy, obstacles.polygons, obstacles.theta_min, obstacles.theta_max, r_far)
-
-
-def _shadows(
-    ego_xy: np.ndarray, polygons: Sequence[np.ndarray], theta_min: np.ndarray, theta_max: np.ndarray, r_far: float
-) -> np.ndarray:
-    """:func:`shadow_polygons` of the obstacles given by their vertex arrays and tangent rays (each independent of
-    the others)."""
-    if len(polygons) == 0:
+    n_obs = len(obstacles)
+    if n_obs == 0:
         return np.zeros(0, dtype=object)
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
-    theta_min = np.asarray(theta_min, dtype=float)
-    verts = _padded(polygons)
+    verts = _padded(obstacles.polygons)
     reach = np.maximum(r_far, np.hypot(*(verts - ego_xy).transpose(2, 0, 1)).max(axis=1))
-    width = np.mod(np.asarray(theta_max, dtype=float) - theta_min, 2.0 * np.pi)
+    width = np.mod(obstacles.theta_max - obstacles.theta_min, 2.0 * np.pi)
     s = np.linspace(0.0, 1.0, _SHADOW_ARC_POINTS)
-    phi = theta_min[:, None] + width[:, None] * s[None, :]
+    phi = obstacles.theta_min[:, None] + width[:, None] * s[None, :]
     radius = (reach * (1.0 + 1e-9) + 1e-6) / np.cos(0.5 * width / (_SHADOW_ARC_POINTS - 1))
     far = ego_xy + radius[:, None, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
     return shapely.convex_hull(shapely.multipoints(np.concatenate([verts, far], axis=1)))
@@ -327,7 +319,7 @@ _SURE = 1e-9
 
 
 class VisibleRegion(DeferredRegion):
-    """Omega_k of one scan (§3.1.4), built only when read (docs/method.md §5.8): what the sensor puts in
+    """Omega_k of one scan (§3.1.4), built only when read (docs/method.md §3.1.4): what the sensor puts in
     ``Scan.visible_region``.
 
     :meth:`build` is :func:`visible_region` (the same polygon overlay, bit for bit). :meth:`contains_xy` answers
@@ -410,26 +402,14 @@ def segment_meets_convex(ego_xy: np.ndarray, points: np.ndarray, polygons: Seque
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if len(points) == 0 or len(polygons) == 0:
         return np.zeros(len(points), dtype=bool)
-    from soabench.geometry_kernels import segments_meet_convex
+    from soabench.geometry_kernels import flat_polygons, segments_meet_convex
     from soabench.notice import announced
 
     e = np.asarray(ego_xy, dtype=float)
-    counts = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))
-    starts = np.zeros_like(counts)
-    np.cumsum(counts[:-1], out=starts[1:])
-    v = np.concatenate(polygons).astype(float, copy=False)
-    return announced(
-        "geometry.segments",
-        segments_meet_convex,
-        float(e[0]),
-        float(e[1]),
-        points[:, 0].copy(),
-        points[:, 1].copy(),
-        v[:, 0].copy(),
-        v[:, 1].copy(),
-        starts,
-        counts,
-    )
+    vx, vy, starts, counts = flat_polygons(polygons)
+    px, py = points[:, 0].copy(), points[:, 1].copy()
+    args = (float(e[0]), float(e[1]), px, py, vx, vy, starts, counts)
+    return announced("geometry.segments", segments_meet_convex, *args)
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -63,16 +63,12 @@ def ego_inside(polygons: list[np.ndarray], e: np.ndarray) -> np.ndarray:
     N = len(polygons)
     if N == 0:
         return np.zeros(0, dtype=bool)
-    from soabench.geometry_kernels import convex_contains
+    from soabench.geometry_kernels import convex_contains, flat_polygons
     from soabench.notice import announced
 
-    V = np.concatenate([np.asarray(v, dtype=float).reshape(-1, 2) for v in polygons])
-    counts = np.fromiter((len(v) for v in polygons), dtype=np.int64, count=N)
-    starts = np.zeros(N, dtype=np.int64)
-    np.cumsum(counts[:-1], out=starts[1:])
-    tol = 1e-12 * max(1.0, float(np.abs(V).max()))
+    x, y, starts, counts = flat_polygons(polygons)
+    tol = 1e-12 * max(1.0, float(np.abs(x).max()), float(np.abs(y).max()))
     e = np.asarray(e, dtype=float)
-    x, y = V[:, 0].copy(), V[:, 1].copy()
     return announced("geometry.convex", convex_contains, x, y, starts, counts, float(e[0]), float(e[1]), tol)
 
 
