@@ -1,13 +1,15 @@
 """The fused GM-PHD cycle (docs/method.md §2.11): predict, gate, update, prune, merge, cap and extract as compiled
-loops over arrays, three calls per scan (EKF and UKF, both probability modes).
+loops over arrays, one call per scan (EKF and UKF, both probability modes).
 
 Why: at the mixture sizes of a trial (tens of components, a handful of measurements) the array path of
 :mod:`soabench.gmphd.models` and :mod:`soabench.gmphd.reduction` is about 60 small numpy calls per step, each
-costing microseconds of fixed overhead; here a step is three calls (:func:`predict_append`, :func:`update` or
-:func:`support` + :func:`posterior` when a birth model adds measurement-driven newborn terms, :func:`reduce`), so
-``StepResult`` can still time the three stages. Between the calls stays in Python only what needs Python: the
-line-of-sight gate (shapely) of the occlusion-aware mode and the newborn terms' ``beta(A, kappa)``. What used to
-be fixed Python cost around them is done inside: the birth components' input check (:func:`births_ok`, §2.12) and
+costing microseconds of fixed overhead. Here the stages are compiled functions (:func:`predict_append`,
+:func:`update` or :func:`support` + :func:`posterior` when a birth model adds measurement-driven newborn terms,
+:func:`reduce`), and a filter step runs them in one call, :func:`step`, which times each stage inside with the
+clock of ``time.perf_counter`` (:mod:`soabench.gmphd.clock`) so that ``StepResult`` still reports the three stage
+times. Only what needs Python splits a step: the line-of-sight gate (shapely) of the occlusion-aware mode, between
+the prediction and :func:`update_reduce`, and the newborn terms' ``beta(A, kappa)``, between :func:`support` and
+:func:`posterior_reduce`. What used to be fixed Python cost around the stages is done inside: the birth components' input check (:func:`births_ok`, §2.12) and
 the posterior's origin counts (:func:`origin_counts`, §5.7); the settings of a call travel as one float array
 (``PRED_*``, ``RED_*`` name its entries) that the filter packs once instead of converting them on every step.
 
@@ -27,6 +29,7 @@ import math
 import numpy as np
 from numba import njit
 
+from soabench.gmphd.clock import monotonic
 from soabench.gmphd.kernels import _cholesky4, ekf_terms, merge_groups, merge_moments, posterior_pairs, wrap
 
 _TINY = 1e-300  #: as :data:`soabench.gmphd.probabilities._TINY`
@@ -647,3 +650,89 @@ def reduce(w, m, P, origin, n_det, age, beta, pars):
                     k += 1
     counts = origin_counts(origin, age, n_sources)
     return (w, m, P, origin, n_det, age, beta), X, X_w, counts, (sum_w, n_pruned, n_merged, cap_hit)
+
+
+# -- one call per scan -----------------------------------------------------------------------------------------------
+# Each stage above is its own compiled call so that the array path's reference tests can reach it; a filter step
+# composes them here instead, so that a scan costs one call (two with measurement-driven newborn terms, whose
+# beta(A, kappa) is caller code in Python). The stage times are read inside with the clock of time.perf_counter
+# (soabench.gmphd.clock). The arithmetic is that of the separate calls, so the results are the same bit for bit.
+
+#: ``status`` of :func:`step` and :func:`predict_support`: the cycle ran; a birth component is not finite or has a
+#: negative weight (nothing computed); the UKF met a covariance that is not positive definite (nothing kept)
+STEP_OK, STEP_BAD_BIRTHS, STEP_NOT_PD = 0, 1, 2
+
+
+@njit(cache=True)
+def _no_reduction(dyn):
+    """What :func:`reduce` returns for an empty posterior (the value :func:`step` returns when it stops early)."""
+    e = np.empty(0)
+    red = (
+        e,
+        np.empty((0, 4)),
+        np.empty((0, 4, 4)),
+        np.empty(0, dtype=np.int8),
+        np.empty(0, dtype=np.int32),
+        np.empty(0, dtype=np.int32),
+        np.empty((0, 4) if dyn else (0, 0)),
+    )
+    return red, np.empty((0, 4)), e, np.zeros(0, dtype=np.int64), (0.0, 0, 0, False)
+
+
+@njit(cache=True)
+def step(w, m, P, origin, n_det, age, beta, F, Q, pred_pars, bw, bm, bP, bsrc, beta0, ego, p_D0, Z, R, r_min,
+         gate_thr, kappa, ukf, red_pars):  # fmt: skip
+    """One filter cycle without newborn terms and without the line-of-sight gate: :func:`predict_append`,
+    :func:`update`, :func:`reduce` in one call.
+
+    Returns (status, n_predicted, n_updated, n_pairs, A, reduction, times): ``status`` one of ``STEP_*``;
+    ``reduction`` is :func:`reduce`'s value (empty unless ``status`` is ``STEP_OK``); ``times`` the seconds of
+    predict, update and reduce.
+    """
+    times = np.zeros(3)
+    t0 = monotonic()
+    pred = predict_append(w, m, P, origin, n_det, age, beta, F, Q, pred_pars, bw, bm, bP, bsrc, beta0, ego)
+    t1 = monotonic()
+    times[0] = t1 - t0
+    dyn = beta.shape[1] == 4
+    if not pred[8]:
+        return STEP_BAD_BIRTHS, 0, 0, 0, np.empty(0), _no_reduction(dyn), times
+    post, A, ok = update(*pred[:8], p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
+    t2 = monotonic()
+    times[1] = t2 - t1
+    if not ok:
+        return STEP_NOT_PD, 0, 0, 0, A, _no_reduction(dyn), times
+    red = reduce(*post[:7], red_pars)
+    times[2] = monotonic() - t2
+    return STEP_OK, pred[0].shape[0], post[0].shape[0], post[7], A, red, times
+
+
+@njit(cache=True)
+def update_reduce(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars):
+    """:func:`update` and :func:`reduce` in one call, for a predicted mixture whose gate ``g`` the caller has
+    refined (the line-of-sight gate, §4.4). Returns (status, n_updated, n_pairs, A, reduction, times) as
+    :func:`step` (``times``: update, reduce)."""
+    times = np.zeros(2)
+    t1 = monotonic()
+    post, A, ok = update(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
+    t2 = monotonic()
+    times[0] = t2 - t1
+    if not ok:
+        return STEP_NOT_PD, 0, 0, A, _no_reduction(beta.shape[1] == 4), times
+    red = reduce(*post[:7], red_pars)
+    times[1] = monotonic() - t2
+    return STEP_OK, post[0].shape[0], post[7], A, red, times
+
+
+@njit(cache=True)
+def posterior_reduce(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin, red_pars):
+    """:func:`posterior` (with the newborn terms' ``beta_nb``) and :func:`reduce` in one call. Returns (n_updated,
+    n_pairs, n_newborn, reduction, times) with ``times`` the seconds of posterior and reduce."""
+    times = np.zeros(2)
+    t1 = monotonic()
+    post = posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin)
+    t2 = monotonic()
+    times[0] = t2 - t1
+    red = reduce(*post[:7], red_pars)
+    times[1] = monotonic() - t2
+    return post[0].shape[0], post[7], post[8], red, times

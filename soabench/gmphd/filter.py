@@ -256,36 +256,52 @@ class GMPHDFilter:
     def _step_fused(
         self, scan: Scan, Z: np.ndarray, ego: np.ndarray, births: Births, kappa_once: bool = True
     ) -> StepResult | None:
-        """:meth:`step` as three compiled calls (:mod:`soabench.gmphd.cycle`) on finite (checked) ``Z`` and ``ego``
+        """:meth:`step` as compiled calls (:mod:`soabench.gmphd.cycle`) on finite (checked) ``Z`` and ``ego``
         (contiguous float arrays, :func:`~soabench.gmphd.inputs.scan_inputs`); None, having changed nothing, if a
         birth component is not finite or has a negative weight.
 
+        One call (:func:`~soabench.gmphd.cycle.step`) runs the whole cycle. The line-of-sight gate (shapely) of the
+        occlusion-aware mode and the newborn terms' ``beta(A, kappa)`` (caller code) stay in Python, so a step that
+        needs either is split around them (:meth:`_step_fused_split`). The stage times are read inside the
+        compiled calls.
+
         ``kappa_once``: ``Z`` is the scan's own (not a subset left by dropping inputs), so kappa is computed once per
         scan for every filter with the same clutter settings."""
+        if kappa_once:  # the scan's Z is kept alive by its scan_inputs entry, so its id is a sound key
+            kappa = _per_scan(scan, (*self._kappa_key, id(Z)), lambda: self._kappa(Z))
+        else:
+            kappa = self._kappa(Z)
+        if births.newborn is not None or (self.occlusion and scan.occluders):
+            return self._step_fused_split(scan, Z, ego, births, kappa)
+        mix = self.mixture
+        status, n_predicted, n_updated, n_pairs, A, reduced, times = cycle.step(
+            *_mixture_arrays(mix), self.F, self.Q,
+            self._pred_pars, *(_birth_arrays(births) if len(births) else self._no_births), self._beta0, ego,
+            self._p_D, Z, self.R, self._r_min, self._gate, kappa, self._ukf, self._red_pars,
+        )  # fmt: skip
+        if status == cycle.STEP_BAD_BIRTHS:
+            return None
+        if status == cycle.STEP_NOT_PD:  # UKF with a covariance that is not positive definite: the array path's rule
+            return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
+        return self._fused_result(scan, reduced, times[0], times[1], times[2], n_predicted, n_updated, n_pairs, 0,
+                                  A, kappa)  # fmt: skip
+
+    def _step_fused_split(
+        self, scan: Scan, Z: np.ndarray, ego: np.ndarray, births: Births, kappa: np.ndarray
+    ) -> StepResult | None:
+        """:meth:`_step_fused` for a step with the line-of-sight gate or newborn terms: predict; the gate; the
+        update (with the newborn terms' ``beta`` between its two halves); the reduction with the update's last call."""
         mix = self.mixture
         t0 = time.perf_counter()
         pred = cycle.predict_append(
-            np.ascontiguousarray(mix.w, dtype=float),
-            np.ascontiguousarray(mix.m, dtype=float),
-            np.ascontiguousarray(mix.P, dtype=float),
-            np.ascontiguousarray(mix.origin, dtype=np.int8),
-            np.ascontiguousarray(mix.n_det, dtype=np.int32),
-            np.ascontiguousarray(mix.age, dtype=np.int32),
-            _beta_array(mix.beta),
-            self.F,
-            self.Q,
-            self._pred_pars,
-            *(_birth_arrays(births) if len(births) else self._no_births),
-            self._beta0,
-            ego,
-        )
+            *_mixture_arrays(mix), self.F, self.Q,
+            self._pred_pars, *(_birth_arrays(births) if len(births) else self._no_births), self._beta0, ego,
+        )  # fmt: skip
         if not pred[8]:
             return None
         g = pred[7]
         newborn = births.newborn
         n_predicted = len(g) + (len(Z) if newborn is not None else 0)
-        t1 = time.perf_counter()
-
         if self.occlusion and scan.occluders and g.any():  # line-of-sight gate (§4.4), as detection_gate
             from soabench.sensor import line_of_sight_past, sight_blockers
 
@@ -295,14 +311,15 @@ class GMPHDFilter:
             blockers = _per_scan(scan, key, make)[0]
             vis = np.asarray(line_of_sight_past(ego[:2], pred[1][idx, :2], blockers), dtype=bool)
             g[idx] = vis.reshape(-1)
-        if kappa_once:  # the scan's Z is kept alive by its scan_inputs entry, so its id is a sound key
-            kappa = _per_scan(scan, (*self._kappa_key, id(Z)), lambda: self._kappa(Z))
-        else:
-            kappa = self._kappa(Z)
+        t1 = time.perf_counter()
+
         if newborn is None:
-            post, A, ok = cycle.update(*pred[:8], self._p_D, Z, ego, self.R, self._r_min, self._gate, kappa, self._ukf)
-            if not ok:  # UKF with a covariance that is not positive definite: the array path's jitter rule
+            status, n_updated, n_pairs, A, reduced, times = cycle.update_reduce(
+                *pred[:8], self._p_D, Z, ego, self.R, self._r_min, self._gate, kappa, self._ukf, self._red_pars
+            )
+            if status == cycle.STEP_NOT_PD:
                 return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
+            n_newborn, t_update, t_reduce = 0, times[0], times[1]
         else:
             sup = cycle.support(
                 pred[0], pred[1], pred[2], pred[6], g, self._p_D, Z, ego, self.R, self._r_min, self._gate, kappa,
@@ -316,7 +333,8 @@ class GMPHDFilter:
             if M:  # a copy of kappa: the newborn terms are caller code, and kappa is shared across filters
                 beta_nb = np.asarray(newborn.beta(A, kappa.copy()), dtype=float).reshape(M)
                 beta_nb = np.where(beta_nb > 0.0, beta_nb, 0.0)  # a newborn term is a non-negative intensity
-            post = cycle.posterior(
+            t2 = time.perf_counter()
+            n_updated, n_pairs, n_newborn, reduced, times = cycle.posterior_reduce(
                 *pred[:7],
                 sup,
                 self.R,
@@ -325,19 +343,36 @@ class GMPHDFilter:
                 np.ascontiguousarray(newborn.P, dtype=float).reshape(-1, 4, 4),
                 self._nb_beta,
                 SOURCE_MEAS,
+                self._red_pars,
             )
-        n_updated, n_pairs, n_newborn = len(post[0]), post[7], post[8]
-        t2 = time.perf_counter()
+            t_update, t_reduce = t2 - t1 + times[0], times[1]
+        return self._fused_result(scan, reduced, t1 - t0, t_update, t_reduce, n_predicted, n_updated, n_pairs,
+                                  n_newborn, A, kappa)  # fmt: skip
 
-        red, X, X_w, counts, (sum_w, n_pruned, n_merged, cap_hit) = cycle.reduce(*post[:7], self._red_pars)
+    def _fused_result(
+        self,
+        scan: Scan,
+        reduced: tuple,
+        t_predict: float,
+        t_update: float,
+        t_reduce: float,
+        n_predicted: int,
+        n_updated: int,
+        n_pairs: int,
+        n_newborn: int,
+        A: np.ndarray,
+        kappa: np.ndarray,
+    ) -> StepResult:
+        """Keep the reduced posterior of a fused step, extract (unless Vo-Ma extraction ran compiled), and report."""
+        red, X, X_w, counts, (sum_w, n_pruned, n_merged, cap_hit) = reduced
         if cap_hit:
             cfg = self.cfg
             reduction.log.info("J_max = %d hit: %d components reduced to %d", cfg.J_max, n_merged, cfg.J_max)
         self.mixture = Mixture(*red[:6], red[6] if self.dynamic else None)
         if not self._vo_ma:
+            t = time.perf_counter()
             X, X_w = extract(self.mixture, self.cfg.extract_thr, self.cfg.extraction)
-        t3 = time.perf_counter()
-
+            t_reduce += time.perf_counter() - t
         w = red[0]
         return StepResult(
             k=scan.k,
@@ -349,9 +384,9 @@ class GMPHDFilter:
             n_updated=n_updated,
             n_reduced=len(w),
             cap_hit=cap_hit,
-            t_predict=t1 - t0,
-            t_update=t2 - t1,
-            t_reduce=t3 - t2,
+            t_predict=t_predict,
+            t_update=t_update,
+            t_reduce=t_reduce,
             mean_pD=self._mean_pD(),
             A=A,
             kappa=kappa,
@@ -388,6 +423,20 @@ def _birth_arrays(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
         np.ascontiguousarray(births.m, dtype=float).reshape(-1, 4),
         np.ascontiguousarray(births.P, dtype=float).reshape(-1, 4, 4),
         np.ascontiguousarray(births.source, dtype=np.int8).reshape(-1),
+    )
+
+
+def _mixture_arrays(mix: Mixture) -> tuple[np.ndarray, ...]:
+    """A mixture's arrays as :mod:`soabench.gmphd.cycle` takes them (contiguous, float / int8 / int32; Beta (J, 4)
+    or (0, 0)): no copy for the mixtures the cycle itself produced."""
+    return (
+        np.ascontiguousarray(mix.w, dtype=float),
+        np.ascontiguousarray(mix.m, dtype=float),
+        np.ascontiguousarray(mix.P, dtype=float),
+        np.ascontiguousarray(mix.origin, dtype=np.int8),
+        np.ascontiguousarray(mix.n_det, dtype=np.int32),
+        np.ascontiguousarray(mix.age, dtype=np.int32),
+        _beta_array(mix.beta),
     )
 
 
