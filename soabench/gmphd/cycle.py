@@ -9,9 +9,10 @@ costing microseconds of fixed overhead. Here the stages are compiled functions (
 clock of ``time.perf_counter`` (:mod:`soabench.gmphd.clock`) so that ``StepResult`` still reports the three stage
 times. Only what needs Python splits a step: the line-of-sight gate (shapely) of the occlusion-aware mode, between
 the prediction and :func:`update_reduce`, and the newborn terms' ``beta(A, kappa)``, between :func:`support` and
-:func:`posterior_reduce`. What used to be fixed Python cost around the stages is done inside: the birth components' input check (:func:`births_ok`, §2.12) and
-the posterior's origin counts (:func:`origin_counts`, §5.7); the settings of a call travel as one float array
-(``PRED_*``, ``RED_*`` name its entries) that the filter packs once instead of converting them on every step.
+:func:`posterior_reduce`. What used to be fixed Python cost around the stages is done inside: the birth
+components' input check (:func:`births_ok`, §2.12) and the posterior's origin counts (:func:`origin_counts`, §5.7);
+the settings of a call travel as one float array (``PRED_*``, ``RED_*`` name its entries) that the filter packs
+once instead of converting them on every step.
 
 Each formula is the one of the array path, evaluated in the same order where that order is ours (elementwise Beta
 algebra, log-sum-exp, the Kalman kernels of :mod:`soabench.gmphd.kernels`, which both paths share); matrix products
