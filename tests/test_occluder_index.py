@@ -46,3 +46,23 @@ def test_many_lists_evict_old_entries():
         assert inside_any(lst, np.array([[i + 0.5, 0.5]])).tolist() == [True]
     for i, lst in enumerate(lists):  # evicted entries are rebuilt, correctly
         assert inside_any(lst, np.array([[i + 0.5, 0.5], [i + 1.5, 0.5]])).tolist() == [True, False]
+
+
+def test_box_prefilter_matches_the_within_query_on_both_paths(monkeypatch):
+    """inside_any's bounding-box pairs + prepared contains_xy give the tree query's ``within`` answer: rotated and
+    non-convex polygons, points on edges and vertices, NaN points, an empty geometry; numpy boxes and tree boxes."""
+    from soabench.birth import base
+
+    rng = np.random.default_rng(3)
+    geoms = [shapely.affinity.rotate(box(x, y, x + 3, y + 1.5), a) for (x, y), a in
+             zip(rng.uniform(-20, 20, (25, 2)), rng.uniform(0, 180, 25), strict=True)]  # fmt: skip
+    geoms += [shapely.Polygon([(0, 0), (6, 0), (6, 6), (3, 2), (0, 6)]), shapely.Polygon()]
+    edge = np.array([[3.0, 0.0], [0.0, 0.0], [6.0, 3.0], [3.0, 2.0]])  # on the L-shape's boundary: not interior
+    xy = np.vstack([rng.uniform(-24, 24, (2000, 2)), edge, [[np.nan, 1.0]], shapely.get_coordinates(geoms[0])])
+    tree = shapely.STRtree(geoms)
+    expect = np.zeros(len(xy), dtype=bool)
+    expect[tree.query(shapely.points(xy), predicate="within")[0]] = True
+    assert expect.sum() > 50 and not expect[2000:].any()
+    np.testing.assert_array_equal(inside_any(tree, xy), expect)
+    monkeypatch.setattr(base, "_BOX_BRUTE", 0)  # the tree finds the boxes instead of numpy
+    np.testing.assert_array_equal(inside_any(tree, xy), expect)

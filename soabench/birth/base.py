@@ -11,6 +11,7 @@ inside each measurement's normaliser with no missed-detection term (PUBM, ATBM s
 
 from __future__ import annotations
 
+import weakref
 from collections import OrderedDict
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
@@ -120,8 +121,12 @@ def geometry_index(geoms: Sequence[BaseGeometry]) -> STRtree:
 
 
 def inside_any(geoms: Sequence[BaseGeometry] | STRtree | None, xy: np.ndarray) -> np.ndarray:
-    """(J,) True where a point of ``xy`` (J, 2) lies in the interior of any geometry (one vectorised tree query;
-    the tree of a geometry list is built once, :func:`geometry_index`)."""
+    """(J,) True where a point of ``xy`` (J, 2) lies in the interior of any geometry.
+
+    The tree of a geometry list is built once (:func:`geometry_index`). Candidate (point, geometry) pairs are those
+    whose point lies in the geometry's bounding box (:func:`_box_pairs`); each pair is then decided by
+    ``shapely.contains_xy`` on the prepared geometry, the predicate of a tree query with ``predicate="within"``
+    without building a Point per candidate mean."""
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     out = np.zeros(len(xy), dtype=bool)
     if geoms is None or len(xy) == 0:
@@ -131,9 +136,33 @@ def inside_any(geoms: Sequence[BaseGeometry] | STRtree | None, xy: np.ndarray) -
     tree = geoms if isinstance(geoms, STRtree) else geometry_index(geoms)
     if len(tree.geometries) == 0:
         return out
-    hit = tree.query(shapely.points(xy), predicate="within")[0]
-    out[hit] = True
+    i, j, members = _box_pairs(tree, xy)
+    if len(i):
+        out[i[shapely.contains_xy(members[j], xy[i, 0], xy[i, 1])]] = True
     return out
+
+
+#: per tree: its geometries (prepared) and their bounding boxes (G, 4), kept while the tree lives
+_BOXES: weakref.WeakKeyDictionary[STRtree, tuple[np.ndarray, np.ndarray]] = weakref.WeakKeyDictionary()
+_BOX_BRUTE = 200_000  #: up to this many (point, geometry) pairs the boxes are tested with numpy, beyond in the tree
+
+
+def _box_pairs(tree: STRtree, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(i, j, geometries): the pairs of point i of ``xy`` and geometry j of ``tree`` with the point in the
+    geometry's closed bounding box, in point-major order for the numpy test, in the tree's order otherwise."""
+    hit = _BOXES.get(tree)
+    if hit is None:
+        members = np.asarray(tree.geometries, dtype=object)
+        shapely.prepare(members)
+        hit = _BOXES[tree] = (members, shapely.bounds(members))
+    members, bounds = hit
+    if len(xy) * len(members) > _BOX_BRUTE:
+        i, j = tree.query(shapely.points(xy))
+        return i, j, members
+    x, y = xy[:, :1], xy[:, 1:]
+    inbox = (x >= bounds[:, 0]) & (x <= bounds[:, 2]) & (y >= bounds[:, 1]) & (y <= bounds[:, 3])
+    i, j = np.nonzero(inbox)
+    return i, j, members
 
 
 class FOVRule:
