@@ -127,6 +127,20 @@ PRED_P_S, PRED_BETA_FACTOR, PRED_THETA_MIN, PRED_P_S_MAX, PRED_R_MIN, PRED_R_MAX
 
 
 @njit(cache=True)
+def _empty_mixture(dyn):
+    """(w, m, P, origin, n_det, age, beta) of no component, as the compiled calls pass a mixture."""
+    return (
+        np.empty(0),
+        np.empty((0, 4)),
+        np.empty((0, 4, 4)),
+        np.empty(0, dtype=np.int8),
+        np.empty(0, dtype=np.int32),
+        np.empty(0, dtype=np.int32),
+        np.empty((0, 4) if dyn else (0, 0)),
+    )
+
+
+@njit(cache=True)
 def births_ok(bw, bm, bP):
     """Every birth weight, mean and covariance finite and every weight >= 0: the fused cycle's part of
     :func:`soabench.gmphd.inputs.births_finite` (the newborn terms are checked before the cycle)."""
@@ -156,18 +170,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, pars, bw, bm, bP, bs
     """
     dyn = beta.shape[1] == 4
     if not births_ok(bw, bm, bP):
-        z = np.empty(0)
-        return (
-            z,
-            np.empty((0, 4)),
-            np.empty((0, 4, 4)),
-            np.empty(0, dtype=np.int8),
-            np.empty(0, dtype=np.int32),
-            np.empty(0, dtype=np.int32),
-            np.empty((0, 4) if dyn else (0, 0)),
-            z,
-            False,
-        )
+        return (*_empty_mixture(dyn), np.empty(0), False)
     p_S = pars[PRED_P_S]
     f_beta, theta_min, p_S_max = pars[PRED_BETA_FACTOR], pars[PRED_THETA_MIN], pars[PRED_P_S_MAX]
     r_min, r_max, half_fov = pars[PRED_R_MIN], pars[PRED_R_MAX], pars[PRED_HALF_FOV]
@@ -667,17 +670,7 @@ STEP_OK, STEP_BAD_BIRTHS, STEP_NOT_PD = 0, 1, 2
 @njit(cache=True)
 def _no_reduction(dyn):
     """What :func:`reduce` returns for an empty posterior (the value :func:`step` returns when it stops early)."""
-    e = np.empty(0)
-    red = (
-        e,
-        np.empty((0, 4)),
-        np.empty((0, 4, 4)),
-        np.empty(0, dtype=np.int8),
-        np.empty(0, dtype=np.int32),
-        np.empty(0, dtype=np.int32),
-        np.empty((0, 4) if dyn else (0, 0)),
-    )
-    return red, np.empty((0, 4)), e, np.zeros(0, dtype=np.int64), (0.0, 0, 0, False)
+    return _empty_mixture(dyn), np.empty((0, 4)), np.empty(0), np.zeros(0, dtype=np.int64), (0.0, 0, 0, False)
 
 
 @njit(cache=True)
