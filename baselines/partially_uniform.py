@@ -22,7 +22,7 @@ from soabench.birth.base import BirthContext, Births, NewbornTerms, build_compon
 from soabench.config import BirthConfig, SensorConfig
 from soabench.geometry import fov_area, inverse_measurement_cov, measurement_volume, polar_to_world
 from soabench.scenario.scene import SceneMap
-from soabench.types import Scan
+from soabench.types import Scan, scan_once
 
 
 def inverse_measurement_terms(
@@ -44,12 +44,9 @@ def scan_inverse_terms(scan: Scan, sensor: SensorConfig, sigma_v: float) -> tupl
         P.setflags(write=False)
         return m, P
 
-    once = getattr(scan, "once", None)
-    if once is None:
-        return make()
     key = ("birth.inverse_terms", id(scan.Z), id(scan.ego), float(sensor.sigma_r), float(sensor.sigma_b))
     key += (float(sigma_v),)
-    return once(key, lambda: (*make(), scan.Z, scan.ego))[:2]  # held with Z and ego: their ids stay theirs
+    return scan_once(scan, key, lambda: (*make(), scan.Z, scan.ego))[:2]  # held with Z and ego: their ids stay theirs
 
 
 class PartiallyUniformBirth:

@@ -292,6 +292,13 @@ class Scan:
         return {k: v for k, v in self.__dict__.items() if k not in ("_occluder_index", "_once")}
 
 
+def scan_once(scan: Any, key: Hashable, make: Callable[[], Any]) -> Any:
+    """:meth:`Scan.once` of ``scan``, or ``make()`` now for a scan object that cannot keep it (a duck-typed scan of
+    a plugin or a test): what every stage that shares per-scan work across runs calls (docs/method.md §5.8)."""
+    once = getattr(scan, "once", None)
+    return make() if once is None else once(key, make)
+
+
 @dataclass
 class Scans:
     """K scans plus the per-scan truth needed by the metrics. P pedestrians (same order as the Recording).

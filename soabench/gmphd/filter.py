@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -41,6 +41,7 @@ from soabench.types import (  # StepResult re-exported: old import path
     SOURCE_NAMES,
     Births,
     StepResult,
+    scan_once,
 )
 
 if TYPE_CHECKING:
@@ -147,7 +148,7 @@ class GMPHDFilter:
         Non-finite inputs raise :class:`~soabench.errors.SoabenchError` or are dropped and counted, as
         ``filter.nonfinite`` says (:mod:`soabench.gmphd.inputs`); a result never holds a NaN."""
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))
-        Z, ego, finite, _ = _per_scan(scan, key, _scan_inputs_of(scan))
+        Z, ego, finite, _ = scan_once(scan, key, _scan_inputs_of(scan))
         kind = (self.fused, births.newborn is not None)
         if not notice.ready(kind):  # the first step of a kind may compile kernels: never a silent pause
             with notice.first_use_notice(kind):
@@ -268,7 +269,7 @@ class GMPHDFilter:
         ``kappa_once``: ``Z`` is the scan's own (not a subset left by dropping inputs), so kappa is computed once per
         scan for every filter with the same clutter settings."""
         if kappa_once:  # the scan's Z is kept alive by its scan_inputs entry, so its id is a sound key
-            kappa = _per_scan(scan, (*self._kappa_key, id(Z)), lambda: self._kappa(Z))
+            kappa = scan_once(scan, (*self._kappa_key, id(Z)), lambda: self._kappa(Z))
         else:
             kappa = self._kappa(Z)
         if births.newborn is not None or (self.occlusion and scan.occluders):
@@ -308,7 +309,7 @@ class GMPHDFilter:
             idx = np.flatnonzero(g)
             make = lambda: (sight_blockers(ego[:2], scan.occluders), scan.occluders)  # noqa: E731
             key = ("filter.sight_blockers", id(scan.occluders), len(scan.occluders), ego[0], ego[1])
-            blockers = _per_scan(scan, key, make)[0]
+            blockers = scan_once(scan, key, make)[0]
             vis = np.asarray(line_of_sight_past(ego[:2], pred[1][idx, :2], blockers), dtype=bool)
             g[idx] = vis.reshape(-1)
         t1 = time.perf_counter()
@@ -400,13 +401,6 @@ class GMPHDFilter:
     def _kappa(self, Z: np.ndarray) -> np.ndarray:
         """kappa(z_l) of each measurement (§2.3, :func:`soabench.geometry.clutter_intensity`) as a contiguous array."""
         return np.ascontiguousarray(clutter_intensity(Z, self.sensor), dtype=float)
-
-
-def _per_scan(scan: Scan, key: tuple, make: Callable[[], Any]) -> Any:
-    """``make()`` computed once per scan for every filter run over it (:meth:`soabench.types.Scan.once`), or now
-    for a scan object that cannot keep it."""
-    once = getattr(scan, "once", None)
-    return make() if once is None else once(key, make)
 
 
 def _scan_inputs_of(scan: Scan) -> Callable[[], tuple]:
