@@ -86,6 +86,28 @@ def save_arrays(tables: Any, path: Path) -> bool:
     return True
 
 
+#: tables a merge worker already saved as arrays (:mod:`soabench.experiment.premerge`): resolved run folder ->
+#: (:func:`~soabench.experiment.store.merged_stamp` when saved, the ``.npz`` path)
+_SAVED: dict[str, tuple[tuple, str]] = {}
+
+
+def remember_arrays(run_dir: str | Path, stamp: tuple, path: str) -> None:
+    """Let :func:`draw_all` use ``path`` for the tables of ``run_dir`` while its merged files have ``stamp``."""
+    _SAVED[str(Path(run_dir).resolve())] = (stamp, path)
+
+
+def forget_arrays(run_dir: str | Path) -> None:
+    _SAVED.pop(str(Path(run_dir).resolve()), None)
+
+
+def _saved_arrays(run_dir: Path) -> str:
+    """The arrays :func:`remember_arrays` named for ``run_dir`` if its merged files are unchanged since, else ""."""
+    from soabench.experiment.store import merged_stamp
+
+    hit = _SAVED.get(str(Path(run_dir).resolve()))
+    return hit[1] if hit is not None and hit[0] == merged_stamp(run_dir) else ""
+
+
 def load_arrays(path: str, run_dir: str) -> Any:
     """The tables written by :func:`save_arrays` (``allow_pickle=False``: only numbers and text are read)."""
     import numpy as np
@@ -192,8 +214,11 @@ def draw_all(jobs: Sequence[FigureJob], tables: Any) -> list[Path]:
         return [job.draw(tables) for job in jobs]
     order = sorted(range(len(jobs)), key=lambda i: -jobs[i].weight)  # stable: equal weights keep their order
     with tempfile.TemporaryDirectory(prefix="soabench-figures-") as tmp:
-        arrays = Path(tmp) / "tables.npz"  # a new name per report: no worker mistakes it for another's
-        batch = FigureBatch(str(run_dir), tuple(jobs), str(arrays) if save_arrays(tables, arrays) else "")
+        arrays = _saved_arrays(run_dir)  # a name per folder and merge: no worker mistakes it for another's
+        if not arrays:
+            path = Path(tmp) / "tables.npz"  # a new name per report
+            arrays = str(path) if save_arrays(tables, path) else ""
+        batch = FigureBatch(str(run_dir), tuple(jobs), arrays)
         with contextlib.closing(exe.results(batch, order)) as results:  # closing cancels the rest
             for i, rec in results:
                 if rec.get("status") != "ok":

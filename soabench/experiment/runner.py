@@ -256,6 +256,7 @@ class DeferredRun:
     todo: frozenset[int]
     n_trials: int
     config: Config
+    figures: bool = True  #: whether its report draws figures
 
 
 def run_experiment(
@@ -424,7 +425,7 @@ def _run_locked(
                 config.to_dict(), str(net), polys, scenario, bool(save_estimates), trial_fn, load_fn,
                 plugins.session_import_paths(),
             )  # fmt: skip
-            defer.append(DeferredRun(store, spec, frozenset(todo), n_trials, config))
+            defer.append(DeferredRun(store, spec, frozenset(todo), n_trials, config, figures))
             return RunOutcome(store.run_dir, False, len(done), n_trials - len(done), store.failures(), "")
         if len(todo):
             spec = TaskSpec(
@@ -470,11 +471,12 @@ def _run_locked(
         raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
     if unattempted or stopped or defer is not None:  # deferring: the report follows the group (run_trials=False)
         return outcome
+    from soabench.experiment import premerge
     from soabench.experiment.drawing import report_pool
     from soabench.experiment.report import write_report
 
     try:
-        store.merge((*config.experiment.models, *config.experiment.trackers), config.experiment.probabilities)
+        premerge.merge(store, *premerge.merge_args(config))  # a study's workers may have merged it already
         with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
             outcome.summary_markdown = write_report(store.run_dir, figures=figures, store=store)
     except KeyboardInterrupt:

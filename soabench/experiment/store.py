@@ -292,6 +292,20 @@ def read_csv(path: Path) -> dict[str, np.ndarray]:
         return {name: _parse_column([r[j] for r in data]) for j, name in enumerate(header)}
 
 
+def header_of(path: Path) -> list[str] | None:
+    """The column names :func:`read_csv` gives ``path`` (its first line), or None if the file is missing, empty or
+    its first line is not a plain header (quotes, a carriage return, a blank line: :func:`read_csv` decides those)."""
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            line = fh.readline()
+    except (OSError, ValueError):
+        return None
+    line = line[:-1] if line.endswith("\n") else line
+    if not line or '"' in line or "\r" in line:
+        return None
+    return line.split(",")
+
+
 def _parse_column(cells: Sequence[str]) -> np.ndarray:
     """A float array if every cell parses (an empty cell is NaN), else a str array."""
     try:
@@ -455,6 +469,11 @@ class RunStore:
         return [read_json(p) for p in sorted(d.glob("session_*.json"))] if d.is_dir() else []
 
     # -- merge
+    def adopt_merge(self, done: Sequence[int], failures: Sequence[dict]) -> None:
+        """Take over the merge another process just did of this folder (:mod:`soabench.experiment.premerge`): the
+        finished trials it merged and the model failures it read, which :meth:`model_failures` then returns."""
+        self._merged_failures = (tuple(int(t) for t in done), [dict(f) for f in failures])
+
     def merge(self, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
         """Write trials.csv, episodes.csv, steps.csv and timing.csv from the ok records; returns row counts."""
         with gc_paused():
@@ -543,6 +562,23 @@ class RunStore:
             p = self.run_dir / name
             if p.exists():
                 p.unlink()
+
+
+#: the files a merge writes, with run.json: a folder whose :func:`merged_stamp` is unchanged is as its merge left it
+MERGED_FILES = ("trials.csv", "episodes.csv", "steps.csv", "timing.csv", RUN_FILE)
+
+
+def merged_stamp(run_dir: Path | str) -> tuple:
+    """Size and modification time of each of :data:`MERGED_FILES` in ``run_dir`` (None for a missing one)."""
+    out: list[tuple[int, int] | None] = []
+    for name in MERGED_FILES:
+        try:
+            st = os.stat(Path(run_dir) / name)
+        except OSError:
+            out.append(None)
+            continue
+        out.append((st.st_size, st.st_mtime_ns))
+    return tuple(out)
 
 
 class _SortedSteps:

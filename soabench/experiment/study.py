@@ -162,6 +162,7 @@ def run_study(
                 )
                 from soabench.experiment.drawing import parallel
                 from soabench.experiment.grouped import run_group
+                from soabench.experiment.premerge import merged_on
                 from soabench.experiment.runner import open_executor
 
                 pool = open_executor(workers, scheduler, dask_local)  # the trials', then the figures' workers
@@ -169,7 +170,8 @@ def run_study(
                 try:
                     if deferred:
                         run_group(deferred, pool, progress=progress, label=root.name)
-                    with parallel(pool):  # the reports of the parts that attempted every trial
+                    # the reports of the parts that attempted every trial, each merged by a worker first
+                    with parallel(pool), merged_on(pool, deferred):
                         main, clutter, births = parts(run_trials=False)
                         sensitivity = run_variants(
                             sens_dir,

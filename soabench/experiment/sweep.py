@@ -255,19 +255,30 @@ def _run_points(
             trial_fn=trial_fn, load_fn=load_fn, figures=figures, defer=deferred,
         )  # fmt: skip
         if deferred:
+            from soabench.experiment.drawing import parallel
             from soabench.experiment.grouped import group_trials, run_group
+            from soabench.experiment.premerge import merged_on
 
             exe = open_executor(workers, scheduler, dask_local, n_trials=len(group_trials(deferred)))
             aborted = True
             try:
                 stopped, _ = run_group(deferred, exe, fail_fast=fail_fast, progress=progress, label=sweep_dir.name)
-                aborted = stopped
+                if stopped:
+                    return _sweep_outcome(sweep_dir, points, [_stopped_outcome(d) for d in deferred])
+                # every trial is attempted: the points merged on the workers, then the points' reports (their
+                # figures drawn on the same workers) and the sweep's
+                with parallel(exe), merged_on(exe, deferred):
+                    outcome = _run_points(
+                        sweep_dir, kind, points, net, polys, scenario, None, workers=workers, scheduler=scheduler,
+                        dask_local=dask_local, fail_fast=fail_fast, save_estimates=save_estimates, progress=progress,
+                        trial_fn=trial_fn, load_fn=load_fn, figures=figures, run_trials=False,
+                    )  # fmt: skip
+                aborted = False
+                return outcome
             except KeyboardInterrupt:
                 raise Interrupted(f"interrupted: sweep {sweep_dir} is incomplete; {hint}") from None
             finally:
                 exe.close(abort=aborted)
-            if stopped:
-                return _sweep_outcome(sweep_dir, points, [_stopped_outcome(d) for d in deferred])
         more, run_trials = None, False  # every trial is attempted: the points' reports and the sweep's
     deferring = defer is not None or not run_trials
     outcomes: list[RunOutcome] = []

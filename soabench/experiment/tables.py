@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from soabench.errors import SoabenchError
-from soabench.experiment.store import RunStore, read_csv
+from soabench.experiment.store import RunStore, header_of, read_csv
 
 
 @dataclass
@@ -67,6 +67,15 @@ class LazyTable(Mapping[str, np.ndarray]):
 
     def __getitem__(self, key: str) -> np.ndarray:
         return self.columns[key]
+
+    def __contains__(self, key: object) -> bool:
+        """Whether the file has column ``key``, from its header alone while the columns are not read yet (the
+        figure list asks before any figure reads the table, and the figures may be drawn by other processes)."""
+        if self._columns is None:
+            header = header_of(self.path)
+            if header is not None:
+                return key in header
+        return key in self.columns
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.columns)

@@ -1,0 +1,134 @@
+"""The merges of several finished run folders at once, on the workers of a process pool (issue 19: the report
+phase of ``soabench study``).
+
+A study ends with about twenty finished folders (main run, clutter points, N̂ points, sensitivity runs). Each one's
+report starts with :meth:`~soabench.experiment.store.RunStore.merge` (every trial record read, the step rows
+formatted as CSV lines) and, for a folder with figures, reads its steps.csv back for the figure workers
+(:func:`~soabench.experiment.drawing.save_arrays`). Done in the driver one folder after another, that left the
+pool's workers idle for a quarter of the study's wall time.
+
+Inside ``with merged_on(pool, runs):`` every folder of ``runs`` whose trials are all on disk is first handed to a
+worker, largest first: the worker merges it and saves its tables as arrays. The reports are then written as before;
+:func:`merge` adopts a worker's merge when the folder is as the worker left it (the same finished trials, the same
+merged files, by size and modification time), and :func:`~soabench.experiment.drawing.draw_all` takes the saved
+arrays under the same condition. Anything else (a changed folder, a failed merge task, no process pool) is merged
+in the driver as before. A worker runs the driver's code on the same records, so the files are the same byte for
+byte.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import tempfile
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from soabench.experiment.drawing import forget_arrays, remember_arrays, save_arrays
+from soabench.experiment.executors import PoolExecutor
+from soabench.experiment.store import RunStore, merged_stamp
+
+
+@dataclass(frozen=True)
+class Merged:
+    """A worker's merge of one folder: what it found and wrote."""
+
+    stamp: tuple
+    done: tuple[int, ...]
+    failures: tuple[dict, ...]
+    counts: dict
+
+
+#: the folders merged by workers in the open :func:`merged_on` block: resolved path -> :class:`Merged`
+_MERGED: dict[str, Merged] = {}
+
+
+@dataclass(frozen=True)
+class MergeBatch:
+    """The folders to merge as an executor task spec: (run folder, models, modes, whether it draws figures) each,
+    and where the tables of those with figures go."""
+
+    folders: tuple[tuple[str, tuple[str, ...], tuple[str, ...], bool], ...]
+    tmp: str
+    config: dict = field(default_factory=dict)  # read by the executors for a failure record's seed
+
+    @property
+    def task_fn(self) -> Any:
+        return merge_task
+
+
+def merge_args(config: Any) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The (models, modes) a run folder of ``config`` is merged with: its birth models then trackers, its modes."""
+    exp = config.experiment
+    return (*exp.models, *exp.trackers), tuple(exp.probabilities)
+
+
+def merge_task(i: int, batch: MergeBatch) -> dict:
+    """Worker side: merge folder ``i`` of ``batch``; if it draws figures, save its tables as arrays
+    (``<tmp>/<i>.npz``)."""
+    from soabench.experiment.tables import load_tables
+
+    run_dir, models, modes, figures = batch.folders[i]
+    store = RunStore(Path(run_dir))
+    done = tuple(store.done_trials())
+    counts = store.merge(models, modes)
+    failures = store.model_failures()
+    arrays = Path(batch.tmp) / f"{i}.npz"
+    saved = figures and save_arrays(load_tables(Path(run_dir)), arrays)
+    return {
+        "status": "ok",
+        "done": list(done),
+        "failures": failures,
+        "counts": counts,
+        "stamp": merged_stamp(run_dir),
+        "arrays": str(arrays) if saved else "",
+    }
+
+
+@contextlib.contextmanager
+def merged_on(executor: Any, runs: Sequence[Any]) -> Iterator[None]:
+    """Merge every complete folder of ``runs`` (:class:`~soabench.experiment.runner.DeferredRun`) on ``executor``'s
+    workers, then run the block (whose reports adopt those merges); a no-op unless ``executor`` is a local process
+    pool with more than one worker. The saved arrays are deleted on the way out."""
+    ready = [r for r in runs if len(r.store.done_trials()) == r.n_trials > 0]
+    if not (isinstance(executor, PoolExecutor) and executor.n_workers > 1 and len(ready) > 1):
+        yield
+        return
+    with tempfile.TemporaryDirectory(prefix="soabench-merge-") as tmp:
+        folders = tuple((str(r.store.run_dir), *merge_args(r.config), bool(r.figures)) for r in ready)
+        batch = MergeBatch(folders, tmp)
+        size = [r.n_trials * len(f[1]) * len(f[2]) for r, f in zip(ready, folders, strict=True)]
+        order = sorted(range(len(folders)), key=lambda i: -size[i])  # the largest first: no long tail on one worker
+        keys = []
+        try:
+            with contextlib.closing(executor.results(batch, order)) as results:
+                for i, rec in results:
+                    if rec.get("status") != "ok":
+                        continue  # the report merges this folder itself (and says what is wrong with it)
+                    key = _key(folders[i][0])
+                    _MERGED[key] = Merged(
+                        tuple(rec["stamp"]), tuple(rec["done"]), tuple(rec["failures"]), dict(rec["counts"])
+                    )
+                    keys.append(key)
+                    if rec["arrays"]:
+                        remember_arrays(folders[i][0], tuple(rec["stamp"]), rec["arrays"])
+            yield
+        finally:
+            for key in keys:
+                _MERGED.pop(key, None)
+                forget_arrays(key)
+
+
+def _key(run_dir: Path | str) -> str:
+    return str(Path(run_dir).resolve())
+
+
+def merge(store: RunStore, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
+    """:meth:`RunStore.merge <soabench.experiment.store.RunStore.merge>`, or the merge a worker of :func:`merged_on`
+    did of this folder if the folder is as it left it (used once)."""
+    hit = _MERGED.pop(_key(store.run_dir), None)
+    if hit is not None and hit.stamp == merged_stamp(store.run_dir) and hit.done == tuple(store.done_trials()):
+        store.adopt_merge(hit.done, hit.failures)
+        return dict(hit.counts)
+    return store.merge(models, modes)
