@@ -98,7 +98,10 @@ def merged_on(executor: Any, runs: Sequence[Any]) -> Iterator[None]:
     with tempfile.TemporaryDirectory(prefix="soabench-merge-") as tmp:
         folders = tuple((str(r.store.run_dir), *merge_args(r.config), bool(r.figures)) for r in ready)
         batch = MergeBatch(folders, tmp)
-        size = [r.n_trials * len(f[1]) * len(f[2]) for r, f in zip(ready, folders, strict=True)]
+        size = [
+            r.n_trials * len(f[1]) * len(f[2]) * len(r.config.experiment.clutter)
+            for r, f in zip(ready, folders, strict=True)
+        ]
         order = sorted(range(len(folders)), key=lambda i: -size[i])  # the largest first: no long tail on one worker
         keys = []
         try:
