@@ -80,26 +80,3 @@ def test_a_failed_figure_raises_and_the_report_is_not_written(run_dir, tmp_path,
     with pytest.raises(ValueError, match="no figure today"):
         write_report(run_dir)
     assert not (run_dir / "summary.json").exists()
-
-
-def test_the_trial_pool_draws_the_report(run_dir, tmp_path, monkeypatch):
-    """A run on a pool of its own keeps that pool (its workers started and warm) for the report's figures, then
-    closes it; the figures are the ones the module's run drew one after another."""
-    pools: list[PoolExecutor] = []
-    init = PoolExecutor.__init__
-
-    def counted(self, workers):
-        pools.append(self)
-        init(self, workers)
-
-    monkeypatch.setattr(PoolExecutor, "__init__", counted)
-    cfg = Config.from_dict(load_tables(run_dir).meta["config"])
-    out = tmp_path / "pool"
-    o = run_experiment(
-        cfg, "intersection", out=out, trial_fn=ft.fake_trial, load_fn=ft.fake_load, workers=2, progress=False
-    )
-    assert o.complete and len(pools) == 1 and pools[0]._pool is None  # one pool for trials and figures, closed
-    serial = plots.make_figures(load_tables(run_dir), tmp_path / "serial")
-    assert sorted(p.name for p in (out / "figures").iterdir()) == sorted(p.name for p in serial)
-    for p in serial:
-        assert (out / "figures" / p.name).read_bytes() == p.read_bytes(), p.name

@@ -397,7 +397,7 @@ def _run_locked(
     # connect to the executor before creating the run folder (an unreachable scheduler leaves nothing behind)
     own_executor = executor is None and len(todo) > 0 and defer is None
     exe = open_executor(workers, scheduler, dask_local, n_trials=len(todo)) if own_executor else executor
-    interrupted = stopped = trials_ended = False
+    interrupted = stopped = False
     try:
         if not resumed:
             locks.append(FolderLock(store.run_dir).acquire())  # creates the folder; run_experiment releases it
@@ -452,53 +452,15 @@ def _run_locked(
                     **times,
                 },
             )
-        trials_ended = True
     except KeyboardInterrupt:
         interrupted = True
         raise Interrupted(
             f"interrupted: {len(store.done_trials())} of {n_trials} trials on disk in {store.run_dir}; {hint}"
         ) from None
     finally:
-        # a pool of our own that ran every trial draws the report's figures too: its workers are started and warm
-        reuse = own_executor and trials_ended and not (interrupted or stopped) and isinstance(exe, PoolExecutor)
-        reuse = reuse and figures and exe.n_workers > 1
-        if own_executor and not reuse:
+        if own_executor:
             exe.close(abort=interrupted or stopped)
-    report_ok = False
-    try:
-        outcome = _report(
-            store,
-            config,
-            n_trials,
-            interrupted,
-            stopped,
-            defer is not None,
-            hint,
-            figures,
-            None if scheduler or dask_local else workers,
-            exe if reuse else executor,
-        )
-        report_ok = True
-        return outcome
-    finally:
-        if reuse:
-            exe.close(abort=not report_ok)
 
-
-def _report(
-    store: RunStore,
-    config: Config,
-    n_trials: int,
-    interrupted: bool,
-    stopped: bool,
-    deferred: bool,
-    hint: str,
-    figures: bool,
-    workers: int | None,
-    executor: Any,
-) -> RunOutcome:
-    """The outcome of a run folder whose trials were run (or deferred): merged and reported once every trial was
-    attempted; ``executor`` (if a local process pool) draws the figures, else a pool of ``workers`` processes."""
     done = set(store.done_trials())
     failures = store.failures()
     failed_set = {int(f["trial"]) for f in failures}
@@ -507,7 +469,7 @@ def _report(
     outcome = RunOutcome(store.run_dir, n_missing == 0, len(done), n_missing, failures, "")
     if interrupted:
         raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
-    if unattempted or stopped or deferred:  # deferring: the report follows the group (run_trials=False)
+    if unattempted or stopped or defer is not None:  # deferring: the report follows the group (run_trials=False)
         return outcome
     from soabench.experiment import premerge
     from soabench.experiment.drawing import report_pool
@@ -515,7 +477,7 @@ def _report(
 
     try:
         premerge.merge(store, *premerge.merge_args(config))  # a study's workers may have merged it already
-        with report_pool(workers, executor):  # figures on local processes
+        with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
             outcome.summary_markdown = write_report(store.run_dir, figures=figures, store=store)
     except KeyboardInterrupt:
         raise Interrupted(
