@@ -86,11 +86,49 @@ def merge_task(i: int, batch: MergeBatch) -> dict:
     }
 
 
+class _Pending:
+    """The merge tasks of an open :func:`merged_on` block, collected as the reports ask for their folders."""
+
+    def __init__(self, results: Iterator[tuple[int, dict]], folders: Sequence[tuple]) -> None:
+        self.results = results
+        self.folders = folders
+        self.waiting = {_key(f[0]) for f in folders}
+        self.keys: list[str] = []
+
+    def wait_for(self, key: str) -> None:
+        """Collect finished merges until the one of folder ``key`` is in (or failed); no-op for another folder."""
+        while key in self.waiting:
+            try:
+                i, rec = next(self.results)
+            except StopIteration:
+                self.waiting.clear()
+                return
+            run_dir = self.folders[i][0]
+            done = _key(run_dir)
+            self.waiting.discard(done)
+            if rec.get("status") != "ok":
+                continue  # the report merges this folder itself (and says what is wrong with it)
+            stamp = tuple(rec["stamp"])
+            _MERGED[done] = Merged(stamp, tuple(rec["done"]), tuple(rec["failures"]), dict(rec["counts"]))
+            self.keys.append(done)
+            if rec["arrays"]:
+                remember_arrays(run_dir, stamp, rec["arrays"])
+
+
+#: the open :func:`merged_on` blocks, innermost last
+_PENDING: list[_Pending] = []
+
+
 @contextlib.contextmanager
 def merged_on(executor: Any, runs: Sequence[Any]) -> Iterator[None]:
     """Merge every complete folder of ``runs`` (:class:`~soabench.experiment.runner.DeferredRun`) on ``executor``'s
-    workers, then run the block (whose reports adopt those merges); a no-op unless ``executor`` is a local process
-    pool with more than one worker. The saved arrays are deleted on the way out."""
+    workers while the block writes the reports; a no-op unless ``executor`` is a local process pool with more than
+    one worker.
+
+    The merges are submitted as the pool takes them (two per worker in flight) and collected when a report asks
+    for its folder (:func:`merge` waits for that one), so a report's figures are drawn while the other folders are
+    still being merged. Merges not collected by the end of the block are cancelled, and the saved arrays deleted.
+    """
     ready = [r for r in runs if len(r.store.done_trials()) == r.n_trials > 0]
     if not (isinstance(executor, PoolExecutor) and executor.n_workers > 1 and len(ready) > 1):
         yield
@@ -103,22 +141,14 @@ def merged_on(executor: Any, runs: Sequence[Any]) -> Iterator[None]:
             for r, f in zip(ready, folders, strict=True)
         ]
         order = sorted(range(len(folders)), key=lambda i: -size[i])  # the largest first: no long tail on one worker
-        keys = []
+        pending = _Pending(executor.results(batch, order), folders)
+        _PENDING.append(pending)
         try:
-            with contextlib.closing(executor.results(batch, order)) as results:
-                for i, rec in results:
-                    if rec.get("status") != "ok":
-                        continue  # the report merges this folder itself (and says what is wrong with it)
-                    key = _key(folders[i][0])
-                    _MERGED[key] = Merged(
-                        tuple(rec["stamp"]), tuple(rec["done"]), tuple(rec["failures"]), dict(rec["counts"])
-                    )
-                    keys.append(key)
-                    if rec["arrays"]:
-                        remember_arrays(folders[i][0], tuple(rec["stamp"]), rec["arrays"])
             yield
         finally:
-            for key in keys:
+            _PENDING.remove(pending)
+            pending.results.close()  # cancels the merges not started (a running one finishes its folder's files)
+            for key in pending.keys:
                 _MERGED.pop(key, None)
                 forget_arrays(key)
 
@@ -130,7 +160,10 @@ def _key(run_dir: Path | str) -> str:
 def merge(store: RunStore, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
     """:meth:`RunStore.merge <soabench.experiment.store.RunStore.merge>`, or the merge a worker of :func:`merged_on`
     did of this folder if the folder is as it left it (used once)."""
-    hit = _MERGED.pop(_key(store.run_dir), None)
+    key = _key(store.run_dir)
+    for pending in _PENDING:
+        pending.wait_for(key)
+    hit = _MERGED.pop(key, None)
     if hit is not None and hit.stamp == merged_stamp(store.run_dir) and hit.done == tuple(store.done_trials()):
         store.adopt_merge(hit.done, hit.failures)
         return dict(hit.counts)
