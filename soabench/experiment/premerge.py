@@ -7,8 +7,9 @@ formatted as CSV lines) and, for a folder with figures, reads its steps.csv back
 (:func:`~soabench.experiment.drawing.save_arrays`). Done in the driver one folder after another, that left the
 pool's workers idle for a quarter of the study's wall time.
 
-Inside ``with merged_on(pool, runs):`` every folder of ``runs`` whose trials are all on disk is first handed to a
-worker, largest first: the worker merges it and saves its tables as arrays. The reports are then written as before;
+Inside ``with merged_on(pool, runs):`` every folder of ``runs`` whose trials are all on disk is handed to a worker,
+largest first: the worker merges it and saves its tables as arrays. The reports are written as before, each
+waiting only for its own folder's merge (so one report's figures are drawn while later folders merge);
 :func:`merge` adopts a worker's merge when the folder is as the worker left it (the same finished trials, the same
 merged files, by size and modification time), and :func:`~soabench.experiment.drawing.draw_all` takes the saved
 arrays under the same condition. Anything else (a changed folder, a failed merge task, no process pool) is merged
