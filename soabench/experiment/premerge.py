@@ -94,7 +94,6 @@ class _Pending:
         self.results = results
         self.folders = folders
         self.waiting = {_key(f[0]) for f in folders}
-        self.keys: list[str] = []
 
     def wait_for(self, key: str) -> None:
         """Collect finished merges until the one of folder ``key`` is in (or failed); no-op for another folder."""
@@ -111,7 +110,6 @@ class _Pending:
                 continue  # the report merges this folder itself (and says what is wrong with it)
             stamp = tuple(rec["stamp"])
             _MERGED[done] = Merged(stamp, tuple(rec["done"]), tuple(rec["failures"]), dict(rec["counts"]))
-            self.keys.append(done)
             if rec["arrays"]:
                 remember_arrays(run_dir, stamp, rec["arrays"])
 
@@ -149,9 +147,9 @@ def merged_on(executor: Any, runs: Sequence[Any]) -> Iterator[None]:
         finally:
             _PENDING.remove(pending)
             pending.results.close()  # cancels the merges not started (a running one finishes its folder's files)
-            for key in pending.keys:
-                _MERGED.pop(key, None)
-                forget_arrays(key)
+            for run_dir, *_ in folders:
+                _MERGED.pop(_key(run_dir), None)
+                forget_arrays(run_dir)
 
 
 def _key(run_dir: Path | str) -> str:

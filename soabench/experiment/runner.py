@@ -256,7 +256,7 @@ class DeferredRun:
     todo: frozenset[int]
     n_trials: int
     config: Config
-    figures: bool = True  #: whether its report draws figures
+    figures: bool  #: whether its report draws figures
 
 
 def run_experiment(
