@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -172,3 +173,46 @@ def test_model_failures_after_a_merge_are_the_records_own(tmp_path, monkeypatch)
     rec["model_failures"] = [{"trial": 1, "model": "plug", "k": 9}]
     run.write_trial(rec)  # the records changed: read them again
     assert [f["k"] for f in run.model_failures()] == [0, 9, 2] and reads == [0, 1, 2]
+
+
+#: step-table cells a record can hold, per column of the test below (one value per trial's rows)
+_ODD_CELLS = {
+    "ospa": [1.5, -0.0, float("nan"), -float("nan"), float("inf"), 1e-320, 2**70, 7, None],  # floats, ints, none
+    "card_err": [True, False, 3, 2, 1, 0, 5, 4],  # bools write as 1 / 0
+    "sum_w": [0.25, "0.5", " 6 ", "1_0", "", 2.0, "3", 1.0],  # text that float() reads, an empty cell
+    "n_est": ["a,b", 'say "hi"', "x", "y", "z", "w", "v", "u"],  # text that needs quoting
+    "n_gt": [1, 2, 3, "four", 5, 6, 7, 8],  # numbers in some trials, text in another: only the file decides
+    "fp": [10**400, 1, 2, 3, 4, 5, 6, 7],  # an int beyond the float range reads as inf
+}
+
+
+@pytest.mark.parametrize("column", sorted(_ODD_CELLS))
+def test_merge_keeps_the_step_columns_read_csv_reads(tmp_path, column):
+    """``merge(..., step_columns=True)`` keeps steps.csv's columns as ``read_csv`` reads the file it wrote, byte for
+    byte and dtype for dtype, whatever the cells; it gives None where only the file decides, and nothing once a
+    merged file changed."""
+    from soabench.experiment import store
+    from soabench.experiment.tables import load_tables
+
+    run = store.RunStore(tmp_path / "run")
+    run.create({"config": {"experiment": {"models": ["soa", "gmbm"], "probabilities": ["static"]}}})
+    for trial, value in enumerate(_ODD_CELLS[column]):  # trial t's step rows all hold the column's value t
+        rec = _records("regular")[0]
+        cols = rec["steps"]["columns"]
+        rec["trial"] = trial
+        for row in rec["steps"]["rows"]:
+            row[cols.index("trial")], row[cols.index(column)] = trial, value
+        run.write_trial(rec)
+    run.merge(("soa", "gmbm"), ("static",), step_columns=True)
+    kept, read = run.step_columns(), read_csv(run.run_dir / "steps.csv")
+    if column == "n_gt":
+        assert kept is None and read[column].dtype.kind == "U"
+        return
+    assert kept is not None and same(kept, read)
+    assert load_tables(run.run_dir, steps=kept).steps[column] is kept[column]
+    assert store.RunStore(run.run_dir).step_columns() is None  # another store did not merge
+    run.merge(("soa", "gmbm"), ("static",))  # merged again without columns: none kept
+    assert run.step_columns() is None
+    run.merge(("soa", "gmbm"), ("static",), step_columns=True)
+    os.utime(run.run_dir / "steps.csv", ns=(1, 1))  # the file changed since
+    assert run.step_columns() is None

@@ -3,7 +3,7 @@ phase of ``soabench study``).
 
 A study ends with about twenty finished folders (main run, clutter points, N̂ points, sensitivity runs). Each one's
 report starts with :meth:`~soabench.experiment.store.RunStore.merge` (every trial record read, the step rows
-formatted as CSV lines) and, for a folder with figures, reads its steps.csv back for the figure workers
+formatted as CSV lines) and, for a folder with figures, hands its tables to the figure workers as arrays
 (:func:`~soabench.experiment.drawing.save_arrays`). Done in the driver one folder after another, that left the
 pool's workers idle for a quarter of the study's wall time.
 
@@ -67,16 +67,16 @@ def merge_args(config: Any) -> tuple[tuple[str, ...], tuple[str, ...]]:
 
 def merge_task(i: int, batch: MergeBatch) -> dict:
     """Worker side: merge folder ``i`` of ``batch``; if it draws figures, save its tables as arrays
-    (``<tmp>/<i>.npz``)."""
+    (``<tmp>/<i>.npz``; the step table's columns as the merge kept them, not parsed back from steps.csv)."""
     from soabench.experiment.tables import load_tables
 
     run_dir, models, modes, figures = batch.folders[i]
     store = RunStore(Path(run_dir))
     done = tuple(store.done_trials())
-    counts = store.merge(models, modes)
+    counts = store.merge(models, modes, step_columns=figures)
     failures = store.model_failures()
     arrays = Path(batch.tmp) / f"{i}.npz"
-    saved = figures and save_arrays(load_tables(Path(run_dir)), arrays)
+    saved = figures and save_arrays(load_tables(Path(run_dir), steps=store.step_columns()), arrays)
     return {
         "status": "ok",
         "done": list(done),
@@ -156,9 +156,10 @@ def _key(run_dir: Path | str) -> str:
     return str(Path(run_dir).resolve())
 
 
-def merge(store: RunStore, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
-    """:meth:`RunStore.merge <soabench.experiment.store.RunStore.merge>`, or the merge a worker of :func:`merged_on`
-    did of this folder if the folder is as it left it (used once)."""
+def merge(store: RunStore, models: Sequence[str], modes: Sequence[str], step_columns: bool = False) -> dict[str, int]:
+    """:meth:`RunStore.merge <soabench.experiment.store.RunStore.merge>` (``step_columns``: keep steps.csv's columns
+    for the report's figures), or the merge a worker of :func:`merged_on` did of this folder if the folder is as it
+    left it (used once)."""
     key = _key(store.run_dir)
     for pending in _PENDING:
         pending.wait_for(key)
@@ -166,4 +167,4 @@ def merge(store: RunStore, models: Sequence[str], modes: Sequence[str]) -> dict[
     if hit is not None and hit.stamp == merged_stamp(store.run_dir) and hit.done == tuple(store.done_trials()):
         store.adopt_merge(hit.done, hit.failures)
         return dict(hit.counts)
-    return store.merge(models, modes)
+    return store.merge(models, modes, step_columns)

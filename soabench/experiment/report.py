@@ -353,7 +353,7 @@ def write_report(run_dir: Path, figures: bool = True, store: RunStore | None = N
     failures without reading every trial record again)."""
     run_dir = Path(run_dir)
     store = store if store is not None else RunStore(run_dir)
-    tables = load_tables(run_dir)
+    tables = load_tables(run_dir, steps=store.step_columns())  # the columns its merge kept: no parse of steps.csv
     summary = summarize(tables, store.failures(), store.sessions())
     fig_paths: list[str] = []
     if figures:

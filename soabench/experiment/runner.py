@@ -476,7 +476,8 @@ def _run_locked(
     from soabench.experiment.report import write_report
 
     try:
-        premerge.merge(store, *premerge.merge_args(config))  # a study's workers may have merged it already
+        # a study's workers may have merged it already; the figures read the step columns the merge kept
+        premerge.merge(store, *premerge.merge_args(config), step_columns=figures)
         with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
             outcome.summary_markdown = write_report(store.run_dir, figures=figures, store=store)
     except KeyboardInterrupt:

@@ -316,6 +316,71 @@ def _parse_column(cells: Sequence[str]) -> np.ndarray:
         return np.array(cells, dtype=str)
 
 
+class _ReadBack:
+    """The columns :func:`read_csv` would read from CSV rows written by :func:`_csv_line`, built from the rows' values
+    as they are written, block by block (the merge's trials).
+
+    A column whose cells are all Python floats and ints reads back as those numbers (``float(repr(x)) == x``,
+    ``float(str(n)) == float(n)``, NaN as numpy's NaN); any other block is formatted (:func:`format_value`) and
+    parsed by :func:`_parse_column`, exactly as the file's cells are. A column that is numbers in one block and text
+    in another is decided only by the whole file (a float block would have to be formatted again), so then
+    :meth:`arrays` gives None and the caller reads the file.
+    """
+
+    def __init__(self) -> None:
+        self.blocks: list[list[np.ndarray]] = []
+        self.ok = True
+
+    def add(self, rows: Sequence[Sequence[Any]]) -> None:
+        if not self.ok or not rows:
+            return
+        cols = list(zip(*rows, strict=True))
+        if not self.blocks:
+            self.blocks = [[] for _ in cols]
+        if len(cols) != len(self.blocks):
+            self.ok = False
+            return
+        for j, col in enumerate(cols):
+            kinds = set(map(type, col))
+            a = _numbers(col) if kinds <= _NUMBER_TYPES else None
+            if a is None:  # text, or a cell only its text decides: the cells as the file holds them (unquoted)
+                a = _parse_column(list(col) if kinds == {str} else [format_value(v) for v in col])
+            self.blocks[j].append(a)
+
+    def arrays(self, header: Sequence[str]) -> dict[str, np.ndarray] | None:
+        """The columns by name (``header``: the file's columns, in order), or None when only the file decides."""
+        if not self.ok:
+            return None
+        if not self.blocks:
+            return {name: np.zeros(0) for name in header}
+        if len(header) != len(self.blocks) or len(set(header)) != len(header):
+            return None
+        out: dict[str, np.ndarray] = {}
+        for name, blocks in zip(header, self.blocks, strict=True):
+            kinds = {b.dtype.kind for b in blocks}
+            if kinds == {"f"}:
+                out[name] = np.concatenate(blocks)
+            elif "f" not in kinds:
+                out[name] = np.concatenate(blocks)  # str, as wide as the widest cell (np.array of the cells)
+            else:
+                return None
+        return out
+
+
+_NUMBER_TYPES = frozenset({float, int})
+
+
+def _numbers(values: Sequence[float | int]) -> np.ndarray | None:
+    """Python floats and ints as :func:`_parse_column` reads their CSV text: the same numbers, NaN as
+    ``float("nan")``; None for an int beyond the float range (its text reads as inf)."""
+    try:
+        a = np.array(values, dtype=float)
+    except OverflowError:
+        return None
+    a[np.isnan(a)] = math.nan
+    return a
+
+
 _BLOCK = 20_000  #: rows parsed at a time by :func:`_read_plain`
 
 
@@ -371,6 +436,8 @@ class RunStore:
 
     def __init__(self, run_dir: Path):
         self.run_dir = Path(run_dir)
+        #: (the merged files' stamp, steps.csv's columns) kept by the last ``merge(..., step_columns=True)``
+        self._merged_steps: tuple[tuple, dict[str, np.ndarray]] | None = None
         #: (the finished trials, their model failures) as the last :meth:`merge` read them
         self._merged_failures: tuple[tuple[int, ...], list[dict]] | None = None
 
@@ -474,12 +541,16 @@ class RunStore:
         finished trials it merged and the model failures it read, which :meth:`model_failures` then returns."""
         self._merged_failures = (tuple(int(t) for t in done), [dict(f) for f in failures])
 
-    def merge(self, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
-        """Write trials.csv, episodes.csv, steps.csv and timing.csv from the ok records; returns row counts."""
-        with gc_paused():
-            return self._merge(models, modes)
+    def merge(self, models: Sequence[str], modes: Sequence[str], step_columns: bool = False) -> dict[str, int]:
+        """Write trials.csv, episodes.csv, steps.csv and timing.csv from the ok records; returns row counts.
 
-    def _merge(self, models: Sequence[str], modes: Sequence[str]) -> dict[str, int]:
+        ``step_columns``: also keep steps.csv's columns as :func:`read_csv` reads them back (:meth:`step_columns`),
+        taken from the values the merge formats, so that a report's figures need not parse the file again."""
+        self._merged_steps = None
+        with gc_paused():
+            return self._merge(models, modes, step_columns)
+
+    def _merge(self, models: Sequence[str], modes: Sequence[str], step_columns: bool) -> dict[str, int]:
         m_idx = {m: i for i, m in enumerate(models)}
         p_idx = {p: i for i, p in enumerate(modes)}
 
@@ -502,7 +573,7 @@ class RunStore:
 
         rows: list[dict] = []
         episodes: list[dict] = []
-        steps = _SortedSteps(step_key)
+        steps = _SortedSteps(step_key, columns=step_columns)
         timing: list[dict] = []
         failures: list[dict] = []
         done = self.done_trials()
@@ -532,7 +603,9 @@ class RunStore:
             tables = [rec["steps"] for rec in map(self.load_trial, done) if rec.get("steps")]
             step_cols, step_rows = _rows_of(tables, STEP_COLUMNS)
             step_rows.sort(key=step_key(step_cols))
-            steps = _SortedSteps(step_key, step_cols, list(map(_csv_line, step_rows)))
+            steps = _SortedSteps(step_key, step_cols, list(map(_csv_line, step_rows)), columns=step_columns)
+            if steps.columns is not None:
+                steps.columns.add(step_rows)
         write_csv(
             self.run_dir / "trials.csv",
             [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows],
@@ -546,7 +619,16 @@ class RunStore:
             ("trial", "clutter", "model", "mode", *TIMING_COLUMNS, *(f"t_{k}" for k in TRIAL_TIMING_KEYS)),
         )
         self._merged_failures = (tuple(done), failures)
+        columns = steps.columns.arrays(steps.cols or list(STEP_COLUMNS)) if steps.columns is not None else None
+        if columns is not None:
+            self._merged_steps = (merged_stamp(self.run_dir), columns)
         return {"trials": len(rows), "episodes": len(episodes), "steps": len(steps.lines)}
+
+    def step_columns(self) -> dict[str, np.ndarray] | None:
+        """steps.csv's columns as :func:`read_csv` gives them, kept by this store's last ``merge(...,
+        step_columns=True)`` while the merged files are as it wrote them (:func:`merged_stamp`); else None."""
+        hit = self._merged_steps
+        return hit[1] if hit is not None and hit[0] == merged_stamp(self.run_dir) else None
 
     def clear_merged(self) -> None:
         """Remove merged outputs of an earlier session (they are rewritten when the run completes)."""
@@ -592,13 +674,19 @@ class _SortedSteps:
     """
 
     def __init__(
-        self, key: Callable[[list[str]], Callable[[list], tuple]], cols: list[str] | None = None, lines=None
+        self,
+        key: Callable[[list[str]], Callable[[list], tuple]],
+        cols: list[str] | None = None,
+        lines=None,
+        columns: bool = False,
     ) -> None:
         self.key = key
         self.cols = cols
         self.lines: list[str] = lines if lines is not None else []
         self.ok = True
         self._last: tuple | None = None
+        #: the columns as :func:`read_csv` will read them back, collected block by block (``columns=True``)
+        self.columns: _ReadBack | None = _ReadBack() if columns else None
 
     def add(self, table: dict) -> None:
         """Append one record's packed step table (:func:`pack_table`)."""
@@ -618,6 +706,8 @@ class _SortedSteps:
                 return
             self._last = key(rows[-1])
         self.lines.extend(map(_csv_line, rows))
+        if self.columns is not None:
+            self.columns.add(rows)
 
     def write(self, path: Path) -> None:
         """The file: the header and every line (:func:`_write_lines`)."""

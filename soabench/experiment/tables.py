@@ -55,9 +55,10 @@ class LazyTable(Mapping[str, np.ndarray]):
     the figures read it: a report written without figures never parses it.
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, columns: dict[str, np.ndarray] | None = None) -> None:
         self.path = path
-        self._columns: dict[str, np.ndarray] | None = None
+        #: the columns, once read (or as given: what :func:`read_csv` gives the file, e.g. kept by its merge)
+        self._columns: dict[str, np.ndarray] | None = columns
 
     @property
     def columns(self) -> dict[str, np.ndarray]:
@@ -84,8 +85,11 @@ class LazyTable(Mapping[str, np.ndarray]):
         return len(self.columns)
 
 
-def load_tables(run_dir: Path) -> RunTables:
-    """Read a run's merged CSV files and its run.json (steps.csv when first used, :class:`LazyTable`)."""
+def load_tables(run_dir: Path, steps: dict[str, np.ndarray] | None = None) -> RunTables:
+    """Read a run's merged CSV files and its run.json (steps.csv when first used, :class:`LazyTable`).
+
+    ``steps``: steps.csv's columns as :func:`read_csv` would give them, when the caller has them already
+    (:meth:`RunStore.step_columns <soabench.experiment.store.RunStore.step_columns>`)."""
     run_dir = Path(run_dir)
     meta = RunStore(run_dir).meta()
     path = run_dir / "trials.csv"
@@ -95,7 +99,7 @@ def load_tables(run_dir: Path) -> RunTables:
     for name in ("trials", "episodes", "timing"):
         p = run_dir / f"{name}.csv"
         tables[name] = read_csv(p) if p.is_file() else _empty(())
-    tables["steps"] = LazyTable(run_dir / "steps.csv")
+    tables["steps"] = LazyTable(run_dir / "steps.csv", steps)
     return RunTables(meta=meta, run_dir=run_dir, **tables)
 
 
