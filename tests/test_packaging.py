@@ -36,6 +36,17 @@ def test_every_package_folder_is_installed():
     assert {p.split(".")[0] for p in listed} == {"soabench"}
 
 
+def test_every_shipped_network_is_listed():
+    """A shipped network's folder (data files only) is a folder Python could import: pyproject lists it, so that
+    setuptools does not warn that it would be left out of the packages (its files are soabench.nets' data)."""
+    listed = set(PYPROJECT["tool"]["setuptools"]["packages"])
+    folders = {
+        f"soabench.nets.{d.name}" for d in (ROOT / "sumo_nets").iterdir() if d.is_dir() and d.name.isidentifier()
+    }
+    assert folders and folders - listed == set()
+    assert {n.removeprefix("soabench.nets.") for n in folders} >= set(shipped_nets())
+
+
 def test_subpackages_are_the_repository_folders():
     assert Path(soabench.baselines.__file__).parent.name == "baselines"
     assert Path(soabench.nets.__file__).parent.name == "sumo_nets"
