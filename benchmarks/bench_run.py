@@ -21,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config
+from soabench.experiment.files import read_csv
 from soabench.experiment.runner import run_experiment
-from soabench.experiment.store import RunStore, read_csv
+from soabench.experiment.store import RunStore
 
 STAGES = ("birth", "predict", "update", "reduce", "metrics")
 #: the stages timed inside the filter loop, whose wall time is ``t_filter_total`` (metrics are timed after it)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from soabench.errors import SoabenchError
-from soabench.experiment.store import read_csv, write_csv
+from soabench.experiment.files import read_csv, write_csv
 
 
 def csv_module_columns(path) -> dict[str, np.ndarray]:
@@ -56,9 +56,9 @@ TEXTS = {
 @pytest.mark.parametrize("name", sorted(TEXTS))
 def test_read_csv_reads_what_the_csv_module_reads(tmp_path, monkeypatch, name, block):
     """Whatever the block of rows parsed at a time (a column can turn out to be text in a later block)."""
-    from soabench.experiment import store
+    from soabench.experiment import files
 
-    monkeypatch.setattr(store, "_BLOCK", block)
+    monkeypatch.setattr(files, "_BLOCK", block)
     path = tmp_path / "t.csv"
     path.write_text(TEXTS[name], encoding="utf-8", newline="")
     try:
@@ -112,7 +112,8 @@ def test_steps_are_read_only_when_used(tmp_path, monkeypatch):
 
 def _records(kind: str) -> list[dict]:
     """Three trials' records whose step rows arrive unsorted; ``kind`` makes one of them irregular."""
-    from soabench.experiment.store import STEP_COLUMNS, pack_table
+    from soabench.experiment.files import pack_table
+    from soabench.experiment.store import STEP_COLUMNS
 
     rng = np.random.default_rng(5)
     out = []
@@ -134,7 +135,7 @@ def _records(kind: str) -> list[dict]:
 
 @pytest.mark.parametrize("kind", ["regular", "extra column", "out of order"])
 def test_merge_writes_steps_as_one_sort_of_every_row(tmp_path, kind):
-    from soabench.experiment import store
+    from soabench.experiment import files, store
 
     run = store.RunStore(tmp_path / "run")
     for rec in _records(kind):
@@ -149,7 +150,7 @@ def test_merge_writes_steps_as_one_sort_of_every_row(tmp_path, kind):
         *(cols.index(c) for c in ("trial", "clutter", "model", "mode", "k")),
     )
     rows.sort(key=lambda r: (int(r[it]), float(r[ic]), m_idx[r[im]], r[im], 0, r[ip], r[ik]))
-    store._write_csv_lists(tmp_path / "reference.csv", cols, rows)
+    files.write_csv_lists(tmp_path / "reference.csv", cols, rows)
     assert (run.run_dir / "steps.csv").read_bytes() == (tmp_path / "reference.csv").read_bytes()
     assert counts["steps"] == 3 * 2 * 4 and ("n_plugin" in cols) == (kind == "extra column")
 

@@ -13,6 +13,7 @@ import fake_trial as ft
 import pytest
 
 from soabench.config import Config
+from soabench.experiment.files import write_csv
 from soabench.experiment.report import (
     load_tables,
     paper_protocol_mismatch,
@@ -21,7 +22,7 @@ from soabench.experiment.report import (
     write_report,
 )
 from soabench.experiment.runner import run_experiment
-from soabench.experiment.store import RunStore, write_csv
+from soabench.experiment.store import RunStore
 from soabench.scenario import load, shipped_nets
 
 NET_DIR = Path(__file__).resolve().parents[1] / "sumo_nets" / "intersection"

@@ -233,8 +233,8 @@ def test_bad_plugins_are_recorded_and_others_kept(intersection) -> None:
 
 
 def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
+    from soabench.experiment.files import read_csv
     from soabench.experiment.runner import run_experiment
-    from soabench.experiment.store import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
     plugins.allow_import_paths([one, echo, bad])
@@ -289,8 +289,8 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     from pathlib import Path
 
     distributed = pytest.importorskip("distributed")
+    from soabench.experiment.files import read_csv
     from soabench.experiment.runner import run_experiment
-    from soabench.experiment.store import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
     plugins.allow_import_paths([one, echo, bad])

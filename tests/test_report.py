@@ -12,10 +12,11 @@ import fake_trial as ft
 import numpy as np
 
 from soabench.config import Config
+from soabench.experiment.files import format_value, read_csv, write_csv
 from soabench.experiment.plots import cumulative_precision
 from soabench.experiment.report import RunTables, load_tables, summarize, write_report
 from soabench.experiment.runner import run_experiment
-from soabench.experiment.store import RunStore, format_value, read_csv, write_csv
+from soabench.experiment.store import RunStore
 
 
 def small_config(trials: int = 3, models=("soa", "pubm", "atbm"), modes=("static",)) -> Config:

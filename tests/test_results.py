@@ -18,9 +18,10 @@ from pathlib import Path
 import pytest
 
 from soabench.config import Config
+from soabench.experiment.files import format_value
 from soabench.experiment.provenance import REGENERATE_COMMAND, REPRODUCTION_TOLERANCE, cpu_model, within_tolerance
 from soabench.experiment.runner import package_versions
-from soabench.experiment.store import TRIAL_COLUMNS, format_value
+from soabench.experiment.store import TRIAL_COLUMNS
 from soabench.experiment.trial import run_trial
 from soabench.scenario import load
 

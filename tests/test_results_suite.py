@@ -18,8 +18,8 @@ import soabench.scenario
 from soabench.cli import main
 from soabench.config import SensorConfig
 from soabench.experiment import cross_scene, paper, registry
+from soabench.experiment.files import read_json
 from soabench.experiment.occlusion_density import scan_occlusion
-from soabench.experiment.store import read_json
 
 TINY = [
     "--scenes", "intersection,tjunction", "--trials", "2", "--duration", "10", "--births-trials", "1",

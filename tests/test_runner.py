@@ -19,9 +19,9 @@ import pytest
 
 from soabench.config import Config
 from soabench.errors import SoabenchError
+from soabench.experiment.files import read_csv
 from soabench.experiment.report import LABEL, fmt, fmt_pct
 from soabench.experiment.runner import run_experiment
-from soabench.experiment.store import read_csv
 from soabench.experiment.sweep import run_sweep, sweep_points
 
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")

@@ -16,7 +16,8 @@ from shapely.geometry import box
 from soabench.birth.base import FOVRule, inside_any
 from soabench.config import FilterConfig, SensorConfig
 from soabench.errors import SoabenchError
-from soabench.experiment.store import _rows_of, _write_csv_lists, format_value, pack_table, unpack_table, write_csv
+from soabench.experiment.files import format_value, pack_table, unpack_table, write_csv, write_csv_lists
+from soabench.experiment.store import _rows_of
 from soabench.gmphd.filter import GMPHDFilter
 from soabench.gmphd.inputs import births_finite
 from soabench.sensor import _padded, line_of_sight, line_of_sight_past, sight_blockers
@@ -156,10 +157,10 @@ def test_step_tables_as_lists_write_what_dicts_would(tmp_path):
     t3 = {"columns": ["a", "b", "c", "zz"], "rows": [[1, 2.0]]}  # a short row: the missing cells are absent
     tables = [t1, t2, t3]
     out_cols, rows = _rows_of(tables, cols)
-    _write_csv_lists(tmp_path / "lists.csv", out_cols, rows)
+    write_csv_lists(tmp_path / "lists.csv", out_cols, rows)
     write_csv(tmp_path / "dicts.csv", [r for t in tables for r in unpack_table(t)], cols)
     assert (tmp_path / "lists.csv").read_bytes() == (tmp_path / "dicts.csv").read_bytes()
     empty_cols, empty = _rows_of([], cols)
-    _write_csv_lists(tmp_path / "empty.csv", empty_cols, empty)
+    write_csv_lists(tmp_path / "empty.csv", empty_cols, empty)
     write_csv(tmp_path / "empty_dicts.csv", [], cols)
     assert (tmp_path / "empty.csv").read_bytes() == (tmp_path / "empty_dicts.csv").read_bytes()

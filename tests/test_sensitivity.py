@@ -16,7 +16,7 @@ import pytest
 from soabench.cli import main
 from soabench.experiment import registry
 from soabench.experiment import sensitivity as sens
-from soabench.experiment.store import write_csv
+from soabench.experiment.files import write_csv
 
 COLS = ["trial", "clutter", "model", "mode", "delay_mean", "delay_std", "card_err", "ospa", "mean_components"]
 

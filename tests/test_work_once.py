@@ -18,7 +18,7 @@ import pytest
 
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
-from soabench.experiment.store import read_csv
+from soabench.experiment.files import read_csv
 from soabench.experiment.sweep import run_sweep, scans_per_run
 from soabench.experiment.trial import ROW_TIME_KEYS, TrialShare, run_trial
 

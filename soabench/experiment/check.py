@@ -239,8 +239,9 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
 
 def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict[str, float], list[dict]]:
     """Run every scenario and seed; return the mean of every trials.csv metric per key, and the plugin failures."""
+    from soabench.experiment.files import read_csv
     from soabench.experiment.runner import run_experiment
-    from soabench.experiment.store import RunStore, read_csv
+    from soabench.experiment.store import RunStore
 
     base = load_config(suite.config)
     for s in suite.scenarios:  # validate every scenario before running any
@@ -339,7 +340,7 @@ def read_baseline(path: Path) -> dict[str, float]:
 
 
 def write_baseline(path: Path, suite: Suite, values: dict[str, float]) -> None:
-    from soabench.experiment.store import write_json_atomic
+    from soabench.experiment.files import write_json_atomic
 
     path.parent.mkdir(parents=True, exist_ok=True)
     clean = {k: (v if math.isfinite(v) else None) for k, v in values.items() if not _is_time(k)}
@@ -401,7 +402,7 @@ def run_check(suite_path: str | Path, out: Path, update_baseline: bool = False, 
     for f in failures:
         outcome.results.append(CheckResult(f"{f['scenario']}/{f['model']}/plugin", False, failure_message(f)))
     outcome.wall_s = time.perf_counter() - t0
-    from soabench.experiment.store import write_json_atomic, write_text_atomic
+    from soabench.experiment.files import write_json_atomic, write_text_atomic
 
     write_json_atomic(
         out / "check.json",

@@ -212,7 +212,7 @@ def figure(rows: Sequence[Mapping]):
 
 def write_summary(out_dir: Path, scenes: Sequence[tuple[str, Mapping[str, Any], Path]], clutter: float = 3.0) -> str:
     """Write summary.md, summary.csv and the figure into ``out_dir`` from (scene, density, trials.csv) triples."""
-    from soabench.experiment.store import write_csv, write_text_atomic
+    from soabench.experiment.files import write_csv, write_text_atomic
     from soabench.plotstyle import save_png
 
     rows = [r for name, dens, csv in scenes for r in advantage_rows(name, dens, paper.read_rows(csv), clutter)]

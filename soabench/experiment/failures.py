@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from soabench.experiment.files import write_csv
 from soabench.experiment.guard import FAILURE_KEYS
-from soabench.experiment.store import write_csv
 
 
 def write_model_failures(run_dir: Path, failures: list[dict], summary: dict) -> str:

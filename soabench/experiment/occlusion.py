@@ -15,8 +15,8 @@ from pathlib import Path
 
 from soabench.birth import LABEL
 from soabench.errors import require
+from soabench.experiment.files import read_json
 from soabench.experiment.report import fmt, fmt_pct
-from soabench.experiment.store import read_json
 
 if sys.version_info >= (3, 11):
     import tomllib

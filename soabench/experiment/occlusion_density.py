@@ -120,7 +120,7 @@ def settings(config: Config, trials: int) -> dict[str, Any]:
 
 def read_density(path: Path) -> dict[str, Any] | None:
     """A density file's content if it is one (checked field by field: it is data from a file), else None."""
-    from soabench.experiment.store import read_json
+    from soabench.experiment.files import read_json
 
     try:
         data = read_json(path)
@@ -140,7 +140,7 @@ def write_density(path: Path, net: str, config: Config, trials: int, **fns: Any)
 
     Returns (density, kept). The file is written atomically: an interrupted measurement leaves no file.
     """
-    from soabench.experiment.store import to_jsonable, write_json_atomic
+    from soabench.experiment.files import to_jsonable, write_json_atomic
 
     old = read_density(path) if Path(path).is_file() else None
     want = to_jsonable(settings(config, trials))

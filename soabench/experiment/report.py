@@ -30,9 +30,10 @@ import numpy as np
 
 from soabench.birth import BASELINES, LABEL
 from soabench.errors import SoabenchError
+from soabench.experiment.files import write_json_atomic, write_text_atomic
 from soabench.experiment.paper import percent_reduction
 from soabench.experiment.provenance import REPRODUCTION_TOLERANCE
-from soabench.experiment.store import RunStore, write_json_atomic, write_text_atomic
+from soabench.experiment.store import RunStore
 from soabench.experiment.tables import RunTables, load_tables, select, tables_models  # noqa: F401 (shared)
 
 

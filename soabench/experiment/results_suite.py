@@ -91,7 +91,7 @@ class ResultsOutcome:
 
 # ------------------------------------------------------------------------------------------------ completeness
 def _json(path: Path) -> Any:
-    from soabench.experiment.store import read_json
+    from soabench.experiment.files import read_json
 
     try:
         return read_json(path) if path.is_file() else None
@@ -252,7 +252,7 @@ def kitti_settings_check(base: Path, want: dict[str, Any]) -> dict | None:
 
 def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None], progress: bool) -> tuple[str, int]:
     """Export ``kitti_sequences`` SUMO trials of ``scene`` in the KITTI layout, then the KITTI protocol on them."""
-    from soabench.experiment.store import write_json_atomic
+    from soabench.experiment.files import write_json_atomic
     from soabench.kitti.config import load_kitti_config
     from soabench.kitti.export import export_kitti
     from soabench.kitti.protocol import KittiSpec, run_kitti

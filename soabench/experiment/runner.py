@@ -39,21 +39,12 @@ from soabench.experiment.executors import (  # noqa: F401  (re-exported: the exe
     failure_record,
     open_executor,
 )
+from soabench.experiment.files import pack_table, to_jsonable, write_json_atomic
 from soabench.experiment.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.progress import Progress
 from soabench.experiment.provenance import REPRODUCTION_TOLERANCE, platform_info
 from soabench.experiment.runmeta import check_requested, validate_run_meta
-from soabench.experiment.store import (
-    EPISODE_COLUMNS,
-    RUN_FILE,
-    STEP_COLUMNS,
-    TIMING_COLUMNS,
-    TRIAL_COLUMNS,
-    RunStore,
-    pack_table,
-    to_jsonable,
-    write_json_atomic,
-)
+from soabench.experiment.store import EPISODE_COLUMNS, RUN_FILE, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS, RunStore
 from soabench.seeding import trial_seeds
 
 TrialFn = Callable[..., Any]

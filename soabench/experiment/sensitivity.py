@@ -54,7 +54,7 @@ import numpy as np
 
 from soabench.birth import BASELINES, LABEL
 from soabench.experiment import paper
-from soabench.experiment.store import write_csv, write_text_atomic
+from soabench.experiment.files import write_csv, write_text_atomic
 
 #: settings in column order: key -> column header
 SETTINGS: dict[str, str] = {

@@ -31,12 +31,13 @@ from soabench.config import Config
 from soabench.errors import Interrupted
 from soabench.experiment import paper
 from soabench.experiment import sensitivity as sens
+from soabench.experiment.files import write_text_atomic
 from soabench.experiment.ownership import FolderLock, check_writable_target, resolve
 from soabench.experiment.report import paper_protocol_mismatch
 from soabench.experiment.runmeta import flatten_config
 from soabench.experiment.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.sensitivity_runs import VARIANTS, run_variants
-from soabench.experiment.store import RunStore, write_text_atomic
+from soabench.experiment.store import RunStore
 from soabench.experiment.sweep import BIRTHS_MODELS as BIRTH_MODELS  # the N_hat sweep's models
 from soabench.experiment.sweep import SweepOutcome, run_sweep
 

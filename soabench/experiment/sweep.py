@@ -37,6 +37,7 @@ import numpy as np
 from soabench.birth import LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config
 from soabench.errors import Interrupted, require
+from soabench.experiment.files import read_csv, read_json, write_json_atomic, write_text_atomic
 from soabench.experiment.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.report import fmt
 from soabench.experiment.runmeta import check_requested, flatten_config, validate_sweep_meta
@@ -51,7 +52,6 @@ from soabench.experiment.runner import (
     run_experiment,
     scenario_name,
 )
-from soabench.experiment.store import read_csv, read_json, write_json_atomic, write_text_atomic
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births", "occlusion")

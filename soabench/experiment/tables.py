@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from soabench.errors import SoabenchError
-from soabench.experiment.store import RunStore, header_of, read_csv
+from soabench.experiment.files import header_of, read_csv
+from soabench.experiment.store import RunStore
 
 
 @dataclass
@@ -49,7 +50,7 @@ def _empty(columns: Sequence[str]) -> dict[str, np.ndarray]:
 
 
 class LazyTable(Mapping[str, np.ndarray]):
-    """A CSV file's columns (:func:`~soabench.experiment.store.read_csv`), read on first use.
+    """A CSV file's columns (:func:`~soabench.experiment.files.read_csv`), read on first use.
 
     steps.csv holds a row per scan of every filter run (up to hundreds of thousands of rows per run folder) and only
     the figures read it: a report written without figures never parses it.

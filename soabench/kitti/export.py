@@ -35,7 +35,7 @@ from shapely.ops import split
 
 from soabench.config import Config, SensorConfig
 from soabench.errors import require
-from soabench.experiment.store import write_json_atomic, write_text_atomic
+from soabench.experiment.files import write_json_atomic, write_text_atomic
 from soabench.geometry import wrap
 from soabench.kitti.formats import (
     NOMINAL,

@@ -25,7 +25,7 @@ import numpy as np
 
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import require
-from soabench.experiment.store import read_json, write_json_atomic
+from soabench.experiment.files import read_json, write_json_atomic
 from soabench.kitti.config import KittiConfig, kitti_from_dict, kitti_to_dict
 from soabench.kitti.formats import ReadError, UnreadableError
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
