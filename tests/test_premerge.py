@@ -85,7 +85,7 @@ def test_a_worker_merge_is_adopted_only_while_the_folder_is_unchanged(sweeps, mo
     monkeypatch.setattr(RunStore, "merge", counted)
     fake = {"failures": ({"trial": 0, "model": "x"},), "counts": {"trials": -1}}
 
-    premerge._MERGED[premerge._key(pdir)] = premerge.Merged(merged_stamp(pdir), done, **fake)
+    premerge._MERGED[premerge.folder_key(pdir)] = premerge.Merged(merged_stamp(pdir), done, **fake)
     assert premerge.merge(store, models, modes) == {"trials": -1}  # adopted: the recorded counts, no merge here
     assert merges == [] and store.model_failures() == [{"trial": 0, "model": "x"}]
     assert premerge.merge(store, models, modes)["trials"] == 4  # used once: then merged (2 trials x 2 models)
@@ -94,9 +94,9 @@ def test_a_worker_merge_is_adopted_only_while_the_folder_is_unchanged(sweeps, mo
     before = merged_stamp(pdir)
     (pdir / "steps.csv").write_bytes((pdir / "steps.csv").read_bytes())  # the same bytes, a new modification time
     assert merged_stamp(pdir) != before
-    premerge._MERGED[premerge._key(pdir)] = premerge.Merged(before, done, **fake)
+    premerge._MERGED[premerge.folder_key(pdir)] = premerge.Merged(before, done, **fake)
     assert premerge.merge(store, models, modes)["trials"] == 4  # changed since the worker's merge: merged again
-    premerge._MERGED[premerge._key(pdir)] = premerge.Merged(merged_stamp(pdir), done[:1], **fake)
+    premerge._MERGED[premerge.folder_key(pdir)] = premerge.Merged(merged_stamp(pdir), done[:1], **fake)
     assert premerge.merge(store, models, modes)["trials"] == 4  # other finished trials: merged again
     assert len(merges) == 3 and not premerge._MERGED
 

@@ -91,20 +91,26 @@ def save_arrays(tables: Any, path: Path) -> bool:
 _SAVED: dict[str, tuple[tuple, str]] = {}
 
 
+def folder_key(run_dir: str | Path) -> str:
+    """The key of a run folder in the registries of merged folders (here and :mod:`soabench.experiment.premerge`):
+    its resolved path, the same however the folder was named."""
+    return str(Path(run_dir).resolve())
+
+
 def remember_arrays(run_dir: str | Path, stamp: tuple, path: str) -> None:
     """Let :func:`draw_all` use ``path`` for the tables of ``run_dir`` while its merged files have ``stamp``."""
-    _SAVED[str(Path(run_dir).resolve())] = (stamp, path)
+    _SAVED[folder_key(run_dir)] = (stamp, path)
 
 
 def forget_arrays(run_dir: str | Path) -> None:
-    _SAVED.pop(str(Path(run_dir).resolve()), None)
+    _SAVED.pop(folder_key(run_dir), None)
 
 
 def _saved_arrays(run_dir: Path) -> str:
     """The arrays :func:`remember_arrays` named for ``run_dir`` if its merged files are unchanged since, else ""."""
     from soabench.experiment.store import merged_stamp
 
-    hit = _SAVED.get(str(Path(run_dir).resolve()))
+    hit = _SAVED.get(folder_key(run_dir))
     return hit[1] if hit is not None and hit[0] == merged_stamp(run_dir) else ""
 
 

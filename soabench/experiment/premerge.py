@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from soabench.experiment.drawing import forget_arrays, remember_arrays, save_arrays
+from soabench.experiment.drawing import folder_key, forget_arrays, remember_arrays, save_arrays
 from soabench.experiment.executors import PoolExecutor
 from soabench.experiment.store import RunStore, merged_stamp
 
@@ -93,7 +93,7 @@ class _Pending:
     def __init__(self, results: Iterator[tuple[int, dict]], folders: Sequence[tuple]) -> None:
         self.results = results
         self.folders = folders
-        self.waiting = {_key(f[0]) for f in folders}
+        self.waiting = {folder_key(f[0]) for f in folders}
 
     def wait_for(self, key: str) -> None:
         """Collect finished merges until the one of folder ``key`` is in (or failed); no-op for another folder."""
@@ -104,7 +104,7 @@ class _Pending:
                 self.waiting.clear()
                 return
             run_dir = self.folders[i][0]
-            done = _key(run_dir)
+            done = folder_key(run_dir)
             self.waiting.discard(done)
             if rec.get("status") != "ok":
                 continue  # the report merges this folder itself (and says what is wrong with it)
@@ -148,19 +148,15 @@ def merged_on(executor: Any, runs: Sequence[Any]) -> Iterator[None]:
             _PENDING.remove(pending)
             pending.results.close()  # cancels the merges not started (a running one finishes its folder's files)
             for run_dir, *_ in folders:
-                _MERGED.pop(_key(run_dir), None)
+                _MERGED.pop(folder_key(run_dir), None)
                 forget_arrays(run_dir)
-
-
-def _key(run_dir: Path | str) -> str:
-    return str(Path(run_dir).resolve())
 
 
 def merge(store: RunStore, models: Sequence[str], modes: Sequence[str], step_columns: bool = False) -> dict[str, int]:
     """:meth:`RunStore.merge <soabench.experiment.store.RunStore.merge>` (``step_columns``: keep steps.csv's columns
     for the report's figures), or the merge a worker of :func:`merged_on` did of this folder if the folder is as it
     left it (used once)."""
-    key = _key(store.run_dir)
+    key = folder_key(store.run_dir)
     for pending in _PENDING:
         pending.wait_for(key)
     hit = _MERGED.pop(key, None)

@@ -17,9 +17,9 @@ Layout of a run folder (``results/<net>/<UTC timestamp>/``)::
 
 Why one file per trial: each record is written to a temporary file in the same folder, flushed, fsynced and moved
 into place with ``os.replace`` (atomic on POSIX), so a record is either absent or whole (every file of the folder
-is written and read by :mod:`soabench.experiment.files`). A Ctrl-C, a killed
-driver or a lost worker loses at most the trials in flight; ``--resume`` runs exactly the trials without an "ok"
-record. Appending CSV lines would need a commit marker and a torn-line repair on restart; separate files do not.
+is written and read by :mod:`soabench.experiment.files`). A Ctrl-C, a killed driver or a lost worker loses at most
+the trials in flight; ``--resume`` runs exactly the trials without an "ok" record. Appending CSV lines would need
+a commit marker and a torn-line repair on restart; separate files do not.
 
 Determinism: records store floats through ``json`` (``float.__repr__``, exact round trip) and the CSVs write
 ``repr`` of every float, rows sorted by (trial, clutter, model, mode[, target/k]) in the config's order. Wall-clock

@@ -662,7 +662,7 @@ def reduce(w, m, P, origin, n_det, age, beta, pars):
 # beta(A, kappa) is caller code in Python). The stage times are read inside with the clock of time.perf_counter
 # (soabench.gmphd.clock). The arithmetic is that of the separate calls, so the results are the same bit for bit.
 
-#: ``status`` of :func:`step` and :func:`predict_support`: the cycle ran; a birth component is not finite or has a
+#: ``status`` of :func:`step` and :func:`update_reduce`: the cycle ran; a birth component is not finite or has a
 #: negative weight (nothing computed); the UKF met a covariance that is not positive definite (nothing kept)
 STEP_OK, STEP_BAD_BIRTHS, STEP_NOT_PD = 0, 1, 2
 
