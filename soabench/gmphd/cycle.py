@@ -676,8 +676,8 @@ def _no_reduction(dyn):
 @njit(cache=True)
 def step(w, m, P, origin, n_det, age, beta, F, Q, pred_pars, bw, bm, bP, bsrc, beta0, ego, p_D0, Z, R, r_min,
          gate_thr, kappa, ukf, red_pars):  # fmt: skip
-    """One filter cycle without newborn terms and without the line-of-sight gate: :func:`predict_append`,
-    :func:`update`, :func:`reduce` in one call.
+    """One filter cycle without newborn terms and without the line-of-sight gate: :func:`predict_append`, then
+    :func:`update_reduce` (:func:`update`, :func:`reduce`), in one call.
 
     Returns (status, n_predicted, n_updated, n_pairs, A, reduction, times): ``status`` one of ``STEP_*``;
     ``reduction`` is :func:`reduce`'s value (empty unless ``status`` is ``STEP_OK``); ``times`` the seconds of
@@ -686,19 +686,14 @@ def step(w, m, P, origin, n_det, age, beta, F, Q, pred_pars, bw, bm, bP, bsrc, b
     times = np.zeros(3)
     t0 = monotonic()
     pred = predict_append(w, m, P, origin, n_det, age, beta, F, Q, pred_pars, bw, bm, bP, bsrc, beta0, ego)
-    t1 = monotonic()
-    times[0] = t1 - t0
-    dyn = beta.shape[1] == 4
+    times[0] = monotonic() - t0
     if not pred[8]:
-        return STEP_BAD_BIRTHS, 0, 0, 0, np.empty(0), _no_reduction(dyn), times
-    post, A, ok = update(*pred[:8], p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
-    t2 = monotonic()
-    times[1] = t2 - t1
-    if not ok:
-        return STEP_NOT_PD, 0, 0, 0, A, _no_reduction(dyn), times
-    red = reduce(*post[:7], red_pars)
-    times[2] = monotonic() - t2
-    return STEP_OK, pred[0].shape[0], post[0].shape[0], post[7], A, red, times
+        return STEP_BAD_BIRTHS, 0, 0, 0, np.empty(0), _no_reduction(beta.shape[1] == 4), times
+    status, n_updated, n_pairs, A, red, ur = update_reduce(
+        *pred[:8], p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars
+    )
+    times[1], times[2] = ur[0], ur[1]
+    return status, pred[0].shape[0] if status == STEP_OK else 0, n_updated, n_pairs, A, red, times
 
 
 @njit(cache=True)
