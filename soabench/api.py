@@ -1,25 +1,45 @@
-"""The public API of soabench in one place: import from here, not from the stages (README, "Benchmark your own
-method").
+"""The public API of soabench in one place: ``import soabench.api as sb`` (walk-through: docs/user-guide/python.md).
 
-The data that flows (:mod:`soabench.types`):
+Four calls cover a study from a notebook:
 
-* :class:`Recording`: the truth of one scenario run; :class:`Scans` / :class:`Scan`: what a tracker receives per scan
-  (ego pose, range-bearing measurements Z, occluders, visible region) plus the truth the metrics read;
-* :class:`Births` and :class:`NewbornTerms`: what a birth model hands our GM-PHD filter, from a :class:`BirthContext`;
-* :class:`Estimates`: what any tracker returns per scan; :class:`StepResult`: the richer output of our GM-PHD.
+* :func:`simulate_trial`: one trial's truth (:class:`Recording`) and sensor scans (:class:`Scans`), as trial n of
+  ``soabench run --seed S`` sees them;
+* :func:`make_tracker`: a tracker with ``step(scan)``: a birth model in our GM-PHD filter (S-OA and the
+  baselines, an entry point or your class) or a whole tracker (Stone Soup's, an entry point or your class);
+* :func:`evaluate`: the metrics of one run (docs/method.md §5) from its per-scan :class:`Estimates` or
+  :class:`StepResult`: the numbers of a row of ``trials.csv``;
+* :func:`run`: the Monte Carlo protocol (§5.8) in memory, a :class:`RunResult` holding the rows ``soabench run``
+  writes to ``trials.csv``, ``episodes.csv`` and ``steps.csv``.
 
-The two extension points (:mod:`soabench.protocols`): :class:`BirthModel` and :class:`Tracker` (built from a
-:class:`TrackerSetup`). :class:`GMPHDTracker` is our filter with a birth model as a tracker; :func:`build_components`
-and :class:`FOVRule` are the shared birth builder and FOV rule (docs/method.md §3.0).
+:func:`to_stonesoup` and :func:`from_stonesoup` carry scans, truth and tracks to and from Stone Soup (the
+``stonesoup`` extra).
 
-Plugins register by entry point (groups :data:`BIRTH_GROUP`, :data:`TRACKER_GROUP`) or are named on the command line
-as ``module:Class``; :func:`resolve` turns a name into the class as the harness does.
+The data that flows (:mod:`soabench.types`): :class:`Recording`; :class:`Scans` / :class:`Scan`;
+:class:`Births` and :class:`NewbornTerms` from a :class:`BirthContext`; :class:`Estimates` (any tracker) and
+:class:`StepResult` (our GM-PHD). The two extension points (:mod:`soabench.protocols`): :class:`BirthModel` and
+:class:`Tracker` (built from a :class:`TrackerSetup`); :class:`GMPHDTracker` is our filter with a birth model as a
+tracker; :func:`build_components`, :func:`births_from`, :func:`isotropic` and :class:`FOVRule` help write birth
+models (§3.0). Plugins register by entry point (groups :data:`BIRTH_GROUP`, :data:`TRACKER_GROUP`) or are named as
+``module:Class``; :func:`resolve` turns a name of a kind (:data:`BIRTH_MODEL`, :data:`TRACKER`) into its class.
+
+Wrong input fails at this boundary with one line (a ``ValueError``; a ``TypeError`` too for an object of the wrong
+kind), e.g. a :class:`Scans` passed to ``step``, NaN truth rows, or Stone Soup-ordered states ([x, vx, y, vy],
+:data:`ORDER_STONESOUP`) where ours ([x, y, vx, vy], :data:`ORDER_SOABENCH`) are expected.
 """
 
-from __future__ import annotations
+from collections.abc import Sequence as _Sequence
+from pathlib import Path as _Path
+from typing import Any as _Any
 
+from soabench import boundary as _boundary
+from soabench import plugins as _plugins
 from soabench.birth.base import FOVRule, births_from, build_components, isotropic
-from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP, resolve
+from soabench.boundary import ORDER_SOABENCH, ORDER_STONESOUP
+from soabench.config import Config
+from soabench.errors import require as _require
+from soabench.experiment.memory import RunResult
+from soabench.metrics import TrialMetrics
+from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP
 from soabench.protocols import BirthModel, Tracker, TrackerSetup
 from soabench.trackers import GMPHDTracker, run_tracker
 from soabench.types import (
@@ -42,9 +62,15 @@ from soabench.types import (
     StepResult,
 )
 
+BIRTH_MODEL = _plugins.BIRTH  #: plugin kind of a birth model (:func:`resolve`): ``"birth model"``
+TRACKER = _plugins.TRACKER  #: plugin kind of a whole tracker (:func:`resolve`): ``"tracker"``
+
 __all__ = [
     "BIRTH_GROUP",
+    "BIRTH_MODEL",
     "CLUTTER",
+    "ORDER_SOABENCH",
+    "ORDER_STONESOUP",
     "SOURCE_FOV",
     "SOURCE_GM",
     "SOURCE_GRID",
@@ -52,24 +78,253 @@ __all__ = [
     "SOURCE_NAMES",
     "SOURCE_OCCL",
     "SOURCE_SEM",
+    "TRACKER",
     "TRACKER_GROUP",
     "BirthContext",
     "BirthModel",
     "Births",
+    "Config",
     "Estimates",
     "FOVRule",
     "GMPHDTracker",
     "NewbornTerms",
     "Obstacles",
     "Recording",
+    "RunResult",
     "Scan",
     "Scans",
     "StepResult",
     "Tracker",
     "TrackerSetup",
+    "TrialMetrics",
     "births_from",
     "build_components",
+    "evaluate",
+    "from_stonesoup",
     "isotropic",
+    "make_tracker",
     "resolve",
+    "run",
     "run_tracker",
+    "simulate_trial",
+    "to_stonesoup",
 ]
+
+
+def __dir__() -> list[str]:
+    """The public names only (tab completion in a notebook lists what is meant to be used)."""
+    return sorted(__all__)
+
+
+def resolve(kind: str, name: str) -> type:
+    """The class registered under ``name`` as a plugin of ``kind`` (:data:`BIRTH_MODEL` or :data:`TRACKER`).
+
+    ``name`` is a built-in (``"soa"``, ``"stonesoup-gmphd"``, ...), an installed entry point or an import path
+    ``module:Class`` (allowed here as if typed on the command line). A kind other than the two, or a name unknown for
+    the kind, is one line naming what is allowed.
+    """
+    _plugins.check_kind(kind)
+    _plugins.allow_import_paths([name] if isinstance(name, str) else [])
+    return _plugins.resolve(kind, name)
+
+
+def simulate_trial(
+    net: str = "intersection",
+    seed: int = 0,
+    trial: int = 0,
+    duration: float | None = None,
+    config: "Config | dict | str | _Path | None" = None,
+) -> tuple[Recording, Scans]:
+    """The truth and the sensor scans of trial ``trial`` of ``soabench run --seed seed`` (docs/method.md §5.8).
+
+    Args:
+        net: a shipped scene (``"intersection"``, ``"tjunction"``, ``"arterial"``, ``"grid_block"``), a scene
+            folder or the path of a ``.net.xml``.
+        seed, trial: the base seed and the trial index; trial n's random streams depend only on ``(seed, n)``.
+        duration: seconds to simulate (default: the configuration's ``experiment.duration``, 100 s).
+        config: a :class:`Config`, a dict of sections, a TOML path or None (defaults); its ``[sensor]`` section
+            (with its clutter rate ``lambda_c``) makes the scans.
+
+    Returns:
+        ``(recording, scans)``: the same values trial ``trial`` of a run with this configuration and its first
+        clutter rate equal to ``sensor.lambda_c`` uses.
+    """
+    from soabench.experiment.runner import check_against_scenario, load_scene_cached
+    from soabench.scenario import simulate
+    from soabench.seeding import trial_seeds
+    from soabench.sensor import observe
+
+    cfg = _boundary.as_config(config)
+    _require(_is_int(seed) and seed >= 0, f"seed = {seed!r} must be an integer >= 0")
+    _require(_is_int(trial) and trial >= 0, f"trial = {trial!r} must be an integer >= 0")
+    if duration is not None:
+        cfg = Config.from_dict({"experiment": {"duration": duration}}, base=cfg).validate()
+    scene, scenario = load_scene_cached(str(net), (), None)
+    check_against_scenario(cfg, scenario)
+    seeds = trial_seeds(seed, trial)
+    recording = simulate(scene, scenario, seeds, duration=cfg.experiment.duration)
+    return recording, observe(recording, scene, cfg.sensor, seeds.sensor_rngs())
+
+
+def _is_int(v: _Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def make_tracker(
+    name_or_class: "str | type",
+    scene_or_net: _Any = "intersection",
+    config: "Config | dict | str | _Path | None" = None,
+    mode: str = "static",
+    seed: int = 0,
+    trial: int = 0,
+    **options: _Any,
+) -> _Any:
+    """A tracker with ``step(scan)``, built as the harness builds the run of ``name_or_class`` in trial ``trial``.
+
+    Args:
+        name_or_class: a birth model (``"soa"``, ``"pubm"``, ``"ubm"``, ``"ubm-ws"``, ``"atbm"``, ``"gmbm"``, an
+            installed entry point, ``"module:Class"`` or the class itself), which runs in our GM-PHD filter; or a
+            whole tracker (``"stonesoup-gmphd"``, ``"stonesoup-gnn"``, an entry point, ``"module:Class"`` or a class
+            with a ``step`` method).
+        scene_or_net: the scene the birth model reads (a SceneMap, or a network name or path).
+        config: a :class:`Config`, a dict of sections, a TOML path or None (defaults).
+        mode: the probability mode (``"static"``, ``"dynamic"``, ``"dynamic+occ"``; docs/method.md §4.6).
+        seed, trial: the run's placement generator is trial ``trial``'s of base seed ``seed``.
+        options: a plugin's own options (default: the configuration's ``[plugins.<name>]`` table).
+
+    Returns:
+        A :class:`GMPHDTracker` for a birth model (``step`` returns :class:`StepResult`), else the tracker
+        (``step`` returns :class:`Estimates`). Stepping it through :func:`simulate_trial`'s scans gives the step
+        results of that run of ``soabench run``.
+    """
+    from soabench.config import filter_config_for_mode
+    from soabench.experiment import guard
+    from soabench.gmphd.filter import GMPHDFilter
+    from soabench.seeding import trial_seeds
+
+    cfg = _boundary.as_config(config)
+    kind, name, cls = _boundary.plugin(name_or_class)
+    scene = _boundary.as_scene(scene_or_net)
+    filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
+    rng = trial_seeds(seed, trial).placement_rng()
+    builtin = kind == BIRTH_MODEL and isinstance(name_or_class, str) and _plugins.is_builtin_birth(name)
+    _require(
+        not (builtin and options), f"{name} is a built-in birth model: set its options in the config's [birth] section"
+    )
+    options = options or dict(cfg.plugins.get(name, {}))
+    _plugins.check_options(kind, name, cls, options)
+    if kind == TRACKER:
+        return cls(TrackerSetup(cfg.sensor, scene, rng, mode, cfg), **options)
+    birth_model = cls(cfg.birth, cfg.sensor, scene, rng, **options)
+    filt = GMPHDFilter(filter_cfg, cfg.sensor, filter_mode)
+    return GMPHDTracker(birth_model, filt, p_D_b, check_births=None if builtin else guard.check_births)
+
+
+def evaluate(
+    scans: Scans,
+    estimates: _Sequence[_Any],
+    config: "Config | dict | str | _Path | None" = None,
+    order: str | None = None,
+) -> TrialMetrics:
+    """Every metric of one run (docs/method.md §5): the numbers of its row in ``trials.csv``.
+
+    Args:
+        scans: the run's scans (with their sensor settings, which set the FOV of the estimate set, §5.1).
+        estimates: one entry per scan: :class:`Estimates`, :class:`StepResult` (our filter's) or an (n, 2) / (n, 4)
+            array; checked as the harness checks a tracker's output.
+        config: its ``[metrics]`` section (OSPA/GOSPA cut-offs, truth set, gate, ...); a :class:`Config`, a dict,
+            a TOML path, or None for the defaults.
+        order: the column order of four-column states: :data:`ORDER_SOABENCH` ``"x,y,vx,vy"`` or
+            :data:`ORDER_STONESOUP` ``"x,vx,y,vy"``. None: ours, refused with one line if the states fit the truth
+            far better read in Stone Soup's order.
+
+    Returns:
+        A :class:`TrialMetrics`: ``summary`` (``m["ospa"]``, the columns of a ``trials.csv`` row), the delay
+        ``episodes`` and the per-scan ``series`` (the columns of ``steps.csv``).
+    """
+    from soabench.metrics import evaluate as _evaluate
+
+    results = _boundary.step_results(scans, estimates, order)
+    _require(
+        scans.sensor is not None, "these Scans carry no SensorConfig (Scans.sensor); set it to the sensor's settings"
+    )
+    return _evaluate(scans, results, _boundary.metrics_config(config), scans.sensor)
+
+
+def run(
+    config: "Config | dict | str | _Path | None" = None,
+    *,
+    net: str = "intersection",
+    models: "str | _Sequence[str | type] | None" = None,
+    trackers: "str | _Sequence[str | type] | None" = None,
+    trials: int | None = None,
+    duration: float | None = None,
+    seed: int | None = None,
+    probabilities: "str | _Sequence[str] | None" = None,
+    clutter: "float | _Sequence[float] | None" = None,
+    workers: int | None = 1,
+    executor: _Any = None,
+    out: "str | _Path | None" = None,
+    progress: bool = False,
+) -> RunResult:
+    """The Monte Carlo protocol (docs/method.md §5.8) of ``config`` on ``net``, as ``soabench run`` runs it.
+
+    Args:
+        config: a :class:`Config`, a dict of sections, a TOML path or None (defaults); the keywords below
+            override its ``[experiment]`` section as the command-line flags do.
+        net: a shipped scene, a scene folder or a ``.net.xml`` path.
+        models: birth models (names or classes; a comma-separated string is split); trackers: whole trackers.
+        trials, duration, seed, probabilities, clutter: the protocol's size, seconds per trial, base seed,
+            probability modes and clutter rates.
+        workers: processes (1: this process); executor: an executor of :mod:`soabench.experiment.executors` to
+            reuse (e.g. a Dask one).
+        out: also write the run folder ``soabench run --out`` writes (run.json, trial records, the CSV files and
+            the report); None (default): nothing is written.
+        progress: report progress on stderr.
+
+    Returns:
+        A :class:`RunResult`: ``trials``, ``episodes``, ``steps`` (and ``timing``) as numpy record arrays holding
+        the values of the CSV files ``soabench run`` writes for the same configuration, ``.to_pandas(name)`` with
+        pandas, ``.write_csv(folder)`` for the files themselves (the same bytes).
+    """
+    from soabench.experiment.memory import run_in_memory, with_experiment
+
+    cfg = with_experiment(
+        _boundary.as_config(config),
+        models=_boundary.as_names(models, "models"),
+        trackers=_boundary.as_names(trackers, "trackers"),
+        trials=trials,
+        duration=duration,
+        seed=seed,
+        probabilities=_boundary.as_names(probabilities, "probabilities"),
+        clutter=[clutter] if isinstance(clutter, (int, float)) else clutter,
+    )
+    if out is None:
+        return run_in_memory(cfg, str(net), workers=workers, executor=executor, progress=progress)
+    from soabench.experiment.memory import from_run_folder
+    from soabench.experiment.runner import run_experiment
+
+    outcome = run_experiment(
+        cfg, str(net), out=_Path(out), workers=workers, executor=executor, progress=progress, figures=False
+    )
+    return from_run_folder(outcome.run_dir, cfg, str(net))
+
+
+def to_stonesoup(scans: Scans, sigma_r: float | None = None, sigma_b: float | None = None, gt_set: str = "fov") -> _Any:
+    """Scans and truth as Stone Soup detections and ground-truth paths (``pip install "soabench[stonesoup]"``).
+
+    The noise defaults to the scans' own sensor settings; the paths hold the truth set of our tables
+    (``gt_set``: ``"fov"``, present and in the field of view, the default; ``"visible"``; ``"scene"``, every
+    present walker; docs/method.md §5.1). See :func:`soabench.bridges.stonesoup.to_stonesoup`.
+    """
+    from soabench.bridges.stonesoup import to_stonesoup as _to
+
+    return _to(scans, sigma_r, sigma_b, gt_set=gt_set)
+
+
+def from_stonesoup(tracks: _Any, scans: Scans) -> _Any:
+    """Stone Soup tracks as one :class:`Estimates` per scan (states in our order) and their track ids:
+    ``estimates, labels = from_stonesoup(tracks, scans)``. See :func:`soabench.bridges.stonesoup.from_stonesoup`."""
+    from soabench.bridges.stonesoup import from_stonesoup as _from
+
+    return _from(tracks, scans)

@@ -18,3 +18,18 @@ def require(condition: bool, message: str) -> None:
 
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C during a run: the message says what is on disk and how to finish (printed as one line by the CLI)."""
+
+
+class WrongTypeError(SoabenchError, TypeError):
+    """A user-facing error about an object of the wrong kind (also a ``TypeError``): one line naming what was given
+    and what is required."""
+
+
+def require_type(value: object, cls: type | tuple[type, ...], what: str, hint: str = "") -> None:
+    """Raise :class:`WrongTypeError` unless ``value`` is an instance of ``cls``; ``hint`` says how to get one."""
+    if isinstance(value, cls):
+        return
+    names = " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
+    got = type(value).__name__
+    shown = repr(value) if isinstance(value, (int, float, str)) and len(repr(value)) < 40 else f"a {got}"
+    raise WrongTypeError(f"{what} must be a {names}, got {shown}" + (f"; {hint}" if hint else ""))

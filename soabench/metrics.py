@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from soabench.errors import require
+from soabench.errors import SoabenchError, require
 from soabench.geometry import fov_mask
 from soabench.origins import ORIGIN_KEYS, origin_counts_of
 
@@ -87,12 +87,21 @@ SERIES_KEYS = (
 # point-set distances
 
 
-def _points(X: np.ndarray | Sequence) -> np.ndarray:
-    """(n, 2) float array of the (x, y) of ``X`` (rows may carry more columns, e.g. velocities)."""
+def _points(X: np.ndarray | Sequence, what: str = "a point set") -> np.ndarray:
+    """(n, 2) float array of the (x, y) of ``X`` (rows may carry more columns, e.g. velocities); SoabenchError
+    naming ``what`` if a position is NaN or infinite (the truth of an absent walker is NaN: select the truth set
+    first, :func:`gt_mask`)."""
     A = np.asarray(X, dtype=float)
     if A.size == 0:
         return np.zeros((0, 2))
-    return A.reshape(len(A), -1)[:, :2]
+    P = A.reshape(len(A), -1)[:, :2]
+    if not np.isfinite(P).all():
+        bad = int(np.flatnonzero(~np.isfinite(P).all(axis=1))[0])
+        raise SoabenchError(
+            f"{what} holds a NaN or infinite position (row {bad}); keep only the targets of the truth set, e.g. "
+            "scans.truth_xy[k][soabench.metrics.gt_mask(scans)[k]] (an absent walker's position is NaN)"
+        )
+    return P
 
 
 def pairwise_distances(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
@@ -123,7 +132,7 @@ def ospa(
     Returns:
         ``(total, loc, card)``.
     """
-    X, Y = _points(X), _points(Y)
+    X, Y = _points(X, "ospa's X"), _points(Y, "ospa's Y")
     if len(X) > len(Y):
         X, Y = Y, X
         D = None if D is None else D.T
@@ -158,7 +167,7 @@ def gospa(
     Returns:
         ``(total, loc, missed, false)``.
     """
-    X, Y = _points(X), _points(Y)
+    X, Y = _points(X, "gospa's X (the truth)"), _points(Y, "gospa's Y (the estimates)")
     n_assigned, loc = 0, 0.0
     if len(X) and len(Y):
         D = _distances(X, Y, D)
@@ -182,7 +191,7 @@ def gated_assignment(est: np.ndarray, gt: np.ndarray, d_gate: float, D: np.ndarr
     Returns:
         (n_pairs, 2) int array of (estimate index, ground-truth index) rows, sorted by estimate index.
     """
-    est, gt = _points(est), _points(gt)
+    est, gt = _points(est, "gated_assignment's est"), _points(gt, "gated_assignment's gt")
     if len(est) == 0 or len(gt) == 0:
         return np.zeros((0, 2), dtype=int)
     D = _distances(est, gt, D)

@@ -29,7 +29,8 @@ from soabench.errors import SoabenchError, require
 
 BIRTH_GROUP = "soabench.birth_models"  #: entry-point group of birth-model plugins
 TRACKER_GROUP = "soabench.trackers"  #: entry-point group of tracker plugins
-BIRTH, TRACKER = "birth model", "tracker"
+BIRTH, TRACKER = "birth model", "tracker"  #: the plugin kinds (``soabench.api.BIRTH_MODEL``, ``soabench.api.TRACKER``)
+KINDS = (BIRTH, TRACKER)
 
 #: trackers that ship with soabench (bridges to other frameworks; each needs its optional extra)
 BUILTIN_TRACKERS: dict[str, str] = {
@@ -77,8 +78,18 @@ def _entry_points(group: str) -> dict[str, metadata.EntryPoint]:
     return {ep.name: ep for ep in metadata.entry_points(group=group)}
 
 
+def check_kind(kind: str) -> None:
+    """SoabenchError unless ``kind`` is one of :data:`KINDS`."""
+    require(
+        kind in KINDS,
+        f"plugin kind {kind!r} is unknown; choose {BIRTH!r} (soabench.api.BIRTH_MODEL) or {TRACKER!r} "
+        "(soabench.api.TRACKER)",
+    )
+
+
 def names(kind: str) -> list[str]:
     """Every registered name of ``kind`` (built-ins first, then installed entry points, then typed paths)."""
+    check_kind(kind)
     builtin = _builtin_birth() if kind == BIRTH else BUILTIN_TRACKERS
     eps = [n for n in _entry_points(BIRTH_GROUP if kind == BIRTH else TRACKER_GROUP) if n not in builtin]
     return [*builtin, *sorted(eps)]
@@ -91,6 +102,7 @@ def is_builtin_birth(name: str) -> bool:
 
 def check_name(kind: str, name: str) -> None:
     """SoabenchError unless ``name`` is in the closed list of ``kind`` (see the module docstring)."""
+    check_kind(kind)
     require(isinstance(name, str) and name != "", f"{kind} name {name!r} must be a non-empty string")
     if is_import_path(name):
         require(

@@ -28,7 +28,7 @@ from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
 from soabench.config import SensorConfig
-from soabench.errors import SoabenchError, require
+from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import fov_mask, range_bearing, wrap
 
 # the stage contract lives in the bottom layer; re-exported here so old import paths keep working
@@ -527,6 +527,17 @@ def observe(
     and settings other than ``lambda_c`` reuses it (another recording, scene or setting starts it afresh). The scans
     are the same as without it (docs/method.md §5.8: the detection and clutter streams are drawn as before).
     """
+    from soabench.scenario.recording import Recording
+    from soabench.scenario.scene import SceneMap
+
+    require_type(recording, Recording, "observe's recording", "simulate one with soabench.scenario.simulate")
+    require_type(scene, SceneMap, "observe's scene", "load it with soabench.scenario.load(net)")
+    require_type(cfg, SensorConfig, "observe's sensor settings", "pass Config().sensor, not the whole Config")
+    require(
+        isinstance(rngs, tuple) and len(rngs) == 2 and all(isinstance(g, np.random.Generator) for g in rngs),
+        f"observe's rngs must be the pair (detection, clutter) of numpy Generators of TrialSeeds.sensor_rngs(), "
+        f"got a {type(rngs).__name__}",
+    )
     cfg.validate(recording.step_length)
     if geometry is not None:
         key = (id(recording), id(scene), repr(dataclasses.replace(cfg, lambda_c=0.0)))

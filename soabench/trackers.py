@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from soabench.errors import require_type
 from soabench.protocols import Tracker, TrackerSetup
 from soabench.types import BirthContext, Births, Estimates, Scan, Scans, StepResult
 
@@ -54,6 +55,7 @@ class GMPHDTracker:
 
     def step(self, scan: Scan) -> StepResult:
         """Birth from the context at k, then one filter cycle (predict, birth, update, reduce, extract)."""
+        check_scan(scan)
         tb = time.perf_counter()
         births = self.birth_model(BirthContext(scan, self.prev, self.p_D_b))
         if self.check_births is not None:
@@ -61,6 +63,14 @@ class GMPHDTracker:
         self.t_birth += time.perf_counter() - tb
         self.prev = self.filt.step(scan, births)
         return self.prev
+
+
+def check_scan(scan: Any) -> None:
+    """WrongTypeError unless ``scan`` looks like one :class:`Scan` (a tracker steps through scans one at a time)."""
+    if isinstance(scan, Scan) or (hasattr(scan, "Z") and hasattr(scan, "ego")):
+        return
+    hint = "step through them one at a time: for scan in scans: tracker.step(scan)" if isinstance(scan, Scans) else ""
+    require_type(scan, Scan, "a tracker's step(scan) argument", hint)
 
 
 def step_result_from(est: Estimates, k: int, t_step: float) -> StepResult:

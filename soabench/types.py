@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import operator
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Hashable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -77,6 +77,14 @@ class Recording:
     seed: int
     net: str
     meta: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        T, P = np.shape(self.ped_present)[:2] if np.ndim(self.ped_present) == 2 else (len(self.t), 0)
+        span = f"{float(self.t[0]):g}-{float(self.t[-1]):g} s" if len(self.t) else "empty"
+        return (
+            f"Recording(net={self.net!r}, seed={self.seed}, {T} steps of {self.step_length:g} s ({span}), "
+            f"{P} pedestrians, {len(self.veh_ids)} vehicles, {len(self.static_occluders)} parked cars)"
+        )
 
     def save_npz(self, path: str | Path) -> None:
         """Write the Recording as a compressed .npz (format: README, "Recording format"); exact round trip."""
@@ -248,6 +256,13 @@ class Scan:
     occluders: list[BaseGeometry]
     visible_region: BaseGeometry = _RegionField()  # type: ignore[assignment]  # no default: see _RegionField
 
+    def __repr__(self) -> str:
+        x, y, th = (float(v) for v in np.asarray(self.ego, dtype=float).reshape(3))
+        return (
+            f"Scan(k={self.k}, t={self.t:g} s, ego=({x:.1f}, {y:.1f}, {th:.2f} rad), {len(self.Z)} measurements, "
+            f"{len(self.obstacles)} obstacles, {len(self.occluders)} occluders)"
+        )
+
     def in_visible_region(self, xy: np.ndarray) -> np.ndarray:
         """(J,) True where a point of ``xy`` (J, 2) lies in the interior of Omega_k (``shapely.contains_xy``).
 
@@ -327,6 +342,24 @@ class Scans:
 
     def __len__(self) -> int:
         return len(self.scans)
+
+    def __iter__(self) -> Iterator[Scan]:
+        """The scans in order (``for scan in scans: tracker.step(scan)``)."""
+        return iter(self.scans)
+
+    def __getitem__(self, k: int) -> Scan:
+        """Scan ``k``."""
+        return self.scans[k]
+
+    def __repr__(self) -> str:
+        K, P = np.shape(self.present)[:2] if np.ndim(self.present) == 2 else (len(self.scans), 0)
+        n_z = sum(len(sc.Z) for sc in self.scans)
+        n_true = sum(int(np.count_nonzero(np.asarray(s) != CLUTTER)) for s in self.source)
+        lam = "" if self.sensor is None else f", lambda_c={self.sensor.lambda_c:g}"
+        return (
+            f"Scans({K} scans every {self.dt:g} s, {P} pedestrians, {n_z} measurements ({n_true} from targets, "
+            f"{n_z - n_true} clutter){lam})"
+        )
 
     def save_npz(self, path: str | Path) -> None:
         """Write the Scans as a compressed .npz without pickles (format: README, "Scans format"), with the sensor
@@ -541,6 +574,10 @@ class Births:
     source: np.ndarray  #: (J,) int source codes (SOURCE_*)
     newborn: NewbornTerms | None = None
 
+    def __repr__(self) -> str:
+        n_new = 0 if self.newborn is None else len(self.newborn.m)
+        return f"Births({len(self.w)} components of total weight {float(np.sum(self.w)):.3g}, {n_new} newborn terms)"
+
     @classmethod
     def empty(cls) -> Births:
         return cls(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int8))
@@ -585,6 +622,16 @@ class Estimates:
     def empty(cls) -> Estimates:
         """No target at this scan."""
         return cls(np.zeros((0, 4)))
+
+    def __repr__(self) -> str:
+        X = np.asarray(self.X)
+        extra = "".join(
+            f", {name}={value!r}"
+            for name, value in (("n_components", self.n_components), ("cardinality", self.cardinality))
+            if value is not None
+        )
+        w = "" if self.w is None else ", with weights"
+        return f"Estimates({len(X)} targets, X of shape {X.shape}{w}{extra})"
 
     def __len__(self) -> int:
         return len(self.X)
@@ -634,3 +681,6 @@ class StepResult:
     #: posterior components (after reduction) by birth origin and age, in the order of
     #: :data:`soabench.origins.ORIGIN_KEYS` (docs/method.md §5.7); None: origins unknown (a foreign tracker)
     origin_counts: np.ndarray | None = None
+
+    def __repr__(self) -> str:
+        return f"StepResult(k={self.k}, {len(self.X)} estimates, mass {self.sum_w:.3g}, {self.n_reduced} components)"

@@ -11,9 +11,10 @@ diag(sigma_b^2, sigma_r^2)); scan k happens at ``EPOCH + t_k`` seconds.
   :class:`StoneSoupGNN` (``MultiTargetTracker`` with global-nearest-neighbour assignment, a
   ``MultiMeasurementInitiator`` and an ``UpdateTimeStepsDeleter``); their estimates go through the same metrics
   as ours.
-* Out of the harness: :func:`to_stonesoup` gives a run's scans and truth as Stone Soup detections (``TrueDetection``
-  linked to the walker's ``GroundTruthPath``, or ``Clutter``) and ground-truth paths, for Stone Soup's own metric
-  managers.
+* Out of the harness: :func:`to_stonesoup` gives a run's scans and truth (by default the truth set of our tables,
+  docs/method.md §5.1) as Stone Soup detections (``TrueDetection`` linked to the walker's ``GroundTruthPath``, or
+  ``Clutter``) and ground-truth paths, for Stone Soup's trackers and metric managers; :func:`from_stonesoup` turns
+  the tracks back into our per-scan estimates (with the track ids), scored by ``soabench.api.evaluate``.
 
 Stone Soup's conventions are its own (docs/method.md has ours): its GM-PHD gives the birth component no
 missed-detection term, caps a merged weight at 1, and evaluates the likelihood on the raw bearing difference.
@@ -23,14 +24,15 @@ from __future__ import annotations
 
 import datetime
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from soabench.errors import SoabenchError
 from soabench.protocols import TrackerSetup
+from soabench.trackers import check_scan
 from soabench.types import CLUTTER, Estimates, Scan, Scans
 
 try:
@@ -117,35 +119,52 @@ class StoneSoupFeed:
         return iter(self.detections)
 
 
-def to_stonesoup(scans: Scans, sigma_r: float, sigma_b: float) -> StoneSoupFeed:
+def to_stonesoup(
+    scans: Scans, sigma_r: float | None = None, sigma_b: float | None = None, gt_set: str = "fov"
+) -> StoneSoupFeed:
     """Our scans and truth as Stone Soup detections and ground-truth paths.
 
     Args:
-        scans: a run's :class:`~soabench.types.Scans` (``soabench.sensor.observe`` or ``Scans.load_npz``).
-        sigma_r, sigma_b: the sensor's range (m) and bearing (rad) noise stds (``SensorConfig.sigma_r``,
-            ``SensorConfig.sigma_b``), put into each detection's measurement model.
+        scans: a run's :class:`~soabench.types.Scans` (``soabench.api.simulate_trial`` or ``Scans.load_npz``).
+        sigma_r, sigma_b: the sensor's range (m) and bearing (rad) noise stds put into each detection's measurement
+            model; default: the scans' own sensor settings (``scans.sensor``).
+        gt_set: the truth the paths hold, the truth set of our tables (docs/method.md §5.1): ``"fov"`` (default:
+            present and inside the field of view), ``"visible"`` (line of sight too) or ``"scene"`` (present).
 
     Returns:
         A :class:`StoneSoupFeed`: ``feed.detections`` (or iterate the feed) gives ``(time, set of detections)`` per
         scan, target-originated ones as ``TrueDetection`` linked to their walker's path, the rest as ``Clutter``;
-        ``feed.truths`` gives one ``GroundTruthPath`` per walker (``id`` = the walker's id) with states
-        [x, v_x, y, v_y] at the scans where the walker is present, velocities by finite differences. Hand them to
-        Stone Soup's metric managers (OSPA, SIAP, ...) with your tracker's tracks.
+        ``feed.truths`` gives one ``GroundTruthPath`` per walker of the set (``id`` = the walker's id) with states
+        [x, v_x, y, v_y] at the scans where the walker is in the set, velocities by finite differences over the
+        scans where it is present. Hand them to Stone Soup's metric managers (OSPA, SIAP, ...) with your tracker's
+        tracks, or turn the tracks back into our estimates with :func:`from_stonesoup`.
 
     Example::
 
         from soabench.bridges.stonesoup import to_stonesoup
-        feed = to_stonesoup(Scans.load_npz("run.scans.npz"), sigma_r=1.0, sigma_b=math.radians(5))
+        feed = to_stonesoup(Scans.load_npz("run.scans.npz"))
         for time, detections in feed:
             ...
     """
+    from soabench.errors import require, require_type
+    from soabench.metrics import gt_mask
+
+    require_type(scans, Scans, "to_stonesoup's scans", "simulate them with soabench.api.simulate_trial")
+    if sigma_r is None or sigma_b is None:
+        require(
+            scans.sensor is not None,
+            "these Scans carry no sensor settings (Scans.sensor): give sigma_r (m) and sigma_b (rad)",
+        )
+        sigma_r = scans.sensor.sigma_r if sigma_r is None else sigma_r
+        sigma_b = scans.sensor.sigma_b if sigma_b is None else sigma_b
+    in_set = gt_mask(scans, gt_set)
     K, P = scans.truth_xy.shape[:2]
     dt = float(scans.dt)
     paths = [GroundTruthPath(id=str(scans.ped_ids[p])) for p in range(P)]
     xy = np.asarray(scans.truth_xy, dtype=float)
     present = np.asarray(scans.present, dtype=bool)
     for p in range(P):
-        for k in np.flatnonzero(present[:, p]):
+        for k in np.flatnonzero(in_set[:, p]):
             prev = k - 1 if k > 0 and present[k - 1, p] else k
             nxt = k + 1 if k + 1 < K and present[k + 1, p] else k
             v = (xy[nxt, p] - xy[prev, p]) / (dt * (nxt - prev)) if nxt > prev else np.zeros(2)
@@ -156,6 +175,50 @@ def to_stonesoup(scans: Scans, sigma_r: float, sigma_b: float) -> StoneSoupFeed:
         for i, scan in enumerate(scans.scans)
     ]
     return StoneSoupFeed(detections, {p for p in paths if len(p)})
+
+
+class StoneSoupEstimates(NamedTuple):
+    """Stone Soup tracks as our per-scan estimates (:func:`from_stonesoup`)."""
+
+    estimates: list[Estimates]  #: one per scan: the states the tracks hold at the scan's time, in our order
+    labels: list[np.ndarray]  #: one (n_k,) str array per scan: the track id of each row of the scan's estimates
+
+
+def from_stonesoup(tracks: Iterable[Any], scans: Scans) -> StoneSoupEstimates:
+    """Stone Soup tracks as one :class:`~soabench.types.Estimates` per scan, for :func:`soabench.api.evaluate`.
+
+    Args:
+        tracks: Stone Soup ``Track`` objects (or any sequences of states with ``timestamp`` and a 4-dimensional
+            ``state_vector`` [x, v_x, y, v_y], and an ``id``): every track the tracker held, including those it has
+            deleted since. Each state must lie at a scan's time (scan k at ``EPOCH + t_k``, as :func:`to_stonesoup`
+            dates the detections).
+        scans: the scans the tracks were made from.
+
+    Returns:
+        ``(estimates, labels)``: per scan, the states the tracks hold at its time in our order [x, y, v_x, v_y]
+        (a track's whole history counts, the states before its confirmation too) and the track id of each row.
+    """
+    from soabench.errors import require, require_type
+
+    require_type(scans, Scans, "from_stonesoup's scans", "give the Scans the tracks were made from")
+    times = {scan_time(scan): k for k, scan in enumerate(scans.scans)}
+    rows: list[list[np.ndarray]] = [[] for _ in scans.scans]
+    ids: list[list[str]] = [[] for _ in scans.scans]
+    for track in tracks:
+        label = str(getattr(track, "id", ""))
+        for state in getattr(track, "states", track):
+            k = times.get(getattr(state, "timestamp", None))
+            require(
+                k is not None,
+                f"track {label!r} holds a state at {getattr(state, 'timestamp', None)}, which is no scan's time; "
+                f"scan k is at EPOCH + t_k ({EPOCH})",
+            )
+            x = np.asarray(state.state_vector, dtype=float).ravel()
+            require(len(x) == 4, f"track {label!r} holds a {len(x)}-dimensional state; [x, vx, y, vy] is required")
+            rows[k].append(x[SS_ORDER])
+            ids[k].append(label)
+    estimates = [Estimates(np.array(r).reshape(-1, 4)) for r in rows]
+    return StoneSoupEstimates(estimates, [np.array(i, dtype=str) for i in ids])
 
 
 def _state_array(states: list[Any]) -> np.ndarray:
@@ -181,6 +244,7 @@ class _Base:
         self.updater = ExtendedKalmanUpdater(measurement_model=None)  # each detection carries its own model
 
     def _detections(self, scan: Scan) -> tuple[datetime.datetime, set[Detection]]:
+        check_scan(scan)
         return scan_time(scan), scan_detections(scan, self.sigma_r, self.sigma_b)
 
 

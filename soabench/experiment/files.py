@@ -213,11 +213,17 @@ def csv_line(row: Sequence[Any]) -> str:
     )
 
 
-def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
-    """Atomically write ``rows`` (dicts) with ``columns`` (plus any extra keys, sorted) as a CSV file."""
+def as_lists(rows: Iterable[dict], columns: Sequence[str]) -> tuple[list[str], list[list]]:
+    """The column names of a table of dict rows (``columns`` plus any extra keys, sorted) and each row as a list
+    over them (None where a row lacks a key): what :func:`write_csv` writes."""
     rows = list(rows)
     cols = list(columns) + sorted({k for r in rows for k in r} - set(columns))
-    write_csv_lists(path, cols, ([r.get(c) for c in cols] for r in rows))
+    return cols, [[r.get(c) for c in cols] for r in rows]
+
+
+def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
+    """Atomically write ``rows`` (dicts) with ``columns`` (plus any extra keys, sorted) as a CSV file."""
+    write_csv_lists(path, *as_lists(rows, columns))
 
 
 @contextlib.contextmanager

@@ -200,26 +200,8 @@ class RunStore:
             return self._merge(models, modes, step_columns)
 
     def _merge(self, models: Sequence[str], modes: Sequence[str], step_columns: bool) -> dict[str, int]:
-        m_idx = {m: i for i, m in enumerate(models)}
-        p_idx = {p: i for i, p in enumerate(modes)}
-
-        def key_of(trial: Any, clutter: Any, model: Any, mode: Any) -> tuple:
-            return (
-                int(trial),
-                float(clutter),
-                m_idx.get(model, len(m_idx)),
-                str(model),
-                p_idx.get(mode, len(p_idx)),
-                str(mode),
-            )
-
-        def key(r: dict) -> tuple:
-            return key_of(r["trial"], r["clutter"], r["model"], r["mode"])
-
-        def step_key(cols: list[str]) -> Callable[[list], tuple]:
-            it, ic, im, ip, ik = (cols.index(c) for c in ("trial", "clutter", "model", "mode", "k"))
-            return lambda r: (*key_of(r[it], r[ic], r[im], r[ip]), r[ik])
-
+        order = TableOrder(models, modes)
+        key, step_key = order.row, order.step_key
         rows: list[dict] = []
         episodes: list[dict] = []
         steps = _SortedSteps(step_key, columns=step_columns)
@@ -234,20 +216,10 @@ class RunStore:
             episodes += unpack_table(rec.get("episodes"))
             if rec.get("steps"):
                 steps.add(rec["steps"])
-            tt = rec.get("timing") or {}
-            for r in rrows:
-                timing.append(
-                    {
-                        **{c: r.get(c) for c in ("trial", "clutter", "model", "mode")},
-                        **{c: r.get(c) for c in TIMING_COLUMNS},
-                        **{f"t_{k}": tt.get(k) for k in TRIAL_TIMING_KEYS},
-                    }
-                )
+            timing += timing_rows(rrows, rec.get("timing") or {})
         rows.sort(key=key)
         timing.sort(key=key)
-        episodes.sort(
-            key=lambda r: (*key(r), float(r["target"]) if _is_num(r["target"]) else 0, str(r["target"]), r["k0"])
-        )
+        episodes.sort(key=order.episode)
         if not steps.ok:  # records with other columns, or blocks out of key order: every row sorted at once
             tables = [rec["steps"] for rec in map(self.load_trial, done) if rec.get("steps")]
             step_cols, step_rows = _rows_of(tables, STEP_COLUMNS)
@@ -262,11 +234,7 @@ class RunStore:
         )
         write_csv(self.run_dir / "episodes.csv", episodes, EPISODE_COLUMNS)
         steps.write(self.run_dir / "steps.csv")
-        write_csv(
-            self.run_dir / "timing.csv",
-            timing,
-            ("trial", "clutter", "model", "mode", *TIMING_COLUMNS, *(f"t_{k}" for k in TRIAL_TIMING_KEYS)),
-        )
+        write_csv(self.run_dir / "timing.csv", timing, TIMING_FILE_COLUMNS)
         self._merged_failures = (tuple(done), failures)
         columns = steps.columns.arrays(steps.cols or list(STEP_COLUMNS)) if steps.columns is not None else None
         if columns is not None:
@@ -310,6 +278,57 @@ def merged_stamp(run_dir: Path | str) -> tuple:
             continue
         out.append((st.st_size, st.st_mtime_ns))
     return tuple(out)
+
+
+#: columns of ``timing.csv``: a row's keys, its wall-clock columns and its trial's stage times
+TIMING_FILE_COLUMNS = ("trial", "clutter", "model", "mode", *TIMING_COLUMNS, *(f"t_{k}" for k in TRIAL_TIMING_KEYS))
+
+
+def timing_rows(rows: Sequence[dict], trial_timing: dict) -> list[dict]:
+    """The ``timing.csv`` rows of one trial record: per result row its keys and wall-clock columns, with the
+    trial's stage times (``TrialResult.timing``)."""
+    return [
+        {
+            **{c: r.get(c) for c in ("trial", "clutter", "model", "mode")},
+            **{c: r.get(c) for c in TIMING_COLUMNS},
+            **{f"t_{k}": trial_timing.get(k) for k in TRIAL_TIMING_KEYS},
+        }
+        for r in rows
+    ]
+
+
+class TableOrder:
+    """The order of the merged tables (module docstring): rows by (trial, clutter, model, mode) with models and modes
+    in the config's order (unknown ones after, by name); episodes then by target and k0; steps then by k."""
+
+    def __init__(self, models: Sequence[str], modes: Sequence[str]) -> None:
+        self.m_idx = {m: i for i, m in enumerate(models)}
+        self.p_idx = {p: i for i, p in enumerate(modes)}
+
+    def key_of(self, trial: Any, clutter: Any, model: Any, mode: Any) -> tuple:
+        m_idx, p_idx = self.m_idx, self.p_idx
+        return (
+            int(trial),
+            float(clutter),
+            m_idx.get(model, len(m_idx)),
+            str(model),
+            p_idx.get(mode, len(p_idx)),
+            str(mode),
+        )
+
+    def row(self, r: dict) -> tuple:
+        """Sort key of a trials (or timing) row."""
+        return self.key_of(r["trial"], r["clutter"], r["model"], r["mode"])
+
+    def episode(self, r: dict) -> tuple:
+        """Sort key of an episode row."""
+        return (*self.row(r), float(r["target"]) if _is_num(r["target"]) else 0, str(r["target"]), r["k0"])
+
+    def step_key(self, cols: list[str]) -> Callable[[list], tuple]:
+        """Sort key of a step row given as a list over ``cols``."""
+        it, ic, im, ip, ik = (cols.index(c) for c in ("trial", "clutter", "model", "mode", "k"))
+        key_of = self.key_of
+        return lambda r: (*key_of(r[it], r[ic], r[im], r[ip]), r[ik])
 
 
 class _SortedSteps:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from shapely.geometry import LineString, Point, box
 
-from soabench.errors import SoabenchError, require
+from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import wrap
 from soabench.scenario.config import ScenarioConfig
 from soabench.scenario.recording import Recording
@@ -159,6 +159,10 @@ def simulate(scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, durat
     """
     import libsumo
 
+    hint = "load both with soabench.scenario.load(net), or call soabench.api.simulate_trial(net, seed, trial)"
+    require_type(scene, SceneMap, "simulate's scene", hint)
+    require_type(scenario, ScenarioConfig, "simulate's scenario", hint)
+    require_type(seeds, TrialSeeds, "simulate's seeds", "make them with soabench.seeding.trial_seeds(seed, trial)")
     dur = scenario.duration if duration is None else duration
     require(
         isinstance(dur, (int, float)) and math.isfinite(dur) and dur >= scenario.step_length,
