@@ -364,6 +364,17 @@ class TrialMetrics:
     episodes: list[Episode] = field(default_factory=list)
     series: dict[str, np.ndarray] = field(default_factory=dict)
 
+    def __getitem__(self, key: str) -> float | int:
+        """``summary[key]``: ``metrics["ospa"]``."""
+        return self.summary[key]
+
+    def __repr__(self) -> str:
+        s = self.summary
+        shown = ("ospa", "gospa", "card_err", "precision", "recall", "delay_mean", "n_episodes")
+        body = ", ".join(f"{k}={s[k]:.4g}" if isinstance(s[k], float) else f"{k}={s[k]}" for k in shown if k in s)
+        K = len(next(iter(self.series.values()))) if self.series else 0
+        return f"TrialMetrics({body}; {len(s)} summary keys, {len(self.episodes)} episodes, {K} scans)"
+
 
 def _mean(a: np.ndarray) -> float:
     """Mean over all steps (NaN for an empty run)."""

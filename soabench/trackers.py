@@ -53,6 +53,11 @@ class GMPHDTracker:
         self.prev: StepResult | None = None
         self.t_birth = 0.0
 
+    def __repr__(self) -> str:
+        model = getattr(self.birth_model, "name", None) or type(self.birth_model).__name__
+        mode = getattr(self.filt, "mode", "?")
+        return f"GMPHDTracker(birth model {model!r}, mode {mode!r}, p_D_b={self.p_D_b:g})"
+
     def step(self, scan: Scan) -> StepResult:
         """Birth from the context at k, then one filter cycle (predict, birth, update, reduce, extract)."""
         check_scan(scan)

@@ -221,6 +221,26 @@ def from_stonesoup(tracks: Iterable[Any], scans: Scans) -> StoneSoupEstimates:
     return StoneSoupEstimates(estimates, [np.array(i, dtype=str) for i in ids])
 
 
+def estimate_set(tracks: Iterable[Any], scans: Scans, gt_set: str = "fov") -> list[Any]:
+    """The track states our metrics score (Est_k of docs/method.md §5.1): those inside the field of view of their
+    scan's sensor pose unless ``gt_set`` is ``"scene"``. With :func:`to_stonesoup`'s truths (same ``gt_set``) and
+    ``Euclidean(mapping=(0, 2))`` (positions only; Stone Soup's default measure also reads the velocities), Stone
+    Soup's ``OSPAMetric`` gives our per-scan OSPA."""
+    from soabench.geometry import fov_mask
+
+    by_time = {scan_time(scan): scan for scan in scans.scans}
+    out = []
+    for track in tracks:
+        for state in getattr(track, "states", track):
+            scan = by_time.get(state.timestamp)
+            if scan is None:
+                continue
+            xy = np.asarray(state.state_vector, dtype=float).ravel()[[0, 2]].reshape(1, 2)
+            if gt_set == "scene" or fov_mask(xy, np.asarray(scan.ego, dtype=float), scans.sensor)[0]:
+                out.append(state)
+    return out
+
+
 def _state_array(states: list[Any]) -> np.ndarray:
     """(n, 4) in our order [x, y, v_x, v_y] from Stone Soup states."""
     if not states:
@@ -244,7 +264,6 @@ class _Base:
         self.updater = ExtendedKalmanUpdater(measurement_model=None)  # each detection carries its own model
 
     def _detections(self, scan: Scan) -> tuple[datetime.datetime, set[Detection]]:
-        check_scan(scan)
         return scan_time(scan), scan_detections(scan, self.sigma_r, self.sigma_b)
 
 
@@ -295,6 +314,7 @@ class StoneSoupGMPHD(_Base):
         )
 
     def step(self, scan: Scan) -> Estimates:
+        check_scan(scan)
         x, y, theta = (float(v) for v in scan.ego)
         d = self.birth_ahead  # not on the sensor itself: the range-bearing Jacobian is singular there
         self.birth.state_vector = StateVector([x + d * math.cos(theta), 0.0, y + d * math.sin(theta), 0.0])
@@ -346,6 +366,7 @@ class StoneSoupGNN(_Base):
         )
 
     def step(self, scan: Scan) -> Estimates:
+        check_scan(scan)
         time, dets = self._detections(scan)
         _, tracks = self.tracker.update_tracker(time, dets)
         states = [t.state for t in tracks]
