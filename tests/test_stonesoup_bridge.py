@@ -33,7 +33,13 @@ def test_to_stonesoup_detections_and_truth(short_run) -> None:
 
     _, _, cfg, scans = short_run
     s = cfg.sensor
-    feed = ss.to_stonesoup(scans, s.sigma_r, s.sigma_b)
+    feed = ss.to_stonesoup(scans, s.sigma_r, s.sigma_b, gt_set="scene")  # every present walker
+    default = ss.to_stonesoup(scans)  # the truth set of our tables (present and in the FOV), the scans' own noise
+    in_fov = scans.present & scans.in_fov
+    assert {p.id: len(p) for p in default.truths} == {
+        str(scans.ped_ids[p]): int(in_fov[:, p].sum()) for p in np.flatnonzero(in_fov.any(0))
+    }
+    assert [len(d) for _, d in default] == [len(d) for _, d in feed]
     assert len(feed.detections) == len(scans)
     assert sum(len(d) for _, d in feed) == sum(len(sc.Z) for sc in scans.scans)
     assert {p.id for p in feed.truths} == {str(scans.ped_ids[p]) for p in np.flatnonzero(scans.present.any(0))}
