@@ -289,3 +289,15 @@ def test_config_forms_are_accepted(tmp_path) -> None:
     c = sb.simulate_trial(NET, duration=5, config=cfg)[1]
     assert a.sensor.lambda_c == b.sensor.lambda_c == c.sensor.lambda_c == 1.0
     assert all(np.array_equal(x.Z, y.Z) and np.array_equal(x.Z, z.Z) for x, y, z in zip(a, b, c, strict=True))
+
+
+def test_run_on_two_processes_equals_the_serial_run(api_run) -> None:
+    result, _ = api_run
+    parallel = sb.run(**ARGS, workers=2)
+    for name in ("trials", "episodes", "steps"):
+        a, b = result.table(name), parallel.table(name)
+        assert a.dtype == b.dtype and len(a) == len(b), name
+        for col in a.dtype.names:
+            x, y = a[col], b[col]
+            same = (x == y) | (np.isnan(x) & np.isnan(y)) if x.dtype.kind == "f" else x == y
+            assert np.all(same), (name, col)
