@@ -29,6 +29,7 @@ kind), e.g. a :class:`Scans` passed to ``step``, NaN truth rows, or Stone Soup-o
 
 from collections.abc import Sequence as _Sequence
 from pathlib import Path as _Path
+from typing import TYPE_CHECKING as _TYPE_CHECKING
 from typing import Any as _Any
 
 from soabench import boundary as _boundary
@@ -37,8 +38,6 @@ from soabench.birth.base import FOVRule, births_from, build_components, isotropi
 from soabench.boundary import ORDER_SOABENCH, ORDER_STONESOUP
 from soabench.config import Config
 from soabench.errors import require as _require
-from soabench.experiment.memory import RunResult
-from soabench.metrics import TrialMetrics
 from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP
 from soabench.protocols import BirthModel, Tracker, TrackerSetup
 from soabench.trackers import GMPHDTracker, run_tracker
@@ -61,6 +60,10 @@ from soabench.types import (
     Scans,
     StepResult,
 )
+
+if _TYPE_CHECKING:  # at run time imported on first use (module __getattr__)
+    from soabench.experiment.memory import RunResult
+    from soabench.metrics import TrialMetrics
 
 BIRTH_MODEL = _plugins.BIRTH  #: plugin kind of a birth model (:func:`resolve`): ``"birth model"``
 TRACKER = _plugins.TRACKER  #: plugin kind of a whole tracker (:func:`resolve`): ``"tracker"``
@@ -109,6 +112,19 @@ __all__ = [
     "simulate_trial",
     "to_stonesoup",
 ]
+
+
+#: public classes imported on first use (their modules load the metrics and the harness, seconds of imports that a
+#: plugin importing this module does not need)
+_LAZY = {"RunResult": "soabench.experiment.memory", "TrialMetrics": "soabench.metrics"}
+
+
+def __getattr__(name: str) -> _Any:
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'soabench.api' has no attribute {name!r}")
 
 
 def __dir__() -> list[str]:
@@ -225,7 +241,7 @@ def evaluate(
     estimates: _Sequence[_Any],
     config: "Config | dict | str | _Path | None" = None,
     order: str | None = None,
-) -> TrialMetrics:
+) -> "TrialMetrics":
     """Every metric of one run (docs/method.md §5): the numbers of its row in ``trials.csv``.
 
     Args:
@@ -266,7 +282,7 @@ def run(
     executor: _Any = None,
     out: "str | _Path | None" = None,
     progress: bool = False,
-) -> RunResult:
+) -> "RunResult":
     """The Monte Carlo protocol (docs/method.md §5.8) of ``config`` on ``net``, as ``soabench run`` runs it.
 
     Args:

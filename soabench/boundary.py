@@ -11,7 +11,6 @@ readings with the truth (:func:`check_state_order`).
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -37,12 +36,10 @@ def as_config(config: Config | dict | str | Path | None) -> Config:
         return Config().validate()
     if isinstance(config, Config):
         return Config.from_dict(config.to_dict()).validate()
+    require_type(config, (Config, dict, str, Path), "config", "give a soabench.api.Config, a dict or a TOML path")
     if isinstance(config, dict):
         return Config.from_dict(config).validate()
-    if isinstance(config, (str, Path)):
-        return load_config(config)
-    require_type(config, (Config, dict, str, Path), "config", "give a soabench.api.Config, a dict or a TOML path")
-    raise AssertionError  # unreachable: require_type raised
+    return load_config(config)
 
 
 def metrics_config(config: Config | MetricsConfig | dict | str | Path | None) -> MetricsConfig:
@@ -67,8 +64,9 @@ def as_scene(scene_or_net: Any) -> Any:
 
 
 def as_names(value: Any, what: str) -> tuple[str, ...] | None:
-    """Plugin names of ``models``/``trackers``: a comma-separated string, or a sequence of names and classes (a class
-    is named by its import path ``module:Class``, allowed for this process). None stays None."""
+    """Names of ``models``/``trackers``/``probabilities``: a comma-separated string, or a sequence of names and (for
+    plugins) classes, a class named by its import path ``module:Class``, which this process may then import.
+    None stays None."""
     if value is None:
         return None
     items = value.split(",") if isinstance(value, str) else list(value)
@@ -76,9 +74,10 @@ def as_names(value: Any, what: str) -> tuple[str, ...] | None:
     for item in items:
         if isinstance(item, type):
             item = class_path(item)
-        require(isinstance(item, str), f"{what} holds {item!r}; give plugin names or classes")
+        require(isinstance(item, str), f"{what} holds {item!r}; give names (or plugin classes)")
         out.append(item.strip())
-    plugins.allow_import_paths(out)
+    if what != "probabilities":
+        plugins.allow_import_paths(out)
     return tuple(out)
 
 
@@ -118,14 +117,6 @@ def plugin(name_or_class: Any) -> tuple[str, str, type]:
     )
     kind = plugins.BIRTH if name in births else plugins.TRACKER
     return kind, name, plugins.resolve(kind, name)
-
-
-def accepts_options(cls: type) -> bool:
-    """Whether a class takes keyword options besides the positional ones the harness passes."""
-    try:
-        return len(inspect.signature(cls).parameters) > 0
-    except (TypeError, ValueError):
-        return True
 
 
 # ------------------------------------------------------------------------------------------------------ estimates
