@@ -301,3 +301,20 @@ def test_run_on_two_processes_equals_the_serial_run(api_run) -> None:
             x, y = a[col], b[col]
             same = (x == y) | (np.isnan(x) & np.isnan(y)) if x.dtype.kind == "f" else x == y
             assert np.all(same), (name, col)
+
+
+def test_failed_plugin_runs_and_failed_trials_are_listed(monkeypatch) -> None:
+    from soabench.experiment import runner
+
+    result = sb.run(net=NET, trials=1, duration=5, models=["soa", "plugin_fixtures:RaiseAtScan3"])
+    assert set(result.trials["model"]) == {"soa"} and result.complete
+    assert [(f["model"], f["k"]) for f in result.model_failures] == [("plugin_fixtures:RaiseAtScan3", 3)] * 2
+
+    def broken(trial, *args, **kwargs):
+        raise RuntimeError(f"trial {trial} broke")
+
+    monkeypatch.setattr(runner, "_default_trial_fn", lambda: broken)
+    with pytest.warns(UserWarning, match=r"2 of 2 trials failed \(trial 0: RuntimeError: trial 0 broke\)"):
+        failed = sb.run(net=NET, trials=2, duration=5, models="soa")
+    assert not failed.complete and len(failed.trials) == 0 and [f["trial"] for f in failed.failures] == [0, 1]
+    assert "2 failed trials" in repr(failed)

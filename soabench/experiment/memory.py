@@ -10,6 +10,7 @@ writer, byte for byte. Nothing is written to disk unless asked.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -196,20 +197,29 @@ def run_in_memory(
     records: list[dict] = []
     failures: list[dict] = []
     bar = Progress(n_trials, 0, progress, label=str(net))
+    finished = False
     try:
         for _, rec in exe.results(spec, range(n_trials)):
             ok = rec.get("status") == "ok"
             (records if ok else failures).append(rec)
             bar.update(ok)
+        finished = True
     finally:
         bar.close()
         if executor is None:
-            exe.close()
+            exe.close(abort=not finished)  # Ctrl-C: stop the trials in flight instead of waiting for them
     tables = collect(records, *merge_args(config))
     model_failures = [
         dict(f) for rec in sorted(records, key=lambda r: r["trial"]) for f in rec.get("model_failures") or ()
     ]
     failures = [{k: f.get(k) for k in ("trial", "seed", "sumo_seed", "error")} for f in failures]
+    if failures:
+        first = min(failures, key=lambda f: f["trial"])
+        warnings.warn(
+            f"{len(failures)} of {n_trials} trials failed (trial {first['trial']}: {first['error']}); their rows are "
+            "missing, RunResult.failures lists them",
+            stacklevel=3,
+        )
     return RunResult(
         config=config,
         net=str(net),
