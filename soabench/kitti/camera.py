@@ -11,8 +11,8 @@
   left, top, right, bottom within [0, W - 1] x [0, H - 1] pixels.
 * An object is seen when its box overlaps the image [0, W] x [0, H] (the extent from which the horizontal FOV
   2 atan(W / 2 f_x) of :meth:`~soabench.kitti.formats.Calib.fov_deg` is measured). Its truncation level (the
-  tracking devkit's integer 0, 1, 2) is 0 when the whole box is in the image, 1 when less than half of its area is
-  cut off, 2 otherwise.
+  tracking devkit's integer 0, 1, 2) is 0 when clipping leaves the box as it is, 1 when the clipped box keeps more
+  than half of its area, 2 otherwise.
 """
 
 from __future__ import annotations
@@ -69,8 +69,9 @@ def image_box(
     (left, top), (right, bottom) = uv.min(axis=0), uv.max(axis=0)
     if right <= 0.0 or left >= width or bottom <= 0.0 or top >= height:
         return None
-    box = np.array([max(left, 0.0), max(top, 0.0), min(right, width - 1.0), min(bottom, height - 1.0)])
+    box = np.clip([left, top, right, bottom], 0.0, [width - 1.0, height - 1.0, width - 1.0, height - 1.0])
+    if (box == [left, top, right, bottom]).all():
+        return box, 0
     area = (right - left) * (bottom - top)
-    seen = max(min(right, width) - max(left, 0.0), 0.0) * max(min(bottom, height) - max(top, 0.0), 0.0)
-    cut = 1.0 - seen / area if area > 0.0 else 0.0
-    return box, 0 if cut <= 1e-12 else (1 if cut < 0.5 else 2)
+    kept = (box[2] - box[0]) * (box[3] - box[1])
+    return box, 1 if area > 0.0 and kept > 0.5 * area else 2
