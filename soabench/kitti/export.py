@@ -105,10 +105,10 @@ def imu_motion(T_imu: np.ndarray, dt: float) -> dict[str, np.ndarray]:
         return {"v": z2, "a": z2.copy(), "yaw_rate": np.zeros(F), "v_body": z2.copy(), "a_body": z2.copy()}
     v = np.gradient(T_imu[:, :2, 3], dt, axis=0)
     a = np.gradient(v, dt, axis=0)
-    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    c, s = np.cos(yaw), np.sin(yaw)
 
     def body(x: np.ndarray) -> np.ndarray:  # world (east, north) -> vehicle (forward, left)
-        return np.column_stack([c[:, 0] * x[:, 0] + s[:, 0] * x[:, 1], -s[:, 0] * x[:, 0] + c[:, 0] * x[:, 1]])
+        return np.column_stack([c * x[:, 0] + s * x[:, 1], -s * x[:, 0] + c * x[:, 1]])
 
     return {"v": v, "a": a, "yaw_rate": np.gradient(yaw, dt), "v_body": body(v), "a_body": body(a)}
 
