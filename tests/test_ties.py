@@ -13,8 +13,9 @@ import shapely
 from test_gmphd import reference_merge_groups
 
 from soabench.birth.soa import occlusion_layers
-from soabench.config import BirthConfig
-from soabench.gmphd import kernels
+from soabench.config import BirthConfig, FilterConfig, SensorConfig
+from soabench.gmphd import cycle, kernels
+from soabench.gmphd.filter import GMPHDFilter, _mixture_arrays
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.reduction import merge, merge_groups
 from soabench.sensor import SIGHT_TOL, compute_obstacles, line_of_sight, line_of_sight_past, sight_blockers
@@ -42,6 +43,20 @@ def test_a_pair_at_the_threshold_merges_under_any_1e12_perturbation():
     rng = np.random.default_rng(35)
     for _ in range(200):
         assert len(merge(_pair(4.0, rng.uniform(-EPS, EPS, (2, 4))), 4.0)) == 1
+
+
+def test_the_compiled_cycle_reduces_with_the_same_tie_rule():
+    """The filter's compiled reduction (one call per scan) merges a pair at the threshold under any 1e-12
+    perturbation, as :func:`merge` does: the cycle calls the merge kernel with the tie rule, not a copy compiled
+    before it."""
+    red = GMPHDFilter(FilterConfig(), SensorConfig(), "static")._red_pars
+    rng = np.random.default_rng(350)
+    for d2 in (4.0, 4.0 * (1.0 + 1e-12), 4.0 * (1.0 - 1e-12)):
+        for _ in range(20):
+            mix = _pair(d2, rng.uniform(-EPS, EPS, (2, 4)))
+            out = cycle.reduce(*_mixture_arrays(mix), red)
+            assert out[4][2] == 1 and len(out[0][0]) == len(merge(mix, 4.0)) == 1  # n_merged
+    assert len(cycle.reduce(*_mixture_arrays(_pair(4.0001)), red)[0][0]) == 2
 
 
 def ubm_grid(x0: float, y0: float, n: int, d_u: float = 5.0, sigma_u: float = 2.5) -> tuple[np.ndarray, ...]:
