@@ -3,7 +3,7 @@
 The stage contract (:class:`Scan`, :class:`Scans`, :class:`Obstacles`) lives in :mod:`soabench.types`. Here:
 
 * geometry of one scan: :func:`circle_tangents`, :func:`compute_obstacles` (O_k with tangent rays, T12-T15),
-  :func:`line_of_sight` (strict: merely touching an occluder is visible), :func:`fov_polygon`,
+  :func:`line_of_sight` (touching or grazing an occluder is visible), :func:`fov_polygon`,
   :func:`shadow_polygons` and :func:`visible_region` (Omega_k, §3.1.4);
 * the occluders present at a recording step: :func:`occluders_at`;
 * the sensor itself: :func:`observe` (detections with p_D, Gaussian noise, Poisson clutter, source ids, flags).
@@ -155,12 +155,18 @@ def _polygons_from_arrays(polygons: Sequence[np.ndarray]) -> np.ndarray:
 # Line of sight (§2.3 simulator-side detection, §4.4 occlusion_pd)
 
 
-def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[BaseGeometry]) -> np.ndarray:
-    """(N,) bool: the segment sensor -> target meets no occluder interior (§2.3, §4.4).
+#: depth (m) by which a sight line must run inside an occluder to be blocked (docs/method.md §2.3, register row 34):
+#: grazing a vertex or running along an edge is visible whatever the rounding of the sight line's end point
+SIGHT_TOL = 1e-9
 
-    Strict: a segment that merely touches an occluder (grazes a vertex, runs along an edge) is visible. Occluders
-    that contain the sensor in their interior are ignored (the sensor cannot be occluded by what it sits in).
-    One vectorised shapely call over all (target, occluder) pairs.
+
+def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[BaseGeometry]) -> np.ndarray:
+    """(N,) bool: the segment sensor -> target does not run through an occluder (§2.3, §4.4).
+
+    Blocked only where the segment passes through an occluder's core, the polygon eroded by :data:`SIGHT_TOL`:
+    a segment that touches an occluder, grazes a vertex or runs along an edge is visible, also when rounding puts it
+    a few ulps inside (S-OA's births on tangent rays, §3.1.2). Occluders that contain the sensor in their interior
+    are ignored (the sensor cannot be occluded by what it sits in).
     """
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     targets = np.asarray(targets, dtype=float).reshape(-1, 2)
@@ -169,20 +175,40 @@ def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[B
     return line_of_sight_past(ego_xy, targets, sight_blockers(ego_xy, occluders))
 
 
-def sight_blockers(ego_xy: np.ndarray, occluders: Sequence[BaseGeometry]) -> np.ndarray:
-    """The occluders that can hide a point from ``ego_xy`` (those not containing the sensor in their interior),
-    prepared: what :func:`line_of_sight` tests against, computed once per scan by a caller that tests many point
-    sets from the same pose (:func:`line_of_sight_past`)."""
+class SightBlockers:
+    """The occluders that can hide a point from one pose (those not containing the sensor in their interior),
+    prepared, and their cores (each eroded by :data:`SIGHT_TOL`), built on first use for the occluders some sight
+    line meets and kept for the next point set tested from the same pose (:func:`line_of_sight_past`)."""
+
+    def __init__(self, occ: np.ndarray) -> None:
+        self.occ = occ
+        self._core = np.empty(len(occ), dtype=object)
+        self._built = np.zeros(len(occ), dtype=bool)
+
+    def __len__(self) -> int:
+        return len(self.occ)
+
+    def cores(self, j: np.ndarray) -> np.ndarray:
+        """The cores of occluders ``j`` (indices, repeats allowed)."""
+        todo = np.unique(j[~self._built[j]])
+        if len(todo):
+            self._core[todo] = shapely.buffer(self.occ[todo], -SIGHT_TOL, join_style="mitre")
+            self._built[todo] = True
+        return self._core[j]
+
+
+def sight_blockers(ego_xy: np.ndarray, occluders: Sequence[BaseGeometry]) -> SightBlockers:
+    """What :func:`line_of_sight` tests against from ``ego_xy``, computed once per scan by a caller that tests many
+    point sets from the same pose (:func:`line_of_sight_past`)."""
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     occ = np.asarray(list(occluders), dtype=object).reshape(-1)
-    if len(occ) == 0:
-        return occ
-    occ = occ[~shapely.contains(occ, shapely.points(ego_xy))]
-    shapely.prepare(occ)
-    return occ
+    if len(occ):
+        occ = occ[~shapely.contains(occ, shapely.points(ego_xy))]
+        shapely.prepare(occ)
+    return SightBlockers(occ)
 
 
-def line_of_sight_past(ego_xy: np.ndarray, targets: np.ndarray, blockers: np.ndarray) -> np.ndarray:
+def line_of_sight_past(ego_xy: np.ndarray, targets: np.ndarray, blockers: SightBlockers) -> np.ndarray:
     """:func:`line_of_sight` given the scan's :func:`sight_blockers` (same result)."""
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     targets = np.asarray(targets, dtype=float).reshape(-1, 2)
@@ -192,12 +218,13 @@ def line_of_sight_past(ego_xy: np.ndarray, targets: np.ndarray, blockers: np.nda
     return ~_blocked_pairs(lines, blockers).any(axis=1)
 
 
-def _blocked_pairs(lines: np.ndarray, occ: np.ndarray) -> np.ndarray:
-    """(N, O) bool: line i and occluder j share interior points (intersects and not merely touches)."""
-    hit = shapely.intersects(lines[:, None], occ[None, :])
+def _blocked_pairs(lines: np.ndarray, blockers: SightBlockers) -> np.ndarray:
+    """(N, O) bool: line i runs through the core of occluder j. Only pairs that meet the occluder itself (a prepared,
+    cheap test) are tested against its core."""
+    hit = shapely.intersects(lines[:, None], blockers.occ[None, :])
     ii, jj = np.nonzero(hit)
     if len(ii):
-        hit[ii, jj] = ~shapely.touches(lines[ii], occ[jj])
+        hit[ii, jj] = shapely.intersects(lines[ii], blockers.cores(jj))
     return hit
 
 

@@ -228,7 +228,8 @@ def test_t8_predict_mass_and_covariance():
 
 
 def reference_merge_groups(m, P, w, U):
-    """Literal Vo-Ma Table II loop (one vectorised Mahalanobis pass per merged component)."""
+    """Literal Vo-Ma Table II loop (one vectorised Mahalanobis pass per merged component), with the tie rule of
+    register row 35: d^2 <= U (1 + 1e-9)."""
     Pinv = np.linalg.inv(P)
     alive = np.ones(len(w), bool)
     label = np.full(len(w), -1)
@@ -238,7 +239,7 @@ def reference_merge_groups(m, P, w, U):
         j = idx[np.argmax(w[idx])]
         d = m[idx] - m[j]
         d2 = np.einsum("ni,nij,nj->n", d, Pinv[idx], d)
-        members = idx[d2 <= U]
+        members = idx[d2 <= U * (1.0 + 1e-9)]
         label[members] = g
         alive[members] = False
         g += 1

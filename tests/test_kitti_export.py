@@ -1,5 +1,6 @@
-"""SUMO -> KITTI files -> reader: the same measurements and truth as the direct path; `soabench kitti` end to end on
-the exported sequences (2 trials x 30 s at 10 Hz; the first ~20 s of a trial see few pedestrians)."""
+"""SUMO -> KITTI files -> reader: the same measurements and truth in the camera's view as the direct path;
+`soabench kitti` end to end on the exported sequences (2 trials x 30 s at 10 Hz; the first ~20 s of a trial see few
+pedestrians). The files' own conventions: tests/test_kitti_camera.py."""
 
 from __future__ import annotations
 
@@ -47,35 +48,61 @@ def _in_ego_frame(xy, ego):
     return np.column_stack([r, b])
 
 
+def _in_sector(Z, sensor):
+    """(M,) measurements (range, bearing) in the sensor's FOV sector (what the reader keeps by default)."""
+    return (Z[:, 0] >= sensor.r_min) & (Z[:, 0] <= sensor.r_max) & (np.abs(Z[:, 1]) <= 0.5 * sensor.fov + 1e-12)
+
+
+def _facing(obstacles, ego, sensor):
+    """(N,) obstacles whose cone overlaps the sensor's sector (the only ones the camera can label)."""
+    lo = np.angle(np.exp(1j * (obstacles.theta_min - ego[2])))
+    width = np.mod(obstacles.theta_max - obstacles.theta_min, 2 * np.pi)
+    half = 0.5 * sensor.fov
+    return (lo <= half) & (lo + width >= -half) | (lo + width >= 2 * np.pi - half)
+
+
 @pytest.mark.parametrize("trial", [0, 1])
 def test_round_trip_gives_the_direct_measurements_and_truth(exported, trial):
     direct, sensor = _direct(trial)
     ds = open_dataset(exported, semantics=exported / "semantics")
-    kc = KittiConfig(source="track_id", detections_in_fov=False)
+    kc = KittiConfig(source="track_id")
     read = to_scans(read_sequence(ds, f"{trial:04d}"), kc, kitti_base_config().sensor)
     r = read.scans
     assert read.sensor.fov_deg == pytest.approx(sensor.fov_deg, abs=1e-9)  # from P2
     assert len(r) == len(direct) >= round(DURATION / 0.1) and r.dt == direct.dt
-    assert read.info["measurements"] == sum(len(s.Z) for s in direct.scans) > 0
+    kept = [_in_sector(s.Z, sensor) for s in direct.scans]
+    assert read.info["measurements"] == sum(int(m.sum()) for m in kept) > 0
     cols = np.array([int(i) for i in r.ped_ids])
     never = np.setdiff1d(np.arange(direct.present.shape[1]), cols)
-    assert not direct.present[:, never].any()  # only never-present pedestrians are missing from the labels
-    for name in ("present", "in_fov", "visible", "detected"):
+    assert not direct.in_fov[:, never].any()  # only pedestrians the sensor never had in its FOV are never labelled
+    # labelled: what the camera sees, a subset of the present pedestrians holding every one in the sensor's FOV
+    assert not (r.present & ~direct.present[:, cols]).any()
+    assert not (direct.in_fov[:, cols] & ~r.present).any()
+    assert (direct.present[:, cols] & ~r.present).any()  # the export leaves out pedestrians behind the camera
+    for name in ("in_fov", "visible"):
         assert np.array_equal(getattr(direct, name)[:, cols], getattr(r, name)), name
+    detected = np.zeros_like(direct.detected)  # detected by a measurement the reader keeps (in the sector)
+    for k, m in enumerate(kept):
+        src = direct.source[k][m]
+        detected[k, src[src >= 0]] = True
+    assert np.array_equal(detected[:, cols], r.detected)
     assert direct.detected.any() and direct.visible.any()
     for k, (a, b) in enumerate(zip(direct.scans, r.scans, strict=True)):
-        assert a.Z.shape == b.Z.shape
-        assert np.allclose(a.Z, b.Z, rtol=0, atol=1e-9), k
+        assert b.Z.shape == (int(kept[k].sum()), 2)
+        assert np.allclose(a.Z[kept[k]], b.Z, rtol=0, atol=1e-9), k
         mapped = np.where(r.source[k] >= 0, cols[np.maximum(r.source[k], 0)], -1)
-        assert np.array_equal(mapped, direct.source[k]), k
+        assert np.array_equal(mapped, direct.source[k][kept[k]]), k
         here = np.flatnonzero(r.present[k])
         ta = _in_ego_frame(direct.truth_xy[k, cols[here]], a.ego)
         tb = _in_ego_frame(r.truth_xy[k, here], b.ego)
         assert np.allclose(ta, tb, rtol=0, atol=1e-9), k
-        # obstacles (vehicles, parked cars, buildings) with their tangent rays, and the visible sidewalk
-        assert len(a.obstacles) == len(b.obstacles), k
+        # obstacles facing the camera (vehicles, parked cars, buildings) with their tangent rays, and the visible
+        # sidewalk (obstacles behind the camera shadow nothing in its view)
+        fa, fb = _facing(a.obstacles, a.ego, sensor), _facing(b.obstacles, b.ego, sensor)
+        assert fa.sum() == fb.sum(), k
         for f in ("r_min", "r_max", "centroid_range"):
-            assert np.allclose(np.sort(getattr(a.obstacles, f)), np.sort(getattr(b.obstacles, f)), atol=1e-9), (k, f)
+            va, vb = getattr(a.obstacles, f)[fa], getattr(b.obstacles, f)[fb]
+            assert np.allclose(np.sort(va), np.sort(vb), atol=1e-9), (k, f)
         assert b.visible_region.area == pytest.approx(a.visible_region.area, rel=1e-6, abs=1e-6), k
     # relative headings of the ego path agree (the reader's world is the first IMU frame)
     d_direct = np.diff([s.ego[2] for s in direct.scans])

@@ -597,7 +597,7 @@ def reduce(w, m, P, origin, n_det, age, beta, pars):
     dyn = beta.shape[1] == 4
     if n_pruned > 0:
         order = _order_heaviest_first(w)
-        label, centres = merge_groups(m, P, order, U)
+        label, centres = merge_groups(m, P, order, U)  # q <= U (1 + 1e-9): a pair at exactly U merges (§2.9)
         G = centres.shape[0]
         if G == n_pruned:
             w, m, P, origin, n_det, age, beta = _select(w, m, P, origin, n_det, age, beta, centres)

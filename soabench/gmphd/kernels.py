@@ -255,11 +255,23 @@ def _kdtree(x, y, perm):
 
 _SMALL_MERGE = 96  #: up to this many components the x-sorted window is faster than building the tree
 
+#: relative margin of the merge test (docs/method.md §2.9, register row 35): i joins j*'s group when
+#: q <= U (1 + MERGE_TIE). Candidates at exactly q = U (the UBM grid's neighbours, S-OA's layers l and l + 2 on one
+#: ray) then merge whatever the last bit of q's rounding, on every CPU
+MERGE_TIE = 1e-9
+
+
+@njit(cache=True, inline="always")
+def merge_threshold(U):
+    """The bound every merge kernel compares q with: U (1 + MERGE_TIE) (§2.9)."""
+    return U * (1.0 + MERGE_TIE)
+
 
 @njit(cache=True)
 def merge_groups(m, P, order, U):
     """Vo-Ma greedy merge groups (Table II, §2.9), literally: pass g takes j* = the next component of ``order``
-    (heaviest first) still unmerged, and absorbs every unmerged i with (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U.
+    (heaviest first) still unmerged, and absorbs every unmerged i with q = (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U,
+    compared as q <= U (1 + MERGE_TIE) (:func:`merge_threshold`) so that a tie at q = U merges whatever the rounding.
 
     Every search structure gives exactly the same groups (the same quadratic form, evaluated the same way, on a
     superset of the candidates that can merge): :func:`merge_groups_window` for small mixtures, where its O(J x
@@ -290,6 +302,7 @@ def merge_groups_tree(m, P, order, U):
     a centre or candidate with a non-finite position merges with nothing (its quadratic form is NaN or inf).
     Returns (label (J,), centres (G,)): the group of each component and the j* of each group, in creation order.
     """
+    U = merge_threshold(U)  # the tie rule of §2.9; every bound below is derived from this U
     J = m.shape[0]
     L = np.zeros((J, 4, 4))
     reach2 = np.empty(J)  # rho_i^2 with slack; -1 for components outside the index
@@ -448,6 +461,7 @@ def merge_groups_grid(m, P, order, U):
     gets larger cells (still >= its reaches). Covariances that are not positive definite and non-finite positions
     are handled as in the tree. Returns (label (J,), centres (G,)).
     """
+    U = merge_threshold(U)  # the tie rule of §2.9; every bound below is derived from this U
     J = m.shape[0]
     L = np.zeros((J, 4, 4))
     reach2 = np.empty(J)
@@ -634,6 +648,7 @@ def merge_groups_window(m, P, order, U):
     covariance that is not positive definite never joins another component's group.
     Returns (label (J,), centres (G,)): the group of each component and the j* of each group, in creation order.
     """
+    U = merge_threshold(U)  # the tie rule of §2.9; every bound below is derived from this U
     J = m.shape[0]
     L = np.zeros((J, 4, 4))
     spd = np.empty(J, dtype=np.bool_)

@@ -25,7 +25,8 @@ def detection_gate(
     """g(m_j) (J,) in {0, 1}: 1[m_j in FOV_k] (§4.1; includes r >= r_min), times line of sight (§4.4) if given.
 
     ``occluders`` (shapely polygons) switches on the ``occlusion_pd`` gate: a mean whose segment from the sensor
-    crosses an occluder gets g = 0 (:func:`soabench.sensor.line_of_sight`).
+    runs through an occluder (more than 1e-9 m inside it; grazing is visible) gets g = 0
+    (:func:`soabench.sensor.line_of_sight`).
     """
     m = np.asarray(m, dtype=float).reshape(-1, 4)
     g = fov_mask(m[:, :2], ego, sensor_cfg)

@@ -1,8 +1,9 @@
 """Pruning, merging, capping (Vo & Ma 2006, Table II) and state extraction (Table III) (docs/method.md §2.9, §2.10).
 
 Exactly Vo & Ma: prune w <= T (no renormalisation); greedy merge around the heaviest remaining component j* of
-every i with (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U (P_i of the candidate); no weight cap, no redistribution;
-then keep the J_max heaviest (logged when hit).
+every i with (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U (P_i of the candidate; a tie at exactly U merges: the test is
+<= U (1 + 1e-9), :func:`soabench.gmphd.kernels.merge_threshold`); no weight cap, no redistribution; then keep the
+J_max heaviest (logged when hit).
 
 The greedy merge and the moment matching are compiled loops (:mod:`soabench.gmphd.kernels`): Table II literally,
 with a spatial index (uniform grids over the positions, one per reach class, or an x-sorted window for small
@@ -34,7 +35,8 @@ def merge_groups(m: np.ndarray, P: np.ndarray, w: np.ndarray, U: float) -> tuple
     """Vo-Ma greedy merge groups: returns (label (J,), centre index per group (G,)), groups in creation order.
 
     Pass g takes j* = the heaviest unmerged component (lowest index on ties) and absorbs every unmerged i with
-    (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U (compiled loop: :func:`soabench.gmphd.kernels.merge_groups`).
+    (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U, ties at U included whatever the rounding (compiled loop:
+    :func:`soabench.gmphd.kernels.merge_groups`).
     """
     if len(w) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)

@@ -4,16 +4,19 @@ For trial n (sequence ``%04d`` % n) of a run with the config's seed, the very tr
 and observe (same SUMO run, same sensor draws), with the sensor period set to the KITTI frame period and the sensor
 sector set to the camera's horizontal FOV:
 
-* ``label_02/XXXX.txt``: every present pedestrian (type ``Pedestrian``, track id = its index in the Recording,
-  ``occluded`` 0 when in line of sight, 2 when in the FOV but hidden, 3 outside the FOV) and every vehicle and parked
-  car within r_max (type ``Car``, track ids after the pedestrians);
+* ``label_02/XXXX.txt``: what the camera sees (:mod:`soabench.kitti.camera`): every present pedestrian within
+  r_max (type ``Pedestrian``, track id = its index in the Recording) and every vehicle and parked car within r_max
+  (type ``Car``, track ids after the pedestrians) whose 3-D box lies in front of the camera and overlaps the image,
+  with its 2-D box projected with P2 and clipped to the image, its truncation level, and ``occluded`` 0 when in
+  line of sight, 2 when in the sensor's FOV but hidden, 3 when its centre is outside the FOV (a truncated box);
 * ``detections/XXXX.txt``: KITTI tracking result format (label columns + score): the synthetic sensor's measurements
-  in scan order, target-originated ones with the target's track id, clutter with -1 (all typed ``Pedestrian``), plus
-  the vehicle boxes as ``Car`` detections with score 1; scores are drawn from the export's own stream (targets
-  U(0.5, 1), clutter U(0, 1)), so they never change the measurements;
+  in scan order whose pedestrian-sized box the camera sees, target-originated ones with the target's track id,
+  clutter with -1 (all typed ``Pedestrian``), plus the labelled vehicle boxes as ``Car`` detections with score 1;
+  scores are drawn from the export's own stream (targets U(0.5, 1), clutter U(0, 1)), so they never change the
+  measurements;
 * ``oxts/XXXX.txt``: 30-column packets whose devkit Mercator poses reproduce the ego path (first packet at
-  49 N, 8.43 E);
-* ``calib/XXXX.txt``: the nominal KITTI calibration, P2's focal length set so that the camera FOV equals the sensor's;
+  49 N, 8.43 E), with the velocities, accelerations and yaw rate of that path (:func:`imu_motion`);
+* ``calib/XXXX.txt``: the export's camera (:func:`export_calib`), whose horizontal FOV is the sensor's sector;
 * ``semantics/XXXX.txt``: per frame, the sidewalk within r_max (hole-free pieces) and the buildings within r_max, in
   the ego frame;
 * ``export.json``: provenance (net, seed, trials, duration, sensor).
@@ -37,6 +40,7 @@ from soabench.config import Config, SensorConfig
 from soabench.errors import require
 from soabench.experiment.files import write_json_atomic, write_text_atomic
 from soabench.geometry import wrap
+from soabench.kitti.camera import image_box
 from soabench.kitti.formats import (
     NOMINAL,
     NOMINAL_IMAGE_WIDTH,
@@ -52,6 +56,7 @@ GROUND_Z = -1.73  #: ground height in the Velodyne frame (m; KITTI sensor setup)
 PED_HWL = (1.75, 0.6, 0.8)  #: pedestrian box (m)
 CAR_H = 1.5  #: vehicle box height (m)
 SCORE_STREAM = 0x4B495454  #: "KITT": spawn key of the score stream
+GRAVITY = 9.80665  #: specific force (m/s^2) an accelerometer at rest reports upward: the OXTS az and au of a level ego
 
 
 def _fmt(values) -> str:
@@ -59,11 +64,16 @@ def _fmt(values) -> str:
 
 
 def export_calib(sensor: SensorConfig):
-    """The nominal calibration with P2's focal length giving the sensor FOV: f_x = (W/2) / tan(Theta/2)."""
-    P2 = NOMINAL["P2"].copy()
+    """The export's camera: P2 = [[f, 0, W/2, 0], [0, f, c_y, 0], [0, 0, 1, 0]] with f = (W/2) / tan(Theta/2) (c_y
+    nominal), at the Velodyne's position in the ground plane (Tr_velo_to_cam: KITTI's axes and 0.08 m height offset,
+    without the 0.27 m forward offset). Its horizontal FOV is then the sensor's sector exactly: a point is in the
+    image's width when its bearing from the sensor is within +-Theta/2, so every pedestrian the sensor can see is
+    labelled, and the reader's FOV from P2 (:meth:`~soabench.kitti.formats.Calib.fov_deg`) is the sensor's."""
     f = 0.5 * NOMINAL_IMAGE_WIDTH / math.tan(0.5 * sensor.fov)
-    P2[0] = P2[5] = f
-    return calib_from_values({"P2": P2}, [])
+    P2 = np.array([f, 0.0, 0.5 * NOMINAL_IMAGE_WIDTH, 0.0, 0.0, f, NOMINAL["P2"][6], 0.0, 0.0, 0.0, 1.0, 0.0])
+    Tr = NOMINAL["Tr_velo_to_cam"].copy()
+    Tr[11] = 0.0  # z_cam = x_velo: the camera's optical centre above the Velodyne's
+    return calib_from_values({"P2": P2, "Tr_velo_to_cam": Tr}, [])
 
 
 def calib_text(calib) -> str:
@@ -83,18 +93,45 @@ def _pose4(ego: np.ndarray) -> np.ndarray:
     return T
 
 
-def oxts_text(egos: np.ndarray, calib) -> str:
-    """Packets whose devkit poses (:func:`~soabench.kitti.formats.poses_from_oxts`) give the Velodyne path ``egos``."""
+def imu_motion(T_imu: np.ndarray, dt: float) -> dict[str, np.ndarray]:
+    """Planar motion of the IMU path ``T_imu`` (F, 4, 4), sampled every ``dt`` s: world velocity (v_east, v_north),
+    acceleration (a_east, a_north), yaw rate, and the velocity and acceleration in the vehicle frame (forward,
+    left). Central differences of the positions and of the unwrapped heading (one-sided at the ends), so that
+    integrating them (trapezoid rule) gives back the path to second order in dt."""
+    F = len(T_imu)
+    yaw = np.unwrap(np.arctan2(T_imu[:, 1, 0], T_imu[:, 0, 0]))
+    if F < 2:
+        z2 = np.zeros((F, 2))
+        return {"v": z2, "a": z2.copy(), "yaw_rate": np.zeros(F), "v_body": z2.copy(), "a_body": z2.copy()}
+    v = np.gradient(T_imu[:, :2, 3], dt, axis=0)
+    a = np.gradient(v, dt, axis=0)
+    c, s = np.cos(yaw), np.sin(yaw)
+
+    def body(x: np.ndarray) -> np.ndarray:  # world (east, north) -> vehicle (forward, left)
+        return np.column_stack([c * x[:, 0] + s * x[:, 1], -s * x[:, 0] + c * x[:, 1]])
+
+    return {"v": v, "a": a, "yaw_rate": np.gradient(yaw, dt), "v_body": body(v), "a_body": body(a)}
+
+
+def oxts_text(egos: np.ndarray, calib, dt: float) -> str:
+    """Packets whose devkit poses (:func:`~soabench.kitti.formats.poses_from_oxts`) give the Velodyne path ``egos``,
+    with the IMU's velocities, accelerations and yaw rate along it (:func:`imu_motion`; the ego stays level: roll,
+    pitch, vertical velocity and the other angular rates are 0, az = au = g)."""
     T_imu = np.array([_pose4(e) @ calib.Tr_imu_velo for e in egos])
     scale = lat_to_scale(ORIGIN_LAT)
     mx0, my0 = latlon_to_mercator(ORIGIN_LAT, ORIGIN_LON, scale)
     lat, lon = mercator_to_latlon(mx0 + T_imu[:, 0, 3] - T_imu[0, 0, 3], my0 + T_imu[:, 1, 3] - T_imu[0, 1, 3], scale)
     lat[0] = ORIGIN_LAT  # exactly: the reader takes the Mercator scale from it
     yaw = np.arctan2(T_imu[:, 1, 0], T_imu[:, 0, 0])
+    mo = imu_motion(T_imu, dt)
+    (ve, vn), (vf, vl), (ax, ay), wz = mo["v"].T, mo["v_body"].T, mo["a_body"].T, mo["yaw_rate"]
     rows = []
     for i in range(len(egos)):
         packet = np.zeros(30)
         packet[:6] = [lat[i], lon[i], T_imu[i, 2, 3], 0.0, 0.0, yaw[i]]
+        packet[6:11] = [vn[i], ve[i], vf[i], vl[i], 0.0]  # vn ve vf vl vu
+        packet[11:17] = [ax[i], ay[i], GRAVITY, ax[i], ay[i], GRAVITY]  # ax ay az af al au
+        packet[17:23] = [0.0, 0.0, wz[i], 0.0, 0.0, wz[i]]  # wx wy wz wf wl wu
         packet[25:30] = [4, 10, 4, 4, 6]  # navstat numsats posmode velmode orimode (RTK-like)
         rows.append(_fmt(packet[:25]) + " " + " ".join(str(int(v)) for v in packet[25:]))
     return "\n".join(rows) + "\n"
@@ -106,10 +143,17 @@ def _ego_frame(xy: np.ndarray, ego: np.ndarray) -> np.ndarray:
     return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
 
 
-def _object_row(frame, tid, typ, occluded, hwl, xyz, ry, score=None) -> str:
+def _object_row(frame, tid, typ, truncated, occluded, bbox, hwl, xyz, ry, score=None) -> str:
+    """One row in the devkit's field order: frame, track id, type, truncated, occluded, alpha, 2-D box (left, top,
+    right, bottom; px), h w l (m), x y z (bottom centre, camera frame, m), rotation_y (rad)[, score]."""
     alpha = float(wrap(ry - math.atan2(xyz[0], xyz[2])))
-    row = f"{frame} {tid} {typ} 0 {occluded} {alpha!r} -1.0 -1.0 -1.0 -1.0 {_fmt(hwl)} {_fmt(xyz)} {float(ry)!r}"
+    row = f"{frame} {tid} {typ} {truncated} {occluded} {alpha!r} {_fmt(bbox)} {_fmt(hwl)} {_fmt(xyz)} {float(ry)!r}"
     return row if score is None else f"{row} {float(score)!r}"
+
+
+def _seen(calib, hwl, xyz, ry) -> tuple[np.ndarray, int] | None:
+    """The 2-D box and truncation level of a box the camera sees with its centre in front of it, else None."""
+    return image_box(calib.P2, hwl, xyz, ry) if xyz[2] > 0.0 else None
 
 
 def _ry(calib, heading_ego: float) -> float:
@@ -165,11 +209,15 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
         # pedestrians
         for i in np.flatnonzero(scans.present[k]):
             p = _ego_frame(scans.truth_xy[k, i], ego)[0]
+            if math.hypot(p[0], p[1]) > sensor.r_max:
+                continue
             xyz = calib.velo_to_rect_pts([p[0], p[1], GROUND_Z])[0]
-            occ = 0 if scans.visible[k, i] else (2 if scans.in_fov[k, i] else 3)
             heading = float(recording.ped_heading[idx, i]) - float(ego[2])
             ry = _ry(calib, heading) if math.isfinite(heading) else 0.0
-            labels.append(_object_row(k, int(i), "Pedestrian", occ, PED_HWL, xyz, ry))
+            seen = _seen(calib, PED_HWL, xyz, ry)
+            if seen is not None:
+                occ = 0 if scans.visible[k, i] else (2 if scans.in_fov[k, i] else 3)
+                labels.append(_object_row(k, int(i), "Pedestrian", seen[1], occ, seen[0], PED_HWL, xyz, ry))
         # vehicles and parked cars within r_max
         boxes = []
         foot = np.asarray(recording.veh_footprint[idx], dtype=float).reshape(-1, 4, 2)
@@ -184,15 +232,20 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
             centre, length, width, heading = _box(_ego_frame(corners, ego))
             xyz = calib.velo_to_rect_pts([centre[0], centre[1], GROUND_Z])[0]
             ry = _ry(calib, heading)
-            labels.append(_object_row(k, tid, "Car", 0, (CAR_H, width, length), xyz, ry))
-            dets.append(_object_row(k, tid, "Car", 0, (CAR_H, width, length), xyz, ry, 1.0))
+            seen = _seen(calib, (CAR_H, width, length), xyz, ry)
+            if seen is not None:
+                row = (k, tid, "Car", seen[1], 0, seen[0], (CAR_H, width, length), xyz, ry)
+                labels.append(_object_row(*row))
+                dets.append(_object_row(*row, 1.0))
         # measurements in scan order
         Z, src = scan.Z, scans.source[k]
         scores = np.where(src >= 0, rng.uniform(0.5, 1.0, len(Z)), rng.uniform(0.0, 1.0, len(Z)))
         for (r, b), s, sc in zip(Z, src, scores, strict=True):
             xyz = calib.velo_to_rect_pts([r * math.cos(b), r * math.sin(b), GROUND_Z])[0]
-            dets.append(_object_row(k, int(s), "Pedestrian", 0, PED_HWL, xyz, 0.0, sc))
-        n_meas += len(Z)
+            seen = _seen(calib, PED_HWL, xyz, 0.0)
+            if seen is not None:
+                dets.append(_object_row(k, int(s), "Pedestrian", seen[1], 0, seen[0], PED_HWL, xyz, 0.0, sc))
+                n_meas += 1
         # semantics: sidewalk within r_max (+1 m), buildings within r_max
         disk = ego_pt.buffer(sensor.r_max + 1.0, 64)
         for piece in _hole_free(shapely.intersection(sidewalk, disk)):
@@ -204,7 +257,7 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
     egos = np.array([s.ego for s in scans.scans])
     for folder, text in (
         (LABEL_DIR, "\n".join(labels)), (DETECTION_DIR, "\n".join(dets)), (SEMANTICS_DIR, "\n".join(sem)),
-        (OXTS_DIR, oxts_text(egos, calib).rstrip("\n")), (CALIB_DIR, calib_text(calib).rstrip("\n")),
+        (OXTS_DIR, oxts_text(egos, calib, float(sensor.dt)).rstrip("\n")), (CALIB_DIR, calib_text(calib).rstrip("\n")),
     ):  # fmt: skip
         write_text_atomic(out / folder / f"{seq}.txt", text + "\n" if text else "")
     return {"sequence": seq, "frames": len(scans), "pedestrians": P, "measurements": n_meas}
