@@ -1,5 +1,5 @@
-"""The public API of soabench in one place: import from here, not from the stages (README, "Benchmark your own
-method").
+"""The public API of soabench in one place: import from here, not from the stages (docs/user-guide/birth-model.md,
+docs/user-guide/tracker.md).
 
 The data that flows (:mod:`soabench.types`):
 
