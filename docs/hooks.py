@@ -13,13 +13,15 @@ with KIND one of
   :mod:`soabench.config` (the ``#:`` comment after each field is its description);
 * ``scenario-keys``: the table of every scenario TOML key, read from
   :class:`soabench.scenario.config.ScenarioConfig` (defaults, and the ``Attributes:`` section of its docstring);
+* ``kitti-keys``: the table of the ``[kitti]`` section's keys (:class:`soabench.kitti.config.KittiConfig`);
 * ``commands``: a section per command of :func:`soabench.cli.build_parser` with its ``--help`` text.
 
 ``python docs/hooks.py`` rewrites the blocks of every page from the installed code; ``python docs/hooks.py --check``
 lists the pages whose blocks are stale (``tests/test_docs.py`` runs the check).
 
 Two things only the built site can show are filled in at build time and stay a sentence in the page file: the API
-reference (``<!-- soabench:api -->`` becomes one mkdocstrings ``::: module`` block per public module), and the copies
+reference (the sentence between ``<!-- soabench:api -->`` and ``<!-- /soabench:api -->`` becomes one mkdocstrings
+``::: module`` block per public module), and the copies
 of repository files outside ``docs/`` that a page links to. A page links such a file as a code host does
 (``../results/intersection/key_figure.png`` from ``docs/results.md``); the build checks that the file exists, serves
 a copy of an image or data file, and shows a Markdown file outside ``docs/`` as its path (it is not a page of the
@@ -39,7 +41,8 @@ import inspect
 import re
 from pathlib import Path
 
-_API = "<!-- soabench:api -->"
+#: the API reference's stand-in: a sentence in the page file, the mkdocstrings blocks on the site
+_API = re.compile(r"<!-- soabench:api -->.*?<!-- /soabench:api -->", re.S)
 #: a generated block: the opening comment names what is generated, the closing comment ends it
 _BLOCK = re.compile(r"(<!-- soabench:(?P<kind>[a-z-]+) -->\n)(?P<body>.*?)(<!-- /soabench -->)", re.S)
 _DOCS = Path(__file__).resolve().parent
@@ -104,7 +107,7 @@ def parameter_table() -> str:
     for sec in dataclasses.fields(Config):
         obj = getattr(cfg, sec.name)
         if not dataclasses.is_dataclass(obj):  # [plugins.<name>] tables: each plugin's own options
-            parts.append(f"### `[{sec.name}]` {{#{sec.name}}}\n")
+            parts.append(f"### `[{sec.name}]`\n")  # the heading's anchor is #{sec.name}
             parts.append(
                 "One table `[plugins.<name>]` per plugin birth model or tracker (an entry-point name or the "
                 "`module:Class` you typed); its keys are passed to the plugin's constructor as keyword arguments, "
@@ -112,19 +115,29 @@ def parameter_table() -> str:
                 "plugin documents its own.\n"
             )
             continue
-        cls = type(obj)
-        comments = _field_comments(cls)
-        doc = (inspect.getdoc(cls) or "").splitlines()[0]
-        doc = re.sub(r"\s*\(docs/method\.md[^)]*\)|\s*\(ALGORITHMS\.md[^)]*\)", "", doc).rstrip(".")
-        parts.append(f"### `[{sec.name}]` {{#{sec.name}}}\n")
+        doc = (inspect.getdoc(type(obj)) or "").splitlines()[0]
+        doc = re.sub(r"\s*\(docs/method\.md[^)]*\)", "", doc).rstrip(".")
+        parts.append(f"### `[{sec.name}]`\n")
         parts.append(f"{doc}. Method: {_SECTION_REFS.get(sec.name, 'docs/method.md')}.\n")
-        parts.append("| key | default | meaning |\n|---|---|---|")
-        for f in dataclasses.fields(cls):
-            default = getattr(obj, f.name)
-            meaning = _link_sections(_escape(comments.get(f.name, "")), "../method.md")
-            parts.append(f"| `{f.name}` | {_fmt_default(default)} | {meaning} |")
-        parts.append("")
+        parts.append(key_table(obj))
     return "\n".join(parts)
+
+
+def key_table(obj: object) -> str:
+    """Markdown: the fields of the dataclass instance ``obj`` with their values as defaults and ``#:`` comments."""
+    comments = _field_comments(type(obj))
+    rows = ["| key | default | meaning |", "|---|---|---|"]
+    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
+        meaning = _link_sections(_escape(comments.get(f.name, "")), "../method.md")
+        rows.append(f"| `{f.name}` | {_fmt_default(getattr(obj, f.name))} | {meaning} |")
+    return "\n".join(rows) + "\n"
+
+
+def kitti_table() -> str:
+    """Markdown: the keys of the ``[kitti]`` section (:class:`soabench.kitti.config.KittiConfig`)."""
+    from soabench.kitti.config import KittiConfig
+
+    return key_table(KittiConfig())
 
 
 def _attribute_docs(cls: type) -> dict[str, str]:
@@ -213,6 +226,7 @@ _GENERATORS = {
     "parameters": lambda: parameter_table(),
     "scenario-keys": lambda: scenario_table(),
     "commands": lambda: commands_section(),
+    "kitti-keys": lambda: kitti_table(),
 }
 
 
@@ -328,8 +342,7 @@ def _site_links(markdown: str, src_uri: str) -> str:
 def on_page_markdown(markdown: str, **kwargs) -> str:
     src = kwargs["page"].file.src_uri
     markdown = refresh(markdown)
-    if _API in markdown:
-        markdown = markdown.replace(_API, api_blocks())
+    markdown = _API.sub(lambda m: api_blocks(), markdown)
     return _site_links(markdown, src)
 
 
