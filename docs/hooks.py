@@ -19,13 +19,16 @@ with KIND one of
 ``python docs/hooks.py`` rewrites the blocks of every page from the installed code; ``python docs/hooks.py --check``
 lists the pages whose blocks are stale (``tests/test_docs.py`` runs the check).
 
-Two things only the built site can show are filled in at build time and stay a sentence in the page file: the API
-reference (the sentence between ``<!-- soabench:api -->`` and ``<!-- /soabench:api -->`` becomes one mkdocstrings
-``::: module`` block per public module), and the copies
-of repository files outside ``docs/`` that a page links to. A page links such a file as a code host does
-(``../results/intersection/key_figure.png`` from ``docs/results.md``); the build checks that the file exists, serves
-a copy of an image or data file, and shows a Markdown file outside ``docs/`` as its path (it is not a page of the
-site).
+Three things only the built site can show are filled in at build time and stay a sentence in the page file:
+
+* the API reference: the sentence between ``<!-- soabench:api -->`` and ``<!-- /soabench:api -->`` becomes one
+  mkdocstrings ``::: module`` block per public module;
+* the committed reports of ``results/``: the sentence between ``<!-- soabench:include PATH -->`` and
+  ``<!-- /soabench:include -->`` becomes the report's text without its title (they change with every regeneration of ``results/``,
+  which should not need a documentation commit);
+* the repository files outside ``docs/`` that a page links to, as a code host resolves them
+  (``../../results/intersection/key_figure.png`` from ``docs/results/index.md``): the build checks that the file
+  exists, serves a copy of an image or data file, and shows a Markdown file as its path (it is not a page).
 
 Docstrings cite pages as plain text ("docs/method.md §3.1.4"): :func:`on_page_content` turns every such citation
 into a link to that page and section, for the API reference.
@@ -311,7 +314,9 @@ def on_files(files, config, **kwargs):
     wanted: set[str] = set()
     for page in pages():
         src_uri = page.relative_to(_DOCS).as_posix()
-        for _m, path in _repository_links(page.read_text(encoding="utf-8"), src_uri):
+        text = page.read_text(encoding="utf-8")
+        text = _INCLUDE.sub(lambda m: include_report(m.group("path"), src_uri), text)  # noqa: B023
+        for _m, path in _repository_links(text, src_uri):
             if (_ROOT / path).is_file() and not path.endswith(".md"):
                 wanted.add(path)
     from mkdocs.structure.files import File
@@ -330,7 +335,7 @@ def _site_links(markdown: str, src_uri: str) -> str:
         out.append(markdown[last : m.start()])
         if (_ROOT / path).is_file() and not path.endswith(".md"):
             out.append(f"{m.group(1)}[{m.group(2)}]({up}{path}{m.group(5) or ''})")
-        elif m.group(2).strip("`") == path.rstrip("/") or m.group(2).strip("`") == path:
+        elif path.rstrip("/").endswith(m.group(2).strip("`").rstrip("/")):  # the label is (the end of) the path
             out.append(f"`{path}`")
         else:
             out.append(f"{m.group(2)} (`{path}` in the repository)")
@@ -339,10 +344,54 @@ def _site_links(markdown: str, src_uri: str) -> str:
     return "".join(out)
 
 
+#: a committed report of ``results/`` shown on the site: a sentence linking the file in the page file, the report's
+#: text (links rebased) on the site
+_INCLUDE = re.compile(r"<!-- soabench:include (?P<path>\S+) -->.*?<!-- /soabench:include -->", re.S)
+_LINK = re.compile(r"(!?\[[^\]]*\])\(([^)\s#]+)(#[^)\s]*)?\)")
+
+
+def _included_reports() -> dict[str, str]:
+    """``{report path: page src_uri}`` of every report a page shows."""
+    return {
+        m.group("path"): page.relative_to(_DOCS).as_posix()
+        for page in pages()
+        for m in _INCLUDE.finditer(page.read_text(encoding="utf-8"))
+    }
+
+
+def include_report(path: str, src_uri: str) -> str:
+    """The report ``path`` (a Markdown file under ``results/``) for the page ``src_uri``: its title dropped (the
+    page has its own), links rebased (to a docs page, to the page showing another report, or to the repository file)."""
+    import posixpath
+
+    target = (_ROOT / path).resolve()
+    if _ROOT / "results" not in target.parents or target.suffix != ".md" or not target.is_file():
+        raise ValueError(f"docs/{src_uri} includes {path!r}: only Markdown reports under results/ are shown")
+    text = re.sub(r"\A# .*\n", "", target.read_text(encoding="utf-8"))  # the page has its own title
+    text = re.sub(r"^# ", "## ", text, flags=re.M)  # a second title becomes a section
+    here, depth = posixpath.dirname(path), src_uri.count("/")
+    shown = _included_reports()
+
+    def rebase(m: re.Match) -> str:
+        label, link, anchor = m.group(1), m.group(2), m.group(3) or ""
+        if re.match(r"^[a-z]+:", link):
+            return m.group(0)
+        repo = posixpath.normpath(posixpath.join(here, link)) + ("/" if link.endswith("/") else "")
+        if repo.startswith("docs/"):
+            return f"{label}({'../' * depth}{repo[len('docs/') :]}{anchor})"
+        if repo in shown:
+            page = shown[repo]
+            return f"{label}({posixpath.relpath(page, posixpath.dirname(src_uri) or '.')}{anchor})"
+        return f"{label}({'../' * (depth + 1)}{repo}{anchor})"
+
+    return _LINK.sub(rebase, text)
+
+
 def on_page_markdown(markdown: str, **kwargs) -> str:
     src = kwargs["page"].file.src_uri
     markdown = refresh(markdown)
     markdown = _API.sub(lambda m: api_blocks(), markdown)
+    markdown = _INCLUDE.sub(lambda m: include_report(m.group("path"), src), markdown)
     return _site_links(markdown, src)
 
 
