@@ -24,8 +24,8 @@ Three things only the built site can show are filled in at build time and stay a
 * the API reference: the sentence between ``<!-- soabench:api -->`` and ``<!-- /soabench:api -->`` becomes one
   mkdocstrings ``::: module`` block per public module;
 * the committed reports of ``results/``: the sentence between ``<!-- soabench:include PATH -->`` and
-  ``<!-- /soabench:include -->`` becomes the report's text without its title (they change with every regeneration of ``results/``,
-  which should not need a documentation commit);
+  ``<!-- /soabench:include -->`` becomes the report's text without its title (reports change with every
+  regeneration of ``results/``, which should not need a documentation commit);
 * the repository files outside ``docs/`` that a page links to, as a code host resolves them
   (``../../results/intersection/key_figure.png`` from ``docs/results/index.md``): the build checks that the file
   exists, serves a copy of an image or data file, and shows a Markdown file as its path (it is not a page).
