@@ -49,6 +49,10 @@ def _text(html_file: Path) -> str:
 def test_strict_build_produces_every_page(site):
     for page in ("index.html", "method/index.html", "api/index.html", "user-guide/parameters/index.html"):
         assert (site / page).is_file(), page
+    for md in DOCS.rglob("*.md"):  # every page file is in the navigation and built
+        rel = md.relative_to(DOCS).with_suffix("")
+        built = site / (rel.parent if rel.name == "index" else rel) / "index.html"
+        assert built.is_file(), md
     api = _text(site / "api/index.html")
     # the API reference is generated from the docstrings, not an empty shell
     for name in ("GMPHDFilter", "SOABirth", "run_experiment", "ospa", "Scans"):
@@ -182,3 +186,30 @@ def test_method_citations_in_the_code_resolve():
                 if f"s{sec}" not in ids:
                     bad.append(f"{path.relative_to(ROOT)}: §{sec}")
     assert not bad, f"citations of sections that docs/method.md does not have: {bad}"
+
+
+def test_result_pages_show_the_committed_reports(site):
+    """Each result set's page shows its report's tables on the site; the page file holds a sentence and a link."""
+    hooks = _hooks()
+    reports = hooks._included_reports()
+    assert set(reports) >= {"results/README.md", "results/intersection/comparison.md", "results/scenes/summary.md"}
+    for report, page in reports.items():
+        raw = (DOCS / page).read_text(encoding="utf-8")
+        assert f"](../../{report})" in raw, page  # on a code host: one click to the report
+        table = next(ln for ln in (ROOT / report).read_text(encoding="utf-8").splitlines() if ln.startswith("| "))
+        first_cell = table.split("|")[1].strip().replace("`", "")
+        html = _text(site / Path(page).with_suffix("") / "index.html")
+        assert "<table>" in html and first_cell.split()[0] in html, page
+    assert (site / "results/intersection/key_figure.png").is_file()  # a linked repository image is served
+
+
+def test_a_link_out_of_docs_must_name_a_repository_file():
+    hooks = _hooks()
+    ok = "see [the suite](../../examples/check/suite.toml) and [x](../method.md)"
+    assert [path for _m, path in hooks._repository_links(ok, "user-guide/ci.md")] == ["examples/check/suite.toml"]
+    with pytest.raises(ValueError, match="not a file of the repository"):
+        list(hooks._repository_links("[gone](../../examples/nothing.toml)", "user-guide/ci.md"))
+    shown = hooks._site_links(
+        "[results/README.md](../../results/README.md) ![f](../../results/intersection/key_figure.png)", "a/b.md"
+    )
+    assert shown == "`results/README.md` ![f](../results/intersection/key_figure.png)"  # a path; the served copy
