@@ -213,3 +213,29 @@ def test_a_link_out_of_docs_must_name_a_repository_file():
         "[results/README.md](../../results/README.md) ![f](../../results/intersection/key_figure.png)", "a/b.md"
     )
     assert shown == "`results/README.md` ![f](../results/intersection/key_figure.png)"  # a path; the served copy
+
+
+def test_ci_page_documents_every_suite_key_with_its_default():
+    """The suite format of docs/user-guide/ci.md names exactly the keys soabench/experiment/check.py reads."""
+    from soabench.experiment import check
+
+    text = (DOCS / "user-guide" / "ci.md").read_text(encoding="utf-8")
+    sections = {
+        "### `[suite]`": (check.SUITE_KEYS, None),
+        "### `[[scenario]]`": (check.SCENARIO_KEYS, check.Scenario(name="x", net="y")),
+        "### `[[threshold]]`": (check.THRESHOLD_KEYS, check.Threshold(metric="m")),
+    }
+    for heading, (keys, defaults) in sections.items():
+        table = text.split(heading, 1)[1].split("\n#", 1)[0]
+        rows = {
+            m.group(1): m.group(2) for m in re.finditer(r"^\| `(\w+)`(?:, `\w+`)* \| [^|]+ \| ([^|]+) \|", table, re.M)
+        }
+        named = set(re.findall(r"^\| `(\w+)`", table, re.M)) | set(re.findall(r"^\| `\w+`, `(\w+)`", table, re.M))
+        assert named == set(keys), (heading, sorted(set(keys) ^ named))
+        for key in keys & set(rows) if defaults is not None else ():
+            value = getattr(defaults, key)
+            if isinstance(value, (tuple, list)):
+                shown = "[" + ", ".join(f'"{v}"' if isinstance(v, str) else repr(v) for v in value) + "]"
+                assert f"`{shown}`" in rows[key], (key, rows[key])
+            elif isinstance(value, float) and key != "abs_tol":
+                assert f"`{value!r}`" in rows[key], (key, rows[key])
