@@ -1,4 +1,4 @@
-"""Reliability figures of the README's "Reliability" section, measured (issue 14).
+"""Reliability figures of docs/user-guide/reliability.md, measured.
 
 1. Bad inputs: every case of ``tests/bad_inputs.py`` (command line) and of ``tests/test_hardening_runs.py``
    (poisoned and invalid ``run.json`` files) is tried; a case counts as refused when the command exits with status 2

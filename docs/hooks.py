@@ -1,18 +1,37 @@
-"""MkDocs hook: pages that must not drift from the code are filled in from the code at build time.
+"""MkDocs hook and page generator: what must not drift from the code is generated from the code.
 
-* ``<!-- soabench:parameters -->`` becomes the table of every configuration key with its default and meaning, read
-  from the dataclasses of :mod:`soabench.config` (the ``#:`` comment after each field is its description);
-* ``<!-- soabench:scenario-keys -->`` becomes the table of every scenario TOML key, read from
+Generated blocks are written into the page files, so a page reads the same on a code host as on the built site, and
+refreshed again at build time. A block is the text between an opening and a closing comment::
+
+    <!-- soabench:KIND ARG -->
+    ...generated text...
+    <!-- /soabench -->
+
+with KIND one of
+
+* ``parameters``: the table of every configuration key with its default and meaning, read from the dataclasses of
+  :mod:`soabench.config` (the ``#:`` comment after each field is its description);
+* ``scenario-keys``: the table of every scenario TOML key, read from
   :class:`soabench.scenario.config.ScenarioConfig` (defaults, and the ``Attributes:`` section of its docstring);
-* ``<!-- soabench:readme HEADING -->`` becomes the README section whose ``## `` heading starts with HEADING (down to
-  the next ``## `` heading), so that text both need (file formats, cluster use) has one source;
-* ``<!-- soabench:api -->`` becomes one mkdocstrings ``::: module`` block per public module of the package (and of
-  the repository's ``baselines`` package while it is a top-level one), grouped by subpackage, so that a new or moved
-  module is documented without editing the page;
-* ``<!-- soabench:help COMMAND -->`` becomes the ``soabench COMMAND --help`` text of :func:`soabench.cli.build_parser`.
+* ``kitti-keys``: the table of the ``[kitti]`` section's keys (:class:`soabench.kitti.config.KittiConfig`);
+* ``commands``: a section per command of :func:`soabench.cli.build_parser` with its ``--help`` text.
 
-Docstrings and README text cite pages as plain text ("docs/method.md §3.1.4"): :func:`on_page_content` turns every
-such citation into a link to that page and section, for the API reference and the included README sections.
+``python docs/hooks.py`` rewrites the blocks of every page from the installed code; ``python docs/hooks.py --check``
+lists the pages whose blocks are stale (``tests/test_docs.py`` runs the check).
+
+Three things only the built site can show are filled in at build time and stay a sentence in the page file:
+
+* the API reference: the sentence between ``<!-- soabench:api -->`` and ``<!-- /soabench:api -->`` becomes one
+  mkdocstrings ``::: module`` block per public module;
+* the committed reports of ``results/``: the sentence between ``<!-- soabench:include PATH -->`` and
+  ``<!-- /soabench:include -->`` becomes the report's text without its title (reports change with every
+  regeneration of ``results/``, which should not need a documentation commit);
+* the repository files outside ``docs/`` that a page links to, as a code host resolves them
+  (``../../results/intersection/key_figure.png`` from ``docs/results/index.md``): the build checks that the file
+  exists, serves a copy of an image or data file, and shows a Markdown file as its path (it is not a page).
+
+Docstrings cite pages as plain text ("docs/method.md §3.1.4"): :func:`on_page_content` turns every such citation
+into a link to that page and section, for the API reference.
 
 Only our own package is imported; nothing is read from user files.
 """
@@ -25,11 +44,14 @@ import inspect
 import re
 from pathlib import Path
 
-_PARAMS = "<!-- soabench:parameters -->"
-_SCENARIO = "<!-- soabench:scenario-keys -->"
-_API = "<!-- soabench:api -->"
-_README = re.compile(r"<!-- soabench:readme ([^>]*?) -->")
-_HELP = re.compile(r"<!-- soabench:help ([a-z]*) -->")
+#: the API reference's stand-in: a sentence in the page file, the mkdocstrings blocks on the site
+_API = re.compile(r"<!-- soabench:api -->.*?<!-- /soabench:api -->", re.S)
+#: a generated block: the opening comment names what is generated, the closing comment ends it
+_BLOCK = re.compile(r"(<!-- soabench:(?P<kind>[a-z-]+) -->\n)(?P<body>.*?)(<!-- /soabench -->)", re.S)
+_DOCS = Path(__file__).resolve().parent
+_ROOT = _DOCS.parent
+#: the width of the generated ``--help`` text (the terminal's width would make the page depend on who built it)
+_HELP_WIDTH = 100
 
 # where each section's formulas and decisions are explained (docs/method.md)
 _SECTION_REFS = {
@@ -88,7 +110,7 @@ def parameter_table() -> str:
     for sec in dataclasses.fields(Config):
         obj = getattr(cfg, sec.name)
         if not dataclasses.is_dataclass(obj):  # [plugins.<name>] tables: each plugin's own options
-            parts.append(f"### `[{sec.name}]` {{#{sec.name}}}\n")
+            parts.append(f"### `[{sec.name}]`\n")  # the heading's anchor is #{sec.name}
             parts.append(
                 "One table `[plugins.<name>]` per plugin birth model or tracker (an entry-point name or the "
                 "`module:Class` you typed); its keys are passed to the plugin's constructor as keyword arguments, "
@@ -96,19 +118,29 @@ def parameter_table() -> str:
                 "plugin documents its own.\n"
             )
             continue
-        cls = type(obj)
-        comments = _field_comments(cls)
-        doc = (inspect.getdoc(cls) or "").splitlines()[0]
-        doc = re.sub(r"\s*\(docs/method\.md[^)]*\)|\s*\(ALGORITHMS\.md[^)]*\)", "", doc).rstrip(".")
-        parts.append(f"### `[{sec.name}]` {{#{sec.name}}}\n")
+        doc = (inspect.getdoc(type(obj)) or "").splitlines()[0]
+        doc = re.sub(r"\s*\(docs/method\.md[^)]*\)", "", doc).rstrip(".")
+        parts.append(f"### `[{sec.name}]`\n")
         parts.append(f"{doc}. Method: {_SECTION_REFS.get(sec.name, 'docs/method.md')}.\n")
-        parts.append("| key | default | meaning |\n|---|---|---|")
-        for f in dataclasses.fields(cls):
-            default = getattr(obj, f.name)
-            meaning = _link_sections(_escape(comments.get(f.name, "")), "../method.md")
-            parts.append(f"| `{f.name}` | {_fmt_default(default)} | {meaning} |")
-        parts.append("")
+        parts.append(key_table(obj))
     return "\n".join(parts)
+
+
+def key_table(obj: object) -> str:
+    """Markdown: the fields of the dataclass instance ``obj`` with their values as defaults and ``#:`` comments."""
+    comments = _field_comments(type(obj))
+    rows = ["| key | default | meaning |", "|---|---|---|"]
+    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
+        meaning = _link_sections(_escape(comments.get(f.name, "")), "../method.md")
+        rows.append(f"| `{f.name}` | {_fmt_default(getattr(obj, f.name))} | {meaning} |")
+    return "\n".join(rows) + "\n"
+
+
+def kitti_table() -> str:
+    """Markdown: the keys of the ``[kitti]`` section (:class:`soabench.kitti.config.KittiConfig`)."""
+    from soabench.kitti.config import KittiConfig
+
+    return key_table(KittiConfig())
 
 
 def _attribute_docs(cls: type) -> dict[str, str]:
@@ -153,44 +185,74 @@ def scenario_table() -> str:
 
 
 def cli_help(command: str) -> str:
-    """``soabench COMMAND --help`` (``soabench --help`` for an empty command) as a fenced block."""
+    """``soabench COMMAND --help`` (``soabench --help`` for an empty command) as a fenced block, 100 columns wide."""
+    from soabench.cli import build_parser
+
+    parser = build_parser()
+    if command:
+        parser = _subcommands(parser)[command]
+    formatter = parser.formatter_class
+    parser.formatter_class = lambda prog: formatter(prog, width=_HELP_WIDTH)  # type: ignore[misc]
+    try:
+        text = parser.format_help().rstrip()
+    finally:
+        parser.formatter_class = formatter
+    return "```text\n" + text + "\n```"
+
+
+def _subcommands(parser) -> dict:
+    """``{name: subparser}`` of the ``soabench`` parser, in the order ``soabench --help`` lists them."""
     import argparse
-    import os
+
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(sub.choices)
+
+
+def commands_section() -> str:
+    """Markdown: ``soabench --help``, then a section per command with its one-line summary and ``--help`` text."""
+    import argparse
 
     from soabench.cli import build_parser
 
-    os.environ.setdefault("COLUMNS", "100")
     parser = build_parser()
-    if command:
-        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        parser = sub.choices[command]
-    return "```text\n" + parser.format_help().rstrip() + "\n```"
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    summary = {a.dest: a.help for a in sub._choices_actions}
+    parts = ["### soabench\n", cli_help("") + "\n"]
+    for name in _subcommands(parser):
+        parts.append(f"### soabench {name}\n")
+        parts.append(f"{summary[name][0].upper()}{summary[name][1:]}.\n")
+        parts.append(cli_help(name) + "\n")
+    return "\n".join(parts)
 
 
-def readme_section(heading: str, page_src: str = "index.md") -> str:
-    """The README section ``## HEADING...`` (without the next section); a missing heading fails the build.
+_GENERATORS = {
+    "parameters": lambda: parameter_table(),
+    "scenario-keys": lambda: scenario_table(),
+    "commands": lambda: commands_section(),
+    "kitti-keys": lambda: kitti_table(),
+}
 
-    Relative links of the README (written from the repository root) are rebased for the page ``page_src`` (its
-    path under docs/): ``docs/x.md`` becomes a link to that page, anything else a link to the file on disk would
-    leave the site, so it is an error.
-    """
-    lines = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8").splitlines()
-    start = next((i for i, line in enumerate(lines) if line.startswith("## " + heading)), None)
-    if start is None:
-        raise ValueError(f"README.md has no section starting with '## {heading}' (docs include)")
-    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
-    text = "\n".join(lines[start:end]).rstrip() + "\n"
-    up = "../" * page_src.count("/")
 
-    def rebase(m: re.Match) -> str:
-        target = m.group(1)
-        if target.startswith("docs/"):
-            return f"]({up}{target[len('docs/') :]})"
-        if re.match(r"^[a-z]+://|^#", target):
-            return m.group(0)
-        raise ValueError(f"README section '{heading}' links to {target!r}, outside docs/: cannot include it")
+def refresh(markdown: str) -> str:
+    """``markdown`` with every generated block rewritten from the code (an unknown kind is an error)."""
 
-    return re.sub(r"\]\(([^)\s]+)\)", rebase, text)
+    def fill(m: re.Match) -> str:
+        kind = m.group("kind")
+        if kind not in _GENERATORS:
+            raise ValueError(f"unknown generated block 'soabench:{kind}'; known: {', '.join(_GENERATORS)}")
+        return m.group(1) + "\n" + _GENERATORS[kind]().strip() + "\n\n" + m.group(4)
+
+    return _BLOCK.sub(fill, markdown)
+
+
+def pages() -> list[Path]:
+    """Every Markdown page of the documentation."""
+    return sorted(_DOCS.rglob("*.md"))
+
+
+def stale_pages() -> list[Path]:
+    """The pages whose generated blocks differ from what the installed code generates now."""
+    return [p for p in pages() if refresh(text := p.read_text(encoding="utf-8")) != text]
 
 
 _GROUPS = {
@@ -230,20 +292,110 @@ def api_blocks() -> str:
 _SUBPACKAGES = {"soabench.scenario", "soabench.gmphd", "soabench.birth", "soabench.baselines", "soabench.experiment"}
 
 
+# ----------------------------------------------------------------------------------- repository files outside docs/
+_REPO_LINK = re.compile(r"(!?)\[([^\]]*)\]\(((?:\.\./)+)([^)\s#]+)(#[^)\s]*)?\)")
+
+
+def _repository_links(markdown: str, src_uri: str):
+    """``(match, repository path)`` of every link of the page ``src_uri`` that leaves ``docs/``."""
+    depth = src_uri.count("/")
+    for m in _REPO_LINK.finditer(markdown):
+        ups = len(m.group(3)) // 3
+        if ups <= depth:
+            continue  # a link to another page or file of the site
+        path = m.group(4)
+        if ups > depth + 1 or not (_ROOT / path).exists():
+            raise ValueError(f"docs/{src_uri} links to {m.group(3)}{path}, which is not a file of the repository")
+        yield m, path
+
+
+def on_files(files, config, **kwargs):
+    """Serve a copy of every repository file outside ``docs/`` that a page links to (images, data; not Markdown)."""
+    wanted: set[str] = set()
+    for page in pages():
+        src_uri = page.relative_to(_DOCS).as_posix()
+        text = page.read_text(encoding="utf-8")
+        text = _INCLUDE.sub(lambda m: include_report(m.group("path"), src_uri), text)  # noqa: B023
+        for _m, path in _repository_links(text, src_uri):
+            if (_ROOT / path).is_file() and not path.endswith(".md"):
+                wanted.add(path)
+    from mkdocs.structure.files import File
+
+    for path in sorted(wanted):
+        if files.get_file_from_path(path) is None:
+            files.append(File(path, str(_ROOT), config["site_dir"], config["use_directory_urls"]))
+    return files
+
+
+def _site_links(markdown: str, src_uri: str) -> str:
+    """Links leaving ``docs/`` pointed at the served copies; a Markdown file or a folder shown as its path."""
+    up = "../" * src_uri.count("/")
+    out, last = [], 0
+    for m, path in _repository_links(markdown, src_uri):
+        out.append(markdown[last : m.start()])
+        if (_ROOT / path).is_file() and not path.endswith(".md"):
+            out.append(f"{m.group(1)}[{m.group(2)}]({up}{path}{m.group(5) or ''})")
+        elif path.rstrip("/").endswith(m.group(2).strip("`").rstrip("/")):  # the label is (the end of) the path
+            out.append(f"`{path}`")
+        else:
+            out.append(f"{m.group(2)} (`{path}` in the repository)")
+        last = m.end()
+    out.append(markdown[last:])
+    return "".join(out)
+
+
+#: a committed report of ``results/`` shown on the site: a sentence linking the file in the page file, the report's
+#: text (links rebased) on the site
+_INCLUDE = re.compile(r"<!-- soabench:include (?P<path>\S+) -->.*?<!-- /soabench:include -->", re.S)
+_LINK = re.compile(r"(!?\[[^\]]*\])\(([^)\s#]+)(#[^)\s]*)?\)")
+
+
+def _included_reports() -> dict[str, str]:
+    """``{report path: page src_uri}`` of every report a page shows."""
+    return {
+        m.group("path"): page.relative_to(_DOCS).as_posix()
+        for page in pages()
+        for m in _INCLUDE.finditer(page.read_text(encoding="utf-8"))
+    }
+
+
+def include_report(path: str, src_uri: str) -> str:
+    """The report ``path`` (a Markdown file under ``results/``) for the page ``src_uri``: its title dropped (the
+    page has its own), links rebased (to a docs page, to the page showing another report, or to the repository file)."""
+    import posixpath
+
+    target = (_ROOT / path).resolve()
+    if _ROOT / "results" not in target.parents or target.suffix != ".md" or not target.is_file():
+        raise ValueError(f"docs/{src_uri} includes {path!r}: only Markdown reports under results/ are shown")
+    text = re.sub(r"\A# .*\n", "", target.read_text(encoding="utf-8"))  # the page has its own title
+    text = re.sub(r"^# ", "## ", text, flags=re.M)  # a second title becomes a section
+    here, depth = posixpath.dirname(path), src_uri.count("/")
+    shown = _included_reports()
+
+    def rebase(m: re.Match) -> str:
+        label, link, anchor = m.group(1), m.group(2), m.group(3) or ""
+        if re.match(r"^[a-z]+:", link):
+            return m.group(0)
+        repo = posixpath.normpath(posixpath.join(here, link)) + ("/" if link.endswith("/") else "")
+        if repo.startswith("docs/"):
+            return f"{label}({'../' * depth}{repo[len('docs/') :]}{anchor})"
+        if repo in shown:
+            page = shown[repo]
+            return f"{label}({posixpath.relpath(page, posixpath.dirname(src_uri) or '.')}{anchor})"
+        return f"{label}({'../' * (depth + 1)}{repo}{anchor})"
+
+    return _LINK.sub(rebase, text)
+
+
 def on_page_markdown(markdown: str, **kwargs) -> str:
-    if _PARAMS in markdown:
-        markdown = markdown.replace(_PARAMS, parameter_table())
-    if _API in markdown:
-        markdown = markdown.replace(_API, api_blocks())
     src = kwargs["page"].file.src_uri
-    markdown = _README.sub(lambda m: readme_section(m.group(1), src), markdown)
-    if _SCENARIO in markdown:
-        markdown = markdown.replace(_SCENARIO, scenario_table())
-    return _HELP.sub(lambda m: cli_help(m.group(1)), markdown)
+    markdown = refresh(markdown)
+    markdown = _API.sub(lambda m: api_blocks(), markdown)
+    markdown = _INCLUDE.sub(lambda m: include_report(m.group("path"), src), markdown)
+    return _site_links(markdown, src)
 
 
 _CITE = re.compile(r"docs/((?:user-guide/)?[\w-]+)\.md(?:(?:\s|&nbsp;)+§(\d+(?:\.\d+)*))?")
-_DOCS = Path(__file__).resolve().parent
 
 
 def _method_ids() -> set[str]:
@@ -281,3 +433,22 @@ def _role(m: re.Match, ids: set[str]) -> str:
     if name in ids:
         return f'<a href="#{name}"><code>{shown}</code></a>'
     return f"<code>{shown}</code>"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python docs/hooks.py [--check]``: rewrite (or, with ``--check``, list) the pages with stale blocks."""
+    import sys
+
+    args = sys.argv[1:] if argv is None else argv
+    stale = stale_pages()
+    for page in stale:
+        if "--check" in args:
+            print(f"stale: {page.relative_to(_ROOT)} (regenerate with: python docs/hooks.py)")
+        else:
+            page.write_text(refresh(page.read_text(encoding="utf-8")), encoding="utf-8")
+            print(f"rewrote {page.relative_to(_ROOT)}")
+    return 1 if stale and "--check" in args else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

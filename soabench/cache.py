@@ -4,7 +4,7 @@ numba's ``cache=True`` writes its index and machine code (``.nbi``/``.nbc``) nex
 into ``site-packages/soabench/gmphd/__pycache__`` after ``pip install .``. Those files survive ``pip uninstall``
 and a later ``pip install -e .``; the left-over ``site-packages/soabench`` folder then becomes a namespace package
 that shadows the editable install. So before numba is imported, :func:`configure_numba_cache` points
-``NUMBA_CACHE_DIR`` at a per-user folder (README "Quickstart"):
+``NUMBA_CACHE_DIR`` at a per-user folder (docs/user-guide/install.md):
 
 * ``NUMBA_CACHE_DIR`` when the user set it (left untouched);
 * else ``$XDG_CACHE_HOME/soabench/numba`` (``XDG_CACHE_HOME`` when it is an absolute path);

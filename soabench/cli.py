@@ -286,7 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder (KITTI layout)")
 
     p = sub.add_parser("check", help="CI mode: short scenarios against per-metric thresholds (exit 1 on regression)")
-    p.add_argument("--suite", required=True, metavar="FILE.toml", help="scenarios and thresholds (README, CI)")
+    p.add_argument("--suite", required=True, metavar="FILE.toml", help="scenarios and thresholds")
     p.add_argument("--out", type=Path, default=Path("check-results"), help="check.json, junit.xml, run folders")
     p.add_argument("--update-baseline", action="store_true", help="rewrite the suite's baseline JSON from this run")
     p.add_argument("--workers", type=int, default=1, help="process workers per run (default 1)")

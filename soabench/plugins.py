@@ -1,4 +1,4 @@
-"""Which birth models and trackers a run may use, and how a name becomes a class (README, "Benchmark your own method").
+"""Which birth models and trackers a run may use, and how a name becomes a class (docs/user-guide/tracker.md).
 
 The registry is a closed list, rebuilt in every process from three sources:
 
@@ -138,7 +138,8 @@ def resolve(kind: str, name: str) -> type:
     except SoabenchError as exc:
         raise PluginError(f"{kind} plugin {name!r} cannot be used: {exc}") from None
     except Exception as exc:  # an import error inside the plugin is the plugin's, reported in one line
-        raise PluginError(f"{kind} plugin {name!r} cannot be imported: {type(exc).__name__}: {exc}") from None
+        hint = _import_hint(name, exc)
+        raise PluginError(f"{kind} plugin {name!r} cannot be imported: {type(exc).__name__}: {exc}{hint}") from None
     require(callable(obj), f"{kind} plugin {name!r} resolves to {obj!r}, which is not a class or callable")
     if kind == TRACKER:
         require(
@@ -146,6 +147,17 @@ def resolve(kind: str, name: str) -> type:
             f"tracker plugin {name!r} ({obj!r}) has no step(scan) method; see soabench.api.Tracker",
         )
     return obj
+
+
+def _import_hint(name: str, exc: Exception) -> str:
+    """For an import path whose own package is missing: how to make it importable (docs/user-guide/birth-model.md)."""
+    top = name.partition(":")[0].split(".")[0]
+    if is_import_path(name) and isinstance(exc, ModuleNotFoundError) and exc.name == top:
+        return (
+            f"; the module must be importable by this Python: install its package (pip install -e ...) or put the "
+            f"folder that holds {top!r} on PYTHONPATH"
+        )
+    return ""
 
 
 def check_options(kind: str, name: str, cls: type, options: dict[str, Any]) -> None:

@@ -4,7 +4,8 @@ A *birth model* says where our GM-PHD filter expects new targets (S-OA, PUBM, UB
 *tracker* is anything that turns scans into estimated states (our GM-PHD with a birth model and a probability mode,
 Stone Soup's trackers, or yours). Both are plain classes; nothing needs to inherit from these protocols, they only
 document the shape the harness calls. Register your class by entry point (groups ``soabench.birth_models`` and
-``soabench.trackers``) or name it on the command line as ``module:Class`` (README, "Benchmark your own method").
+``soabench.trackers``) or name it on the command line as ``module:Class`` (docs/user-guide/birth-model.md,
+docs/user-guide/tracker.md).
 """
 
 from __future__ import annotations

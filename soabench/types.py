@@ -6,8 +6,8 @@ with :class:`NewbornTerms`); our GM-PHD filter returns a :class:`StepResult` per
 :class:`Estimates` per scan. The public names are re-exported by :mod:`soabench.api`.
 
 This module imports numpy, shapely (for the geometry a scan carries) and :mod:`soabench.errors` only. The ``.npz``
-round trips of :class:`Recording` and :class:`Scans` live here with their classes (formats: README, "Recording
-format" and "Scans format").
+round trips of :class:`Recording` and :class:`Scans` live here with their classes (both formats:
+docs/user-guide/outputs.md).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ if TYPE_CHECKING:  # soabench.config sits above this module; imported at run tim
 
 CLUTTER = -1  #: source id of a clutter measurement
 OCCLUDER_KINDS = ("building", "parked", "vehicle")  #: values of ``Obstacles.kind``
-SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (README, "Scans format")
+SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (docs/user-guide/outputs.md)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -87,7 +87,7 @@ class Recording:
         )
 
     def save_npz(self, path: str | Path) -> None:
-        """Write the Recording as a compressed .npz (format: README, "Recording format"); exact round trip."""
+        """Write the Recording as a compressed .npz (format: docs/user-guide/outputs.md); exact round trip."""
         occ = [np.asarray(o, dtype=float).reshape(-1, 2) for o in self.static_occluders]
         offsets = np.cumsum([0] + [len(o) for o in occ]).astype(np.int64)
         np.savez_compressed(
@@ -362,7 +362,7 @@ class Scans:
         )
 
     def save_npz(self, path: str | Path) -> None:
-        """Write the Scans as a compressed .npz without pickles (format: README, "Scans format"), with the sensor
+        """Write the Scans as a compressed .npz without pickles (format: docs/user-guide/outputs.md), with the sensor
         parameters and their units (:func:`sensor_arrays`): a tracker reading the file needs R, p_D and kappa."""
         require(
             self.sensor is not None,
@@ -382,7 +382,7 @@ class Scans:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# .npz round trip (README, "Scans format")
+# .npz round trip (docs/user-guide/outputs.md)
 
 
 def _offsets(counts: Sequence[int]) -> np.ndarray:
@@ -494,7 +494,7 @@ def _scans_from_arrays(a: dict[str, np.ndarray], where: str) -> Scans:
     )
 
 
-#: unit of each sensor parameter written into a scans file (README, "Scans format")
+#: unit of each sensor parameter written into a scans file (docs/user-guide/outputs.md)
 SENSOR_UNITS: dict[str, str] = {
     "dt": "s",
     "sigma_r": "m",

@@ -341,3 +341,18 @@ def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None
     assert exp.models == (*BIRTH_MODEL_NAMES, one) and exp.trackers == (echo,)
     assert main(["study", "--models", "soa"]) == 2
     assert "adds plugins only" in capsys.readouterr().err
+
+
+def test_an_import_path_whose_package_is_missing_says_how_to_make_it_importable(tmp_path, monkeypatch) -> None:
+    """The advice names PYTHONPATH and an install only when the plugin's own top-level package is missing."""
+    plugins.allow_import_paths(["no_such_pkg_xyz.births:Ring"])
+    with pytest.raises(plugins.PluginError, match="No module named 'no_such_pkg_xyz'; the module must be importable"):
+        plugins.resolve(plugins.BIRTH, "no_such_pkg_xyz.births:Ring")
+    (tmp_path / "broken_pkg_xyz").mkdir()
+    (tmp_path / "broken_pkg_xyz" / "__init__.py").write_text("")
+    (tmp_path / "broken_pkg_xyz" / "births.py").write_text("import no_such_dependency_xyz\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    plugins.allow_import_paths(["broken_pkg_xyz.births:Ring"])
+    with pytest.raises(plugins.PluginError) as info:  # the plugin's own missing dependency: no PYTHONPATH advice
+        plugins.resolve(plugins.BIRTH, "broken_pkg_xyz.births:Ring")
+    assert "no_such_dependency_xyz" in str(info.value) and "PYTHONPATH" not in str(info.value)

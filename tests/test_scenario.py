@@ -224,13 +224,13 @@ def test_npz_round_trip(rec, tmp_path):
     assert (back.seed, back.net, back.meta, back.step_length) == (rec.seed, rec.net, rec.meta, rec.step_length)
 
 
-def test_readme_recording_format_lists_every_array(rec, tmp_path):
+def test_docs_recording_format_lists_every_array(rec, tmp_path):
     from pathlib import Path
 
     path = tmp_path / "rec.npz"
     rec.save_npz(path)
-    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
-    doc = readme.split("## Recording format", 1)[1].split("\n## ", 1)[0]
+    page = (Path(__file__).parents[1] / "docs" / "user-guide" / "outputs.md").read_text(encoding="utf-8")
+    doc = page.split("## Recording format", 1)[1].split("\n## ", 1)[0]
     with np.load(path, allow_pickle=False) as data:
         assert [name for name in data.files if f"`{name}`" not in doc] == []
 

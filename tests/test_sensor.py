@@ -464,12 +464,12 @@ def test_save_and_load_npz_round_trip(run, tmp_path):
         Scans.load_npz(tmp_path / "missing.npz")
 
 
-def test_readme_scans_format_lists_every_array(run, tmp_path):
+def test_docs_scans_format_lists_every_array(run, tmp_path):
     _, _, scans = run
     path = tmp_path / "scans.npz"
     scans.save_npz(path)
-    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
-    doc = readme.split("## Scans format", 1)[1].split("\n## ", 1)[0]
+    page = (Path(__file__).parents[1] / "docs" / "user-guide" / "outputs.md").read_text(encoding="utf-8")
+    doc = page.split("## Scans format", 1)[1].split("\n## ", 1)[0]
     with np.load(path, allow_pickle=False) as data:
         missing = [name for name in data.files if f"`{name}`" not in doc]
     assert missing == []

@@ -1,5 +1,4 @@
-"""Checks on what a plugin hands the harness, and the record of a plugin that failed (README, "Benchmark your own
-method").
+"""Checks on what a plugin hands the harness, and the record of a plugin that failed (docs/user-guide/tracker.md).
 
 A plugin's output is checked at every scan before anything uses it: :func:`check_births` (shapes, numeric dtypes,
 finite values, non-negative weights, symmetric covariances; newborn terms: one per measurement and a ``beta`` that

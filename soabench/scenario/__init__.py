@@ -85,7 +85,7 @@ def load(
     of the scenario file (its folder's name for a ``scenario.toml``); without a scenario file, the scene folder's
     name (a shipped name) or the ``.net.xml`` file stem.
 
-    Whatever the scenario leaves open is derived from the network (README, "Your own streets"; module
+    Whatever the scenario leaves open is derived from the network (docs/user-guide/scenes.md; module
     :mod:`soabench.scenario.derive`): ego route, world box, vehicle sources / sinks and doors.
     """
     from soabench.scenario.derive import derive_defaults

@@ -42,7 +42,8 @@ class ScenarioConfig:
     Attributes:
         net_file: SUMO ``.net.xml``.
         poly_files: SUMO polygon files (buildings, parked cars, obstacles).
-        world_box: evaluated workspace W as (x_min, y_min, x_max, y_max) in m; None = network boundary.
+        world_box: evaluated workspace W as (x_min, y_min, x_max, y_max) in m; None = derived: the ego's stretch
+            in the run plus 40 m, cut to the network (docs/user-guide/scenes.md).
         step_length: SUMO step (s).
         duration: recorded time (s); the Recording holds round(duration / step_length) samples.
         ego_route: edge ids of the ego's predefined path.
@@ -54,7 +55,8 @@ class ScenarioConfig:
         vehicle_sources, vehicle_sinks: candidate first / last edges of their routes.
         vehicle_max_speed: their speed limit (m/s).
         n_pedestrians: number of pedestrians (stable ids ``ped0`` .. ``ped{P-1}``).
-        pedestrian_model: SUMO ``--pedestrian.model``.
+        pedestrian_model: SUMO ``--pedestrian.model``; a network loaded without a scenario file gets "striping"
+            (docs/user-guide/scenes.md).
         ped_speed: (min, max) of each pedestrian's walking speed, drawn once per trial (m/s).
         p_enter: probability that a pedestrian's next walk ends at a door, entering the building (vanishing).
         dwell: (min, max) time (s) spent inside a building before exiting at a random door.

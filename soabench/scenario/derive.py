@@ -1,4 +1,4 @@
-"""Defaults derived from a network for whatever a scenario leaves open (README "Your own streets").
+"""Defaults derived from a network for whatever a scenario leaves open (docs/user-guide/scenes.md).
 
 * ego route: the longest of the shortest passenger-car routes between two fringe edges
   (:func:`~soabench.scenario.network.default_ego_route`; dead ends with turnarounds count as fringe);

@@ -1,4 +1,4 @@
-"""``soabench import osm FILE.osm --out DIR``: an OpenStreetMap extract -> a scene folder (README "Your own streets").
+"""``soabench import osm FILE.osm --out DIR``: an OpenStreetMap extract -> a scene folder (docs/user-guide/scenes.md).
 
 The wheel's ``netconvert`` builds the network (sidewalks, crossings and walking areas guessed, geometry cleaned,
 the projection kept in the net's ``<location>``), ``polyconvert`` the buildings through SUMO's OSM typemap
@@ -126,7 +126,7 @@ def scenario_toml(cfg, scene, net_name: str, poly_name: str, source: str) -> str
     x0, y0, x1, y1 = cfg.world_box
     doors = ", ".join(f"[{x:.2f}, {y:.2f}]" for x, y in scene.doors)
     return f"""# Scene imported from {source} by `soabench import osm`; the values below were derived from the network
-# (README "Your own streets") and may be edited. Keys: soabench/scenario/config.py.
+# (docs/user-guide/scenes.md) and may be edited. Keys: soabench/scenario/config.py.
 
 [scenario]
 name = "{cfg.name}"
