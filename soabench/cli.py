@@ -495,7 +495,13 @@ def _report_outcome(outcome, finish: str = "soabench run --resume {dir}") -> int
     if getattr(outcome, "summary_markdown", None):
         print(outcome.summary_markdown)
     if outcome.complete:
+        from soabench.experiment.failures import failed_methods_line, outcome_model_failures
+
         print(f"results in {outcome.run_dir}")
+        failed = failed_methods_line(outcome_model_failures(outcome))
+        if failed:  # a requested method is missing from some tables: not a success (docs/user-guide/commands.md)
+            print(f"soabench: {failed}", file=sys.stderr)
+            return 1
         return 0
     print(
         f"run incomplete: {outcome.n_missing} trial(s) missing in {outcome.run_dir}; "
