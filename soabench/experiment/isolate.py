@@ -54,12 +54,9 @@ class _PluginTimeout(BaseException):
     """Raised asynchronously on a plugin's thread that ran past its budget (stops a loop of Python code)."""
 
 
-_GUARD_PID = [0]  #: the process that routed os._exit (a child forked by a plugin exits for real)
-
-
 def _guarded_exit(code: int) -> None:
     """``os._exit`` while plugins run: a plugin's thread gets :class:`PluginExit`, every other caller exits."""
-    if threading.get_ident() in _PLUGIN_THREADS and os.getpid() == _GUARD_PID[0]:
+    if threading.get_ident() in _PLUGIN_THREADS:
         raise PluginExit(f"the plugin called os._exit({code})")
     _REAL_EXIT(code)
 
@@ -67,8 +64,12 @@ def _guarded_exit(code: int) -> None:
 def _guard_exit() -> None:
     """Route ``os._exit`` through :func:`_guarded_exit` in this process (idempotent)."""
     if os._exit is not _guarded_exit:
-        _GUARD_PID[0] = os.getpid()
         os._exit = _guarded_exit
+
+
+# a forked child (a pool worker, or a process a plugin forks) runs none of its parent's plugin calls: its os._exit
+# exits unless it starts plugin threads of its own
+os.register_at_fork(after_in_child=_PLUGIN_THREADS.clear)
 
 
 def _describe(exc: BaseException) -> str:
@@ -139,21 +140,25 @@ class PluginCalls:
             try:
                 ok, value = thread.results.get(timeout=self.budget if self.budget > 0 else None)
             except queue.Empty:
-                self._abandon(thread)
+                where = self._abandon(thread)
                 raise PluginFailed(
-                    f"the call took longer than its budget of {self.budget:g} s (experiment.plugin_budget)"
+                    f"the call took longer than its budget of {self.budget:g} s (experiment.plugin_budget)", where
                 ) from None
         if ok:
             return value
         tb = "".join(traceback.format_exception(value))
         raise PluginFailed(_describe(value), tb)
 
-    def _abandon(self, thread: _Thread) -> None:
-        """Leave a thread that ran past its budget: ask it to stop at its next Python instruction, never wait."""
+    def _abandon(self, thread: _Thread) -> str:
+        """Leave a thread that ran past its budget: ask it to stop at its next Python instruction, never wait.
+        Returns where it was (its stack, as a traceback reads)."""
         self._thread = None
+        frame = sys._current_frames().get(thread.ident or -1)
+        where = "".join(["Stack of the plugin's call when its budget ran out:\n", *traceback.format_stack(frame)])
         if thread.ident is not None:
             ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread.ident), ctypes.py_object(_PluginTimeout))
         thread.jobs.put(None)
+        return where if frame is not None else ""
 
 
 def _private(value: Any) -> Any:
