@@ -224,3 +224,12 @@ def test_a_missing_dependency_of_a_plugin_is_named(tmp_path, monkeypatch) -> Non
     plugins.allow_import_paths(["needs_dep:T"])
     with pytest.raises(SoabenchError, match="imports 'not_installed_dep_xyz', which is not installed"):
         plugins.resolve(plugins.TRACKER, "needs_dep:T")
+
+
+def test_birth_command_names_a_failing_plugin_in_one_line(tmp_path, capsys) -> None:
+    out = tmp_path / "b.png"
+    argv = ["birth", "--model", f"{FX}:RaiseAtScan3", "--time", "5", "--out", str(out)]
+    assert main(argv) == 2
+    lines = [ln for ln in capsys.readouterr().err.strip().splitlines() if "compiling" not in ln]
+    assert len(lines) == 1 and f"birth model plugin '{FX}:RaiseAtScan3' failed: RuntimeError: boom at three" in lines[0]
+    assert not out.exists()
