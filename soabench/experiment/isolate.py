@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import dataclasses
 import os
 import queue
 import sys
@@ -169,7 +168,7 @@ def _private(value: Any) -> Any:
         return [_private(v) for v in value]
     if isinstance(value, tuple):
         return tuple(_private(v) for v in value)
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+    if hasattr(type(value), "__dataclass_fields__"):  # a dataclass instance (Obstacles)
         return _rebuilt(value)
     return value  # numbers, strings, shapely geometries and deferred regions (immutable to a reader)
 
