@@ -97,7 +97,8 @@ def main() -> None:
     if base:
         med_b = statistics.median(r["trial_s"] for r in base)
         print("  baseline: ", ", ".join(f"{r['trial_s']:.3f}" for r in base))
-        print(f"  ratio this / baseline (medians): {med / med_b:.3f}")
+        best = min(r["trial_s"] for r in here) / min(r["trial_s"] for r in base)
+        print(f"  ratio this / baseline: {med / med_b:.3f} (medians), {best:.3f} (fastest runs)")
     filt = statistics.median(r["filter_per_scan_s"] for r in here)
     c = per_scan_costs(args.duration)
     print(f"a plugin's overhead per scan ({c['scans']} scans, {c['obstacles']:.1f} obstacles on average):")
