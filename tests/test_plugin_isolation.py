@@ -233,3 +233,21 @@ def test_birth_command_names_a_failing_plugin_in_one_line(tmp_path, capsys) -> N
     lines = [ln for ln in capsys.readouterr().err.strip().splitlines() if "compiling" not in ln]
     assert len(lines) == 1 and f"birth model plugin '{FX}:RaiseAtScan3' failed: RuntimeError: boom at three" in lines[0]
     assert not out.exists()
+
+
+def test_failed_method_runs_of_sweep_and_study_outcomes_are_collected(tmp_path) -> None:
+    from types import SimpleNamespace
+
+    from soabench.experiment.failures import failed_methods_line, outcome_model_failures
+    from soabench.experiment.runner import RunOutcome
+
+    def run(*models):
+        fails = [{"model": m, "trial": t, "k": 0} for t, m in enumerate(models)]
+        return RunOutcome(tmp_path, True, 1, 0, model_failures=fails)
+
+    sweep = SimpleNamespace(points=[run("a"), run(), run("a", "b")])
+    study = SimpleNamespace(main=run("b"), clutter=sweep, births=SimpleNamespace(points=[]), sensitivity=(run("c"),))
+    assert [f["model"] for f in outcome_model_failures(study)] == ["b", "a", "a", "b", "c"]
+    line = failed_methods_line(outcome_model_failures(sweep))
+    assert "3 method run(s) failed" in line and "'a' in 2 run(s) of 1 trial(s)" in line and "'b' in 1 run(s)" in line
+    assert failed_methods_line([]) == ""

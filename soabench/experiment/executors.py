@@ -100,7 +100,7 @@ class PoolExecutor:
         for code, note in notes.values():
             t = note["trial"]
             if code == stopped and died:
-                out[t] = f"worker process stopped by the pool after the worker of {died[0]} died"
+                out[t] = f"lost when a worker process died (the worker of {died[0]}); the pool stopped this one"
             else:
                 how = "still running" if code is None else _exit_text(code)
                 out[t] = f"worker process died ({how}) in trial {t} while running {note['doing']}"

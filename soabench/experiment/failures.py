@@ -1,7 +1,9 @@
 """The record of failed plugin runs in a run folder: ``model_failures.csv``, ``summary.json`` and the summary table.
 
-A plugin run that failed (:mod:`soabench.experiment.guard`) has no row in trials.csv, episodes.csv or steps.csv;
-the trial record keeps it under ``model_failures`` and this module lists every such run.
+A plugin run that failed (:mod:`soabench.experiment.guard`, :mod:`soabench.experiment.isolate`) has no row in
+trials.csv, episodes.csv or steps.csv; the trial record keeps it under ``model_failures`` (with the plugin's
+traceback), this module lists every such run, and a command whose runs include one exits with status 1
+(docs/user-guide/commands.md, "Exit status").
 """
 
 from __future__ import annotations
