@@ -23,14 +23,7 @@ from soabench.types import Births, Estimates, NewbornTerms, Scan
 FX = "plugin_fixtures"
 
 
-@pytest.fixture(autouse=True)
-def clean_registry():
-    """Each test starts with no typed import paths (the registry is per process)."""
-    saved = set(plugins._TYPED)
-    plugins._TYPED.clear()
-    yield
-    plugins._TYPED.clear()
-    plugins._TYPED.update(saved)
+pytestmark = pytest.mark.usefixtures("typed_plugins_cleared")  # conftest.py
 
 
 # ------------------------------------------------------------------------------------------------ the API layer
