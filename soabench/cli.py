@@ -421,6 +421,7 @@ def cmd_birth(args: argparse.Namespace) -> int:
     from soabench.birth import LABEL
     from soabench.birth.base import BirthContext
     from soabench.birth.plots import draw_births
+    from soabench.experiment.guard import check_births
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.plotstyle import panel_title
     from soabench.scenario.plots import plot_scene, scene_figure
@@ -432,14 +433,21 @@ def cmd_birth(args: argparse.Namespace) -> int:
     scans = _observe(recording, scene, cfg, seeds)
     options = {} if plugins.is_builtin_birth(args.model) else cfg.plugins.get(args.model, {})
     plugins.check_options(plugins.BIRTH, args.model, cls, options)
-    model = cls(cfg.birth, cfg.sensor, scene, seeds.placement_rng(), **options)
     filter_cfg, mode, p_D_b = filter_config_for_mode(cfg.filter, args.probability)
     filt = GMPHDFilter(filter_cfg, cfg.sensor, mode)
     prev = None
     births = None
-    for scan in scans.scans:  # run the filter up to the snapshot so stateful models see their history
-        births = model(BirthContext(scan, prev, p_D_b))
-        prev = filt.step(scan, births)
+    try:
+        model = cls(cfg.birth, cfg.sensor, scene, seeds.placement_rng(), **options)
+        for scan in scans.scans:  # run the filter up to the snapshot so stateful models see their history
+            births = model(BirthContext(scan, prev, p_D_b))
+            if not plugins.is_builtin_birth(args.model):
+                births = check_births(births, scan)
+            prev = filt.step(scan, births)
+    except Exception as exc:  # a plugin's error is one line naming it; a built-in's is a bug of soabench
+        if plugins.is_builtin_birth(args.model):
+            raise
+        raise plugins.PluginError(f"birth model plugin {args.model!r} failed: {type(exc).__name__}: {exc}") from None
     fig, ax = scene_figure(scene, legend_rows=5)
     plot_scene(scene, recording, time=scans.scans[-1].t, ax=ax)
     draw_births(ax, births, scans.scans[-1])
@@ -495,7 +503,13 @@ def _report_outcome(outcome, finish: str = "soabench run --resume {dir}") -> int
     if getattr(outcome, "summary_markdown", None):
         print(outcome.summary_markdown)
     if outcome.complete:
+        from soabench.experiment.failures import failed_methods_line, outcome_model_failures
+
         print(f"results in {outcome.run_dir}")
+        failed = failed_methods_line(outcome_model_failures(outcome))
+        if failed:  # a requested method is missing from some tables: not a success (docs/user-guide/commands.md)
+            print(f"soabench: {failed}", file=sys.stderr)
+            return 1
         return 0
     print(
         f"run incomplete: {outcome.n_missing} trial(s) missing in {outcome.run_dir}; "

@@ -318,6 +318,7 @@ class ExperimentConfig:
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda (each gets every model x mode)
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
+    plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
 
     def validate(self) -> None:
         _int_range("trials", self.trials, 1, MAX_TRIALS)
@@ -341,6 +342,7 @@ class ExperimentConfig:
         for lam in self.clutter:
             _non_negative("clutter", lam, hi=1e4)
         _int_range("seed", self.seed, 0, MAX_SEED)
+        _non_negative("plugin_budget", self.plugin_budget, hi=86400.0)
 
 
 @dataclass

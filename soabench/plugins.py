@@ -138,26 +138,44 @@ def resolve(kind: str, name: str) -> type:
     except SoabenchError as exc:
         raise PluginError(f"{kind} plugin {name!r} cannot be used: {exc}") from None
     except Exception as exc:  # an import error inside the plugin is the plugin's, reported in one line
-        hint = _import_hint(name, exc)
-        raise PluginError(f"{kind} plugin {name!r} cannot be imported: {type(exc).__name__}: {exc}{hint}") from None
-    require(callable(obj), f"{kind} plugin {name!r} resolves to {obj!r}, which is not a class or callable")
-    if kind == TRACKER:
-        require(
-            callable(getattr(obj, "step", None)),
-            f"tracker plugin {name!r} ({obj!r}) has no step(scan) method; see soabench.api.Tracker",
-        )
+        raise PluginError(
+            f"{kind} plugin {name!r} cannot be imported: {type(exc).__name__}: {exc}{_import_hint(name, exc)}"
+        ) from None
+    api = "soabench.api.BirthModel" if kind == BIRTH else "soabench.api.Tracker"
+    require(
+        inspect.isclass(obj),
+        f"{kind} plugin {name!r} is {_describe(obj)}, not a class; name a {kind} class (see {api})",
+    )
+    method = "__call__" if kind == BIRTH else "step"  # dir() of a class lists its own and inherited methods
+    require(
+        method in dir(obj) and callable(getattr(obj, method)),
+        f"{kind} plugin {name!r} ({obj.__module__}.{obj.__qualname__}) has no {method}() method; see {api}",
+    )
     return obj
 
 
+def _describe(obj: Any) -> str:
+    """``the built-in function os.system``, ``the module os``, ``an int`` ... for a one-line refusal."""
+    if inspect.ismodule(obj):
+        return f"the module {obj.__name__}"
+    if callable(obj) and hasattr(obj, "__qualname__"):
+        kind = "built-in function" if inspect.isbuiltin(obj) else "function"
+        return f"the {kind} {getattr(obj, '__module__', None) or '?'}.{obj.__qualname__}"
+    return f"an object of type {type(obj).__name__}"
+
+
 def _import_hint(name: str, exc: Exception) -> str:
-    """For an import path whose own package is missing: how to make it importable (docs/user-guide/birth-model.md)."""
-    top = name.partition(":")[0].split(".")[0]
-    if is_import_path(name) and isinstance(exc, ModuleNotFoundError) and exc.name == top:
+    """What to do about a ModuleNotFoundError: make the plugin's module importable, or install what it imports."""
+    missing = getattr(exc, "name", None)
+    if not isinstance(exc, ModuleNotFoundError) or not missing:
+        return ""
+    module = name.partition(":")[0] if is_import_path(name) else ""
+    if module == missing or module.startswith(missing + "."):
         return (
-            f"; the module must be importable by this Python: install its package (pip install -e ...) or put the "
-            f"folder that holds {top!r} on PYTHONPATH"
+            f" (the module {module!r} must be importable: put the folder that holds it on PYTHONPATH, e.g. "
+            "PYTHONPATH=. soabench ..., or install its package with pip install -e DIR)"
         )
-    return ""
+    return f" (the plugin imports {missing!r}, which is not installed here)"
 
 
 def check_options(kind: str, name: str, cls: type, options: dict[str, Any]) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -122,10 +123,11 @@ class TrackerRun:
 class ScanFailure(Exception):
     """A tracker or birth model raised, or returned something unusable, at scan ``k`` (wraps the cause)."""
 
-    def __init__(self, k: int, message: str) -> None:
+    def __init__(self, k: int, message: str, tb: str = "") -> None:
         super().__init__(message)
         self.k = k
         self.message = message
+        self.traceback = tb
 
 
 def run_tracker(
@@ -135,8 +137,8 @@ def run_tracker(
 
     ``check(out, scan, t_step)`` validates a plugin's output and converts :class:`Estimates` to a
     :class:`StepResult` (without ``check``, ``step`` must return StepResults: our GM-PHD). With ``check`` given,
-    any exception at scan k becomes a :class:`ScanFailure` naming k, so the caller can record it and keep the
-    other runs of the trial.
+    any exception at scan k becomes a :class:`ScanFailure` naming k (with its traceback), so the caller can record it
+    and keep the other runs of the trial.
     """
     results: list[StepResult] = []
     t0 = time.perf_counter()
@@ -152,5 +154,5 @@ def run_tracker(
         except ScanFailure:
             raise
         except Exception as exc:
-            raise ScanFailure(scan.k, f"{type(exc).__name__}: {exc}") from exc
+            raise ScanFailure(scan.k, f"{type(exc).__name__}: {exc}", traceback.format_exc()) from exc
     return TrackerRun(results, float(getattr(tracker, "t_birth", 0.0)), time.perf_counter() - t0)

@@ -4,8 +4,22 @@ from __future__ import annotations
 
 import signal
 
+import pytest
+
 # A test run started from a background shell (`pytest &`, some CI runners) inherits SIGINT ignored, and an ignored
 # disposition survives fork and exec: every driver process the Ctrl-C tests start would then ignore the Ctrl-C they
 # send. Python's own handler (reset to the default on exec) gives the children what a terminal gives them.
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+@pytest.fixture
+def typed_plugins_cleared():
+    """The test starts with no typed import paths (soabench.plugins keeps them per process) and leaves none."""
+    from soabench import plugins
+
+    saved = set(plugins._TYPED)
+    plugins._TYPED.clear()
+    yield
+    plugins._TYPED.clear()
+    plugins._TYPED.update(saved)

@@ -106,3 +106,100 @@ class StringTracker(EchoTracker):
 
 class NotATracker:
     """No step method."""
+
+
+class AlwaysRaises(EchoTracker):
+    def step(self, scan):
+        raise RuntimeError("fails at every scan")
+
+
+class SysExit(EchoTracker):
+    def step(self, scan):
+        import sys
+
+        sys.exit(0)
+
+
+class OsExit(EchoTracker):
+    def step(self, scan):
+        import os
+
+        os._exit(0)
+
+
+class RaisesKeyboardInterrupt(EchoTracker):
+    def step(self, scan):
+        raise KeyboardInterrupt
+
+
+class SleepsForever(EchoTracker):
+    def step(self, scan):
+        import time
+
+        time.sleep(1e6)
+
+
+class Prints(EchoTracker):
+    def step(self, scan):
+        print("PLUGIN OUTPUT LINE")
+        return super().step(scan)
+
+
+class KillsItsProcess(EchoTracker):
+    """Kills the process it runs in at scan 2 (as a crash in native code would)."""
+
+    def step(self, scan):
+        import os
+        import signal
+
+        if scan.k == 2:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return super().step(scan)
+
+
+class CtrlCWhileRunning(EchoTracker):
+    """Sends SIGINT to its process at scan 2 and keeps working: what a user's Ctrl-C during a plugin's call does."""
+
+    def step(self, scan):
+        import os
+        import signal
+        import time
+
+        if scan.k == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(2.0)
+        return super().step(scan)
+
+
+def _scribble(scan) -> None:
+    """Change everything a scan holds, in place and by reassignment."""
+    scan.Z[:] = 1.0
+    scan.ego[:2] += 100.0
+    for name in ("centroid_range", "theta_min", "theta_max", "r_min", "r_max"):
+        getattr(scan.obstacles, name)[:] = 0.0
+    for p in scan.obstacles.polygons:
+        p[:] = 0.0
+    scan.occluders.clear()
+    scan.Z = np.zeros((0, 2))
+    scan.k = -5
+
+
+class ScanMutator(EchoTracker):
+    """Changes the scan it is given (every array, a list, and by reassignment), then reports nothing."""
+
+    def step(self, scan) -> Estimates:
+        _scribble(scan)
+        return Estimates.empty()
+
+
+class ScanMutatingBirth(OneBirth):
+    """Changes its configuration when built and every scan it is given."""
+
+    def __init__(self, cfg, sensor, scene, rng) -> None:
+        super().__init__(cfg, sensor, scene, rng)
+        cfg.N_hat = 99.0
+        sensor.r_max = 1.0
+
+    def __call__(self, ctx) -> Births:
+        _scribble(ctx.scan)
+        return Births.empty()

@@ -23,14 +23,7 @@ from soabench.types import Births, Estimates, NewbornTerms, Scan
 FX = "plugin_fixtures"
 
 
-@pytest.fixture(autouse=True)
-def clean_registry():
-    """Each test starts with no typed import paths (the registry is per process)."""
-    saved = set(plugins._TYPED)
-    plugins._TYPED.clear()
-    yield
-    plugins._TYPED.clear()
-    plugins._TYPED.update(saved)
+pytestmark = pytest.mark.usefixtures("typed_plugins_cleared")  # conftest.py
 
 
 # ------------------------------------------------------------------------------------------------ the API layer
@@ -346,7 +339,10 @@ def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None
 def test_an_import_path_whose_package_is_missing_says_how_to_make_it_importable(tmp_path, monkeypatch) -> None:
     """The advice names PYTHONPATH and an install only when the plugin's own top-level package is missing."""
     plugins.allow_import_paths(["no_such_pkg_xyz.births:Ring"])
-    with pytest.raises(plugins.PluginError, match="No module named 'no_such_pkg_xyz'; the module must be importable"):
+    with pytest.raises(
+        plugins.PluginError,
+        match=r"No module named 'no_such_pkg_xyz' \(the module 'no_such_pkg_xyz.births' must be importable",
+    ):
         plugins.resolve(plugins.BIRTH, "no_such_pkg_xyz.births:Ring")
     (tmp_path / "broken_pkg_xyz").mkdir()
     (tmp_path / "broken_pkg_xyz" / "__init__.py").write_text("")

@@ -12,7 +12,10 @@ item (:func:`failure_record`); the run goes on.
 from __future__ import annotations
 
 import os
+import shutil
+import signal
 import socket
+import tempfile
 import time
 import traceback
 from collections.abc import Iterator, Sequence
@@ -22,7 +25,7 @@ from typing import Any
 
 from soabench.cli_checks import check_scheduler_address
 from soabench.errors import SoabenchError, require
-from soabench.experiment.workers import init_worker, sigint_ignored_by_children
+from soabench.experiment.workers import init_worker, last_activity, sigint_ignored_by_children
 from soabench.seeding import trial_seeds
 
 MAX_WORKERS = 1024  #: upper bound of --workers (processes or LocalCluster workers on one machine)
@@ -64,17 +67,49 @@ class PoolExecutor:
         self.n_workers = int(workers)
         self._pool: ProcessPoolExecutor | None = None
         self._generation = 0  # incremented whenever a broken pool is replaced
+        self._notes: str | None = None  # the workers' notes folder (soabench.experiment.workers.note_activity)
+        self._procs: dict[int, Any] = {}  # pid -> process of the current pool (its exit code names a death)
+        self._lost: dict[int, dict[int, str]] = {}  # pool generation -> trial -> why it was lost
 
     def _get_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.n_workers, initializer=init_worker)
+            self._notes = tempfile.mkdtemp(prefix="soabench-workers-")
+            self._procs = {}
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.n_workers, initializer=init_worker, initargs=(None, self._notes)
+            )
         return self._pool
+
+    def _submit(self, spec: Any, t: int) -> Any:
+        fut = self._get_pool().submit(spec.task_fn, t, spec)
+        self._procs.update(getattr(self._pool, "_processes", None) or {})
+        return fut
+
+    def _lost_trials(self) -> dict[int, str]:
+        """Why each trial in flight was lost when the pool broke: the worker that died (its exit code or signal)
+        and what it was running, from the workers' notes; a trial whose worker the pool stopped afterwards says so."""
+        notes = {}
+        for pid, proc in self._procs.items():
+            proc.join(timeout=5)
+            note = last_activity(self._notes, pid) if self._notes else None
+            if note is not None:
+                notes[pid] = (proc.exitcode, note)
+        stopped = -signal.SIGTERM  # what the pool does to the other workers once one died
+        died = [f"trial {n['trial']} ({n['doing']})" for code, n in notes.values() if code != stopped]
+        out = {}
+        for code, note in notes.values():
+            t = note["trial"]
+            if code == stopped and died:
+                out[t] = f"lost when a worker process died (the worker of {died[0]}); the pool stopped this one"
+            else:
+                how = "still running" if code is None else _exit_text(code)
+                out[t] = f"worker process died ({how}) in trial {t} while running {note['doing']}"
+        return out
 
     def results(self, spec: Any, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
         base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
         queue = iter(trials)  # consumed lazily: a huge to-do list is never built in memory
         pending: dict = {}  # future -> (trial, pool generation)
-        lost = "worker process died (BrokenProcessPool)"
         exhausted = False
         try:
             while not exhausted or pending:
@@ -84,10 +119,10 @@ class PoolExecutor:
                         exhausted = True
                         break
                     try:
-                        fut = self._get_pool().submit(spec.task_fn, t, spec)
+                        fut = self._submit(spec, t)
                     except BrokenProcessPool:  # the pool broke since the last submit: start a fresh one
                         self.close(abort=True)
-                        fut = self._get_pool().submit(spec.task_fn, t, spec)
+                        fut = self._submit(spec, t)
                     pending[fut] = (t, self._generation)
                 done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
                 for fut in sorted(done, key=lambda f: pending[f][0]):
@@ -95,9 +130,11 @@ class PoolExecutor:
                     try:
                         rec = fut.result()
                     except BrokenProcessPool:  # a worker died: every trial in flight on that pool is lost
-                        rec = failure_record(t, base_seed, lost)
                         if gen == self._generation:
+                            self._lost[gen] = self._lost_trials()
                             self.close(abort=True)
+                        why = self._lost.get(gen, {}).get(t, f"worker process died in trial {t} (BrokenProcessPool)")
+                        rec = failure_record(t, base_seed, why)
                     except Exception as exc:
                         rec = failure_record(t, base_seed, f"{type(exc).__name__}: {exc}", traceback.format_exc())
                     yield t, rec
@@ -120,6 +157,19 @@ class PoolExecutor:
                 p.join(timeout=5)
         else:
             pool.shutdown(wait=True)
+        if self._notes is not None:
+            shutil.rmtree(self._notes, ignore_errors=True)
+            self._notes = None
+
+
+def _exit_text(code: int) -> str:
+    """``killed by signal SIGKILL`` or ``exit code 3`` for a process's exit code."""
+    if code < 0:
+        try:
+            return f"killed by signal {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"
 
 
 class DaskExecutor:

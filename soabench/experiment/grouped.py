@@ -122,6 +122,7 @@ def run_group(
                         d.store.write_trial(r)
                         bar.update(True)
                         _print_model_failures(r, bar)
+                        stopped = stopped or (fail_fast and bool(r.get("model_failures")))
                     else:
                         d.store.write_failure(r)
                         bar.update(False)

@@ -108,8 +108,11 @@ def check_estimates(out: Any, scan: Scan, t_step: float) -> StepResult:
     return step_result_from(Estimates(X, w, n_comp, card), scan.k, t_step)
 
 
-def failure_row(trial: int, clutter: float, model: str, mode: str, kind: str, k: int | None, error: str) -> dict:
-    """One failed run (``k`` None: it failed before the first scan, e.g. in its constructor)."""
+def failure_row(
+    trial: int, clutter: float, model: str, mode: str, kind: str, k: int | None, error: str, tb: str = ""
+) -> dict:
+    """One failed run (``k`` None: it failed before the first scan, e.g. in its constructor); ``tb``, the plugin's
+    traceback, is kept in the trial record (``trials/trial_NNNNN.json``), not in the tables."""
     return {
         "trial": int(trial),
         "clutter": float(clutter),
@@ -118,6 +121,7 @@ def failure_row(trial: int, clutter: float, model: str, mode: str, kind: str, k:
         "kind": kind,
         "k": -1 if k is None else int(k),
         "error": error,
+        "traceback": tb,
     }
 
 

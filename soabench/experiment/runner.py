@@ -45,6 +45,7 @@ from soabench.experiment.progress import Progress
 from soabench.experiment.provenance import REPRODUCTION_TOLERANCE, platform_info
 from soabench.experiment.runmeta import check_requested, validate_run_meta
 from soabench.experiment.store import EPISODE_COLUMNS, RUN_FILE, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS, RunStore
+from soabench.experiment.workers import OWN_CODE, note_activity
 from soabench.seeding import trial_seeds
 
 TrialFn = Callable[..., Any]
@@ -70,6 +71,8 @@ class RunOutcome:
     n_missing: int
     failures: list[dict] = field(default_factory=list)
     summary_markdown: str = ""
+    #: failed method runs inside finished trials (:mod:`soabench.experiment.failures`), once every trial was attempted
+    model_failures: list[dict] = field(default_factory=list)
 
 
 # ------------------------------------------------------------------------------------------------ one trial
@@ -122,6 +125,7 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     """Run one trial in this process and return its record; an exception becomes a failure record."""
     base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
     t0 = time.perf_counter()
+    note_activity(trial, OWN_CODE)
     try:
         with _SUMO_LOCK:
             plugins.allow_import_paths(spec.plugin_paths)
@@ -285,7 +289,7 @@ def run_experiment(
         resume: an earlier run folder: run only its trials without a result, with its stored config. Every value of
             its ``run.json`` is validated; its trial kind and scene loader are names looked up in
             :mod:`~soabench.experiment.registry` (nothing from the folder is imported).
-        fail_fast: stop at the first failed trial (trials in flight are still recorded).
+        fail_fast: stop at the first failed trial or failed method run (trials in flight are still recorded).
         save_estimates: also store the per-scan estimates (``estimates/``, format in :mod:`.store`).
         progress: report progress on stderr (a bar on a terminal, periodic lines otherwise: :mod:`.progress`).
         trial_fn: ``run_trial(trial, config, scene, scenario, *, save_estimates)``; must be importable by
@@ -471,6 +475,7 @@ def _run_locked(
         premerge.merge(store, *premerge.merge_args(config), step_columns=figures)
         with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
             outcome.summary_markdown = write_report(store.run_dir, figures=figures, store=store)
+        outcome.model_failures = store.model_failures()
     except KeyboardInterrupt:
         raise Interrupted(
             f"interrupted while writing the report of {store.run_dir} (all {len(done)} trials are on disk); {hint}"
@@ -503,6 +508,9 @@ def _run_trials(
                 store.write_trial(rec)
                 bar.update(True)
                 _print_model_failures(rec, bar)
+                if fail_fast and rec.get("model_failures"):  # a requested method has no row in this trial
+                    stopped = True
+                    break
             else:
                 store.write_failure(rec)
                 bar.update(False)

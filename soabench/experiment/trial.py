@@ -22,6 +22,7 @@ Its schemas are the module constants :data:`ROW_KEYS`, :data:`EPISODE_KEYS`, :da
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import json
@@ -508,14 +509,50 @@ def _run_one(
     def build() -> GMPHDTracker:
         cls = birth_factory(key.model)
         options = config.plugins.get(key.model, {})
-        birth_model = cls(config.birth, sensor_cfg, scene, seeds.placement_rng(), **options)
+        own_cfg, own_sensor = dataclasses.replace(config.birth), dataclasses.replace(sensor_cfg)
+        birth_model = cls(own_cfg, own_sensor, scene, seeds.placement_rng(), **options)
         filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
-        return GMPHDTracker(birth_model, filt, p_D_b, check_births=guard.check_births)
+        return GMPHDTracker(_PrivateScans(birth_model), filt, p_D_b, check_births=guard.check_births)
 
-    run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out)
+    run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out, config.experiment.plugin_budget)
     if run is not None:
         _record(key, config, sensor_cfg, scans, seeds, run, out)
     return None
+
+
+class _PrivateScans:
+    """A plugin birth model that reads a private copy of each scan (:func:`soabench.experiment.isolate.private_scan`);
+    the filter around it reads the scan itself."""
+
+    def __init__(self, model: Callable[[BirthContext], Any]) -> None:
+        self.model = model
+
+    def __call__(self, ctx: BirthContext) -> Any:
+        from soabench.experiment.isolate import private_scan
+
+        return self.model(dataclasses.replace(ctx, scan=private_scan(ctx.scan)))
+
+
+class _Isolated:
+    """A guarded run's tracker whose every step runs through ``calls`` (:class:`~soabench.experiment.isolate.
+    PluginCalls`); ``private``: hand it a private copy of each scan (a plugin tracker; a plugin birth model inside our
+    GM-PHD gets its copy from :class:`_PrivateScans`)."""
+
+    def __init__(self, tracker: Any, calls: Any, private: bool) -> None:
+        self.tracker, self.calls, self.private = tracker, calls, private
+
+    @property
+    def t_birth(self) -> float:
+        return float(getattr(self.tracker, "t_birth", 0.0))
+
+    def step(self, scan: Any) -> Any:
+        from soabench.experiment.isolate import PluginFailed, private_scan
+        from soabench.trackers import ScanFailure
+
+        try:
+            return self.calls(self.tracker.step, private_scan(scan) if self.private else scan)
+        except PluginFailed as exc:
+            raise ScanFailure(scan.k, exc.message, exc.traceback) from None
 
 
 def _run_one_tracker(
@@ -534,32 +571,45 @@ def _run_one_tracker(
 
     def build() -> Any:
         cls = plugins.resolve(plugins.TRACKER, key.model)
-        setup = TrackerSetup(sensor_cfg, scene, seeds.placement_rng(), key.mode, config)
-        return cls(setup, **config.plugins.get(key.model, {}))
+        own = copy.deepcopy(config)  # the plugin's own: nothing it changes reaches another run
+        setup = TrackerSetup(dataclasses.replace(sensor_cfg), scene, seeds.placement_rng(), key.mode, own)
+        return cls(setup, **own.plugins.get(key.model, {}))
 
-    run = _guarded(key, plugins.TRACKER, build, scans, guard.check_estimates, out)
+    run = _guarded(key, plugins.TRACKER, build, scans, guard.check_estimates, out, config.experiment.plugin_budget)
     if run is not None:
         _record(key, config, sensor_cfg, scans, seeds, run, out)
 
 
 def _guarded(
-    key: RunKey, kind: str, build: Callable[[], Any], scans: Scans, check: Callable[..., Any], out: TrialResult
+    key: RunKey,
+    kind: str,
+    build: Callable[[], Any],
+    scans: Scans,
+    check: Callable[..., Any],
+    out: TrialResult,
+    budget: float,
 ) -> Any:
-    """Build and run a plugin; on failure append a failure record to ``out`` and return None."""
-    from soabench.experiment import guard
+    """Build and run a plugin through :class:`~soabench.experiment.isolate.PluginCalls` (its own thread, ``budget``
+    seconds per call, a private copy of each scan); on failure append a failure record (with the plugin's traceback)
+    to ``out`` and return None."""
+    from soabench import plugins
+    from soabench.experiment import guard, isolate
+    from soabench.experiment.workers import OWN_CODE, note_activity
     from soabench.trackers import ScanFailure, run_tracker
 
     k: int | None = None
+    note_activity(key.trial, f"{kind} plugin {key.model!r} (clutter {key.clutter:g}, mode {key.mode})")
     try:
-        tracker = build()
-    except Exception as exc:
-        error = f"{type(exc).__name__}: {exc}"
-    else:
-        try:
-            return run_tracker(scans, tracker, check)
-        except ScanFailure as exc:
-            k, error = exc.k, exc.message
-    out.failures.append(guard.failure_row(key.trial, key.clutter, key.model, key.mode, kind, k, error))
+        with isolate.PluginCalls(budget, f"{kind} {key.model!r}") as calls:
+            tracker = calls(build)
+            return run_tracker(scans, _Isolated(tracker, calls, private=kind == plugins.TRACKER), check)
+    except isolate.PluginFailed as exc:  # in its constructor
+        error, tb = exc.message, exc.traceback
+    except ScanFailure as exc:
+        k, error, tb = exc.k, exc.message, exc.traceback
+    finally:
+        note_activity(key.trial, OWN_CODE)
+    out.failures.append(guard.failure_row(key.trial, key.clutter, key.model, key.mode, kind, k, error, tb))
     return None
 
 
