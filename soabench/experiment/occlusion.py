@@ -47,16 +47,16 @@ def dump_toml(data: dict) -> str:
 
 
 def base_scenario(net: str, scenario: str | None) -> dict:
-    """The scenario dict a sweep point starts from (the user's TOML, else the scene folder's own, else empty),
-    with ``[files]`` paths made absolute so the point's TOML may live anywhere."""
-    from soabench.scenario import scene_folder
+    """The scenario dict a sweep point starts from (the user's TOML, else the scene folder's own, else a user net's
+    defaults), with ``[files]`` paths made absolute so the point's TOML may live anywhere."""
+    from soabench.scenario import USER_NET_DEFAULTS, scene_folder
 
     path = Path(scenario) if scenario is not None else None
     if path is None:
         folder = scene_folder(net)
         path = folder / "scenario.toml" if folder is not None else None
     if path is None:
-        return {}
+        return {k: dict(v) for k, v in USER_NET_DEFAULTS.items()}
     from soabench.scenario import load_scenario
 
     load_scenario(path)  # validates (one-line errors)
@@ -99,6 +99,21 @@ def occlusion_points(values, base_config: dict) -> list[dict]:
             f"{MAX_PARKING_DENSITY:g}]",
         )
     return [{"name": f"density_{v:05.2f}", "value": v, "config": base_config} for v in vals]
+
+
+def check_parking_lanes(net_file: str, values) -> None:
+    """Refuse, before anything is written, densities above 0 on a network without parking lanes (parked cars stand
+    only on parking lanes: :mod:`soabench.scenario.parking`)."""
+    from soabench.scenario.network import read_net
+    from soabench.scenario.parking import parking_lanes
+
+    above = [float(v) for v in values if float(v) > 0]
+    require(
+        not above or bool(parking_lanes(read_net(net_file))),
+        f"sweep occlusion: network {Path(net_file).name!r} has no parking lanes, so density {above[0]:g} is "
+        'impossible (parked cars stand on normal-edge lanes such as allow="custom1" that carry neither passenger '
+        "cars nor pedestrians); give a network with parking lanes (every shipped scene has them) or only --values 0",
+    )
 
 
 def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:

@@ -184,6 +184,10 @@ def run_sweep(
             # the network and the config cross-checks, before the folder is written
             _, scenario_cfg = load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
             check_against_scenario(config, scenario_cfg)
+            if kind == "occlusion":
+                from soabench.experiment.occlusion import check_parking_lanes
+
+                check_parking_lanes(scenario_cfg.net_file, values)
             name = scenario_name(net, scenario_cfg)
             default = Path("results") / name / f"sweep-{kind}-{_utc_stamp()}"
             sweep_dir = resolve(out if out is not None else default)
