@@ -138,3 +138,23 @@ def test_occlusion_sweep_on_user_net_keeps_its_defaults_and_says_each_derivation
     err = capfd.readouterr().err
     for density in ("0 per 100 m", "4 per 100 m"):
         assert sum(density in ln for ln in err.splitlines()) == 1, err
+    _sweep_figure_has_error_bars(out)
+
+
+def _sweep_figure_has_error_bars(sweep_dir: Path) -> None:
+    """sweep_occlusion.png: every panel draws each series with error bars (95 % CI over trials, said in the legend)."""
+    import json
+
+    from matplotlib.container import ErrorbarContainer
+
+    from soabench.experiment.occlusion import occlusion_figure, occlusion_report
+
+    meta = json.loads((sweep_dir / "sweep.json").read_text())
+    report, _ = occlusion_report(sweep_dir, meta)
+    fig = occlusion_figure(sweep_dir, meta["points"], report["table"])
+    assert "95% CI over trials" in fig.legends[0].get_title().get_text()
+    for ax in fig.axes:
+        bars = [c for c in ax.containers if isinstance(c, ErrorbarContainer)]
+        assert len(bars) == 2  # S-OA static and dynamic
+        segments = [seg for c in bars for seg in c.lines[2][0].get_segments()]
+        assert len(segments) == 4 and any(abs(seg[1, 1] - seg[0, 1]) > 0 for seg in segments)
