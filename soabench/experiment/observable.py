@@ -57,7 +57,7 @@ def _hint(meta_json: str) -> str:
     meta = json.loads(meta_json)
     try:
         firsts, probe = first_observable(meta)
-    except SoabenchError:  # the scene is not loadable here (a copied run folder): no hint
+    except (SoabenchError, OSError):  # the scene is not loadable here (a copied run folder): no hint
         return ""
     name = meta.get("net_name") or meta.get("net")
     if not firsts:
