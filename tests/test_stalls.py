@@ -4,6 +4,7 @@ points of an occlusion sweep on a user network keep that network's defaults."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -17,7 +18,7 @@ from soabench.cli import main
 from soabench.errors import SoabenchError
 from soabench.scenario import load, simulate
 from soabench.scenario.simulation import _simulate_here
-from soabench.scenario.watchdog import STALL_ENV, Progress, stall_timeout
+from soabench.scenario.watchdog import INSERTING, STALL_ENV, STEPPING, Progress, run_watched, stall_timeout
 from soabench.seeding import trial_seeds
 
 BIN = Path(sumo.SUMO_HOME) / "bin"
@@ -158,3 +159,34 @@ def _sweep_figure_has_error_bars(sweep_dir: Path) -> None:
         assert len(bars) == 2  # S-OA static and dynamic
         segments = [seg for c in bars for seg in c.lines[2][0].get_segments()]
         assert len(segments) == 4 and any(abs(seg[1, 1] - seg[0, 1]) > 0 for seg in segments)
+
+
+def _beating(seconds: float, progress: Progress) -> str:
+    for i in range(int(seconds / 0.05)):
+        time.sleep(0.05)
+        progress.beat(STEPPING, 0.1 * i)
+    return "done"
+
+
+def _silent(progress: Progress) -> None:
+    progress.beat(INSERTING)
+    time.sleep(60)
+
+
+def _crashing(progress: Progress) -> None:
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_watchdog_tells_slow_progress_from_a_stall(monkeypatch):
+    """Progress resets the clock (1.5 s of work under a 0.5 s limit returns); silence stops the child in bounded
+    time with the phase it stood in; a crash becomes one line too; an error keeps its message."""
+    monkeypatch.setenv(STALL_ENV, "0.5")
+    assert run_watched(_beating, (1.5,), "work") == "done"
+    t0 = time.monotonic()
+    with pytest.raises(SoabenchError, match=r"^work made no progress for 0.5 s while inserting .*; try less"):
+        run_watched(_silent, (), "work", hint="try less")
+    assert time.monotonic() - t0 < 5
+    with pytest.raises(SoabenchError, match="work stopped without a result .*signal SIGKILL"):
+        run_watched(_crashing, (), "work")
+    with pytest.raises(SoabenchError, match="^bad input$"):
+        run_watched(lambda progress: (_ for _ in ()).throw(SoabenchError("bad input")), (), "work")

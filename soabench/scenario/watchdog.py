@@ -89,13 +89,15 @@ def run_watched(fn: Callable[..., Any], args: tuple, describe: str, hint: str = 
     limit = stall_timeout()
     if not hasattr(os, "fork"):  # pragma: no cover - Windows
         return fn(*args, progress=Progress())
+    from soabench.experiment.workers import _set_pdeathsig  # imported here: the child starts at once
+
     page = mmap.mmap(-1, _STATE.size)  # anonymous and shared: the child's writes are seen here
     read_fd, write_fd = os.pipe()
     with warnings.catch_warnings():  # the child runs only SUMO and numpy; it takes no lock another thread holds
         warnings.simplefilter("ignore", DeprecationWarning)
         pid = os.fork()
     if pid == 0:  # the child
-        _child(read_fd, write_fd, page, fn, args)
+        _child(read_fd, write_fd, page, fn, args, _set_pdeathsig)
     os.close(write_fd)
     finished = False
     try:
@@ -104,26 +106,26 @@ def run_watched(fn: Callable[..., Any], args: tuple, describe: str, hint: str = 
     finally:
         os.close(read_fd)
         page.close()
-        status = _reap(pid, kill=not finished)
+        ended = _reap(pid, kill=not finished)
     if not data:
-        raise SoabenchError(f"{describe} stopped without a result (the SUMO process ended with {status})")
-    status, *rest = pickle.loads(data)  # our own child's bytes: never data read from a file
-    if status == "ok":
+        raise SoabenchError(f"{describe} stopped without a result (the SUMO process ended with {ended})")
+    kind, *rest = pickle.loads(data)  # our own child's bytes: never data read from a file
+    if kind == "ok":
         return rest[0]
-    if status == "soabench":
+    if kind == "soabench":
         raise SoabenchError(rest[0])
     raise RuntimeError(f"{rest[0]} (in the SUMO process)\n{rest[1]}")
 
 
-def _child(read_fd: int, write_fd: int, page: mmap.mmap, fn: Callable[..., Any], args: tuple) -> None:
+def _child(
+    read_fd: int, write_fd: int, page: mmap.mmap, fn: Callable[..., Any], args: tuple, pdeathsig: Callable[[], bool]
+) -> None:
     """Run ``fn`` and write its pickled outcome to ``write_fd``; never returns (``os._exit``)."""
     code = 0
     try:
         os.close(read_fd)
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's; it kills this process
-        from soabench.experiment.workers import _set_pdeathsig
-
-        _set_pdeathsig()  # dies with its parent
+        pdeathsig()  # dies with its parent (Linux)
         try:
             out: tuple = ("ok", fn(*args, progress=Progress(page)))
         except SoabenchError as exc:
