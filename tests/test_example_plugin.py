@@ -43,14 +43,32 @@ def _env(site: Path) -> dict[str, str]:
     return env
 
 
-def test_entry_points_are_found(installed) -> None:
+def _other_plugin(site: Path) -> Path:
+    """Another installed soabench plugin (distribution metadata only), whose names sort after the example's."""
+    info = site / "zz_other_plugin-0.1.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: zz-other-plugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[soabench.birth_models]\nzz_birth = zz_other:Birth\n[soabench.trackers]\nzz_tracker = zz_other:Tracker\n"
+    )
+    return site
+
+
+@pytest.mark.parametrize("others", [False, True], ids=["alone", "beside-another-plugin"])
+def test_entry_points_are_found(installed, tmp_path, others) -> None:
+    """The example's entry points are found and resolve to its classes, whatever else the user has installed."""
     code = (
         "from soabench import plugins; "
-        "print(plugins.names(plugins.BIRTH)[-1], plugins.names(plugins.TRACKER)[-1], "
-        "plugins.resolve(plugins.TRACKER, 'nnkf').__name__)"
+        "print('edge' in plugins.names(plugins.BIRTH), 'nnkf' in plugins.names(plugins.TRACKER), "
+        "'zz_tracker' in plugins.names(plugins.TRACKER), plugins.resolve(plugins.TRACKER, 'nnkf').__module__, "
+        "plugins.resolve(plugins.BIRTH, 'edge').__module__)"
     )
-    out = subprocess.run([sys.executable, "-c", code], env=_env(installed), capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["edge", "nnkf", "NearestNeighbourKF"]
+    env = _env(installed)
+    if others:
+        env["PYTHONPATH"] = os.pathsep.join([env["PYTHONPATH"], str(_other_plugin(tmp_path / "other"))])
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    found = ["True", "True", str(others), "soabench_example_plugin.tracker", "soabench_example_plugin.births"]
+    assert out.stdout.split() == found
 
 
 def test_example_plugins_run_beside_soa(installed, tmp_path) -> None:

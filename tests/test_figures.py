@@ -240,6 +240,30 @@ def test_births_sweep_figure(tmp_path):
     fig = births_figure(table, ["soa", "pubm"], ["static"], 6)
     _rendered(fig, tmp_path, "sweep_births")
     assert {"S-OA", "PUBM", "static", "true births per run N_true = 6"} <= set(_legend_labels(fig))
+    half = [{"soa/static": 0.1, "pubm/static": 0.2} for _ in table]
+    fig = births_figure(table, ["soa", "pubm"], ["static"], 6, half)
+    ax = fig.axes[0]
+    assert len(ax.containers) == 2 and all(c.has_yerr for c in ax.containers)
+    assert fig.legends[0].get_title().get_text() == "error bars: 95% CI over trials"
+
+
+def test_pooled_mean_ci_is_the_trial_cluster_interval():
+    """Pooled over trials with equal counts, the ratio estimator's CI is the Student-t CI of the trial means."""
+    from scipy.stats import t as student_t
+
+    from soabench.experiment.plots import mean_ci, pooled_mean_ci
+
+    rng = np.random.default_rng(4)
+    values, trials = rng.exponential(1.5, 40), np.repeat(np.arange(8), 5)
+    means = np.array([values[trials == t].mean() for t in range(8)])
+    assert pooled_mean_ci(values, trials) == pytest.approx(mean_ci(means)[1], rel=1e-12)
+    # unequal counts: (sum_t (S_t - R n_t)^2 T/(T-1))^0.5 / N times the t quantile
+    trials = np.array([0] * 3 + [1] * 10 + [2] * 27)
+    s, n = np.bincount(trials, values), np.bincount(trials)
+    r = s.sum() / n.sum()
+    want = student_t.ppf(0.975, 2) * np.sqrt(3 / 2 * np.sum((s - r * n) ** 2)) / n.sum()
+    assert pooled_mean_ci(values, trials) == pytest.approx(want, rel=1e-12)
+    assert np.isnan(pooled_mean_ci(values[:3], trials[:3]))  # one trial: no interval
 
 
 def test_key_figure_labels_units_and_full_precision_axis(tables, tmp_path):

@@ -7,11 +7,11 @@ A suite file (TOML, read as data only) holds:
 * one ``[[scenario]]`` table per short scenario: ``name``, ``net`` (a shipped network or a path relative to the
   suite file), optional ``polys`` (polygon files) and ``scenario`` (scenario TOML), ``seeds`` (base seeds),
   ``trials`` per seed, ``duration`` (s), ``models``, ``trackers``, ``probabilities``, ``clutter``;
-* one ``[[threshold]]`` table per check: ``metric`` (a column of trials.csv, e.g. ``ospa``, ``card_err``,
-  ``precision``), ``model`` (a name or ``"*"``), optional ``mode``/``scenario`` filters, and any of ``max``,
-  ``min`` (absolute), ``max_increase``, ``max_decrease`` (relative to the baseline value: fail when the value
-  exceeds ``baseline * (1 + max_increase)`` or falls below ``baseline * (1 - max_decrease)``) and ``abs_tol``
-  (slack added to the relative bounds, default 1e-9).
+* one ``[[threshold]]`` table per check: ``metric`` (a metric or ``t_*`` timing column of trials.csv, e.g.
+  ``ospa``, ``card_err``, ``precision``; any other name is a bad suite), ``model`` (a name or ``"*"``), optional
+  ``mode``/``scenario`` filters, and any of ``max``, ``min`` (absolute), ``max_increase``, ``max_decrease``
+  (relative to the baseline value: fail when the value exceeds ``baseline * (1 + max_increase)`` or falls below
+  ``baseline * (1 - max_decrease)``) and ``abs_tol`` (slack added to the relative bounds, default 1e-9).
 
 A value is the mean of the metric over every trial and seed of one (scenario, model, mode, clutter). A value that is
 NaN (no trial produced it) fails every threshold on it, and a plugin run that failed (soabench.experiment.guard)
@@ -22,6 +22,7 @@ check passes, 1 on a regression. ``--update-baseline`` writes every measured val
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import json
 import math
 import sys
@@ -198,6 +199,7 @@ def load_suite(path: str | Path) -> Suite:
     for i, raw in enumerate(data.get("threshold", [])):
         t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
         require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
+        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}")
         th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
         th.mode, th.scenario = t.get("mode"), t.get("scenario")
         for key in ("max", "min"):
@@ -215,6 +217,34 @@ def load_suite(path: str | Path) -> Suite:
     if any(th.relative for th in suite.thresholds):
         require(suite.baseline is not None, f'{p}: relative thresholds need [suite] baseline = "FILE.json"')
     return suite
+
+
+def _check_metric(metric: Any, where: str) -> None:
+    """A threshold's metric must be a metric or timing column of trials.csv (a typo is a bad suite, not a failed
+    check)."""
+    from soabench.experiment.store import METRIC_COLUMNS, TIMING_COLUMNS
+
+    allowed = METRIC_COLUMNS + TIMING_COLUMNS
+    if metric in allowed:
+        return
+    close = difflib.get_close_matches(str(metric), allowed, n=1)
+    guess = f" (did you mean {close[0]!r}?)" if close else ""
+    raise SoabenchError(f"{where}: metric {metric!r} is not a trials.csv metric{guess}; allowed: {', '.join(allowed)}")
+
+
+def check_import_paths(suite: Suite) -> None:
+    """Every import-path plugin a suite names must be allowed with ``--plugin`` (soabench.plugins: the closed list);
+    said before anything runs, with the check command's advice."""
+    from soabench import plugins
+
+    typed = set(plugins.session_import_paths())
+    for s in suite.scenarios:
+        for name in (*s.models, *s.trackers):
+            require(
+                not plugins.is_import_path(name) or name in typed,
+                f"{suite.path}: scenario {s.name!r} names the import-path plugin {name!r}; soabench imports only "
+                f"built-ins, installed entry points and import paths allowed on the command line: add --plugin {name}",
+            )
 
 
 # ------------------------------------------------------------------------------------------------ running
@@ -243,6 +273,7 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
     from soabench.experiment.runner import run_experiment
     from soabench.experiment.store import RunStore
 
+    check_import_paths(suite)
     base = load_config(suite.config)
     for s in suite.scenarios:  # validate every scenario before running any
         _config_for(base, s, s.seeds[0])

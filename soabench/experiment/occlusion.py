@@ -12,11 +12,17 @@ from __future__ import annotations
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from soabench.birth import LABEL
 from soabench.errors import require
 from soabench.experiment.files import read_json
 from soabench.experiment.report import fmt, fmt_pct
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -47,16 +53,16 @@ def dump_toml(data: dict) -> str:
 
 
 def base_scenario(net: str, scenario: str | None) -> dict:
-    """The scenario dict a sweep point starts from (the user's TOML, else the scene folder's own, else empty),
-    with ``[files]`` paths made absolute so the point's TOML may live anywhere."""
-    from soabench.scenario import scene_folder
+    """The scenario dict a sweep point starts from (the user's TOML, else the scene folder's own, else a user net's
+    defaults), with ``[files]`` paths made absolute so the point's TOML may live anywhere."""
+    from soabench.scenario import USER_NET_DEFAULTS, scene_folder
 
     path = Path(scenario) if scenario is not None else None
     if path is None:
         folder = scene_folder(net)
         path = folder / "scenario.toml" if folder is not None else None
     if path is None:
-        return {}
+        return {k: dict(v) for k, v in USER_NET_DEFAULTS.items()}
     from soabench.scenario import load_scenario
 
     load_scenario(path)  # validates (one-line errors)
@@ -99,6 +105,21 @@ def occlusion_points(values, base_config: dict) -> list[dict]:
             f"{MAX_PARKING_DENSITY:g}]",
         )
     return [{"name": f"density_{v:05.2f}", "value": v, "config": base_config} for v in vals]
+
+
+def check_parking_lanes(net_file: str, values) -> None:
+    """Refuse, before anything is written, densities above 0 on a network without parking lanes (parked cars stand
+    only on parking lanes: :mod:`soabench.scenario.parking`)."""
+    from soabench.scenario.network import read_net
+    from soabench.scenario.parking import parking_lanes
+
+    above = [float(v) for v in values if float(v) > 0]
+    require(
+        not above or bool(parking_lanes(read_net(net_file))),
+        f"sweep occlusion: network {Path(net_file).name!r} has no parking lanes, so density {above[0]:g} is "
+        'impossible (parked cars stand on normal-edge lanes such as allow="custom1" that carry neither passenger '
+        "cars nor pedestrians); give a network with parking lanes (every shipped scene has them) or only --values 0",
+    )
 
 
 def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
@@ -144,42 +165,76 @@ def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
                 f"| {c['wins']} / {c['ties']} / {c['losses']} / {c['na']} | {fmt_pct(c['card_reduction'])} "
                 f"| {fmt_pct(c['ospa_reduction'])} | {fmt_pct(100 * frac if math.isfinite(frac) else frac)} |"
             )
-    _figure_occlusion(sweep_dir, rows)
-    lines += ["", "Figure: `sweep_occlusion.png`"]
+    from soabench.plotstyle import save_png
+
+    save_png(occlusion_figure(sweep_dir, meta["points"], rows), sweep_dir / "sweep_occlusion.png")
+    lines += ["", "Figure: `sweep_occlusion.png` (mean over trials, error bars: 95% confidence interval over trials)"]
     return {"kind": "occlusion", "table": rows, "vs_soa": comps}, "\n".join(lines) + "\n"
 
 
-def _figure_occlusion(sweep_dir: Path, rows: list[dict]) -> None:
-    """Delay, cardinality error and OSPA per birth model and mode against the parked-car density (one style module)."""
+def _trial_values(sweep_dir: Path, points: list[dict], clutter: float) -> dict[tuple, np.ndarray]:
+    """Per-trial values of the figure's metrics per (density, model, mode, column), from each point's trials.csv."""
+    from soabench.experiment.paper import read_rows
+
+    out: dict[tuple, list[float]] = {}
+    for p in points:
+        for r in read_rows(sweep_dir / "points" / p["name"] / "trials.csv"):
+            if float(r["clutter"]) != clutter:
+                continue
+            for col, _ in _PANELS:
+                out.setdefault((float(p["value"]), str(r["model"]), str(r["mode"]), col), []).append(float(r[col]))
+    return {k: np.asarray(v, dtype=float) for k, v in out.items()}
+
+
+#: (trials.csv column, axis label) per panel of sweep_occlusion.png
+_PANELS = (
+    ("delay_mean", "mean tracking delay k̄ (s)"),
+    ("card_err", "mean cardinality error (targets)"),
+    ("ospa", "mean OSPA (m)"),
+)
+
+
+def occlusion_figure(sweep_dir: Path, points: list[dict], rows: list[dict]) -> Figure:
+    """Delay, cardinality error and OSPA per birth model and mode against the parked-car density, mean over trials
+    with its 95 % confidence interval (Student t) as error bars (one style module)."""
     from soabench import plotstyle as ps
+    from soabench.experiment.plots import mean_ci
 
     models = list(dict.fromkeys(r["model"] for r in rows))
     modes = list(dict.fromkeys(r["mode"] for r in rows))
-    panels = (
-        ("delay_mean", "mean tracking delay k̄ (s)"),
-        ("card_err_mean", "mean cardinality error (targets)"),
-        ("ospa_mean", "mean OSPA (m)"),
-    )
+    values = _trial_values(sweep_dir, points, float(rows[0]["clutter"])) if rows else {}
+    densities = sorted({float(r["density"]) for r in rows})
+    n_series = max(1, len(models) * len(modes))
+    span = 0.012 * (densities[-1] - densities[0] if len(densities) > 1 else 1.0)  # offsets keep the bars apart
     with ps.style():
         fig = ps.figure("double", 2.6)
         axes = fig.subplots(1, 3, sharex=True)  # one density axis (a point without episodes has no delay)
-        for ax, letter, (col, ylabel) in zip(axes, ps.letters(3), panels, strict=True):
-            for model in models:
+        for ax, letter, (col, ylabel) in zip(axes, ps.letters(3), _PANELS, strict=True):
+            for i, (model, mode) in enumerate((a, b) for a in models for b in modes):
                 st = ps.model_style(model)
-                for mode in modes:
-                    sub = [r for r in rows if r["model"] == model and r["mode"] == mode]
-                    ax.plot(
-                        [r["density"] for r in sub],
-                        [r[col] for r in sub],
-                        ls=ps.mode_style(mode).linestyle,
-                        marker=st.marker,
-                        ms=3,
-                        color=st.color,
-                        mfc=st.color if mode == "static" else "white",
-                    )
+                pts = [
+                    (d, *mean_ci(values[(d, model, mode, col)])) for d in densities if (d, model, mode, col) in values
+                ]
+                if not pts:
+                    continue
+                x, mu, half = (np.array(c, dtype=float) for c in zip(*pts, strict=True))
+                ax.errorbar(
+                    x + (i - (n_series - 1) / 2) * span,
+                    mu,
+                    yerr=np.nan_to_num(half),
+                    fmt=st.marker,
+                    ls=ps.mode_style(mode).linestyle,
+                    ms=3,
+                    color=st.color,
+                    mfc=st.color if mode == "static" else "white",
+                    elinewidth=0.7,
+                    capsize=2,
+                )
             ax.set_xlabel("parked cars per 100 m of kerb")
             ax.set_ylabel(ylabel)
             ax.set_ylim(bottom=0)
             ps.panel_title(ax, letter, ylabel.split(" (")[0])
-        ps.legend_below(fig, ps.model_handles(models) + ps.mode_handles(modes), ncol=4)
-        ps.save_png(fig, sweep_dir / "sweep_occlusion.png")
+        ps.legend_below(
+            fig, ps.model_handles(models) + ps.mode_handles(modes), ncol=4, title="error bars: 95% CI over trials"
+        )
+    return fig

@@ -55,6 +55,24 @@ def mean_ci(v: np.ndarray, level: float = 0.95) -> tuple[float, float]:
     return float(v.mean()), float(half)
 
 
+def pooled_mean_ci(values: np.ndarray, trials: np.ndarray, level: float = 0.95) -> float:
+    """Half-width of the Student-t confidence interval, over trials, of the mean of ``values`` pooled over every
+    trial (each value tagged with its trial): the ratio estimator sum / count with trials as the sampled units,
+    variance T/(T-1) * sum_t (S_t - mean * n_t)^2 / (sum_t n_t)^2 over the T trials with a value. NaN for T < 2."""
+    from scipy.stats import t as student_t
+
+    values, trials = np.asarray(values, dtype=float), np.asarray(trials)
+    keep = np.isfinite(values)
+    values, trials = values[keep], trials[keep]
+    ids, which = np.unique(trials, return_inverse=True)
+    if ids.size < 2:
+        return math.nan
+    sums, counts = np.bincount(which, weights=values), np.bincount(which).astype(float)
+    mean = sums.sum() / counts.sum()
+    var = ids.size / (ids.size - 1) * float(np.sum((sums - mean * counts) ** 2)) / counts.sum() ** 2
+    return float(student_t.ppf(0.5 + level / 2, ids.size - 1) * math.sqrt(var))
+
+
 def _dt(tables: RunTables) -> float:
     return float(tables.meta["config"]["sensor"]["dt"])
 

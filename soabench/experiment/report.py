@@ -20,6 +20,7 @@ Statistics (per clutter rate lambda, birth model and probability mode):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from collections.abc import Sequence
@@ -168,6 +169,10 @@ def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: l
         stats = {(mo, md): model_stats(tables, clutter, mo, md) for mo in tables.models for md in tables.modes}
         comps = []
         warning = unobserved_warning(tables, clutter)
+        if warning:  # when, on this scene, somebody does become observable
+            from soabench.experiment.observable import duration_hint
+
+            warning += duration_hint(meta)
         if "soa" in tables.models and not warning:  # paired against S-OA: the baselines, then every plugin
             others = [b for b in BASELINES if b in tables.models] + [
                 m for m in tables.models if m != "soa" and m not in BASELINES
@@ -254,6 +259,8 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
                     f"| {c['ties']} | {c['losses']} | {c['na']} | {pct} "
                     f"| {fmt_pct(c['card_reduction'])} | {fmt_pct(c['ospa_reduction'])} |"
                 )
+    if summary["results"]:
+        lines += ["", table_legend(summary["config"].get("metrics", {}))]
     if summary["failures"]:
         lines += ["", f"## Failed trials ({len(summary['failures'])})", "", "| trial | seed | sumo_seed | error |"]
         lines.append("|---|---|---|---|")
@@ -270,6 +277,29 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
     if figures:
         lines += ["", "Figures: " + ", ".join(f"`{f}`" for f in figures)]
     return "\n".join(lines) + "\n"
+
+
+def table_legend(metrics: dict) -> str:
+    """What the summary table's terms mean, with the values this run used (docs/method.md §5.2-5.6)."""
+    from soabench.config import MetricsConfig
+
+    m = {**dataclasses.asdict(MetricsConfig()), **metrics}
+    lower_bound = m["censored"] == "lower_bound"
+    return (
+        "Legend: k̄ delay is the mean over trials of each trial's mean tracking delay, σ̄ the mean of the per-trial "
+        "standard deviations (docs/method.md §5.4); ± is the standard deviation over trials. **censored** counts "
+        "detection episodes in which no estimate ever came within the "
+        f"{m['d_gate']:g} m gate of the pedestrian (never initiated), out of all episodes; they are "
+        + (
+            'counted in k̄ with the episode\'s remaining length as a lower bound (metrics.censored = "lower_bound")'
+            if lower_bound
+            else 'left out of k̄ (metrics.censored = "exclude")'
+        )
+        + f". **OSPA** (§5.2): cut-off c = {m['ospa_c']:g} m, order p = {m['ospa_p']:g}; c is the distance charged "
+        "for each missed or false target, and for an estimate farther than c from its pedestrian. **GOSPA** (§5.6): "
+        f"cut-off c = {m['gospa_c']:g} m, order p = {m['gospa_p']:g}, α = 2; each missed or false target costs c^p / 2 "
+        "and the total is not divided by the number of targets."
+    )
 
 
 def unobserved_warning(tables: RunTables, clutter: float) -> str:

@@ -46,6 +46,7 @@ from soabench.experiment.provenance import REPRODUCTION_TOLERANCE, platform_info
 from soabench.experiment.runmeta import check_requested, validate_run_meta
 from soabench.experiment.store import EPISODE_COLUMNS, RUN_FILE, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS, RunStore
 from soabench.experiment.workers import OWN_CODE, note_activity
+from soabench.scenario.derive import said_by_the_driver
 from soabench.seeding import trial_seeds
 
 TrialFn = Callable[..., Any]
@@ -130,7 +131,8 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
         with _SUMO_LOCK:
             plugins.allow_import_paths(spec.plugin_paths)
             config = Config.from_dict(spec.config)
-            scene, scenario = load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
+            with said_by_the_driver():  # the driver loaded this scene and said what it derived
+                scene, scenario = load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
             fn = spec.trial_fn or _default_trial_fn()
             result = fn(trial, config, scene, scenario, save_estimates=spec.save_estimates)
     except Exception as exc:  # a failed trial must not stop the run (issue 7)

@@ -2,7 +2,7 @@
 
 * :func:`clutter_figure`: precision vs clutter rate λ per model (colour) and mode (static solid, dynamic dashed),
   mean over trials with its 95% confidence interval (paper Fig. 5h, docs/method.md §5.5);
-* :func:`births_figure`: k̄_delay vs the expected births per run N_tot (paper §V.C);
+* :func:`births_figure`: k̄_delay vs the expected births per run N_tot (paper §V.C), ± its 95% CI over trials;
 * :func:`key_figure`: the README's key figure: (a) mean delay, (b) cardinality error, (c) precision vs λ.
 
 Each ``*_figure`` returns the :class:`~matplotlib.figure.Figure`; :func:`soabench.plotstyle.save_png` writes it.
@@ -82,30 +82,44 @@ def clutter_figure(rows: Sequence[Mapping], models: Sequence[str] = (), modes: S
     return fig
 
 
-def births_figure(table: Sequence[Mapping], models: Sequence[str], modes: Sequence[str], n_true: float) -> Figure:
-    """k̄_delay over all counted episodes vs N_tot (``table`` rows: ``N_tot`` and ``delay["model/mode"]``)."""
+def births_figure(
+    table: Sequence[Mapping],
+    models: Sequence[str],
+    modes: Sequence[str],
+    n_true: float,
+    half: Sequence[Mapping] | None = None,
+) -> Figure:
+    """k̄_delay over all counted episodes vs N_tot (``table`` rows: ``N_tot`` and ``delay["model/mode"]``), with
+    error bars of half-width ``half[i]["model/mode"]`` (95 % CI over trials) where given."""
+    n_series = max(1, len(models) * len(modes))
+    x = np.array([r["N_tot"] for r in table], dtype=float)
+    span = 0.006 * (x.max() - x.min() if len(x) > 1 else 1.0)  # small x offsets keep the error bars apart
     with ps.style():
         fig = ps.figure("single", 2.9)
         ax = fig.add_subplot()
-        x = [r["N_tot"] for r in table]
-        for mode in modes:
-            for model in models:
-                st = ps.model_style(model)
-                ax.plot(
-                    x,
-                    [r["delay"][f"{model}/{mode}"] for r in table],
-                    ls=ps.mode_style(mode).linestyle,
-                    marker=st.marker,
-                    ms=3,
-                    color=st.color,
-                    mfc=st.color if mode == "static" else "white",
-                )
+        for i, (mode, model) in enumerate((b, a) for b in modes for a in models):
+            st = ps.model_style(model)
+            key = f"{model}/{mode}"
+            err = None if half is None else np.nan_to_num(np.array([h[key] for h in half], dtype=float))
+            ax.errorbar(
+                x + (0.0 if half is None else (i - (n_series - 1) / 2) * span),
+                [r["delay"][key] for r in table],
+                yerr=err,
+                ls=ps.mode_style(mode).linestyle,
+                marker=st.marker,
+                ms=3,
+                color=st.color,
+                mfc=st.color if mode == "static" else "white",
+                elinewidth=0.6,
+                capsize=1.5,
+            )
         line = ax.axvline(n_true, color="k", lw=0.8, ls=":", label=f"true births per run N_true = {n_true:g}")
         ax.set_xlabel("expected births per run N_tot")
         ax.set_ylabel("mean tracking delay k̄ (s)")
         ax.set_ylim(bottom=0)
         ps.panel_title(ax, None, "Average delay vs N̂ (paper §V.C)")
-        ps.legend_below(fig, ps.model_handles(models) + ps.mode_handles(modes) + [line], ncol=3)
+        title = None if half is None else "error bars: 95% CI over trials"
+        ps.legend_below(fig, ps.model_handles(models) + ps.mode_handles(modes) + [line], ncol=3, title=title)
     return fig
 
 

@@ -184,6 +184,10 @@ def run_sweep(
             # the network and the config cross-checks, before the folder is written
             _, scenario_cfg = load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
             check_against_scenario(config, scenario_cfg)
+            if kind == "occlusion":
+                from soabench.experiment.occlusion import check_parking_lanes
+
+                check_parking_lanes(scenario_cfg.net_file, values)
             name = scenario_name(net, scenario_cfg)
             default = Path("results") / name / f"sweep-{kind}-{_utc_stamp()}"
             sweep_dir = resolve(out if out is not None else default)
@@ -346,19 +350,25 @@ def _sweep_outcome(sweep_dir: Path, points: list[dict], outcomes: list[RunOutcom
 
 
 # ------------------------------------------------------------------------------------------------ sweep report
-def _episode_means(run_dir: Path, models: Sequence[str], modes: Sequence[str], clutter: float) -> dict:
-    """k̄_delay over all counted episodes of a run, per (model, mode)."""
+def _episode_means(
+    run_dir: Path, models: Sequence[str], modes: Sequence[str], clutter: float
+) -> dict[tuple[str, str], tuple[float, float]]:
+    """k̄_delay over all counted episodes of a run per (model, mode), and the half-width of its 95 % confidence
+    interval over trials (:func:`~soabench.experiment.plots.pooled_mean_ci`)."""
+    from soabench.experiment.plots import pooled_mean_ci
+
     e = read_csv(run_dir / "episodes.csv")
     out = {}
     for model in models:
         for mode in modes:
             if not e or "delay" not in e or len(e["delay"]) == 0:
-                out[(model, mode)] = math.nan
+                out[(model, mode)] = (math.nan, math.nan)
                 continue
             m = (e["model"] == model) & (e["mode"] == mode) & (e["clutter"] == clutter) & (e["censored"] == 0)
-            d = e["delay"][m]
+            d, trials = e["delay"][m], e["trial"][m]
+            trials = trials[~np.isnan(d)]
             d = d[~np.isnan(d)]
-            out[(model, mode)] = float(d.mean()) if d.size else math.nan
+            out[(model, mode)] = (float(d.mean()), pooled_mean_ci(d, trials)) if d.size else (math.nan, math.nan)
     return out
 
 
@@ -367,12 +377,13 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     points = meta["points"]
     exp = points[0]["config"]["experiment"]
     models, modes, clutter = [*exp["models"], *exp.get("trackers", ())], exp["probabilities"], float(exp["clutter"][0])
-    table = []
+    table, half = [], []  # half: 95 % CI half-widths (the figure's error bars; not in the sweep's tables)
     for p in points:
         means = _episode_means(sweep_dir / "points" / p["name"], models, modes, clutter)
         table.append(
-            {"N_tot": p["value"], "N_hat": p["N_hat"], "delay": {f"{a}/{b}": v for (a, b), v in means.items()}}
+            {"N_tot": p["value"], "N_hat": p["N_hat"], "delay": {f"{a}/{b}": v[0] for (a, b), v in means.items()}}
         )
+        half.append({f"{a}/{b}": v[1] for (a, b), v in means.items()})
     cols = [f"{a}/{b}" for a in models for b in modes]
     std = {}
     for c in cols:
@@ -397,7 +408,7 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     from soabench.experiment.study_plots import births_figure
     from soabench.plotstyle import save_png
 
-    save_png(births_figure(table, models, modes, meta["n_true"]), sweep_dir / "sweep_births.png")
+    save_png(births_figure(table, models, modes, meta["n_true"], half), sweep_dir / "sweep_births.png")
     lines += ["", "Figure: `sweep_births.png`"]
     return {"kind": "births", "table": table, "std_over_N_tot": std}, "\n".join(lines) + "\n"
 

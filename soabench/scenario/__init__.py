@@ -12,12 +12,13 @@ from importlib.resources import files
 from pathlib import Path
 
 from soabench.errors import require
-from soabench.scenario.config import ScenarioConfig, load_scenario
+from soabench.scenario.config import ScenarioConfig, load_scenario, scenario_from_dict
 from soabench.scenario.recording import Recording
 from soabench.scenario.scene import SceneMap
 from soabench.scenario.simulation import simulate
 
 __all__ = [
+    "USER_NET_DEFAULTS",
     "Recording",
     "ScenarioConfig",
     "SceneMap",
@@ -28,6 +29,12 @@ __all__ = [
     "shipped_root",
     "simulate",
 ]
+
+
+#: what a user ``.net.xml`` without a scenario file gets besides the derived defaults (scenario-TOML shaped, so a
+#: generated scenario file, e.g. a ``sweep occlusion`` point's, starts from it): striping, since SUMO 1.28's jupedsim
+#: hangs on nets whose sidewalks enclose a block (a grid).
+USER_NET_DEFAULTS: dict[str, dict] = {"pedestrians": {"model": "striping"}}
 
 
 def shipped_root() -> Path:
@@ -120,8 +127,8 @@ def load(
         )
         if scenario is not None:
             cfg = load_scenario(scenario)
-        else:  # striping: SUMO 1.28's jupedsim hangs on nets whose sidewalks enclose a block (a grid)
-            cfg = ScenarioConfig(pedestrian_model="striping")
+        else:
+            cfg = scenario_from_dict(USER_NET_DEFAULTS, source="user net defaults")
         cfg.net_file = str(Path(net).resolve()) if Path(net).exists() else net
         name = _stem(net)
     cfg.poly_files = list(dict.fromkeys(list(cfg.poly_files) + [str(p) for p in polys]))  # each file once

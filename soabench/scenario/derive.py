@@ -14,7 +14,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+from collections.abc import Iterator
 
 import numpy as np
 from shapely.geometry import LineString, box
@@ -35,13 +37,25 @@ NO_SIDEWALK_HINT = (
 
 log = logging.getLogger("soabench")
 _said: set[str] = set()
+_silenced = [False]
 
 
 def info_once(line: str) -> None:
-    """Log ``line`` at INFO once per process (a run's workers load the same scene again)."""
-    if line not in _said:
+    """Log ``line`` at INFO once per process, and not at all inside :func:`said_by_the_driver`."""
+    if line not in _said and not _silenced[0]:
         _said.add(line)
         log.info(line)
+
+
+@contextlib.contextmanager
+def said_by_the_driver() -> Iterator[None]:
+    """Silence :func:`info_once` within: a run's worker loads the scene its driver loaded and described already,
+    so the user reads what was derived once per scene, not once per process."""
+    before, _silenced[0] = _silenced[0], True
+    try:
+        yield
+    finally:
+        _silenced[0] = before
 
 
 def _has_pedestrian_lane(net) -> bool:

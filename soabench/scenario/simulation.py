@@ -11,7 +11,9 @@ What SUMO simulates (paper Section IV-A):
   same id is re-added at a random door ("exits the building").
 
 Every random choice comes from ``seeds.scenario_rng()`` and SUMO runs with ``--seed seeds.sumo_seed``, so the same
-seeds give a bit-identical Recording. libsumo is a process singleton: one simulation per process, always closed.
+seeds give a bit-identical Recording. libsumo is a process singleton: each simulation runs in a forked child
+process that is watched for progress (:mod:`soabench.scenario.watchdog`), so one that stalls inside SUMO stops with
+one line instead of hanging.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from soabench.geometry import wrap
 from soabench.scenario.config import ScenarioConfig
 from soabench.scenario.recording import Recording
 from soabench.scenario.scene import SceneMap
+from soabench.scenario.watchdog import INSERTING, STARTING, STEPPING, Progress, run_watched
 from soabench.seeding import TrialSeeds
 
 #: steps run before the first recorded sample (insertion; the first sample of a new person is dropped anyway).
@@ -37,6 +40,11 @@ WARMUP_STEPS = 3
 MIN_SEPARATION = 2.0
 #: re-inserted vehicles start this far (m) before their first edge enters the world box.
 VEHICLE_LEAD_IN = 20.0
+#: what a stalled jupedsim run is told (docs/user-guide/sumo.md "Stalls").
+JUPEDSIM_HINT = (
+    'SUMO\'s jupedsim can hang on networks whose sidewalks enclose a block: set [pedestrians] model = "striping" '
+    "in the scenario"
+)
 
 
 @dataclass
@@ -157,7 +165,7 @@ def simulate(scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, durat
         seeds: trial seeds; SUMO gets ``seeds.sumo_seed``, every scenario choice uses ``seeds.scenario_rng()``.
         duration: recorded time (s), overriding ``scenario.duration``.
     """
-    import libsumo
+    import libsumo  # noqa: F401  (imported once here, about 1 s; every forked SUMO run inherits it)
 
     hint = "load both with soabench.scenario.load(net), or call soabench.api.simulate_trial(net, seed, trial)"
     require_type(scene, SceneMap, "simulate's scene", hint)
@@ -170,36 +178,52 @@ def simulate(scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, durat
     )
     require(bool(scenario.ego_route), "ego.route is empty; give the ego's edge ids (or load the scenario with load())")
     n_steps = int(round(dur / scenario.step_length))
-    rng = seeds.scenario_rng()
+    name = Path(scenario.net_file).name
+    describe = f"SUMO on {name!r} (pedestrian model {scenario.pedestrian_model!r})"
+    hint = JUPEDSIM_HINT if scenario.pedestrian_model == "jupedsim" else ""
     with tempfile.TemporaryDirectory(prefix="soabench_sumo_") as tmp:
-        routes = Path(tmp) / "types.rou.xml"
-        routes.write_text(_routes_xml(scenario), encoding="utf-8")
-        cmd = [
-            "sumo", "-n", scenario.net_file, "-r", str(routes),
-            "--step-length", repr(float(scenario.step_length)), "--begin", "0",
-            "--seed", str(int(seeds.sumo_seed)), "--pedestrian.model", scenario.pedestrian_model,
-            "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true",
-            "--time-to-teleport", "-1", "--collision.action", "none",
-            "--output-prefix", str(Path(tmp) / "out_"),
-        ]  # fmt: skip
-        try:
-            libsumo.start(cmd)
-        except libsumo.TraCIException as exc:
-            raise SoabenchError(f"SUMO could not start on {scenario.net_file!r}: {exc}") from None
-        try:
-            return _run(libsumo, scene, scenario, seeds, rng, n_steps)
-        except (libsumo.TraCIException, libsumo.FatalTraCIError) as exc:
-            raise SoabenchError(f"SUMO failed while simulating {scenario.net_file!r}: {exc}") from None
-        finally:
-            libsumo.close()
+        return run_watched(_simulate_here, (scene, scenario, seeds, n_steps, Path(tmp)), describe, hint)
 
 
-def _run(libsumo, scene: SceneMap, sc: ScenarioConfig, seeds: TrialSeeds, rng, n_steps: int) -> Recording:
+def _simulate_here(
+    scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, n_steps: int, tmp: Path, progress: Progress
+) -> Recording:
+    """:func:`simulate` in this process (libsumo started and always closed); ``tmp`` holds SUMO's files."""
+    import libsumo
+
+    rng = seeds.scenario_rng()
+    routes = tmp / "types.rou.xml"
+    routes.write_text(_routes_xml(scenario), encoding="utf-8")
+    cmd = [
+        "sumo", "-n", scenario.net_file, "-r", str(routes),
+        "--step-length", repr(float(scenario.step_length)), "--begin", "0",
+        "--seed", str(int(seeds.sumo_seed)), "--pedestrian.model", scenario.pedestrian_model,
+        "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true",
+        "--time-to-teleport", "-1", "--collision.action", "none",
+        "--output-prefix", str(tmp / "out_"),
+    ]  # fmt: skip
+    progress.beat(STARTING)
+    try:
+        libsumo.start(cmd)
+    except libsumo.TraCIException as exc:
+        raise SoabenchError(f"SUMO could not start on {scenario.net_file!r}: {exc}") from None
+    try:
+        return _run(libsumo, scene, scenario, seeds, rng, n_steps, progress)
+    except (libsumo.TraCIException, libsumo.FatalTraCIError) as exc:
+        raise SoabenchError(f"SUMO failed while simulating {scenario.net_file!r}: {exc}") from None
+    finally:
+        libsumo.close()
+
+
+def _run(
+    libsumo, scene: SceneMap, sc: ScenarioConfig, seeds: TrialSeeds, rng, n_steps: int, progress: Progress
+) -> Recording:
     dt = float(sc.step_length)
     world = scene.bounds
     all_edges = set(libsumo.edge.getIDList())
     for e in sc.ego_route + sc.vehicle_sources + sc.vehicle_sinks:
         require(e in all_edges, f"edge {e!r} (ego route / vehicle sources / sinks) is not in {sc.net_file!r}")
+    progress.beat(INSERTING)
     places = _sidewalk_places(libsumo, world)
     doors = [places.nearest(x, y) for x, y in np.asarray(scene.doors).reshape(-1, 2)]
 
@@ -225,6 +249,7 @@ def _run(libsumo, scene: SceneMap, sc: ScenarioConfig, seeds: TrialSeeds, rng, n
             raise SoabenchError(
                 f"no route for vehicles between sources {sc.vehicle_sources} and sinks {sc.vehicle_sinks}"
             )
+        progress.beat(INSERTING)
         rid = f"r{n_routes[0]}"
         n_routes[0] += 1
         libsumo.route.add(rid, edges)
@@ -251,6 +276,7 @@ def _run(libsumo, scene: SceneMap, sc: ScenarioConfig, seeds: TrialSeeds, rng, n
     peds = [_Pedestrian(f"ped{i}", float(lo + (hi - lo) * rng.random())) for i in range(sc.n_pedestrians)]
 
     def insert(p: _Pedestrian, edge: str, pos: float) -> None:
+        progress.beat(INSERTING)
         libsumo.person.add(p.pid, edge, pos, -3, "ped")
         libsumo.person.setSpeed(p.pid, p.speed)
         p.end_edge, p.end_pos, p.inside, p.going_in, p.fresh = edge, pos, False, False, True
@@ -298,6 +324,7 @@ def _run(libsumo, scene: SceneMap, sc: ScenarioConfig, seeds: TrialSeeds, rng, n
     for k in range(-WARMUP_STEPS, T):
         libsumo.simulationStep()
         now = libsumo.simulation.getTime()
+        progress.beat(STEPPING, now)
         if k == 0:
             t0 = now
         arrived_p = set(libsumo.simulation.getArrivedPersonIDList())
