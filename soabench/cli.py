@@ -667,8 +667,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     from soabench import plugins
     from soabench.experiment.check import run_check
 
-    bad = [p for p in args.plugin if ":" not in p]
-    require(not bad, f"--plugin {bad[0]!r} must be MODULE:CLASS (installed entry-point plugins need no --plugin)")
+    for name in args.plugin:
+        require(":" in name, f"--plugin {name!r} must be MODULE:CLASS (installed entry-point plugins need no --plugin)")
     plugins.allow_import_paths(args.plugin)
     return run_check(args.suite, args.out, update_baseline=args.update_baseline, workers=args.workers)
 
