@@ -39,10 +39,8 @@ import bad_inputs  # noqa: E402
 import fake_trial as ft  # noqa: E402
 
 import soabench.experiment.report as report  # noqa: E402
-import soabench.scenario  # noqa: E402
 from soabench.cli import main  # noqa: E402
 from soabench.config import Config  # noqa: E402
-from soabench.experiment import registry  # noqa: E402
 from soabench.experiment.runner import run_experiment  # noqa: E402
 
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
@@ -103,7 +101,7 @@ def catalogue_counts(tmp: Path, timeout_s: float = 30.0, limit_gb: float = 3.0) 
             os.setpgid(0, 0)
             f = os.fdopen(w, "w")
 
-            def say_command(command: str) -> None:
+            def say_command(command: str, f=f) -> None:
                 f.write(command + "\n")
                 f.flush()
 
@@ -282,7 +280,9 @@ def filter_steps(n: int = 2000) -> dict:
 
 
 def main_() -> None:
-    report.write_report = lambda run_dir, figures=True, store=None: "summary"  # the figures are not what is measured here
+    report.write_report = lambda run_dir, figures=True, store=None: (
+        "summary"
+    )  # the figures are not what is measured here
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.monotonic()

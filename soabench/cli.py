@@ -432,7 +432,9 @@ def cmd_record(args: argparse.Namespace) -> int:
     out = _prepare_out(args.out, ".npz")
     scans_out = None
     if args.scans is not None:
-        scans_out = _prepare_out(args.scans, ".npz", "--scans") if args.scans else out.with_name(out.stem + ".scans.npz")
+        scans_out = (
+            _prepare_out(args.scans, ".npz", "--scans") if args.scans else out.with_name(out.stem + ".scans.npz")
+        )
         require(scans_out != out, f"--scans {args.scans!r} is the --out file; give the scans their own file")
     scene, _, cfg, seeds, recording = _snapshot(args, args.duration)
     recording.save_npz(out)

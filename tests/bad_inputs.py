@@ -346,7 +346,8 @@ def _usage_cases() -> list[Case]:
         cases.append((f"{command} unknown option", _with(command, "--frobnicate", "1"), "--frobnicate"))
         cases.append((f"{command} stray argument", _with(command, "stray"), "stray"))
     for command, option in (
-        ("run", "--trials"), ("run", "--seed"), ("scene", "--time"), ("record", "--scans-x"), ("study", "--births-trials"),
+        ("run", "--trials"), ("run", "--seed"), ("scene", "--time"), ("record", "--scans-x"),
+        ("study", "--births-trials"),
         ("kitti", "--folds"), ("export", "--fov-deg"), ("check", "--workers"), ("results", "--seed"),
         ("sensitivity", "--trials"), ("sweep births", "--offsets"), ("sweep clutter", "--values"),
     ):  # fmt: skip
@@ -430,13 +431,13 @@ def _input_cases() -> list[Case]:
     for c in ("scene", "record", "birth", "run", "sweep clutter", "export"):
         cases += [
             (f"{c} --net missing", _with(c, "--net", "nope.net.xml"), "nope.net.xml"),
-            (f"{c} --net not XML", lambda t, c=c: [*_base(c, t), "--net", _text(t, "n.net.xml", "not xml")], "n.net.xml"),
+            (f"{c} --net not XML", _with_file(c, "--net", "n.net.xml", "not xml"), "n.net.xml"),
             (f"{c} --net unknown scene", _with(c, "--net", "atlantis"), "atlantis"),
             (f"{c} --poly missing", _with(c, "--poly", "nope.poly.xml"), "nope.poly.xml"),
             (f"{c} --scenario missing", _with(c, "--scenario", "nope.toml"), "nope.toml"),
-            (f"{c} --scenario not TOML", lambda t, c=c: [*_base(c, t), "--scenario", _text(t, "s.toml", "[x")], "s.toml"),
+            (f"{c} --scenario not TOML", _with_file(c, "--scenario", "s.toml", "[x"), "s.toml"),
             (f"{c} --config missing", _with(c, "--config", "nope.toml"), "nope.toml"),
-            (f"{c} --config unknown section", lambda t, c=c: [*_base(c, t), "--config", _toml(t, "[nope]\na = 1\n")], "nope"),
+            (f"{c} --config unknown section", _with_file(c, "--config", "c.toml", "[nope]\na = 1\n"), "nope"),
         ]  # fmt: skip
     cases += [
         ("study --poly", _with("study", "--poly", "b.poly.xml"), "b.poly.xml"),
@@ -446,6 +447,11 @@ def _input_cases() -> list[Case]:
         ("study --config missing", _with("study", "--config", "nope.toml"), "nope.toml"),
     ]
     return cases
+
+
+def _with_file(command: str, option: str, name: str, text: str) -> Callable[[Path], list[str]]:
+    """``command``'s valid arguments and ``option FILE``, FILE holding ``text``."""
+    return lambda t: [*_base(command, t), option, _text(t, name, text)]
 
 
 def _text(tmp: Path, name: str, text: str) -> str:
@@ -467,8 +473,8 @@ def _kitti_cases() -> list[Case]:
     return [
         ("kitti without --root", lambda t: ["kitti", "--out", str(t / "o")], "--root"),
         ("kitti without --out", lambda t: ["kitti", "--root", _kitti_root(t)], "--out"),
-        ("kitti --root missing", lambda t: ["kitti", "--root", str(t / "no"), "--out", str(t / "o")], "is not a folder"),
-        ("kitti --root is a file", lambda t: ["kitti", "--root", str(_a_file(t)), "--out", str(t / "o")], "not a folder"),
+        ("kitti --root missing", lambda t: ["kitti", "--root", str(t / "no"), "--out", "o"], "is not a folder"),
+        ("kitti --root is a file", lambda t: ["kitti", "--root", str(_a_file(t)), "--out", "o"], "not a folder"),
         ("kitti --root without label_02", lambda t: ["kitti", "--root", str(t), "--out", str(t / "o")], "label_02"),
         ("kitti --detections missing", _with("kitti", "--detections", "nodets"), "nodets"),
         ("kitti --semantics missing", _with("kitti", "--semantics", "nosem"), "nosem"),
@@ -477,21 +483,25 @@ def _kitti_cases() -> list[Case]:
         ("kitti --resume missing", lambda t: ["kitti", "--resume", str(t / "none")], "none"),
         ("kitti --resume with --root", lambda t: ["kitti", "--resume", str(t), "--root", str(t)], "--root"),
         ("kitti --resume a foreign folder", lambda t: ["kitti", "--resume", str(_foreign(t))], "theirs"),
-        ("kitti detections extra sequence", root_with(lambda r: (r / "detections" / "0009.txt").write_text("")), "0009"),
+        ("kitti detections extra sequence", root_with(lambda r: (r / "detections" / "0009.txt").touch()), "0009"),
         ("kitti no detections for a sequence", root_with(lambda r: (r / "detections" / "0001.txt").unlink()), "0001"),
-        ("kitti label row too short", root_with(lambda r: (r / "label_02" / "0000.txt").write_text("0 1 Car\n")), "0000"),
+        ("kitti label row too short", root_with(lambda r: (r / "label_02" / "0000.txt").write_text("0 1\n")), "0000"),
     ]  # fmt: skip
 
 
 # ------------------------------------------------------------------------------------------------ check suites
 def _suite_case(name: str, scenarios: str, needle: str, extra: str = "") -> Case:
-    return (f"check suite {name}", lambda t: ["check", "--suite", _suite(t, scenarios, extra), "--out", str(t / "o")], needle)
+    return (
+        f"check suite {name}",
+        lambda t: ["check", "--suite", _suite(t, scenarios, extra), "--out", str(t / "o")],
+        needle,
+    )
 
 
 def _check_cases() -> list[Case]:
     s = GOOD_SCENARIO
     return [
-        _suite_case("scenario name ../../x", '[[scenario]]\nname = "../../../../x"\nnet = "intersection"\n', "../../../../x"),
+        _suite_case("scenario name ../../x", '[[scenario]]\nname = "../../../../x"\nnet = "intersection"\n', "../../"),
         _suite_case("scenario name absolute", '[[scenario]]\nname = "/tmp/x"\nnet = "intersection"\n', "/tmp/x"),
         _suite_case("scenario name with a slash", '[[scenario]]\nname = "a/b"\nnet = "intersection"\n', "a/b"),
         _suite_case("scenario name empty", '[[scenario]]\nname = ""\nnet = "intersection"\n', "''"),
@@ -519,8 +529,8 @@ def _check_cases() -> list[Case]:
         ("check suite relative threshold without baseline",
          lambda t: ["check", "--suite", _text(t, "s.toml", s + '[[threshold]]\nmetric = "ospa"\nmax_increase = 0.1\n'),
                     "--out", str(t / "o")], "baseline"),
-        ("check suite missing", lambda t: ["check", "--suite", str(t / "none.toml"), "--out", str(t / "o")], "none.toml"),
-        ("check suite not TOML", lambda t: ["check", "--suite", _text(t, "s.toml", "[suite"), "--out", str(t / "o")], "s.toml"),
+        ("check suite missing", lambda t: ["check", "--suite", str(t / "none.toml"), "--out", "o"], "none.toml"),
+        ("check suite not TOML", lambda t: ["check", "--suite", _text(t, "s.toml", "[suite"), "--out", "o"], "s.toml"),
         ("check suite is a folder", lambda t: ["check", "--suite", str(t), "--out", str(t / "o")], "does not exist"),
         ("check --plugin not module:Class", _with("check", "--plugin", "nocolon"), "nocolon"),
     ]  # fmt: skip
@@ -550,8 +560,9 @@ def _import_cases() -> list[Case]:
         imp(lambda t: _osm(t, "<osm"), "not valid XML", "not XML"),
         imp(lambda t: _osm(t, "<gpx/>"), "gpx", "not OSM"),
         imp(lambda t: _osm(t, "<osm></osm>"), "no roads", "no roads"),
-        imp(lambda t: _osm(t, '<osm><way id="1"><tag k="highway" v="motorway"/></way></osm>'), "walkable", "no walkway"),
-        imp(lambda t: _osm(t, '<?xml version="1.0"?><!DOCTYPE osm [<!ENTITY a "aaaa">]><osm>&a;</osm>'), "m.osm", "entity"),
+        imp(lambda t: _osm(t, '<osm><way id="1"><tag k="highway" v="track"/><tag k="foot" v="no"/></way></osm>'),
+            "walkable", "no walkway"),
+        imp(lambda t: _osm(t, '<!DOCTYPE osm [<!ENTITY a "aa">]><osm>&a;</osm>'), "m.osm", "entity"),
         imp(lambda t: (Path(t / "b.osm").write_bytes(b"\xff\xfe<osm>"), str(t / "b.osm"))[1], "b.osm", "not UTF-8"),
         into(with_scene, "already holds a scene", "holding a scene"),
         into(lambda t: str(_foreign(t)), "not empty", "a foreign folder"),

@@ -7,7 +7,6 @@ from __future__ import annotations
 import shutil
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 import bad_inputs
@@ -17,6 +16,7 @@ from hypothesis import strategies as st
 
 import soabench.scenario.osm as osm
 from soabench.cli import main
+from soabench.config import tomllib
 
 DATA = Path(__file__).parent / "data"
 
@@ -61,7 +61,11 @@ def test_no_command_writes_into_a_foreign_folder(tmp_path, capsys, monkeypatch, 
     argv = bad_inputs._out_is(command, lambda t: str(theirs))(tmp_path)
     assert main(argv) == 2
     assert "not empty" in _one_error(capsys)
-    assert _snapshot(theirs) == before and sorted(p.name for p in theirs.iterdir()) == ["README.md", "data", "notes.txt"]
+    assert _snapshot(theirs) == before and sorted(p.name for p in theirs.iterdir()) == [
+        "README.md",
+        "data",
+        "notes.txt",
+    ]
     assert not no_work
 
 

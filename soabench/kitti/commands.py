@@ -61,12 +61,10 @@ def cmd_kitti(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``soabench export kitti``: SUMO trials written in the KITTI tracking layout."""
-    from soabench.kitti.config import load_kitti_config
-    from soabench.kitti.export import export_kitti
-
     from soabench.cli_checks import check_time
     from soabench.config import MAX_SEED
-    from soabench.kitti.export import MAX_EXPORT_TRIALS
+    from soabench.kitti.config import load_kitti_config
+    from soabench.kitti.export import MAX_EXPORT_TRIALS, export_kitti
 
     require(
         args.trials is not None and 1 <= args.trials <= MAX_EXPORT_TRIALS,

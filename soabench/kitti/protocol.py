@@ -183,8 +183,7 @@ def run_kitti(
     log: Callable[[str], None] | None = None,
 ) -> KittiOutcome:
     """Run (or finish, ``resume=True``) the protocol into the run folder ``out``: resolved, new or empty for a new
-    run (or one holding this run's ``run.json`` on resume), locked while it works (:mod:`soabench.experiment.ownership`).
-    """
+    run (holding this run's ``run.json`` on resume), locked while it works (:mod:`soabench.experiment.ownership`)."""
     from soabench.experiment.ownership import FolderLock, check_new_folder, resolve
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))

@@ -99,7 +99,9 @@ def check_osm(osm: Path) -> OsmCounts:
     try:
         events = ET.iterparse(osm, events=("start", "end"))
         _, root = next(events)
-        require(root.tag == "osm", f"OSM file {str(osm)!r} is not OpenStreetMap XML (root <{root.tag}>, expected <osm>)")
+        require(
+            root.tag == "osm", f"OSM file {str(osm)!r} is not OpenStreetMap XML (root <{root.tag}>, expected <osm>)"
+        )
         for event, elem in events:
             if event != "end" or elem.tag not in ("node", "way", "relation"):
                 continue
@@ -232,7 +234,7 @@ def scenario_toml(cfg, scene, net_name: str, poly_name: str, source: str) -> str
     """A scenario TOML spelling out ``cfg``'s derived values (every key of soabench/scenario/config.py)."""
     x0, y0, x1, y1 = cfg.world_box
     doors = ", ".join(f"[{x:.2f}, {y:.2f}]" for x, y in scene.doors)
-    return f"""# Scene imported from OpenStreetMap by `soabench import osm`; the values below were derived from the network
+    return f"""# Scene imported from OpenStreetMap by `soabench import osm`; the values below were derived from the net
 # (README "Your own streets") and may be edited. Keys: soabench/scenario/config.py.
 
 [scenario]
@@ -259,7 +261,7 @@ sinks = {_q(cfg.vehicle_sinks)}
 
 [pedestrians]
 count = {cfg.n_pedestrians}
-model = {toml_string(cfg.pedestrian_model)}   # striping: SUMO 1.28's jupedsim hangs on nets whose sidewalks enclose a block
+model = {toml_string(cfg.pedestrian_model)}  # striping: SUMO 1.28's jupedsim hangs where sidewalks enclose a block
 
 [doors]
 points = [{doors}]
