@@ -524,6 +524,8 @@ def _check_cases() -> list[Case]:
         _suite_case("probabilities unknown", s + 'probabilities = ["sometimes"]\n', "sometimes"),
         _suite_case("net missing file", '[[scenario]]\nname = "a"\nnet = "nets/none.net.xml"\n', "none.net.xml"),
         _suite_case("names repeat", s + s, "repeat"),
+        _suite_case("baseline outside the suite folder", s, "../b.json", extra='baseline = "../b.json"'),
+        _suite_case("baseline absolute", s, "/tmp/b.json", extra='baseline = "/tmp/b.json"'),
         _suite_case("baseline missing", s + '[[threshold]]\nmetric = "ospa"\nmax_increase = 0.1\n', "none.json",
                     extra='baseline = "none.json"'),
         ("check suite relative threshold without baseline",

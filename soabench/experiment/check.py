@@ -144,6 +144,18 @@ def _number(v: Any, where: str, lo: float = -math.inf) -> float:
     return float(v)
 
 
+def _inside(folder: Path, name: Any, where: str) -> Path:
+    """``folder / name`` for a relative path that stays inside ``folder`` (``--update-baseline`` writes it: a suite
+    file never names a place outside its own folder)."""
+    require(isinstance(name, str) and name != "", f"{where} = {name!r} must be a file name relative to the suite")
+    path = (folder / name).resolve()
+    require(
+        not Path(name).is_absolute() and path.is_relative_to(folder),
+        f"{where} = {name!r} lies outside the suite file's folder {str(folder)!r}; give a path inside it",
+    )
+    return path
+
+
 def load_suite(path: str | Path) -> Suite:
     """Read and validate a suite file (SoabenchError naming the value and what is allowed)."""
     p = Path(path)
@@ -160,7 +172,7 @@ def load_suite(path: str | Path) -> Suite:
         path=p,
         scenarios=[],
         thresholds=[],
-        baseline=here / head["baseline"] if "baseline" in head else None,
+        baseline=_inside(here, head["baseline"], "[suite] baseline") if "baseline" in head else None,
         config=here / head["config"] if "config" in head else None,
     )
     scen = data.get("scenario", [])
