@@ -1,6 +1,6 @@
 """Every command writes only into a folder of its own (new, empty, or holding nothing but its own files), names read
 from files are names, never paths, values written into TOML parse back, and every size a user can type is bounded
-before any work (docs/user-guide/outputs.md, "Folders a command writes")."""
+before any work (docs/user-guide/folders.md)."""
 
 from __future__ import annotations
 
