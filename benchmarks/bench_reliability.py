@@ -1,8 +1,11 @@
 """Reliability figures of docs/user-guide/reliability.md, measured.
 
-1. Bad inputs: every case of ``tests/bad_inputs.py`` (command line) and of ``tests/test_hardening_runs.py``
-   (poisoned and invalid ``run.json`` files) is tried; a case counts as refused when the command exits with status 2
-   and prints exactly one line, no traceback, no trial run, nothing imported from the run folder.
+1. Bad inputs: every case of the catalogue (``tests/bad_inputs.py``, organised by command, plus
+   ``tests/bad_inputs_more.py`` when present) runs in its own forked process with real work stubbed, a time bound
+   and a memory bound, and is counted per command as clean (exit 2, one line ``soabench: error: ...`` naming the
+   value), traceback, silent (another exit status, real work started, or a write into a foreign folder), hang
+   (killed at the time bound) or unclear (exit 2 without one line naming the value); every case that is not clean
+   is listed. The poisoned and invalid ``run.json`` files of ``tests/test_hardening_runs.py`` are counted too.
 2. Kill/resume cycles: a 16-trial process-pool run (the tests' slow fake trial) is SIGKILLed after some trials,
    resumed, killed again, ... until it completes; after each kill no pool worker may survive; the result must equal
    an uninterrupted serial run byte for byte.
@@ -10,9 +13,9 @@
    CSV files must be byte-identical.
 4. Filter steps: random mixtures and scans with NaN/inf injected, ``filter.nonfinite = "drop"``: no NaN anywhere.
 
-Uses the fake trial of the tests (no SUMO), so it takes about a minute::
+Uses the fake trial of the tests (no SUMO), so it takes a few minutes (``--catalogue``: part 1 only)::
 
-    python benchmarks/bench_reliability.py
+    python benchmarks/bench_reliability.py [--catalogue]
 """
 
 from __future__ import annotations
@@ -36,64 +39,119 @@ import bad_inputs  # noqa: E402
 import fake_trial as ft  # noqa: E402
 
 import soabench.experiment.report as report  # noqa: E402
-import soabench.scenario  # noqa: E402
 from soabench.cli import main  # noqa: E402
 from soabench.config import Config  # noqa: E402
-from soabench.experiment import registry  # noqa: E402
 from soabench.experiment.runner import run_experiment  # noqa: E402
 
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
 
-def _one_line_exit_2(argv: list[str]) -> bool:
+VERDICTS = ("clean", "traceback", "silent", "hang", "unclear")
+
+
+def _case_in_child(make, needle: str, case_dir: Path, limit_bytes: int, say_command) -> dict:
+    """Run one catalogue case in this (forked) process; return its verdict and first lines."""
     import contextlib
     import io
+    import operator
+    import resource
+    import traceback
 
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+    resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
+    bad_inputs.stub_work(setattr, operator.setitem)
+    os.chdir(case_dir)
+    out, err = io.StringIO(), io.StringIO()
+    started = False
+    try:
+        argv = make(case_dir)
+    finally:
+        say_command(bad_inputs.command_of(argv) if "argv" in locals() else "?")
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
         try:
             code = main(argv)
         except SystemExit as exc:
             code = exc.code
-    lines = err.getvalue().strip().splitlines()
-    return code == 2 and len(lines) == 1 and "Traceback" not in err.getvalue()
+        except bad_inputs.WorkStarted:
+            code, started = 0, True
+        except BaseException:  # noqa: BLE001 - what the catalogue measures
+            code = None
+            traceback.print_exc()
+    started = started or bool(bad_inputs.STARTED)
+    verdict = "silent" if started else bad_inputs.verdict(code, out.getvalue(), err.getvalue(), needle)
+    theirs = case_dir / "theirs"
+    if theirs.is_dir() and sorted(p.name for p in theirs.iterdir()) != ["README.md", "notes.txt"]:
+        verdict = "silent"  # wrote into a folder that is not the command's
+    return {"verdict": verdict, "code": code, "started": started, "err": err.getvalue()[-2000:]}
 
 
-def bad_inputs_refused(tmp: Path) -> tuple[int, int]:
-    """(tried, refused) over the command-line table and the run.json cases."""
-    started: list = []
+def catalogue_counts(tmp: Path, timeout_s: float = 30.0, limit_gb: float = 3.0) -> tuple[dict, list[dict]]:
+    """Every case of the catalogue (tests/bad_inputs.py and tests/bad_inputs_more.py) in its own forked process
+    (a fresh working folder, real work stubbed), killed after ``timeout_s`` (a hang) with ``limit_gb`` of address
+    space. Returns the counts per command and verdict, and one row per case that is not clean."""
+    counts: dict[str, dict[str, int]] = {}
+    bad: list[dict] = []
+    limit = int(limit_gb * 2**30)
+    for i, (name, make, needle) in enumerate(bad_inputs.catalogue()):
+        d = tmp / f"case{i:04d}"
+        d.mkdir(parents=True)
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: its own process group, so a hang's helpers die with it
+            os.close(r)
+            os.setpgid(0, 0)
+            f = os.fdopen(w, "w")
 
-    def no_trial(*a, **k):
-        started.append(a)
-        raise AssertionError("a trial ran")
+            def say_command(command: str, f=f) -> None:
+                f.write(command + "\n")
+                f.flush()
 
-    def no_simulation(*a, **k):
-        raise AssertionError("a simulation ran")
+            try:
+                result = _case_in_child(make, needle, d, limit, say_command)
+            except BaseException as exc:  # noqa: BLE001
+                result = {"verdict": "traceback", "code": None, "started": False, "err": f"Traceback: {exc!r}"}
+            json.dump(result, f, default=str)
+            f.close()
+            os._exit(0)
+        os.close(w)
+        t0 = time.monotonic()
+        while os.waitpid(pid, os.WNOHANG) == (0, 0):
+            if time.monotonic() - t0 > timeout_s:
+                os.killpg(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                break
+            time.sleep(0.005)
+        with os.fdopen(r) as f:
+            data = f.read()
+        command, _, rest = data.partition("\n")
+        result = json.loads(rest) if rest else {"verdict": "hang", "err": f"killed after {timeout_s:g} s"}
+        command = command or "?"
+        counts.setdefault(command, dict.fromkeys(VERDICTS, 0))[result["verdict"]] += 1
+        if result["verdict"] != "clean":
+            bad.append({"name": name, "command": command, **result})
+    return counts, bad
 
-    saved = registry._TRIAL_KINDS[registry.DEFAULT_TRIAL_KIND], soabench.scenario.simulate
-    registry._TRIAL_KINDS[registry.DEFAULT_TRIAL_KIND] = no_trial
-    soabench.scenario.simulate = no_simulation
+
+def run_meta_cases(tmp: Path) -> tuple[int, int]:
+    """(tried, refused) over the poisoned and invalid run.json files of tests/test_hardening_runs.py."""
+    import contextlib
+    import io
+
+    from test_hardening_runs import BAD_META, POISONS
+
     tried = refused = 0
-    try:
-        for i, (_name, make, _needle) in enumerate(bad_inputs.CASES):
-            d = tmp / f"cli{i}"
-            d.mkdir(parents=True)
-            tried += 1
-            refused += _one_line_exit_2(make(d)) and not started
-        from test_hardening_runs import BAD_META, POISONS
-
-        for i, changes in enumerate([*POISONS, *(c for c, _ in BAD_META)]):
-            run = tmp / f"meta{i}"
-            run_experiment(_cfg(3), "x", out=run, workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load,
-                           progress=False, figures=False)  # fmt: skip
-            meta = json.loads((run / "run.json").read_text())
-            for k, v in changes.items():
-                meta.pop(k, None) if v is ... else meta.__setitem__(k, v)
-            (run / "run.json").write_text(json.dumps(meta))
-            tried += 1
-            refused += _one_line_exit_2(["run", "--resume", str(run)]) and "poison_marker" not in sys.modules
-    finally:
-        registry._TRIAL_KINDS[registry.DEFAULT_TRIAL_KIND], soabench.scenario.simulate = saved
+    for i, changes in enumerate([*POISONS, *(c for c, _ in BAD_META)]):
+        run = tmp / f"meta{i}"
+        run_experiment(_cfg(3), "x", out=run, workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load,
+                       progress=False, figures=False)  # fmt: skip
+        meta = json.loads((run / "run.json").read_text())
+        for k, v in changes.items():
+            meta.pop(k, None) if v is ... else meta.__setitem__(k, v)
+        (run / "run.json").write_text(json.dumps(meta))
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            code = main(["run", "--resume", str(run)])
+        tried += 1
+        refused += code == 2 and len(bad_inputs.messages(err.getvalue())) == 1 and "poison_marker" not in sys.modules
     return tried, refused
 
 
@@ -222,12 +280,29 @@ def filter_steps(n: int = 2000) -> dict:
 
 
 def main_() -> None:
-    report.write_report = lambda run_dir, figures=True: "summary"  # the figures are not what is measured here
+    report.write_report = lambda run_dir, figures=True, store=None: (
+        "summary"
+    )  # the figures are not what is measured here
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.monotonic()
-        tried, refused = bad_inputs_refused(tmp / "bad")
-        print(f"bad inputs: {refused} of {tried} refused with one line and exit 2 ({time.monotonic() - t0:.1f} s)")
+        counts, bad = catalogue_counts(tmp / "bad")
+        total = dict.fromkeys(VERDICTS, 0)
+        for c in counts.values():
+            for k, v in c.items():
+                total[k] += v
+        n = sum(total.values())
+        print(f"bad inputs: {n} cases, " + ", ".join(f"{k} {v}" for k, v in total.items())
+              + f" ({time.monotonic() - t0:.1f} s)")  # fmt: skip
+        for command, c in sorted(counts.items()):
+            print(f"  {command:16s} " + "  ".join(f"{k} {v:3d}" for k, v in c.items()))
+        for row in bad:
+            first = (bad_inputs.messages(row.get("err") or "") or [""])[-1][:150]
+            print(f"  not clean: {row['verdict']:9s} {row['name']}: {first}")
+        tried, refused = run_meta_cases(tmp / "meta")
+        print(f"run.json files: {refused} of {tried} refused with one line and exit 2")
+        if "--catalogue" in sys.argv[1:]:
+            return
         t0 = time.monotonic()
         kr = kill_resume_cycles(tmp / "kill")
         print(

@@ -48,8 +48,13 @@ def _float_list(text: str) -> tuple[float, ...]:
     return values
 
 
+MAX_OFFSETS = 1001  #: values of one --offsets / --nhat-sweep (e.g. -500:500)
+MAX_OFFSET = 10_000  #: largest |offset| (N_hat itself is at most 10000: soabench/config.py)
+
+
 def _offsets(text: str) -> tuple[int, ...]:
-    """``-10:10`` (inclusive range), ``-10:10:2`` (with step) or ``-5,0,5``."""
+    """``-10:10`` (inclusive range), ``-10:10:2`` (with step) or ``-5,0,5``; at most :data:`MAX_OFFSETS` values,
+    each in [-MAX_OFFSET, MAX_OFFSET] (checked before a range is expanded)."""
     try:
         if ":" in text:
             parts = [int(p) for p in text.split(":")]
@@ -57,12 +62,22 @@ def _offsets(text: str) -> tuple[int, ...]:
             lo, hi = parts[0], parts[1]
             step = parts[2] if len(parts) == 3 else 1
             require(step > 0 and hi >= lo, "")
-            return tuple(range(lo, hi + 1, step))
-        return tuple(int(s) for s in text.split(",") if s.strip())
+            values: Sequence[int] = range(lo, hi + 1, step)
+        else:
+            values = [int(s) for s in text.split(",") if s.strip()]
     except (ValueError, SoabenchError):
         raise argparse.ArgumentTypeError(
             f"offsets {text!r} must be LO:HI, LO:HI:STEP (integers, HI >= LO, STEP > 0) or a comma list of integers"
         ) from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"offsets {text!r} give no value")
+    low, high = (values[0], values[-1]) if isinstance(values, range) else (min(values), max(values))
+    if len(values) > MAX_OFFSETS or max(-low, high) > MAX_OFFSET:
+        raise argparse.ArgumentTypeError(
+            f"offsets {text!r} give {len(values)} values from {low} to {high}; allowed: at most "
+            f"{MAX_OFFSETS} values, each in [-{MAX_OFFSET}, {MAX_OFFSET}]"
+        )
+    return tuple(values)
 
 
 def _add_net_args(p: argparse.ArgumentParser) -> None:
@@ -135,6 +150,14 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """A usage error is one line, like every other error: ``soabench: error: <command>: <what> (see ... --help)``."""
+
+    def error(self, message: str):  # type: ignore[override]
+        where = self.prog.removeprefix("soabench").strip()
+        self.exit(EXIT_USAGE, f"soabench: error: {where + ': ' if where else ''}{message} (see {self.prog} --help)\n")
+
+
 class DefaultsHelpFormatter(argparse.HelpFormatter):
     """``--help`` shows every option's default: appended as "(default: X)" unless the help text already says it."""
 
@@ -148,7 +171,7 @@ class DefaultsHelpFormatter(argparse.HelpFormatter):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="soabench",
         formatter_class=DefaultsHelpFormatter,
         description="Where should a multi-target filter expect new targets to appear? "
@@ -302,7 +325,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("import", help="turn an OpenStreetMap extract into a scene folder for --net")
     p.add_argument("kind", choices=["osm"])
     p.add_argument("file", metavar="FILE.osm")
-    p.add_argument("--out", required=True, help="scene folder to write")
+    p.add_argument("--out", required=True, help="scene folder to write (new or empty)")
+    p.add_argument(
+        "--force", action="store_true", help="import a file above the size limit (soabench/scenario/osm.py MAX_OSM_MB)"
+    )
     for command in sub.choices.values():  # subparsers do not inherit the formatter
         command.formatter_class = DefaultsHelpFormatter
     return parser
@@ -346,7 +372,9 @@ def _snapshot(args: argparse.Namespace, duration: float | None, include_end: boo
     ``include_end``: simulate one SUMO step more so that a sample (and a scan, when ``duration`` is a multiple of
     the sensor period) lies exactly at ``duration``: a snapshot at ``--time 50`` shows the scan at t = 50 s.
     """
-    require(args.seed >= 0, f"--seed {args.seed} must be >= 0")
+    from soabench.config import MAX_SEED
+
+    require(0 <= args.seed <= MAX_SEED, f"--seed {args.seed} is out of range; allowed: integers in [0, {MAX_SEED}]")
     require(args.trial >= 0, f"--trial {args.trial} must be >= 0")
     cli_checks.check_time("--time/--duration", duration)
     cfg = load_config(args.config)
@@ -370,8 +398,8 @@ def _observe(recording, scene, cfg: Config, seeds):
     return observe(recording, scene, cfg.sensor, seeds.sensor_rngs())
 
 
-def _prepare_out(path: str) -> Path:
-    return cli_checks.check_out_file(path)
+def _prepare_out(path: str, suffix: str, flag: str = "--out") -> Path:
+    return cli_checks.check_out_file(path, suffix, flag)
 
 
 def _save_figure(fig, out: Path) -> None:
@@ -384,7 +412,7 @@ def _save_figure(fig, out: Path) -> None:
 def cmd_scene(args: argparse.Namespace) -> int:
     from soabench.scenario.plots import plot_scene, scene_figure
 
-    out = _prepare_out(args.out)
+    out = _prepare_out(args.out, ".png")
     scene, _, cfg, seeds, recording = _snapshot(args, args.time, include_end=True)
     fig, ax = scene_figure(scene, legend_rows=6 if args.sensor else 3)
     if args.sensor:
@@ -401,10 +429,13 @@ def cmd_scene(args: argparse.Namespace) -> int:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
-    out = _prepare_out(args.out)
+    out = _prepare_out(args.out, ".npz")
     scans_out = None
     if args.scans is not None:
-        scans_out = _prepare_out(args.scans) if args.scans else out.with_name(out.stem + ".scans.npz")
+        scans_out = (
+            _prepare_out(args.scans, ".npz", "--scans") if args.scans else out.with_name(out.stem + ".scans.npz")
+        )
+        require(scans_out != out, f"--scans {args.scans!r} is the --out file; give the scans their own file")
     scene, _, cfg, seeds, recording = _snapshot(args, args.duration)
     recording.save_npz(out)
     print(f"wrote {out} ({len(recording.t)} steps, {len(recording.ped_ids)} pedestrians)")
@@ -426,7 +457,7 @@ def cmd_birth(args: argparse.Namespace) -> int:
     from soabench.plotstyle import panel_title
     from soabench.scenario.plots import plot_scene, scene_figure
 
-    out = _prepare_out(args.out)
+    out = _prepare_out(args.out, ".png")
     plugins.allow_import_paths([args.model])
     cls = plugins.resolve(plugins.BIRTH, args.model)  # an unknown or broken model fails before SUMO runs
     scene, _, cfg, seeds, recording = _snapshot(args, args.time, include_end=True)
@@ -575,6 +606,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     require(not args.save_estimates, "--save-estimates is not offered by `study`; use `run`")
     require(not args.fail_fast, "--fail-fast is not offered by `study`; use `run`")
     require(args.probabilities is None, "`study` runs the paper's probability modes")
+    for flag, value in (("--poly", args.poly[0] if args.poly else None), ("--scenario", args.scenario)):
+        require(value is None, f"{flag} {value!r} is not offered by `study`: give a scene folder with --net")
     from soabench import plugins
 
     extra = tuple(args.models or ())  # plugins ride along with the built-in six (--trackers too)
@@ -608,8 +641,17 @@ def cmd_study(args: argparse.Namespace) -> int:
 
 
 def cmd_sensitivity(args: argparse.Namespace) -> int:
-    require(args.trials is None or args.trials >= 1, f"--trials {args.trials} must be >= 1")
-    require(args.workers is None or args.workers >= 1, f"--workers {args.workers} must be >= 1")
+    from soabench.config import MAX_TRIALS
+    from soabench.experiment.executors import MAX_WORKERS
+
+    require(
+        args.trials is None or 1 <= args.trials <= MAX_TRIALS,
+        f"--trials {args.trials} is out of range; allowed: integers in [1, {MAX_TRIALS}]",
+    )
+    require(
+        args.workers is None or 1 <= args.workers <= MAX_WORKERS,
+        f"--workers {args.workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
     from soabench.experiment.sensitivity_runs import run_sensitivity
 
     outcome = run_sensitivity(
@@ -641,6 +683,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     from soabench import plugins
     from soabench.experiment.check import run_check
 
+    for name in args.plugin:
+        require(":" in name, f"--plugin {name!r} must be MODULE:CLASS (installed entry-point plugins need no --plugin)")
     plugins.allow_import_paths(args.plugin)
     return run_check(args.suite, args.out, update_baseline=args.update_baseline, workers=args.workers)
 
@@ -655,7 +699,7 @@ def cmd_scenes(args: argparse.Namespace) -> int:
 def cmd_import(args: argparse.Namespace) -> int:
     from soabench.scenario.osm import import_osm
 
-    toml = import_osm(args.file, args.out)
+    toml = import_osm(args.file, args.out, force=args.force)
     print(f"wrote scene folder {toml.parent} (use: soabench run --net {toml.parent})")
     return 0
 
@@ -721,6 +765,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.explicit = cli_checks.explicit_dests(parser, argv)
     _say_derived()
     try:
+        cli_checks.check_no_empty_paths(argv)
         if getattr(args, "net", None) == "all":
             from soabench.scenario.suite import run_on_all
 

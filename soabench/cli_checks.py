@@ -69,25 +69,46 @@ def check_time(flag: str, value: float | None) -> None:
     )
 
 
-def check_out_file(path: str) -> Path:
-    """An output file path: resolved, not a folder, in an existing writable folder."""
-    require(bool(path), "--out needs a file name")
+#: options naming a file or folder: an empty value is refused (``Path("")`` would be the working folder)
+PATH_OPTIONS = frozenset(
+    ("--out", "--scans", "--resume", "--main", "--root", "--detections", "--semantics", "--config", "--scenario",
+     "--poly", "--net", "--suite")
+)  # fmt: skip
+
+
+def check_no_empty_paths(argv: Sequence[str]) -> None:
+    """Refuse ``--out ''`` (and ``--out=``) for every option of :data:`PATH_OPTIONS`."""
+    for i, token in enumerate(argv):
+        name, eq, value = token.partition("=")
+        if name in PATH_OPTIONS:
+            empty = value == "" if eq else (i + 1 < len(argv) and argv[i + 1] == "")
+            require(not empty, f"{name} '' is empty; give a path")
+
+
+def check_out_file(path: str, suffix: str | None = None, flag: str = "--out") -> Path:
+    """An output file path: resolved, not a folder, in an existing writable folder, ending in ``suffix`` (the
+    format it is written in) when given."""
+    require(bool(path), f"{flag} needs a file name")
     try:
         out = Path(path).expanduser().resolve()
     except (OSError, RuntimeError) as exc:
-        raise SoabenchError(f"cannot resolve --out {path!r}: {exc}") from None
-    require(not out.is_dir(), f"--out {path!r} is a folder; give a file name")
+        raise SoabenchError(f"cannot resolve {flag} {path!r}: {exc}") from None
+    require(not out.is_dir(), f"{flag} {path!r} is a folder; give a file name")
+    require(
+        suffix is None or out.suffix.lower() == suffix,
+        f"{flag} {path!r} must end in {suffix}: the file is written in that format",
+    )
     parent = out.parent
     if not parent.exists():
         anc = parent
         while not anc.exists():
             anc = anc.parent
-        require(anc.is_dir(), f"--out {path!r} lies under {str(anc)!r}, which is a file, not a folder")
+        require(anc.is_dir(), f"{flag} {path!r} lies under {str(anc)!r}, which is a file, not a folder")
         raise SoabenchError(f"output folder {str(parent)!r} does not exist for {path!r}")
-    require(parent.is_dir(), f"--out {path!r} lies under {str(parent)!r}, which is a file, not a folder")
+    require(parent.is_dir(), f"{flag} {path!r} lies under {str(parent)!r}, which is a file, not a folder")
     from soabench.experiment.ownership import probe_writable
 
-    probe_writable(parent, f"--out {path!r}: the folder {str(parent)!r}")
+    probe_writable(parent, f"{flag} {path!r}: the folder {str(parent)!r}")
     return out
 
 

@@ -25,6 +25,7 @@ import dataclasses
 import difflib
 import json
 import math
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -53,6 +54,10 @@ SCENARIO_KEYS = {
 }
 THRESHOLD_KEYS = {"metric", "model", "mode", "scenario", "max", "min", "max_increase", "max_decrease", "abs_tol"}
 BASELINE_FORMAT = 1
+#: a scenario's name names its folder ``--out/runs/NAME/``: a plain name, never a path
+SCENARIO_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
+#: every entry of a check folder (a folder holding anything else is not a check's and is refused)
+CHECK_ENTRIES = ("check.json", "junit.xml", "runs")
 
 
 @dataclass
@@ -140,6 +145,18 @@ def _number(v: Any, where: str, lo: float = -math.inf) -> float:
     return float(v)
 
 
+def _inside(folder: Path, name: Any, where: str) -> Path:
+    """``folder / name`` for a relative path that stays inside ``folder`` (``--update-baseline`` writes it: a suite
+    file never names a place outside its own folder)."""
+    require(isinstance(name, str) and name != "", f"{where} = {name!r} must be a file name relative to the suite")
+    path = (folder / name).resolve()
+    require(
+        not Path(name).is_absolute() and path.is_relative_to(folder),
+        f"{where} = {name!r} lies outside the suite file's folder {str(folder)!r}; give a path inside it",
+    )
+    return path
+
+
 def load_suite(path: str | Path) -> Suite:
     """Read and validate a suite file (SoabenchError naming the value and what is allowed)."""
     p = Path(path)
@@ -156,7 +173,7 @@ def load_suite(path: str | Path) -> Suite:
         path=p,
         scenarios=[],
         thresholds=[],
-        baseline=here / head["baseline"] if "baseline" in head else None,
+        baseline=_inside(here, head["baseline"], "[suite] baseline") if "baseline" in head else None,
         config=here / head["config"] if "config" in head else None,
     )
     scen = data.get("scenario", [])
@@ -164,6 +181,11 @@ def load_suite(path: str | Path) -> Suite:
     for i, raw in enumerate(scen):
         t = _table(raw, f"[[scenario]] #{i + 1}", SCENARIO_KEYS)
         require("name" in t and "net" in t, f"[[scenario]] #{i + 1} needs a name and a net")
+        require(
+            isinstance(t["name"], str) and SCENARIO_NAME.fullmatch(t["name"]) is not None,
+            f"[[scenario]] #{i + 1}: name = {t['name']!r} is not a plain name (letters, digits, '.', '_', '-', at most "
+            "100, starting with a letter or digit): it names the folder --out/runs/NAME",
+        )
         net = str(t["net"])
         if "/" in net or net.endswith(".xml"):
             net = str(here / net)
@@ -419,8 +441,19 @@ def run_check(suite_path: str | Path, out: Path, update_baseline: bool = False, 
     baseline = None
     if any(th.relative for th in suite.thresholds) and not update_baseline:
         baseline = read_baseline(suite.baseline)  # a missing baseline is a user error, before any run
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    from soabench.experiment.ownership import FolderLock, check_own_folder, resolve
+
+    out = resolve(out)
+    check_own_folder(out, "check folder", CHECK_ENTRIES)
+    with FolderLock(out, "check folder"):
+        check_own_folder(out, "check folder", CHECK_ENTRIES)  # again, under the lock
+        return _check_locked(suite, out, baseline, update_baseline, workers, t0)
+
+
+def _check_locked(
+    suite: Suite, out: Path, baseline: dict[str, float] | None, update_baseline: bool, workers: int | None, t0: float
+) -> int:
+    """The body of :func:`run_check` once ``out`` is checked and locked."""
     values, failures = run_suite(suite, out, workers)
     if update_baseline:
         require(suite.baseline is not None, f'{suite.path}: --update-baseline needs [suite] baseline = "FILE.json"')

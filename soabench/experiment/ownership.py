@@ -4,6 +4,9 @@
   and is refused when ``/x/run`` already holds a run.
 * A new run needs a folder that does not exist or is empty; a folder with content but without the run's own file
   (e.g. ``trials/`` and no ``run.json``: a half-copied or foreign folder) is refused, never adopted.
+* A command whose folder holds parts of known names (a study's ``main/``, ``clutter/``, ...; a check's
+  ``check.json``, ``runs/``) writes only into a folder that is absent, empty or holds nothing but those names
+  (:func:`check_own_folder`): anything else there is someone else's and the folder is refused.
 * :class:`FolderLock` holds ``fcntl.flock`` on ``<folder>/.lock`` for the whole session; the file names the holder
   (pid, host, start time). A second process gets one clear error naming the holder. The kernel drops the lock
   when its holder dies, however it dies (SIGKILL included), so a stale ``.lock`` left behind is detected by taking
@@ -16,6 +19,7 @@ import json
 import os
 import socket
 import tempfile
+from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -75,6 +79,23 @@ def check_new_folder(path: Path, marker: str, what: str, resume_hint: str) -> No
         raise SoabenchError(
             f"{str(path)!r} is not empty ({shown}) but holds no {marker}: a stale or foreign folder is never adopted; "
             "give a new or empty folder with --out"
+        )
+
+
+def check_own_folder(path: Path, what: str, own: Iterable[str]) -> None:
+    """``path`` (resolved) may be written by a command whose entries all have one of the names ``own``: it is
+    absent, empty, or holds nothing else (the command's own folder, re-run to finish or refresh it). Any other entry
+    belongs to someone else, and the folder is refused before anything is written."""
+    check_writable_target(path, what)
+    if not path.is_dir():
+        return
+    names = set(own) | {LOCK_FILE}
+    foreign = sorted(p.name for p in path.iterdir() if p.name not in names)
+    if foreign:
+        shown = ", ".join(foreign[:4]) + (", ..." if len(foreign) > 4 else "")
+        raise SoabenchError(
+            f"{str(path)!r} is not empty ({shown}) and is not a {what}: a folder that is not ours is never written "
+            "into; give a new or empty folder with --out"
         )
 
 

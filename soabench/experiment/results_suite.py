@@ -52,21 +52,23 @@ class Settings:
     kitti_folds: int = 7  #: the paper's 7-fold cross-validation (3 sequences per fold for 21)
 
     def validate(self, shipped: Sequence[str]) -> Settings:
+        """Every size in its range (the bounds of soabench/config.py and of ``export kitti``), before any part runs."""
+        from soabench.cli_checks import check_time
+        from soabench.config import MAX_SEED, MAX_TRIALS
+        from soabench.kitti.export import MAX_EXPORT_TRIALS
+
+        def count(name: str, low: int, high: int, why: str = "") -> None:
+            v = getattr(self, name)
+            ok = isinstance(v, int) and low <= v <= high
+            require(ok, f"--{name.replace('_', '-')} {v!r} is out of range; allowed: integers in [{low}, {high}]{why}")
+
         for name in ("trials", "births_trials", "scene_trials", "density_trials"):
-            v = getattr(self, name)
-            require(isinstance(v, int) and v >= 1, f"--{name.replace('_', '-')} {v!r} must be an integer >= 1")
-        require(
-            isinstance(self.kitti_sequences, int) and self.kitti_sequences >= 2,
-            f"--kitti-sequences {self.kitti_sequences!r} must be an integer >= 2 (cross-validation needs 2)",
-        )
-        require(
-            isinstance(self.kitti_folds, int) and self.kitti_folds >= 2,
-            f"--kitti-folds {self.kitti_folds!r} must be an integer >= 2",
-        )
+            count(name, 1, MAX_TRIALS)
+        count("kitti_sequences", 2, MAX_EXPORT_TRIALS, " (cross-validation needs 2)")
+        count("kitti_folds", 2, MAX_EXPORT_TRIALS, " (more folds than sequences: one per sequence)")
+        count("seed", 0, MAX_SEED)
         for name in ("duration", "kitti_duration"):
-            v = getattr(self, name)
-            require(v > 0 and v < float("inf"), f"--{name.replace('_', '-')} {v!r} must be a number of seconds > 0")
-        require(self.seed >= 0, f"--seed {self.seed} must be >= 0")
+            check_time(f"--{name.replace('_', '-')}", getattr(self, name))
         for flag, names in (("--scenes", self.scenes or ()), ("--kitti-scenes", self.kitti_scenes)):
             bad = [n for n in names if n not in shipped]
             require(not bad, f"{flag} {','.join(bad)}: not a shipped scene; allowed: {', '.join(shipped)}")
@@ -310,7 +312,7 @@ def run_results(
 ) -> ResultsOutcome:
     """Make (or finish) every part of results/ in ``out``; see the module docstring."""
     from soabench.experiment.occlusion_density import write_density
-    from soabench.experiment.ownership import FolderLock, check_writable_target, resolve
+    from soabench.experiment.ownership import FolderLock, check_own_folder, resolve
     from soabench.scenario import shipped_nets
 
     shipped = shipped_nets()
@@ -318,7 +320,8 @@ def run_results(
     scenes = list(s.scenes or shipped)
     log = log or (lambda msg: print(f"soabench results: {msg}", file=sys.stderr, flush=True))
     root = resolve(out)
-    check_writable_target(root, "results folder")
+    own = (*shipped, "scenes", "kitti", "README.md")  # README.md: results/'s own description, never written here
+    check_own_folder(root, "results folder", own)
     root.mkdir(parents=True, exist_ok=True)
     hint = f"finish with: soabench results --out {root} (and the same options)"
     exe = dict(workers=workers, progress=progress)
@@ -416,7 +419,12 @@ def add_arguments(p: argparse.ArgumentParser, csv_list: Callable[[str], Callable
 
 def cmd_results(args: argparse.Namespace) -> int:
     """Handler of ``soabench results``."""
-    require(args.workers is None or args.workers >= 1, f"--workers {args.workers} must be >= 1")
+    from soabench.experiment.executors import MAX_WORKERS
+
+    require(
+        args.workers is None or 1 <= args.workers <= MAX_WORKERS,
+        f"--workers {args.workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
     settings = Settings(
         scenes=tuple(args.scenes) if args.scenes else None,
         trials=args.trials,

@@ -17,13 +17,15 @@ from pathlib import Path
 from soabench.config import Config
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment import sensitivity as sens
-from soabench.experiment.ownership import FolderLock, check_writable_target, resolve
+from soabench.experiment.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runmeta import config_differences, validate_run_meta
 from soabench.experiment.runner import RunOutcome, run_experiment
 from soabench.experiment.store import RunStore
 
 #: the variant runs, in column order
 VARIANTS = ("gate_off", "visible")
+#: every entry a sensitivity folder holds
+SENSITIVITY_ENTRIES = (*VARIANTS, "sensitivity.md", "sensitivity.csv")
 
 
 def variant_config(main: Config, key: str, trials: int) -> Config:
@@ -130,8 +132,9 @@ def run_sensitivity(main_dir: Path, out: Path | None = None, *, trials: int | No
         f"finish it first: soabench run --resume {main_dir}",
     )
     root = resolve(Path(out) if out is not None else main_dir.with_name(main_dir.name + "_sensitivity"))
-    check_writable_target(root, "sensitivity folder")
+    check_own_folder(root, "sensitivity folder", SENSITIVITY_ENTRIES)
     with FolderLock(root, "sensitivity folder"):
+        check_own_folder(root, "sensitivity folder", SENSITIVITY_ENTRIES)
         try:
             runs = _run_variants_grouped(root, main_dir, trials, exe)
             md = ""

@@ -32,7 +32,7 @@ from soabench.errors import Interrupted
 from soabench.experiment import paper
 from soabench.experiment import sensitivity as sens
 from soabench.experiment.files import write_text_atomic
-from soabench.experiment.ownership import FolderLock, check_writable_target, resolve
+from soabench.experiment.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.report import paper_protocol_mismatch
 from soabench.experiment.runmeta import flatten_config
 from soabench.experiment.runner import RunOutcome, net_name, run_experiment
@@ -42,6 +42,8 @@ from soabench.experiment.sweep import BIRTHS_MODELS as BIRTH_MODELS  # the N_hat
 from soabench.experiment.sweep import SweepOutcome, run_sweep
 
 CLUTTER_VALUES = (0.5, 3.0, 5.0)
+#: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
+STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png")
 BIRTH_OFFSETS = tuple(range(-10, 11))
 
 
@@ -102,7 +104,7 @@ def run_study(
     summaries only).
     """
     root = resolve(out if out is not None else Path("results") / net_name(net))
-    check_writable_target(root, "study folder")
+    check_own_folder(root, "study folder", STUDY_ENTRIES)
     hint = f"finish with: soabench study --out {root}"
     explicit = set(explicit or ())
     main_cfg = config
@@ -152,6 +154,7 @@ def run_study(
         return main, clutter, births
 
     with FolderLock(root, "study folder"):
+        check_own_folder(root, "study folder", STUDY_ENTRIES)  # again, under the lock
         try:
             follow = sensitivity_trials is None and "experiment.trials" in explicit  # like the clutter sweep
             sens_dir = root / "sensitivity"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from pathlib import Path
 
@@ -35,12 +36,13 @@ def cmd_kitti(args: argparse.Namespace) -> int:
         if args.classes is not None:
             kcfg = dataclasses.replace(kcfg, classes=tuple(args.classes)).validate()
         if args.score_min is not None:
+            require(math.isfinite(args.score_min), f"--score-min {args.score_min!r} must be a finite number")
             kcfg = dataclasses.replace(kcfg, score_min=float(args.score_min)).validate()
         spec = KittiSpec(
             root=str(Path(args.root).resolve()),
             detections=str(Path(args.detections).resolve()) if args.detections else None,
             semantics=str(Path(args.semantics).resolve()) if args.semantics else None,
-            sequences=parse_sequences(args.sequences) if args.sequences else None,
+            sequences=parse_sequences(args.sequences) if args.sequences is not None else None,
             folds=args.folds,
             nhat_sweep=list(args.nhat_sweep) if args.nhat_sweep is not None else None,
             skip_bad=args.skip_bad,
@@ -59,13 +61,20 @@ def cmd_kitti(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``soabench export kitti``: SUMO trials written in the KITTI tracking layout."""
+    from soabench.cli_checks import check_time
+    from soabench.config import MAX_SEED
     from soabench.kitti.config import load_kitti_config
-    from soabench.kitti.export import export_kitti
+    from soabench.kitti.export import MAX_EXPORT_TRIALS, export_kitti
 
-    require(args.trials is not None and args.trials >= 1, f"--trials {args.trials!r} must be an integer >= 1")
+    require(
+        args.trials is not None and 1 <= args.trials <= MAX_EXPORT_TRIALS,
+        f"--trials {args.trials!r} is out of range; allowed: integers in [1, {MAX_EXPORT_TRIALS}] "
+        "(sequence ids 0000-9999)",
+    )
+    check_time("--duration", args.duration)
     cfg, _ = load_kitti_config(args.config)
     if args.seed is not None:
-        require(args.seed >= 0, f"--seed {args.seed} must be >= 0")
+        require(0 <= args.seed <= MAX_SEED, f"--seed {args.seed} is out of range; allowed: integers in [0, {MAX_SEED}]")
         cfg.experiment = dataclasses.replace(cfg.experiment, seed=args.seed)
     out = Path(args.out)
     rows = export_kitti(

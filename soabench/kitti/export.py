@@ -39,6 +39,7 @@ from shapely.ops import split
 from soabench.config import Config, SensorConfig
 from soabench.errors import require
 from soabench.experiment.files import write_json_atomic, write_text_atomic
+from soabench.experiment.ownership import FolderLock, check_new_folder, resolve
 from soabench.geometry import wrap
 from soabench.kitti.camera import image_box
 from soabench.kitti.formats import (
@@ -57,6 +58,8 @@ PED_HWL = (1.75, 0.6, 0.8)  #: pedestrian box (m)
 CAR_H = 1.5  #: vehicle box height (m)
 SCORE_STREAM = 0x4B495454  #: "KITT": spawn key of the score stream
 GRAVITY = 9.80665  #: specific force (m/s^2) an accelerometer at rest reports upward: the OXTS az and au of a level ego
+MAX_EXPORT_TRIALS = 10_000  #: trials of one export: KITTI sequence ids have four digits
+EXPORT_FILE = "export.json"  #: written last: a folder holding it is a finished export
 
 
 def _fmt(values) -> str:
@@ -275,18 +278,14 @@ def export_kitti(
     log: Callable[[str], None] = print,
 ) -> list[dict]:
     """Simulate, observe and write ``trials`` SUMO trials as KITTI sequences 0000, 0001, ... under ``out``."""
-    from soabench.scenario import load, simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
+    from soabench.scenario import load
 
-    require(isinstance(trials, int) and trials >= 1, f"--trials {trials!r} must be an integer >= 1")
-    out = Path(out)
     require(
-        not (out / LABEL_DIR).exists() or not any((out / LABEL_DIR).iterdir()),
-        f"--out {str(out)!r} already holds a KITTI layout ({LABEL_DIR}/ is not empty); choose another folder",
+        isinstance(trials, int) and 1 <= trials <= MAX_EXPORT_TRIALS,
+        f"--trials {trials!r} is out of range; allowed: integers in [1, {MAX_EXPORT_TRIALS}] (sequence ids 0000-9999)",
     )
-    require(out.parent.is_dir(), f"--out {str(out)!r}: folder {str(out.parent)!r} does not exist")
-    require(not out.exists() or out.is_dir(), f"--out {str(out)!r} is a file; give a folder")
+    out = resolve(out)
+    check_new_folder(out, EXPORT_FILE, "KITTI export", "remove it to export again")
     fov = float(fov_deg) if fov_deg is not None else export_default_fov(cfg.sensor)
     require(0.0 < fov < 180.0, f"--fov-deg {fov!r} must be in (0, 180): a camera's horizontal field of view")
     sensor = dataclasses.replace(cfg.sensor, fov_deg=fov)
@@ -295,6 +294,28 @@ def export_kitti(
     sensor.validate(scen.step_length)
     dur = float(scen.duration) if duration is None else float(duration)
     require(dur > 0, f"--duration {dur!r} must be > 0")
+    with FolderLock(out, "export folder"):
+        check_new_folder(out, EXPORT_FILE, "KITTI export", "remove it to export again")  # again, under the lock
+        return _export_trials(cfg, (net, polys, scenario), (scene, scen), trials, out, dur, sensor, calib, log)
+
+
+def _export_trials(
+    cfg: Config,
+    source: tuple[str, tuple[str, ...], str | None],
+    loaded: tuple,
+    trials: int,
+    out: Path,
+    dur: float,
+    sensor: SensorConfig,
+    calib: dict,
+    log: Callable[[str], None],
+) -> list[dict]:
+    """The trials of :func:`export_kitti` written into the checked and locked folder ``out``; ``export.json`` last."""
+    from soabench.scenario import simulate
+    from soabench.seeding import trial_seeds
+    from soabench.sensor import observe
+
+    (net, polys, scenario), (scene, scen) = source, loaded
     rows = []
     for n in range(trials):
         seeds = trial_seeds(cfg.experiment.seed, n)
@@ -303,7 +324,7 @@ def export_kitti(
         rows.append(export_trial(n, recording, scans, scene, sensor, calib, out, cfg.experiment.seed))
         log(f"sequence {n:04d}: {rows[-1]['frames']} frames, {rows[-1]['measurements']} measurements")
     write_json_atomic(
-        out / "export.json",
+        out / EXPORT_FILE,
         {
             "net": net, "polys": list(polys), "scenario": scenario, "seed": cfg.experiment.seed, "trials": trials,
             "duration": dur, "sensor": dataclasses.asdict(sensor), "sequences": rows,

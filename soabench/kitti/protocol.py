@@ -182,21 +182,31 @@ def run_kitti(
     resume: bool = False,
     log: Callable[[str], None] | None = None,
 ) -> KittiOutcome:
-    """Run (or finish, ``resume=True``) the protocol into the run folder ``out``."""
-    from soabench.kitti.report import write_outputs
+    """Run (or finish, ``resume=True``) the protocol into the run folder ``out``: resolved, new or empty for a new
+    run (holding this run's ``run.json`` on resume), locked while it works (:mod:`soabench.experiment.ownership`)."""
+    from soabench.experiment.ownership import FolderLock, check_new_folder, resolve
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
-    out = Path(out)
+    out = resolve(out)
     run_file = out / RUN_FILE
     if resume:
         require(run_file.is_file(), f"--resume {str(out)!r} is not a `soabench kitti` run folder (no {RUN_FILE})")
         spec = KittiSpec.from_meta(read_json(run_file))
     else:
         require(spec is not None, "a new run needs its settings")
-        require(not run_file.exists(), f"{str(out)!r} already holds a run; use --resume {out} or another --out")
-        require(
-            out.parent.is_dir() or out.parent == Path(""), f"--out {str(out)!r}: {str(out.parent)!r} does not exist"
-        )
+        check_new_folder(out, RUN_FILE, "run", f"finish it with: soabench kitti --resume {out}")
+        open_dataset(spec.root, spec.detections, spec.semantics, spec.sequences)  # bad folders: before any write
+    with FolderLock(out, "KITTI run folder"):
+        if not resume:  # again, under the lock
+            check_new_folder(out, RUN_FILE, "run", f"finish it with: soabench kitti --resume {out}")
+        return _run_locked(spec, out, resume, log)
+
+
+def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], None]) -> KittiOutcome:
+    """The body of :func:`run_kitti` once the folder is checked and locked."""
+    from soabench.kitti.report import write_outputs
+
+    run_file = out / RUN_FILE
     assert spec is not None
     ds = open_dataset(spec.root, spec.detections, spec.semantics, spec.sequences)
     seqs, skipped = _read_all(ds, spec, log)

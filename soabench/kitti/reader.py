@@ -63,23 +63,39 @@ def sequence_files(folder: Path) -> dict[str, Path]:
     return {m.group(1): p for p in sorted(Path(folder).iterdir()) if (m := _SEQ_FILE.match(p.name)) and p.is_file()}
 
 
+#: ``--sequences`` bounds: sequence numbers and how many one run may name
+MAX_SEQUENCE_NUMBER = 999_999
+MAX_SEQUENCES = 10_000
+
+
 def parse_sequences(text: str) -> list[int]:
-    """``0000-0020``, ``0,3,5`` or a mix (``0-3,7``): sorted unique sequence numbers."""
-    out: set[int] = set()
+    """``0000-0020``, ``0,3,5`` or a mix (``0-3,7``): sorted unique sequence numbers, each in
+    [0, :data:`MAX_SEQUENCE_NUMBER`], at most :data:`MAX_SEQUENCES` of them (checked before a range is expanded)."""
+    shown = text if len(text) <= 60 else text[:57] + "..."
+    spans: list[tuple[int, int]] = []
     try:
         for part in (s.strip() for s in text.split(",")):
-            if "-" in part:
-                a, b = (int(x) for x in part.split("-"))
-                require(b >= a >= 0, "")
-                out.update(range(a, b + 1))
-            else:
-                require(int(part) >= 0, "")
-                out.add(int(part))
+            a, _, b = part.partition("-") if "-" in part else (part, "", part)
+            lo, hi = int(a), int(b)
+            require(hi >= lo >= 0, "")
+            spans.append((lo, hi))
     except (ValueError, SoabenchError):
         raise SoabenchError(
-            f"--sequences {text!r} must be ranges LO-HI and/or numbers separated by commas, e.g. 0000-0020 or 0,3,5"
+            f"--sequences {shown!r} must be ranges LO-HI and/or numbers separated by commas, e.g. 0000-0020 or 0,3,5"
         ) from None
-    return sorted(out)
+    top = max(hi for _, hi in spans)
+    count = sum(hi - lo + 1 for lo, hi in spans)
+    require(
+        top <= MAX_SEQUENCE_NUMBER and count <= MAX_SEQUENCES,
+        f"--sequences {shown!r} names sequence {top} ({count} numbers); allowed: numbers 0-{MAX_SEQUENCE_NUMBER}, "
+        f"at most {MAX_SEQUENCES} of them",
+    )
+    return sorted({n for lo, hi in spans for n in range(lo, hi + 1)})
+
+
+def _listed(items: list[str], limit: int = 5) -> str:
+    """``a, b, c`` or ``a, b, c, d, e, ... (N in all)``: a list in one readable line."""
+    return ", ".join(items[:limit]) + (f", ... ({len(items)} in all)" if len(items) > limit else "")
 
 
 @dataclass
@@ -123,7 +139,7 @@ def open_dataset(
     else:
         by_num = {int(s): s for s in label_ids}
         missing = [f"{n:04d}" for n in sequences if n not in by_num]
-        require(not missing, f"--sequences: no labels for {', '.join(missing)} in {str(labels)!r}")
+        require(not missing, f"--sequences: no labels for {_listed(missing)} in {str(labels)!r}")
         ids = [by_num[n] for n in sequences]
     no_det = [s for s in ids if s not in det_ids]
     require(
