@@ -72,6 +72,14 @@ def _non_negative(name: str, value: float, hi: float = 1e6) -> None:
     _in_range(name, value, 0.0, hi)
 
 
+def require_distinct(name: str, values: tuple) -> None:
+    """Each value once: a repeated clutter rate or mode would write every row twice and count its trials twice."""
+    seen: set = set()
+    for v in values:
+        require(v not in seen, f"{name} = {list(values)!r} names {v!r} twice; give each value once")
+        seen.add(v)
+
+
 def _check_type(name: str, default: Any, value: Any) -> Any:
     """``value`` from a file, checked against the type of the field's ``default``; ints become floats for floats."""
     if default is None and value is None:  # an unset Optional field (JSON null in a run file)
@@ -337,9 +345,11 @@ class ExperimentConfig:
         require(len(self.probabilities) >= 1, "probabilities must name at least one mode")
         for p in self.probabilities:
             _one_of("probability mode", p, PROBABILITY_MODES)
+        require_distinct("probabilities", self.probabilities)
         require(len(self.clutter) >= 1, "clutter must give at least one rate")
         for lam in self.clutter:
             _non_negative("clutter", lam, hi=1e4)
+        require_distinct("clutter", self.clutter)
         _int_range("seed", self.seed, 0, MAX_SEED)
 
 
