@@ -16,17 +16,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from soabench.errors import SoabenchError, require
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - exercised on Python 3.10 only
-    import tomli as tomllib
 
 BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
@@ -443,14 +437,8 @@ def load_config(path: str | Path | None, base: Config | None = None) -> Config:
     """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
     if path is None:
         return (base or Config()).validate()
+    from soabench.tomlfile import read_toml
+
     p = Path(path)
     require(p.is_file(), f"config file {str(p)!r} does not exist")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as exc:
-        raise SoabenchError(f"config file {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
-    except OSError as exc:
-        raise SoabenchError(f"cannot read the config file {str(p)!r}: {exc.strerror or exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SoabenchError(f"config file {str(p)!r} is not valid TOML: {exc}") from None
-    return Config.from_dict(data, base).validate()
+    return Config.from_dict(read_toml(p, "config file"), base).validate()

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from soabench.config import Config, tomllib
-from soabench.errors import SoabenchError, require
+from soabench.config import Config
+from soabench.errors import require
+from soabench.tomlfile import read_toml
 
 VEHICLE_CLASSES = ("Car", "Van", "Truck", "Tram")  #: KITTI classes that occlude (obstacles O_k)
 
@@ -73,10 +74,7 @@ def load_kitti_config(path: str | Path | None) -> tuple[Config, KittiConfig]:
         return base.validate(), KittiConfig().validate()
     p = Path(path)
     require(p.is_file(), f"config file {str(p)!r} does not exist")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise SoabenchError(f"config file {str(p)!r} is not valid TOML: {exc}") from None
+    data = read_toml(p, "config file")
     kitti = kitti_from_dict(data.pop("kitti", {}))
     return Config.from_dict(data, base).validate(), kitti
 

@@ -29,6 +29,9 @@ from shapely.geometry.base import BaseGeometry
 from soabench.errors import SoabenchError, require
 from soabench.scenario.scene import SceneMap
 
+#: farthest a scenario's door may lie from a sidewalk centre line (m); as far as a derived door may lie from a
+#: sidewalk (:func:`default_doors`)
+MAX_DOOR_DISTANCE = 30.0
 #: polygon ``type`` substrings (case-insensitive) that make a polygon a static occluder.
 OCCLUDER_TYPES = ("parked", "car", "vehicle", "obstacle", "occluder", "wall")
 
@@ -179,15 +182,28 @@ def default_doors(buildings: Sequence[Polygon], sidewalk: BaseGeometry, max_dist
     return np.asarray(doors, dtype=float).reshape(-1, 2)
 
 
-def project_doors(points: np.ndarray, lines: Sequence[LineString]) -> np.ndarray:
-    """Each door point moved onto the nearest sidewalk centre line (where SUMO persons depart and arrive)."""
+def project_doors(points: np.ndarray, lines: Sequence[LineString], max_dist: float | None = None) -> np.ndarray:
+    """Each door point moved onto the nearest sidewalk centre line (where SUMO persons depart and arrive).
+
+    ``max_dist``: refuse a door farther than this (m) from every sidewalk centre line in the box (a door given at
+    the wrong place would otherwise be moved silently onto some sidewalk)."""
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     if len(pts) == 0 or not lines:
+        require(
+            max_dist is None or len(pts) == 0,
+            f"doors.points: {len(pts)} door(s) given but the world box holds no sidewalk centre line to put them on",
+        )
         return pts.copy()
     ml = MultiLineString(list(lines))
     out = []
     for x, y in pts:
         q, _ = shapely.ops.nearest_points(ml, Point(x, y))
+        far = max_dist is not None and not q.distance(Point(x, y)) <= max_dist
+        require(
+            not far,
+            f"door [{x:g}, {y:g}] lies {q.distance(Point(x, y)):.4g} m from the nearest sidewalk in the world box; "
+            f"allowed: at most {max_dist:g} m (doors.points are points on buildings facing a sidewalk)",
+        )
         out.append((q.x, q.y))
     return np.asarray(out, dtype=float)
 
@@ -204,6 +220,7 @@ def load_scene(
     name: str | None = None,
     net=None,
     skip_parked: bool = False,
+    door_limit: float | None = None,
 ) -> SceneMap:
     """Build the :class:`SceneMap` of a network (docs/method.md §2.1(c)).
 
@@ -216,6 +233,7 @@ def load_scene(
         name: map name; default: the file stem.
         net: an already read sumolib network (skips re-reading ``net_file``).
         skip_parked: leave out the polygon files' parked cars (see :func:`read_polygons`).
+        door_limit: refuse a door farther than this (m) from every sidewalk (:func:`project_doors`).
     """
     import shapely.ops  # noqa: F401  (nearest_points)
 
@@ -241,7 +259,9 @@ def load_scene(
     lines = [g for ln in regions["lines"] for g in _parts(ln.intersection(world))]
     if doors is None:
         doors = default_doors(buildings, sidewalk)
-    doors = project_doors(np.asarray(doors, dtype=float).reshape(-1, 2), _sidewalk_only_lines(net, world))
+    doors = project_doors(
+        np.asarray(doors, dtype=float).reshape(-1, 2), _sidewalk_only_lines(net, world), max_dist=door_limit
+    )
     return SceneMap(
         name=name or Path(net_file).name.removesuffix(".xml").removesuffix(".net"),
         world_box=world,
