@@ -74,6 +74,35 @@ def read_net(net_file: str | os.PathLike):  # -> sumolib.net.Net
     return net
 
 
+def _require_not_a_network(p: Path) -> None:
+    """Refuse a SUMO network given as a polygon file (it reads as one without polygons)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        _, root = next(ET.iterparse(p, events=("start",)))
+    except (ET.ParseError, StopIteration):
+        return  # the polygon reader names what is wrong with the file
+    require(
+        root.tag != "net",
+        f"polygon file {str(p)!r} is a SUMO network, not a polygon file; give it with --net (polygons: --poly)",
+    )
+
+
+def _require_outline(p: Path, poly) -> None:
+    """A building's or occluder's outline: at least 3 points, finite coordinates within
+    :data:`~soabench.scenario.config.MAX_COORDINATE` (a scene spans at most 10 000 km)."""
+    from soabench.scenario.config import MAX_COORDINATE
+
+    where = f"polygon {poly.id!r} ({poly.type}) of {str(p)!r}"
+    require(len(poly.shape) >= 3, f"{where} has {len(poly.shape)} point(s); an outline needs at least 3")
+    xy = np.asarray(poly.shape, dtype=float)
+    bad = xy[~(np.isfinite(xy) & (np.abs(xy) <= MAX_COORDINATE))]
+    if len(bad):
+        raise SoabenchError(
+            f"{where} has the coordinate {float(bad[0])!r}; allowed: finite, |value| <= {MAX_COORDINATE:g} m"
+        )
+
+
 def read_polygons(
     poly_files: Sequence[str | os.PathLike], skip_parked: bool = False
 ) -> tuple[list[Polygon], list[Polygon]]:
@@ -85,6 +114,7 @@ def read_polygons(
     occluders: list[Polygon] = []
     for f in poly_files:
         p = _check_file(f, "polygon file")
+        _require_not_a_network(p)
         try:
             polys = sumolib.shapes.polygon.read(str(p), includeTaz=False)
         except xml.sax.SAXParseException as exc:
@@ -96,10 +126,17 @@ def read_polygons(
             raise SoabenchError(
                 f"polygon file {str(p)!r} could not be read as SUMO polygons ({type(exc).__name__}: {exc})"
             ) from None
+        ids: set[str] = set()
         for poly in polys:
+            require(poly.id not in ids, f"polygon file {str(p)!r} holds the polygon id {poly.id!r} twice")
+            ids.add(poly.id)
             kind = (poly.type or "").lower()
-            if len(poly.shape) < 3:
+            used = "building" in kind or (
+                any(k in kind for k in OCCLUDER_TYPES) and not (skip_parked and "parked" in kind)
+            )
+            if not used:
                 continue
+            _require_outline(p, poly)
             geom = shapely.make_valid(Polygon([(float(x), float(y)) for x, y in poly.shape]))
             if geom.is_empty or geom.area <= 0:
                 continue
