@@ -14,6 +14,7 @@ from typing import Any
 
 from soabench.config import Config
 from soabench.errors import require
+from soabench.kitti.formats import KITTI_TYPES
 from soabench.tomlfile import read_toml
 
 VEHICLE_CLASSES = ("Car", "Van", "Truck", "Tram")  #: KITTI classes that occlude (obstacles O_k)
@@ -43,7 +44,18 @@ class KittiConfig:
             f"kitti.classes {list(self.classes)} and kitti.obstacle_classes {list(self.obstacle_classes)} overlap; "
             "a tracked class cannot also be an occluder",
         )
-        require(not math.isnan(self.score_min), "kitti.score_min must be a number")
+        for key in ("classes", "obstacle_classes"):
+            bad = [c for c in getattr(self, key) if c not in KITTI_TYPES or c == "DontCare"]
+            require(
+                not bad,
+                f"kitti.{key}: {bad[0] if bad else ''!r} is not a KITTI object type; allowed: "
+                + ", ".join(t for t in KITTI_TYPES if t != "DontCare"),
+            )
+        require(
+            not math.isnan(self.score_min) and self.score_min < math.inf,
+            f"kitti.score_min = {self.score_min!r} must be a number below inf (inf drops every detection; "
+            "default -inf: keep all)",
+        )
         require(
             self.obstacles in ("labels", "detections"),
             f"kitti.obstacles = {self.obstacles!r}; choose 'labels' or 'detections'",
