@@ -108,7 +108,9 @@ def _num(path: Path, line: int, token: str, what: str, kind: type = float) -> fl
 
 def _frame(path: Path, line: int, token: str) -> int:
     f = int(_num(path, line, token, "frame", int))
-    if not 0 <= f <= MAX_FRAME:
+    if f < 0:
+        raise ReadError(f"{path}:{line}: frame {f} is negative")
+    if f > MAX_FRAME:
         raise ReadError(f"{path}:{line}: frame {f} is out of range; allowed: 0 to {MAX_FRAME}")
     return f
 
@@ -158,7 +160,10 @@ def parse_objects(path: Path, kind: str) -> tuple[Objects, str]:
     path = Path(path)
     lines = read_lines(path)
     if kind == "label" and not lines:
-        raise ReadError(f"{path}: the label file is empty; it needs one row per labelled object and frame")
+        raise ReadError(
+            f"sequence {path.stem} is empty: the label file {str(path)!r} holds no rows (one row per labelled object "
+            "and frame)"
+        )
     fmt = "label" if kind == "label" else detect_format(path, lines)
     cols: dict[str, list] = {k: [] for k in ("frame", "tid", "type", "occ", "hwl", "xyz", "ry", "score", "line")}
     for line, text in lines:
