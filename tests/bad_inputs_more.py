@@ -177,6 +177,11 @@ CASES: list[Case] = [
     ("kitti semantics malformed", _kitti(_semantics("0 sidewalk 0 0 1 1 x 1\n"), "--semantics", "SEMANTICS"), "'x'"),
     ("kitti semantics NaN", _kitti(_semantics("0 sidewalk 0 0 1 1 nan 1\n"), "--semantics", "SEMANTICS"), "finite"),
     (
+        "kitti semantics 1e300 m",
+        _kitti(_semantics("0 sidewalk 0 0 1e300 0 1e300 1e300\n"), "--semantics", "SEMANTICS"),
+        "coordinate 1e+300 is out of range",
+    ),  # fmt: skip
+    (
         "kitti semantics frame 999999999",
         _kitti(_semantics("999999999 sidewalk 0 0 10 0 10 10\n"), "--semantics", "SEMANTICS"),
         "frame 999999999",

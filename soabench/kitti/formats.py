@@ -40,6 +40,9 @@ OXTS_MIN_COLUMNS = 6
 KITTI_TYPES = ("Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc", "DontCare")
 MAX_INT = 2**31 - 1  #: largest |track id| and other integer column (a C int, as the devkit stores them)
 MAX_FRAME = 1_000_000  #: largest frame index (a day of frames at 10 Hz is 864 000)
+#: largest |coordinate| of a semantic polygon (m, ego frame): twice the largest sensor.r_max, so that every file
+#: ``soabench export kitti`` writes (polygons within r_max of the ego) reads back
+MAX_SEMANTICS_COORDINATE = 20_000.0
 
 
 class ReadError(SoabenchError):
@@ -402,5 +405,11 @@ def parse_semantics(path: Path) -> dict[int, list[tuple[str, np.ndarray]]]:
             )
         frame = _frame(path, line, tok[0])
         xy = np.array([_num(path, line, t, "coordinate") for t in tok[2:]]).reshape(-1, 2)
+        far = np.abs(xy) > MAX_SEMANTICS_COORDINATE
+        if far.any():
+            raise ReadError(
+                f"{path}:{line}: coordinate {float(xy[far][0])!r} is out of range; semantic polygons lie around the "
+                f"ego: |x|, |y| <= {MAX_SEMANTICS_COORDINATE:g} m"
+            )
         out.setdefault(frame, []).append((tok[1], xy))
     return out
