@@ -235,12 +235,11 @@ def project_doors(points: np.ndarray, lines: Sequence[LineString], max_dist: flo
     out = []
     for x, y in pts:
         q, _ = shapely.ops.nearest_points(ml, Point(x, y))
-        far = max_dist is not None and not q.distance(Point(x, y)) <= max_dist
-        require(
-            not far,
-            f"door [{x:g}, {y:g}] lies {q.distance(Point(x, y)):.4g} m from the nearest sidewalk in the world box; "
-            f"allowed: at most {max_dist:g} m (doors.points are points on buildings facing a sidewalk)",
-        )
+        if max_dist is not None and not q.distance(Point(x, y)) <= max_dist:
+            raise SoabenchError(
+                f"door [{x:g}, {y:g}] lies {q.distance(Point(x, y)):.4g} m from the nearest sidewalk in the world "
+                f"box; allowed: at most {max_dist:g} m (doors.points are points on buildings facing a sidewalk)"
+            )
         out.append((q.x, q.y))
     return np.asarray(out, dtype=float)
 
