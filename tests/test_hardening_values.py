@@ -12,7 +12,8 @@ import bad_inputs
 import bad_inputs_more
 import fake_trial as ft
 import pytest
-from test_hardening_cli import _messages, no_work  # noqa: F401  (no_work: a fixture)
+from test_hardening_cli import no_work  # noqa: F401  (a fixture)
+from test_hardening_cli import test_bad_input_is_one_line_and_exit_2 as one_line_and_exit_2
 
 from soabench.cli import main
 from soabench.config import Config, ExperimentConfig
@@ -27,14 +28,9 @@ from soabench.experiment.store import RunStore, run_identity, trial_of_name
     ("name", "make", "needle"), bad_inputs_more.CASES, ids=[c[0] for c in bad_inputs_more.CASES]
 )  # fmt: skip
 def test_bad_value_is_one_line_and_exit_2(tmp_path, capsys, no_work, name, make, needle):  # noqa: F811
-    argv = make(tmp_path)
-    assert main(argv) == 2, name
-    out, err = capsys.readouterr()
-    lines = _messages(err)
-    assert len(lines) == 1, err
-    assert lines[0].startswith("soabench: error: ") and needle in lines[0], lines[0]
-    assert "Traceback" not in err and not no_work
-    assert not (tmp_path / "out").exists() and not (tmp_path / "sw").exists() and not (tmp_path / "kout").exists()
+    one_line_and_exit_2(tmp_path, capsys, no_work, name, make, needle)  # the first table's test, on these cases
+    for folder in ("out", "sw", "kout"):  # and no output folder was started
+        assert not (tmp_path / folder).exists(), folder
 
 
 def test_the_new_cases_are_distinct_from_each_other_and_from_the_first_table():

@@ -109,21 +109,10 @@ def check_vehicles_and_ego(net, cfg: ScenarioConfig) -> None:
             require(e in edges, f"{key} edge {e!r} is not in network {cfg.net_file!r}")
             if cfg.n_vehicles:
                 _drive_lane(net, e)
+    from soabench.scenario.simulation import ego_depart_pos
+
     lane = _drive_lane(net, cfg.ego_route[0])
-    length = lane.getLength()
-    if cfg.ego_start_x is None:
-        pos = cfg.ego_depart_pos
-    else:
-        line = LineString(lane.getShape())
-        xs = np.linspace(0.0, line.length, 2001)
-        px = np.array([line.interpolate(s).x for s in xs])
-        s = float(xs[np.argmin(np.abs(px - cfg.ego_start_x))]) * length / max(line.length, 1e-9)
-        pos = s + 0.5 * cfg.ego_length
-    require(
-        0.0 <= pos <= length,
-        f"ego start (lane position {pos:.1f} m) is off the first route edge {cfg.ego_route[0]!r} (length "
-        f"{length:.1f} m); give ego.start_x or ego.depart_pos on that edge",
-    )
+    ego_depart_pos(lane.getShape(), lane.getLength(), cfg)
 
 
 def derive_defaults(cfg: ScenarioConfig, net, quiet: bool = False) -> SceneMap:
