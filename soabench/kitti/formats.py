@@ -1,7 +1,9 @@
 """KITTI tracking file formats (docs/method.md §5.9; KITTI tracking devkit readme; AB3DMOT data format).
 
 Parsing only: every function reads one text file and returns arrays, or raises :class:`SoabenchError` naming the file
-and the 1-based line of the first bad row. Nothing read is evaluated; numbers go through ``float``/``int`` only.
+and the 1-based line of the first bad row. Nothing read is evaluated; numbers go through ``float``/``int`` only, and
+must be finite; integers fit a C int, frames lie in [0, :data:`MAX_FRAME`], object types are the devkit's
+(:data:`KITTI_TYPES`, case matters), box sizes are >= 0, and a label file holds at least one row.
 
 * ``label_02/XXXX.txt`` (ground truth), 17 space-separated columns per object: frame, track id, type, truncated,
   occluded, alpha, 2-D box (left, top, right, bottom), dimensions h w l (m), location x y z (bottom centre, rectified
