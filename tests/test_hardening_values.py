@@ -205,3 +205,26 @@ def test_config_from_a_run_with_duplicates_is_refused_on_resume(tmp_path, fake, 
     assert main(["run", "--resume", str(out)]) == 2
     assert "names 3.0 twice" in capsys.readouterr().err
     assert Config.from_dict({"experiment": {"clutter": [3.0]}}).validate()
+
+
+# ------------------------------------------------------------------------------------------------ KITTI records
+@pytest.mark.parametrize(
+    ("content", "says"),
+    [("[1, 2]", "is not the record of cv sequence 0001"), (None, "it says 'cv' sequence '0000'")],
+)
+def test_a_kitti_record_that_is_not_its_sequence_is_one_line(tmp_path, capsys, content, says):
+    import kitti_files
+
+    root = kitti_files.write_dataset(tmp_path / "kitti", n=3, n_frames=12)
+    run = tmp_path / "run"
+    assert main(["kitti", "--root", str(root), "--folds", "3", "--models", "soa", "--out", str(run)]) == 0
+    records = run / "records" / "cv"
+    if content is None:  # a copy of sequence 0000's record (folds of one sequence each: another N_hat, too)
+        shutil.copy(records / "0000.json", records / "0001.json")
+    else:
+        (records / "0001.json").write_text(content)
+    capsys.readouterr()
+    assert main(["kitti", "--resume", str(run)]) == 2
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("soabench: error")]
+    assert len(lines) == 1 and says in lines[0] and "Traceback" not in err, err

@@ -221,8 +221,14 @@ def run_kitti(
         path = out / RECORDS / setting / f"{s}.json"
         if path.is_file():
             rec = read_json(path)
+            rec = rec if isinstance(rec, dict) else {"N_hat": f"a JSON {type(rec).__name__}, not a record"}
             require(
-                isinstance(rec, dict) and rec.get("N_hat") == nh and set(rec.get("models", {})) == set(models),
+                (rec.get("setting"), rec.get("sequence")) == (setting, s),
+                f"{path} is not the record of {setting} sequence {s} (it says {rec.get('setting')!r} sequence "
+                f"{rec.get('sequence')!r}); move it away and resume",
+            )
+            require(
+                rec.get("N_hat") == nh and set(rec.get("models") or {}) == set(models),
                 f"{path} was made with other data or settings (N_hat {rec.get('N_hat')!r}, now {nh!r}); "
                 "start a new run folder",
             )
