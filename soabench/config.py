@@ -317,8 +317,8 @@ class ExperimentConfig:
     duration: float = 100.0  #: seconds simulated per trial
     models: tuple[str, ...] = BIRTH_MODEL_NAMES  #: birth models to run in our GM-PHD (built-ins or plugins)
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
-    probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run
-    clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda (each gets every model x mode)
+    probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
+    clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
 
     def validate(self) -> None:
