@@ -372,10 +372,20 @@ def _snapshot(args: argparse.Namespace, duration: float | None, include_end: boo
     ``include_end``: simulate one SUMO step more so that a sample (and a scan, when ``duration`` is a multiple of
     the sensor period) lies exactly at ``duration``: a snapshot at ``--time 50`` shows the scan at t = 50 s.
     """
-    from soabench.config import MAX_SEED
+    from soabench.config import MAX_SEED, MAX_TRIALS
 
-    require(0 <= args.seed <= MAX_SEED, f"--seed {args.seed} is out of range; allowed: integers in [0, {MAX_SEED}]")
-    require(args.trial >= 0, f"--trial {args.trial} must be >= 0")
+    require(
+        0 <= args.seed <= MAX_SEED,
+        f"--seed {args.seed} must be >= 0"
+        if args.seed < 0
+        else f"--seed {args.seed} is out of range; allowed: 0 to {MAX_SEED}",
+    )
+    require(
+        0 <= args.trial < MAX_TRIALS,
+        f"--trial {args.trial} must be >= 0"
+        if args.trial < 0
+        else f"--trial {args.trial} is out of range; allowed: 0 to {MAX_TRIALS - 1} (a run's trial indices)",
+    )
     cli_checks.check_time("--time/--duration", duration)
     cfg = load_config(args.config)
     from soabench.scenario import simulate

@@ -128,9 +128,9 @@ def config_file_keys(path: str | None) -> set[str]:
     """Dotted keys a (valid, already loaded) TOML config file sets."""
     if path is None:
         return set()
-    from soabench.config import tomllib
+    from soabench.tomlfile import read_toml
 
-    data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    data = read_toml(path, "config file")
     return {f"{sec}.{k}" for sec, values in data.items() if isinstance(values, dict) for k in values}
 
 

@@ -16,17 +16,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from soabench.errors import SoabenchError, require
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - exercised on Python 3.10 only
-    import tomli as tomllib
 
 BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
@@ -70,6 +64,14 @@ def _positive(name: str, value: float, hi: float = 1e6) -> None:
 
 def _non_negative(name: str, value: float, hi: float = 1e6) -> None:
     _in_range(name, value, 0.0, hi)
+
+
+def require_distinct(name: str, values: tuple) -> None:
+    """Each value once: a repeated clutter rate or mode would write every row twice and count its trials twice."""
+    seen: set = set()
+    for v in values:
+        require(v not in seen, f"{name} = {list(values)!r} names {v!r} twice; give each value once")
+        seen.add(v)
 
 
 def _check_type(name: str, default: Any, value: Any) -> Any:
@@ -315,8 +317,8 @@ class ExperimentConfig:
     duration: float = 100.0  #: seconds simulated per trial
     models: tuple[str, ...] = BIRTH_MODEL_NAMES  #: birth models to run in our GM-PHD (built-ins or plugins)
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
-    probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run
-    clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda (each gets every model x mode)
+    probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
+    clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
     plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
 
@@ -338,9 +340,11 @@ class ExperimentConfig:
         require(len(self.probabilities) >= 1, "probabilities must name at least one mode")
         for p in self.probabilities:
             _one_of("probability mode", p, PROBABILITY_MODES)
+        require_distinct("probabilities", self.probabilities)
         require(len(self.clutter) >= 1, "clutter must give at least one rate")
         for lam in self.clutter:
             _non_negative("clutter", lam, hi=1e4)
+        require_distinct("clutter", self.clutter)
         _int_range("seed", self.seed, 0, MAX_SEED)
         _non_negative("plugin_budget", self.plugin_budget, hi=86400.0)
 
@@ -435,14 +439,8 @@ def load_config(path: str | Path | None, base: Config | None = None) -> Config:
     """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
     if path is None:
         return (base or Config()).validate()
+    from soabench.tomlfile import read_toml
+
     p = Path(path)
     require(p.is_file(), f"config file {str(p)!r} does not exist")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as exc:
-        raise SoabenchError(f"config file {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
-    except OSError as exc:
-        raise SoabenchError(f"cannot read the config file {str(p)!r}: {exc.strerror or exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SoabenchError(f"config file {str(p)!r} is not valid TOML: {exc}") from None
-    return Config.from_dict(data, base).validate()
+    return Config.from_dict(read_toml(p, "config file"), base).validate()

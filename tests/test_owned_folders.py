@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 import soabench.scenario.osm as osm
 from soabench.cli import main
-from soabench.config import tomllib
+from soabench.tomlfile import tomllib
 
 DATA = Path(__file__).parent / "data"
 

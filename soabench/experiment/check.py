@@ -35,8 +35,9 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-from soabench.config import Config, load_config, tomllib
+from soabench.config import Config, load_config
 from soabench.errors import SoabenchError, require
+from soabench.tomlfile import read_toml
 
 SUITE_KEYS = {"name", "baseline", "config"}
 SCENARIO_KEYS = {
@@ -161,10 +162,7 @@ def load_suite(path: str | Path) -> Suite:
     """Read and validate a suite file (SoabenchError naming the value and what is allowed)."""
     p = Path(path)
     require(p.is_file(), f"suite file {str(p)!r} does not exist")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise SoabenchError(f"suite file {str(p)!r} is not valid TOML: {exc}") from None
+    data = read_toml(p, "suite file")
     _table(data, str(p), {"suite", "scenario", "threshold"})
     head = _table(data.get("suite", {}), "[suite]", SUITE_KEYS)
     here = p.resolve().parent
@@ -383,8 +381,8 @@ def read_baseline(path: Path) -> dict[str, float]:
     require(path.is_file(), f"baseline {str(path)!r} does not exist; create it with soabench check --update-baseline")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise SoabenchError(f"baseline {str(path)!r} is not valid JSON: {exc}") from None
+    except (ValueError, RecursionError) as exc:  # not JSON, not UTF-8, or nested too deeply to read
+        raise SoabenchError(f"baseline {str(path)!r} is not valid JSON: {type(exc).__name__}: {exc}") from None
     require(
         isinstance(data, dict) and data.get("format") == BASELINE_FORMAT and isinstance(data.get("values"), dict),
         f"baseline {str(path)!r} is not a soabench check baseline (format {BASELINE_FORMAT})",

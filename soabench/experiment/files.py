@@ -150,7 +150,7 @@ def write_json_atomic(path: Path, obj: Any, compact: bool = False) -> None:
 def read_json(path: Path) -> Any:
     try:
         return json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:  # RecursionError: nested too deeply to read
         raise SoabenchError(f"cannot read {str(path)!r}: {exc}") from None
 
 

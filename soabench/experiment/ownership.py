@@ -164,7 +164,7 @@ class FolderLock:
             data = os.pread(fd, 4096, 0).decode("utf-8", "replace")
             info = json.loads(data)
             return info if isinstance(info, dict) else {}
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError):
             return {}
 
     def _write_holder(self) -> None:

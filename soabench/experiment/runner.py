@@ -330,6 +330,13 @@ def run_experiment(
                     raw["trials"] = more
                     write_json_atomic(store.run_file, raw)
                     meta = validate_run_meta(raw, str(store.run_file))
+            require(
+                meta.save_estimates or not save_estimates,
+                f"--save-estimates does not apply to --resume of {str(run_dir)!r}: the run was started without it, "
+                "so its finished trials have no estimates; start a new run with --save-estimates --out",
+            )
+            for line in store.reject_foreign_records():  # copies, strays: moved aside, their trials run again
+                print(f"soabench: {line}", file=sys.stderr)
             config = meta.config
             net, polys, scenario = meta.net, meta.polys, meta.scenario
             save_estimates = meta.save_estimates

@@ -4,14 +4,18 @@ Layout of a run folder (``results/<net>/<UTC timestamp>/``)::
 
     run.json                 written once at start: resolved config (Config.to_dict()), net, polys, scenario,
                              trial count, save_estimates, trial kind and scene loader (registered names, never
-                             import paths: :mod:`soabench.experiment.registry`), package versions
+                             import paths: :mod:`soabench.experiment.registry`), package versions, and the
+                             run's identity ``run_id`` (:func:`run_identity`)
     .lock                    while a process works the folder (:mod:`soabench.experiment.ownership`)
-    trials/trial_00042.json  one record per finished trial (status "ok"): rows, episodes, steps, timing
+    trials/trial_00042.json  one record per finished trial (status "ok"): its trial index and ``run_id``, rows,
+                             episodes, steps, timing
     failed/trial_00042.json  one record per failed trial: seed, sumo_seed, error, traceback (retried by --resume)
     estimates/trial_00042.json.gz   with --save-estimates: gzipped JSON {"trial": n, "estimates": [...]}, the
                              trial's ``TrialResult.estimates``: one object per extracted estimate (with
                              multiplicity) with keys trial, clutter, model, mode, k (scan), x, y (m), w (weight)
     sessions/session_*.json  wall time, executor and versions of each (resumed) session
+    rejected/                records a resume found in trials/ or failed/ that are not that trial of this run
+                             (:meth:`RunStore.reject_foreign_records`), moved aside; their trials run again
     trials.csv episodes.csv steps.csv timing.csv   merged, written only once every trial was attempted
     summary.json summary.md figures/*.png           written by :mod:`soabench.experiment.report`
 
@@ -30,8 +34,10 @@ columns (``t_*`` and the per-trial SUMO/sensor seconds) go to ``timing.csv`` so 
 from __future__ import annotations
 
 import gzip
+import hashlib
 import json
 import os
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -58,6 +64,7 @@ TRIALS_DIR = "trials"
 FAILED_DIR = "failed"
 ESTIMATES_DIR = "estimates"
 SESSIONS_DIR = "sessions"
+REJECTED_DIR = "rejected"
 FORMAT_VERSION = 1
 
 # The schemas are those of a TrialResult (:mod:`soabench.experiment.trial`), whose metric names come from
@@ -80,6 +87,31 @@ def trial_name(trial: int) -> str:
     return f"trial_{int(trial):05d}"
 
 
+_RECORD_NAME = re.compile(r"^trial_(\d{5,})\.json$")
+
+
+def trial_of_name(name: str) -> int | None:
+    """The trial index a record's file name gives (``trial_00042.json`` -> 42); None unless :func:`trial_name`
+    would write exactly that name (``trial_-0001.json``, ``trial_2.json`` and ``trial_000042.json`` give None)."""
+    m = _RECORD_NAME.match(name)
+    if m is None or trial_name(int(m.group(1))) != f"trial_{m.group(1)}":
+        return None
+    return int(m.group(1))
+
+
+def run_identity(meta: dict) -> str:
+    """A run's identity: SHA-256 of what decides its trials' numbers, everything in ``run.json`` that trial n's
+    record depends on (configuration without the trial count, which a resume may raise; network, polygons,
+    scenario; trial kind and scene loader). Every trial record carries it, so a record copied in from another run
+    (other settings) or saved under another trial's name is recognised as not belonging here."""
+    config = {sec: dict(values) for sec, values in (meta.get("config") or {}).items() if isinstance(values, dict)}
+    config.get("experiment", {}).pop("trials", None)
+    keys = ("net", "polys", "scenario", "trial_kind", "scene_loader")
+    what = {"config": config, **{k: meta.get(k) for k in keys}}
+    text = json.dumps(what, sort_keys=True, allow_nan=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 class RunStore:
     """Reads and writes one run folder (layout in the module docstring)."""
 
@@ -89,6 +121,8 @@ class RunStore:
         self._merged_steps: tuple[tuple, dict[str, np.ndarray]] | None = None
         #: (the finished trials, their model failures) as the last :meth:`merge` read them
         self._merged_failures: tuple[tuple[int, ...], list[dict]] | None = None
+        #: run.json's ``run_id`` once read ("" for a folder written before records carried one)
+        self._run_id: str | None = None
 
     # -- run metadata
     @property
@@ -105,7 +139,8 @@ class RunStore:
                 f"{str(self.run_dir)!r} already holds a run; use --resume {self.run_dir} or another --out"
             )
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(self.run_file, {"format": FORMAT_VERSION, **meta})
+        self._run_id = run_identity(meta)
+        write_json_atomic(self.run_file, {"format": FORMAT_VERSION, **meta, "run_id": self._run_id})
 
     def meta(self) -> dict:
         if not self.exists():
@@ -115,14 +150,74 @@ class RunStore:
             raise SoabenchError(f"{str(self.run_file)!r} has an unknown format")
         return meta
 
+    def run_id(self) -> str:
+        """run.json's ``run_id`` ("" for a run folder made before trial records carried one)."""
+        if self._run_id is None:
+            rid = self.meta().get("run_id", "")
+            if not (isinstance(rid, str) and re.fullmatch(r"[0-9a-f]{64}|", rid)):
+                raise SoabenchError(f"{str(self.run_file)!r}: run_id = {rid!r} is not a run identity")
+            self._run_id = rid
+        return self._run_id
+
     # -- per-trial records
     def _record_path(self, folder: str, trial: int) -> Path:
         return self.run_dir / folder / f"{trial_name(trial)}.json"
 
+    def record_problem(self, record: Any, trial: int, ok: bool = True) -> str | None:
+        """Why ``record`` (read from the file of ``trial``) is not trial ``trial`` of this run, or None if it is:
+        a JSON object whose ``trial`` is that index, whose ``run_id`` is this run's (folders whose run.json has
+        none: not checked) and, for a finished trial (``ok``), whose status is "ok"."""
+        if not isinstance(record, dict):
+            return f"it holds a JSON {type(record).__name__}, not a trial record"
+        held = record.get("trial")
+        if type(held) is not int or held != trial:
+            return f"it holds trial {held!r}"
+        if ok and record.get("status") != "ok":
+            return f"its status is {record.get('status')!r}, not 'ok'"
+        rid = self.run_id()
+        if rid and record.get("run_id") != rid:
+            return "it was made by another run (other settings: its run_id differs from run.json's)"
+        return None
+
+    def reject_foreign_records(self) -> list[str]:
+        """Move every file of trials/ and failed/ that is not the record its name says aside into rejected/
+        (:meth:`record_problem`; also names :func:`trial_name` never writes); returns one line per file moved.
+        A moved trial counts as missing, so a resume runs it again."""
+        lines = []
+        for folder in (TRIALS_DIR, FAILED_DIR):
+            d = self.run_dir / folder
+            if not d.is_dir():
+                continue
+            for p in sorted(d.glob("trial_*.json")):
+                trial = trial_of_name(p.name)
+                if trial is None:
+                    problem = f"{p.name!r} is not a trial record name (trial_NNNNN.json)"
+                else:
+                    try:
+                        problem = self.record_problem(read_json(p), trial, ok=folder == TRIALS_DIR)
+                    except SoabenchError as exc:
+                        problem = str(exc)
+                    if problem is not None:
+                        problem = f"it is not trial {trial} of this run: {problem}"
+                if problem is None:
+                    continue
+                dest = self.run_dir / REJECTED_DIR / folder / p.name
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                n = 1
+                while dest.exists():
+                    dest, n = dest.with_name(f"{p.name}.{n}"), n + 1
+                os.replace(p, dest)
+                again = "" if trial is None else f"; trial {trial} runs again"
+                lines.append(f"{folder}/{p.name}: {problem}; moved to {dest.relative_to(self.run_dir)}{again}")
+        self._merged_failures = None
+        return lines
+
     def write_trial(self, record: dict) -> None:
-        """Persist a finished trial (status "ok") and drop an older failure record of it."""
+        """Persist a finished trial (status "ok"), stamped with this run's ``run_id``, and drop an older failure
+        record of it."""
         trial = int(record["trial"])
         self._merged_failures = None
+        record["run_id"] = self.run_id()
         est = record.pop("estimates", None)
         if est is not None:
             payload = json.dumps(to_jsonable({"trial": trial, "estimates": est}), allow_nan=True).encode()
@@ -135,19 +230,15 @@ class RunStore:
             failed.unlink()
 
     def write_failure(self, record: dict) -> None:
+        """Persist a failed trial's record (retried by a resume), stamped with this run's ``run_id``."""
+        record["run_id"] = self.run_id()
         write_json_atomic(self._record_path(FAILED_DIR, int(record["trial"])), record)
 
     def _trials_in(self, folder: str) -> list[int]:
         d = self.run_dir / folder
         if not d.is_dir():
             return []
-        out = []
-        for p in d.glob("trial_*.json"):
-            try:
-                out.append(int(p.stem.split("_", 1)[1]))
-            except ValueError:
-                continue
-        return sorted(out)
+        return sorted(t for t in map(trial_of_name, (p.name for p in d.glob("trial_*.json"))) if t is not None)
 
     def done_trials(self) -> list[int]:
         return self._trials_in(TRIALS_DIR)
@@ -169,7 +260,17 @@ class RunStore:
         return [f for t in done for f in self.load_trial(t).get("model_failures") or ()]
 
     def load_trial(self, trial: int) -> dict:
-        return read_json(self._record_path(TRIALS_DIR, trial))
+        """The record of finished trial ``trial``; :class:`SoabenchError` if the file is not that trial of this run
+        (:meth:`record_problem`: a resume moves such files aside and runs the trial again)."""
+        path = self._record_path(TRIALS_DIR, trial)
+        record = read_json(path)
+        problem = self.record_problem(record, trial)
+        if problem is not None:
+            raise SoabenchError(
+                f"{str(path)!r} is not trial {trial} of this run ({problem}); "
+                f"`soabench run --resume {self.run_dir}` moves it aside and runs the trial again"
+            )
+        return record
 
     def write_session(self, name: str, info: dict) -> None:
         """Record one session as ``sessions/session_<name>.json``; a second session of the same name (same second,

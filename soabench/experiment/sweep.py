@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from soabench.birth import LABEL
-from soabench.config import BIRTH_MODEL_NAMES, Config
+from soabench.config import BIRTH_MODEL_NAMES, Config, require_distinct
 from soabench.errors import Interrupted, require
 from soabench.experiment.files import read_csv, read_json, write_json_atomic, write_text_atomic
 from soabench.experiment.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
@@ -83,6 +83,7 @@ def sweep_points(
     """The points of a sweep: ``{"name", "value", "config"}`` (config as a dict)."""
     require(kind in KINDS, f"sweep kind {kind!r} is unknown; choose one of {', '.join(KINDS)}")
     require(len(values) >= 1, "a sweep needs at least one value")
+    require_distinct({"births": "offsets"}.get(kind, "values"), tuple(values))
     base = Config.from_dict(config.to_dict())
     if models is not None:
         base.experiment = dataclasses.replace(base.experiment, models=tuple(models))

@@ -13,6 +13,7 @@ from soabench.errors import require
 
 def cmd_kitti(args: argparse.Namespace) -> int:
     """The paper's KITTI protocol on a KITTI-format folder (``soabench kitti --root DIR ... --out RUN``)."""
+    from soabench.config import require_distinct
     from soabench.kitti.config import load_kitti_config
     from soabench.kitti.protocol import KittiSpec, run_kitti
     from soabench.kitti.reader import parse_sequences
@@ -33,6 +34,8 @@ def cmd_kitti(args: argparse.Namespace) -> int:
             overrides["probabilities"] = (args.probability,)
         cfg.experiment = dataclasses.replace(exp, **{k: v for k, v in overrides.items() if v is not None})
         cfg.validate()
+        if args.nhat_sweep is not None:
+            require_distinct("--nhat-sweep offsets", tuple(args.nhat_sweep))
         if args.classes is not None:
             kcfg = dataclasses.replace(kcfg, classes=tuple(args.classes)).validate()
         if args.score_min is not None:

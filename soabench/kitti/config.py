@@ -12,8 +12,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from soabench.config import Config, tomllib
-from soabench.errors import SoabenchError, require
+from soabench.config import Config
+from soabench.errors import require
+from soabench.kitti.formats import KITTI_TYPES
+from soabench.tomlfile import read_toml
 
 VEHICLE_CLASSES = ("Car", "Van", "Truck", "Tram")  #: KITTI classes that occlude (obstacles O_k)
 
@@ -42,7 +44,18 @@ class KittiConfig:
             f"kitti.classes {list(self.classes)} and kitti.obstacle_classes {list(self.obstacle_classes)} overlap; "
             "a tracked class cannot also be an occluder",
         )
-        require(not math.isnan(self.score_min), "kitti.score_min must be a number")
+        for key in ("classes", "obstacle_classes"):
+            bad = [c for c in getattr(self, key) if c not in KITTI_TYPES or c == "DontCare"]
+            require(
+                not bad,
+                f"kitti.{key}: {bad[0] if bad else ''!r} is not a KITTI object type; allowed: "
+                + ", ".join(t for t in KITTI_TYPES if t != "DontCare"),
+            )
+        require(
+            not math.isnan(self.score_min) and self.score_min < math.inf,
+            f"kitti.score_min = {self.score_min!r} must be a number below inf (inf drops every detection; "
+            "default -inf: keep all)",
+        )
         require(
             self.obstacles in ("labels", "detections"),
             f"kitti.obstacles = {self.obstacles!r}; choose 'labels' or 'detections'",
@@ -73,10 +86,7 @@ def load_kitti_config(path: str | Path | None) -> tuple[Config, KittiConfig]:
         return base.validate(), KittiConfig().validate()
     p = Path(path)
     require(p.is_file(), f"config file {str(p)!r} does not exist")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise SoabenchError(f"config file {str(p)!r} is not valid TOML: {exc}") from None
+    data = read_toml(p, "config file")
     kitti = kitti_from_dict(data.pop("kitti", {}))
     return Config.from_dict(data, base).validate(), kitti
 

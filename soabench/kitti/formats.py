@@ -1,7 +1,9 @@
 """KITTI tracking file formats (docs/method.md §5.9; KITTI tracking devkit readme; AB3DMOT data format).
 
 Parsing only: every function reads one text file and returns arrays, or raises :class:`SoabenchError` naming the file
-and the 1-based line of the first bad row. Nothing read is evaluated; numbers go through ``float``/``int`` only.
+and the 1-based line of the first bad row. Nothing read is evaluated; numbers go through ``float``/``int`` only, and
+must be finite; integers fit a C int, frames lie in [0, :data:`MAX_FRAME`], object types are the devkit's
+(:data:`KITTI_TYPES`, case matters), box sizes are >= 0, and a label file holds at least one row.
 
 * ``label_02/XXXX.txt`` (ground truth), 17 space-separated columns per object: frame, track id, type, truncated,
   occluded, alpha, 2-D box (left, top, right, bottom), dimensions h w l (m), location x y z (bottom centre, rectified
@@ -36,6 +38,13 @@ LABEL_COLUMNS = 17
 RESULT_COLUMNS = 18
 AB3DMOT_COLUMNS = 15
 OXTS_MIN_COLUMNS = 6
+#: the object types of the KITTI tracking devkit (case matters: "pedestrian" is none of them)
+KITTI_TYPES = ("Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc", "DontCare")
+MAX_INT = 2**31 - 1  #: largest |track id| and other integer column (a C int, as the devkit stores them)
+MAX_FRAME = 1_000_000  #: largest frame index (a day of frames at 10 Hz is 864 000)
+#: largest |coordinate| of a semantic polygon (m, ego frame): twice the largest sensor.r_max, so that every file
+#: ``soabench export kitti`` writes (polygons within r_max of the ego) reads back
+MAX_SEMANTICS_COORDINATE = 20_000.0
 
 
 class ReadError(SoabenchError):
@@ -97,6 +106,8 @@ def _num(path: Path, line: int, token: str, what: str, kind: type = float) -> fl
         raise ReadError(f"{path}:{line}: {what} {token!r} is not {noun}") from None
     if kind is float and not math.isfinite(value):
         raise ReadError(f"{path}:{line}: {what} {token!r} is not a finite number")
+    if kind is int and abs(value) > MAX_INT:
+        raise ReadError(f"{path}:{line}: {what} {token!r} is out of range; allowed: |{what}| <= {MAX_INT}")
     return value
 
 
@@ -104,7 +115,24 @@ def _frame(path: Path, line: int, token: str) -> int:
     f = int(_num(path, line, token, "frame", int))
     if f < 0:
         raise ReadError(f"{path}:{line}: frame {f} is negative")
+    if f > MAX_FRAME:
+        raise ReadError(f"{path}:{line}: frame {f} is out of range; allowed: 0 to {MAX_FRAME}")
     return f
+
+
+def _type(path: Path, line: int, token: str) -> str:
+    """A KITTI object type (:data:`KITTI_TYPES`; case matters)."""
+    if token not in KITTI_TYPES:
+        raise ReadError(f"{path}:{line}: type {token!r} is not a KITTI type; allowed: {', '.join(KITTI_TYPES)}")
+    return token
+
+
+def _size(path: Path, line: int, token: str) -> float:
+    """A box dimension (h, w or l): a finite number >= 0 (m)."""
+    v = _num(path, line, token, "dimension")
+    if v < 0:
+        raise ReadError(f"{path}:{line}: box dimension {token!r} is negative; h, w, l are sizes in metres (>= 0)")
+    return v
 
 
 def detect_format(path: Path, lines: list[tuple[int, str]]) -> str:
@@ -136,6 +164,11 @@ def parse_objects(path: Path, kind: str) -> tuple[Objects, str]:
     """
     path = Path(path)
     lines = read_lines(path)
+    if kind == "label" and not lines:
+        raise ReadError(
+            f"sequence {path.stem} is empty: the label file {str(path)!r} holds no rows (one row per labelled object "
+            "and frame)"
+        )
     fmt = "label" if kind == "label" else detect_format(path, lines)
     cols: dict[str, list] = {k: [] for k in ("frame", "tid", "type", "occ", "hwl", "xyz", "ry", "score", "line")}
     for line, text in lines:
@@ -155,7 +188,7 @@ def parse_objects(path: Path, kind: str) -> tuple[Objects, str]:
             want = LABEL_COLUMNS if fmt == "label" else RESULT_COLUMNS
             if len(tok) != want:
                 raise ReadError(f"{path}:{line}: {len(tok)} columns; expected {want}")
-            if tok[2] == "DontCare":
+            if _type(path, line, tok[2]) == "DontCare":
                 continue
             row = dict(
                 frame=_frame(path, line, tok[0]), tid=int(_num(path, line, tok[1], "track id", int)), type=tok[2],
@@ -166,7 +199,7 @@ def parse_objects(path: Path, kind: str) -> tuple[Objects, str]:
         cols["tid"].append(row["tid"])
         cols["type"].append(row["type"])
         cols["occ"].append(row["occ"])
-        cols["hwl"].append([_num(path, line, t, "dimension") for t in row["hwl"]])
+        cols["hwl"].append([_size(path, line, t) for t in row["hwl"]])
         cols["xyz"].append([_num(path, line, t, "location") for t in row["xyz"]])
         cols["ry"].append(_num(path, line, row["ry"], "rotation_y"))
         cols["score"].append(row["score"])
@@ -374,5 +407,11 @@ def parse_semantics(path: Path) -> dict[int, list[tuple[str, np.ndarray]]]:
             )
         frame = _frame(path, line, tok[0])
         xy = np.array([_num(path, line, t, "coordinate") for t in tok[2:]]).reshape(-1, 2)
+        far = np.abs(xy) > MAX_SEMANTICS_COORDINATE
+        if far.any():
+            raise ReadError(
+                f"{path}:{line}: coordinate {float(xy[far][0])!r} is out of range; semantic polygons lie around the "
+                f"ego: |x|, |y| <= {MAX_SEMANTICS_COORDINATE:g} m"
+            )
         out.setdefault(frame, []).append((tok[1], xy))
     return out

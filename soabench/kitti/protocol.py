@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from soabench.config import Config, filter_config_for_mode
-from soabench.errors import require
+from soabench.errors import SoabenchError, require
 from soabench.experiment.files import read_json, write_json_atomic
 from soabench.kitti.config import KittiConfig, kitti_from_dict, kitti_to_dict
 from soabench.kitti.formats import ReadError, UnreadableError
@@ -196,10 +196,16 @@ def run_kitti(
         require(spec is not None, "a new run needs its settings")
         check_new_folder(out, RUN_FILE, "run", f"finish it with: soabench kitti --resume {out}")
         open_dataset(spec.root, spec.detections, spec.semantics, spec.sequences)  # bad folders: before any write
-    with FolderLock(out, "KITTI run folder"):
-        if not resume:  # again, under the lock
-            check_new_folder(out, RUN_FILE, "run", f"finish it with: soabench kitti --resume {out}")
-        return _run_locked(spec, out, resume, log)
+    created = not out.exists()
+    try:
+        with FolderLock(out, "KITTI run folder"):
+            if not resume:  # again, under the lock
+                check_new_folder(out, RUN_FILE, "run", f"finish it with: soabench kitti --resume {out}")
+            return _run_locked(spec, out, resume, log)
+    except SoabenchError:  # bad data found while reading the sequences: leave no empty run folder behind
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()
+        raise
 
 
 def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], None]) -> KittiOutcome:
@@ -231,8 +237,14 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
         path = out / RECORDS / setting / f"{s}.json"
         if path.is_file():
             rec = read_json(path)
+            rec = rec if isinstance(rec, dict) else {"N_hat": f"a JSON {type(rec).__name__}, not a record"}
             require(
-                isinstance(rec, dict) and rec.get("N_hat") == nh and set(rec.get("models", {})) == set(models),
+                (rec.get("setting"), rec.get("sequence")) == (setting, s),
+                f"{path} is not the record of {setting} sequence {s} (it says {rec.get('setting')!r} sequence "
+                f"{rec.get('sequence')!r}); move it away and resume",
+            )
+            require(
+                rec.get("N_hat") == nh and set(rec.get("models") or {}) == set(models),
                 f"{path} was made with other data or settings (N_hat {rec.get('N_hat')!r}, now {nh!r}); "
                 "start a new run folder",
             )

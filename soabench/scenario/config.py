@@ -17,21 +17,18 @@ Unknown sections or keys and invalid values raise :class:`SoabenchError` naming 
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from soabench.errors import SoabenchError, require
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10 only
-    import tomli as tomllib
+from soabench.errors import require
+from soabench.tomlfile import read_toml
 
 PEDESTRIAN_MODELS = ("jupedsim", "striping", "nonInteracting")
 #: parked cars per 100 m of parking lane at most (4.5 m cars with 1 m gaps).
 MAX_PARKING_DENSITY = 18.0
+#: largest |coordinate| (m) of a world box, door or polygon point: a scene spans at most 10 000 km
+MAX_COORDINATE = 1e7
 
 
 @dataclass
@@ -109,8 +106,13 @@ class ScenarioConfig:
         if self.world_box is not None:
             wb = self.world_box
             require(
-                len(wb) == 4 and all(_is_num(v) for v in wb) and wb[2] > wb[0] and wb[3] > wb[1],
-                f"simulation.world_box = {list(wb)!r} must be [x_min, y_min, x_max, y_max] with min < max",
+                isinstance(wb, (list, tuple))
+                and len(wb) == 4
+                and all(_is_num(v) and abs(v) <= MAX_COORDINATE for v in wb)
+                and wb[2] > wb[0]
+                and wb[3] > wb[1],
+                f"simulation.world_box = {wb!r} must be [x_min, y_min, x_max, y_max] (m, |value| <= "
+                f"{MAX_COORDINATE:g}) with min < max",
             )
         require(
             isinstance(self.ego_route, list) and all(isinstance(e, str) and e for e in self.ego_route),
@@ -137,16 +139,22 @@ class ScenarioConfig:
         _pair("pedestrians.dwell", self.dwell, lo=1.0, hi=1e6)
         if self.parking_density is not None:
             _num("parking.density", self.parking_density, lo=0.0, hi=MAX_PARKING_DENSITY)
+        require(isinstance(self.name, str), f"scenario.name = {self.name!r} must be a string")
         require(isinstance(self.description, str), f"scenario.description = {self.description!r} must be a string")
         if self.doors is not None:
             require(
-                all(len(d) == 2 and _is_num(d[0]) and _is_num(d[1]) for d in self.doors),
-                f"doors.points = {self.doors!r} must be a list of [x, y] pairs",
+                isinstance(self.doors, list) and all(_is_point(d) for d in self.doors),
+                f"doors.points = {self.doors!r} must be a list of [x, y] pairs (m, |value| <= {MAX_COORDINATE:g})",
             )
 
 
 def _is_num(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _is_point(d: Any) -> bool:
+    """An [x, y] pair of finite coordinates within :data:`MAX_COORDINATE`."""
+    return isinstance(d, (list, tuple)) and len(d) == 2 and all(_is_num(v) and abs(v) <= MAX_COORDINATE for v in d)
 
 
 def _num(name: str, v: Any, lo: float = -math.inf, hi: float = math.inf, lo_open: bool = False) -> None:
@@ -201,11 +209,7 @@ def load_scenario(path: str | Path) -> ScenarioConfig:
     """Read and validate a scenario TOML (module docstring); relative file paths are resolved against its folder."""
     p = Path(path)
     require(p.is_file(), f"scenario file {str(path)!r} does not exist; give the path of a scenario .toml")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SoabenchError(f"scenario file {str(p)!r} is not valid TOML ({exc})") from None
-    return scenario_from_dict(data, base=p.parent, source=str(p))
+    return scenario_from_dict(read_toml(p, "scenario file"), base=p.parent, source=str(p))
 
 
 def scenario_from_dict(data: dict, base: Path | None = None, source: str = "scenario") -> ScenarioConfig:

@@ -21,7 +21,7 @@ from collections.abc import Iterator
 import numpy as np
 from shapely.geometry import LineString, box
 
-from soabench.errors import require
+from soabench.errors import SoabenchError, require
 from soabench.scenario.config import ScenarioConfig
 from soabench.scenario.scene import SceneMap
 
@@ -105,9 +105,33 @@ def _check_route(net, cfg: ScenarioConfig) -> None:
         require(b in nxt, f"ego.route = {cfg.ego_route!r}: edge {b!r} does not follow {a!r}; give connected edges")
 
 
+def _drive_lane(net, edge_id: str):
+    """The first lane of ``edge_id`` passenger cars may use (as the simulation picks it); SoabenchError if none."""
+    for lane in net.getEdge(edge_id).getLanes():
+        if lane.allows("passenger"):
+            return lane
+    raise SoabenchError(f"edge {edge_id!r} has no lane for passenger cars; vehicle routes need drivable edges")
+
+
+def check_vehicles_and_ego(net, cfg: ScenarioConfig) -> None:
+    """What the simulation would find only inside a trial, found at load: every vehicle source and sink is a
+    drivable edge of the network, and the ego's start (``ego.start_x`` or ``ego.depart_pos``) lies on its first
+    route edge (the same position :mod:`soabench.scenario.simulation` computes)."""
+    edges = {e.getID() for e in net.getEdges(withInternal=False)}
+    for key, ids in (("vehicles.sources", cfg.vehicle_sources), ("vehicles.sinks", cfg.vehicle_sinks)):
+        for e in ids:
+            require(e in edges, f"{key} edge {e!r} is not in network {cfg.net_file!r}")
+            if cfg.n_vehicles:
+                _drive_lane(net, e)
+    from soabench.scenario.simulation import ego_depart_pos
+
+    lane = _drive_lane(net, cfg.ego_route[0])
+    ego_depart_pos(lane.getShape(), lane.getLength(), cfg)
+
+
 def derive_defaults(cfg: ScenarioConfig, net, quiet: bool = False) -> SceneMap:
     """Fill ``cfg``'s open fields from ``net`` (module docstring) and return the scene map; log what was derived."""
-    from soabench.scenario.network import default_doors, fringe_edges, load_scene, read_polygons
+    from soabench.scenario.network import MAX_DOOR_DISTANCE, default_doors, fringe_edges, load_scene, read_polygons
     from soabench.scenario.parking import kerbside_parking
 
     require(
@@ -148,6 +172,7 @@ def derive_defaults(cfg: ScenarioConfig, net, quiet: bool = False) -> SceneMap:
         cfg.name,
         net=net,
         skip_parked=cfg.parking_density is not None,
+        door_limit=MAX_DOOR_DISTANCE if cfg.doors is not None else None,
     )
     if cfg.parking_density is not None:
         cars, kerb = kerbside_parking(net, scene.world_box, float(cfg.parking_density))
@@ -159,6 +184,7 @@ def derive_defaults(cfg: ScenarioConfig, net, quiet: bool = False) -> SceneMap:
         cfg.vehicle_sources = cfg.vehicle_sources or [e for e in sources if e not in ego] or sources
         cfg.vehicle_sinks = cfg.vehicle_sinks or [e for e in sinks if e not in ego] or sinks
         said.append(f"{len(cfg.vehicle_sources)} vehicle source(s), {len(cfg.vehicle_sinks)} sink(s)")
+    check_vehicles_and_ego(net, cfg)
     if said and not quiet:
         info_once(f"{cfg.name}: derived " + "; ".join(said))
     return scene

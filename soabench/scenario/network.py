@@ -29,6 +29,9 @@ from shapely.geometry.base import BaseGeometry
 from soabench.errors import SoabenchError, require
 from soabench.scenario.scene import SceneMap
 
+#: farthest a scenario's door may lie from a sidewalk centre line (m); as far as a derived door may lie from a
+#: sidewalk (:func:`default_doors`)
+MAX_DOOR_DISTANCE = 30.0
 #: polygon ``type`` substrings (case-insensitive) that make a polygon a static occluder.
 OCCLUDER_TYPES = ("parked", "car", "vehicle", "obstacle", "occluder", "wall")
 
@@ -71,6 +74,35 @@ def read_net(net_file: str | os.PathLike):  # -> sumolib.net.Net
     return net
 
 
+def _require_not_a_network(p: Path) -> None:
+    """Refuse a SUMO network given as a polygon file (it reads as one without polygons)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        _, root = next(ET.iterparse(p, events=("start",)))
+    except (ET.ParseError, StopIteration):
+        return  # the polygon reader names what is wrong with the file
+    require(
+        root.tag != "net",
+        f"polygon file {str(p)!r} is a SUMO network, not a polygon file; give it with --net (polygons: --poly)",
+    )
+
+
+def _require_outline(p: Path, poly) -> None:
+    """A building's or occluder's outline: at least 3 points, finite coordinates within
+    :data:`~soabench.scenario.config.MAX_COORDINATE` (a scene spans at most 10 000 km)."""
+    from soabench.scenario.config import MAX_COORDINATE
+
+    where = f"polygon {poly.id!r} ({poly.type}) of {str(p)!r}"
+    require(len(poly.shape) >= 3, f"{where} has {len(poly.shape)} point(s); an outline needs at least 3")
+    xy = np.asarray(poly.shape, dtype=float)
+    bad = xy[~(np.isfinite(xy) & (np.abs(xy) <= MAX_COORDINATE))]
+    if len(bad):
+        raise SoabenchError(
+            f"{where} has the coordinate {float(bad[0])!r}; allowed: finite, |value| <= {MAX_COORDINATE:g} m"
+        )
+
+
 def read_polygons(
     poly_files: Sequence[str | os.PathLike], skip_parked: bool = False
 ) -> tuple[list[Polygon], list[Polygon]]:
@@ -82,6 +114,7 @@ def read_polygons(
     occluders: list[Polygon] = []
     for f in poly_files:
         p = _check_file(f, "polygon file")
+        _require_not_a_network(p)
         try:
             polys = sumolib.shapes.polygon.read(str(p), includeTaz=False)
         except xml.sax.SAXParseException as exc:
@@ -93,10 +126,17 @@ def read_polygons(
             raise SoabenchError(
                 f"polygon file {str(p)!r} could not be read as SUMO polygons ({type(exc).__name__}: {exc})"
             ) from None
+        ids: set[str] = set()
         for poly in polys:
+            require(poly.id not in ids, f"polygon file {str(p)!r} holds the polygon id {poly.id!r} twice")
+            ids.add(poly.id)
             kind = (poly.type or "").lower()
-            if len(poly.shape) < 3:
+            used = "building" in kind or (
+                any(k in kind for k in OCCLUDER_TYPES) and not (skip_parked and "parked" in kind)
+            )
+            if not used:
                 continue
+            _require_outline(p, poly)
             geom = shapely.make_valid(Polygon([(float(x), float(y)) for x, y in poly.shape]))
             if geom.is_empty or geom.area <= 0:
                 continue
@@ -179,15 +219,27 @@ def default_doors(buildings: Sequence[Polygon], sidewalk: BaseGeometry, max_dist
     return np.asarray(doors, dtype=float).reshape(-1, 2)
 
 
-def project_doors(points: np.ndarray, lines: Sequence[LineString]) -> np.ndarray:
-    """Each door point moved onto the nearest sidewalk centre line (where SUMO persons depart and arrive)."""
+def project_doors(points: np.ndarray, lines: Sequence[LineString], max_dist: float | None = None) -> np.ndarray:
+    """Each door point moved onto the nearest sidewalk centre line (where SUMO persons depart and arrive).
+
+    ``max_dist``: refuse a door farther than this (m) from every sidewalk centre line in the box (a door given at
+    the wrong place would otherwise be moved silently onto some sidewalk)."""
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     if len(pts) == 0 or not lines:
+        require(
+            max_dist is None or len(pts) == 0,
+            f"doors.points: {len(pts)} door(s) given but the world box holds no sidewalk centre line to put them on",
+        )
         return pts.copy()
     ml = MultiLineString(list(lines))
     out = []
     for x, y in pts:
         q, _ = shapely.ops.nearest_points(ml, Point(x, y))
+        if max_dist is not None and not q.distance(Point(x, y)) <= max_dist:
+            raise SoabenchError(
+                f"door [{x:g}, {y:g}] lies {q.distance(Point(x, y)):.4g} m from the nearest sidewalk in the world "
+                f"box; allowed: at most {max_dist:g} m (doors.points are points on buildings facing a sidewalk)"
+            )
         out.append((q.x, q.y))
     return np.asarray(out, dtype=float)
 
@@ -204,6 +256,7 @@ def load_scene(
     name: str | None = None,
     net=None,
     skip_parked: bool = False,
+    door_limit: float | None = None,
 ) -> SceneMap:
     """Build the :class:`SceneMap` of a network (docs/method.md §2.1(c)).
 
@@ -216,6 +269,7 @@ def load_scene(
         name: map name; default: the file stem.
         net: an already read sumolib network (skips re-reading ``net_file``).
         skip_parked: leave out the polygon files' parked cars (see :func:`read_polygons`).
+        door_limit: refuse a door farther than this (m) from every sidewalk (:func:`project_doors`).
     """
     import shapely.ops  # noqa: F401  (nearest_points)
 
@@ -241,7 +295,9 @@ def load_scene(
     lines = [g for ln in regions["lines"] for g in _parts(ln.intersection(world))]
     if doors is None:
         doors = default_doors(buildings, sidewalk)
-    doors = project_doors(np.asarray(doors, dtype=float).reshape(-1, 2), _sidewalk_only_lines(net, world))
+    doors = project_doors(
+        np.asarray(doors, dtype=float).reshape(-1, 2), _sidewalk_only_lines(net, world), max_dist=door_limit
+    )
     return SceneMap(
         name=name or Path(net_file).name.removesuffix(".xml").removesuffix(".net"),
         world_box=world,

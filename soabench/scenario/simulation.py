@@ -451,19 +451,27 @@ def _box_exit(libsumo, lane: str, world) -> float:
 
 def _ego_depart_pos(libsumo, sc: ScenarioConfig) -> float:
     """Front-bumper lane position on the first route edge that puts the ego's centre at ``ego_start_x``."""
+    lane = f"{sc.ego_route[0]}_{_drive_lane(libsumo, sc.ego_route[0])}"
+    return ego_depart_pos(libsumo.lane.getShape(lane), libsumo.lane.getLength(lane), sc)
+
+
+def ego_depart_pos(shape, length: float, sc: ScenarioConfig) -> float:
+    """Front-bumper position (m) along the ego's drive lane on its first route edge (``shape``: the lane's points,
+    ``length``: its length): ``ego.depart_pos``, or the position that puts the ego's centre at ``ego.start_x``;
+    :class:`SoabenchError` if that is off the edge. Checked at load (:mod:`soabench.scenario.derive`) and used by
+    the simulation."""
     edge = sc.ego_route[0]
-    lane = f"{edge}_{_drive_lane(libsumo, edge)}"
-    length = libsumo.lane.getLength(lane)
     if sc.ego_start_x is None:
         pos = sc.ego_depart_pos
     else:
-        line = LineString(libsumo.lane.getShape(lane))
+        line = LineString(shape)
         xs = np.linspace(0.0, line.length, 2001)
         px = np.array([line.interpolate(s).x for s in xs])
         s = float(xs[np.argmin(np.abs(px - sc.ego_start_x))]) * length / max(line.length, 1e-9)
         pos = s + 0.5 * sc.ego_length
     require(
         0.0 <= pos <= length,
-        f"ego start (lane position {pos:.1f} m) is off the first route edge {edge!r} (length {length:.1f} m)",
+        f"ego start (lane position {pos:.1f} m) is off the first route edge {edge!r} (length {length:.1f} m); give "
+        "ego.start_x or ego.depart_pos on that edge",
     )
     return float(pos)
