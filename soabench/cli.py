@@ -298,6 +298,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="allow this import-path plugin named by the suite (entry points need nothing); repeatable",
     )
 
+    from soabench.replay.commands import add_replay_parser, add_report_parser
+
+    add_replay_parser(sub, _csv_list)
+    add_report_parser(sub)
+
     sub.add_parser("scenes", help="the shipped scenes: size, lanes, pedestrians, occluders, what each tests")
     p = sub.add_parser("import", help="turn an OpenStreetMap extract into a scene folder for --net")
     p.add_argument("kind", choices=["osm"])
@@ -646,6 +651,18 @@ def cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_replay(args: argparse.Namespace) -> int:
+    from soabench.replay.commands import cmd_replay as run
+
+    return run(args)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from soabench.replay.commands import cmd_report as run
+
+    return run(args)
+
+
 COMMANDS = {
     "kitti": cmd_kitti,
     "export": cmd_export,
@@ -660,6 +677,8 @@ COMMANDS = {
     "sensitivity": cmd_sensitivity,
     "results": cmd_results,
     "check": cmd_check,
+    "replay": cmd_replay,
+    "report": cmd_report,
 }
 
 

@@ -1,0 +1,86 @@
+"""``soabench replay`` and ``soabench report``: argument parsing and handlers over :mod:`soabench.replay`
+(docs/user-guide/replay.md)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from soabench.errors import require
+
+
+def add_replay_parser(sub: argparse._SubParsersAction, csv_list) -> None:
+    """Register ``replay`` (``csv_list``: the CLI's comma-list parser factory)."""
+    p = sub.add_parser("replay", help="re-simulate one trial of a finished run as an interactive HTML page")
+    p.add_argument("run", metavar="RUN", help="a finished (or resumable) run folder (holds run.json)")
+    p.add_argument("--trial", type=int, required=True, help="trial index of the run")
+    p.add_argument("--models", type=csv_list("model"), help="birth models to show side by side (default: the run's)")
+    p.add_argument("--mode", help="probability mode (default: the run's first)")
+    p.add_argument("--clutter", type=float, help="clutter rate lambda (default: the run's first)")
+    p.add_argument("--out", help="HTML file to write (default RUN/replays/trial_NNNNN.html)")
+
+
+def add_report_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``report``."""
+    p = sub.add_parser("report", help="one self-contained HTML page for a run folder (RUN/report.html)")
+    p.add_argument("run", metavar="RUN", help="a run folder (holds run.json)")
+    p.add_argument("--out", help="HTML file to write (default RUN/report.html)")
+    p.add_argument(
+        "--replays",
+        action="store_true",
+        help="also write the replay pages of each model's best and worst trial into RUN/replays/ and link them",
+    )
+
+
+def _replay_out(run_dir: Path, trial: int, out: str | None) -> Path:
+    from soabench.cli_checks import check_out_file
+    from soabench.replay.report import REPLAYS_DIR, replay_file
+
+    if out is not None:
+        return check_out_file(out)
+    folder = run_dir / REPLAYS_DIR
+    folder.mkdir(exist_ok=True)
+    return check_out_file(str(folder / replay_file(trial)))
+
+
+def write_trial_replay(run: str | Path, trial: int, models=None, mode=None, clutter=None, out: str | None = None):
+    """Re-simulate and write one replay page; returns (path, size in bytes, the replay, seconds simulating,
+    seconds rendering)."""
+    from soabench.replay import replay_data, replay_trial, write_replay
+    from soabench.replay.simulate import read_run
+
+    run_dir, _, _ = read_run(run)
+    target = _replay_out(run_dir, trial, out)
+    t0 = time.perf_counter()
+    rep = replay_trial(run_dir, trial, models, mode, clutter)
+    t1 = time.perf_counter()
+    size = write_replay(replay_data(rep), target)
+    return target, size, rep, t1 - t0, time.perf_counter() - t1
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    require(args.trial >= 0, f"--trial {args.trial} must be >= 0")
+    target, size, rep, t_sim, t_draw = write_trial_replay(
+        args.run, args.trial, args.models, args.mode, args.clutter, args.out
+    )
+    for note in rep.notes:
+        print(note)
+    print(f"wrote {target} ({len(rep.scans)} scans x {len(rep.models)} models, {size / 1e6:.2f} MB; "
+          f"simulated in {t_sim:.1f} s, page in {t_draw:.1f} s)")  # fmt: skip
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from soabench.replay.report import extreme_trials, write_report
+    from soabench.replay.simulate import read_run
+
+    run_dir, meta, _ = read_run(args.run)
+    if args.replays:
+        trials = sorted({r[w][1] for r in extreme_trials(run_dir) for w in ("best", "worst")})
+        for trial in trials:
+            target, size, rep, _, _ = write_trial_replay(run_dir, trial)
+            print(f"wrote {target} ({size / 1e6:.2f} MB; {rep.notes[-1]})")
+    target, size = write_report(run_dir, args.out)
+    print(f"wrote {target} ({size / 1e6:.2f} MB)")
+    return 0
