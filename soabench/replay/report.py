@@ -21,6 +21,7 @@ from typing import Any
 
 from soabench.errors import SoabenchError, require
 from soabench.experiment.files import write_text_atomic
+from soabench.replay.page import asset, fill
 
 GENERATOR = "soabench report"
 REPORT_FILE = "report.html"
@@ -167,11 +168,8 @@ def report_html(run_dir: Path, raw: dict) -> str:
     toc = " · ".join(f'<a href="#s{i}">{html.escape(n)}</a>' for i, (n, _) in enumerate(sections))
     body = "\n".join(f'<section id="s{i}"><h2>{html.escape(n)}</h2>\n{c}</section>' for i, (n, c) in
                      enumerate(sections))  # fmt: skip
-    return (
-        _HEAD.replace("%%MARKER%%", _MARKER).replace("%%TITLE%%", title)
-        + f"<h1>{title}</h1><p>{html.escape(str(run_dir))}</p><nav>{toc}</nav>\n{body}\n"
-        + _SCRIPT
-    )
+    content = f"<h1>{title}</h1><p>{html.escape(str(run_dir))}</p><nav>{toc}</nav>\n{body}\n"
+    return fill(_PAGE, MARKER=_MARKER, TITLE=title, CSS=asset("report.css"), BODY=content, JS=asset("report.js"))
 
 
 def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, int]:
@@ -193,44 +191,12 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Pa
     return target, len(text.encode("utf-8"))
 
 
-_HEAD = """<!DOCTYPE html>
+_PAGE = """<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">%%MARKER%%
 <title>%%TITLE%%</title>
 <style>
-body{font:14px/1.4 system-ui,sans-serif;margin:12px auto;max-width:1200px;color:#222;padding:0 10px}
-h1{font-size:20px}h2{font-size:17px;border-bottom:1px solid #ccc;margin-top:22px}h3{font-size:15px}
-table{border-collapse:collapse;font-size:12.5px;margin:6px 0}
-td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}
-table.sortable th{cursor:pointer;background:#f2f2f2;user-select:none}
-th.asc::after{content:" \\25B2"}th.desc::after{content:" \\25BC"}
-figure{display:inline-block;margin:6px;vertical-align:top;max-width:48%}figure img{max-width:100%}
-figcaption{font-size:12px;color:#555}code{font-size:12px;background:#f6f6f6}
-</style></head>
+%%CSS%%</style></head>
 <body data-status="loading">
-"""
-
-_SCRIPT = r"""<script>
-"use strict";
-(function(){
-const body=document.body;
-window.addEventListener("error",function(e){body.dataset.status="error: "+e.message;});
-function key(td){const t=td.textContent.trim();const n=parseFloat(t.replace(/[^0-9eE+\-.]/g," ").trim().split(" ")[0]);
-  return isNaN(n)||!/^[\-+]?[0-9.]/.test(t)?[1,t.toLowerCase()]:[0,n];}
-function sortBy(table,col,th){
-  const tb=table.tBodies[0], rows=Array.from(tb.rows), asc=!th.classList.contains("asc");
-  table.querySelectorAll("th").forEach(h=>h.classList.remove("asc","desc"));th.classList.add(asc?"asc":"desc");
-  rows.sort(function(a,b){const x=key(a.cells[col]),y=key(b.cells[col]);
-    const c=x[0]-y[0]||(x[1]<y[1]?-1:x[1]>y[1]?1:0);return asc?c:-c;});
-  rows.forEach(r=>tb.appendChild(r));}
-document.querySelectorAll("table.sortable").forEach(function(t){
-  Array.from(t.tHead.rows[0].cells).forEach(function(th,i){th.addEventListener("click",function(){sortBy(t,i,th);});});});
-const m=/sort=(\d+):(\d+)/.exec(location.hash);
-if(m){const t=document.querySelectorAll("table.sortable")[+m[1]];if(t)sortBy(t,+m[2],t.tHead.rows[0].cells[+m[2]]);}
-function images(){const imgs=Array.from(document.images);
-  const ok=imgs.filter(i=>i.complete&&i.naturalWidth>0).length;
-  body.dataset.images=ok+"/"+imgs.length;}
-window.addEventListener("load",function(){images();if(body.dataset.status=="loading")body.dataset.status="ok";});
-body.dataset.tables=String(document.querySelectorAll("table.sortable").length);
-})();
-</script></body></html>
+%%BODY%%<script>
+%%JS%%</script></body></html>
 """

@@ -1,4 +1,5 @@
-"""Re-simulate one trial of a finished run folder, keeping every per-scan state a replay draws (docs/user-guide/replay.md).
+"""Re-simulate one trial of a finished run folder, keeping the per-scan state a replay draws
+(docs/user-guide/replay.md).
 
 A run keeps no per-scan state; trial n is reproduced exactly from the run's stored configuration and the trial seeds
 (seed, n) (docs/method.md §5.8, :mod:`soabench.seeding`): one SUMO run, the scans of one clutter rate, and per birth
