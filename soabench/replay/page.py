@@ -65,7 +65,8 @@ _TEMPLATE = r"""<!DOCTYPE html>
 <label>speed <select id="speed"><option value="1">1x</option><option value="2">2x</option>
 <option value="5" selected>5x</option><option value="10">10x</option></select></label>
 <label>view <select id="zoom"><option value="scene">whole scene</option>
-<option value="ego">around the ego</option></select></label></div>
+<option value="ego">the FOV</option><option value="near">close up</option></select></label>
+<button id="ego" type="button" title="centre the zoomed views on the ego again">centre on ego</button></div>
 <div class="legend" id="legend"></div>
 <div class="panels" id="panels"></div>
 <div id="episodes"></div>

@@ -55,11 +55,12 @@ D.models.forEach(function(m,i){
   div.appendChild(svg);panels.appendChild(div);
 });
 function view(f){
-  const z=document.getElementById("zoom").value=="ego", h=D.r_max*1.1;
-  const box=z?[f.ego[0]-h*S.viewBox[2]/S.viewBox[3],f.ego[1]-h,2*h*S.viewBox[2]/S.viewBox[3],2*h]:S.viewBox;
+  const v=document.getElementById("zoom").value, z=v!="scene", h=D.r_max*(v=="near"?0.45:1.1);
+  const p=focus===null?null:f.peds.find(q=>q[0]==focus), c=p?[p[1],p[2]]:f.ego, a=S.viewBox[2]/S.viewBox[3];
+  const box=z?[c[0]-h*a,c[1]-h,2*h*a,2*h]:S.viewBox;
   fs=Math.max(box[2],box[3])/55;
   svgs.forEach(s=>s.setAttribute("viewBox",box.map(v=>v.toFixed(2)).join(" ")));
-  body.dataset.view=z?"ego":"scene";}
+  body.dataset.view=v;body.dataset.focus=p?focus:"";}
 function draw(k){
   const f=D.frames[k];view(f);const R=fs*0.45;
   let common='<path d="'+f.omega+'" fill="#7fd37f" fill-opacity="0.45" fill-rule="evenodd"/>'+
@@ -104,7 +105,7 @@ function draw(k){
   body.dataset.pedestrians=String(f.peds.length);body.dataset.drawn=String(nDrawn);
 }
 const slider=document.getElementById("slider");slider.max=String(K-1);
-let cur=0,timer=null;
+let cur=0,timer=null,focus=null;  // focus: the pedestrian the zoomed views centre on (else the ego)
 function go(k){cur=Math.max(0,Math.min(K-1,k|0));draw(cur);}
 function stop(){if(timer){clearInterval(timer);timer=null;}document.getElementById("play").textContent="play";}
 function play(){stop();if(cur>=K-1)go(0);const sp=+document.getElementById("speed").value;
@@ -115,6 +116,7 @@ document.getElementById("play").addEventListener("click",function(){timer?stop()
 document.getElementById("prev").addEventListener("click",function(){stop();go(cur-1);});
 document.getElementById("next").addEventListener("click",function(){stop();go(cur+1);});
 document.getElementById("zoom").addEventListener("change",function(){go(cur);});
+document.getElementById("ego").addEventListener("click",function(){focus=null;go(cur);});
 document.getElementById("speed").addEventListener("change",function(){if(timer)play();});
 document.addEventListener("keydown",function(ev){if(ev.key=="ArrowRight"){stop();go(cur+1);}
   else if(ev.key=="ArrowLeft"){stop();go(cur-1);}else if(ev.key==" "&&ev.target==body){ev.preventDefault();timer?stop():play();}});
@@ -122,16 +124,18 @@ document.addEventListener("keydown",function(ev){if(ev.key=="ArrowRight"){stop()
 const eps=document.getElementById("episodes");
 D.models.forEach(function(m){
   const d=document.createElement("details");
-  d.innerHTML="<summary>"+esc(m.label)+": "+m.episodes.length+" visibility episodes (click a row to open its first detection)</summary>";
+  d.innerHTML="<summary>"+esc(m.label)+": "+m.episodes.length+" visibility episodes (click a row to open its first detection, centred on the pedestrian)</summary>";
   const t=document.createElement("table");t.className="ep";
   t.innerHTML="<tr><th>pedestrian</th><th>k0</th><th>k_end</th><th>k_d (detected)</th><th>k_t (initiated)</th><th>delay (s)</th></tr>";
   m.episodes.forEach(function(r){const tr=document.createElement("tr");tr.className="jump"+((r[6]||r[5]>0)?" late":"");
     tr.innerHTML="<td>"+esc(r[0])+"</td><td>"+r[1]+"</td><td>"+r[2]+"</td><td>"+r[3]+"</td><td>"+(r[4]<0?"never":r[4])+
       "</td><td>"+(r[6]?"censored":r[5].toFixed(1))+"</td>";
-    tr.addEventListener("click",function(){stop();go(r[3]);window.scrollTo(0,0);});t.appendChild(tr);});
+    tr.addEventListener("click",function(){stop();focus=r[0];const zs=document.getElementById("zoom");
+      if(zs.value=="scene")zs.value="near";go(r[3]);window.scrollTo(0,0);});t.appendChild(tr);});
   d.appendChild(t);eps.appendChild(d);});
 function fromHash(){const m=/frame=(\d+)/.exec(location.hash);
-  if(/view=ego/.test(location.hash))document.getElementById("zoom").value="ego";go(m?+m[1]:0);}
+  const fp=/focus=([^&]+)/.exec(location.hash);focus=fp?decodeURIComponent(fp[1]):null;
+  const v=/view=(scene|ego|near)/.exec(location.hash);if(v)document.getElementById("zoom").value=v[1];go(m?+m[1]:0);}
 window.addEventListener("hashchange",fromHash);
 body.dataset.frames=String(K);
 fromHash();
