@@ -3,8 +3,9 @@
 Subcommands: ``scene`` (Fig. 3 bird's-eye view, optional sensor overlay), ``record`` (ground truth and scans to
 .npz), ``birth`` (birth components of one model over the scene), ``run`` (the Monte Carlo protocol), ``sweep``
 (clutter, N_hat or occluder-density sensitivity), ``scenes`` (the shipped scenes), ``import osm`` (an OpenStreetMap
-extract as a scene folder). ``--net all`` runs a command on every shipped scene. Any error a user can cause prints
-one line and exits with status 2.
+extract as a scene folder), ``replay`` (one trial of a finished run as an HTML page) and ``report`` (a run
+folder's HTML page; both in :mod:`soabench.replay`). ``--net all`` runs a command on every shipped scene. Any error a
+user can cause prints one line and exits with status 2.
 """
 
 from __future__ import annotations

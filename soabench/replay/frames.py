@@ -119,14 +119,14 @@ def _births_of(births: Any) -> list:
     return [[*r, int(s)] for r, s in zip(np.round(rows, 2).tolist(), ss.tolist(), strict=True)]
 
 
-def frame_data(rep: Any, k: int, peds: np.ndarray, inits: list[np.ndarray]) -> dict[str, Any]:
-    """Scan ``k`` of a :class:`~soabench.replay.simulate.TrialReplay` as a JSON-able record."""
+def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndarray]) -> dict[str, Any]:
+    """Scan ``k`` (recording step ``idx``) of a :class:`~soabench.replay.simulate.TrialReplay` as a JSON-able
+    record; ``peds`` from :func:`ped_states`, ``inits`` one :func:`init_states` per model."""
     from soabench.geometry import polar_to_world
-    from soabench.sensor import CLUTTER, fov_polygon, scan_steps
+    from soabench.sensor import CLUTTER, fov_polygon
 
     scans, rec = rep.scans, rep.recording
     scan = scans.scans[k]
-    idx = int(scan_steps(rec.t, rec.step_length, scans.dt)[k])
     ego = np.asarray(scan.ego, dtype=float)
     z = polar_to_world(scan.Z, ego) if len(scan.Z) else np.zeros((0, 2))
     clutter = np.asarray(scans.source[k]) == CLUTTER
@@ -160,10 +160,13 @@ def frame_data(rep: Any, k: int, peds: np.ndarray, inits: list[np.ndarray]) -> d
 
 def replay_data(rep: Any) -> dict[str, Any]:
     """The whole replay: header, scene, legend tables, per-model episodes and every scan's record."""
+    from soabench.sensor import scan_steps
+
     scans = rep.scans
     K, P = np.shape(scans.present)
     peds = ped_states(scans)
     inits = [init_states(m.metrics, K, P) for m in rep.models]
+    steps = scan_steps(rep.recording.t, rep.recording.step_length, scans.dt)
     exp = rep.config.experiment
     return {
         "title": f"trial {rep.trial} of {rep.run_dir.name}",
@@ -196,7 +199,7 @@ def replay_data(rep: Any) -> dict[str, Any]:
             }
             for m in rep.models
         ],
-        "frames": [frame_data(rep, k, peds, inits) for k in range(K)],
+        "frames": [frame_data(rep, k, int(idx), peds, inits) for k, idx in enumerate(steps)],
     }
 
 

@@ -71,7 +71,8 @@ def read_run(run_dir: str | Path):
     return path, validate_run_meta(raw, str(store.run_file)), raw
 
 
-def _choose(kind: str, value: Any, allowed: list, flag: str) -> Any:
+def _choose(value: Any, allowed: list, flag: str) -> Any:
+    """``value`` if the run has it (None: the run's first), else a one-line error naming what it has."""
     if value is None:
         return allowed[0]
     require(value in allowed, f"{flag} {value!r} is not in this run; choose from {', '.join(map(str, allowed))}")
@@ -115,9 +116,8 @@ def replay_trial(
     for name in names:
         require(name in exp.models, f"--models {name!r} is not a birth model of this run; choose from "
                 f"{', '.join(exp.models)}")  # fmt: skip
-    mode = _choose("mode", mode, list(exp.probabilities), "--mode")
-    lam = float(_choose("clutter", None if clutter is None else float(clutter), [float(c) for c in exp.clutter],
-                        "--clutter"))  # fmt: skip
+    mode = _choose(mode, list(exp.probabilities), "--mode")
+    lam = float(_choose(None if clutter is None else float(clutter), [float(c) for c in exp.clutter], "--clutter"))
     scene, scenario = load_scene_cached(meta.net, meta.polys, meta.scenario)
     seeds = trial_seeds(exp.seed, trial)
     recording = simulate(scene, scenario, seeds, duration=exp.duration)
