@@ -119,6 +119,14 @@ def _births_of(births: Any) -> list:
     return [[*r, int(s)] for r, s in zip(np.round(rows, 2).tolist(), ss.tolist(), strict=True)]
 
 
+def _hidden(scene: Any, fov: Any, omega: Any) -> Any:
+    """The complement of Omega_k on the sidewalk within the FOV: sidewalk the sensor cannot see (§3.1.4)."""
+    import shapely
+
+    base = shapely.clip_by_rect(scene.sidewalk, *fov.bounds).intersection(fov)
+    return base.difference(omega) if not base.is_empty else base
+
+
 def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndarray]) -> dict[str, Any]:
     """Scan ``k`` (recording step ``idx``) of a :class:`~soabench.replay.simulate.TrialReplay` as a JSON-able
     record; ``peds`` from :func:`ped_states`, ``inits`` one :func:`init_states` per model."""
@@ -139,6 +147,7 @@ def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndar
             xy = scans.truth_xy[seen[-1], j]
         ped_rows.append([str(scans.ped_ids[j]), *_xy(xy)[0], int(peds[k, j]), int(bool(scans.detected[k, j])),
                          [int(s[k, j]) for s in inits]])  # fmt: skip
+    fov, omega = fov_polygon(ego, rep.scans.sensor), scan.visible_region
     models = []
     for m in rep.models:
         res = m.results[k]
@@ -149,8 +158,9 @@ def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndar
         "t": round(float(scan.t), 3),
         "ego": _xy(ego[:2])[0] + [round(float(ego[2]), 4)],
         "ego_box": _xy(rec.ego_footprint[idx]) if not np.isnan(rec.ego_footprint[idx]).any() else [],
-        "fov": path_of(fov_polygon(ego, rep.scans.sensor)),
-        "omega": path_of(scan.visible_region, tol=0.05),
+        "fov": path_of(fov),
+        "omega": path_of(omega, tol=0.05),
+        "hidden": path_of(_hidden(rep.scene, fov, omega), tol=0.05),
         "vehicles": vehicles,
         "peds": ped_rows,
         "z": [[*p, int(c)] for p, c in zip(_xy(z), clutter.tolist(), strict=True)],

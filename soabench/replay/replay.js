@@ -21,6 +21,7 @@ const legend=document.getElementById("legend");
 function swatch(svg,label){const s=document.createElement("span");
   s.innerHTML='<svg width="18" height="14" viewBox="0 0 18 14">'+svg+"</svg> "+esc(label);legend.appendChild(s);}
 swatch('<rect x="1" y="2" width="16" height="10" fill="#7fd37f" fill-opacity="0.45"/>',"visible sidewalk \u03a9_k");
+swatch('<rect x="1" y="2" width="16" height="10" fill="#6d6d6d" fill-opacity="0.35"/>',"occluded sidewalk (in the FOV)");
 swatch('<rect x="1" y="2" width="16" height="10" fill="none" stroke="#000" stroke-dasharray="3 2"/>',"field of view");
 swatch('<rect x="1" y="3" width="16" height="8" fill="#e41a1c" stroke="#000"/>',"ego (sensor)");
 swatch('<rect x="1" y="3" width="16" height="8" fill="#377eb8" stroke="#000"/>',"moving vehicle");
@@ -64,6 +65,7 @@ function view(f){
 function draw(k){
   const f=D.frames[k];view(f);const R=fs*0.45;
   let common='<path d="'+f.omega+'" fill="#7fd37f" fill-opacity="0.45" fill-rule="evenodd"/>'+
+    '<path d="'+f.hidden+'" fill="#6d6d6d" fill-opacity="0.35" fill-rule="evenodd"/>'+
     '<path d="'+f.fov+'" fill="none" stroke="#000" stroke-width="0.25" stroke-dasharray="1.5 1" fill-rule="evenodd"/>';
   f.vehicles.forEach(function(v){common+='<polygon points="'+pts(v)+'" fill="#377eb8" stroke="#000" stroke-width="0.15"/>';});
   if(f.ego_box.length)common+='<polygon points="'+pts(f.ego_box)+'" fill="#e41a1c" stroke="#000" stroke-width="0.15"/>';
