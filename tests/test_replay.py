@@ -137,13 +137,21 @@ def test_replay_bad_input(run_dir: Path, tmp_path: Path, capsys) -> None:
 
 
 def test_report_page(run_dir: Path, capsys) -> None:
-    from soabench.replay.report import REPORT_FILE
+    from soabench.replay.report import REPLAYS_DIR, REPORT_FILE, extreme_trials
 
-    assert main(["report", str(run_dir)]) == 0
+    assert main(["report", str(run_dir), "--replays"]) == 0
     text = (run_dir / REPORT_FILE).read_text(encoding="utf-8")
     n_figures = len(list((run_dir / "figures").glob("*.png")))
     assert n_figures > 0 and text.count('src="data:image/png;base64,') == n_figures
     assert "soabench replay" in text and "Provenance" in text and 'class="sortable"' in text
+    # the best and worst trial of each model (by its trials.csv mean delay) link their replay pages
+    rows = extreme_trials(run_dir)
+    assert {r["model"] for r in rows} == {"soa", "ubm"}
+    for r in rows:
+        for which in ("best", "worst"):
+            trial = r[which][1]
+            assert (run_dir / REPLAYS_DIR / f"trial_{trial:05d}.html").is_file()
+            assert f'href="{REPLAYS_DIR}/trial_{trial:05d}.html"' in text
     assert main(["report", str(run_dir)]) == 0  # its own page is rewritten
 
 
