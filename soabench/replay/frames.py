@@ -56,8 +56,9 @@ def path_of(geom: Any, tol: float = 0.0) -> str:
 
 
 def _ring(pts: np.ndarray) -> str:
+    """One closed subpath: "M x y x y ... Z" (pairs after the first are implicit line-tos)."""
     p = np.round(np.column_stack([pts[:, 0], -pts[:, 1]]), 2)
-    return "M" + "L".join(f"{x:g} {y:g}" for x, y in p.tolist()) + "Z"
+    return "M" + " ".join(map(str, p.ravel().tolist())) + "Z"
 
 
 def scene_data(scene: Any) -> dict[str, Any]:
