@@ -231,3 +231,18 @@ def test_report_page_in_browser(run_dir: Path, tmp_path: Path) -> None:
     delays = [float(r[3]) for r in (re.findall(r"<td>(.*?)</td>", row) for row in re.findall(r"<tr>(.*?)</tr>", table))
               if r]  # fmt: skip
     assert len(delays) == 2 and delays == sorted(delays) and 'class="asc"' in table
+
+
+def test_index_of_a_folder_of_runs(run_dir: Path, tmp_path: Path) -> None:
+    """A folder holding run folders (a study, results/) gets each run's report and an index page linking them."""
+    from soabench.replay.report import INDEX_FILE, REPORT_FILE
+
+    folder = run_dir.parent
+    (folder / "notes.md").write_text("# Study <b>notes</b>\n\n| a | b |\n|---|---|\n| 2 | 1 |\n", encoding="utf-8")
+    assert main(["report", str(folder)]) == 0
+    index = folder / INDEX_FILE
+    text = index.read_text(encoding="utf-8")
+    assert f'href="{run_dir.name}/{REPORT_FILE}"' in text and (run_dir / REPORT_FILE).is_file()
+    assert "Study &lt;b&gt;notes&lt;/b&gt;" in text
+    attrs = body_attrs(browse(index, "", tmp_path))
+    assert attrs["status"] == "ok" and attrs["tables"] == "2"

@@ -24,7 +24,12 @@ def add_replay_parser(sub: argparse._SubParsersAction, csv_list) -> None:
 def add_report_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``report``."""
     p = sub.add_parser("report", help="one self-contained HTML page for a run folder (RUN/report.html)")
-    p.add_argument("run", metavar="RUN", help="a run folder (holds run.json)")
+    p.add_argument(
+        "run",
+        metavar="RUN",
+        help="a run folder (holds run.json), or a folder of them (a study, results/): then "
+        "each run's report.html and an index.html linking them",
+    )
     p.add_argument("--out", help="HTML file to write (default RUN/report.html)")
     p.add_argument(
         "--replays",
@@ -72,9 +77,16 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from soabench.replay.report import extreme_trials, write_report
+    from soabench.experiment.store import RUN_FILE
+    from soabench.replay.report import extreme_trials, write_index, write_report
     from soabench.replay.simulate import read_run
 
+    if not (Path(args.run) / RUN_FILE).is_file() and Path(args.run).is_dir():  # a study or results/ folder
+        require(args.out is None, "--out names one run's page; a folder of runs gets index.html and one report each")
+        require(not args.replays, "--replays works on one run folder; give a run folder")
+        target, size, runs = write_index(args.run)
+        print(f"wrote {len(runs)} run reports and {target} ({size / 1e6:.2f} MB)")
+        return 0
     run_dir, meta, _ = read_run(args.run)
     if args.replays:
         trials = sorted({r[w][1] for r in extreme_trials(run_dir) for w in ("best", "worst")})

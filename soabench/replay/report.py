@@ -25,6 +25,7 @@ from soabench.replay.page import asset, fill
 
 GENERATOR = "soabench report"
 REPORT_FILE = "report.html"
+INDEX_FILE = "index.html"
 REPLAYS_DIR = "replays"
 _MARKER = f'<meta name="generator" content="{GENERATOR}">'
 
@@ -96,13 +97,15 @@ def markdown_html(md: str) -> str:
     return "\n".join(out)
 
 
+def _figure(png: Path) -> str:
+    """A PNG file inlined as a data URI, captioned with its name."""
+    data = base64.b64encode(png.read_bytes()).decode("ascii")
+    name = html.escape(png.name)
+    return f'<figure><img alt="{name}" src="data:image/png;base64,{data}"><figcaption>{name}</figcaption></figure>'
+
+
 def _figures(run_dir: Path) -> str:
-    parts = []
-    for png in sorted((run_dir / "figures").glob("*.png")):
-        data = base64.b64encode(png.read_bytes()).decode("ascii")
-        name = html.escape(png.name)
-        parts.append(f'<figure><img alt="{name}" src="data:image/png;base64,{data}"><figcaption>{name}'
-                     "</figcaption></figure>")  # fmt: skip
+    parts = [_figure(png) for png in sorted((run_dir / "figures").glob("*.png"))]
     return "\n".join(parts) if parts else "<p>No figures in figures/.</p>"
 
 
@@ -172,6 +175,17 @@ def report_html(run_dir: Path, raw: dict) -> str:
     return fill(_PAGE, MARKER=_MARKER, TITLE=title, CSS=asset("report.css"), BODY=content, JS=asset("report.js"))
 
 
+def _check_ours(target: Path) -> None:
+    """An existing file at ``target`` must be a page this command wrote (else it is left alone, with an error)."""
+    if not target.exists():
+        return
+    try:
+        ours = _MARKER in target.read_text(encoding="utf-8", errors="replace")[:2000]
+    except OSError as exc:
+        raise SoabenchError(f"cannot read {str(target)!r}: {exc}") from None
+    require(ours, f"{str(target)!r} exists and was not written by soabench report; move it or give --out")
+
+
 def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, int]:
     """Write the report page of a run folder (default ``RUN/report.html``); returns its path and size in bytes.
 
@@ -180,15 +194,86 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Pa
 
     path, _, raw = read_run(run_dir)
     target = path / REPORT_FILE if out is None else Path(out)
-    if target.exists():
-        try:
-            ours = _MARKER in target.read_text(encoding="utf-8", errors="replace")[:2000]
-        except OSError as exc:
-            raise SoabenchError(f"cannot read {str(target)!r}: {exc}") from None
-        require(ours, f"{str(target)!r} exists and was not written by soabench report; move it or give --out")
+    _check_ours(target)
     text = report_html(path, raw)
     write_text_atomic(target, text)
     return target, len(text.encode("utf-8"))
+
+
+def find_runs(folder: Path) -> list[Path]:
+    """Every run folder (holding ``run.json``) under ``folder``, sorted by path."""
+    from soabench.experiment.store import RUN_FILE
+
+    return sorted(p.parent for p in folder.rglob(RUN_FILE))
+
+
+def _folder_parts(folder: Path, runs: list[Path]) -> list[tuple[Path, list[Path], list[Path]]]:
+    """(subfolder, its Markdown files, its PNG files) for every folder under ``folder`` outside the run folders."""
+    inside = set(runs)
+    out = []
+    for d in sorted([folder, *(p for p in folder.rglob("*") if p.is_dir())]):
+        if any(d == r or r in d.parents for r in inside):
+            continue
+        md, png = sorted(d.glob("*.md")), sorted(d.glob("*.png"))
+        if md or png:
+            out.append((d, md, png))
+    return out
+
+
+def _run_row(folder: Path, run: Path) -> str:
+    from soabench.replay.simulate import read_run
+
+    rel = run.relative_to(folder).as_posix()
+    try:
+        _, meta, raw = read_run(run)
+    except SoabenchError as exc:
+        return f"<tr><td>{html.escape(rel)}</td><td colspan=6>{html.escape(str(exc))}</td></tr>"
+    exp = meta.config.experiment
+    link = f'<a href="{html.escape(rel)}/{REPORT_FILE}">{html.escape(rel)}</a>'
+    cells = (
+        link, html.escape(str(raw.get("net_name", meta.net))), str(exp.trials), f"{exp.duration:g} s",
+        html.escape(", ".join(exp.models)), html.escape(", ".join(f"{c:g}" for c in exp.clutter)), str(exp.seed),
+    )  # fmt: skip
+    return "<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>"
+
+
+def index_html(folder: Path, runs: list[Path]) -> str:
+    """The index page of a folder of run folders (a study, ``results/``): its own Markdown and figures, and a table
+    linking every run's report page."""
+    head = "".join(f"<th>{h}</th>" for h in ("run folder", "scene", "trials", "duration", "models", "λ", "seed"))
+    table = (f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>'
+             + "".join(_run_row(folder, r) for r in runs) + "</tbody></table>")  # fmt: skip
+    parts = []
+    for d, mds, pngs in _folder_parts(folder, runs):
+        rel = d.relative_to(folder).as_posix() if d != folder else "."
+        body = "".join(markdown_html(m.read_text(encoding="utf-8")) for m in mds)
+        body += "".join(_figure(p) for p in pngs)
+        parts.append((f"{rel}/", body))
+    sections = [("Run folders", table), *parts]
+    title = html.escape(f"soabench report: {folder.name}")
+    toc = " · ".join(f'<a href="#s{i}">{html.escape(n)}</a>' for i, (n, _) in enumerate(sections))
+    body = "\n".join(f'<section id="s{i}"><h2>{html.escape(n)}</h2>\n{c}</section>' for i, (n, c) in
+                     enumerate(sections))  # fmt: skip
+    content = f"<h1>{title}</h1><p>{html.escape(str(folder))}</p><nav>{toc}</nav>\n{body}\n"
+    return fill(_PAGE, MARKER=_MARKER, TITLE=title, CSS=asset("report.css"), BODY=content, JS=asset("report.js"))
+
+
+def write_index(folder: str | Path) -> tuple[Path, int, list[Path]]:
+    """Write every run's report under ``folder`` and ``folder/index.html`` linking them; returns the index path, its
+    size in bytes and the run folders."""
+    from soabench.experiment.ownership import resolve
+
+    path = resolve(folder)
+    require(path.is_dir(), f"{str(path)!r} is not a folder")
+    runs = find_runs(path)
+    require(bool(runs), f"{str(path)!r} is not a run folder and holds none (no run.json in it or below)")
+    target = path / INDEX_FILE
+    _check_ours(target)
+    for run in runs:
+        write_report(run)
+    text = index_html(path, runs)
+    write_text_atomic(target, text)
+    return target, len(text.encode("utf-8")), runs
 
 
 _PAGE = """<!DOCTYPE html>

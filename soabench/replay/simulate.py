@@ -135,6 +135,8 @@ def replay_trial(
         runs.append(ModelReplay(name, LABEL.get(name, name), model.births, run.results, metrics, row))
     out = TrialReplay(path, trial, lam, mode, cfg, scene, recording, scans, seeds, runs)
     out.notes.append(_version_note(raw))
+    if exp.trackers:
+        out.notes.append(f"not replayed: the run's whole trackers ({', '.join(exp.trackers)}); birth models only")
     out.reproduced, note = _check_rows(path, out)
     out.notes.append(note)
     return out
