@@ -15,7 +15,11 @@ def add_replay_parser(sub: argparse._SubParsersAction, csv_list) -> None:
     p = sub.add_parser("replay", help="re-simulate one trial of a finished run as an interactive HTML page")
     p.add_argument("run", metavar="RUN", help="a finished (or resumable) run folder (holds run.json)")
     p.add_argument("--trial", type=int, required=True, help="trial index of the run")
-    p.add_argument("--models", type=csv_list("model"), help="birth models to show side by side (default: the run's)")
+    p.add_argument(
+        "--models",
+        type=csv_list("model"),
+        help="birth models to show side by side (default: the run's; a run's module:Class plugin only when typed here)",
+    )
     p.add_argument("--mode", help="probability mode (default: the run's first)")
     p.add_argument("--clutter", type=float, help="clutter rate lambda (default: the run's first)")
     p.add_argument("--out", help="HTML file to write (default RUN/replays/trial_NNNNN.html)")
@@ -66,6 +70,10 @@ def write_trial_replay(run: str | Path, trial: int, models=None, mode=None, clut
 
 def cmd_replay(args: argparse.Namespace) -> int:
     require(args.trial >= 0, f"--trial {args.trial} must be >= 0")
+    from soabench import plugins
+
+    # a run's import-path plugin is imported only when typed here (as with run --resume): run.json is data
+    plugins.allow_import_paths(args.models or ())
     target, size, rep, t_sim, t_draw = write_trial_replay(
         args.run, args.trial, args.models, args.mode, args.clutter, args.out
     )
