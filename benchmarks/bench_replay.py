@@ -1,13 +1,13 @@
 """Replay pages: the time to draw a trial's page against the time to re-simulate the trial, and the pages' sizes.
 
-Usage: python benchmarks/bench_replay.py [--run results/intersection/main] [--trials 3] [--browser]
+Usage: python benchmarks/bench_replay.py [--run results/intersection/main] [--trials 3] [--browser] [--gif]
 
 For each of ``--trials`` trials of the run folder (default: the committed 100-trial x 100 s main run with six birth
 models): the re-simulation (:func:`soabench.replay.replay_trial`: SUMO, the sensor, every model's filter run and
 its metrics) and the page (:func:`soabench.replay.replay_data` and writing the HTML) are timed in the same process,
 and their ratio printed; the report page of the run folder is written to a temporary file (the run folder is not
 touched) and its size printed. ``--browser`` also times headless Chromium opening the page (``--dump-dom``, the
-browser's start included) and checks that the page's script ran.
+browser's start included) and checks that the page's script ran; ``--gif`` times writing the animated GIF.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 from soabench.replay import replay_data, replay_trial, write_replay, write_report
+from soabench.replay.gif import write_gif
 
 
 def _browser_seconds(page: Path) -> float:
@@ -45,6 +46,7 @@ def main() -> None:
     ap.add_argument("--run", default="results/intersection/main", help="a finished run folder")
     ap.add_argument("--trials", type=int, default=3, help="trials 0..N-1 to replay")
     ap.add_argument("--browser", action="store_true", help="also time headless Chromium opening each page")
+    ap.add_argument("--gif", action="store_true", help="also time writing each replay's animated GIF")
     args = ap.parse_args()
 
     sims, draws, sizes, opens = [], [], [], []
@@ -63,6 +65,10 @@ def main() -> None:
             if args.browser:
                 opens.append(_browser_seconds(page))
                 extra = f", browser {opens[-1]:.2f} s"
+            if args.gif:
+                t3 = time.perf_counter()
+                gif_size = write_gif(replay_data(rep), Path(tmp) / f"trial_{trial}.gif")
+                extra += f", GIF {time.perf_counter() - t3:.1f} s ({gif_size / 1e6:.2f} MB)"
             print(f"trial {trial}: {len(rep.scans)} scans x {len(rep.models)} models; re-simulate {t1 - t0:.2f} s, "
                   f"page {t2 - t1:.2f} s (ratio {(t2 - t1) / (t1 - t0):.2f}), {size / 1e6:.2f} MB{extra}; "
                   f"{rep.notes[-1]}")  # fmt: skip

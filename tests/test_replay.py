@@ -122,6 +122,18 @@ def test_replay_scans_equal_scene_sensor_arrays(run_dir: Path, monkeypatch, tmp_
         np.testing.assert_array_equal(getattr(rep.scans, flag)[k], getattr(scans, flag)[k])
 
 
+def test_replay_gif(run_dir: Path, tmp_path: Path) -> None:
+    from PIL import Image
+
+    out, gif = tmp_path / "t0.html", tmp_path / "t0.gif"
+    assert main(["replay", str(run_dir), "--trial", "0", "--models", "soa", "--out", str(out), "--gif", str(gif)]) == 0
+    with Image.open(gif) as img:
+        assert img.n_frames == DURATION and img.info["duration"] == 200  # 1 s scans at 5x
+        img.seek(DURATION - 1)
+        assert len(img.convert("RGB").getcolors(maxcolors=1 << 16) or ()) > 10
+    assert main(["replay", str(run_dir), "--trial", "0", "--gif", str(tmp_path / "t0.png")]) == 2
+
+
 def test_replay_bad_input(run_dir: Path, tmp_path: Path, capsys) -> None:
     cases = [
         (["replay", str(run_dir), "--trial", "7"], "--trial 7 is not a trial of this run; choose 0 to 1"),

@@ -23,6 +23,7 @@ def add_replay_parser(sub: argparse._SubParsersAction, csv_list) -> None:
     p.add_argument("--mode", help="probability mode (default: the run's first)")
     p.add_argument("--clutter", type=float, help="clutter rate lambda (default: the run's first)")
     p.add_argument("--out", help="HTML file to write (default RUN/replays/trial_NNNNN.html)")
+    p.add_argument("--gif", metavar="FILE.gif", help="also an animated GIF, 5x real time (default: none)")
 
 
 def add_report_parser(sub: argparse._SubParsersAction) -> None:
@@ -53,19 +54,30 @@ def _replay_out(run_dir: Path, trial: int, out: str | None) -> Path:
     return check_out_file(str(folder / replay_file(trial)))
 
 
-def write_trial_replay(run: str | Path, trial: int, models=None, mode=None, clutter=None, out: str | None = None):
-    """Re-simulate and write one replay page; returns (path, size in bytes, the replay, seconds simulating,
-    seconds rendering)."""
+def write_trial_replay(
+    run: str | Path, trial: int, models=None, mode=None, clutter=None, out: str | None = None, gif: str | None = None
+):
+    """Re-simulate and write one replay page (and a GIF if ``gif``); returns (path, size in bytes, the replay,
+    seconds simulating, seconds rendering the page)."""
+    from soabench.cli_checks import check_out_file
     from soabench.replay import replay_data, replay_trial, write_replay
     from soabench.replay.simulate import read_run
 
     run_dir, _, _ = read_run(run)
+    gif_out = None if gif is None else check_out_file(gif)
+    require(gif_out is None or gif_out.suffix.lower() == ".gif", f"--gif {gif!r} must name a .gif file")
     target = _replay_out(run_dir, trial, out)
     t0 = time.perf_counter()
     rep = replay_trial(run_dir, trial, models, mode, clutter)
     t1 = time.perf_counter()
-    size = write_replay(replay_data(rep), target)
-    return target, size, rep, t1 - t0, time.perf_counter() - t1
+    data = replay_data(rep)
+    size = write_replay(data, target)
+    t2 = time.perf_counter()
+    if gif_out is not None:
+        from soabench.replay.gif import write_gif
+
+        print(f"wrote {gif_out} ({write_gif(data, gif_out) / 1e6:.2f} MB)")
+    return target, size, rep, t1 - t0, t2 - t1
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -75,7 +87,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     # a run's import-path plugin is imported only when typed here (as with run --resume): run.json is data
     plugins.allow_import_paths(args.models or ())
     target, size, rep, t_sim, t_draw = write_trial_replay(
-        args.run, args.trial, args.models, args.mode, args.clutter, args.out
+        args.run, args.trial, args.models, args.mode, args.clutter, args.out, args.gif
     )
     for note in rep.notes:
         print(note)
