@@ -3,8 +3,9 @@
 Subcommands: ``scene`` (Fig. 3 bird's-eye view, optional sensor overlay), ``record`` (ground truth and scans to
 .npz), ``birth`` (birth components of one model over the scene), ``run`` (the Monte Carlo protocol), ``sweep``
 (clutter, N_hat or occluder-density sensitivity), ``scenes`` (the shipped scenes), ``import osm`` (an OpenStreetMap
-extract as a scene folder). ``--net all`` runs a command on every shipped scene. Any error a user can cause prints
-one line and exits with status 2.
+extract as a scene folder), ``replay`` (one trial of a finished run as an HTML page) and ``report`` (a run
+folder's HTML page; both in :mod:`soabench.replay`). ``--net all`` runs a command on every shipped scene. Any error a
+user can cause prints one line and exits with status 2.
 """
 
 from __future__ import annotations
@@ -320,6 +321,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="MODULE:CLASS",
         help="allow this import-path plugin named by the suite (entry points need nothing); repeatable",
     )
+
+    from soabench.replay.commands import add_replay_parser, add_report_parser
+
+    add_replay_parser(sub, _csv_list)
+    add_report_parser(sub)
 
     sub.add_parser("scenes", help="the shipped scenes: size, lanes, pedestrians, occluders, what each tests")
     p = sub.add_parser("import", help="turn an OpenStreetMap extract into a scene folder for --net")
@@ -714,6 +720,18 @@ def cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_replay(args: argparse.Namespace) -> int:
+    from soabench.replay.commands import cmd_replay as run
+
+    return run(args)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from soabench.replay.commands import cmd_report as run
+
+    return run(args)
+
+
 COMMANDS = {
     "kitti": cmd_kitti,
     "export": cmd_export,
@@ -728,6 +746,8 @@ COMMANDS = {
     "sensitivity": cmd_sensitivity,
     "results": cmd_results,
     "check": cmd_check,
+    "replay": cmd_replay,
+    "report": cmd_report,
 }
 
 

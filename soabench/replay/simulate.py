@@ -1,0 +1,213 @@
+"""Re-simulate one trial of a finished run folder, keeping the per-scan state a replay draws
+(docs/user-guide/replay.md).
+
+A run keeps no per-scan state; trial n is reproduced exactly from the run's stored configuration and the trial seeds
+(seed, n) (docs/method.md §5.8, :mod:`soabench.seeding`): one SUMO run, the scans of one clutter rate, and per birth
+model one GM-PHD run of one probability mode. Each model's births per scan are kept (the birth model is wrapped), the
+filter's step results and the metrics' delay episodes (§5.4). The recomputed per-trial metrics are compared with
+the run's ``trials.csv`` rows and the package versions with ``run.json``'s, so a replay says when it does not show
+what the run measured.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from soabench.config import Config, filter_config_for_mode
+from soabench.errors import SoabenchError, require
+
+#: per-trial metric columns compared with ``trials.csv`` (the rest are derived from these or are wall times)
+CHECKED_COLUMNS = ("delay_mean", "n_episodes", "n_censored", "card_err", "ospa", "gospa", "tp", "fp", "fn")
+
+
+@dataclass
+class ModelReplay:
+    """One birth model's filter run over the trial's scans."""
+
+    name: str
+    label: str
+    births: list[Any]  #: K Births, as the model returned them at each scan
+    results: list[Any]  #: K StepResult
+    metrics: Any  #: soabench.metrics.TrialMetrics of the run
+    row: dict[str, Any]  #: the trials.csv row this run gives
+
+
+@dataclass
+class TrialReplay:
+    """Everything one replayed trial shows."""
+
+    run_dir: Path
+    trial: int
+    clutter: float
+    mode: str
+    config: Config
+    scene: Any
+    recording: Any
+    scans: Any
+    seeds: Any
+    models: list[ModelReplay]
+    #: one-line notes: version differences, reproduction check against trials.csv
+    notes: list[str] = field(default_factory=list)
+    #: True when every replayed model's metrics equal the run's trials.csv row
+    reproduced: bool | None = None
+
+
+def read_run(run_dir: str | Path):
+    """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runmeta.validate_run_meta`) and its
+    raw dict."""
+    from soabench.experiment.ownership import check_existing_folder, resolve
+    from soabench.experiment.runmeta import validate_run_meta
+    from soabench.experiment.store import RUN_FILE, RunStore
+
+    path = resolve(run_dir)
+    check_existing_folder(path, RUN_FILE, "run")
+    store = RunStore(path)
+    raw = store.meta()
+    return path, validate_run_meta(raw, str(store.run_file)), raw
+
+
+def _choose(value: Any, allowed: list, flag: str) -> Any:
+    """``value`` if the run has it (None: the run's first), else a one-line error naming what it has."""
+    if value is None:
+        return allowed[0]
+    require(value in allowed, f"{flag} {value!r} is not in this run; choose from {', '.join(map(str, allowed))}")
+    return value
+
+
+def replay_trial(
+    run_dir: str | Path,
+    trial: int,
+    models: tuple[str, ...] | None = None,
+    mode: str | None = None,
+    clutter: float | None = None,
+) -> TrialReplay:
+    """Re-simulate trial ``trial`` of the run in ``run_dir`` for ``models`` (default: the run's birth models) in
+    probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
+    from soabench import plugins
+    from soabench.birth import LABEL
+    from soabench.experiment import registry
+    from soabench.experiment.runner import load_scene_cached
+    from soabench.experiment.trial import RunKey, make_row
+    from soabench.gmphd.filter import GMPHDFilter
+    from soabench.metrics import evaluate
+    from soabench.scenario import simulate
+    from soabench.seeding import trial_seeds
+    from soabench.sensor import observe
+    from soabench.trackers import GMPHDTracker, run_tracker
+
+    path, meta, raw = read_run(run_dir)
+    cfg = meta.config
+    exp = cfg.experiment
+    require(
+        isinstance(trial, int) and 0 <= trial < exp.trials,
+        f"--trial {trial} is not a trial of this run; choose 0 to {exp.trials - 1}",
+    )
+    require(
+        meta.trial_kind == registry.DEFAULT_TRIAL_KIND and meta.scene_loader == registry.DEFAULT_SCENE_LOADER,
+        f"run folder {str(path)!r} was made by trial kind {meta.trial_kind!r} / scene loader {meta.scene_loader!r}; "
+        "a replay re-simulates the built-in pipeline only",
+    )
+    names = tuple(exp.models) if models is None else tuple(models)
+    for name in names:
+        require(name in exp.models, f"--models {name!r} is not a birth model of this run; choose from "
+                f"{', '.join(exp.models)}")  # fmt: skip
+    mode = _choose(mode, list(exp.probabilities), "--mode")
+    lam = float(_choose(None if clutter is None else float(clutter), [float(c) for c in exp.clutter], "--clutter"))
+    scene, scenario = load_scene_cached(meta.net, meta.polys, meta.scenario)
+    seeds = trial_seeds(exp.seed, trial)
+    recording = simulate(scene, scenario, seeds, duration=exp.duration)
+    sensor_cfg = dataclasses.replace(cfg.sensor, lambda_c=lam)
+    scans = observe(recording, scene, sensor_cfg, seeds.sensor_rngs())
+    filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
+    runs: list[ModelReplay] = []
+    for name in names:
+        cls = plugins.resolve(plugins.BIRTH, name)
+        options = {} if plugins.is_builtin_birth(name) else cfg.plugins.get(name, {})
+        model = _Recorder(cls(cfg.birth, sensor_cfg, scene, seeds.placement_rng(), **options))
+        run = run_tracker(scans, GMPHDTracker(model, GMPHDFilter(filter_cfg, sensor_cfg, filter_mode), p_D_b))
+        metrics = evaluate(scans, run.results, cfg.metrics, sensor_cfg)
+        row = make_row(RunKey(trial, lam, name, mode), seeds, cfg.birth.N_hat, metrics, run, 0.0)
+        runs.append(ModelReplay(name, LABEL.get(name, name), model.births, run.results, metrics, row))
+    out = TrialReplay(path, trial, lam, mode, cfg, scene, recording, scans, seeds, runs)
+    out.notes.append(_version_note(raw))
+    if exp.trackers:
+        out.notes.append(f"not replayed: the run's whole trackers ({', '.join(exp.trackers)}); birth models only")
+    out.reproduced, note = _check_rows(path, out)
+    out.notes.append(note)
+    return out
+
+
+class _Recorder:
+    """A birth model that keeps what it returned at each scan (the filter sees the very same Births)."""
+
+    def __init__(self, model: Any) -> None:
+        self.model = model
+        self.name = getattr(model, "name", None)
+        self.births: list[Any] = []
+
+    def __call__(self, ctx: Any) -> Any:
+        births = self.model(ctx)
+        self.births.append(births)
+        return births
+
+
+def _version_note(raw: dict) -> str:
+    """One line: the package versions that differ between the run and this replay (or that they agree)."""
+    from soabench.experiment.runner import package_versions
+
+    stored = raw.get("versions") if isinstance(raw.get("versions"), dict) else {}
+    now = package_versions()
+    diffs = [
+        f"{k} {stored.get(k)} -> {now.get(k)}" for k in sorted(set(stored) | set(now)) if stored.get(k) != now.get(k)
+    ]
+    if not diffs:
+        return "versions: as in the run"
+    return "versions differ from the run's: " + ", ".join(diffs)
+
+
+def _check_rows(path: Path, rep: TrialReplay) -> tuple[bool | None, str]:
+    """Compare each replayed run's metrics with its row of the run's ``trials.csv``."""
+    table = path / "trials.csv"
+    if not table.is_file():
+        return None, "reproduction not checked: the run has no trials.csv (unfinished run)"
+    want = {m.name for m in rep.models}
+    stored: dict[str, dict[str, str]] = {}
+    try:
+        with table.open(newline="", encoding="utf-8") as fh:
+            for r in csv.DictReader(fh):
+                try:
+                    same = int(r["trial"]) == rep.trial and float(r["clutter"]) == rep.clutter
+                except (KeyError, ValueError):
+                    continue
+                if same and r.get("mode") == rep.mode and r.get("model") in want:
+                    stored[r["model"]] = r
+    except (OSError, csv.Error, UnicodeDecodeError) as exc:
+        raise SoabenchError(f"cannot read {str(table)!r}: {exc}") from None
+    bad: list[str] = []
+    missing = [m.name for m in rep.models if m.name not in stored]
+    for m in rep.models:
+        if m.name in stored:
+            bad += [f"{m.name} {c}" for c in CHECKED_COLUMNS if not _equal(stored[m.name].get(c), m.row.get(c))]
+    if bad:
+        return False, "NOT the run's numbers: the replay differs from trials.csv in " + ", ".join(bad[:6])
+    if missing:
+        return None, "reproduction not checked for " + ", ".join(missing) + " (no row in trials.csv)"
+    return True, f"reproduced: {len(rep.models)} model run(s) give the run's trials.csv metrics"
+
+
+def _equal(text: str | None, value: Any) -> bool:
+    """A trials.csv cell equals a recomputed value (NaN equals NaN; floats to 1e-9 relative)."""
+    if text is None:
+        return False
+    try:
+        a, b = float(text), float(value)
+    except (TypeError, ValueError):
+        return str(text) == str(value)
+    if math.isnan(a) or math.isnan(b):
+        return math.isnan(a) and math.isnan(b)
+    return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
