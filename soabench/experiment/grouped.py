@@ -24,6 +24,7 @@ from typing import Any
 from soabench.experiment.ownership import FolderLock
 from soabench.experiment.progress import Progress
 from soabench.experiment.runner import DeferredRun, TaskSpec, _utc_stamp, package_versions, run_trial_task
+from soabench.kernel_warmup import ensure_compiled
 
 
 @dataclass(frozen=True)
@@ -106,6 +107,7 @@ def run_group(
             lock.acquire()
         for d in deferred:
             d.store.clear_merged()
+        ensure_compiled()  # once per machine: before the progress line, so that its ETA counts trials only
         bar = Progress(total, done0, progress, label=label)
         gen = exe.results(group, trials)
         try:

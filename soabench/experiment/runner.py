@@ -45,6 +45,7 @@ from soabench.experiment.progress import Progress
 from soabench.experiment.provenance import REPRODUCTION_TOLERANCE, platform_info
 from soabench.experiment.runmeta import check_requested, validate_run_meta
 from soabench.experiment.store import EPISODE_COLUMNS, RUN_FILE, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS, RunStore
+from soabench.kernel_warmup import ensure_compiled
 from soabench.seeding import trial_seeds
 
 TrialFn = Callable[..., Any]
@@ -495,6 +496,7 @@ def _run_trials(
     interrupted = stopped = False
     store.clear_merged()
     t_start = time.time()
+    ensure_compiled()  # once per machine: before the progress line, so that its ETA counts trials only
     bar = Progress(n_trials, n_done, progress, label=store.run_dir.name)
     gen = exe.results(spec, todo)
     try:
