@@ -12,8 +12,8 @@ that were mostly compiling. Instead, the driver of a run calls :func:`ensure_com
 * the trials then load machine code from the cache (about a second per process) and the ETA counts trials only;
 * one line says so, once per run, on its own line; off a terminal (CI, ``2> log``) a line follows every
   :data:`LINE_INTERVAL_S` seconds while it lasts;
-* a stamp file in the cache folder records that the kernels of this soabench, numba and Python were compiled, so a
-  later run does not start the processes at all.
+* a stamp file in the cache folder records that the kernels of this soabench, numba and Python (and these kernel
+  sources: path and content, as numba's own cache key) were compiled, so a later run starts no process at all.
 
 Each group calls the kernels with small inputs of the types a trial passes (the filter's own argument packing),
 so the trials find exactly these specialisations in the cache. Compiling changes no number: the arithmetic is the
@@ -169,8 +169,8 @@ def stamp_path() -> Path:
     for name in KERNEL_MODULES:
         spec = importlib.util.find_spec(name)
         origin = spec.origin if spec is not None and spec.origin else ""
-        st = os.stat(origin)
-        parts += [origin, str(st.st_mtime_ns), str(st.st_size)]  # numba's cache is keyed on these too
+        digest = hashlib.sha256(Path(origin).read_bytes()).hexdigest()
+        parts += [origin, digest]  # numba keys its cache on the path and the content of the source file too
     key = hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
     return configure_numba_cache() / f"soabench-kernels-{key}.ready"
 
