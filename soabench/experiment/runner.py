@@ -102,6 +102,12 @@ def _default_trial_fn() -> TrialFn:
     return registry.trial_kind(registry.DEFAULT_TRIAL_KIND)
 
 
+def uses_kernels(spec: TaskSpec) -> bool:
+    """True when the trials of ``spec`` are soabench's own (which run the compiled kernels; another trial kind
+    may not)."""
+    return spec.trial_fn is None or spec.trial_fn is _default_trial_fn()
+
+
 def _default_load_fn() -> LoadFn:
     return registry.scene_loader(registry.DEFAULT_SCENE_LOADER)
 
@@ -496,7 +502,8 @@ def _run_trials(
     interrupted = stopped = False
     store.clear_merged()
     t_start = time.time()
-    ensure_compiled()  # once per machine: before the progress line, so that its ETA counts trials only
+    if uses_kernels(spec):  # once per machine: before the progress line, so that its ETA counts trials only
+        ensure_compiled()
     bar = Progress(n_trials, n_done, progress, label=store.run_dir.name)
     gen = exe.results(spec, todo)
     try:
