@@ -121,33 +121,50 @@ def _metrics_geometry() -> None:
     sampling._warm_poisson(poisson_accept, poisson_first_free)
 
 
+def _no_obstacles():
+    from soabench.types import Obstacles
+
+    return Obstacles([], *(np.zeros(0) for _ in range(7)))
+
+
 def _fused_steps() -> None:
-    """The fused cycle's entry points as the filter calls them: one call per scan, the split step of the
-    line-of-sight gate, and the split step of measurement-driven newborn terms (§2.11)."""
+    """The fused cycle's entry points as the filter calls them: one call per scan (both probability modes), and the
+    split step of the line-of-sight gate (§2.11, §4.4)."""
     import shapely
 
-    from soabench.types import NewbornTerms, Obstacles, Scan
+    from soabench.types import Scan
 
     Z, ego = _scan_arrays()
-    none = Obstacles([], *(np.zeros(0) for _ in range(7)))
     far = [shapely.box(1000.0, 1000.0, 1001.0, 1001.0)]
-    newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0.1 + 0 * A)
     for mode in ("static", "dynamic", "dynamic+occ"):
         f = _filter(mode)
         for k in range(2):  # the second step has a mixture to predict
-            scan = Scan(k, 0.1 * k, ego, Z, none, far if mode == "dynamic+occ" else [], shapely.box(0, 0, 1, 1))
-            f.step(scan, _births())
-        if mode != "dynamic+occ":
+            occluders = far if mode == "dynamic+occ" else []
+            f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), occluders, shapely.box(0, 0, 1, 1)), _births())
+
+
+def _newborn_steps() -> None:
+    """The split step of measurement-driven newborn terms (§3.4) in both probability modes."""
+    import shapely
+
+    from soabench.types import NewbornTerms, Scan
+
+    Z, ego = _scan_arrays()
+    for mode in ("static", "dynamic"):
+        f = _filter(mode)
+        for k in range(2):
             b = _births()
-            b.newborn = newborn
-            f.step(Scan(2, 0.2, ego, Z, none, [], shapely.box(0, 0, 1, 1)), b)
+            b.newborn = NewbornTerms(
+                np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0.1 + 0 * A
+            )
+            f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
 
 
 #: rounds of groups: the groups of a round are independent (no kernel in two of them) and run in parallel; a later
 #: round links the earlier rounds' cached kernels
 ROUNDS: tuple[tuple[Callable[[], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_fused_steps,),
+    (_fused_steps, _newborn_steps),
 )
 
 
