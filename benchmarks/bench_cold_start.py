@@ -2,9 +2,10 @@
 
 A fresh ``NUMBA_CACHE_DIR`` stands for a fresh machine (or a CI job without a cache step): the first command
 compiles the numba kernels (:mod:`soabench.kernel_warmup`), the second loads them. Each round runs, as separate
-processes, ``soabench check --suite examples/check/suite.toml`` cold then warm, and ``soabench run`` of one short
-trial cold then warm, alternating, so that a machine shared with other work loads both alike. Printed per round:
-wall seconds and CPU seconds (the command and every process it started) of each, and the ratios cold / warm.
+processes, ``soabench check --suite examples/check/suite.toml`` cold then warm, and a short ``soabench run`` of two
+trials on two workers cold then warm, alternating, so that a machine shared with other work loads both alike.
+Printed per round: wall seconds and CPU seconds (the command and every process it started) of each, and the ratios
+cold / warm.
 Example::
 
     python benchmarks/bench_cold_start.py --rounds 2
@@ -31,7 +32,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--rounds", type=int, default=1, help="cold/warm pairs of each command (default 1)")
     p.add_argument("--suite", default=str(ROOT / "examples" / "check" / "suite.toml"))
     p.add_argument("--duration", type=float, default=20.0, help="seconds of the one-trial run (default 20)")
+    p.add_argument("--trials", type=int, default=2, help="trials of the run, on two workers (default 2)")
     p.add_argument("--skip-run", action="store_true", help="only the check")
+    p.add_argument("--skip-check", action="store_true", help="only the run")
     return p.parse_args(argv)
 
 
@@ -63,11 +66,13 @@ def main(argv=None) -> int:
     cli = [sys.executable, "-m", "soabench.cli"]
     commands = {
         "check": lambda out: [*cli, "check", "--suite", args.suite, "--out", str(out)],
-        "first trial": lambda out: [*cli, "run", "--net", "intersection", "--trials", "1", "--duration",
-                                    str(args.duration), "--out", str(out), "--no-progress"],
+        "run": lambda out: [*cli, "run", "--net", "intersection", "--trials", str(args.trials), "--workers", "2",
+                            "--duration", str(args.duration), "--out", str(out), "--no-progress"],
     }  # fmt: skip
     if args.skip_run:
-        del commands["first trial"]
+        del commands["run"]
+    if args.skip_check:
+        del commands["check"]
     print(f"cores: {os.cpu_count()}; load average at start: {os.getloadavg()[0]:.1f}")
     print(f"{'command':12s} {'round':>5s} {'cold wall':>9s} {'warm wall':>9s} {'ratio':>6s} "
           f"{'cold CPU':>8s} {'warm CPU':>8s} {'ratio':>6s}")  # fmt: skip
