@@ -1,4 +1,4 @@
-"""Compile the numba kernels once per machine, before the first trial, on every core (docs/development.md).
+"""Compile the numba kernels once per machine, before the first trial, on every core (docs/user-guide/ci-cache.md).
 
 The filter, metric and scan-geometry kernels (:mod:`soabench.gmphd.cycle`, :mod:`soabench.gmphd.kernels`,
 :mod:`soabench.metrics_kernels`, :mod:`soabench.geometry_kernels`) are compiled by numba on first use and cached in
