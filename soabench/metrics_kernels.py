@@ -40,7 +40,7 @@ def np_sum(a, n):  # pragma: no cover - compiled
     at a multiple of 8, each summed the same way). 0.0 for n = 0."""
     if n == 0:
         return 0.0
-    return _pairwise(a, 0, n)
+    return _pairwise(a, np.int64(0), n)  # an int64 start, not the literal 0: one specialisation of _pairwise
 
 
 @njit(cache=True)

@@ -33,6 +33,12 @@ def _print_once() -> None:
         print(MESSAGE, file=sys.stderr, flush=True)
 
 
+def silence() -> None:
+    """Never print :data:`MESSAGE` in this process (compilation is announced elsewhere, once per run:
+    :mod:`soabench.kernel_warmup`)."""
+    _printed.set()
+
+
 def ready(key: Hashable) -> bool:
     """True once a step of kind ``key`` has completed in this process."""
     return key in _done

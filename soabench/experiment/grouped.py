@@ -23,7 +23,15 @@ from typing import Any
 
 from soabench.experiment.ownership import FolderLock
 from soabench.experiment.progress import Progress
-from soabench.experiment.runner import DeferredRun, TaskSpec, _utc_stamp, package_versions, run_trial_task
+from soabench.experiment.runner import (
+    DeferredRun,
+    TaskSpec,
+    _utc_stamp,
+    package_versions,
+    run_trial_task,
+    uses_kernels,
+)
+from soabench.kernel_warmup import ensure_compiled
 
 
 @dataclass(frozen=True)
@@ -106,6 +114,8 @@ def run_group(
             lock.acquire()
         for d in deferred:
             d.store.clear_merged()
+        if any(uses_kernels(d.spec) for d in deferred):  # before the progress line: its ETA counts trials only
+            ensure_compiled()
         bar = Progress(total, done0, progress, label=label)
         gen = exe.results(group, trials)
         try:

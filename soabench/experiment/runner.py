@@ -46,6 +46,7 @@ from soabench.experiment.provenance import REPRODUCTION_TOLERANCE, platform_info
 from soabench.experiment.runmeta import check_requested, validate_run_meta
 from soabench.experiment.store import EPISODE_COLUMNS, RUN_FILE, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS, RunStore
 from soabench.experiment.workers import OWN_CODE, note_activity
+from soabench.kernel_warmup import ensure_compiled
 from soabench.scenario.derive import said_by_the_driver
 from soabench.seeding import trial_seeds
 
@@ -103,6 +104,12 @@ _SUMO_LOCK = threading.Lock()
 
 def _default_trial_fn() -> TrialFn:
     return registry.trial_kind(registry.DEFAULT_TRIAL_KIND)
+
+
+def uses_kernels(spec: TaskSpec) -> bool:
+    """True when the trials of ``spec`` are soabench's own (which run the compiled kernels; another trial kind
+    may not)."""
+    return spec.trial_fn is None or spec.trial_fn is _default_trial_fn()
 
 
 def _default_load_fn() -> LoadFn:
@@ -509,6 +516,8 @@ def _run_trials(
     interrupted = stopped = False
     store.clear_merged()
     t_start = time.time()
+    if uses_kernels(spec):  # once per machine: before the progress line, so that its ETA counts trials only
+        ensure_compiled()
     bar = Progress(n_trials, n_done, progress, label=store.run_dir.name)
     gen = exe.results(spec, todo)
     try:

@@ -517,7 +517,11 @@ def update(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_th
     """:func:`support` then :func:`posterior` without newborn terms, in one call; returns (posterior, A, ok)."""
     sup = support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
     no_nb = np.empty(0)
-    out = posterior(w, m, P, origin, n_det, age, beta, sup, R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)), no_nb, 0)
+    # nb_origin as an int64 variable, not the literal 0: then this is the specialisation posterior_reduce compiles
+    # too (a literal argument would make numba compile posterior a second time)
+    nb_origin = np.int64(0)
+    out = posterior(w, m, P, origin, n_det, age, beta, sup, R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)), no_nb,
+                    nb_origin)  # fmt: skip
     return out, sup[11], sup[12]
 
 

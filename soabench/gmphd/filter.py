@@ -340,8 +340,8 @@ class GMPHDFilter:
                 sup,
                 self.R,
                 beta_nb,
-                np.ascontiguousarray(newborn.m, dtype=float).reshape(-1, 4),
-                np.ascontiguousarray(newborn.P, dtype=float).reshape(-1, 4, 4),
+                _read_only(np.ascontiguousarray(newborn.m, dtype=float).reshape(-1, 4)),
+                _read_only(np.ascontiguousarray(newborn.P, dtype=float).reshape(-1, 4, 4)),
                 self._nb_beta,
                 SOURCE_MEAS,
                 self._red_pars,
@@ -418,6 +418,16 @@ def _birth_arrays(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
         np.ascontiguousarray(births.P, dtype=float).reshape(-1, 4, 4),
         np.ascontiguousarray(births.source, dtype=np.int8).reshape(-1),
     )
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as a read-only array (a view when ``a`` is writable): numba compiles one specialisation per
+    writability, so the newborn terms of every birth model reach the compiled cycle as the same type."""
+    if not a.flags.writeable:
+        return a
+    view = a.view()
+    view.flags.writeable = False
+    return view
 
 
 def _mixture_arrays(mix: Mixture) -> tuple[np.ndarray, ...]:
