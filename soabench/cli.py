@@ -350,6 +350,7 @@ def _snapshot(args: argparse.Namespace, duration: float | None, include_end: boo
     require(args.trial >= 0, f"--trial {args.trial} must be >= 0")
     cli_checks.check_time("--time/--duration", duration)
     cfg = load_config(args.config)
+    cfg.single_clutter_rate(f"`soabench {args.command}`")
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
 

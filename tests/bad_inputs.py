@@ -41,7 +41,7 @@ def _a_file(tmp: Path) -> Path:
 
 def _not_utf8(tmp: Path) -> list[str]:
     p = tmp / "latin1.toml"
-    p.write_bytes("# caf\xe9\n[sensor]\nlambda_c = 3.0\n".encode("latin-1"))
+    p.write_bytes("# caf\xe9\n[experiment]\nclutter = [3.0]\n".encode("latin-1"))
     return _run(tmp, "--config", str(p))
 
 
@@ -63,8 +63,12 @@ CASES: list[Case] = [
     _cfg("[filter]\nJ_max = true\n", "must be an integer"),
     _cfg('[experiment]\ntrials = "5"\n', "must be an integer"),
     _cfg("[experiment]\ntrials = 2.0\n", "must be an integer"),
-    _cfg('[sensor]\nlambda_c = "3"\n', "must be a number"),
-    _cfg("[sensor]\nlambda_c = true\n", "must be a number"),
+    _cfg('[experiment]\nclutter = ["3"]\n', "must be a number"),
+    _cfg("[experiment]\nclutter = [true]\n", "must be a number"),
+    _cfg(
+        "[sensor]\nlambda_c = 5.0\n",
+        "sensor.lambda_c is not a config key: the clutter rate has one key, experiment.clutter",
+    ),
     _cfg("[sensor]\nclutter_space = 1\n", "must be a string"),
     _cfg('[experiment]\nmodels = "soa"\n', "must be a list"),
     _cfg("[experiment]\nmodels = [1]\n", "must be a string"),
@@ -76,7 +80,7 @@ CASES: list[Case] = [
     _cfg("[birth]\nrho = [1.0, nan, 1.0]\n", "birth.rho"),
     _cfg("[sensor]\nr_max = inf\n", "sensor.r_max = inf"),
     _cfg("[filter]\nsigma_a = 1e300\n", "filter.sigma_a = 1e+300"),
-    _cfg("[sensor]\nlambda_c = nan\n", "sensor.lambda_c = nan"),
+    _cfg("[experiment]\nclutter = [nan]\n", "clutter = nan"),
     _cfg("[birth]\nN_hat = 1e9\n", "birth.N_hat"),
     _cfg("[birth]\nd_min = 1e-9\n", "birth.d_min"),
     _cfg("[metrics]\nospa_c = -inf\n", "metrics.ospa_c"),

@@ -304,7 +304,7 @@ def _run_points(
                 req = {"experiment.trials": more} if more is not None else None
                 o = run_experiment(None, net, polys, sc, resume=pdir, requested=req, **kwargs)
             else:
-                o = run_experiment(Config.from_dict(p["config"]), net, polys, sc, out=pdir, **kwargs)
+                o = run_experiment(Config.from_record(p["config"]), net, polys, sc, out=pdir, **kwargs)
             outcomes.append(o)
             if not o.summary_markdown and defer is None:  # the point did not attempt every trial (--fail-fast)
                 stopped = True
@@ -380,7 +380,7 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
         v = v[~np.isnan(v)]
         std[c] = float(v.std(ddof=0)) if v.size else math.nan
     head = [f"{LABEL.get(a, a)} {b}" for a in models for b in modes]
-    K = scans_per_run(Config.from_dict(points[0]["config"]))
+    K = scans_per_run(Config.from_record(points[0]["config"]))
     lines = [
         f"# N̂ sensitivity sweep: {meta.get('net_name')}",
         "",

@@ -78,7 +78,9 @@ def load_kitti_config(path: str | Path | None) -> tuple[Config, KittiConfig]:
     except tomllib.TOMLDecodeError as exc:
         raise SoabenchError(f"config file {str(p)!r} is not valid TOML: {exc}") from None
     kitti = kitti_from_dict(data.pop("kitti", {}))
-    return Config.from_dict(data, base).validate(), kitti
+    cfg = Config.from_dict(data, base).validate()
+    cfg.single_clutter_rate("a KITTI run")
+    return cfg, kitti
 
 
 def kitti_from_dict(values: Any) -> KittiConfig:
