@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from soabench.birth import REGISTRY as _BIRTH_REGISTRY
 from soabench.errors import SoabenchError, require
 
 if sys.version_info >= (3, 11):
@@ -30,7 +31,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
+BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(_BIRTH_REGISTRY)  #: the built-in birth models (soabench.birth.REGISTRY)
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
 
 

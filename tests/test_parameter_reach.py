@@ -176,7 +176,8 @@ def test_a_run_records_every_key_and_its_rows_show_the_experiment(tmp_path):
     assert set(rows["clutter"]) == set(exp.clutter)
     assert set(rows["model"]) == {*exp.models, *exp.trackers}
     assert set(rows["mode"]) == set(exp.probabilities)
-    assert set(rows["n_steps"]) == {int(exp.duration / cfg.sensor.dt)}
+    steps = read_csv(tmp_path / "run" / "steps.csv")  # one row per scan k = 0 .. duration / dt - 1
+    assert set(steps["k"]) == set(range(int(exp.duration / cfg.sensor.dt)))
 
 
 def spy_config(values: dict[str, object], reads: dict[str, set]) -> Config:
@@ -219,6 +220,7 @@ def test_every_key_reaches_its_consumer_with_its_value():
     # filter.nonfinite is read only when an input is not finite: one scan with a NaN measurement
     scan = Scan(0, 0.0, np.zeros(3), np.array([[10.0, 0.1], [np.nan, 0.2]]), None, [], Polygon())
     assert GMPHDFilter(cfg.filter, cfg.sensor).step(scan, Births.empty()).n_dropped == 1
+    assert reads["sensor.lambda_c"] == {"5.0"}  # the scans' clutter rate is experiment.clutter's, unchanged
     missing = []
     for key in sorted(documented_keys()):
         if key.startswith("experiment."):

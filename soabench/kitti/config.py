@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from soabench.birth import CORE_MODELS
 from soabench.config import Config, tomllib
 from soabench.errors import SoabenchError, require
 
@@ -60,9 +61,7 @@ def kitti_base_config() -> Config:
     cfg = Config()
     cfg.sensor = dataclasses.replace(cfg.sensor, dt=0.1)
     cfg.metrics = dataclasses.replace(cfg.metrics, ospa_c=10.0, d_gate=2.0)
-    cfg.experiment = dataclasses.replace(
-        cfg.experiment, models=("soa", "pubm", "ubm", "ubm-ws"), probabilities=("static",)
-    )
+    cfg.experiment = dataclasses.replace(cfg.experiment, models=CORE_MODELS, probabilities=("static",))
     return cfg
 
 
