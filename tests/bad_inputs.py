@@ -81,6 +81,7 @@ CASES: list[Case] = [
     _cfg("[sensor]\nr_max = inf\n", "sensor.r_max = inf"),
     _cfg("[filter]\nsigma_a = 1e300\n", "filter.sigma_a = 1e+300"),
     _cfg("[experiment]\nclutter = [nan]\n", "clutter = nan"),
+    _cfg("[experiment]\nclutter = [0.5, 3.0]\n", "gives 2 rates; `soabench scene` observes at one rate", "scene"),
     _cfg("[birth]\nN_hat = 1e9\n", "birth.N_hat"),
     _cfg("[birth]\nd_min = 1e-9\n", "birth.d_min"),
     _cfg("[metrics]\nospa_c = -inf\n", "metrics.ospa_c"),
