@@ -526,6 +526,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.kind in ("clutter", "occlusion"):
         require(args.offsets is None, f"--offsets belongs to `sweep births`; use --values for `sweep {args.kind}`")
         values = args.values or DEFAULT_VALUES[args.kind]
+    if args.kind == "clutter":  # the sweep's points are its clutter rates: λ has no second home here
+        given = cli_checks.requested_keys(args, getattr(args, "explicit", set()))
+        require(
+            "experiment.clutter" not in given,
+            "`sweep clutter` takes its clutter rates from --values; drop --clutter and [experiment] clutter",
+        )
     else:
         require(
             args.values is None,

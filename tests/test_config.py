@@ -113,3 +113,15 @@ def test_a_run_record_with_the_sensor_rate_is_read():
     stored["sensor"]["lambda_c"] = 3.0
     cfg = Config.from_record(stored).validate()
     assert cfg.experiment.clutter == (0.5, 3.0, 5.0) and cfg.sensor.lambda_c == 0.5
+
+
+def test_the_clutter_sweep_takes_its_rates_from_values_only(tmp_path, capsys):
+    from soabench.cli import main
+
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[experiment]\nclutter = [5.0]\n")
+    for extra in (["--config", str(cfg)], ["--clutter", "2"]):
+        assert main(["sweep", "clutter", "--trials", "1", "--duration", "5", "--out", str(tmp_path / "s"), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "`sweep clutter` takes its clutter rates from --values" in err[0]
+    assert not (tmp_path / "s").exists()
