@@ -40,7 +40,6 @@ def test_example_suite_passes_then_catches_a_regression(tmp_path, capsys) -> Non
 
 def test_bad_suites_are_one_line_errors(tmp_path, capsys) -> None:
     suite = tmp_path / "s.toml"
-    (tmp_path / "c.toml").write_text("[experiment]\nclutter = [5.0]\n")  # a second home for the suite's clutter
     for text, msg in [
         ('[[scenario]]\nname = "a"\nnet = "intersection"\nmodel = ["soa"]\n', "unknown key 'model'"),
         ('[[scenario]]\nname = "a"\nnet = "intersection"\n[[threshold]]\nmetric = "ospa"\n', "sets none of max"),
@@ -52,13 +51,23 @@ def test_bad_suites_are_one_line_errors(tmp_path, capsys) -> None:
          'metric = "ospa"\nmax_increase = 0.1\n', "create it with soabench check --update-baseline"),
         ('[[scenario]]\nname = "a"\nnet = "intersection"\nmodels = ["nosuch"]\n', "'nosuch' is unknown"),
         ('[[scenario]]\nname = "a"\nnet = "intersection"\npolys = ["nope.poly.xml"]\n', "poly.xml' does not exist"),
-        ('[suite]\nconfig = "c.toml"\n[[scenario]]\nname = "a"\nnet = "intersection"\nclutter = [1.0]\n',
-         "[experiment] clutter is set per scenario in a check suite ([[scenario]] clutter)"),
     ]:  # fmt: skip
         suite.write_text(text)
         assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2, text
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and msg in err[0], (err, msg)
+
+
+def test_a_suite_config_that_sets_the_protocol_is_refused(tmp_path, capsys) -> None:
+    """The [[scenario]] tables are the one home of the experiment keys in a suite (one of them: the clutter rate)."""
+    (tmp_path / "c.toml").write_text("[experiment]\nclutter = [5.0]\n")
+    suite = tmp_path / "s.toml"
+    suite.write_text('[suite]\nconfig = "c.toml"\n[[scenario]]\nname = "a"\nnet = "intersection"\nclutter = [1.0]\n')
+    assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        len(err) == 1 and "[experiment] clutter is set per scenario in a check suite ([[scenario]] clutter)" in err[0]
+    )
 
 
 def test_import_path_plugins_need_plugin_flag_and_a_failed_plugin_fails(tmp_path, capsys) -> None:
