@@ -523,15 +523,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
     from soabench.experiment.sweep import DEFAULT_VALUES, run_sweep
 
-    if args.kind in ("clutter", "occlusion"):
-        require(args.offsets is None, f"--offsets belongs to `sweep births`; use --values for `sweep {args.kind}`")
-        values = args.values or DEFAULT_VALUES[args.kind]
     if args.kind == "clutter":  # the sweep's points are its clutter rates: λ has no second home here
         given = cli_checks.requested_keys(args, getattr(args, "explicit", set()))
         require(
             "experiment.clutter" not in given,
             "`sweep clutter` takes its clutter rates from --values; drop --clutter and [experiment] clutter",
         )
+    if args.kind in ("clutter", "occlusion"):
+        require(args.offsets is None, f"--offsets belongs to `sweep births`; use --values for `sweep {args.kind}`")
+        values = args.values or DEFAULT_VALUES[args.kind]
     else:
         require(
             args.values is None,
