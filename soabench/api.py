@@ -159,11 +159,11 @@ def simulate_trial(
         seed, trial: the base seed and the trial index; trial n's random streams depend only on ``(seed, n)``.
         duration: seconds to simulate (default: the configuration's ``experiment.duration``, 100 s).
         config: a :class:`Config`, a dict of sections, a TOML path or None (defaults); its ``[sensor]`` section
-            (with its clutter rate ``lambda_c``) makes the scans.
+            makes the scans, at the first clutter rate of ``experiment.clutter``.
 
     Returns:
         ``(recording, scans)``: the same values trial ``trial`` of a run with this configuration and its first
-        clutter rate equal to ``sensor.lambda_c`` uses.
+        clutter rate uses.
     """
     from soabench.experiment.runner import check_against_scenario, load_scene_cached
     from soabench.scenario import simulate

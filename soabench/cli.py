@@ -394,6 +394,7 @@ def _snapshot(args: argparse.Namespace, duration: float | None, include_end: boo
     )
     cli_checks.check_time("--time/--duration", duration)
     cfg = load_config(args.config)
+    cfg.single_clutter_rate(f"`soabench {args.command}`")
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
 
@@ -581,20 +582,24 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             **kwargs,
         )  # fmt: skip
         return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
-    if args.kind == "clutter":
-        require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep clutter`")
-        values = args.values or (0.5, 3.0, 5.0)
-    elif args.kind == "occlusion":
-        require(args.offsets is None, "--offsets belongs to `sweep births`; use --values for `sweep occlusion`")
-        values = args.values or (0.0, 4.0, 8.0, 12.0)
+    from soabench.experiment.sweep import DEFAULT_VALUES, run_sweep
+
+    if args.kind == "clutter":  # the sweep's points are its clutter rates: λ has no second home here
+        given = cli_checks.requested_keys(args, getattr(args, "explicit", set()))
+        require(
+            "experiment.clutter" not in given,
+            "`sweep clutter` takes its clutter rates from --values; drop --clutter and [experiment] clutter",
+        )
+    if args.kind in ("clutter", "occlusion"):
+        require(args.offsets is None, f"--offsets belongs to `sweep births`; use --values for `sweep {args.kind}`")
+        values = args.values or DEFAULT_VALUES[args.kind]
     else:
         require(
             args.values is None,
             "--values belongs to `sweep clutter` and `sweep occlusion`; use --offsets for `sweep births`",
         )
-        values = args.offsets if args.offsets is not None else tuple(range(-10, 11))
+        values = args.offsets if args.offsets is not None else DEFAULT_VALUES["births"]
     cfg = _config_from_args(args)
-    from soabench.experiment.sweep import run_sweep
 
     outcome = run_sweep(
         args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out,

@@ -2,14 +2,16 @@
 
 Defaults are the register's bold options. A TOML file may set any of them, section by section::
 
-    [sensor]
-    lambda_c = 5.0
+    [experiment]
+    clutter = [5.0]
     [birth]
     sem_mode = "dbscan"
 
 Unknown sections or keys and out-of-range values raise :class:`~soabench.errors.SoabenchError` naming the value
-and what is allowed. The scenario itself (network, vehicles, pedestrians) is configured by the network's
-``scenario.toml`` (see :mod:`soabench.scenario`).
+and what is allowed. Each parameter has one key: the clutter rate λ is ``experiment.clutter`` (the rates a run
+loops over; a command that observes one scene uses its single rate), and ``sensor.lambda_c`` is the rate of the
+scans being made, set from it and refused in a file (:data:`DERIVED_KEYS`). The scenario itself (network,
+vehicles, pedestrians) is configured by the network's ``scenario.toml`` (see :mod:`soabench.scenario`).
 """
 
 from __future__ import annotations
@@ -20,11 +22,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from soabench.birth import REGISTRY as _BIRTH_REGISTRY
 from soabench.errors import SoabenchError, require
 
-BIRTH_MODEL_NAMES = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
+BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(_BIRTH_REGISTRY)  #: the built-in birth models (soabench.birth.REGISTRY)
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
 
+
+#: fields that are not config keys: their value comes from the key named beside them (one home per parameter)
+DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
@@ -108,7 +114,8 @@ class SensorConfig:
     p_D: float = 0.98  #: detection probability of a visible target [P]
     sigma_r: float = 1.0  #: range noise std (m) [P]
     sigma_b_deg: float = 5.0  #: bearing noise std (deg) [P]
-    lambda_c: float = 3.0  #: mean clutter count per scan
+    #: mean clutter count per scan; in a :class:`Config` set from ``experiment.clutter``, not a key of its own
+    lambda_c: float = 3.0
     clutter_space: str = "polar"  #: "polar" (uniform in (r, b)) or "cartesian" (uniform in area, kappa ~ r)
     visibility_points: int = 1  #: 1 (centre) or 3 (centre and +-offset across the line of sight)
     visibility_offset: float = 0.3  #: lateral offset (m) of the extra sight points
@@ -369,11 +376,12 @@ class Config:
             for f in dataclasses.fields(obj):
                 default = f.default_factory() if f.default is dataclasses.MISSING else f.default
                 _check_type(f"{sec.name}.{f.name}", default, getattr(obj, f.name))
+        self.experiment.validate()  # first: the sensor's clutter rate comes from it
+        self.sync_derived()
         self.sensor.validate(sumo_step)
         self.filter.validate()
         self.birth.validate()
         self.metrics.validate()
-        self.experiment.validate()
         require(
             self.experiment.duration >= self.sensor.dt,
             f"duration = {self.experiment.duration!r} is shorter than one sensor period sensor.dt = {self.sensor.dt!r}",
@@ -383,9 +391,42 @@ class Config:
         return self
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``."""
+        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS`."""
         out = dataclasses.asdict(self)
-        return {sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()} for sec, d in out.items()}
+        return {
+            sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items() if f"{sec}.{k}" not in DERIVED_KEYS}
+            for sec, d in out.items()
+        }
+
+    def __post_init__(self) -> None:
+        # the clutter rate the sensor holds unset (its default) or got from experiment.clutter: a sensor.lambda_c
+        # set to anything else is a second value for the one key, refused by validate() unless the two agree
+        lam = self.sensor.lambda_c
+        unset = lam == SensorConfig.lambda_c or not self.experiment.clutter
+        self._lambda_c = lam if unset else float(self.experiment.clutter[0])
+
+    def sync_derived(self) -> Config:
+        """Set the :data:`DERIVED_KEYS` fields from their keys: the scans' clutter rate is the first of
+        ``experiment.clutter`` (a run sets each rate in turn, docs/method.md §5.8). A ``sensor.lambda_c`` changed
+        in place to another value than these keys gave it is refused with one line naming both keys."""
+        lam = self.sensor.lambda_c
+        require(
+            lam == self._lambda_c or (bool(self.experiment.clutter) and lam == self.experiment.clutter[0]),
+            f"sensor.lambda_c = {lam!r} disagrees with experiment.clutter = {list(self.experiment.clutter)!r}: "
+            "the clutter rate has one key, experiment.clutter; set the rate there",
+        )
+        if self.experiment.clutter:
+            self.sensor.lambda_c = self._lambda_c = float(self.experiment.clutter[0])
+        return self
+
+    def single_clutter_rate(self, command: str) -> float:
+        """The one clutter rate of a command that observes one scene; a list of several is refused with one line."""
+        rates = self.experiment.clutter
+        require(
+            len(rates) == 1,
+            f"experiment.clutter = {list(rates)!r} gives {len(rates)} rates; {command} observes at one rate: give one",
+        )
+        return float(rates[0])
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], base: Config | None = None) -> Config:
@@ -410,14 +451,30 @@ class Config:
             obj = sections[sec]
             fields = {f.name: f for f in dataclasses.fields(obj)}
             for key, value in values.items():
-                require(
-                    key in fields,
-                    f"unknown config key {sec}.{key}; allowed: {', '.join(sorted(fields))}",
-                )
+                if f"{sec}.{key}" in DERIVED_KEYS:
+                    raise SoabenchError(_derived_message(f"{sec}.{key}", value))
+                allowed = sorted(k for k in fields if f"{sec}.{k}" not in DERIVED_KEYS)
+                require(key in fields, f"unknown config key {sec}.{key}; allowed: {', '.join(allowed)}")
                 f = fields[key]
                 default = f.default_factory() if f.default is dataclasses.MISSING else f.default
                 setattr(obj, key, _check_type(f"{sec}.{key}", default, value))
-        return cfg
+        return cfg.sync_derived()
+
+    @classmethod
+    def from_record(cls, data: Any) -> Config:
+        """The configuration stored in a run or sweep file: like :meth:`from_dict`, except that a recorded
+        ``sensor.lambda_c`` is dropped (the scans' rate, which ``experiment.clutter`` of the same record sets)."""
+        if isinstance(data, dict) and isinstance(data.get("sensor"), dict) and "lambda_c" in data["sensor"]:
+            data = {**data, "sensor": {k: v for k, v in data["sensor"].items() if k != "lambda_c"}}
+        return cls.from_dict(data)
+
+
+def _derived_message(key: str, value: Any) -> str:
+    """One line naming a field that is not a key and the key that sets it."""
+    home = DERIVED_KEYS[key]
+    example = f"[{value!r}]" if _is_number(value) else "[3.0]"
+    section, name = home.split(".")
+    return f"{key} is not a config key: the clutter rate has one key, {home} (a list: [{section}] {name} = {example})"
 
 
 def filter_config_for_mode(cfg: FilterConfig, mode: str) -> tuple[FilterConfig, str, float]:

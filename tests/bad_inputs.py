@@ -45,7 +45,7 @@ def _a_file(tmp: Path) -> Path:
 
 def _not_utf8(tmp: Path) -> list[str]:
     p = tmp / "latin1.toml"
-    p.write_bytes("# caf\xe9\n[sensor]\nlambda_c = 3.0\n".encode("latin-1"))
+    p.write_bytes("# caf\xe9\n[experiment]\nclutter = [3.0]\n".encode("latin-1"))
     return _run(tmp, "--config", str(p))
 
 
@@ -67,8 +67,12 @@ _CONFIG_AND_RUN: list[Case] = [
     _cfg("[filter]\nJ_max = true\n", "must be an integer"),
     _cfg('[experiment]\ntrials = "5"\n', "must be an integer"),
     _cfg("[experiment]\ntrials = 2.0\n", "must be an integer"),
-    _cfg('[sensor]\nlambda_c = "3"\n', "must be a number"),
-    _cfg("[sensor]\nlambda_c = true\n", "must be a number"),
+    _cfg('[experiment]\nclutter = ["3"]\n', "must be a number"),
+    _cfg("[experiment]\nclutter = [true]\n", "must be a number"),
+    _cfg(
+        "[sensor]\nlambda_c = 5.0\n",
+        "sensor.lambda_c is not a config key: the clutter rate has one key, experiment.clutter",
+    ),
     _cfg("[sensor]\nclutter_space = 1\n", "must be a string"),
     _cfg('[experiment]\nmodels = "soa"\n', "must be a list"),
     _cfg("[experiment]\nmodels = [1]\n", "must be a string"),
@@ -80,7 +84,8 @@ _CONFIG_AND_RUN: list[Case] = [
     _cfg("[birth]\nrho = [1.0, nan, 1.0]\n", "birth.rho"),
     _cfg("[sensor]\nr_max = inf\n", "sensor.r_max = inf"),
     _cfg("[filter]\nsigma_a = 1e300\n", "filter.sigma_a = 1e+300"),
-    _cfg("[sensor]\nlambda_c = nan\n", "sensor.lambda_c = nan"),
+    _cfg("[experiment]\nclutter = [nan]\n", "clutter = nan"),
+    _cfg("[experiment]\nclutter = [0.5, 3.0]\n", "gives 2 rates; `soabench scene` observes at one rate", "scene"),
     _cfg("[birth]\nN_hat = 1e9\n", "birth.N_hat"),
     _cfg("[birth]\nd_min = 1e-9\n", "birth.d_min"),
     _cfg("[metrics]\nospa_c = -inf\n", "metrics.ospa_c"),
@@ -575,6 +580,26 @@ def _import_cases() -> list[Case]:
     ]  # fmt: skip
 
 
+# ------------------------------------------------------------------------------------------------ replay, report
+def _replay_cases() -> list[Case]:
+    def bad_run(t: Path) -> str:
+        (t / "r").mkdir()
+        (t / "r" / "run.json").write_text("[1")
+        return str(t / "r")
+
+    return [
+        ("replay missing run", lambda t: ["replay", str(t / "nope"), "--trial", "0"], "is not a run folder"),
+        ("replay folder without run.json", lambda t: ["replay", str(t), "--trial", "0"], "no run.json"),
+        ("replay run.json not JSON", lambda t: ["replay", bad_run(t), "--trial", "0"], "run.json"),
+        ("replay --trial -1", lambda t: ["replay", str(t), "--trial", "-1"], "--trial -1"),
+        ("replay --trial x", lambda t: ["replay", str(t), "--trial", "x"], "'x'"),
+        ("replay without --trial", lambda t: ["replay", str(t)], "--trial"),
+        ("report missing run", lambda t: ["report", str(t / "nope")], "is not a run folder"),
+        ("report folder without runs", lambda t: ["report", str(t)], "no run.json"),
+        ("report run.json not JSON", lambda t: ["report", bad_run(t)], "run.json"),
+    ]  # fmt: skip
+
+
 # ------------------------------------------------------------------------------------------------ the catalogue
 def _sections() -> dict[str, list[Case]]:
     return {
@@ -586,6 +611,7 @@ def _sections() -> dict[str, list[Case]]:
         "kitti": _kitti_cases(),
         "check suites": _check_cases(),
         "import osm": _import_cases(),
+        "replay and report": _replay_cases(),
     }
 
 

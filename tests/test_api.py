@@ -281,11 +281,11 @@ def test_stonesoup_bridge_both_ways_on_our_truth_set(trial1) -> None:
 
 def test_config_forms_are_accepted(tmp_path) -> None:
     path = tmp_path / "c.toml"
-    path.write_text("[sensor]\nlambda_c = 1.0\n")
+    path.write_text("[experiment]\nclutter = [1.0]\n")
     a = sb.simulate_trial(NET, duration=5, config=path)[1]
-    b = sb.simulate_trial(NET, duration=5, config={"sensor": {"lambda_c": 1.0}})[1]
+    b = sb.simulate_trial(NET, duration=5, config={"experiment": {"clutter": [1.0]}})[1]
     cfg = sb.Config()
-    cfg.sensor = dataclasses.replace(cfg.sensor, lambda_c=1.0)
+    cfg.experiment = dataclasses.replace(cfg.experiment, clutter=(1.0,))
     c = sb.simulate_trial(NET, duration=5, config=cfg)[1]
     assert a.sensor.lambda_c == b.sensor.lambda_c == c.sensor.lambda_c == 1.0
     assert all(np.array_equal(x.Z, y.Z) and np.array_equal(x.Z, z.Z) for x, y, z in zip(a, b, c, strict=True))

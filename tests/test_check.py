@@ -61,6 +61,18 @@ def test_bad_suites_are_one_line_errors(tmp_path, capsys) -> None:
         assert len(err) == 1 and msg in err[0], (err, msg)
 
 
+def test_a_suite_config_that_sets_the_protocol_is_refused(tmp_path, capsys) -> None:
+    """The [[scenario]] tables are the one home of the experiment keys in a suite (one of them: the clutter rate)."""
+    (tmp_path / "c.toml").write_text("[experiment]\nclutter = [5.0]\n")
+    suite = tmp_path / "s.toml"
+    suite.write_text('[suite]\nconfig = "c.toml"\n[[scenario]]\nname = "a"\nnet = "intersection"\nclutter = [1.0]\n')
+    assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        len(err) == 1 and "[experiment] clutter is set per scenario in a check suite ([[scenario]] clutter)" in err[0]
+    )
+
+
 def test_import_path_plugins_need_plugin_flag_and_a_failed_plugin_fails(tmp_path, capsys) -> None:
     from soabench import plugins
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from soabench.config import Config, filter_config_for_mode, load_config
@@ -26,9 +28,9 @@ def test_defaults_are_the_registers_bold_options():
 
 def test_toml_overlay_and_round_trip(tmp_path):
     p = tmp_path / "c.toml"
-    p.write_text('[sensor]\nlambda_c = 5\nfov_deg = 120.0\n[birth]\nrho = [2, 1, 1]\n[experiment]\nmodels = ["soa"]\n')
+    p.write_text('[sensor]\nfov_deg = 120.0\n[birth]\nrho = [2, 1, 1]\n[experiment]\nmodels = ["soa"]\nclutter = [5]\n')
     cfg = load_config(p)
-    assert cfg.sensor.lambda_c == 5.0 and isinstance(cfg.sensor.lambda_c, float)
+    assert cfg.sensor.lambda_c == 5.0 and isinstance(cfg.sensor.lambda_c, float)  # the scans' rate, from the key
     assert cfg.birth.rho == (2, 1, 1) and cfg.experiment.models == ("soa",)
     again = Config.from_dict(cfg.to_dict()).validate()
     assert again == cfg
@@ -38,7 +40,7 @@ def test_toml_overlay_and_round_trip(tmp_path):
     ("toml", "needle"),
     [
         ("[sensor]\np_D = 1.3\n", "sensor.p_D = 1.3"),
-        ("[sensor]\nlambda_c = -1\n", "sensor.lambda_c = -1"),
+        ("[experiment]\nclutter = [-1]\n", "clutter = -1"),
         ("[sensor]\nr_min = 60.0\n", "r_max"),
         ("[sensor]\nfov_deg = 0.0\n", "sensor.fov_deg"),
         ("[sensor]\nsigma_r = 0.0\n", "sensor.sigma_r"),
@@ -82,3 +84,44 @@ def test_probability_modes():
 def test_missing_config_file():
     with pytest.raises(SoabenchError, match="does not exist"):
         load_config("/nonexistent/cfg.toml")
+
+
+def test_the_clutter_rate_has_one_key(tmp_path):
+    """λ is experiment.clutter: the sensor's lambda_c follows it, and a second value for λ is refused with one line
+    naming both keys (docs/user-guide/parameters.md)."""
+    cfg = Config.from_dict({"experiment": {"clutter": [5.0, 0.5]}}).validate()
+    assert cfg.sensor.lambda_c == 5.0 and "lambda_c" not in cfg.to_dict()["sensor"]
+    assert Config.from_dict(cfg.to_dict()).validate() == cfg
+    for data in ({"sensor": {"lambda_c": 5.0}}, {"sensor": {"lambda_c": 5.0}, "experiment": {"clutter": [5.0]}}):
+        with pytest.raises(SoabenchError) as err:
+            Config.from_dict(data)
+        line = str(err.value)
+        assert "\n" not in line and "sensor.lambda_c" in line and "experiment.clutter" in line
+    changed = Config().validate()
+    changed.sensor = dataclasses.replace(changed.sensor, lambda_c=1.0)  # in place, beside experiment.clutter = [3]
+    with pytest.raises(SoabenchError, match=r"sensor.lambda_c = 1.0 disagrees with experiment.clutter = \[3.0\]"):
+        changed.validate()
+    changed.experiment = dataclasses.replace(changed.experiment, clutter=(1.0,))  # both agree: accepted
+    assert changed.validate().sensor.lambda_c == 1.0
+    with pytest.raises(SoabenchError, match=r"experiment.clutter = \[0.5, 3.0\] gives 2 rates; `soabench scene`"):
+        Config.from_dict({"experiment": {"clutter": [0.5, 3.0]}}).validate().single_clutter_rate("`soabench scene`")
+
+
+def test_a_run_record_with_the_sensor_rate_is_read():
+    """Run files that record sensor.lambda_c beside experiment.clutter read as their experiment.clutter."""
+    stored = Config.from_dict({"experiment": {"clutter": [0.5, 3.0, 5.0]}}).to_dict()
+    stored["sensor"]["lambda_c"] = 3.0
+    cfg = Config.from_record(stored).validate()
+    assert cfg.experiment.clutter == (0.5, 3.0, 5.0) and cfg.sensor.lambda_c == 0.5
+
+
+def test_the_clutter_sweep_takes_its_rates_from_values_only(tmp_path, capsys):
+    from soabench.cli import main
+
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[experiment]\nclutter = [5.0]\n")
+    for extra in (["--config", str(cfg)], ["--clutter", "2"]):
+        assert main(["sweep", "clutter", "--trials", "1", "--duration", "5", "--out", str(tmp_path / "s"), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "`sweep clutter` takes its clutter rates from --values" in err[0]
+    assert not (tmp_path / "s").exists()

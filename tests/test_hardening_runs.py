@@ -279,10 +279,10 @@ def test_resume_with_other_settings_is_refused_naming_each_key(tmp_path, capsys)
         assert main(["run", "--resume", str(run), *extra]) == 2
         assert needle in one_error_line(capsys)
     cfg = tmp_path / "c.toml"
-    cfg.write_text("[sensor]\nlambda_c = 4.0\n[experiment]\nseed = 5\n")  # seed as stored: only lambda_c differs
+    cfg.write_text("[experiment]\nclutter = [4.0]\nseed = 5\n")  # seed as stored: only the clutter rate differs
     assert main(["run", "--resume", str(run), "--config", str(cfg)]) == 2
     line = one_error_line(capsys)
-    assert "sensor.lambda_c: stored 3.0, requested 4.0" in line and "seed" not in line
+    assert "experiment.clutter: stored [0.5, 3.0], requested [4.0]" in line and "seed" not in line
 
 
 def test_resume_with_more_trials_extends_the_run_exactly(tmp_path, report_stub):

@@ -39,7 +39,7 @@ def test_atomic_writes_follow_the_umask(tmp_path, umask, mask):
 def test_record_scans_carry_the_sensor_parameters_and_units(tmp_path, umask):
     umask(0o022)
     cfg_file = tmp_path / "sensor.toml"
-    cfg_file.write_text("[sensor]\nfov_deg = 120.0\nlambda_c = 2.5\nsigma_b_deg = 3.0\n")
+    cfg_file.write_text("[sensor]\nfov_deg = 120.0\nsigma_b_deg = 3.0\n[experiment]\nclutter = [2.5]\n")
     out = tmp_path / "rec.npz"
     assert main(["record", "--duration", "3", "--config", str(cfg_file), "--out", str(out), "--scans"]) == 0
     scans_path = tmp_path / "rec.scans.npz"

@@ -35,7 +35,7 @@ def _committed(run_dir: Path) -> dict[tuple, dict]:
 
 def _rerun(run_dir: Path, trials, models, modes) -> list[dict]:
     meta = json.loads((run_dir / "run.json").read_text())
-    cfg = Config.from_dict(meta["config"]).validate()
+    cfg = Config.from_record(meta["config"]).validate()
     cfg.experiment = dataclasses.replace(cfg.experiment, models=tuple(models), probabilities=tuple(modes))
     scene, scenario = load(meta["net"], tuple(meta["polys"]), meta["scenario"])
     return [row for t in trials for row in run_trial(t, cfg, scene, scenario).rows]

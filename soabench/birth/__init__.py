@@ -32,6 +32,9 @@ LABEL: dict[str, str] = {
 }
 #: the four baselines S-OA is compared against (§5.8)
 BASELINES: tuple[str, ...] = tuple(name for name in REGISTRY if name != "soa")
+#: the models of the N_hat sweep and of the KITTI protocol (§5.8): the paper's three (its UBM is ubm-ws) and UBM over
+#: the FOV
+CORE_MODELS: tuple[str, ...] = ("soa", "pubm", "ubm", "ubm-ws")
 
 
 def get_birth_model(name: str) -> type:

@@ -272,6 +272,20 @@ def value_key(scenario: str, model: str, mode: str, clutter: float, metric: str)
     return f"{scenario}/{model}/{mode}/lambda={clutter:g}/{metric}"
 
 
+def _refuse_protocol_keys(config: Path | None) -> None:
+    """In a suite the ``[[scenario]]`` tables own the protocol (each experiment key has that one home): a
+    ``[suite] config`` file that sets an ``[experiment]`` key is refused with one line naming both keys."""
+    if config is None:
+        return
+    section = read_toml(config, "config file").get("experiment", {})  # load_config read it
+    if section:
+        key = sorted(section)[0]
+        raise SoabenchError(
+            f"{config}: [experiment] {key} is set per scenario in a check suite ([[scenario]] "
+            f"{'seeds' if key == 'seed' else key}); remove it from the config file"
+        )
+
+
 def _config_for(base: Config, s: Scenario, seed: int) -> Config:
     cfg = Config.from_dict(base.to_dict())
     cfg.experiment = dataclasses.replace(
@@ -295,6 +309,7 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
 
     check_import_paths(suite)
     base = load_config(suite.config)
+    _refuse_protocol_keys(suite.config)
     for s in suite.scenarios:  # validate every scenario before running any
         _config_for(base, s, s.seeds[0])
     rows: dict[tuple, list[dict]] = {}

@@ -340,7 +340,7 @@ def paper_protocol_mismatch(meta: dict) -> str:
     if meta.get("polys"):
         return "extra polygon files change the scene"
     try:
-        cfg = Config.from_dict(meta["config"]).to_dict()
+        cfg = Config.from_record(meta["config"]).to_dict()
     except SoabenchError as exc:
         return f"the run's configuration is not readable ({exc})"
     default = Config().to_dict()

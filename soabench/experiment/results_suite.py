@@ -179,10 +179,10 @@ def study_kept(root: Path, s: Settings, trials: int | None = None) -> bool:
     part folder it holds) complete, its main protocol and sweep points made with the requested settings. A part
     made with other settings is refused (:func:`same_settings`); more trials are not "kept" (the study extends).
     ``trials``: of the main protocol and clutter sweep (default ``s.trials``; the other scenes' ``s.scene_trials``)."""
-    from soabench.experiment.study import BIRTH_MODELS
+    from soabench.birth import CORE_MODELS
 
     main_cfg = _base_config(s, trials or s.trials)
-    births_cfg = _base_config(s, s.births_trials, models=BIRTH_MODELS, probabilities=("static",))
+    births_cfg = _base_config(s, s.births_trials, models=CORE_MODELS, probabilities=("static",))
     same = True
     if (root / "main" / "run.json").is_file():
         same &= same_settings(root / "main", main_cfg)

@@ -61,7 +61,7 @@ def validate_run_meta(meta: Any, where: str) -> RunMeta:
     """Check every value of a run file (``where`` names it in messages); :class:`SoabenchError` on the first bad one."""
     require(isinstance(meta, dict), f"{where} must hold a JSON object")
     try:
-        config = Config.from_dict(meta.get("config")).validate()
+        config = Config.from_record(meta.get("config")).validate()
     except SoabenchError as exc:
         raise SoabenchError(f"{where}: config: {exc}") from None
     net = _string(where, "net", meta.get("net"))
@@ -159,7 +159,7 @@ def validate_sweep_meta(meta: Any, where: str, kinds: tuple[str, ...]) -> dict:
         require(name not in names, f"{where}: point name {name!r} appears twice")
         names.add(name)
         try:
-            Config.from_dict(p.get("config")).validate()
+            Config.from_record(p.get("config")).validate()
         except SoabenchError as exc:
             raise SoabenchError(f"{where}: point {name}: {exc}") from None
         if p.get("scenario") is not None:  # an occlusion point's own scenario file: inside the sweep folder only

@@ -27,6 +27,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from soabench.birth import CORE_MODELS
 from soabench.config import Config
 from soabench.errors import Interrupted
 from soabench.experiment import paper
@@ -38,13 +39,10 @@ from soabench.experiment.runmeta import flatten_config
 from soabench.experiment.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.sensitivity_runs import VARIANTS, run_variants
 from soabench.experiment.store import RunStore
-from soabench.experiment.sweep import BIRTHS_MODELS as BIRTH_MODELS  # the N_hat sweep's models
-from soabench.experiment.sweep import SweepOutcome, run_sweep
+from soabench.experiment.sweep import DEFAULT_VALUES, SweepOutcome, run_sweep
 
-CLUTTER_VALUES = (0.5, 3.0, 5.0)
 #: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
 STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png")
-BIRTH_OFFSETS = tuple(range(-10, 11))
 
 
 @dataclass
@@ -110,7 +108,7 @@ def run_study(
     main_cfg = config
     n_sweep = sweep_trials or config.experiment.trials
     clutter_cfg = _with_experiment(config, trials=n_sweep)
-    births_cfg = _with_experiment(config, trials=births_trials, models=BIRTH_MODELS, probabilities=("static",))
+    births_cfg = _with_experiment(config, trials=births_trials, models=CORE_MODELS, probabilities=("static",))
 
     def requested(cfg: Config, trials_key: str | None, skip: tuple[str, ...] = ()) -> dict:
         keys = {k for k in explicit if k != "experiment.trials" and k not in skip}
@@ -138,7 +136,7 @@ def run_study(
             req = requested(clutter_cfg, trials_key, skip=("experiment.clutter",))
             clutter = run_sweep("clutter", (), None, net, resume=clutter_dir, requested=req, **exe, **kw)
         else:
-            clutter = run_sweep("clutter", CLUTTER_VALUES, clutter_cfg, net, out=clutter_dir, **exe, **kw)
+            clutter = run_sweep("clutter", DEFAULT_VALUES["clutter"], clutter_cfg, net, out=clutter_dir, **exe, **kw)
         if (births_dir / "sweep.json").is_file():
             trials_key = "experiment.trials" if "births_trials" in explicit else None
             req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
@@ -148,8 +146,8 @@ def run_study(
             )  # fmt: skip
         else:
             births = run_sweep(
-                "births", BIRTH_OFFSETS, births_cfg, net, out=births_dir, grouped=grouped, figures=births_figures,
-                **exe, **kw,
+                "births", DEFAULT_VALUES["births"], births_cfg, net, out=births_dir, grouped=grouped,
+                figures=births_figures, **exe, **kw,
             )  # fmt: skip
         return main, clutter, births
 

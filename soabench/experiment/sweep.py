@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from soabench.birth import LABEL
+from soabench.birth import CORE_MODELS, LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config, require_distinct
 from soabench.errors import Interrupted, require
 from soabench.experiment.files import read_csv, read_json, write_json_atomic, write_text_atomic
@@ -55,7 +55,12 @@ from soabench.experiment.runner import (
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births", "occlusion")
-BIRTHS_MODELS = ("soa", "pubm", "ubm", "ubm-ws")  # the paper's three (its UBM is ubm-ws) and UBM over the FOV
+#: each kind's points when none are given (§5.8): clutter rates; N_tot offsets from N_TRUE; parked cars per 100 m
+DEFAULT_VALUES: dict[str, tuple[float, ...]] = {
+    "clutter": (0.5, 3.0, 5.0),
+    "births": tuple(range(-10, 11)),
+    "occlusion": (0.0, 4.0, 8.0, 12.0),
+}
 N_TRUE = 6
 
 
@@ -98,7 +103,7 @@ def sweep_points(
         base.validate()
         return [{"name": "clutter", "value": list(vals), "config": base.to_dict()}]
     if models is None and tuple(base.experiment.models) == BIRTH_MODEL_NAMES:  # the default set -> §5.8's three
-        base.experiment = dataclasses.replace(base.experiment, models=BIRTHS_MODELS)
+        base.experiment = dataclasses.replace(base.experiment, models=CORE_MODELS)
     for v in values:
         require(float(v) == int(v), f"births offset {v!r} must be an integer")
     K = scans_per_run(base)
@@ -309,7 +314,7 @@ def _run_points(
                 req = {"experiment.trials": more} if more is not None else None
                 o = run_experiment(None, net, polys, sc, resume=pdir, requested=req, **kwargs)
             else:
-                o = run_experiment(Config.from_dict(p["config"]), net, polys, sc, out=pdir, **kwargs)
+                o = run_experiment(Config.from_record(p["config"]), net, polys, sc, out=pdir, **kwargs)
             outcomes.append(o)
             if not o.summary_markdown and defer is None:  # the point did not attempt every trial (--fail-fast)
                 stopped = True
@@ -392,7 +397,7 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
         v = v[~np.isnan(v)]
         std[c] = float(v.std(ddof=0)) if v.size else math.nan
     head = [f"{LABEL.get(a, a)} {b}" for a in models for b in modes]
-    K = scans_per_run(Config.from_dict(points[0]["config"]))
+    K = scans_per_run(Config.from_record(points[0]["config"]))
     lines = [
         f"# N̂ sensitivity sweep: {meta.get('net_name')}",
         "",

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from soabench.birth import CORE_MODELS
 from soabench.config import Config
 from soabench.errors import require
 from soabench.kitti.formats import KITTI_TYPES
@@ -73,9 +74,7 @@ def kitti_base_config() -> Config:
     cfg = Config()
     cfg.sensor = dataclasses.replace(cfg.sensor, dt=0.1)
     cfg.metrics = dataclasses.replace(cfg.metrics, ospa_c=10.0, d_gate=2.0)
-    cfg.experiment = dataclasses.replace(
-        cfg.experiment, models=("soa", "pubm", "ubm", "ubm-ws"), probabilities=("static",)
-    )
+    cfg.experiment = dataclasses.replace(cfg.experiment, models=CORE_MODELS, probabilities=("static",))
     return cfg
 
 
@@ -88,7 +87,9 @@ def load_kitti_config(path: str | Path | None) -> tuple[Config, KittiConfig]:
     require(p.is_file(), f"config file {str(p)!r} does not exist")
     data = read_toml(p, "config file")
     kitti = kitti_from_dict(data.pop("kitti", {}))
-    return Config.from_dict(data, base).validate(), kitti
+    cfg = Config.from_dict(data, base).validate()
+    cfg.single_clutter_rate("a KITTI run")
+    return cfg, kitti
 
 
 def kitti_from_dict(values: Any) -> KittiConfig:

@@ -77,7 +77,7 @@ class KittiSpec:
             folds=int(meta["folds"]),
             nhat_sweep=meta["nhat_sweep"],
             skip_bad=bool(meta["skip_bad"]),
-            config=Config.from_dict(meta["config"]).validate(),
+            config=Config.from_record(meta["config"]).validate(),
             kitti=kitti_from_dict(meta["kitti"]),
         )
 
