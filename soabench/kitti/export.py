@@ -273,8 +273,10 @@ def export_kitti(
     duration: float | None = None,
     fov_deg: float | None = None,
     log: Callable[[str], None] = print,
+    lidar: bool = False,
 ) -> list[dict]:
-    """Simulate, observe and write ``trials`` SUMO trials as KITTI sequences 0000, 0001, ... under ``out``."""
+    """Simulate, observe and write ``trials`` SUMO trials as KITTI sequences 0000, 0001, ... under ``out`` (with
+    ``lidar``, also their synthetic segmented scans: :mod:`soabench.kitti.raycast`)."""
     from soabench.scenario import load, simulate
     from soabench.seeding import trial_seeds
     from soabench.sensor import observe
@@ -301,6 +303,10 @@ def export_kitti(
         recording = simulate(scene, scen, seeds, duration=dur)
         scans = observe(recording, scene, sensor, seeds.sensor_rngs())
         rows.append(export_trial(n, recording, scans, scene, sensor, calib, out, cfg.experiment.seed))
+        if lidar:
+            from soabench.kitti.raycast import export_lidar
+
+            rows[-1]["lidar_points"] = export_lidar(n, recording, scans, scene, sensor, out)
         log(f"sequence {n:04d}: {rows[-1]['frames']} frames, {rows[-1]['measurements']} measurements")
     write_json_atomic(
         out / "export.json",
