@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import time
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -265,8 +266,6 @@ def lidar_files(lidar: dict, seq) -> None:
 
 def lidar_semantics(lidar: dict, seq, kcfg, sensor, run_dir: Path, log) -> dict[int, list[tuple[str, np.ndarray]]]:
     """The sequence's per-frame regions of the birth and occluder classes, cached in ``run_dir/lidar/``."""
-    import time
-
     t0 = time.perf_counter()
     names = tuple(dict.fromkeys(kcfg.semantic_classes + kcfg.occluder_classes))
     params = LidarParams(**{f.name: float(lidar[f.name]) for f in fields(LidarParams)})
