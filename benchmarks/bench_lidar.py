@@ -28,7 +28,7 @@ from soabench.kitti.config import KittiConfig, kitti_base_config
 from soabench.kitti.export import export_kitti
 from soabench.kitti.lidar import LidarParams, sequence_regions
 from soabench.kitti.protocol import run_sequence
-from soabench.kitti.reader import open_dataset, read_sequence, to_scans
+from soabench.kitti.reader import open_dataset, read_sequence, sensor_for, to_scans
 
 
 def main() -> None:
@@ -46,11 +46,12 @@ def main() -> None:
     names = ("sidewalk", "building")
     cache = tmp / "lidar"
     vel, lab = root / "velodyne", root / "point_labels"
+    fov = sensor_for(seq, kc, cfg.sensor).fov_deg
     t0 = time.perf_counter()
-    sem, _ = sequence_regions(vel, lab, "0000", seq.n_frames, names, LidarParams(), cfg.sensor.r_max, cache)
+    sem, _ = sequence_regions(vel, lab, "0000", seq.n_frames, names, LidarParams(), cfg.sensor.r_max, cache, fov)
     t_regions = time.perf_counter() - t0
     t0 = time.perf_counter()
-    _, hit = sequence_regions(vel, lab, "0000", seq.n_frames, names, LidarParams(), cfg.sensor.r_max, cache)
+    _, hit = sequence_regions(vel, lab, "0000", seq.n_frames, names, LidarParams(), cfg.sensor.r_max, cache, fov)
     t_cached = time.perf_counter() - t0
     assert hit
     t0 = time.perf_counter()

@@ -18,7 +18,7 @@ from soabench.cli import main
 from soabench.kitti.config import KittiConfig, kitti_base_config
 from soabench.kitti.lidar import LidarParams, frame_files, region_from_points, sequence_regions
 from soabench.kitti.raycast import SIDEWALK, beam_pattern
-from soabench.kitti.reader import open_dataset, read_sequence, to_scans
+from soabench.kitti.reader import open_dataset, read_sequence, sensor_for, to_scans
 
 DURATION = 30.0
 #: measured IoU of Omega_k (sum of intersections / sum of unions over the 300 frames of sequence 0000) between the
@@ -73,7 +73,7 @@ def test_region_from_synthetic_scans_matches_the_visible_sidewalk(runs):
     ref = to_scans(seq, kc, cfg.sensor)
     sem, cached = sequence_regions(
         exp / "velodyne", exp / "point_labels", "0000", seq.n_frames, ("sidewalk", "building"), LidarParams(),
-        cfg.sensor.r_max, lidar_run / "lidar",
+        cfg.sensor.r_max, lidar_run / "lidar", sensor_for(seq, kc, cfg.sensor).fov_deg,
     )  # fmt: skip
     assert cached  # the run built them with these parameters
     out = to_scans(dataclasses.replace(seq, semantics=sem), kc, cfg.sensor)
@@ -120,11 +120,17 @@ def test_report_names_the_semantic_source_and_resume_reads_the_cache(runs, capsy
 def test_bad_scans_or_labels_stop_with_one_line(runs, tmp_path, capsys, damage, message):
     exp = runs[0]
     bad = tmp_path / "export"
-    shutil.copytree(exp, bad, ignore=shutil.ignore_patterns("*.bin", "*.label"))
-    for d in ("velodyne", "point_labels"):
-        shutil.copytree(exp / d / "0001", bad / d / "0001")
-        shutil.copytree(exp / d / "0000", bad / d / "0000")
+    shutil.copytree(exp, bad, ignore=shutil.ignore_patterns("velodyne", "point_labels"))
+    for d in ("velodyne", "point_labels"):  # links to the export's files, sequence 0001's frame 10 a copy
+        (bad / d / "0001").mkdir(parents=True)
+        (bad / d / "0000").symlink_to(exp / d / "0000")
+        for f in (exp / d / "0001").iterdir():
+            (bad / d / "0001" / f.name).symlink_to(f)
     scan, lab = bad / "velodyne" / "0001" / "000010.bin", bad / "point_labels" / "0001" / "000010.label"
+    for f in (scan, lab):
+        data = f.read_bytes()
+        f.unlink()
+        f.write_bytes(data)
     if damage == "short_bin":
         scan.write_bytes(scan.read_bytes()[:-4])
     elif damage == "extra_label":

@@ -45,6 +45,7 @@ SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
 POINT_BYTES = 16  #: float32 x, y, z, intensity
 CACHE_DIR = "lidar"
 CACHE_FORMAT = "soabench-lidar-regions-1"
+FOV_MARGIN_DEG = 5.0  #: points this far outside the sensor's sector still shape the region at its edges
 
 
 @dataclass(frozen=True)
@@ -134,21 +135,19 @@ def region_from_points(xy: np.ndarray, params: LidarParams, r_max: float):
     occ[ij[:, 0], ij[:, 1]] = True
     if rad:
         occ = ndimage.binary_closing(occ, structure=_disc(rad))
-    # runs along the second axis: starts/ends where the row changes value
-    padded = np.pad(occ, ((0, 0), (1, 1))).astype(np.int8)
-    d = np.diff(padded, axis=1)
-    rows, starts = np.nonzero(d == 1)
-    _, ends = np.nonzero(d == -1)
-    x0 = (rows + lo[0]) * g
-    boxes = shapely.box(x0, (starts + lo[1]) * g, x0 + g, (ends + lo[1]) * g)
-    return shapely.union_all(boxes)
+    # the occupied cells share exact edge coordinates, so their union is a coverage union (linear time); the
+    # staircase outline is then simplified within half a cell
+    xs, ys = ((np.arange(n + 1) + o) * g for n, o in zip(occ.shape, lo, strict=True))
+    ci, cj = np.nonzero(occ)
+    union = shapely.coverage_union_all(shapely.box(xs[ci], ys[cj], xs[ci + 1], ys[cj + 1]))
+    return shapely.simplify(union, 0.5 * g)
 
 
 def sector_order(xy: np.ndarray, params: LidarParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The points' order by (azimuth sector, range), with their sectors and ranges in that order."""
     r = np.hypot(xy[:, 0], xy[:, 1])
     sector = np.floor((np.arctan2(xy[:, 1], xy[:, 0]) + np.pi) / np.radians(params.sector_deg)).astype(np.int64)
-    order = np.lexsort((r, sector))
+    order = np.argsort(sector * (4.0 * np.max(r, initial=0.0) + 1.0) + r, kind="stable")  # by sector, then range
     return order, sector[order], r[order]
 
 
@@ -171,13 +170,23 @@ def ray_fill(xy: np.ndarray, is_cls: np.ndarray, params: LidarParams, by_sector=
 
 
 def frame_regions(
-    pts: np.ndarray, lab: np.ndarray, ids: dict[str, np.ndarray], params: LidarParams, r_max: float
+    pts: np.ndarray,
+    lab: np.ndarray,
+    ids: dict[str, np.ndarray],
+    params: LidarParams,
+    r_max: float,
+    fov_deg: float = 360.0,
 ) -> list[tuple[str, np.ndarray]]:
-    """``(class, (n, 2) vertices)`` hole-free polygons of one frame, per configured class."""
+    """``(class, (n, 2) vertices)`` hole-free polygons of one frame, per configured class, from the points within
+    r_max and within ``FOV_MARGIN_DEG`` of the sensor's sector (Omega_k never reaches beyond it)."""
     from soabench.kitti.export import _hole_free
 
     out = []
     xy = pts[:, :2].astype(float)
+    near = (np.abs(xy) <= r_max).all(axis=1)
+    if fov_deg + 2.0 * FOV_MARGIN_DEG < 360.0:
+        near &= np.abs(np.degrees(np.arctan2(xy[:, 1], xy[:, 0]))) <= 0.5 * fov_deg + FOV_MARGIN_DEG
+    xy, lab = xy[near], lab[near]
     by_sector = sector_order(xy, params) if params.fill > 0 else None
     for name, cid in ids.items():
         is_cls = np.isin(lab, cid)
@@ -191,8 +200,10 @@ def frame_regions(
 # a sequence, with the run folder's cache
 
 
-def _key(files: list[tuple[Path, Path, int]], names: tuple[str, ...], params: LidarParams, r_max: float) -> str:
-    h = hashlib.sha256(json.dumps([CACHE_FORMAT, list(names), asdict(params), r_max]).encode())
+def _key(
+    files: list[tuple[Path, Path, int]], names: tuple[str, ...], params: LidarParams, r_max: float, fov: float
+) -> str:
+    h = hashlib.sha256(json.dumps([CACHE_FORMAT, list(names), asdict(params), r_max, fov, FOV_MARGIN_DEG]).encode())
     for scan, lab, _ in files:
         for p in (scan, lab):
             st = p.stat()
@@ -236,19 +247,20 @@ def sequence_regions(
     params: LidarParams,
     r_max: float,
     cache: Path | None = None,
+    fov_deg: float = 360.0,
 ) -> tuple[dict[int, list[tuple[str, np.ndarray]]], bool]:
     """Per-frame ``(class, vertices)`` polygons of a sequence (the shape of a parsed ``--semantics`` file) and
     whether they came from the cache ``cache/XXXX.npz`` (written when built)."""
     files = frame_files(Path(velodyne), Path(labels), seq, n_frames)
     ids = class_ids(names)
-    key = _key(files, names, params, r_max)
+    key = _key(files, names, params, r_max, fov_deg)
     path = Path(cache) / f"{seq}.npz" if cache is not None else None
     if path is not None and path.is_file() and (hit := _load(path, key)) is not None:
         return hit, True
     sem = {}
     for k, (scan, lab, _) in enumerate(files):
         pts, cl = read_frame(scan, lab)
-        if polys := frame_regions(pts, cl, ids, params, r_max):
+        if polys := frame_regions(pts, cl, ids, params, r_max, fov_deg):
             sem[k] = polys
     if path is not None:
         _save(path, key, names, sem)
@@ -269,9 +281,12 @@ def lidar_semantics(lidar: dict, seq, kcfg, sensor, run_dir: Path, log) -> dict[
     t0 = time.perf_counter()
     names = tuple(dict.fromkeys(kcfg.semantic_classes + kcfg.occluder_classes))
     params = LidarParams(**{f.name: float(lidar[f.name]) for f in fields(LidarParams)})
+    from soabench.kitti.reader import sensor_for
+
+    fov = float(sensor_for(seq, kcfg, sensor).fov_deg)
     sem, cached = sequence_regions(
         Path(lidar["velodyne"]), Path(lidar["point_labels"]), seq.seq, seq.n_frames, names, params,
-        float(sensor.r_max), Path(run_dir) / CACHE_DIR,
+        float(sensor.r_max), Path(run_dir) / CACHE_DIR, fov,
     )  # fmt: skip
     how = f"read from {CACHE_DIR}/{seq.seq}.npz" if cached else "built"
     log(
