@@ -9,7 +9,8 @@ then times, in this one run:
 * ``regions``: :func:`soabench.kitti.lidar.sequence_regions` on all frames, default parameters, no cache (reading the
   .bin/.label files, gap fill, raster, closing, polygons);
 * ``regions (cached)``: the same call reading back the run folder's ``.npz``;
-* ``to_scans``: the reader's Scans of the sequence with those regions (Omega_k per frame);
+* ``to_scans``: the reader's Scans of the sequence with those regions (Omega_k per frame), and with the export's own
+  sidewalk polygons (``--semantics``) for comparison;
 * ``filters``: :func:`soabench.kitti.protocol.run_sequence` with S-OA alone and with the protocol's four models.
 
 It prints each time and the ratios regions / filters.
@@ -57,6 +58,9 @@ def main() -> None:
     t0 = time.perf_counter()
     ss = to_scans(dataclasses.replace(seq, semantics=sem), kc, cfg.sensor)
     t_scans = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    to_scans(read_sequence(open_dataset(root, None, root / "semantics"), "0000"), kc, cfg.sensor)
+    t_poly = time.perf_counter() - t0
     n_hat = 6 / 100
     run_sequence(ss, cfg, n_hat, 0, "0000")  # compile the kernels outside the timed calls
     times = {}
@@ -68,7 +72,7 @@ def main() -> None:
     print(f"{seq.n_frames} frames")
     print(f"regions (built)  {t_regions:8.2f} s  ({1e3 * t_regions / seq.n_frames:.1f} ms/frame)")
     print(f"regions (cached) {t_cached:8.2f} s")
-    print(f"to_scans         {t_scans:8.2f} s")
+    print(f"to_scans         {t_scans:8.2f} s  (with the scene's polygons: {t_poly:.2f} s)")
     for m, t in times.items():
         print(f"filters {m:<20s} {t:8.2f} s   regions / filters = {t_regions / t:.2f}")
     shutil.rmtree(tmp, ignore_errors=True)

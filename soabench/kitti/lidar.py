@@ -8,10 +8,12 @@ Inputs, per sequence ``XXXX`` and frame ``NNNNNN``:
   (:data:`SEMANTIC_KITTI_IDS`), the upper 16 bits an instance id (ignored).
 
 Per frame and configured class (``kitti.semantic_classes``: birth region, ``kitti.occluder_classes``: occluders), the
-bird's-eye points of that class within r_max are rasterised on a grid of ``grid`` m cells aligned with the ego
-frame, the occupancy is closed morphologically with a disc of radius ``closing`` m (it fills the gaps between scan
-rings and beams), and the occupied cells are merged into polygons (row runs of cells -> boxes -> union), cut into
-hole-free pieces: the same ``(class, vertices)`` rows a ``--semantics`` file gives.
+bird's-eye points of that class within r_max and near the sensor's sector, with the ground between consecutive
+returns of the class along a scan sector (gap fill, ``fill`` m at most), are rasterised on a grid of ``grid`` m
+cells aligned with the ego frame; the occupancy is closed morphologically with a disc of radius ``closing`` m (it
+fills the gaps between beams and azimuths), and the occupied cells are merged into polygons (coverage union,
+simplified within half a cell), cut into hole-free pieces: the same ``(class, vertices)`` rows a ``--semantics``
+file gives.
 
 The regions of a sequence are cached in ``RUN/lidar/XXXX.npz`` with a key made of the input files' names, sizes and
 modification times and the parameters, so a resumed or repeated run reads them back instead of rebuilding them.
