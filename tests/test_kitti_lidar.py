@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import shutil
 
 import numpy as np
@@ -54,6 +55,32 @@ def test_region_of_points_is_the_rasterised_closed_area():
     rect = shapely.box(0.0, 5.0, 10.0, 9.0)
     assert shapely.intersection(region, rect).area / shapely.union(region, rect).area > 0.85
     assert region_from_points(np.zeros((0, 2)), LidarParams(), 50.0).is_empty
+
+
+def test_regions_are_cached_by_files_and_parameters(tmp_path):
+    """Two frames of hand-made points: built once, read back, rebuilt when a parameter or a file changes."""
+    vel, lab = tmp_path / "velodyne" / "0003", tmp_path / "labels" / "0003"
+    vel.mkdir(parents=True)
+    lab.mkdir(parents=True)
+    x, y = np.meshgrid(np.arange(2.0, 12.0, 0.3), np.arange(3.0, 6.0, 0.3))
+    pts = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, -1.7), np.zeros(x.size)]).astype("<f4")
+    for k in range(2):
+        pts.tofile(vel / f"{k:06d}.bin")
+        np.full(len(pts), 48 | (7 << 16), dtype="<u4").tofile(lab / f"{k:06d}.label")  # sidewalk, instance 7
+    args = (tmp_path / "velodyne", tmp_path / "labels", "0003", 2, ("sidewalk",))
+    cache = tmp_path / "run" / "lidar"
+    sem, hit = sequence_regions(*args, LidarParams(), 50.0, cache)
+    assert not hit and sorted(sem) == [0, 1] and sem[0][0][0] == "sidewalk"
+    assert shapely.Polygon(sem[0][0][1]).area == pytest.approx(10.0 * 3.0, rel=0.2)
+    again, hit = sequence_regions(*args, LidarParams(), 50.0, cache)
+    assert hit and all(np.array_equal(a[1], b[1]) for a, b in zip(sem[1], again[1], strict=True))
+    assert not sequence_regions(*args, LidarParams(grid=1.0), 50.0, cache)[1]
+    assert sequence_regions(*args, LidarParams(grid=1.0), 50.0, cache)[1]
+    changed, before = lab / "000001.label", (lab / "000001.label").stat().st_mtime_ns
+    changed.write_bytes(np.zeros(len(pts), dtype="<u4").tobytes())  # unlabelled now, same size
+    os.utime(changed, ns=(before + 10**9, before + 10**9))  # a later time even where mtimes are coarse
+    sem, hit = sequence_regions(*args, LidarParams(grid=1.0), 50.0, cache)
+    assert not hit and sorted(sem) == [0]
 
 
 def test_synthetic_scans_follow_the_hdl64_pattern(runs):

@@ -25,6 +25,7 @@ import hashlib
 import json
 import os
 import time
+import zipfile
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -232,7 +233,7 @@ def _load(path: Path, key: str) -> dict[int, list[tuple[str, np.ndarray]]] | Non
             if str(z["key"]) != key:
                 return None
             names, frame, cls, n, xy = (z[k] for k in ("names", "frame", "cls", "n", "xy"))
-    except (OSError, KeyError, ValueError):
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):  # unreadable: rebuilt
         return None
     out: dict[int, list[tuple[str, np.ndarray]]] = {}
     for f, c, part in zip(frame, cls, np.split(xy, np.cumsum(n)[:-1]) if len(n) else [], strict=True):
