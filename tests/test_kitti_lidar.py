@@ -175,11 +175,14 @@ def test_bad_scans_or_labels_stop_with_one_line(runs, tmp_path, capsys, damage, 
 def test_option_errors(runs, tmp_path, capsys):
     exp = runs[0]
     base = ["kitti", "--root", str(exp), "--out", str(tmp_path / "run")]
+    curb = tmp_path / "curb.toml"
+    curb.write_text('[kitti]\nsemantic_classes = ["curb"]\n')
     cases = [
         (["--point-labels", str(exp / "point_labels"), "--semantics", str(exp / "semantics")], "either"),
         (["--lidar-grid", "0.5"], "needs --point-labels"),
         (["--point-labels", str(tmp_path / "nope")], "is not a folder"),
         (["--point-labels", str(exp / "point_labels"), "--lidar-grid", "0"], "--lidar-grid"),
+        (["--point-labels", str(exp / "point_labels"), "--config", str(curb)], "'curb' have no SemanticKITTI id"),
     ]
     for extra, message in cases:
         capsys.readouterr()

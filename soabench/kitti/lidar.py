@@ -26,6 +26,7 @@ import json
 import os
 import time
 import zipfile
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -33,8 +34,11 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
+from soabench.config import SensorConfig
 from soabench.errors import require
+from soabench.kitti.config import KittiConfig
 from soabench.kitti.formats import ReadError
+from soabench.kitti.reader import KittiSequence, sensor_for
 
 #: SemanticKITTI class ids (lower 16 bits of a .label value) by class name, as in the dataset's semantic-kitti.yaml
 SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
@@ -274,18 +278,18 @@ def sequence_regions(
 # the protocol's hooks (``spec.lidar`` of :class:`~soabench.kitti.protocol.KittiSpec`)
 
 
-def lidar_files(lidar: dict, seq) -> None:
+def lidar_files(lidar: dict, seq: KittiSequence) -> None:
     """Check a sequence's scans and labels before anything is written (:class:`ReadError` on the first bad file)."""
     frame_files(Path(lidar["velodyne"]), Path(lidar["point_labels"]), seq.seq, seq.n_frames)
 
 
-def lidar_semantics(lidar: dict, seq, kcfg, sensor, run_dir: Path, log) -> dict[int, list[tuple[str, np.ndarray]]]:
+def lidar_semantics(
+    lidar: dict, seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig, run_dir: Path, log: Callable[[str], None]
+) -> dict[int, list[tuple[str, np.ndarray]]]:
     """The sequence's per-frame regions of the birth and occluder classes, cached in ``run_dir/lidar/``."""
     t0 = time.perf_counter()
     names = tuple(dict.fromkeys(kcfg.semantic_classes + kcfg.occluder_classes))
     params = LidarParams(**{f.name: float(lidar[f.name]) for f in fields(LidarParams)})
-    from soabench.kitti.reader import sensor_for
-
     fov = float(sensor_for(seq, kcfg, sensor).fov_deg)
     sem, cached = sequence_regions(
         Path(lidar["velodyne"]), Path(lidar["point_labels"]), seq.seq, seq.n_frames, names, params,

@@ -52,7 +52,7 @@ class KittiSpec:
     skip_bad: bool
     config: Config
     kitti: KittiConfig = field(default_factory=KittiConfig)
-    lidar: dict | None = None  #: with segmented scans: {"velodyne", "point_labels", "grid", "closing"} (lidar.py)
+    lidar: dict | None = None  #: with segmented scans: velodyne, point_labels and the LidarParams fields (lidar.py)
 
     def to_meta(self) -> dict:
         return {
