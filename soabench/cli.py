@@ -278,6 +278,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--semantics",
         help="per-frame bird's-eye semantic polygons per sequence (default: none)",
     )
+    p.add_argument("--point-labels", help="SemanticKITTI .label files XXXX/NNNNNN.label: S-OA's region from them")
+    p.add_argument("--velodyne", help="KITTI scans XXXX/NNNNNN.bin for --point-labels (default ROOT/velodyne)")
+    p.add_argument("--lidar-grid", type=float, help="raster cell (m) of the region from points (default 0.5)")
+    p.add_argument("--lidar-closing", type=float, help="closing radius (m) of the region from points (default 1.0)")
+    p.add_argument("--lidar-fill", type=float, help="longest gap (m) filled along a scan sector (default 8.0)")
     p.add_argument("--sequences", help="e.g. 0000-0020 or 0,3,5 (default: every labelled sequence)")
     p.add_argument("--folds", type=int, default=7, help="cross-validation folds (default 7; at most one per sequence)")
     p.add_argument("--nhat-sweep", type=_offsets, help="N_hat offsets per sequence, e.g. -10:10 (default: no sweep)")
@@ -308,6 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="base seed (as in `run`, default 0)")
     p.add_argument("--fov-deg", type=float, help="camera horizontal FOV (default: the nominal KITTI camera's)")
     p.add_argument("--out", required=True, help="output folder (KITTI layout)")
+    p.add_argument("--lidar", action="store_true", help="also write synthetic velodyne scans and SemanticKITTI labels")
 
     p = sub.add_parser("check", help="CI mode: short scenarios against per-metric thresholds (exit 1 on regression)")
     p.add_argument("--suite", required=True, metavar="FILE.toml", help="scenarios and thresholds")

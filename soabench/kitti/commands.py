@@ -20,6 +20,7 @@ def cmd_kitti(args: argparse.Namespace) -> int:
 
     if args.resume is not None:
         flags = ("root", "detections", "semantics", "sequences", "out", "config", "models", "nhat_sweep", "classes")
+        flags += ("velodyne", "point_labels", "lidar_grid", "lidar_closing", "lidar_fill")
         given = [f for f in flags if getattr(args, f) is not None]
         first = given[0].replace("_", "-") if given else ""
         require(not given, f"--resume takes its settings from the run folder; drop --{first}")
@@ -51,6 +52,7 @@ def cmd_kitti(args: argparse.Namespace) -> int:
             skip_bad=args.skip_bad,
             config=cfg,
             kitti=kcfg,
+            lidar=lidar_options(args, kcfg),
         )
         outcome = run_kitti(spec, args.out)
     if outcome.summary_markdown:
@@ -81,7 +83,28 @@ def cmd_export(args: argparse.Namespace) -> int:
         cfg.experiment = dataclasses.replace(cfg.experiment, seed=args.seed)
     out = Path(args.out)
     rows = export_kitti(
-        cfg, args.net, tuple(args.poly), args.scenario, args.trials, out, duration=args.duration, fov_deg=args.fov_deg
-    )
+        cfg, args.net, tuple(args.poly), args.scenario, args.trials, out, duration=args.duration, fov_deg=args.fov_deg,
+        lidar=args.lidar,
+    )  # fmt: skip
     print(f"wrote {len(rows)} sequence(s) in the KITTI tracking layout to {out}")
     return 0
+
+
+def lidar_options(args: argparse.Namespace, kcfg) -> dict | None:
+    """``spec.lidar`` from ``--point-labels DIR [--velodyne DIR] [--lidar-grid M] [--lidar-closing M] [--lidar-fill
+    M]`` (None without ``--point-labels``); one line naming the bad value otherwise."""
+    from soabench.kitti.lidar import LidarParams, class_ids
+
+    lidar_only = [f for f in ("velodyne", "lidar_grid", "lidar_closing", "lidar_fill") if getattr(args, f) is not None]
+    if args.point_labels is None:
+        require(not lidar_only, f"--{lidar_only[0].replace('_', '-') if lidar_only else ''} needs --point-labels DIR")
+        return None
+    require(args.semantics is None, "give either --semantics DIR or --point-labels DIR (two sources of one region)")
+    velodyne = Path(args.velodyne) if args.velodyne is not None else Path(args.root) / "velodyne"
+    require(velodyne.is_dir(), f"--velodyne {str(velodyne)!r} is not a folder (KITTI scans XXXX/NNNNNN.bin)")
+    labels = Path(args.point_labels)
+    require(labels.is_dir(), f"--point-labels {str(labels)!r} is not a folder (SemanticKITTI XXXX/NNNNNN.label)")
+    class_ids(kcfg.semantic_classes + kcfg.occluder_classes)
+    given = {"grid": args.lidar_grid, "closing": args.lidar_closing, "fill": args.lidar_fill}
+    params = LidarParams(**{k: float(v) for k, v in given.items() if v is not None}).validate()
+    return {"velodyne": str(velodyne.resolve()), "point_labels": str(labels.resolve()), **dataclasses.asdict(params)}

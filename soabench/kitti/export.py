@@ -276,8 +276,10 @@ def export_kitti(
     duration: float | None = None,
     fov_deg: float | None = None,
     log: Callable[[str], None] = print,
+    lidar: bool = False,
 ) -> list[dict]:
-    """Simulate, observe and write ``trials`` SUMO trials as KITTI sequences 0000, 0001, ... under ``out``."""
+    """Simulate, observe and write ``trials`` SUMO trials as KITTI sequences 0000, 0001, ... under ``out`` (with
+    ``lidar``, also their synthetic segmented scans: :mod:`soabench.kitti.raycast`)."""
     from soabench.scenario import load
 
     require(
@@ -296,7 +298,7 @@ def export_kitti(
     require(dur > 0, f"--duration {dur!r} must be > 0")
     with FolderLock(out, "export folder"):
         check_new_folder(out, EXPORT_FILE, "KITTI export", "remove it to export again")  # again, under the lock
-        return _export_trials(cfg, (net, polys, scenario), (scene, scen), trials, out, dur, sensor, calib, log)
+        return _export_trials(cfg, (net, polys, scenario), (scene, scen), trials, out, dur, sensor, calib, log, lidar)
 
 
 def _export_trials(
@@ -309,6 +311,7 @@ def _export_trials(
     sensor: SensorConfig,
     calib: dict,
     log: Callable[[str], None],
+    lidar: bool,
 ) -> list[dict]:
     """The trials of :func:`export_kitti` written into the checked and locked folder ``out``; ``export.json`` last."""
     from soabench.scenario import simulate
@@ -322,6 +325,10 @@ def _export_trials(
         recording = simulate(scene, scen, seeds, duration=dur)
         scans = observe(recording, scene, sensor, seeds.sensor_rngs())
         rows.append(export_trial(n, recording, scans, scene, sensor, calib, out, cfg.experiment.seed))
+        if lidar:
+            from soabench.kitti.raycast import export_lidar
+
+            rows[-1]["lidar_points"] = export_lidar(n, recording, scans, scene, sensor, out)
         log(f"sequence {n:04d}: {rows[-1]['frames']} frames, {rows[-1]['measurements']} measurements")
     write_json_atomic(
         out / EXPORT_FILE,

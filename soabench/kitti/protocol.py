@@ -28,6 +28,7 @@ from soabench.errors import SoabenchError, require
 from soabench.experiment.files import read_json, write_json_atomic
 from soabench.kitti.config import KittiConfig, kitti_from_dict, kitti_to_dict
 from soabench.kitti.formats import ReadError, UnreadableError
+from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
 
 RUN_FILE = "run.json"
@@ -51,6 +52,7 @@ class KittiSpec:
     skip_bad: bool
     config: Config
     kitti: KittiConfig = field(default_factory=KittiConfig)
+    lidar: dict | None = None  #: with segmented scans: velodyne, point_labels and the LidarParams fields (lidar.py)
 
     def to_meta(self) -> dict:
         return {
@@ -64,7 +66,7 @@ class KittiSpec:
             "skip_bad": self.skip_bad,
             "config": self.config.to_dict(),
             "kitti": kitti_to_dict(self.kitti),
-        }
+        } | ({"lidar": self.lidar} if self.lidar else {})
 
     @classmethod
     def from_meta(cls, meta: dict) -> KittiSpec:
@@ -79,6 +81,7 @@ class KittiSpec:
             skip_bad=bool(meta["skip_bad"]),
             config=Config.from_record(meta["config"]).validate(),
             kitti=kitti_from_dict(meta["kitti"]),
+            lidar=meta.get("lidar"),
         )
 
 
@@ -168,6 +171,8 @@ def _read_all(ds: Dataset, spec: KittiSpec, log: Callable[[str], None]) -> tuple
     for s in ds.ids:
         try:
             seqs[s] = read_sequence(ds, s)
+            if spec.lidar:
+                lidar_files(spec.lidar, seqs[s])
         except ReadError as exc:
             if not (spec.skip_bad or isinstance(exc, UnreadableError)):
                 raise
@@ -255,6 +260,8 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
         if path.is_file():
             continue
         if s not in cache:
+            if spec.lidar:
+                seqs[s].semantics = lidar_semantics(spec.lidar, seqs[s], spec.kitti, sensor, out, log)
             cache = {s: to_scans(seqs[s], spec.kitti, sensor)}  # one sequence in memory at a time
             for note in cache[s].info["notes"]:
                 log(f"warning: {note}")

@@ -289,6 +289,18 @@ def _shown(path, out: Path) -> str:
         return str(path)
 
 
+def _lidar_source(spec, out: Path) -> str:
+    """The report's words for the semantic region built from segmented scans, or for no semantics at all."""
+    lid = spec.lidar
+    if not lid:
+        return ", no semantics"
+    return (
+        f", semantics from LiDAR point labels `{_shown(lid['point_labels'], out)}` on scans "
+        f"`{_shown(lid['velodyne'], out)}` (grid {lid['grid']:g} m, closing {lid['closing']:g} m, "
+        f"gap fill {lid['fill']:g} m along {lid['sector_deg']:g}° sectors)"
+    )
+
+
 def _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, stationary, infos, out) -> str:
     m = spec.config.metrics
     det = _shown(spec.detections, out) if spec.detections else "(root)/detections"
@@ -296,7 +308,7 @@ def _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, station
         "# KITTI protocol (paper §V)",
         "",
         f"Data: `{_shown(spec.root, out)}`, detections `{det}`"
-        + (f", semantics `{_shown(spec.semantics, out)}`" if spec.semantics else ", no semantics")
+        + (f", semantics `{_shown(spec.semantics, out)}`" if spec.semantics else _lidar_source(spec, out))
         + ".",
         f"{len(infos)} sequences in {len(folds)} folds; probability mode `{spec.config.experiment.probabilities[0]}`; "
         f"OSPA c = {m.ospa_c:g} m, p = {m.ospa_p:g}; delay gate {m.d_gate:g} m; "

@@ -1,0 +1,82 @@
+"""Building S-OA's semantic regions from segmented scans against the filters on the same sequence (plain script, not
+a test).
+
+    python benchmarks/bench_lidar.py [--duration 40] [--out DIR]
+
+Exports one SUMO trial of ``--duration`` s (10 Hz: 400 frames for 40 s) with ``soabench export kitti --lidar``,
+then times, in this one run:
+
+* ``regions``: :func:`soabench.kitti.lidar.sequence_regions` on all frames, default parameters, no cache (reading the
+  .bin/.label files, gap fill, raster, closing, polygons);
+* ``regions (cached)``: the same call reading back the run folder's ``.npz``;
+* ``to_scans``: the reader's Scans of the sequence with those regions (Omega_k per frame), and with the export's own
+  sidewalk polygons (``--semantics``) for comparison;
+* ``filters``: :func:`soabench.kitti.protocol.run_sequence` with S-OA alone and with the protocol's four models.
+
+It prints each time and the ratios regions / filters.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+from soabench.kitti.config import KittiConfig, kitti_base_config
+from soabench.kitti.export import export_kitti
+from soabench.kitti.lidar import LidarParams, sequence_regions
+from soabench.kitti.protocol import run_sequence
+from soabench.kitti.reader import open_dataset, read_sequence, sensor_for, to_scans
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--duration", type=float, default=40.0, help="seconds of the exported trial (default 40)")
+    ap.add_argument("--out", type=Path, help="keep the export here (default: a temporary folder)")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="bench_lidar_"))
+    root = args.out or tmp / "export"
+    cfg = kitti_base_config()
+    if not (root / "velodyne").is_dir():
+        export_kitti(cfg, "intersection", (), None, 1, root, duration=args.duration, lidar=True, log=lambda m: None)
+    kc = KittiConfig()
+    seq = read_sequence(open_dataset(root), "0000")
+    names = ("sidewalk", "building")
+    cache = tmp / "lidar"
+    vel, lab = root / "velodyne", root / "point_labels"
+    fov = sensor_for(seq, kc, cfg.sensor).fov_deg
+    t0 = time.perf_counter()
+    sem, _ = sequence_regions(vel, lab, "0000", seq.n_frames, names, LidarParams(), cfg.sensor.r_max, cache, fov)
+    t_regions = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    _, hit = sequence_regions(vel, lab, "0000", seq.n_frames, names, LidarParams(), cfg.sensor.r_max, cache, fov)
+    t_cached = time.perf_counter() - t0
+    assert hit
+    t0 = time.perf_counter()
+    ss = to_scans(dataclasses.replace(seq, semantics=sem), kc, cfg.sensor)
+    t_scans = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    to_scans(read_sequence(open_dataset(root, None, root / "semantics"), "0000"), kc, cfg.sensor)
+    t_poly = time.perf_counter() - t0
+    n_hat = 6 / 100
+    run_sequence(ss, cfg, n_hat, 0, "0000")  # compile the kernels outside the timed calls
+    times = {}
+    for models in (("soa",), cfg.experiment.models):
+        c = dataclasses.replace(cfg, experiment=dataclasses.replace(cfg.experiment, models=models))
+        t0 = time.perf_counter()
+        run_sequence(ss, c, n_hat, 0, "0000")
+        times[",".join(models)] = time.perf_counter() - t0
+    print(f"{seq.n_frames} frames")
+    print(f"regions (built)  {t_regions:8.2f} s  ({1e3 * t_regions / seq.n_frames:.1f} ms/frame)")
+    print(f"regions (cached) {t_cached:8.2f} s")
+    print(f"to_scans         {t_scans:8.2f} s  (with the scene's polygons: {t_poly:.2f} s)")
+    for m, t in times.items():
+        print(f"filters {m:<20s} {t:8.2f} s   regions / filters = {t_regions / t:.2f}")
+    shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

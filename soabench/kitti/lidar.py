@@ -1,0 +1,302 @@
+"""S-OA's semantic region from segmented LiDAR scans (docs/method.md §3.1.4, "The semantic region from a point
+cloud"; docs/user-guide/kitti.md, "From a KITTI download and a segmentation network").
+
+Inputs, per sequence ``XXXX`` and frame ``NNNNNN``:
+
+* ``VELODYNE/XXXX/NNNNNN.bin``: the KITTI scan, float32 rows (x, y, z, intensity) in the Velodyne (ego) frame;
+* ``LABELS/XXXX/NNNNNN.label``: one uint32 per point in the SemanticKITTI format, the lower 16 bits the class id
+  (:data:`SEMANTIC_KITTI_IDS`), the upper 16 bits an instance id (ignored).
+
+Per frame and configured class (``kitti.semantic_classes``: birth region, ``kitti.occluder_classes``: occluders), the
+bird's-eye points of that class within r_max and near the sensor's sector, with the ground between consecutive
+returns of the class along a scan sector (gap fill, ``fill`` m at most), are rasterised on a grid of ``grid`` m
+cells aligned with the ego frame; the occupancy is closed morphologically with a disc of radius ``closing`` m (it
+fills the gaps between beams and azimuths), and the occupied cells are merged into polygons (coverage union,
+simplified within half a cell), cut into hole-free pieces: the same ``(class, vertices)`` rows a ``--semantics``
+file gives.
+
+The regions of a sequence are cached in ``RUN/lidar/XXXX.npz`` with a key made of the input files' names, sizes and
+modification times and the parameters, so a resumed or repeated run reads them back instead of rebuilding them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+import zipfile
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import shapely
+from scipy import ndimage
+
+from soabench.config import SensorConfig
+from soabench.errors import require
+from soabench.kitti.config import KittiConfig
+from soabench.kitti.formats import ReadError
+from soabench.kitti.reader import KittiSequence, sensor_for
+
+#: SemanticKITTI class ids (lower 16 bits of a .label value) by class name, as in the dataset's semantic-kitti.yaml
+SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
+    "unlabeled": (0,), "outlier": (1,), "car": (10, 252), "bicycle": (11,), "bus": (13, 257), "motorcycle": (15,),
+    "on-rails": (16, 256), "truck": (18, 258), "other-vehicle": (20, 259), "person": (30, 254),
+    "bicyclist": (31, 253), "motorcyclist": (32, 255), "road": (40,), "parking": (44,), "sidewalk": (48,),
+    "other-ground": (49,), "building": (50,), "fence": (51,), "other-structure": (52,), "lane-marking": (60,),
+    "vegetation": (70,), "trunk": (71,), "terrain": (72,), "pole": (80,), "traffic-sign": (81,),
+    "other-object": (99,),
+}  # fmt: skip
+POINT_BYTES = 16  #: float32 x, y, z, intensity
+CACHE_DIR = "lidar"
+CACHE_FORMAT = "soabench-lidar-regions-1"
+FOV_MARGIN_DEG = 5.0  #: points this far outside the sensor's sector still shape the region at its edges
+
+
+@dataclass(frozen=True)
+class LidarParams:
+    """Region building parameters (docs/method.md §3.1.4)."""
+
+    grid: float = 0.5  #: raster cell size (m)
+    closing: float = 1.0  #: radius (m) of the disc of the morphological closing (0: none)
+    fill: float = 8.0  #: longest gap (m) filled between consecutive returns of a class along a 1-deg sector (0: none)
+    sector_deg: float = 1.0  #: azimuth sector (deg) of the gap fill
+
+    def validate(self) -> LidarParams:
+        require(0.05 <= self.grid <= 5.0, f"--lidar-grid {self.grid!r} must be in [0.05, 5] m")
+        require(0.0 <= self.closing <= 10.0, f"--lidar-closing {self.closing!r} must be in [0, 10] m")
+        require(0.0 <= self.fill <= 50.0, f"--lidar-fill {self.fill!r} must be in [0, 50] m")
+        require(0.0 < self.sector_deg <= 10.0, f"lidar sector {self.sector_deg!r} must be in (0, 10] deg")
+        return self
+
+
+def class_ids(names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The SemanticKITTI ids of each configured class name; one line naming the allowed names otherwise."""
+    bad = [n for n in names if n not in SEMANTIC_KITTI_IDS]
+    require(
+        not bad,
+        f"semantic class(es) {', '.join(map(repr, bad))} have no SemanticKITTI id; allowed: "
+        + ", ".join(SEMANTIC_KITTI_IDS),
+    )
+    return {n: np.asarray(SEMANTIC_KITTI_IDS[n], dtype=np.uint32) for n in names}
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# files
+
+
+def frame_files(velodyne: Path, labels: Path, seq: str, n_frames: int) -> list[tuple[Path, Path, int]]:
+    """``(scan, labels, n_points)`` of frames 0 .. n_frames-1, checked: both files exist, the scan is whole float32
+    rows of 4 values and the label file holds one uint32 per point (:class:`ReadError` naming the file otherwise)."""
+    out = []
+    for d in (velodyne / seq, labels / seq):
+        if not d.is_dir():
+            raise ReadError(f"{d} is not a folder: sequence {seq} needs one file per frame there (NNNNNN.bin/.label)")
+    for k in range(n_frames):
+        scan, lab = velodyne / seq / f"{k:06d}.bin", labels / seq / f"{k:06d}.label"
+        for p in (scan, lab):
+            if not p.is_file():
+                raise ReadError(f"{p} is missing: sequence {seq} has frames 0-{n_frames - 1} and each needs one")
+        size = scan.stat().st_size
+        if size % POINT_BYTES:
+            raise ReadError(f"{scan}: {size} bytes is not a whole number of points (float32 x y z intensity, 16 bytes)")
+        n = size // POINT_BYTES
+        n_lab = lab.stat().st_size
+        if n_lab != 4 * n:
+            raise ReadError(f"{lab}: {n_lab} bytes = {n_lab / 4:g} labels, but {scan} has {n} points (one uint32 each)")
+        out.append((scan, lab, n))
+    return out
+
+
+def read_frame(scan: Path, labels: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 4) float32 points and (N,) uint32 class ids (lower 16 bits) of one frame."""
+    pts = np.fromfile(scan, dtype="<f4").reshape(-1, 4)
+    lab = np.fromfile(labels, dtype="<u4") & np.uint32(0xFFFF)
+    return pts, lab
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# points -> polygons
+
+
+def _disc(radius_cells: int) -> np.ndarray:
+    r = np.arange(-radius_cells, radius_cells + 1)
+    return (r[:, None] ** 2 + r[None, :] ** 2) <= radius_cells**2
+
+
+def region_from_points(xy: np.ndarray, params: LidarParams, r_max: float):
+    """The bird's-eye region of the points ``xy`` (N, 2): grid occupancy within r_max, closed with a disc of radius
+    ``params.closing``, as the union of the occupied cells (a shapely geometry, empty without points)."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    xy = xy[(np.abs(xy) <= r_max).all(axis=1)]
+    if len(xy) == 0:
+        return shapely.Polygon()
+    g = params.grid
+    rad = int(np.ceil(params.closing / g)) if params.closing > 0 else 0
+    ij = np.floor(xy / g).astype(np.int64)
+    lo = ij.min(axis=0) - rad - 1
+    ij -= lo
+    occ = np.zeros(tuple(ij.max(axis=0) + rad + 2), dtype=bool)
+    occ[ij[:, 0], ij[:, 1]] = True
+    if rad:
+        occ = ndimage.binary_closing(occ, structure=_disc(rad))
+    # the occupied cells share exact edge coordinates, so their union is a coverage union (linear time); the
+    # staircase outline is then simplified within half a cell
+    xs, ys = ((np.arange(n + 1) + o) * g for n, o in zip(occ.shape, lo, strict=True))
+    ci, cj = np.nonzero(occ)
+    union = shapely.coverage_union_all(shapely.box(xs[ci], ys[cj], xs[ci + 1], ys[cj + 1]))
+    return shapely.simplify(union, 0.5 * g)
+
+
+def sector_order(xy: np.ndarray, params: LidarParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The points' order by (azimuth sector, range), with their sectors and ranges in that order."""
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    sector = np.floor((np.arctan2(xy[:, 1], xy[:, 0]) + np.pi) / np.radians(params.sector_deg)).astype(np.int64)
+    order = np.argsort(sector * (4.0 * np.max(r, initial=0.0) + 1.0) + r, kind="stable")  # by sector, then range
+    return order, sector[order], r[order]
+
+
+def ray_fill(xy: np.ndarray, is_cls: np.ndarray, params: LidarParams, by_sector=None) -> np.ndarray:
+    """Extra (M, 2) points on the ground between consecutive returns (by range) of one azimuth sector that are both
+    of the class and at most ``params.fill`` apart: the ground a scan ring skips between two returns of the class,
+    with no return of another class between them, is taken to be of that class."""
+    if params.fill <= 0 or is_cls.sum() < 2:
+        return np.zeros((0, 2))
+    order, s, rr = sector_order(xy, params) if by_sector is None else by_sector
+    c = is_cls[order]
+    pair = (s[1:] == s[:-1]) & c[1:] & c[:-1] & (rr[1:] - rr[:-1] <= params.fill) & (rr[1:] - rr[:-1] > params.grid)
+    a, b = xy[order][:-1][pair], xy[order][1:][pair]
+    n = np.ceil(np.hypot(*(b - a).T) / (0.5 * params.grid)).astype(np.int64)
+    if n.sum() == 0:
+        return np.zeros((0, 2))
+    seg = np.repeat(np.arange(len(n)), n)
+    t = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n, n)
+    return a[seg] + t[:, None] * (b[seg] - a[seg])
+
+
+def frame_regions(
+    pts: np.ndarray,
+    lab: np.ndarray,
+    ids: dict[str, np.ndarray],
+    params: LidarParams,
+    r_max: float,
+    fov_deg: float = 360.0,
+) -> list[tuple[str, np.ndarray]]:
+    """``(class, (n, 2) vertices)`` hole-free polygons of one frame, per configured class, from the points within
+    r_max and within ``FOV_MARGIN_DEG`` of the sensor's sector (Omega_k never reaches beyond it)."""
+    from soabench.kitti.export import _hole_free
+
+    out = []
+    xy = pts[:, :2].astype(float)
+    near = (np.abs(xy) <= r_max).all(axis=1)
+    if fov_deg + 2.0 * FOV_MARGIN_DEG < 360.0:
+        near &= np.abs(np.degrees(np.arctan2(xy[:, 1], xy[:, 0]))) <= 0.5 * fov_deg + FOV_MARGIN_DEG
+    xy, lab = xy[near], lab[near]
+    by_sector = sector_order(xy, params) if params.fill > 0 else None
+    for name, cid in ids.items():
+        is_cls = np.isin(lab, cid)
+        extra = ray_fill(xy, is_cls, params, by_sector)
+        geom = region_from_points(np.concatenate([xy[is_cls], extra]), params, r_max)
+        out.extend((name, np.asarray(p.exterior.coords)[:-1]) for p in _hole_free(geom))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# a sequence, with the run folder's cache
+
+
+def _key(
+    files: list[tuple[Path, Path, int]], names: tuple[str, ...], params: LidarParams, r_max: float, fov: float
+) -> str:
+    h = hashlib.sha256(json.dumps([CACHE_FORMAT, list(names), asdict(params), r_max, fov, FOV_MARGIN_DEG]).encode())
+    for scan, lab, _ in files:
+        for p in (scan, lab):
+            st = p.stat()
+            h.update(f"{p.name} {st.st_size} {st.st_mtime_ns}\n".encode())
+    return h.hexdigest()
+
+
+def _save(path: Path, key: str, names: tuple[str, ...], sem: dict[int, list[tuple[str, np.ndarray]]]) -> None:
+    rows = [(k, names.index(c), xy) for k, polys in sorted(sem.items()) for c, xy in polys]
+    xy = np.concatenate([r[2] for r in rows]) if rows else np.zeros((0, 2))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(
+        tmp, key=np.array(key), names=np.array(names, dtype=str), frame=np.array([r[0] for r in rows], dtype=np.int32),
+        cls=np.array([r[1] for r in rows], dtype=np.int32), n=np.array([len(r[2]) for r in rows], dtype=np.int64),
+        xy=xy,
+    )  # fmt: skip
+    os.replace(tmp, path)
+
+
+def _load(path: Path, key: str) -> dict[int, list[tuple[str, np.ndarray]]] | None:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["key"]) != key:
+                return None
+            names, frame, cls, n, xy = (z[k] for k in ("names", "frame", "cls", "n", "xy"))
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):  # unreadable: rebuilt
+        return None
+    out: dict[int, list[tuple[str, np.ndarray]]] = {}
+    for f, c, part in zip(frame, cls, np.split(xy, np.cumsum(n)[:-1]) if len(n) else [], strict=True):
+        out.setdefault(int(f), []).append((str(names[c]), part))
+    return out
+
+
+def sequence_regions(
+    velodyne: Path,
+    labels: Path,
+    seq: str,
+    n_frames: int,
+    names: tuple[str, ...],
+    params: LidarParams,
+    r_max: float,
+    cache: Path | None = None,
+    fov_deg: float = 360.0,
+) -> tuple[dict[int, list[tuple[str, np.ndarray]]], bool]:
+    """Per-frame ``(class, vertices)`` polygons of a sequence (the shape of a parsed ``--semantics`` file) and
+    whether they came from the cache ``cache/XXXX.npz`` (written when built)."""
+    files = frame_files(Path(velodyne), Path(labels), seq, n_frames)
+    ids = class_ids(names)
+    key = _key(files, names, params, r_max, fov_deg)
+    path = Path(cache) / f"{seq}.npz" if cache is not None else None
+    if path is not None and path.is_file() and (hit := _load(path, key)) is not None:
+        return hit, True
+    sem = {}
+    for k, (scan, lab, _) in enumerate(files):
+        pts, cl = read_frame(scan, lab)
+        if polys := frame_regions(pts, cl, ids, params, r_max, fov_deg):
+            sem[k] = polys
+    if path is not None:
+        _save(path, key, names, sem)
+    return sem, False
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the protocol's hooks (``spec.lidar`` of :class:`~soabench.kitti.protocol.KittiSpec`)
+
+
+def lidar_files(lidar: dict, seq: KittiSequence) -> None:
+    """Check a sequence's scans and labels before anything is written (:class:`ReadError` on the first bad file)."""
+    frame_files(Path(lidar["velodyne"]), Path(lidar["point_labels"]), seq.seq, seq.n_frames)
+
+
+def lidar_semantics(
+    lidar: dict, seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig, run_dir: Path, log: Callable[[str], None]
+) -> dict[int, list[tuple[str, np.ndarray]]]:
+    """The sequence's per-frame regions of the birth and occluder classes, cached in ``run_dir/lidar/``."""
+    t0 = time.perf_counter()
+    names = tuple(dict.fromkeys(kcfg.semantic_classes + kcfg.occluder_classes))
+    params = LidarParams(**{f.name: float(lidar[f.name]) for f in fields(LidarParams)})
+    fov = float(sensor_for(seq, kcfg, sensor).fov_deg)
+    sem, cached = sequence_regions(
+        Path(lidar["velodyne"]), Path(lidar["point_labels"]), seq.seq, seq.n_frames, names, params,
+        float(sensor.r_max), Path(run_dir) / CACHE_DIR, fov,
+    )  # fmt: skip
+    how = f"read from {CACHE_DIR}/{seq.seq}.npz" if cached else "built"
+    log(
+        f"sequence {seq.seq}: semantic regions from {seq.n_frames} LiDAR scans {how} ({time.perf_counter() - t0:.1f} s)"
+    )
+    return sem
