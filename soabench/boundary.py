@@ -106,9 +106,10 @@ def plugin(name_or_class: Any) -> tuple[str, str, type]:
     name = name_or_class
     plugins.allow_import_paths([name])
     if plugins.is_import_path(name):
-        cls = plugins.resolve(plugins.BIRTH, name)  # imports it; the kind follows from its shape
-        kind = plugins.TRACKER if callable(getattr(cls, "step", None)) else plugins.BIRTH
-        return kind, name, cls
+        try:  # the kind follows from its shape: a class with step() is a tracker, else a birth model
+            return plugins.TRACKER, name, plugins.resolve(plugins.TRACKER, name)
+        except SoabenchError:
+            return plugins.BIRTH, name, plugins.resolve(plugins.BIRTH, name)
     births, trackers = plugins.names(plugins.BIRTH), plugins.names(plugins.TRACKER)
     require(
         name in births or name in trackers,

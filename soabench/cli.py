@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -278,7 +279,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--semantics",
         help="per-frame bird's-eye semantic polygons per sequence (default: none)",
     )
-    p.add_argument("--point-labels", help="SemanticKITTI .label files XXXX/NNNNNN.label: S-OA's region from them")
+    p.add_argument(
+        "--point-labels", help="SemanticKITTI .label files XXXX/NNNNNN.label: S-OA's region from them (default: none)"
+    )
     p.add_argument("--velodyne", help="KITTI scans XXXX/NNNNNN.bin for --point-labels (default ROOT/velodyne)")
     p.add_argument("--lidar-grid", type=float, help="raster cell (m) of the region from points (default 0.5)")
     p.add_argument("--lidar-closing", type=float, help="closing radius (m) of the region from points (default 1.0)")
@@ -785,13 +788,21 @@ def _join_negative_values(argv: Sequence[str]) -> list[str]:
     return out
 
 
+class _CurrentStderr(logging.StreamHandler):
+    """A log handler writing to ``sys.stderr`` as it is when a record comes (a caller, or a test, may swap it)."""
+
+    def emit(self, record) -> None:
+        self.stream = sys.stderr
+        super().emit(record)
+
+
 def _say_derived() -> None:
     """Print the scene loader's info line (what it derived from a network) to stderr, once."""
     import logging
 
     log = logging.getLogger("soabench")
     if not any(getattr(h, "_soabench", False) for h in log.handlers):
-        h = logging.StreamHandler(sys.stderr)
+        h = _CurrentStderr()
         h.setFormatter(logging.Formatter("soabench: %(message)s"))
         h._soabench = True  # type: ignore[attr-defined]
         log.addHandler(h)

@@ -7,6 +7,7 @@ Kept out of :mod:`soabench.cli` so that the parser module stays a thin table of 
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import math
 import re
 from collections.abc import Sequence
@@ -50,12 +51,24 @@ def explicit_dests(parser: argparse.ArgumentParser, argv: Sequence[str]) -> set[
     return out
 
 
+def _is_host(host: str) -> bool:
+    """A host name (with a letter), a dotted-quad IPv4 or a bracketed IPv6 address: a bare number such as ``3``
+    (which the resolver would read as 0.0.0.3) is not."""
+    literal = host.strip("[]")
+    if host.startswith("[") or not any(c.isalpha() for c in literal):
+        try:
+            ipaddress.ip_address(literal)
+        except ValueError:
+            return False
+    return True
+
+
 def check_scheduler_address(address: str | None) -> None:
     """Refuse a malformed ``--scheduler`` at once (instead of a connection timeout later)."""
     if address is None:
         return
     m = SCHEDULER_ADDRESS.match(address.strip())
-    ok = m is not None and 1 <= int(m.group("port")) <= 65535
+    ok = m is not None and 1 <= int(m.group("port")) <= 65535 and _is_host(m.group("host"))
     require(ok, f"--scheduler {address!r} is not a scheduler address; expected tcp://HOST:PORT (port 1-65535)")
 
 

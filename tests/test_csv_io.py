@@ -138,6 +138,7 @@ def test_merge_writes_steps_as_one_sort_of_every_row(tmp_path, kind):
     from soabench.experiment import files, store
 
     run = store.RunStore(tmp_path / "run")
+    run.create({"net": "test"})  # a run folder: its records carry its run_id
     for rec in _records(kind):
         run.write_trial(rec)
     models, modes = ("soa", "gmbm"), ("static",)
@@ -160,6 +161,7 @@ def test_model_failures_after_a_merge_are_the_records_own(tmp_path, monkeypatch)
     from soabench.experiment import store
 
     run = store.RunStore(tmp_path / "run")
+    run.create({"net": "test"})  # a run folder: its records carry its run_id
     for i, rec in enumerate(_records("regular")):
         rec["model_failures"] = [{"trial": rec["trial"], "model": "plug", "k": i}] if i != 1 else []
         run.write_trial(rec)

@@ -81,8 +81,9 @@ def test_turnaround_dead_ends_are_fringe(nets):
 
 
 @pytest.mark.parametrize("kind", ["grid", "spider", "rand", "hand", "footways"])
-def test_user_net_runs_with_derived_defaults(nets, kind, caplog):
+def test_user_net_runs_with_derived_defaults(nets, kind, caplog, monkeypatch):
     caplog.set_level("INFO", logger="soabench")
+    monkeypatch.setattr("soabench.scenario.derive._said", set())  # said once per process: another test may have
     scene, sc = load(str(nets[kind]))
     assert len(sc.ego_route) >= 2 and sc.vehicle_sources and sc.vehicle_sinks
     net = read_net(nets[kind])
