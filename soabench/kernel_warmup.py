@@ -34,6 +34,8 @@ from typing import TextIO
 
 import numpy as np
 
+from soabench.experiment.progress import LINE_INTERVAL_S, is_terminal
+
 #: the modules whose kernels are compiled here (their source files key the stamp, as they key numba's cache)
 KERNEL_MODULES = (
     "soabench.gmphd.clock",
@@ -42,7 +44,6 @@ KERNEL_MODULES = (
     "soabench.metrics_kernels",
     "soabench.geometry_kernels",
 )
-LINE_INTERVAL_S = 10.0  #: off a terminal, a line at least this often while compiling (as the progress lines)
 MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version) ..."
 
 
@@ -200,13 +201,6 @@ def compiled() -> bool:
         return False
 
 
-def _isatty(stream: TextIO) -> bool:
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):
-        return False
-
-
 def ensure_compiled(stream: TextIO | None = None, workers: int | None = None) -> float:
     """Compile every kernel into the cache unless the stamp says this was done; returns the seconds spent.
 
@@ -221,7 +215,7 @@ def ensure_compiled(stream: TextIO | None = None, workers: int | None = None) ->
     t0 = time.monotonic()
     print(MESSAGE, file=stream, flush=True)
     notice.silence()  # this process's first steps load what is compiled here: no second notice
-    tty = _isatty(stream)
+    tty = is_terminal(stream)
     n = max(1, min(workers or os.cpu_count() or 1, max(len(r) for r in ROUNDS)))
     ok = True
     try:
@@ -245,7 +239,6 @@ def ensure_compiled(stream: TextIO | None = None, workers: int | None = None) ->
             stamp_path().write_text(f"compiled in {took:.1f} s\n")
         except OSError:
             pass
-    if ok:
         print(f"soabench: kernels compiled in {took:.0f} s (cached for later runs)", file=stream, flush=True)
     else:
         print("soabench: compiling ahead failed; the trials compile what they need", file=stream, flush=True)

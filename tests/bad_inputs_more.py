@@ -186,7 +186,7 @@ CASES: list[Case] = [
         _kitti(_semantics("999999999 sidewalk 0 0 10 0 10 10\n"), "--semantics", "SEMANTICS"),
         "frame 999999999",
     ),  # fmt: skip
-    ("kitti --score-min inf", _kitti(None, "--score-min", "inf"), "--score-min inf must be a finite"),
+    ("kitti --score-min inf", _kitti(None, "--score-min", "inf"), "kitti.score_min = inf"),
     ("kitti --classes Foo", _kitti(None, "--classes", "Foo"), "'Foo' is not a KITTI object type"),
     ("kitti --classes pedestrian", _kitti(None, "--classes", "pedestrian"), "'pedestrian' is not a KITTI"),
     ("kitti --nhat-sweep 0,0", _kitti(None, "--nhat-sweep", "0,0"), "names 0 twice"),

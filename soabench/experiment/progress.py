@@ -20,7 +20,8 @@ LINE_STEP = 0.05
 BAR_WIDTH = 30
 
 
-def _isatty(stream: TextIO) -> bool:
+def is_terminal(stream: TextIO) -> bool:
+    """Whether ``stream`` is a terminal (a redrawn bar) rather than a file or a pipe (a line now and then)."""
     try:
         return bool(stream.isatty())
     except (AttributeError, ValueError):
@@ -61,7 +62,7 @@ class Progress:
         self.stream = stream if stream is not None else sys.stderr
         self.active = bool(enabled)
         #: True when the in-place bar is drawn (callers end its line before printing)
-        self.enabled = self.active and _isatty(self.stream)
+        self.enabled = self.active and is_terminal(self.stream)
         self.label = label
         self._clock = clock
         self._start_done = self.done

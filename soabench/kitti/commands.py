@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import sys
 from pathlib import Path
 
@@ -40,7 +39,6 @@ def cmd_kitti(args: argparse.Namespace) -> int:
         if args.classes is not None:
             kcfg = dataclasses.replace(kcfg, classes=tuple(args.classes)).validate()
         if args.score_min is not None:
-            require(math.isfinite(args.score_min), f"--score-min {args.score_min!r} must be a finite number")
             kcfg = dataclasses.replace(kcfg, score_min=float(args.score_min)).validate()
         spec = KittiSpec(
             root=str(Path(args.root).resolve()),
