@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -144,6 +145,18 @@ def test_bad_input_is_one_clear_error(gt_ids, est_ids, est_xy, message):
         track_scores(gt_ids, [np.zeros((2, 2))], est_ids, est_xy, D_GATE)
 
 
+def test_t32_repeated_positions_equal_trackeval():
+    """Estimates extracted twice (equal positions, different labels) and two truths at one point: several optimal
+    matchings exist, and the scan is matched as TrackEval matches it."""
+    gt_ids, gt_xy, est_ids, est_xy = random_sequence(11)
+    for k in range(0, 40, 3):
+        if len(est_xy[k]) >= 2:
+            est_xy[k][1] = est_xy[k][0]
+        if len(gt_xy[k]) >= 2:
+            gt_xy[k][1] = gt_xy[k][0]
+    assert_equal_trackeval(gt_ids, gt_xy, est_ids, est_xy)
+
+
 def test_blocks_cover_every_scan(monkeypatch):
     """Scores do not depend on how many scans the padded similarity blocks hold."""
     import soabench.tracks.sequence as sequence
@@ -179,6 +192,54 @@ def test_t33_no_tracks_give_c():
 def test_t33_constant_offset_gives_the_offset():
     r = ospa2([np.array([1])] * 20, walk(20), [np.array([5])] * 20, walk(20, 3.0), c=10.0, p=1.0, window=10)
     assert r.ospa2 == pytest.approx(3.0, abs=1e-12) and r.loc == pytest.approx(3.0, abs=1e-12) and r.card == 0.0
+
+
+def ospa2_by_definition(gt_ids, gt_xy, est_ids, est_xy, c, p, w) -> np.ndarray:
+    """OSPA(2) per scan straight from its definition: every track's positions in the window, the base distance of
+    every pair, the OSPA minimum over every injection of the smaller set of tracks into the larger."""
+    K = len(gt_ids)
+    out = np.zeros(K)
+    for k in range(K):
+        window = range(max(0, k - w + 1), k + 1)
+        X = {
+            i: {t: gt_xy[t][list(gt_ids[t]).index(i)] for t in window if i in gt_ids[t]}
+            for t in window
+            for i in gt_ids[t]
+        }
+        Y = {
+            j: {t: est_xy[t][list(est_ids[t]).index(j)] for t in window if j in est_ids[t]}
+            for t in window
+            for j in est_ids[t]
+        }
+        A, B = (list(X.values()), list(Y.values())) if len(X) <= len(Y) else (list(Y.values()), list(X.values()))
+        if not B:
+            continue
+
+        def base(x, y):
+            scans = set(x) | set(y)
+            return sum(min(c, float(np.hypot(*(x[t] - y[t])))) if t in x and t in y else c for t in scans) / len(scans)
+
+        best = min(
+            sum(min(c, base(a, B[j])) ** p for a, j in zip(A, perm, strict=False))
+            for perm in itertools.permutations(range(len(B)), len(A))
+        )
+        out[k] = ((best + c**p * (len(B) - len(A))) / len(B)) ** (1 / p)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize(("p", "w"), [(1.0, 10), (2.0, 3)])
+def test_t33_equals_the_definition(seed, p, w):
+    gt_ids, gt_xy, est_ids, est_xy = random_sequence(seed, K=15)
+    est_ids = [np.asarray(i) % 5 for i in est_ids]  # at most 5 estimate tracks: the permutations stay few
+    keep = [np.unique(i, return_index=True)[1] for i in est_ids]
+    est_ids = [i[j] for i, j in zip(est_ids, keep, strict=True)]
+    est_xy = [x[j] for x, j in zip(est_xy, keep, strict=True)]
+    r = ospa2(gt_ids, gt_xy, est_ids, est_xy, c=10.0, p=p, window=w)
+    expected = ospa2_by_definition(gt_ids, gt_xy, est_ids, est_xy, 10.0, p, w)
+    np.testing.assert_allclose(r.series[:, 0], expected, rtol=0, atol=1e-12)
+    assert r.ospa2 == pytest.approx(expected.mean(), abs=1e-12)
+    np.testing.assert_allclose(r.series[:, 1] ** p + r.series[:, 2] ** p, expected**p, rtol=0, atol=1e-9)
 
 
 def test_t33_a_label_switch_costs_inside_the_window():

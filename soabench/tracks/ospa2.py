@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from soabench.errors import require
-from soabench.metrics import ospa
+from soabench.notice import announced
 from soabench.tracks.sequence import TrackSequence, _Flat
 
 #: register row 31: cut-off c (m), order p, window (scans)
@@ -55,27 +55,14 @@ def _dense(rows: _Flat, n_ids: int, K: int) -> np.ndarray:
 
 
 def ospa2_of(seq: TrackSequence, c: float = OSPA2_C, p: float = OSPA2_P, window: int = OSPA2_WINDOW) -> Ospa2:
-    """:func:`ospa2` of a checked :class:`TrackSequence`."""
+    """:func:`ospa2` of a checked :class:`TrackSequence` (one compiled loop over the windows,
+    :func:`soabench.tracks.kernels.ospa2_scans`)."""
+    from soabench.tracks.kernels import ospa2_scans
+
     require(c > 0 and p >= 1 and window >= 1, f"OSPA(2) needs c > 0, p >= 1, window >= 1 (got {c}, {p}, {window})")
     K = len(seq)
     G = _dense(seq.gt, len(seq.gt_labels), K)
     E = _dense(seq.est, len(seq.est_labels), K)
-    series = np.zeros((K, 3))
-    for k in range(K):
-        lo = max(0, k - window + 1)
-        g_w, e_w = G[lo : k + 1], E[lo : k + 1]
-        g_on, e_on = ~np.isnan(g_w[..., 0]), ~np.isnan(e_w[..., 0])
-        g_sel, e_sel = g_on.any(axis=0), e_on.any(axis=0)
-        m, n = int(g_sel.sum()), int(e_sel.sum())
-        D = np.zeros((m, n))
-        if m and n:
-            g_w, e_w, g_on, e_on = g_w[:, g_sel], e_w[:, e_sel], g_on[:, g_sel], e_on[:, e_sel]
-            both = g_on[:, :, None] & e_on[:, None, :]
-            either = g_on[:, :, None] | e_on[:, None, :]
-            diff = g_w[:, :, None, :] - e_w[:, None, :, :]
-            d = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])
-            d_t = np.where(both, np.minimum(c, np.where(both, d, 0.0)), np.where(either, c, 0.0))
-            D = d_t.sum(axis=0) / either.sum(axis=0)
-        series[k] = ospa(np.zeros((m, 2)), np.zeros((n, 2)), c, p, D)
+    series = announced("track metrics", ospa2_scans, G, E, float(c), float(p), int(window))
     mean = series.mean(axis=0) if K else np.full(3, np.nan)
     return Ospa2(float(mean[0]), float(mean[1]), float(mean[2]), series)

@@ -9,20 +9,20 @@
 Each follows the arithmetic of TrackEval's ``HOTA``, ``CLEAR`` and ``Identity`` metric classes step for step (the
 same Hungarian problems, the same threshold tests with their machine-epsilon margins, the same results on empty
 sequences), so the values equal TrackEval's to rounding; tests/test_track_metrics.py holds them to 1e-12 against
-TrackEval itself. The scan-by-scan work that TrackEval repeats for each of its 19 alphas is done once here and the
-alphas are applied to the stacked matches, which makes one call several times cheaper than TrackEval's three
-``eval_sequence`` calls (benchmarks/bench_track_metrics.py).
+TrackEval itself. The scan-by-scan matching is one compiled loop (:mod:`soabench.tracks.kernels`), done once for
+all 19 alphas, which are then applied to the stacked matches; benchmarks/bench_track_metrics.py times it against
+TrackEval's three ``eval_sequence`` calls.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from soabench.tracks.sequence import TrackSequence
+from soabench.tracks.sequence import TrackSequence, similarity
 
 #: HOTA's localisation thresholds alpha (TrackEval's ``array_labels``)
 ALPHAS = np.arange(0.05, 0.99, 0.05)
@@ -123,64 +123,93 @@ def _global_counts(
     return alignment, id_potential.reshape(nG, nT)
 
 
-def _scans(seq: TrackSequence, d_gate: float) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Scan by scan: contiguous truth ids, estimate ids and their (n_gt, n_est) similarities."""
-    n_g, n_e = np.diff(seq.gt.off), np.diff(seq.est.off)
-    for scans, S, g, e in seq.blocks(d_gate):
-        for b, t in enumerate(scans):
-            yield g[b, : n_g[t]], e[b, : n_e[t]], S[b, : n_g[t], : n_e[t]]
+@dataclass
+class _MatchState:
+    """What the scan loop of :func:`_scan_matches` carries from scan to scan (the order of :meth:`arrays` is the
+    order :func:`soabench.tracks.kernels.match_scans` unpacks).
 
+    Attributes:
+        counts: CLEAR's TP, FN, FP, IDSW and the number of HOTA pairs so far; motp: (1,) sum of matched S.
+        gt_seen, gt_matched, frag: per truth, scans present, scans matched, starts of a matched run.
+        prev_id: per truth, the estimate last matched to it on any scan before (-1: none).
+        prev_scan: per truth, the estimate matched on the previous scan with truth and estimates (-1: none).
+        hg, he, hs: HOTA's matches (truth, estimate, S), the first ``counts[4]`` rows.
+    """
 
-def _scan_matches(
-    seq: TrackSequence, d_gate: float, alignment: np.ndarray, nG: int
-) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], dict[str, float | int]]:
-    """Scan by scan: HOTA's alignment-weighted Hungarian matches (gt index, estimate index, S; every alpha is
-    applied later) and the CLEAR MOT counts (its matching keeps the previous scan's pairs first)."""
-    hg, he, hs = [], [], []
-    tp = fn = fp = idsw = 0
-    motp_sum = 0.0
-    gt_seen = np.zeros(nG)
-    gt_matched = np.zeros(nG)
-    frag_count = np.zeros(nG)
-    prev_id = np.full(nG, -1, dtype=np.int64)  # last estimate matched to each truth, any scan before
-    prev_scan_id = np.full(nG, -1, dtype=np.int64)  # estimate matched on the previous scan with both sets non-empty
-    for g, e, sim in _scans(seq, d_gate):
-        if len(g) == 0:
-            fp += len(e)
-            continue
-        if len(e) == 0:
-            fn += len(g)
-            gt_seen[g] += 1
-            continue
+    counts: np.ndarray
+    motp: np.ndarray
+    gt_seen: np.ndarray
+    gt_matched: np.ndarray
+    frag: np.ndarray
+    prev_id: np.ndarray
+    prev_scan: np.ndarray
+    hg: np.ndarray
+    he: np.ndarray
+    hs: np.ndarray
+
+    @classmethod
+    def new(cls, nG: int, n_pairs: int) -> _MatchState:
+        f, i = np.zeros(nG), np.full(nG, -1, dtype=np.int64)
+        pairs = np.zeros(n_pairs, dtype=np.int64)
+        return cls(np.zeros(5, dtype=np.int64), np.zeros(1), f, f.copy(), f.copy(), i, i.copy(), pairs, pairs.copy(),
+                   np.zeros(n_pairs))  # fmt: skip
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        return (self.counts, self.motp, self.gt_seen, self.gt_matched, self.frag, self.prev_id, self.prev_scan,
+                self.hg, self.he, self.hs)  # fmt: skip
+
+    def match(self, g: np.ndarray, e: np.ndarray, sim: np.ndarray, alignment: np.ndarray) -> None:
+        """One scan with truths and estimates, matched with scipy (a scan the compiled loop leaves to it)."""
         rows, cols = linear_sum_assignment(-(alignment[g[:, None], e[None, :]] * sim))
-        hg.append(g[rows])
-        he.append(e[cols])
-        hs.append(sim[rows, cols])
-        score = 1000.0 * (e[None, :] == prev_scan_id[g[:, None]]) + sim
+        n = self.counts[4]
+        self.hg[n : n + len(rows)], self.he[n : n + len(rows)], self.hs[n : n + len(rows)] = (
+            g[rows],
+            e[cols],
+            sim[rows, cols],
+        )
+        self.counts[4] = n + len(rows)
+        score = 1000.0 * (e[None, :] == self.prev_scan[g[:, None]]) + sim
         score[sim < THRESHOLD - _EPS] = 0
         rows, cols = linear_sum_assignment(-score)
         kept = score[rows, cols] > _EPS
         rows, cols = rows[kept], cols[kept]
         mg, me = g[rows], e[cols]
-        before = prev_id[mg]
-        idsw += int(np.sum((before >= 0) & (me != before)))
-        gt_seen[g] += 1
-        gt_matched[mg] += 1
-        untracked = prev_scan_id < 0
-        prev_id[mg] = me
-        prev_scan_id[:] = -1
-        prev_scan_id[mg] = me
-        frag_count += untracked & (prev_scan_id >= 0)
-        tp += len(mg)
-        fn += len(g) - len(mg)
-        fp += len(e) - len(mg)
-        motp_sum += float(np.sum(sim[rows, cols]))
-    pairs = (
-        np.concatenate(hg) if hg else np.zeros(0, dtype=np.int64),
-        np.concatenate(he) if he else np.zeros(0, dtype=np.int64),
-        np.concatenate(hs) if hs else np.zeros(0),
-    )
-    return pairs, _clear_fields(seq, tp, fn, fp, idsw, motp_sum, gt_seen, gt_matched, frag_count, nG)
+        before = self.prev_id[mg]
+        self.counts[3] += int(np.sum((before >= 0) & (me != before)))
+        self.gt_seen[g] += 1
+        self.gt_matched[mg] += 1
+        untracked = self.prev_scan < 0
+        self.prev_id[mg] = me
+        self.prev_scan[:] = -1
+        self.prev_scan[mg] = me
+        self.frag += untracked & (self.prev_scan >= 0)
+        self.counts[:3] += (len(mg), len(g) - len(mg), len(e) - len(mg))
+        self.motp[0] += sum(sim[rows, cols])
+
+
+def _scan_matches(
+    seq: TrackSequence, d_gate: float, alignment: np.ndarray, nG: int
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], dict[str, float | int]]:
+    """Scan by scan: HOTA's alignment-weighted Hungarian matches (truth, estimate, S; every alpha is applied
+    later) and the CLEAR MOT counts (its matching keeps the previous scan's pairs first). The compiled loop
+    (:func:`soabench.tracks.kernels.match_scans`) hands a scan with two equal positions to scipy."""
+    from soabench.notice import announced
+    from soabench.tracks.kernels import match_scans
+
+    g, e = seq.gt, seq.est
+    state = _MatchState.new(nG, int(np.minimum(np.diff(g.off), np.diff(e.off)).sum()))
+    t, K = 0, len(seq)
+    while t < K:
+        args = (t, g.ids, g.off, g.xy, e.ids, e.off, e.xy, float(d_gate), THRESHOLD, alignment, state.arrays())
+        t = announced("track metrics", match_scans, *args)
+        if t < K:
+            gs, es = slice(g.off[t], g.off[t + 1]), slice(e.off[t], e.off[t + 1])
+            state.match(g.ids[gs], e.ids[es], similarity(g.xy[gs], e.xy[es], d_gate), alignment)
+            t += 1
+    n = state.counts[4]
+    tp, fn, fp, idsw = (int(x) for x in state.counts[:4])
+    clear = _clear_fields(seq, tp, fn, fp, idsw, float(state.motp[0]), state.gt_seen, state.gt_matched, state.frag, nG)
+    return (state.hg[:n], state.he[:n], state.hs[:n]), clear
 
 
 def _clear_fields(
