@@ -1,4 +1,4 @@
-"""Track metrics (docs/method.md, "Track metrics"): HOTA / CLEAR MOT / IDF1 against TrackEval (T32), OSPA(2)
+"""Track metrics (docs/method.md §9.3, §9.4): HOTA / CLEAR MOT / IDF1 against TrackEval (T32), OSPA(2)
 (T33), re-emergence after occlusion (T34)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Compiled scan loops of the track metrics (docs/method.md, "Track metrics").
+"""Compiled scan loops of the track metrics (docs/method.md §9.3).
 
 * :func:`match_scans`: HOTA's alignment-weighted matching and CLEAR MOT's continuity-first matching of every scan,
   in scan order (CLEAR carries the previous scan's matches forward);

@@ -1,5 +1,5 @@
-"""OSPA(2), the OSPA distance between sets of tracks over a sliding window (Beard, Vo & Vo 2020; docs/method.md,
-"Track metrics"; register row 31).
+"""OSPA(2), the OSPA distance between sets of tracks over a sliding window (Beard, Vo & Vo 2020;
+docs/method.md §9.3; register row 31).
 
 Over the window of ``window`` scans ending at k, each track (a truth id or an estimate label) has the scans of the
 window in which it exists. The base distance of a truth track x and an estimate track y is the mean over the scans

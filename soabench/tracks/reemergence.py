@@ -1,4 +1,4 @@
-"""Re-emergence after occlusion (docs/method.md, "Track metrics: re-emergence after occlusion").
+"""Re-emergence after occlusion (docs/method.md §9.4).
 
 An *occlusion gap* of a target is a maximal run of scans k_a..k_b in which it is present and inside the FOV but
 not line-of-sight visible, with the target visible at k_a - 1 and at k_b + 1. The tracking-delay episode

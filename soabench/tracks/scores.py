@@ -1,4 +1,4 @@
-"""HOTA, CLEAR MOT and the identity metrics of one labelled sequence (docs/method.md, "Track metrics").
+"""HOTA, CLEAR MOT and the identity metrics of one labelled sequence (docs/method.md §9.3).
 
 * HOTA with DetA, AssA and LocA per localisation threshold alpha in {0.05, ..., 0.95} and their means
   (Luiten et al. 2021);
@@ -35,7 +35,7 @@ _EPS = np.finfo(float).eps
 
 @dataclass(frozen=True)
 class TrackScores:
-    """Every track metric of one sequence (docs/method.md, "Track metrics").
+    """Every track metric of one sequence (docs/method.md §9.3).
 
     Attributes:
         hota, deta, assa, loca: means over :data:`ALPHAS` of the per-alpha arrays ``*_alpha``.

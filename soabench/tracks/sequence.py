@@ -1,5 +1,5 @@
 """A labelled tracking sequence on plain arrays: per-scan truth ids and positions, estimate labels and positions
-(docs/method.md, "Track metrics").
+(docs/method.md §9.3).
 
 :class:`TrackSequence` checks the input once (equal scan counts, one id per row, no id twice in a scan, finite
 positions) and maps the ids to contiguous indices 0..n-1 in sorted order, the form TrackEval's metrics take. The
@@ -70,7 +70,7 @@ def _flat(ids: Sequence, xy: Sequence, what: str) -> _Flat:
 
 @dataclass(frozen=True)
 class TrackSequence:
-    """One labelled sequence, checked and indexed (docs/method.md, "Track metrics").
+    """One labelled sequence, checked and indexed (docs/method.md §9.3).
 
     Attributes:
         gt, est: every scan's rows stacked; their ``ids`` are contiguous indices 0..n-1.
