@@ -8,10 +8,14 @@ import math
 
 import numpy as np
 import pytest
+from shapely.geometry import Polygon
 from trackeval.metrics import CLEAR, HOTA, Identity
 
+from soabench.config import MetricsConfig, SensorConfig
 from soabench.errors import SoabenchError
 from soabench.metrics import delay_episodes
+from soabench.sensor import Scan, Scans
+from soabench.tracks.evaluate import LABEL_KEYS, REEMERGENCE_KEYS, TRACK_KEYS, evaluate_tracks
 from soabench.tracks.ospa2 import ospa2
 from soabench.tracks.reemergence import associated_labels, occlusion_gaps, reemergence
 from soabench.tracks.scores import ALPHAS, track_scores
@@ -322,3 +326,43 @@ def test_gaps_need_visibility_on_both_sides():
     assert occlusion_gaps(in_view, visible) == []
     in_view[5, 2] = True
     assert [(g.target, g.k_a, g.k_b) for g in occlusion_gaps(in_view, visible)] == [(2, 3, 7)]
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# one filter run: the columns a trial adds
+
+
+def occlusion_scans(K: int = 31) -> Scans:
+    """Target 0 walks at y = 5 and is occluded at scans 10-14; target 1 stands at (20, -10), always visible."""
+    truth = np.stack([np.array([[10 + 0.5 * k, 5.0], [20.0, -10.0]]) for k in range(K)])
+    visible = np.ones((K, 2), dtype=bool)
+    visible[10:15, 0] = False
+    empty = [Scan(k, float(k), np.zeros(3), np.zeros((0, 2)), None, [], Polygon()) for k in range(K)]  # type: ignore[arg-type]
+    ones = np.ones((K, 2), dtype=bool)
+    return Scans(
+        empty, 1.0, [np.zeros(0, int)] * K, truth, ones, ones.copy(), visible, visible.copy(), np.array(["a", "b"])
+    )
+
+
+def test_evaluate_tracks_labelled_and_unlabelled():
+    scans = occlusion_scans()
+    K = len(scans.scans)
+    far = np.array([[500.0, 0.0, 0.0, 0.0]])  # outside the FOV: not in Est_k, and neither is its label
+    X = [np.vstack([np.column_stack([scans.truth_xy[k] + 0.3, np.zeros((2, 2))]), far]) for k in range(K)]
+    labels = [np.array([7 if k < 15 else 9, 8, 99]) for k in range(K)]
+    cfg, sensor_cfg = MetricsConfig(), SensorConfig()
+    assoc = np.ones((K, 2), dtype=bool)
+    episodes = delay_episodes(scans.visible, scans.detected, assoc, scans.dt)
+    out = evaluate_tracks(scans, X, labels, episodes, cfg, sensor_cfg)
+    assert list(out) == list(TRACK_KEYS)
+    expected = track_scores([np.array([0, 1])] * K, list(scans.truth_xy), [lab[:2] for lab in labels],
+                            [x[:2, :2] for x in X], cfg.d_gate)  # fmt: skip
+    assert out["hota"] == expected.hota and out["idsw"] == expected.idsw == 1 and out["idf1"] == expected.idf1
+    assert out["n_entry"] == 2 and out["n_reemergence"] == 1 and out["delay_reemergence_mean"] == 0.0
+    assert (out["coasted"], out["n_gaps"], out["id_kept"], out["n_id"]) == (1.0, 1, 0.0, 1)
+    assert out["ospa2"] > 0 and out["ospa2"] == pytest.approx(out["ospa2_loc"] + out["ospa2_card"])
+    plain = evaluate_tracks(scans, X, None, episodes, cfg, sensor_cfg)
+    assert all(plain[key] is None for key in LABEL_KEYS) and plain["id_kept"] is None and plain["n_id"] is None
+    assert {k: plain[k] for k in REEMERGENCE_KEYS if k not in ("id_kept", "n_id")} == {
+        k: out[k] for k in REEMERGENCE_KEYS if k not in ("id_kept", "n_id")
+    }

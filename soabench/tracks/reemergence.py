@@ -19,7 +19,7 @@ Per filter run:
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,18 +60,20 @@ def associated_labels(
     gt_xy: np.ndarray,
     gt: np.ndarray,
     d_gate: float,
+    scans: Iterable[int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The §5.4 matching of every scan: ``assoc`` (K, P) (the target has a gated partner) and, for a labelled
     tracker, the partner's label (K, P) (:data:`NO_LABEL` where ``assoc`` is False, a filler only: read a label
     where ``assoc`` is True); None for an unlabelled one.
 
     ``est_xy[k]`` are Est_k (restricted like the truth, docs/method.md §5.1), ``gt_xy`` (K, P, 2) the truth
-    positions and ``gt`` (K, P) the truth set GT_k.
+    positions and ``gt`` (K, P) the truth set GT_k. ``scans``: match only these scans (every scan when None) and
+    leave the others unassociated, e.g. the scans :func:`reemergence` reads (gaps, the scan before each, each k_t).
     """
     gt = np.asarray(gt, dtype=bool)
     assoc = np.zeros(gt.shape, dtype=bool)
     labels = None if est_labels is None else np.full(gt.shape, NO_LABEL, dtype=np.int64)
-    for k in range(len(gt)):
+    for k in range(len(gt)) if scans is None else scans:
         idx = np.flatnonzero(gt[k])
         pairs = gated_assignment(est_xy[k], gt_xy[k, idx], d_gate)
         assoc[k, idx[pairs[:, 1]]] = True

@@ -22,6 +22,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from soabench.notice import announced
 from soabench.tracks.sequence import TrackSequence, similarity
 
 #: HOTA's localisation thresholds alpha (TrackEval's ``array_labels``)
@@ -193,8 +194,7 @@ def _scan_matches(
     """Scan by scan: HOTA's alignment-weighted Hungarian matches (truth, estimate, S; every alpha is applied
     later) and the CLEAR MOT counts (its matching keeps the previous scan's pairs first). The compiled loop
     (:func:`soabench.tracks.kernels.match_scans`) hands a scan with two equal positions to scipy."""
-    from soabench.notice import announced
-    from soabench.tracks.kernels import match_scans
+    from soabench.tracks.kernels import match_scans  # numba is imported on first use, not with the package
 
     g, e = seq.gt, seq.est
     state = _MatchState.new(nG, int(np.minimum(np.diff(g.off), np.diff(e.off)).sum()))

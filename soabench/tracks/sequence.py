@@ -27,7 +27,7 @@ def similarity(gt_xy: np.ndarray, est_xy: np.ndarray, d_gate: float) -> np.ndarr
 
 
 @dataclass(frozen=True)
-class _Flat:
+class ScanRows:
     """The rows of every scan stacked: ids (N,) int64, positions (N, 2), scan k's rows ``off[k]:off[k+1]``."""
 
     ids: np.ndarray
@@ -35,7 +35,7 @@ class _Flat:
     off: np.ndarray
 
 
-def _flat(ids: Sequence, xy: Sequence, what: str) -> _Flat:
+def _flat(ids: Sequence, xy: Sequence, what: str) -> ScanRows:
     """Stack per-scan ids and positions (extra columns such as velocities dropped); one clear SoabenchError naming
     ``what`` and the scan for a count mismatch, non-integer ids, a repeated id within a scan or a non-finite
     position."""
@@ -65,7 +65,7 @@ def _flat(ids: Sequence, xy: Sequence, what: str) -> _Flat:
     if not np.isfinite(flat_xy).all():
         k = int(scan[np.flatnonzero(~np.isfinite(flat_xy).all(axis=1))[0]])
         raise SoabenchError(f"{what} at scan {k}: a NaN or infinite position; give finite (x, y) in metres")
-    return _Flat(flat_ids, flat_xy, off)
+    return ScanRows(flat_ids, flat_xy, off)
 
 
 @dataclass(frozen=True)
@@ -77,8 +77,8 @@ class TrackSequence:
         gt_labels, est_labels: the original id of each contiguous index (sorted).
     """
 
-    gt: _Flat
-    est: _Flat
+    gt: ScanRows
+    est: ScanRows
     gt_labels: np.ndarray
     est_labels: np.ndarray
 
@@ -90,7 +90,9 @@ class TrackSequence:
         g, e = _flat(gt_ids, gt_xy, "truth"), _flat(est_ids, est_xy, "estimates")
         g_lab, g_idx = np.unique(g.ids, return_inverse=True)
         e_lab, e_idx = np.unique(e.ids, return_inverse=True)
-        return cls(_Flat(g_idx.astype(np.int64), g.xy, g.off), _Flat(e_idx.astype(np.int64), e.xy, e.off), g_lab, e_lab)
+        return cls(
+            ScanRows(g_idx.astype(np.int64), g.xy, g.off), ScanRows(e_idx.astype(np.int64), e.xy, e.off), g_lab, e_lab
+        )
 
     def __len__(self) -> int:
         return len(self.gt.off) - 1
@@ -159,7 +161,7 @@ class TrackSequence:
         }
 
 
-def _padded(rows: _Flat, scans: range, width: int) -> tuple[np.ndarray, np.ndarray]:
+def _padded(rows: ScanRows, scans: range, width: int) -> tuple[np.ndarray, np.ndarray]:
     """(B, width) ids (-1 in padding) and (B, width, 2) positions (0 in padding) of ``scans``."""
     n = np.diff(rows.off[scans.start : scans.stop + 1])
     ids = np.full((len(scans), width), -1, dtype=np.int64)
