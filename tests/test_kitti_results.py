@@ -7,7 +7,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-import trackeval
 
 from soabench.errors import SoabenchError
 from soabench.kitti.config import kitti_base_config
@@ -48,26 +47,7 @@ def truth_as_estimates(recording, scans, sensor) -> tuple[list, list]:
     return X, labels
 
 
-def score(tmp_path, gt, trackers: dict) -> dict:
-    """TrackEval's KITTI 2-D box evaluation of each tracker folder's results (pedestrians), printing nothing."""
-    config = trackeval.Evaluator.get_default_eval_config()
-    config.update(
-        USE_PARALLEL=False, PRINT_RESULTS=False, PRINT_CONFIG=False, TIME_PROGRESS=False, OUTPUT_SUMMARY=False,
-        OUTPUT_DETAILED=False, PLOT_CURVES=False, DISPLAY_LESS_PROGRESS=True,
-    )  # fmt: skip
-    dataset = trackeval.datasets.Kitti2DBox(
-        {
-            "GT_FOLDER": str(gt), "TRACKERS_FOLDER": str(tmp_path / "trackers"), "OUTPUT_FOLDER": str(tmp_path / "o"),
-            "TRACKERS_TO_EVAL": list(trackers), "CLASSES_TO_EVAL": ["pedestrian"], "PRINT_CONFIG": False,
-        }
-    )  # fmt: skip
-    metrics = [trackeval.metrics.HOTA(), trackeval.metrics.CLEAR(), trackeval.metrics.Identity()]
-    res, msg = trackeval.Evaluator(config).evaluate([dataset], metrics)
-    assert msg["Kitti2DBox"] == dict.fromkeys(trackers, "Success")
-    return {name: res["Kitti2DBox"][name]["COMBINED_SEQ"]["pedestrian"] for name in trackers}
-
-
-def test_trackeval_scores_written_estimates(trial, tmp_path):
+def test_trackeval_scores_written_estimates(trial, tmp_path, trackeval_kitti):
     """The truth written as a tracker's results scores HOTA = MOTA = IDF1 = 1; the same with two pedestrians'
     labels swapped halfway through their common frames costs identity switches and HOTA."""
     recording, scans, sensor, calib, gt = trial
@@ -84,8 +64,8 @@ def test_trackeval_scores_written_estimates(trial, tmp_path):
     swapped = [np.where(lab == a, b, np.where(lab == b, a, lab)) if k >= at else lab for k, lab in enumerate(labels)]
     for name, lab in (("perfect", labels), ("swapped", swapped)):
         assert write_tracking_results(tmp_path / "trackers" / name, 0, X, lab, egos, calib, sensor.r_max) > 2 * common
-    r = score(tmp_path, gt, ["perfect", "swapped"])
-    p, s = r["perfect"], r["swapped"]
+    r = trackeval_kitti(gt, tmp_path / "trackers", ["perfect", "swapped"], ["pedestrian"])
+    p, s = r["perfect"]["pedestrian"], r["swapped"]["pedestrian"]
     assert p["CLEAR"]["CLR_TP"] > 2 * common and p["CLEAR"]["MOTA"] == 1.0 and p["Identity"]["IDF1"] == 1.0
     assert np.allclose(p["HOTA"]["HOTA"], 1.0)
     assert s["CLEAR"]["IDSW"] >= 1 and s["HOTA"]["HOTA"].mean() < 1.0 and s["Identity"]["IDF1"] < 1.0
