@@ -15,7 +15,7 @@ from soabench.config import MetricsConfig, SensorConfig
 from soabench.errors import SoabenchError
 from soabench.metrics import delay_episodes
 from soabench.sensor import Scan, Scans
-from soabench.tracks.evaluate import LABEL_KEYS, REEMERGENCE_KEYS, TRACK_KEYS, evaluate_tracks
+from soabench.tracks.evaluate import ALPHA_KEYS, LABEL_KEYS, REEMERGENCE_KEYS, TRACK_KEYS, evaluate_tracks
 from soabench.tracks.ospa2 import ospa2
 from soabench.tracks.reemergence import associated_labels, occlusion_gaps, reemergence
 from soabench.tracks.scores import ALPHAS, track_scores
@@ -362,7 +362,12 @@ def test_evaluate_tracks_labelled_and_unlabelled():
     assert (out["coasted"], out["n_gaps"], out["id_kept"], out["n_id"]) == (1.0, 1, 0.0, 1)
     assert out["ospa2"] > 0 and out["ospa2"] == pytest.approx(out["ospa2_loc"] + out["ospa2_card"])
     plain = evaluate_tracks(scans, X, None, episodes, cfg, sensor_cfg)
-    assert all(plain[key] is None for key in LABEL_KEYS) and plain["id_kept"] is None and plain["n_id"] is None
+    assert [out[key] for key in ALPHA_KEYS] == expected.hota_alpha.tolist()
+    assert (
+        all(plain[key] is None for key in LABEL_KEYS + ALPHA_KEYS)
+        and plain["id_kept"] is None
+        and plain["n_id"] is None
+    )
     assert {k: plain[k] for k in REEMERGENCE_KEYS if k not in ("id_kept", "n_id")} == {
         k: out[k] for k in REEMERGENCE_KEYS if k not in ("id_kept", "n_id")
     }

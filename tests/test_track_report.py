@@ -52,3 +52,18 @@ def test_paired_hota_against_soa():
     assert math.isclose(c["hota_diff"], 0.0, abs_tol=1e-15) and math.isclose(c["idf1_diff"], (0.2 - 0.2 - 0.1) / 3)
     lines = render_tracks([], [("static", "UBM", c)])
     assert lines[-1] == "| static | UBM | 1 / 4 | 1 | 1 | 1 | 0.000 | -0.033 |"
+
+
+def test_tracks_figure_draws_labelled_curves_and_names_the_unlabelled():
+    from soabench.tracks.evaluate import ALPHA_KEYS
+    from soabench.tracks.figures import tracks_figure
+
+    def col(key: str, model: str, mode: str) -> np.ndarray:
+        if model == "nnkf" and key in ALPHA_KEYS:
+            return np.full(3, NAN)
+        return np.array([0.5, 0.6, 0.7])
+
+    fig = tracks_figure(col, ["soa", "nnkf"], ["static", "dynamic"], 3.0)
+    curves, bars = fig.axes[:2]
+    assert len(curves.get_lines()) == 2 and "no labels: nnkf" in curves.get_title()
+    assert len(bars.patches) == 2 * 2 * 2  # two models x two modes x (entry, re-emergence)

@@ -4,7 +4,8 @@
 the tracker's extracted positions and, if it labels them, their labels, and the §5.4 delay episodes that
 :func:`soabench.metrics.evaluate` already built. Truth ids are the pedestrian columns of the scans; truth and
 estimates are the sets of docs/method.md §5.1. The position-only measures (entry and re-emergence delay, coasted)
-are computed for every tracker; the label measures (HOTA ... OSPA(2), identity kept) are None for an unlabelled one.
+are computed for every tracker; the label measures (HOTA ... OSPA(2), HOTA per alpha, identity kept) are None for an
+unlabelled one.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 from soabench.metrics import Episode, estimate_mask, gt_mask
 from soabench.tracks.ospa2 import ospa2_of
 from soabench.tracks.reemergence import associated_labels, occlusion_gaps, reemergence
-from soabench.tracks.scores import scores_of
+from soabench.tracks.scores import ALPHAS, scores_of
 from soabench.tracks.sequence import TrackSequence
 
 if TYPE_CHECKING:
@@ -37,8 +38,11 @@ REEMERGENCE_KEYS = (
     "coasted", "n_gaps", "id_kept", "n_id",
 )  # fmt: skip
 
+#: per-run columns of HOTA at each localisation threshold alpha (TrackEval's HOTA___5 ... HOTA___95); None unlabelled
+ALPHA_KEYS = tuple(f"hota_a{round(100 * a):02d}" for a in ALPHAS)
+
 #: every per-run column of this module, in table order
-TRACK_KEYS = LABEL_KEYS + REEMERGENCE_KEYS
+TRACK_KEYS = LABEL_KEYS + REEMERGENCE_KEYS + ALPHA_KEYS
 
 
 def evaluate_tracks(
@@ -59,13 +63,14 @@ def evaluate_tracks(
     needed = {k for g in gaps for k in range(g.k_a - 1, g.k_b + 1)}
     needed |= {e.k_t for e in episodes if not e.censored}
     assoc, assoc_labels = associated_labels(est_xy, est_labels, scans.truth_xy, gt, cfg.d_gate, sorted(needed))
-    out: dict[str, float | int | None] = dict.fromkeys(LABEL_KEYS)
+    out: dict[str, float | int | None] = dict.fromkeys(LABEL_KEYS + ALPHA_KEYS)
     if est_labels is not None:
         gt_ids = [np.flatnonzero(row) for row in gt]
         seq = TrackSequence.of(gt_ids, [scans.truth_xy[k, i] for k, i in enumerate(gt_ids)], est_labels, est_xy)
-        s = scores_of(seq, cfg.d_gate).scalars()
-        o = ospa2_of(seq)
+        scores = scores_of(seq, cfg.d_gate)
+        s, o = scores.scalars(), ospa2_of(seq)
         out.update({key: s[key] for key in LABEL_KEYS if key in s})
+        out.update(zip(ALPHA_KEYS, scores.hota_alpha.tolist(), strict=True))
         out.update(ospa2=o.ospa2, ospa2_loc=o.loc, ospa2_card=o.card)
     out.update(reemergence(episodes, gaps, assoc, assoc_labels, cfg.ddof, cfg.censored).summary())
     return {key: out[key] for key in TRACK_KEYS}
