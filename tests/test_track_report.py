@@ -65,5 +65,5 @@ def test_tracks_figure_draws_labelled_curves_and_names_the_unlabelled():
 
     fig = tracks_figure(col, ["soa", "nnkf"], ["static", "dynamic"], 3.0)
     curves, bars = fig.axes[:2]
-    assert len(curves.get_lines()) == 2 and "no labels: nnkf" in curves.get_title()
+    assert len(curves.get_lines()) == 2 and "no labels: nnkf" in curves.get_title(loc="left")
     assert len(bars.patches) == 2 * 2 * 2  # two models x two modes x (entry, re-emergence)
