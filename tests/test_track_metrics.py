@@ -350,6 +350,7 @@ def test_evaluate_tracks_labelled_and_unlabelled():
     far = np.array([[500.0, 0.0, 0.0, 0.0]])  # outside the FOV: not in Est_k, and neither is its label
     X = [np.vstack([np.column_stack([scans.truth_xy[k] + 0.3, np.zeros((2, 2))]), far]) for k in range(K)]
     labels = [np.array([7 if k < 15 else 9, 8, 99]) for k in range(K)]
+    X[3], labels[3] = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)  # a scan without estimates
     cfg, sensor_cfg = MetricsConfig(), SensorConfig()
     assoc = np.ones((K, 2), dtype=bool)
     episodes = delay_episodes(scans.visible, scans.detected, assoc, scans.dt)
@@ -357,6 +358,7 @@ def test_evaluate_tracks_labelled_and_unlabelled():
     assert list(out) == list(TRACK_KEYS)
     expected = track_scores([np.array([0, 1])] * K, list(scans.truth_xy), [lab[:2] for lab in labels],
                             [x[:2, :2] for x in X], cfg.d_gate)  # fmt: skip
+    assert expected.clr_fn == 2  # the empty scan
     assert out["hota"] == expected.hota and out["idsw"] == expected.idsw == 1 and out["idf1"] == expected.idf1
     assert out["n_entry"] == 2 and out["n_reemergence"] == 1 and out["delay_reemergence_mean"] == 0.0
     assert (out["coasted"], out["n_gaps"], out["id_kept"], out["n_id"]) == (1.0, 1, 0.0, 1)

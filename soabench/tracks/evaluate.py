@@ -15,11 +15,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from soabench.errors import SoabenchError
 from soabench.metrics import Episode, estimate_mask, gt_mask
 from soabench.tracks.ospa2 import ospa2_of
 from soabench.tracks.reemergence import associated_labels, occlusion_gaps, reemergence
 from soabench.tracks.scores import ALPHAS, scores_of
-from soabench.tracks.sequence import TrackSequence
+from soabench.tracks.sequence import ScanRows, TrackSequence, checked
 
 if TYPE_CHECKING:
     from soabench.config import MetricsConfig, SensorConfig
@@ -45,6 +46,39 @@ ALPHA_KEYS = tuple(f"hota_a{round(100 * a):02d}" for a in ALPHAS)
 TRACK_KEYS = LABEL_KEYS + REEMERGENCE_KEYS + ALPHA_KEYS
 
 
+def _offsets(counts: np.ndarray) -> np.ndarray:
+    """Row offsets (K + 1,) of per-scan row counts (K,)."""
+    off = np.zeros(len(counts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=off[1:])
+    return off
+
+
+def _estimate_rows(
+    scans: Scans, X: Sequence[np.ndarray], labels: Sequence[np.ndarray] | None, gt_set: str, sensor_cfg: SensorConfig
+) -> ScanRows:
+    """Est_k of every scan stacked (docs/method.md §5.1: restricted to FOV_k unless ``gt_set`` is "scene"; one FOV
+    test for all scans, each row with its scan's pose) with their labels (-1 for an unlabelled tracker)."""
+    xy = [np.asarray(x, dtype=float).reshape(len(x), -1)[:, :2] if np.size(x) else np.zeros((0, 2)) for x in X]
+    counts = np.fromiter((len(x) for x in xy), dtype=np.int64, count=len(xy))
+    E = np.concatenate(xy) if xy else np.zeros((0, 2))
+    if labels is None:
+        ids = np.full(len(E), -1, dtype=np.int64)
+    else:
+        lab = [np.asarray(v).reshape(-1) if np.size(v) else np.zeros(0, dtype=np.int64) for v in labels]
+        n_lab = np.fromiter((len(v) for v in lab), dtype=np.int64, count=len(lab))
+        if (n_lab != counts).any():
+            k = int(np.flatnonzero(n_lab != counts)[0])
+            raise SoabenchError(f"estimates at scan {k}: {n_lab[k]} labels for {counts[k]} estimates")
+        ids = np.concatenate(lab) if lab else np.zeros(0, dtype=np.int64)
+    scan = np.repeat(np.arange(len(counts)), counts)
+    keep = np.ones(len(E), dtype=bool)
+    if gt_set != "scene" and len(E):
+        egos = np.array([s.ego for s in scans.scans], dtype=float).reshape(-1, 3)
+        keep = estimate_mask(E, egos[scan], sensor_cfg, gt_set)
+    rows = ScanRows(ids[keep], E[keep], _offsets(np.bincount(scan[keep], minlength=len(counts))))
+    return rows if labels is None else checked(rows.ids, rows.xy, rows.off, "estimates")
+
+
 def evaluate_tracks(
     scans: Scans,
     X: Sequence[np.ndarray],
@@ -56,17 +90,19 @@ def evaluate_tracks(
     """The :data:`TRACK_KEYS` of one filter run: ``X[k]`` the extracted states at scan k (positions first),
     ``labels[k]`` their labels (None: an unlabelled tracker), ``episodes`` the run's §5.4 delay episodes."""
     gt = gt_mask(scans, cfg.gt_set)
-    keep = [estimate_mask(x, scan.ego, sensor_cfg, cfg.gt_set) for x, scan in zip(X, scans.scans, strict=True)]
-    est_xy = [np.asarray(x, dtype=float).reshape(len(m), -1)[m, :2] for x, m in zip(X, keep, strict=True)]
-    est_labels = None if labels is None else [np.asarray(lab)[m] for lab, m in zip(labels, keep, strict=True)]
+    est = _estimate_rows(scans, X, labels, cfg.gt_set, sensor_cfg)
+    est_xy = np.split(est.xy, est.off[1:-1])
+    est_labels = None if labels is None else np.split(est.ids, est.off[1:-1])
     gaps = occlusion_gaps(np.asarray(scans.present) & np.asarray(scans.in_fov), scans.visible)
+    # the scans reemergence() reads: each gap, the scan before it, and the re-acquisition of the episode after it
     needed = {k for g in gaps for k in range(g.k_a - 1, g.k_b + 1)}
-    needed |= {e.k_t for e in episodes if not e.censored}
+    after_gap = {(g.target, g.k_b + 1) for g in gaps}
+    needed |= {e.k_t for e in episodes if not e.censored and (e.target, e.k0) in after_gap}
     assoc, assoc_labels = associated_labels(est_xy, est_labels, scans.truth_xy, gt, cfg.d_gate, sorted(needed))
     out: dict[str, float | int | None] = dict.fromkeys(LABEL_KEYS + ALPHA_KEYS)
     if est_labels is not None:
-        gt_ids = [np.flatnonzero(row) for row in gt]
-        seq = TrackSequence.of(gt_ids, [scans.truth_xy[k, i] for k, i in enumerate(gt_ids)], est_labels, est_xy)
+        k, p = np.nonzero(gt)  # GT_k of every scan stacked, in column order (finite positions: gt_mask)
+        seq = TrackSequence.of_rows(ScanRows(p.astype(np.int64), scans.truth_xy[k, p], _offsets(gt.sum(axis=1))), est)
         scores = scores_of(seq, cfg.d_gate)
         s, o = scores.scalars(), ospa2_of(seq)
         out.update({key: s[key] for key in LABEL_KEYS if key in s})

@@ -7,8 +7,8 @@
 Each assignment is the minimum-cost one of :func:`soabench.metrics_kernels.assignment` on the cost matrices that
 TrackEval and :func:`soabench.metrics.ospa` build, with the same floating-point operations (IEEE double, no
 ``fastmath``). An optimal assignment is unique unless two have the same cost; :func:`match_scans` stops at a scan
-whose truths or estimates hold two equal positions (an estimate extracted twice) so that the caller matches it with
-scipy, as TrackEval does.
+whose cost matrix has two equal rows or columns (two equal positions that the labels do not tell apart) so that the
+caller matches it with scipy, as TrackEval does.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ configure_numba_cache()  # before numba is imported: compiled kernels go to the 
 
 from numba import njit  # noqa: E402
 
-from soabench.metrics_kernels import _repeats, assignment, np_sum  # noqa: E402
+from soabench.metrics_kernels import assignment, np_sum  # noqa: E402
 
 _EPS = np.finfo(np.float64).eps
 
@@ -42,9 +42,33 @@ def scan_similarity(gx, g0, ng, ex, e0, ne, d_gate):  # pragma: no cover - compi
 
 
 @njit(cache=True)
+def _tied(C):  # pragma: no cover - compiled
+    """True if two rows or two columns of ``C`` are equal and not all zero: then several assignments are optimal
+    and which one is taken can change the matches (a zero row or column is never a kept match)."""
+    a, b = C.shape
+    for i in range(a):
+        for j in range(i + 1, a):
+            same, nonzero = True, False
+            for c in range(b):
+                same = same and C[i, c] == C[j, c]
+                nonzero = nonzero or C[i, c] != 0.0
+            if same and nonzero:
+                return True
+    for i in range(b):
+        for j in range(i + 1, b):
+            same, nonzero = True, False
+            for r in range(a):
+                same = same and C[r, i] == C[r, j]
+                nonzero = nonzero or C[r, i] != 0.0
+            if same and nonzero:
+                return True
+    return False
+
+
+@njit(cache=True)
 def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignment, state):  # pragma: no cover
-    """Scans t, t + 1, ... of :func:`soabench.tracks.scores._scan_matches` until the end or a scan with two equal
-    positions among its truths or its estimates; returns the index of that scan (K at the end).
+    """Scans t, t + 1, ... of :func:`soabench.tracks.scores._scan_matches` until the end or a scan whose matching
+    has several optimal answers (:func:`_tied`); returns the index of that scan (K at the end).
 
     ``state`` is :class:`soabench.tracks.scores._MatchState`'s arrays in order: counts (tp, fn, fp, idsw, n_pairs),
     motp_sum (1,), gt_seen, gt_matched, frag_count, prev_id, prev_scan_id, and HOTA's pairs hg, he, hs.
@@ -60,14 +84,17 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
             counts[1] += ng
             for i in range(ng):
                 gt_seen[g_ids[g0 + i]] += 1
-        elif _repeats(gx, g0, ng) or _repeats(ex, e0, ne):
-            return t
         else:
             S = scan_similarity(gx, g0, ng, ex, e0, ne, d_gate)
-            C = np.empty((ng, ne))
+            C = np.empty((ng, ne))  # HOTA: alignment-weighted similarity
+            Q = np.empty((ng, ne))  # CLEAR: the previous scan's pairs first, then similarity, 0 below the threshold
             for i in range(ng):
                 for j in range(ne):
                     C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j])
+                    score = (1000.0 if e_ids[e0 + j] == prev_scan[g_ids[g0 + i]] else 0.0) + S[i, j]
+                    Q[i, j] = 0.0 if S[i, j] < threshold - _EPS else -score
+            if _tied(C) or _tied(Q):
+                return t
             rows, cols = assignment(C)
             n = counts[4]
             for r in range(len(rows)):
@@ -75,11 +102,7 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
                 he[n + r] = e_ids[e0 + cols[r]]
                 hs[n + r] = S[rows[r], cols[r]]
             counts[4] = n + len(rows)
-            for i in range(ng):
-                for j in range(ne):
-                    score = (1000.0 if e_ids[e0 + j] == prev_scan[g_ids[g0 + i]] else 0.0) + S[i, j]
-                    C[i, j] = 0.0 if S[i, j] < threshold - _EPS else -score
-            rows, cols = assignment(C)
+            rows, cols = assignment(Q)
             for i in range(ng):
                 gt_seen[g_ids[g0 + i]] += 1
             untracked = prev_scan < 0
@@ -87,7 +110,7 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
             matched = 0
             sim_sum = 0.0
             for r in range(len(rows)):
-                if -C[rows[r], cols[r]] > _EPS:
+                if -Q[rows[r], cols[r]] > _EPS:
                     mg, me = g_ids[g0 + rows[r]], e_ids[e0 + cols[r]]
                     if prev_id[mg] >= 0 and prev_id[mg] != me:
                         counts[3] += 1

@@ -36,9 +36,7 @@ class ScanRows:
 
 
 def _flat(ids: Sequence, xy: Sequence, what: str) -> ScanRows:
-    """Stack per-scan ids and positions (extra columns such as velocities dropped); one clear SoabenchError naming
-    ``what`` and the scan for a count mismatch, non-integer ids, a repeated id within a scan or a non-finite
-    position."""
+    """Stack per-scan ids and positions (extra columns such as velocities dropped) and :func:`checked` them."""
     if len(ids) != len(xy):
         raise SoabenchError(f"{what}: {len(ids)} scans of ids but {len(xy)} scans of positions")
     id_list = [np.asarray(i).reshape(-1) for i in ids]
@@ -52,20 +50,26 @@ def _flat(ids: Sequence, xy: Sequence, what: str) -> ScanRows:
     off = np.zeros(len(n) + 1, dtype=np.int64)
     np.cumsum(n, out=off[1:])
     flat_ids = np.concatenate(id_list) if len(id_list) else np.zeros(0, dtype=np.int64)
-    if flat_ids.size and not np.issubdtype(flat_ids.dtype, np.integer):
-        raise SoabenchError(f"{what}: ids of dtype {flat_ids.dtype}; ids must be integers (int64)")
-    flat_ids = flat_ids.astype(np.int64)
     flat_xy = np.concatenate(xy_list) if len(xy_list) else np.zeros((0, 2))
-    scan = np.repeat(np.arange(len(n)), n)
-    order = np.lexsort((flat_ids, scan))
-    twice = (np.diff(flat_ids[order]) == 0) & (np.diff(scan[order]) == 0)
+    return checked(flat_ids, flat_xy, off, what)
+
+
+def checked(ids: np.ndarray, xy: np.ndarray, off: np.ndarray, what: str) -> ScanRows:
+    """Stacked rows (scan k's are ``off[k]:off[k + 1]``) after the checks: integer ids, no id twice in a scan,
+    finite positions; one clear SoabenchError naming ``what`` and the scan otherwise."""
+    if ids.size and not np.issubdtype(ids.dtype, np.integer):
+        raise SoabenchError(f"{what}: ids of dtype {ids.dtype}; ids must be integers (int64)")
+    ids = ids.astype(np.int64)
+    scan = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    order = np.lexsort((ids, scan))
+    twice = (np.diff(ids[order]) == 0) & (np.diff(scan[order]) == 0)
     if twice.any():
         k = int(scan[order][np.flatnonzero(twice)[0]])
         raise SoabenchError(f"{what} at scan {k}: an id appears twice; ids must be unique within a scan")
-    if not np.isfinite(flat_xy).all():
-        k = int(scan[np.flatnonzero(~np.isfinite(flat_xy).all(axis=1))[0]])
+    if not np.isfinite(xy).all():
+        k = int(scan[np.flatnonzero(~np.isfinite(xy).all(axis=1))[0]])
         raise SoabenchError(f"{what} at scan {k}: a NaN or infinite position; give finite (x, y) in metres")
-    return ScanRows(flat_ids, flat_xy, off)
+    return ScanRows(ids, xy, off)
 
 
 @dataclass(frozen=True)
@@ -87,7 +91,13 @@ class TrackSequence:
         """From per-scan truth ids and positions and estimate labels and positions (K scans each)."""
         if len(gt_ids) != len(est_ids):
             raise SoabenchError(f"{len(gt_ids)} scans of truth but {len(est_ids)} scans of estimates")
-        g, e = _flat(gt_ids, gt_xy, "truth"), _flat(est_ids, est_xy, "estimates")
+        return cls.of_rows(_flat(gt_ids, gt_xy, "truth"), _flat(est_ids, est_xy, "estimates"))
+
+    @classmethod
+    def of_rows(cls, g: ScanRows, e: ScanRows) -> TrackSequence:
+        """From stacked truth and estimate rows of equal scan counts, already :func:`checked`."""
+        if len(g.off) != len(e.off):
+            raise SoabenchError(f"{len(g.off) - 1} scans of truth but {len(e.off) - 1} scans of estimates")
         g_lab, g_idx = np.unique(g.ids, return_inverse=True)
         e_lab, e_idx = np.unique(e.ids, return_inverse=True)
         return cls(
