@@ -42,9 +42,8 @@ def scan_similarity(gx, g0, ng, ex, e0, ne, d_gate):  # pragma: no cover - compi
 
 
 @njit(cache=True)
-def _tied(C):  # pragma: no cover - compiled
-    """True if two rows or two columns of ``C`` are equal and not all zero: then several assignments are optimal
-    and which one is taken can change the matches (a zero row or column is never a kept match)."""
+def _equal_rows(C):  # pragma: no cover - compiled
+    """True if two rows of ``C`` are equal and not all zero."""
     a, b = C.shape
     for i in range(a):
         for j in range(i + 1, a):
@@ -54,15 +53,14 @@ def _tied(C):  # pragma: no cover - compiled
                 nonzero = nonzero or C[i, c] != 0.0
             if same and nonzero:
                 return True
-    for i in range(b):
-        for j in range(i + 1, b):
-            same, nonzero = True, False
-            for r in range(a):
-                same = same and C[r, i] == C[r, j]
-                nonzero = nonzero or C[r, i] != 0.0
-            if same and nonzero:
-                return True
     return False
+
+
+@njit(cache=True)
+def _tied(C):  # pragma: no cover - compiled
+    """True if two rows or two columns of ``C`` are equal and not all zero: then several assignments are optimal
+    and which one is taken can change the matches (a zero row or column is never a kept match)."""
+    return _equal_rows(C) or _equal_rows(np.ascontiguousarray(C.T))
 
 
 @njit(cache=True)
