@@ -56,7 +56,7 @@ def as_scene(scene_or_net: Any) -> Any:
     from soabench.scenario.scene import SceneMap
 
     if isinstance(scene_or_net, (str, Path)):
-        from soabench.experiment.runner import load_scene_cached
+        from soabench.experiment.execution.runner import load_scene_cached
 
         return load_scene_cached(str(scene_or_net), (), None)[0]
     require_type(scene_or_net, SceneMap, "scene_or_net", "give a network name such as 'intersection' or a SceneMap")
@@ -158,7 +158,7 @@ def step_results(scans: Scans, estimates: Sequence[Any], order: str | None = Non
     ``order``: the column order of four-column states (:data:`ORDERS`); None: ours, after
     :func:`check_state_order` found no sign of Stone Soup's.
     """
-    from soabench.experiment.guard import PluginOutputError, check_estimates
+    from soabench.experiment.trial.guard import PluginOutputError, check_estimates
 
     require_type(scans, Scans, "scans", "simulate them with soabench.api.simulate_trial")
     require(order is None or order in ORDERS, f"order = {order!r}; choose one of {', '.join(map(repr, ORDERS))}")

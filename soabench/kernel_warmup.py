@@ -34,7 +34,7 @@ from typing import TextIO
 
 import numpy as np
 
-from soabench.experiment.progress import LINE_INTERVAL_S, is_terminal
+from soabench.experiment.execution.progress import LINE_INTERVAL_S, is_terminal
 
 #: the modules whose kernels are compiled here (their source files key the stamp, as they key numba's cache)
 KERNEL_MODULES = (

@@ -205,7 +205,7 @@ def preflight(config: Any) -> None:
 
     An import error or an unknown option is a user error (one line, exit 2) caught here, in the driver, so no
     trial runs with a plugin that cannot even be built; errors while a plugin runs are recorded per run instead
-    (:mod:`soabench.experiment.guard`).
+    (:mod:`soabench.experiment.trial.guard`).
     """
     exp = config.experiment
     for kind, names_ in ((BIRTH, exp.models), (TRACKER, exp.trackers)):

@@ -16,8 +16,8 @@ import pytest
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import SoabenchError
-from soabench.experiment import guard
-from soabench.experiment.trial import run_trial
+from soabench.experiment.trial import guard
+from soabench.experiment.trial.trial import run_trial
 from soabench.types import Births, Estimates, NewbornTerms, Scan
 
 FX = "plugin_fixtures"
@@ -226,8 +226,8 @@ def test_bad_plugins_are_recorded_and_others_kept(intersection) -> None:
 
 
 def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
-    from soabench.experiment.files import read_csv
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.runs.files import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
     plugins.allow_import_paths([one, echo, bad])
@@ -282,8 +282,8 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     from pathlib import Path
 
     distributed = pytest.importorskip("distributed")
-    from soabench.experiment.files import read_csv
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.runs.files import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
     plugins.allow_import_paths([one, echo, bad])
@@ -319,7 +319,7 @@ def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None
 
     from soabench.cli import main
     from soabench.config import BIRTH_MODEL_NAMES
-    from soabench.experiment import study
+    from soabench.experiment.campaigns import study
 
     seen = {}
 

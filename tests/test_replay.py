@@ -43,7 +43,7 @@ def page_data(page: Path) -> dict:
 
 def scene_sensor_scans(monkeypatch, tmp_path: Path, time: float):
     """The scans ``soabench scene --sensor --trial 1 --time T`` draws (captured at its drawing call)."""
-    import soabench.sensor_plot as sp
+    import soabench.figures.sensor as sp
 
     seen = {}
     original = sp.draw_sensor_overlay

@@ -11,6 +11,7 @@ from shapely.geometry import Polygon, box
 
 from soabench.config import SensorConfig
 from soabench.errors import SoabenchError
+from soabench.figures.sensor import draw_sensor_overlay
 from soabench.geometry import fov_mask, range_bearing, wrap
 from soabench.scenario.recording import Recording
 from soabench.scenario.scene import SceneMap
@@ -29,7 +30,6 @@ from soabench.sensor import (
     target_visibility,
     visible_region,
 )
-from soabench.sensor_plot import draw_sensor_overlay
 
 # ----------------------------------------------------------------------------------------------------------------
 # synthetic scene and recording (no SUMO needed); also imported by test_sensor_stats.py

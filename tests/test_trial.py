@@ -17,7 +17,7 @@ from shapely.geometry import Polygon
 from soabench.birth.base import BirthContext, Births
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import SoabenchError
-from soabench.experiment.trial import (
+from soabench.experiment.trial.trial import (
     EPISODE_KEYS,
     ESTIMATE_KEYS,
     ROW_KEYS,

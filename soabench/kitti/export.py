@@ -38,8 +38,8 @@ from shapely.ops import split
 
 from soabench.config import Config, SensorConfig
 from soabench.errors import require
-from soabench.experiment.files import write_json_atomic, write_text_atomic
-from soabench.experiment.ownership import FolderLock, check_new_folder, resolve
+from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
+from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
 from soabench.geometry import wrap
 from soabench.kitti.camera import image_box
 from soabench.kitti.formats import (

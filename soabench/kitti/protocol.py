@@ -25,7 +25,7 @@ import numpy as np
 
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
-from soabench.experiment.files import read_json, write_json_atomic
+from soabench.experiment.runs.files import read_json, write_json_atomic
 from soabench.kitti.config import KittiConfig, kitti_from_dict, kitti_to_dict
 from soabench.kitti.formats import ReadError, UnreadableError
 from soabench.kitti.lidar import lidar_files, lidar_semantics
@@ -135,7 +135,7 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
     times go to ``record["timing"]``, so everything else is bit-identical for the same inputs and seed.
     """
     from soabench.birth import get_birth_model
-    from soabench.experiment.trial import run_filter
+    from soabench.experiment.trial.trial import run_filter
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.metrics import evaluate
 
@@ -188,8 +188,9 @@ def run_kitti(
     log: Callable[[str], None] | None = None,
 ) -> KittiOutcome:
     """Run (or finish, ``resume=True``) the protocol into the run folder ``out``: resolved, new or empty for a new
-    run (holding this run's ``run.json`` on resume), locked while it works (:mod:`soabench.experiment.ownership`)."""
-    from soabench.experiment.ownership import FolderLock, check_new_folder, resolve
+    run (holding this run's ``run.json`` on resume), locked while it works
+    (:mod:`soabench.experiment.runs.ownership`)."""
+    from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = resolve(out)

@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from soabench.birth import LABEL
-from soabench.experiment.files import write_bytes_atomic, write_csv, write_json_atomic, write_text_atomic
-from soabench.plotstyle import model_style
+from soabench.experiment.runs.files import write_bytes_atomic, write_csv, write_json_atomic, write_text_atomic
+from soabench.figures.style import model_style
 
 if TYPE_CHECKING:
     from soabench.kitti.protocol import KittiSpec

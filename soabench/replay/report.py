@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from soabench.errors import SoabenchError, require
-from soabench.experiment.files import write_text_atomic
+from soabench.experiment.runs.files import write_text_atomic
 from soabench.replay.page import asset, fill
 
 GENERATOR = "soabench report"
@@ -202,7 +202,7 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Pa
 
 def find_runs(folder: Path) -> list[Path]:
     """Every run folder (holding ``run.json``) under ``folder``, sorted by path."""
-    from soabench.experiment.store import RUN_FILE
+    from soabench.experiment.runs.store import RUN_FILE
 
     return sorted(p.parent for p in folder.rglob(RUN_FILE))
 
@@ -261,7 +261,7 @@ def index_html(folder: Path, runs: list[Path]) -> str:
 def write_index(folder: str | Path) -> tuple[Path, int, list[Path]]:
     """Write every run's report under ``folder`` and ``folder/index.html`` linking them; returns the index path, its
     size in bytes and the run folders."""
-    from soabench.experiment.ownership import resolve
+    from soabench.experiment.runs.ownership import resolve
 
     path = resolve(folder)
     require(path.is_dir(), f"{str(path)!r} is not a folder")

@@ -58,11 +58,11 @@ class TrialReplay:
 
 
 def read_run(run_dir: str | Path):
-    """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runmeta.validate_run_meta`) and its
+    """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runs.runmeta.validate_run_meta`) and its
     raw dict."""
-    from soabench.experiment.ownership import check_existing_folder, resolve
-    from soabench.experiment.runmeta import validate_run_meta
-    from soabench.experiment.store import RUN_FILE, RunStore
+    from soabench.experiment.runs.ownership import check_existing_folder, resolve
+    from soabench.experiment.runs.runmeta import validate_run_meta
+    from soabench.experiment.runs.store import RUN_FILE, RunStore
 
     path = resolve(run_dir)
     check_existing_folder(path, RUN_FILE, "run")
@@ -90,9 +90,9 @@ def replay_trial(
     probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
     from soabench import plugins
     from soabench.birth import LABEL
-    from soabench.experiment import registry
-    from soabench.experiment.runner import load_scene_cached
-    from soabench.experiment.trial import RunKey, make_row
+    from soabench.experiment.execution.runner import load_scene_cached
+    from soabench.experiment.trial import registry
+    from soabench.experiment.trial.trial import RunKey, make_row
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.metrics import evaluate
     from soabench.scenario import simulate
@@ -158,7 +158,7 @@ class _Recorder:
 
 def _version_note(raw: dict) -> str:
     """One line: the package versions that differ between the run and this replay (or that they agree)."""
-    from soabench.experiment.runner import package_versions
+    from soabench.experiment.execution.runner import package_versions
 
     stored = raw.get("versions") if isinstance(raw.get("versions"), dict) else {}
     now = package_versions()

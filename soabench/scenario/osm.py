@@ -141,7 +141,7 @@ def import_osm(osm_file: str | os.PathLike, out: str | os.PathLike, force: bool 
     ``out`` must not exist or be empty; the scene is built in a temporary folder beside it and moved there when
     complete, so an import that fails leaves nothing. Files above :data:`MAX_OSM_MB` are refused unless ``force``.
     """
-    from soabench.experiment.ownership import check_new_folder, resolve
+    from soabench.experiment.runs.ownership import check_new_folder, resolve
 
     osm = Path(osm_file)
     counts = check_osm(osm)

@@ -89,7 +89,7 @@ def run_watched(fn: Callable[..., Any], args: tuple, describe: str, hint: str = 
     limit = stall_timeout()
     if not hasattr(os, "fork"):  # pragma: no cover - Windows
         return fn(*args, progress=Progress())
-    from soabench.experiment.workers import _set_pdeathsig  # imported here: the child starts at once
+    from soabench.experiment.execution.workers import _set_pdeathsig  # imported here: the child starts at once
 
     page = mmap.mmap(-1, _STATE.size)  # anonymous and shared: the child's writes are seen here
     read_fd, write_fd = os.pipe()
