@@ -476,12 +476,12 @@ def cmd_record(args: argparse.Namespace) -> int:
 def cmd_birth(args: argparse.Namespace) -> int:
     from soabench import plugins
     from soabench.birth import LABEL
-    from soabench.birth.base import BirthContext
     from soabench.experiment.trial.guard import check_births
     from soabench.figures.births import draw_births
     from soabench.figures.scene import plot_scene, scene_figure
     from soabench.figures.style import panel_title
     from soabench.gmphd.filter import GMPHDFilter
+    from soabench.types import BirthContext
 
     out = _prepare_out(args.out, ".png")
     plugins.allow_import_paths([args.model])

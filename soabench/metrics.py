@@ -8,8 +8,8 @@ Building blocks (pure functions of point sets, all distances 2-D Euclidean in me
   association k_t, censoring, the lower-bound variant;
 * :func:`evaluate`: every metric of one filter run (one birth model x probability mode x clutter rate of a trial).
 
-Metrics never touch SUMO or the filter: they read :class:`~soabench.sensor.Scans` (truth flags) and the filter's
-:class:`~soabench.gmphd.filter.StepResult` list.
+Metrics never touch SUMO or the filter: they read :class:`~soabench.types.Scans` (truth flags) and the filter's
+:class:`~soabench.types.StepResult` list.
 """
 
 from __future__ import annotations
@@ -28,8 +28,7 @@ from soabench.origins import ORIGIN_KEYS, origin_counts_of
 
 if TYPE_CHECKING:
     from soabench.config import MetricsConfig, SensorConfig
-    from soabench.gmphd.filter import StepResult
-    from soabench.sensor import Scans
+    from soabench.types import Scans, StepResult
 
 #: cost of a pair beyond the gate in the gated Hungarian assignment (§5.4 step 1)
 GATE_COST = 1e6

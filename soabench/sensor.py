@@ -30,22 +30,16 @@ from shapely.geometry.base import BaseGeometry
 from soabench.config import SensorConfig
 from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import fov_mask, range_bearing, wrap
-
-# the stage contract lives in the bottom layer; re-exported here so old import paths keep working
-from soabench.types import (  # noqa: F401
+from soabench.types import (
     CLUTTER,
-    OCCLUDER_KINDS,
-    SCANS_FORMAT_VERSION,
-    SENSOR_UNITS,
     DeferredRegion,
     Obstacles,
+    Recording,
     Scan,
     Scans,
-    sensor_arrays,
 )
 
 if TYPE_CHECKING:
-    from soabench.scenario.recording import Recording
     from soabench.scenario.scene import SceneMap
 
 _FOV_ARC_STEP = np.radians(1.0)  #: vertex spacing of the FOV polygon arcs (chord error 2 mm at 50 m)
@@ -554,7 +548,6 @@ def observe(
     and settings other than ``lambda_c`` reuses it (another recording, scene or setting starts it afresh). The scans
     are the same as without it (docs/method.md §5.8: the detection and clutter streams are drawn as before).
     """
-    from soabench.scenario.recording import Recording
     from soabench.scenario.scene import SceneMap
 
     require_type(recording, Recording, "observe's recording", "simulate one with soabench.scenario.simulate")

@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from soabench.errors import require_type
-from soabench.protocols import Tracker, TrackerSetup
+from soabench.protocols import Tracker
 from soabench.types import BirthContext, Births, Estimates, Scan, Scans, StepResult
 
-__all__ = ["GMPHDTracker", "Tracker", "TrackerRun", "TrackerSetup", "run_tracker", "step_result_from"]
+__all__ = ["GMPHDTracker", "TrackerRun", "run_tracker", "step_result_from"]
 
 
 class GMPHDTracker:

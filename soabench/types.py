@@ -35,7 +35,7 @@ SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (docs/use
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Truth: one scenario run (moved from soabench.scenario.recording, which re-exports it)
+# Truth: one scenario run
 
 
 @dataclass

@@ -14,12 +14,11 @@ from soabench.baselines.partially_uniform import PartiallyUniformBirth
 from soabench.baselines.standard_gm import StandardGMBirth, boundary_exits, entry_points
 from soabench.baselines.uniform import UniformBirth, grid_nodes
 from soabench.birth import REGISTRY, get_birth_model
-from soabench.birth.base import SOURCE_GM, SOURCE_GRID, SOURCE_MEAS, BirthContext, inside_any
+from soabench.birth.base import SOURCE_GM, SOURCE_GRID, SOURCE_MEAS, inside_any
 from soabench.config import BirthConfig, SensorConfig
 from soabench.geometry import clutter_intensity, fov_mask
-from soabench.gmphd.filter import StepResult
 from soabench.scenario.scene import SceneMap
-from soabench.sensor import Obstacles, Scan
+from soabench.types import BirthContext, Obstacles, Scan, StepResult
 
 
 def make_scene(box_=(-50.0, -50.0, 120.0, 50.0)) -> SceneMap:

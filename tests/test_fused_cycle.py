@@ -21,11 +21,10 @@ import pytest
 from shapely.geometry import Polygon
 
 from soabench.birth import REGISTRY, get_birth_model
-from soabench.birth.base import BirthContext, Births, NewbornTerms
 from soabench.config import PROBABILITY_MODES, Config, filter_config_for_mode
 from soabench.gmphd import GMPHDFilter, Mixture
 from soabench.gmphd.models import h
-from soabench.sensor import Scan
+from soabench.types import BirthContext, Births, NewbornTerms, Scan
 
 TOL = dict(rtol=1e-12, atol=1e-12)
 LOOSE = dict(rtol=1e-9, atol=1e-9)

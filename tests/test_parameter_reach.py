@@ -20,10 +20,9 @@ from shapely.geometry import Polygon
 
 import soabench.config as config_module
 from soabench import plugins
-from soabench.birth.base import Births
 from soabench.config import DERIVED_KEYS, BirthConfig, Config, FilterConfig, MetricsConfig, SensorConfig
 from soabench.gmphd import GMPHDFilter
-from soabench.sensor import Scan
+from soabench.types import Births, Scan
 
 TRACKER = "plugin_fixtures:EchoTracker"
 

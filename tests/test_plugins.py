@@ -38,10 +38,8 @@ def test_types_module_imports_no_stage() -> None:
 
 def test_old_import_paths_are_the_same_classes() -> None:
     from soabench import api
-    from soabench.birth.base import BirthContext, BirthModel, Births, NewbornTerms
-    from soabench.gmphd.filter import StepResult
-    from soabench.scenario.recording import Recording
-    from soabench.sensor import Scan, Scans
+    from soabench.protocols import BirthModel
+    from soabench.types import BirthContext, Births, NewbornTerms, Recording, Scan, Scans, StepResult
 
     assert (Births, NewbornTerms, BirthContext, BirthModel) == (
         api.Births,

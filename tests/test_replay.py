@@ -81,7 +81,7 @@ def _truth_rows(scans, k: int) -> dict[str, tuple[float, float]]:
 @pytest.mark.parametrize("k", [DURATION - 1, 10])
 def test_frame_shows_what_scene_sensor_shows(replay_page: Path, monkeypatch, tmp_path: Path, k: int) -> None:
     from soabench.geometry import polar_to_world
-    from soabench.sensor import CLUTTER
+    from soabench.types import CLUTTER
 
     frame = page_data(replay_page)["frames"][k]
     scans, ks = scene_sensor_scans(monkeypatch, tmp_path, float(k))

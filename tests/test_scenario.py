@@ -14,9 +14,10 @@ from shapely.geometry import LineString  # noqa: E402
 
 from soabench.errors import SoabenchError  # noqa: E402
 from soabench.figures.scene import plot_scene  # noqa: E402
-from soabench.scenario import Recording, load, simulate  # noqa: E402
+from soabench.scenario import load, simulate
 from soabench.scenario.simulation import _footprint, _heading  # noqa: E402
 from soabench.seeding import trial_seeds  # noqa: E402
+from soabench.types import Recording
 
 SEEDS = (1, 2, 3, 4, 5, 6)
 

@@ -22,20 +22,8 @@ from shapely import STRtree
 from shapely.geometry.base import BaseGeometry
 
 from soabench.geometry import fov_mask
-
-# the data classes and the protocol live in the bottom layer; re-exported here so old import paths keep working
-from soabench.protocols import BirthModel  # noqa: F401
-from soabench.types import (  # noqa: F401
-    SOURCE_FOV,
-    SOURCE_GM,
-    SOURCE_GRID,
-    SOURCE_MEAS,
-    SOURCE_NAMES,
-    SOURCE_OCCL,
-    SOURCE_SEM,
-    BirthContext,
+from soabench.types import (
     Births,
-    NewbornTerms,
 )
 
 if TYPE_CHECKING:

@@ -13,13 +13,14 @@ import numpy as np
 from matplotlib.collections import EllipseCollection, LineCollection
 from matplotlib.lines import Line2D
 
-from soabench.birth.base import SOURCE_MEAS, SOURCE_NAMES, Births
+from soabench.birth.base import SOURCE_MEAS
 from soabench.figures import style as ps
+from soabench.types import SOURCE_NAMES, Births
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from soabench.sensor import Scan
+    from soabench.types import Scan
 
 #: colour per source code (occl, sem, fov, grid, gm, meas)
 SOURCE_COLORS = ("black", "tab:green", "tab:red", "tab:blue", "tab:purple", "tab:orange")

@@ -18,8 +18,8 @@ from matplotlib.patches import Patch
 from matplotlib.patches import Polygon as MplPolygon
 
 from soabench.figures import style as ps
-from soabench.scenario.recording import Recording
 from soabench.scenario.scene import SceneMap
+from soabench.types import Recording
 
 BACKGROUND = "#dde3ea"
 ROAD = "#8c8c8c"

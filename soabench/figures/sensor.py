@@ -15,7 +15,8 @@ from matplotlib.patches import Patch
 from soabench.config import SensorConfig
 from soabench.figures import style as ps
 from soabench.geometry import polar_to_world
-from soabench.sensor import CLUTTER, Scans, fov_polygon, shadow_polygons
+from soabench.sensor import fov_polygon, shadow_polygons
+from soabench.types import CLUTTER, Scans
 
 _VISIBLE_REGION = "#7fd37f"
 _SHADOW = "0.55"

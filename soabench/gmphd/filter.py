@@ -36,7 +36,7 @@ from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, p
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
 from soabench.gmphd.reduction import extract, prune_merge_cap
 from soabench.origins import origin_counts
-from soabench.types import (  # StepResult re-exported: old import path
+from soabench.types import (
     SOURCE_MEAS,
     SOURCE_NAMES,
     Births,

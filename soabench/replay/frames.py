@@ -132,7 +132,8 @@ def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndar
     """Scan ``k`` (recording step ``idx``) of a :class:`~soabench.replay.simulate.TrialReplay` as a JSON-able
     record; ``peds`` from :func:`ped_states`, ``inits`` one :func:`init_states` per model."""
     from soabench.geometry import polar_to_world
-    from soabench.sensor import CLUTTER, fov_polygon
+    from soabench.sensor import fov_polygon
+    from soabench.types import CLUTTER
 
     scans, rec = rep.scans, rep.recording
     scan = scans.scans[k]

@@ -1,5 +1,5 @@
-"""SUMO scenarios: networks -> :class:`SceneMap`, libsumo runs -> :class:`Recording` (docs/development.md pipeline,
-stage 1).
+"""SUMO scenarios: networks -> :class:`SceneMap`, libsumo runs -> :class:`~soabench.types.Recording`
+(docs/development.md pipeline, stage 1).
 
 Public API: :func:`load` (network + polygons + scenario TOML) and :func:`simulate` (one run with libsumo).
 """
@@ -13,13 +13,11 @@ from pathlib import Path
 
 from soabench.errors import require
 from soabench.scenario.config import ScenarioConfig, load_scenario, scenario_from_dict
-from soabench.scenario.recording import Recording
 from soabench.scenario.scene import SceneMap
 from soabench.scenario.simulation import simulate
 
 __all__ = [
     "USER_NET_DEFAULTS",
-    "Recording",
     "ScenarioConfig",
     "SceneMap",
     "load",

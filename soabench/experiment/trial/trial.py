@@ -1,7 +1,7 @@
 """One Monte Carlo trial: seed -> Recording -> Scans -> every (birth model x probability mode) filter -> metrics.
 
 Common random numbers (docs/method.md §5.8, docs/development.md): one SUMO run per trial; per clutter rate lambda one
-:class:`~soabench.sensor.Scans`, observed with freshly created sensor generators so detections and noise are identical
+:class:`~soabench.types.Scans`, observed with freshly created sensor generators so detections and noise are identical
 across lambda; every filter run of that lambda consumes the very same Scans, and every filter run re-creates the
 placement generator, so all runs see the same birth-placement stream.
 
@@ -42,12 +42,9 @@ from soabench.trackers import TrackerRun as FilterRun  # the step results and ti
 
 if TYPE_CHECKING:
     from soabench.config import Config, SensorConfig
-    from soabench.gmphd.filter import StepResult
     from soabench.scenario.config import ScenarioConfig
-    from soabench.scenario.recording import Recording
     from soabench.scenario.scene import SceneMap
-    from soabench.sensor import Scans
-    from soabench.types import BirthContext
+    from soabench.types import BirthContext, Recording, Scans, StepResult
 
 #: identifying columns of a row
 ROW_ID_KEYS = ("trial", "seed", "sumo_seed", "clutter", "N_hat", "model", "mode")
