@@ -165,7 +165,8 @@ def simulate_trial(
         ``(recording, scans)``: the same values trial ``trial`` of a run with this configuration and its first
         clutter rate uses.
     """
-    from soabench.experiment.execution.runner import check_against_scenario, load_scene_cached
+    from soabench.experiment.execution.runner import check_against_scenario
+    from soabench.experiment.trial.registry import load_scene_cached
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
     from soabench.sensor import observe

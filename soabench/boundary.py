@@ -56,7 +56,7 @@ def as_scene(scene_or_net: Any) -> Any:
     from soabench.scenario.scene import SceneMap
 
     if isinstance(scene_or_net, (str, Path)):
-        from soabench.experiment.execution.runner import load_scene_cached
+        from soabench.experiment.trial.registry import load_scene_cached
 
         return load_scene_cached(str(scene_or_net), (), None)[0]
     require_type(scene_or_net, SceneMap, "scene_or_net", "give a network name such as 'intersection' or a SceneMap")

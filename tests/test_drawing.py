@@ -10,7 +10,8 @@ import fake_trial as ft
 import pytest
 
 from soabench.config import Config
-from soabench.experiment.execution.runner import PoolExecutor, SerialExecutor, run_experiment
+from soabench.experiment.execution.executors import PoolExecutor, SerialExecutor
+from soabench.experiment.execution.runner import run_experiment
 from soabench.experiment.reports.tables import load_tables
 from soabench.figures import drawing
 from soabench.figures import results as plots

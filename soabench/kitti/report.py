@@ -16,16 +16,13 @@ import io
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from soabench.birth import LABEL
 from soabench.experiment.runs.files import write_bytes_atomic, write_csv, write_json_atomic, write_text_atomic
 from soabench.figures.style import model_style
-
-if TYPE_CHECKING:
-    from soabench.kitti.protocol import KittiSpec
+from soabench.kitti.config import KittiSpec
 
 #: the paper's KITTI numbers (Table I, §V-A pairwise shares, §V-B std of the sweep means); its UBM spreads the grid
 #: across the workspace, so its numbers stand beside ``ubm-ws`` (``ubm``, clipped to the FOV, has none)

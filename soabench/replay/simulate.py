@@ -90,8 +90,8 @@ def replay_trial(
     probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
     from soabench import plugins
     from soabench.birth import LABEL
-    from soabench.experiment.execution.runner import load_scene_cached
     from soabench.experiment.trial import registry
+    from soabench.experiment.trial.registry import load_scene_cached
     from soabench.experiment.trial.trial import RunKey, make_row
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.metrics import evaluate

@@ -256,9 +256,9 @@ def kitti_settings_check(base: Path, want: dict[str, Any]) -> dict | None:
 def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None], progress: bool) -> tuple[str, int]:
     """Export ``kitti_sequences`` SUMO trials of ``scene`` in the KITTI layout, then the KITTI protocol on them."""
     from soabench.experiment.runs.files import write_json_atomic
-    from soabench.kitti.config import load_kitti_config
+    from soabench.kitti.config import KittiSpec, load_kitti_config
     from soabench.kitti.export import export_kitti
-    from soabench.kitti.protocol import KittiSpec, run_kitti
+    from soabench.kitti.protocol import run_kitti
 
     export, run = base / "export", base / "run"
     cfg, kcfg = load_kitti_config(None)

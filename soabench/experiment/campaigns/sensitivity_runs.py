@@ -83,8 +83,8 @@ def _run_variants_grouped(root: Path, main_dir: Path, trials: int | None, exe: d
     the
     sensor once per trial; each variant runs its own filters, the main run's are not at hand), then their reports,
     figures drawn on the same worker processes."""
+    from soabench.experiment.execution.executors import open_executor
     from soabench.experiment.execution.grouped import run_group
-    from soabench.experiment.execution.runner import open_executor
     from soabench.figures.drawing import parallel
 
     deferred: list = []

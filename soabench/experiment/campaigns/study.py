@@ -163,9 +163,9 @@ def run_study(
                 run_variants(
                     sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, defer=deferred, **sens_exe
                 )
+                from soabench.experiment.execution.executors import open_executor
                 from soabench.experiment.execution.grouped import run_group
                 from soabench.experiment.execution.premerge import merged_on
-                from soabench.experiment.execution.runner import open_executor
                 from soabench.figures.drawing import parallel
 
                 pool = open_executor(workers, scheduler, dask_local)  # the trials', then the figures' workers

@@ -37,14 +37,13 @@ import numpy as np
 from soabench.birth import CORE_MODELS, LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config, require_distinct
 from soabench.errors import Interrupted, require
+from soabench.experiment.execution.executors import open_executor
 from soabench.experiment.execution.runner import (
     LoadFn,
     RunOutcome,
     TrialFn,
     _utc_stamp,
     check_against_scenario,
-    load_scene_cached,
-    open_executor,
     run_experiment,
     scenario_name,
 )
@@ -52,6 +51,7 @@ from soabench.experiment.reports.report import fmt
 from soabench.experiment.runs.files import read_csv, read_json, write_json_atomic, write_text_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.runs.runmeta import check_requested, flatten_config, validate_sweep_meta
+from soabench.experiment.trial.registry import load_scene_cached
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births", "occlusion")

@@ -30,11 +30,7 @@ from typing import Any
 from soabench import plugins
 from soabench.config import Config
 from soabench.errors import Interrupted, require
-from soabench.experiment.execution.executors import (  # noqa: F401  (re-exported: the executors' old import path)
-    MAX_WORKERS,
-    DaskExecutor,
-    PoolExecutor,
-    SerialExecutor,
+from soabench.experiment.execution.executors import (
     failure_record,
     open_executor,
 )
@@ -106,7 +102,6 @@ class TaskSpec:
         return run_trial_task
 
 
-_SCENES: dict[tuple, tuple[Any, Any]] = {}
 _SUMO_LOCK = threading.Lock()
 
 
@@ -118,19 +113,6 @@ def uses_kernels(spec: TaskSpec) -> bool:
     """True when the trials of ``spec`` are soabench's own (which run the compiled kernels; another trial kind
     may not)."""
     return spec.trial_fn is None or spec.trial_fn is _default_trial_fn()
-
-
-def _default_load_fn() -> LoadFn:
-    return registry.scene_loader(registry.DEFAULT_SCENE_LOADER)
-
-
-def load_scene_cached(net: str, polys: Sequence[str], scenario: str | None, load_fn: LoadFn | None = None):
-    """``(SceneMap, ScenarioConfig)`` of a network, loaded once per process."""
-    fn = load_fn or _default_load_fn()
-    key = (fn.__module__, fn.__qualname__, str(net), tuple(str(p) for p in polys), scenario)
-    if key not in _SCENES:
-        _SCENES[key] = fn(net, tuple(polys), scenario)
-    return _SCENES[key]
 
 
 def _where() -> str:
@@ -147,7 +129,7 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
             plugins.allow_import_paths(spec.plugin_paths)
             config = Config.from_dict(spec.config)
             with said_by_the_driver():  # the driver loaded this scene and said what it derived
-                scene, scenario = load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
+                scene, scenario = registry.load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
             fn = spec.trial_fn or _default_trial_fn()
             result = fn(trial, config, scene, scenario, save_estimates=spec.save_estimates)
     except Exception as exc:  # a failed trial must not stop the run (issue 7)
@@ -362,7 +344,7 @@ def run_experiment(
             require(config is not None, "run_experiment needs a config (or resume=RUN_DIR)")
             config = Config.from_dict(config.to_dict()).validate()
             if out is None:  # filed under the scenario's name, so the scene is loaded first
-                _, scenario_cfg = load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
+                _, scenario_cfg = registry.load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
                 out = default_run_dir(scenario_name(net, scenario_cfg))
             run_dir = resolve(out)
             check_new_folder(run_dir, RUN_FILE, "run", f"finish it with --resume {run_dir}")
@@ -407,7 +389,7 @@ def _run_locked(
 
     # validate the network and the config against it before starting workers (a bad path or a dt that is no
     # multiple of the SUMO step is a user error, not 100 failed trials)
-    _, scenario_cfg = load_scene_cached(net, polys, scenario, load_fn)
+    _, scenario_cfg = registry.load_scene_cached(net, polys, scenario, load_fn)
     check_against_scenario(config, scenario_cfg)
     name = scenario_name(net, scenario_cfg)
     done = set(store.done_trials()) if resumed else set()

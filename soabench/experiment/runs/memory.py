@@ -184,7 +184,8 @@ def run_in_memory(
     sensor period fits the SUMO step); a failed trial is listed in :attr:`RunResult.failures` and has no rows.
     """
     from soabench.experiment.execution.premerge import merge_args
-    from soabench.experiment.execution.runner import TaskSpec, check_against_scenario, load_scene_cached
+    from soabench.experiment.execution.runner import TaskSpec, check_against_scenario
+    from soabench.experiment.trial.registry import load_scene_cached
 
     config = Config.from_dict(config.to_dict()).validate()
     plugins.preflight(config)

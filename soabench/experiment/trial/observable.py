@@ -31,7 +31,7 @@ def first_observable(meta: dict, trials: int = PROBE_TRIALS) -> tuple[list[float
     """(time in s of the first scan with a visible pedestrian, None if none, for each of the run's first ``trials``
     trials; the probed duration in s), from a run's ``run.json`` metadata."""
     from soabench.config import Config
-    from soabench.experiment.execution.runner import load_scene_cached
+    from soabench.experiment.trial.registry import load_scene_cached
     from soabench.scenario import simulate
     from soabench.scenario.derive import said_by_the_driver
     from soabench.seeding import trial_seeds

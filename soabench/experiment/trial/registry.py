@@ -20,7 +20,7 @@ processes can unpickle them. Registering is done by code the user installed (ent
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from soabench.errors import SoabenchError, require
@@ -116,3 +116,15 @@ def trial_kind_name(fn: TrialFn | None) -> str:
 def scene_loader_name(fn: LoadFn | None) -> str:
     """The name ``run.json`` records for ``fn`` (``sumo`` for None)."""
     return _name_of(_SCENE_LOADERS, fn, DEFAULT_SCENE_LOADER)
+
+
+_SCENES: dict[tuple, tuple[Any, Any]] = {}
+
+
+def load_scene_cached(net: str, polys: Sequence[str], scenario: str | None, load_fn: LoadFn | None = None):
+    """``(SceneMap, ScenarioConfig)`` of a network, loaded once per process (``load_fn``: the built-in loader)."""
+    fn = load_fn or scene_loader(DEFAULT_SCENE_LOADER)
+    key = (fn.__module__, fn.__qualname__, str(net), tuple(str(p) for p in polys), scenario)
+    if key not in _SCENES:
+        _SCENES[key] = fn(net, tuple(polys), scenario)
+    return _SCENES[key]
