@@ -254,10 +254,9 @@ def executors(tmp: Path) -> dict:
 def filter_steps(n: int = 2000) -> dict:
     from shapely.geometry import Polygon
 
-    from soabench.birth.base import SOURCE_GRID
     from soabench.config import FilterConfig, SensorConfig
     from soabench.gmphd import GMPHDFilter
-    from soabench.types import Births, Scan
+    from soabench.types import SOURCE_GRID, Births, Scan
 
     rng = np.random.default_rng(0)
     filt = GMPHDFilter(FilterConfig(nonfinite="drop", J_max=100), SensorConfig(), "dynamic")

@@ -341,10 +341,9 @@ def test_scene_legend_and_polygon_holes_keep_roads_visible(tmp_path):
 
 
 def test_birth_overlay_extends_the_scene_legend(tmp_path):
-    from soabench.birth.base import SOURCE_OCCL, SOURCE_SEM
     from soabench.figures.births import draw_births
     from soabench.figures.scene import plot_scene, scene_figure
-    from soabench.types import Births
+    from soabench.types import SOURCE_OCCL, SOURCE_SEM, Births
 
     scene = _ring_scene()
     fig, ax = scene_figure(scene, legend_rows=5)

@@ -27,12 +27,12 @@ from shapely import STRtree
 from shapely.geometry import LineString, Point
 from shapely.geometry.base import BaseGeometry
 
-from soabench.birth.base import SOURCE_FOV, SOURCE_OCCL, SOURCE_SEM, FOVRule, births_from, isotropic
+from soabench.birth.base import FOVRule, births_from, isotropic
 from soabench.birth.sampling import dbscan_clusters, grid_points, hex_lattice, poisson_disk, uniform_points
 from soabench.config import BirthConfig, SensorConfig
 from soabench.scenario.scene import SceneMap
 from soabench.sensor import fov_polygon, shadow_polygons
-from soabench.types import BirthContext, Births, Obstacles, Scan
+from soabench.types import SOURCE_FOV, SOURCE_OCCL, SOURCE_SEM, BirthContext, Births, Obstacles, Scan
 
 #: speed of the optional occlusion velocity prior (m/s), §3.1.3 ``occl_velocity_prior``
 OCCL_SPEED = 0.8

@@ -13,9 +13,8 @@ import numpy as np
 from matplotlib.collections import EllipseCollection, LineCollection
 from matplotlib.lines import Line2D
 
-from soabench.birth.base import SOURCE_MEAS
 from soabench.figures import style as ps
-from soabench.types import SOURCE_NAMES, Births
+from soabench.types import SOURCE_MEAS, SOURCE_NAMES, Births
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from soabench.birth.base import SOURCE_MEAS
 from soabench.figures.births import SOURCE_COLORS, SOURCE_LABELS, ellipse_params
+from soabench.types import SOURCE_MEAS
 
 #: pedestrian states of a scan: visible, occluded (in the FOV, line of sight blocked), outside the FOV, in a building
 PED_STATES = ("visible", "occluded", "outside FOV", "in building")
