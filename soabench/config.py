@@ -24,6 +24,7 @@ from typing import Any
 
 from soabench import plugins
 from soabench.errors import SoabenchError, require
+from soabench.tomlfile import read_toml
 
 BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(plugins.BUILTIN_BIRTH_MODELS)  #: the built-in birth models
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
@@ -494,7 +495,6 @@ def load_config(path: str | Path | None, base: Config | None = None) -> Config:
     """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
     if path is None:
         return (base or Config()).validate()
-    from soabench.tomlfile import read_toml
 
     p = Path(path)
     require(p.is_file(), f"config file {str(p)!r} does not exist")

@@ -24,6 +24,7 @@ from scipy.optimize import linear_sum_assignment
 
 from soabench.errors import SoabenchError, require
 from soabench.geometry import fov_mask
+from soabench.notice import announced
 from soabench.origins import ORIGIN_KEYS, origin_counts_of
 
 if TYPE_CHECKING:
@@ -514,7 +515,6 @@ def _matchings_compiled(
     """:func:`_matchings` for p = 1 as one compiled call: Est_k of every scan stacked (the FOV test of
     :func:`estimate_positions` over all of them at once, each with its scan's pose)."""
     from soabench.metrics_kernels import run_matchings
-    from soabench.notice import announced
 
     X = [_points(res.X) for res in results]
     counts = np.fromiter((len(x) for x in X), dtype=np.int64, count=len(X))

@@ -30,6 +30,8 @@ from shapely.geometry.base import BaseGeometry
 from soabench.config import SensorConfig
 from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import fov_mask, range_bearing, wrap
+from soabench.notice import announced
+from soabench.scenario.scene import SceneMap
 from soabench.types import (
     CLUTTER,
     DeferredRegion,
@@ -424,7 +426,6 @@ def segment_meets_convex(ego_xy: np.ndarray, points: np.ndarray, polygons: Seque
     if len(points) == 0 or len(polygons) == 0:
         return np.zeros(len(points), dtype=bool)
     from soabench.geometry_kernels import flat_polygons, segments_meet_convex
-    from soabench.notice import announced
 
     e = np.asarray(ego_xy, dtype=float)
     vx, vy, starts, counts = flat_polygons(polygons)
@@ -548,7 +549,6 @@ def observe(
     and settings other than ``lambda_c`` reuses it (another recording, scene or setting starts it afresh). The scans
     are the same as without it (docs/method.md §5.8: the detection and clutter streams are drawn as before).
     """
-    from soabench.scenario.scene import SceneMap
 
     require_type(recording, Recording, "observe's recording", "simulate one with soabench.scenario.simulate")
     require_type(scene, SceneMap, "observe's scene", "load it with soabench.scenario.load(net)")

@@ -24,6 +24,7 @@ import numpy as np
 import shapely
 from shapely.geometry.base import BaseGeometry
 
+from soabench.config import SensorConfig
 from soabench.errors import SoabenchError, require
 
 if TYPE_CHECKING:  # soabench.config sits above this module; imported at run time only where a config is built
@@ -528,7 +529,6 @@ def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
 
 
 def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
-    from soabench.config import SensorConfig
 
     if "sensor_json" not in a:
         return None

@@ -30,6 +30,7 @@ from shapely.geometry.base import BaseGeometry
 from soabench.birth.base import FOVRule, births_from, isotropic
 from soabench.birth.sampling import dbscan_clusters, grid_points, hex_lattice, poisson_disk, uniform_points
 from soabench.config import BirthConfig, SensorConfig
+from soabench.notice import announced
 from soabench.scenario.scene import SceneMap
 from soabench.sensor import fov_polygon, shadow_polygons
 from soabench.types import SOURCE_FOV, SOURCE_OCCL, SOURCE_SEM, BirthContext, Births, Obstacles, Scan
@@ -56,7 +57,6 @@ def ego_inside(polygons: list[np.ndarray], e: np.ndarray) -> np.ndarray:
     if N == 0:
         return np.zeros(0, dtype=bool)
     from soabench.geometry_kernels import convex_contains, flat_polygons
-    from soabench.notice import announced
 
     x, y, starts, counts = flat_polygons(polygons)
     tol = 1e-12 * max(1.0, float(np.abs(x).max()), float(np.abs(y).max()))
@@ -94,7 +94,6 @@ def occlusion_layers(
     # u_perp u_perp^T with u_perp = (-sin, cos), and the velocity prior (out of the cone: clockwise of theta_min,
     # counter-clockwise of theta_max) in one compiled pass (soabench.geometry_kernels.occlusion_layer_arrays)
     from soabench.geometry_kernels import occlusion_layer_arrays
-    from soabench.notice import announced
 
     return announced(
         "geometry.layers",
@@ -118,7 +117,6 @@ def dedup(xy: np.ndarray, d_dup: float) -> np.ndarray:
     if len(xy) < 2:
         return np.ones(len(xy), dtype=bool)
     from soabench.geometry_kernels import greedy_dedup  # compiled: one pass over the pairs
-    from soabench.notice import announced
 
     return announced("geometry.dedup", greedy_dedup, xy[:, 0].copy(), xy[:, 1].copy(), float(d_dup))
 

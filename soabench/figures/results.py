@@ -34,7 +34,8 @@ from matplotlib.figure import Figure
 
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.figures import style as ps
-from soabench.figures.drawing import FigureJob
+from soabench.figures.drawing import FigureJob, draw_all
+from soabench.figures.origins import components_origin_figure, has_origins
 
 #: the paper's Fig. 5 panels (its UBM is the workspace grid); other models are drawn as fig5x_delay_<model>.png
 LETTER = {"soa": "a", "pubm": "b", "ubm-ws": "c", "gmbm": "d", "atbm": "e"}
@@ -480,7 +481,6 @@ def fig_components(tables: RunTables, clutter: float, path: Path) -> Path:
 # -------------------------------------------------------------------------------------------------- all
 def figure_jobs(tables: RunTables, out_dir: Path) -> list[FigureJob]:
     """Every figure of the run (module docstring) as a :class:`~soabench.figures.drawing.FigureJob`, in order."""
-    from soabench.figures.origins import components_origin_figure, has_origins
 
     out_dir = Path(out_dir)
     jobs: list[FigureJob] = []
@@ -515,6 +515,5 @@ def make_figures(tables: RunTables, out_dir: Path) -> list[Path]:
     Tables read from a run folder (``tables.run_dir``) are drawn by the process pool of
     :func:`soabench.figures.drawing.parallel` when one is open (each worker reads the folder's tables itself).
     """
-    from soabench.figures.drawing import draw_all
 
     return draw_all(figure_jobs(tables, out_dir), tables)

@@ -52,6 +52,9 @@ from soabench.kitti.formats import (
 from soabench.kitti.raycast import export_lidar
 from soabench.kitti.reader import CALIB_DIR, DETECTION_DIR, LABEL_DIR, OXTS_DIR, SEMANTICS_DIR
 from soabench.kitti.velodyne import CAR_H, GROUND_Z, PED_HWL, ego_frame, hole_free
+from soabench.scenario import load, simulate
+from soabench.seeding import trial_seeds
+from soabench.sensor import _static_occluder_arrays, observe, scan_steps
 
 ORIGIN_LAT, ORIGIN_LON = 49.0, 8.43  #: geodetic position of the first IMU packet (Karlsruhe)
 SCORE_STREAM = 0x4B495454  #: "KITT": spawn key of the score stream
@@ -168,7 +171,6 @@ def _box(corners: np.ndarray) -> tuple[np.ndarray, float, float, float]:
 
 def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, calib, out: Path, seed: int) -> dict:
     """Write sequence ``trial`` (all five files); returns counts."""
-    from soabench.sensor import _static_occluder_arrays, scan_steps
 
     seq = f"{trial:04d}"
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(trial)], spawn_key=(SCORE_STREAM,)))
@@ -257,7 +259,6 @@ def export_kitti(
 ) -> list[dict]:
     """Simulate, observe and write ``trials`` SUMO trials as KITTI sequences 0000, 0001, ... under ``out`` (with
     ``lidar``, also their synthetic segmented scans: :mod:`soabench.kitti.raycast`)."""
-    from soabench.scenario import load
 
     require(
         isinstance(trials, int) and 1 <= trials <= MAX_EXPORT_TRIALS,
@@ -291,9 +292,6 @@ def _export_trials(
     lidar: bool,
 ) -> list[dict]:
     """The trials of :func:`export_kitti` written into the checked and locked folder ``out``; ``export.json`` last."""
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
 
     (net, polys, scenario), (scene, scen) = source, loaded
     rows = []

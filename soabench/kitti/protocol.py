@@ -23,14 +23,18 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.birth import get_birth_model
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.files import read_json, write_json_atomic
+from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
+from soabench.experiment.trial.trial import run_filter
 from soabench.kitti.config import KittiConfig, KittiSpec
 from soabench.kitti.formats import ReadError, UnreadableError
 from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
 from soabench.kitti.report import write_outputs
+from soabench.metrics import evaluate
 
 RUN_FILE = "run.json"
 RECORDS = "records"
@@ -88,10 +92,7 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
     Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])``. Wall-clock
     times go to ``record["timing"]``, so everything else is bit-identical for the same inputs and seed.
     """
-    from soabench.birth import get_birth_model
-    from soabench.experiment.trial.trial import run_filter
     from soabench.gmphd.filter import GMPHDFilter
-    from soabench.metrics import evaluate
 
     mode = cfg.experiment.probabilities[0]
     filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
@@ -144,7 +145,6 @@ def run_kitti(
     """Run (or finish, ``resume=True``) the protocol into the run folder ``out``: resolved, new or empty for a new
     run (holding this run's ``run.json`` on resume), locked while it works
     (:mod:`soabench.experiment.runs.ownership`)."""
-    from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = resolve(out)

@@ -29,6 +29,7 @@ from shapely.geometry import Point, Polygon
 from soabench.config import SensorConfig
 from soabench.kitti.lidar import SEMANTIC_KITTI_IDS
 from soabench.kitti.velodyne import CAR_H, GROUND_Z, PED_HWL, ego_frame
+from soabench.sensor import _static_occluder_arrays, scan_steps
 
 VELODYNE_DIR, POINT_LABEL_DIR = "velodyne", "point_labels"
 BEAMS = 64
@@ -105,7 +106,6 @@ def cast(
 
 def export_lidar(trial: int, recording, scans, scene, sensor: SensorConfig, out: Path) -> int:
     """Write the scans and labels of sequence ``trial``; returns the number of points written."""
-    from soabench.sensor import _static_occluder_arrays, scan_steps
 
     seq = f"{trial:04d}"
     steps = scan_steps(recording.t, recording.step_length, sensor.dt)

@@ -19,8 +19,10 @@ import shlex
 from pathlib import Path
 from typing import Any
 
+from soabench.birth import LABEL
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.files import write_text_atomic
+from soabench.experiment.runs.ownership import resolve
 from soabench.replay.page import asset, fill
 
 GENERATOR = "soabench report"
@@ -119,7 +121,6 @@ def _replay_cells(run_dir: Path, model: str, mode: str, clutter: float, trial: i
 def _extremes_html(run_dir: Path, rows: list[dict[str, Any]]) -> str:
     if not rows:
         return "<p>No trials.csv with a counted delay: no best or worst trial.</p>"
-    from soabench.birth import LABEL
 
     body = []
     for r in rows:
@@ -261,7 +262,6 @@ def index_html(folder: Path, runs: list[Path]) -> str:
 def write_index(folder: str | Path) -> tuple[Path, int, list[Path]]:
     """Write every run's report under ``folder`` and ``folder/index.html`` linking them; returns the index path, its
     size in bytes and the run folders."""
-    from soabench.experiment.runs.ownership import resolve
 
     path = resolve(folder)
     require(path.is_dir(), f"{str(path)!r} is not a folder")

@@ -18,8 +18,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from soabench import plugins
+from soabench.birth import LABEL
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
+from soabench.experiment.runs.ownership import check_existing_folder, resolve
+from soabench.experiment.runs.runmeta import validate_run_meta
+from soabench.experiment.trial import registry
+from soabench.experiment.trial.registry import load_scene_cached
+from soabench.scenario import simulate
+from soabench.seeding import trial_seeds
+from soabench.sensor import observe
+from soabench.trackers import GMPHDTracker, run_tracker
 
 #: per-trial metric columns compared with ``trials.csv`` (the rest are derived from these or are wall times)
 CHECKED_COLUMNS = ("delay_mean", "n_episodes", "n_censored", "card_err", "ospa", "gospa", "tp", "fp", "fn")
@@ -60,8 +70,6 @@ class TrialReplay:
 def read_run(run_dir: str | Path):
     """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runs.runmeta.validate_run_meta`) and its
     raw dict."""
-    from soabench.experiment.runs.ownership import check_existing_folder, resolve
-    from soabench.experiment.runs.runmeta import validate_run_meta
     from soabench.experiment.runs.store import RUN_FILE, RunStore
 
     path = resolve(run_dir)
@@ -88,17 +96,9 @@ def replay_trial(
 ) -> TrialReplay:
     """Re-simulate trial ``trial`` of the run in ``run_dir`` for ``models`` (default: the run's birth models) in
     probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
-    from soabench import plugins
-    from soabench.birth import LABEL
-    from soabench.experiment.trial import registry
-    from soabench.experiment.trial.registry import load_scene_cached
     from soabench.experiment.trial.trial import RunKey, make_row
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.metrics import evaluate
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
-    from soabench.trackers import GMPHDTracker, run_tracker
 
     path, meta, raw = read_run(run_dir)
     cfg = meta.config

@@ -35,8 +35,12 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
+from soabench import plugins
 from soabench.config import Config, load_config
 from soabench.errors import SoabenchError, require
+from soabench.experiment.runs.files import read_csv, write_json_atomic, write_text_atomic
+from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
+from soabench.experiment.trial.guard import failure_message
 from soabench.tomlfile import read_toml
 
 SUITE_KEYS = {"name", "baseline", "config"}
@@ -255,7 +259,6 @@ def _check_metric(metric: Any, where: str) -> None:
 def check_import_paths(suite: Suite) -> None:
     """Every import-path plugin a suite names must be allowed with ``--plugin`` (soabench.plugins: the closed list);
     said before anything runs, with the check command's advice."""
-    from soabench import plugins
 
     typed = set(plugins.session_import_paths())
     for s in suite.scenarios:
@@ -304,7 +307,6 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
 def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict[str, float], list[dict]]:
     """Run every scenario and seed; return the mean of every trials.csv metric per key, and the plugin failures."""
     from soabench.experiment.execution.runner import run_experiment
-    from soabench.experiment.runs.files import read_csv
     from soabench.experiment.runs.store import RunStore
 
     check_import_paths(suite)
@@ -406,7 +408,6 @@ def read_baseline(path: Path) -> dict[str, float]:
 
 
 def write_baseline(path: Path, suite: Suite, values: dict[str, float]) -> None:
-    from soabench.experiment.runs.files import write_json_atomic
 
     path.parent.mkdir(parents=True, exist_ok=True)
     clean = {k: (v if math.isfinite(v) else None) for k, v in values.items() if not _is_time(k)}
@@ -454,7 +455,6 @@ def run_check(suite_path: str | Path, out: Path, update_baseline: bool = False, 
     baseline = None
     if any(th.relative for th in suite.thresholds) and not update_baseline:
         baseline = read_baseline(suite.baseline)  # a missing baseline is a user error, before any run
-    from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 
     out = resolve(out)
     check_own_folder(out, "check folder", CHECK_ENTRIES)
@@ -474,12 +474,10 @@ def _check_locked(
         print(f"wrote baseline {suite.baseline} ({sum(not _is_time(k) for k in values)} values)")
         baseline = read_baseline(suite.baseline)
     outcome = CheckOutcome(suite.name, values, evaluate(suite, values, baseline))
-    from soabench.experiment.trial.guard import failure_message
 
     for f in failures:
         outcome.results.append(CheckResult(f"{f['scenario']}/{f['model']}/plugin", False, failure_message(f)))
     outcome.wall_s = time.perf_counter() - t0
-    from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
 
     write_json_atomic(
         out / "check.json",

@@ -19,6 +19,7 @@ import numpy as np
 
 from soabench.birth import BASELINES
 from soabench.experiment.reports import paper
+from soabench.experiment.runs.files import write_csv, write_text_atomic
 
 #: columns of summary.csv (percentages in %, p-values two-sided)
 COLUMNS = (
@@ -212,7 +213,6 @@ def figure(rows: Sequence[Mapping]):
 
 def write_summary(out_dir: Path, scenes: Sequence[tuple[str, Mapping[str, Any], Path]], clutter: float = 3.0) -> str:
     """Write summary.md, summary.csv and the figure into ``out_dir`` from (scene, density, trials.csv) triples."""
-    from soabench.experiment.runs.files import write_csv, write_text_atomic
     from soabench.figures.style import save_png
 
     rows = [r for name, dens, csv in scenes for r in advantage_rows(name, dens, paper.read_rows(csv), clutter)]

@@ -18,8 +18,13 @@ import numpy as np
 
 from soabench.birth import LABEL
 from soabench.errors import require
+from soabench.experiment.reports.paper import read_rows
 from soabench.experiment.reports.report import fmt, fmt_pct
 from soabench.experiment.runs.files import read_json
+from soabench.scenario import USER_NET_DEFAULTS, load_scenario, scene_folder
+from soabench.scenario.config import MAX_PARKING_DENSITY
+from soabench.scenario.network import read_net
+from soabench.scenario.parking import parking_lanes
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -55,7 +60,6 @@ def dump_toml(data: dict) -> str:
 def base_scenario(net: str, scenario: str | None) -> dict:
     """The scenario dict a sweep point starts from (the user's TOML, else the scene folder's own, else a user net's
     defaults), with ``[files]`` paths made absolute so the point's TOML may live anywhere."""
-    from soabench.scenario import USER_NET_DEFAULTS, scene_folder
 
     path = Path(scenario) if scenario is not None else None
     if path is None:
@@ -63,7 +67,6 @@ def base_scenario(net: str, scenario: str | None) -> dict:
         path = folder / "scenario.toml" if folder is not None else None
     if path is None:
         return {k: dict(v) for k, v in USER_NET_DEFAULTS.items()}
-    from soabench.scenario import load_scenario
 
     load_scenario(path)  # validates (one-line errors)
     data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -95,7 +98,6 @@ def write_point_scenarios(sweep_dir: Path, points: list[dict], net: str, scenari
 
 def occlusion_points(values, base_config: dict) -> list[dict]:
     """One point per density value (parked cars per 100 m of kerb), sorted, duplicates dropped."""
-    from soabench.scenario.config import MAX_PARKING_DENSITY
 
     vals = sorted({float(v) for v in values})
     for v in vals:
@@ -110,8 +112,6 @@ def occlusion_points(values, base_config: dict) -> list[dict]:
 def check_parking_lanes(net_file: str, values) -> None:
     """Refuse, before anything is written, densities above 0 on a network without parking lanes (parked cars stand
     only on parking lanes: :mod:`soabench.scenario.parking`)."""
-    from soabench.scenario.network import read_net
-    from soabench.scenario.parking import parking_lanes
 
     above = [float(v) for v in values if float(v) > 0]
     require(
@@ -174,7 +174,6 @@ def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
 
 def _trial_values(sweep_dir: Path, points: list[dict], clutter: float) -> dict[tuple, np.ndarray]:
     """Per-trial values of the figure's metrics per (density, model, mode, column), from each point's trials.csv."""
-    from soabench.experiment.reports.paper import read_rows
 
     out: dict[tuple, list[float]] = {}
     for p in points:

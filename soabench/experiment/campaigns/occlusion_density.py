@@ -26,6 +26,10 @@ import numpy as np
 
 from soabench.config import Config
 from soabench.errors import require
+from soabench.experiment.runs.files import read_json, to_jsonable, write_json_atomic
+from soabench.scenario import load, simulate
+from soabench.seeding import trial_seeds
+from soabench.sensor import fov_polygon, observe
 
 FORMAT = "soabench-occlusion-density-1"
 
@@ -33,8 +37,6 @@ FORMAT = "soabench-occlusion-density-1"
 def scan_occlusion(scans: Any, scene: Any) -> dict[str, Any]:
     """Per-scan occluded share of the sidewalk in the FOV (NaN without sidewalk in the FOV) and pedestrian counts."""
     import shapely
-
-    from soabench.sensor import fov_polygon
 
     sensor = scans.sensor
     region = scene.sidewalk
@@ -59,9 +61,6 @@ def scene_density(
     observe_fn: Callable[..., Any] | None = None,
 ) -> dict[str, Any]:
     """The occlusion density of ``net`` over trials 0..trials-1 of ``config`` (seed, duration, sensor)."""
-    from soabench.scenario import load, simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
 
     require(isinstance(trials, int) and trials >= 1, f"density trials {trials!r} must be an integer >= 1")
     load_fn, simulate_fn, observe_fn = load_fn or load, simulate_fn or simulate, observe_fn or observe
@@ -120,7 +119,6 @@ def settings(config: Config, trials: int) -> dict[str, Any]:
 
 def read_density(path: Path) -> dict[str, Any] | None:
     """A density file's content if it is one (checked field by field: it is data from a file), else None."""
-    from soabench.experiment.runs.files import read_json
 
     try:
         data = read_json(path)
@@ -140,7 +138,6 @@ def write_density(path: Path, net: str, config: Config, trials: int, **fns: Any)
 
     Returns (density, kept). The file is written atomically: an interrupted measurement leaves no file.
     """
-    from soabench.experiment.runs.files import to_jsonable, write_json_atomic
 
     old = read_density(path) if Path(path).is_file() else None
     want = to_jsonable(settings(config, trials))

@@ -28,7 +28,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from soabench.birth import CORE_MODELS
+from soabench.cli_checks import check_time
+from soabench.config import MAX_SEED, MAX_TRIALS, Config
 from soabench.errors import Interrupted, SoabenchError, require
+from soabench.experiment.campaigns.occlusion_density import write_density
+from soabench.experiment.execution.executors import MAX_WORKERS
+from soabench.experiment.runs.files import read_json, write_json_atomic
+from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
+from soabench.experiment.runs.runmeta import flatten_config
+from soabench.kitti.config import KittiSpec, load_kitti_config
+from soabench.scenario import shipped_nets
 
 #: the study's part folders; a study is kept only when each is complete (a part added to the study belongs here)
 STUDY_PARTS = ("main", "clutter", "births")  # and sensitivity/ (two run folders and its table; see study_kept)
@@ -53,8 +63,6 @@ class Settings:
 
     def validate(self, shipped: Sequence[str]) -> Settings:
         """Every size in its range (the bounds of soabench/config.py and of ``export kitti``), before any part runs."""
-        from soabench.cli_checks import check_time
-        from soabench.config import MAX_SEED, MAX_TRIALS
         from soabench.kitti.export import MAX_EXPORT_TRIALS
 
         def count(name: str, low: int, high: int, why: str = "") -> None:
@@ -93,7 +101,6 @@ class ResultsOutcome:
 
 # ------------------------------------------------------------------------------------------------ completeness
 def _json(path: Path) -> Any:
-    from soabench.experiment.runs.files import read_json
 
     try:
         return read_json(path) if path.is_file() else None
@@ -148,7 +155,6 @@ def _equal(a: Any, b: Any) -> bool:
 def same_settings(run_dir: Path, cfg, keys: Sequence[str] = SIZE_KEYS) -> bool:
     """Compare a stored run with the requested ``cfg`` on ``keys``: True when equal, False when only more trials
     are requested (the run is extended); any other difference is refused with one line."""
-    from soabench.experiment.runs.runmeta import flatten_config
 
     meta = _json(run_dir / "run.json")
     config = meta.get("config") if isinstance(meta, dict) else None
@@ -179,7 +185,6 @@ def study_kept(root: Path, s: Settings, trials: int | None = None) -> bool:
     part folder it holds) complete, its main protocol and sweep points made with the requested settings. A part
     made with other settings is refused (:func:`same_settings`); more trials are not "kept" (the study extends).
     ``trials``: of the main protocol and clutter sweep (default ``s.trials``; the other scenes' ``s.scene_trials``)."""
-    from soabench.birth import CORE_MODELS
 
     main_cfg = _base_config(s, trials or s.trials)
     births_cfg = _base_config(s, s.births_trials, models=CORE_MODELS, probabilities=("static",))
@@ -205,7 +210,6 @@ def study_kept(root: Path, s: Settings, trials: int | None = None) -> bool:
 
 # ------------------------------------------------------------------------------------------------ parts
 def _base_config(s: Settings, trials: int, **experiment: Any):
-    from soabench.config import Config
 
     cfg = Config()
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=trials, duration=s.duration, seed=s.seed, **experiment)
@@ -255,8 +259,6 @@ def kitti_settings_check(base: Path, want: dict[str, Any]) -> dict | None:
 
 def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None], progress: bool) -> tuple[str, int]:
     """Export ``kitti_sequences`` SUMO trials of ``scene`` in the KITTI layout, then the KITTI protocol on them."""
-    from soabench.experiment.runs.files import write_json_atomic
-    from soabench.kitti.config import KittiSpec, load_kitti_config
     from soabench.kitti.export import export_kitti
     from soabench.kitti.protocol import run_kitti
 
@@ -312,9 +314,6 @@ def run_results(
     log: Callable[[str], None] | None = None,
 ) -> ResultsOutcome:
     """Make (or finish) every part of results/ in ``out``; see the module docstring."""
-    from soabench.experiment.campaigns.occlusion_density import write_density
-    from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
-    from soabench.scenario import shipped_nets
 
     shipped = shipped_nets()
     s = (settings or Settings()).validate(shipped)
@@ -420,7 +419,6 @@ def add_arguments(p: argparse.ArgumentParser, csv_list: Callable[[str], Callable
 
 def cmd_results(args: argparse.Namespace) -> int:
     """Handler of ``soabench results``."""
-    from soabench.experiment.execution.executors import MAX_WORKERS
 
     require(
         args.workers is None or 1 <= args.workers <= MAX_WORKERS,

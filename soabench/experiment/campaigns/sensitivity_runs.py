@@ -18,10 +18,13 @@ from pathlib import Path
 from soabench.config import Config
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns import sensitivity as sens
+from soabench.experiment.execution.executors import open_executor
+from soabench.experiment.execution.grouped import run_group
 from soabench.experiment.execution.runner import RunOutcome, run_experiment
 from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runs.runmeta import config_differences, validate_run_meta
 from soabench.experiment.runs.store import RunStore
+from soabench.figures.drawing import parallel
 
 #: the variant runs, in column order
 VARIANTS = ("gate_off", "visible")
@@ -83,9 +86,6 @@ def _run_variants_grouped(root: Path, main_dir: Path, trials: int | None, exe: d
     the
     sensor once per trial; each variant runs its own filters, the main run's are not at hand), then their reports,
     figures drawn on the same worker processes."""
-    from soabench.experiment.execution.executors import open_executor
-    from soabench.experiment.execution.grouped import run_group
-    from soabench.figures.drawing import parallel
 
     deferred: list = []
     run_variants(root, main_dir, trials=trials, defer=deferred, **exe)

@@ -34,6 +34,9 @@ from soabench.errors import Interrupted
 from soabench.experiment.campaigns import sensitivity as sens
 from soabench.experiment.campaigns.sensitivity_runs import VARIANTS, run_variants
 from soabench.experiment.campaigns.sweep import DEFAULT_VALUES, SweepOutcome, run_sweep
+from soabench.experiment.execution.executors import open_executor
+from soabench.experiment.execution.grouped import run_group
+from soabench.experiment.execution.premerge import merged_on
 from soabench.experiment.execution.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.reports import paper
 from soabench.experiment.reports.report import paper_protocol_mismatch
@@ -41,6 +44,7 @@ from soabench.experiment.runs.files import write_text_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runs.runmeta import flatten_config
 from soabench.experiment.runs.store import RunStore
+from soabench.figures.drawing import parallel
 
 #: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
 STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png")
@@ -163,10 +167,6 @@ def run_study(
                 run_variants(
                     sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, defer=deferred, **sens_exe
                 )
-                from soabench.experiment.execution.executors import open_executor
-                from soabench.experiment.execution.grouped import run_group
-                from soabench.experiment.execution.premerge import merged_on
-                from soabench.figures.drawing import parallel
 
                 pool = open_executor(workers, scheduler, dask_local)  # the trials', then the figures' workers
                 aborted = True

@@ -37,7 +37,15 @@ import numpy as np
 from soabench.birth import CORE_MODELS, LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config, require_distinct
 from soabench.errors import Interrupted, require
+from soabench.experiment.campaigns.occlusion import (
+    check_parking_lanes,
+    occlusion_points,
+    occlusion_report,
+    write_point_scenarios,
+)
 from soabench.experiment.execution.executors import open_executor
+from soabench.experiment.execution.grouped import group_trials, run_group
+from soabench.experiment.execution.premerge import merged_on
 from soabench.experiment.execution.runner import (
     LoadFn,
     RunOutcome,
@@ -47,11 +55,13 @@ from soabench.experiment.execution.runner import (
     run_experiment,
     scenario_name,
 )
+from soabench.experiment.reports.paper import read_rows
 from soabench.experiment.reports.report import fmt
 from soabench.experiment.runs.files import read_csv, read_json, write_json_atomic, write_text_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.runs.runmeta import check_requested, flatten_config, validate_sweep_meta
 from soabench.experiment.trial.registry import load_scene_cached
+from soabench.figures.drawing import parallel
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births", "occlusion")
@@ -93,8 +103,6 @@ def sweep_points(
     if models is not None:
         base.experiment = dataclasses.replace(base.experiment, models=tuple(models))
     if kind == "occlusion":  # soabench/experiment/campaigns/occlusion.py: one point per parked-car density
-        from soabench.experiment.campaigns.occlusion import occlusion_points
-
         base.validate()
         return occlusion_points(values, base.to_dict())
     if kind == "clutter":
@@ -193,8 +201,6 @@ def run_sweep(
             _, scenario_cfg = load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
             check_against_scenario(config, scenario_cfg)
             if kind == "occlusion":
-                from soabench.experiment.campaigns.occlusion import check_parking_lanes
-
                 check_parking_lanes(scenario_cfg.net_file, values)
             name = scenario_name(net, scenario_cfg)
             default = Path("results") / name / f"sweep-{kind}-{_utc_stamp()}"
@@ -204,8 +210,6 @@ def run_sweep(
             locks.append(FolderLock(sweep_dir, "sweep folder").acquire())
             check_new_folder(sweep_dir, SWEEP_FILE, "sweep", hint)
             if kind == "occlusion":  # one scenario file per density point, written into the sweep folder
-                from soabench.experiment.campaigns.occlusion import write_point_scenarios
-
                 write_point_scenarios(sweep_dir, points, net, scenario)
             meta = {
                 "kind": kind,
@@ -268,10 +272,6 @@ def _run_points(
             trial_fn=trial_fn, load_fn=load_fn, figures=figures, defer=deferred,
         )  # fmt: skip
         if deferred:
-            from soabench.experiment.execution.grouped import group_trials, run_group
-            from soabench.experiment.execution.premerge import merged_on
-            from soabench.figures.drawing import parallel
-
             exe = open_executor(workers, scheduler, dask_local, n_trials=len(group_trials(deferred)))
             aborted = True
             try:
@@ -444,7 +444,6 @@ def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
             f"| {r['clutter']:g} | {LABEL.get(r['model'], r['model'])} | {r['mode']} | {fmt(r['precision_mean'])} "
             f"| {fmt(r['recall_mean'])} | {fmt(r['card_err_mean'])} | {fmt(r['ospa_mean'])} | {fmt(r['delay_mean'])} |"
         )
-    from soabench.experiment.reports.paper import read_rows
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import clutter_figure
 
@@ -459,7 +458,6 @@ def write_sweep_report(sweep_dir: Path) -> str:
     """Write sweep.md, sweep_summary.json and the sweep figure from the points' CSV files; return the Markdown."""
     sweep_dir = Path(sweep_dir)
     meta = read_json(sweep_dir / SWEEP_FILE)
-    from soabench.experiment.campaigns.occlusion import occlusion_report
 
     report = {"births": births_report, "clutter": clutter_report, "occlusion": occlusion_report}[meta["kind"]]
     data, md = report(sweep_dir, meta)

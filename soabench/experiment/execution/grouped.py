@@ -26,12 +26,16 @@ from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.runner import (
     DeferredRun,
     TaskSpec,
+    _print_failure,
+    _print_model_failures,
     _utc_stamp,
     package_versions,
     run_trial_task,
     uses_kernels,
 )
 from soabench.experiment.runs.ownership import FolderLock
+from soabench.experiment.trial import registry
+from soabench.experiment.trial.trial import TrialShare, _config_key, run_trial
 from soabench.kernel_warmup import ensure_compiled
 
 
@@ -58,8 +62,6 @@ def run_group_task(trial: int, group: GroupSpec) -> dict:
     Returns ``{"status": "group", "trial", "records": {folder index: trial record}, "shared": counts}``; a folder's
     failure is its own failure record (the others keep theirs). Folders with a custom trial kind run unshared.
     """
-    from soabench.experiment.trial import registry
-    from soabench.experiment.trial.trial import TrialShare, run_trial
 
     builtin = registry.trial_kind(registry.DEFAULT_TRIAL_KIND) is registry._builtin_trial
     share = TrialShare(keep_filter_runs=rescored(group.members))
@@ -76,7 +78,6 @@ def run_group_task(trial: int, group: GroupSpec) -> dict:
 def rescored(members: Sequence[TaskSpec]) -> bool:
     """True when two folders' configs differ only in ``metrics`` (the study's visible-truth run and its main run):
     their filter runs are then kept and scored per folder instead of run twice (memory only where it pays)."""
-    from soabench.experiment.trial.trial import _config_key
 
     full = {_config_key(m.config) for m in members}
     filters = {_config_key(m.config, without=("metrics",)) for m in members}
@@ -97,7 +98,6 @@ def run_group(
     Ctrl-C propagates as ``KeyboardInterrupt`` after the finished records are on disk (the caller names the resume
     command).
     """
-    from soabench.experiment.execution.runner import _print_failure, _print_model_failures
 
     if not deferred:
         return False, {}

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from soabench.experiment.execution.executors import PoolExecutor
+from soabench.experiment.reports.tables import load_tables
 from soabench.experiment.runs.store import RunStore, merged_stamp
 from soabench.figures.drawing import folder_key, forget_arrays, remember_arrays, save_arrays
 
@@ -68,7 +69,6 @@ def merge_args(config: Any) -> tuple[tuple[str, ...], tuple[str, ...]]:
 def merge_task(i: int, batch: MergeBatch) -> dict:
     """Worker side: merge folder ``i`` of ``batch``; if it draws figures, save its tables as arrays
     (``<tmp>/<i>.npz``; the step table's columns as the merge kept them, not parsed back from steps.csv)."""
-    from soabench.experiment.reports.tables import load_tables
 
     run_dir, models, modes, figures = batch.folders[i]
     store = RunStore(Path(run_dir))

@@ -30,12 +30,14 @@ from typing import Any
 from soabench import plugins
 from soabench.config import Config
 from soabench.errors import Interrupted, require
+from soabench.experiment.execution import premerge
 from soabench.experiment.execution.executors import (
     failure_record,
     open_executor,
 )
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
+from soabench.experiment.reports.report import write_report
 from soabench.experiment.runs.files import pack_table, to_jsonable, write_json_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, platform_info
@@ -49,6 +51,8 @@ from soabench.experiment.runs.store import (
     RunStore,
 )
 from soabench.experiment.trial import registry
+from soabench.experiment.trial.guard import failure_message
+from soabench.figures.drawing import report_pool
 from soabench.kernel_warmup import ensure_compiled
 from soabench.scenario.derive import said_by_the_driver
 from soabench.seeding import trial_seeds
@@ -473,9 +477,6 @@ def _run_locked(
         raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
     if unattempted or stopped or defer is not None:  # deferring: the report follows the group (run_trials=False)
         return outcome
-    from soabench.experiment.execution import premerge
-    from soabench.experiment.reports.report import write_report
-    from soabench.figures.drawing import report_pool
 
     try:
         # a study's workers may have merged it already; the figures read the step columns the merge kept
@@ -538,7 +539,6 @@ def _run_trials(
 
 def _print_model_failures(rec: dict, bar: Progress) -> None:
     """One line per failed plugin run of a trial (soabench.experiment.trial.guard)."""
-    from soabench.experiment.trial.guard import failure_message
 
     for f in rec.get("model_failures") or ():
         if bar.enabled:

@@ -30,12 +30,16 @@ from typing import Any
 import numpy as np
 
 from soabench.birth import BASELINES, LABEL
+from soabench.config import Config, MetricsConfig
 from soabench.errors import SoabenchError
+from soabench.experiment.reports import paper
 from soabench.experiment.reports.paper import percent_reduction
 from soabench.experiment.reports.tables import RunTables, load_tables, select, tables_models  # noqa: F401 (shared)
+from soabench.experiment.runs.failures import write_model_failures
 from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE
 from soabench.experiment.runs.store import RunStore
+from soabench.experiment.trial.observable import duration_hint
 
 
 def _nanmean(x: np.ndarray) -> float:
@@ -170,8 +174,6 @@ def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: l
         comps = []
         warning = unobserved_warning(tables, clutter)
         if warning:  # when, on this scene, somebody does become observable
-            from soabench.experiment.trial.observable import duration_hint
-
             warning += duration_hint(meta)
         if "soa" in tables.models and not warning:  # paired against S-OA: the baselines, then every plugin
             others = [b for b in BASELINES if b in tables.models] + [
@@ -281,7 +283,6 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
 
 def table_legend(metrics: dict) -> str:
     """What the summary table's terms mean, with the values this run used (docs/method.md §5.2-5.6)."""
-    from soabench.config import MetricsConfig
 
     m = {**dataclasses.asdict(MetricsConfig()), **metrics}
     lower_bound = m["censored"] == "lower_bound"
@@ -331,7 +332,6 @@ PAPER_DURATION_S = 100.0
 def paper_protocol_mismatch(meta: dict) -> str:
     """Why the paper's numbers do not apply to a run ('' when they do): they hold only for the paper's protocol
     on the shipped intersection (its own scenario and polygons, default parameters, 100 s trials)."""
-    from soabench.config import Config
 
     if str(meta.get("net")) != "intersection":
         return f"the network is {meta.get('net_name') or meta.get('net')!r}, not the shipped intersection"
@@ -370,7 +370,6 @@ def paper_section(run_dir: Path, tables: RunTables, clutter: float = 3.0) -> str
         return ""
     if not set(tables.modes) & {"static", "dynamic"}:
         return ""
-    from soabench.experiment.reports import paper
 
     rows = [r for r in paper.read_rows(run_dir / "trials.csv") if r["mode"] in ("static", "dynamic")]
     with np.errstate(invalid="ignore"):  # percentiles of all-NaN bootstrap samples (trials without episodes)
@@ -393,7 +392,6 @@ def write_report(run_dir: Path, figures: bool = True, store: RunStore | None = N
 
         fig_paths = [str(p.relative_to(run_dir)) for p in make_figures(tables, run_dir / "figures")]
     summary["figures"] = fig_paths
-    from soabench.experiment.runs.failures import write_model_failures
 
     md = render_markdown(summary, fig_paths) + write_model_failures(run_dir, store.model_failures(), summary)
     paper_md = paper_section(run_dir, tables)

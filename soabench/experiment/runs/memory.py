@@ -22,7 +22,9 @@ from soabench import plugins
 from soabench.config import Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.execution.executors import open_executor
+from soabench.experiment.execution.premerge import merge_args
 from soabench.experiment.execution.progress import Progress
+from soabench.experiment.execution.runner import TaskSpec, check_against_scenario
 from soabench.experiment.runs.files import as_lists, format_value, unpack_table, write_csv_lists
 from soabench.experiment.runs.store import (
     EPISODE_COLUMNS,
@@ -30,10 +32,12 @@ from soabench.experiment.runs.store import (
     TIMING_COLUMNS,
     TIMING_FILE_COLUMNS,
     TRIAL_COLUMNS,
+    RunStore,
     TableOrder,
     _rows_of,
     timing_rows,
 )
+from soabench.experiment.trial.registry import load_scene_cached
 
 #: the tables of a :class:`RunResult`, as the CSV files of a run folder are named (``<name>.csv``)
 TABLES = ("trials", "episodes", "steps", "timing")
@@ -183,9 +187,6 @@ def run_in_memory(
     The checks before the first trial are those of a run folder's (plugins import and take their options, the
     sensor period fits the SUMO step); a failed trial is listed in :attr:`RunResult.failures` and has no rows.
     """
-    from soabench.experiment.execution.premerge import merge_args
-    from soabench.experiment.execution.runner import TaskSpec, check_against_scenario
-    from soabench.experiment.trial.registry import load_scene_cached
 
     config = Config.from_dict(config.to_dict()).validate()
     plugins.preflight(config)
@@ -239,8 +240,6 @@ def with_experiment(config: Config, **overrides: Any) -> Config:
 
 def from_run_folder(run_dir: Path, config: Config, net: str) -> RunResult:
     """The :class:`RunResult` of a run folder, from its trial records (the rows its CSV files were merged from)."""
-    from soabench.experiment.execution.premerge import merge_args
-    from soabench.experiment.runs.store import RunStore
 
     store = RunStore(run_dir)
     records = [store.load_trial(t) for t in store.done_trials()]

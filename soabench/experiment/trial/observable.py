@@ -16,7 +16,14 @@ import math
 
 import numpy as np
 
+from soabench.config import Config
 from soabench.errors import SoabenchError
+from soabench.experiment.trial import registry
+from soabench.experiment.trial.registry import load_scene_cached
+from soabench.scenario import simulate
+from soabench.scenario.derive import said_by_the_driver
+from soabench.seeding import trial_seeds
+from soabench.sensor import observe
 
 #: trials probed (the run's first ones): their pedestrians are the run's.
 PROBE_TRIALS = 3
@@ -30,12 +37,6 @@ TRACK_MARGIN_S = 5.0
 def first_observable(meta: dict, trials: int = PROBE_TRIALS) -> tuple[list[float | None], float]:
     """(time in s of the first scan with a visible pedestrian, None if none, for each of the run's first ``trials``
     trials; the probed duration in s), from a run's ``run.json`` metadata."""
-    from soabench.config import Config
-    from soabench.experiment.trial.registry import load_scene_cached
-    from soabench.scenario import simulate
-    from soabench.scenario.derive import said_by_the_driver
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
 
     config = Config.from_dict(meta["config"])
     exp = config.experiment
@@ -81,7 +82,6 @@ def duration_hint(meta: dict) -> str:
     """One or two sentences for a run that observed nobody: when the first pedestrian becomes observable on its
     scene and the shortest useful ``--duration``; '' for a run of another trial kind or scene loader (tests, plugins
     of the harness), whose scenes soabench cannot simulate."""
-    from soabench.experiment.trial import registry
 
     if meta.get("trial_kind", registry.DEFAULT_TRIAL_KIND) != registry.DEFAULT_TRIAL_KIND:
         return ""

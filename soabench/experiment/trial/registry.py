@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from soabench.errors import SoabenchError, require
+from soabench.scenario import load
 
 TrialFn = Callable[..., Any]
 LoadFn = Callable[..., Any]
@@ -44,7 +45,6 @@ def _builtin_trial(trial, config, scene, scenario, *, save_estimates=False):
 
 def _builtin_loader(net, polys=(), scenario=None):
     """The built-in scene loader: :func:`soabench.scenario.load` (imported on first use)."""
-    from soabench.scenario import load
 
     return load(net, tuple(polys), scenario)
 

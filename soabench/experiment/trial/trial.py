@@ -33,11 +33,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from soabench import plugins
 from soabench.config import filter_config_for_mode
 from soabench.errors import require
+from soabench.experiment.execution.workers import OWN_CODE, note_activity
+from soabench.experiment.trial import guard, isolate
+from soabench.experiment.trial.isolate import PluginFailed, private_scan
 from soabench.metrics import SERIES_KEYS, SUMMARY_KEYS, TrialMetrics, evaluate
 from soabench.origins import ORIGIN_KEYS
+from soabench.protocols import TrackerSetup
+from soabench.scenario import simulate
 from soabench.seeding import TrialSeeds, trial_seeds
+from soabench.sensor import observe
+from soabench.trackers import GMPHDTracker, ScanFailure, run_tracker
 from soabench.trackers import TrackerRun as FilterRun  # the step results and times of one run
 
 if TYPE_CHECKING:
@@ -209,7 +217,6 @@ def run_filter(
     p_D_b: float,
 ) -> FilterRun:
     """Run the filter cycle (§2.11) over every scan: birth from the context at k, then ``filt.step``."""
-    from soabench.trackers import GMPHDTracker, run_tracker
 
     return run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
 
@@ -287,13 +294,11 @@ def estimate_rows(key: RunKey, results: Sequence[StepResult]) -> list[dict[str, 
 
 
 def _default_simulate() -> Callable[..., Recording]:
-    from soabench.scenario import simulate
 
     return simulate
 
 
 def _default_observe() -> Callable[..., Scans]:
-    from soabench.sensor import observe
 
     return observe
 
@@ -305,7 +310,6 @@ def _default_filter_cls() -> type:
 
 
 def _default_birth_factory() -> Callable[[str], type]:
-    from soabench import plugins
 
     return lambda name: plugins.resolve(plugins.BIRTH, name)
 
@@ -435,7 +439,6 @@ def _births_once(
     are those each mode's own model would draw. ``candidates``: the trial's shared weight-free candidates of this
     model (:attr:`TrialShare.birth_candidates`), used if the class has ``candidates`` and ``weigh``.
     """
-    from soabench import plugins
 
     if not plugins.is_builtin_birth(model):
         return None
@@ -487,8 +490,6 @@ def _run_one(
     every scan (:mod:`soabench.experiment.trial.guard`); if it fails, the run is recorded in ``out.failures`` and the
     trial goes on with the other runs.
     """
-    from soabench import plugins
-    from soabench.trackers import GMPHDTracker, run_tracker
 
     filter_cfg, filter_mode, p_D_b = filter_config_for_mode(config.filter, key.mode)
     if plugins.is_builtin_birth(key.model):
@@ -501,7 +502,6 @@ def _run_one(
         run = run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
         _record(key, config, sensor_cfg, scans, seeds, run, out)
         return run
-    from soabench.experiment.trial import guard
 
     def build() -> GMPHDTracker:
         cls = birth_factory(key.model)
@@ -526,7 +526,6 @@ class _PrivateScans:
         self.model = model
 
     def __call__(self, ctx: BirthContext) -> Any:
-        from soabench.experiment.trial.isolate import private_scan
 
         return self.model(dataclasses.replace(ctx, scan=private_scan(ctx.scan)))
 
@@ -544,8 +543,6 @@ class _Isolated:
         return float(getattr(self.tracker, "t_birth", 0.0))
 
     def step(self, scan: Any) -> Any:
-        from soabench.experiment.trial.isolate import PluginFailed, private_scan
-        from soabench.trackers import ScanFailure
 
         try:
             return self.calls(self.tracker.step, private_scan(scan) if self.private else scan)
@@ -563,9 +560,6 @@ def _run_one_tracker(
     out: TrialResult,
 ) -> None:
     """One (tracker x mode) run on ``scans``, guarded like a plugin birth model (:func:`_run_one`)."""
-    from soabench import plugins
-    from soabench.experiment.trial import guard
-    from soabench.protocols import TrackerSetup
 
     def build() -> Any:
         cls = plugins.resolve(plugins.TRACKER, key.model)
@@ -591,10 +585,6 @@ def _guarded(
     ``budget``
     seconds per call, a private copy of each scan); on failure append a failure record (with the plugin's traceback)
     to ``out`` and return None."""
-    from soabench import plugins
-    from soabench.experiment.execution.workers import OWN_CODE, note_activity
-    from soabench.experiment.trial import guard, isolate
-    from soabench.trackers import ScanFailure, run_tracker
 
     k: int | None = None
     note_activity(key.trial, f"{kind} plugin {key.model!r} (clutter {key.clutter:g}, mode {key.mode})")
