@@ -24,7 +24,6 @@ import numpy as np
 import shapely
 from shapely.geometry.base import BaseGeometry
 
-from soabench.config import SensorConfig
 from soabench.errors import SoabenchError, require
 
 if TYPE_CHECKING:  # soabench.config sits above this module; imported at run time only where a config is built
@@ -529,6 +528,7 @@ def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
 
 
 def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
+    from soabench.config import SensorConfig  # run time only: soabench.config sits above this bottom module
 
     if "sensor_json" not in a:
         return None

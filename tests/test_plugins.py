@@ -36,7 +36,7 @@ def test_types_module_imports_no_stage() -> None:
     assert eval(out) == ["soabench", "soabench.errors", "soabench.protocols", "soabench.types"]
 
 
-def test_old_import_paths_are_the_same_classes() -> None:
+def test_api_hands_out_the_classes_of_types_and_protocols() -> None:
     from soabench import api
     from soabench.protocols import BirthModel
     from soabench.types import BirthContext, Births, NewbornTerms, Recording, Scan, Scans, StepResult
