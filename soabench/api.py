@@ -62,7 +62,7 @@ from soabench.types import (
 )
 
 if _TYPE_CHECKING:  # at run time imported on first use (module __getattr__)
-    from soabench.experiment.runs.memory import RunResult
+    from soabench.experiment.execution.memory import RunResult
     from soabench.metrics import TrialMetrics
 
 BIRTH_MODEL = _plugins.BIRTH  #: plugin kind of a birth model (:func:`resolve`): ``"birth model"``
@@ -116,7 +116,7 @@ __all__ = [
 
 #: public classes imported on first use (their modules load the metrics and the harness, seconds of imports that a
 #: plugin importing this module does not need)
-_LAZY = {"RunResult": "soabench.experiment.runs.memory", "TrialMetrics": "soabench.metrics"}
+_LAZY = {"RunResult": "soabench.experiment.execution.memory", "TrialMetrics": "soabench.metrics"}
 
 
 def __getattr__(name: str) -> _Any:
@@ -304,7 +304,7 @@ def run(
         the values of the CSV files ``soabench run`` writes for the same configuration, ``.to_pandas(name)`` with
         pandas, ``.write_csv(folder)`` for the files themselves (the same bytes).
     """
-    from soabench.experiment.runs.memory import run_in_memory, with_experiment
+    from soabench.experiment.execution.memory import run_in_memory, with_experiment
 
     cfg = with_experiment(
         _boundary.as_config(config),
@@ -318,8 +318,8 @@ def run(
     )
     if out is None:
         return run_in_memory(cfg, str(net), workers=workers, executor=executor, progress=progress)
+    from soabench.experiment.execution.memory import from_run_folder
     from soabench.experiment.execution.runner import run_experiment
-    from soabench.experiment.runs.memory import from_run_folder
 
     outcome = run_experiment(
         cfg, str(net), out=_Path(out), workers=workers, executor=executor, progress=progress, figures=False
