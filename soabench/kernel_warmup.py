@@ -55,6 +55,7 @@ MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (onc
 
 
 def _filter(mode: str):
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import GMPHDFilter
 
     cfg = Config()
@@ -75,6 +76,7 @@ def _births(n: int = 2):
 
 def _predict_update() -> None:
     """The prediction and the update (EKF and UKF terms, posterior) of both probability modes' argument types."""
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import cycle
     from soabench.gmphd.filter import _birth_arrays, _mixture_arrays
 
@@ -89,6 +91,7 @@ def _predict_update() -> None:
 
 def _reduction() -> None:
     """Pruning, merging (window and grid), capping and extraction."""
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import cycle
     from soabench.gmphd.filter import _mixture_arrays
     from soabench.gmphd.mixture import Mixture
@@ -105,6 +108,7 @@ def _reduction() -> None:
 
 def _metrics_geometry() -> None:
     """The per-run matchings (§5.2-5.6) and the scan-geometry kernels of the birth models and the sensor."""
+    # imported when called: numba, scipy would slow every start-up
     from soabench.geometry_kernels import occlusion_layer_arrays, poisson_accept, poisson_first_free
     from soabench.metrics import GATE_COST
     from soabench.metrics_kernels import run_matchings

@@ -514,6 +514,7 @@ def _matchings_compiled(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_matchings` for p = 1 as one compiled call: Est_k of every scan stacked (the FOV test of
     :func:`estimate_positions` over all of them at once, each with its scan's pose)."""
+    # imported when called: numba would slow every start-up
     from soabench.metrics_kernels import run_matchings
 
     X = [_points(res.X) for res in results]

@@ -425,6 +425,7 @@ def segment_meets_convex(ego_xy: np.ndarray, points: np.ndarray, polygons: Seque
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if len(points) == 0 or len(polygons) == 0:
         return np.zeros(len(points), dtype=bool)
+    # imported when called: numba would slow every start-up
     from soabench.geometry_kernels import flat_polygons, segments_meet_convex
 
     e = np.asarray(ego_xy, dtype=float)

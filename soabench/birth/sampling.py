@@ -63,6 +63,7 @@ def poisson_disk(region: BaseGeometry, d_min: float, rng: np.random.Generator, k
     require(d_min > 0, f"d_min = {d_min!r} must be > 0")
     if region.is_empty or region.area <= 0.0:
         return np.zeros((0, 2))
+    # imported when called: numba would slow every start-up
     from soabench.geometry_kernels import poisson_accept, poisson_first_free
 
     if not ready("geometry.poisson"):  # the kernels' first call in a process may compile them

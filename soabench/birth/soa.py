@@ -56,6 +56,7 @@ def ego_inside(polygons: list[np.ndarray], e: np.ndarray) -> np.ndarray:
     N = len(polygons)
     if N == 0:
         return np.zeros(0, dtype=bool)
+    # imported when called: numba would slow every start-up
     from soabench.geometry_kernels import convex_contains, flat_polygons
 
     x, y, starts, counts = flat_polygons(polygons)
@@ -116,6 +117,7 @@ def dedup(xy: np.ndarray, d_dup: float) -> np.ndarray:
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     if len(xy) < 2:
         return np.ones(len(xy), dtype=bool)
+    # imported when called: numba would slow every start-up
     from soabench.geometry_kernels import greedy_dedup  # compiled: one pass over the pairs
 
     return announced("geometry.dedup", greedy_dedup, xy[:, 0].copy(), xy[:, 1].copy(), float(d_dup))

@@ -147,6 +147,7 @@ def to_stonesoup(
         for time, detections in feed:
             ...
     """
+    # imported when called: scipy would slow every start-up
     from soabench.metrics import gt_mask
 
     require_type(scans, Scans, "to_stonesoup's scans", "simulate them with soabench.api.simulate_trial")

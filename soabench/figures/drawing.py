@@ -44,6 +44,7 @@ class FigureJob:
     weight: float = 1.0
 
     def draw(self, tables: Any) -> Path:
+        # imported when called: matplotlib would slow every start-up
         from soabench.figures.style import save_png
 
         return save_png(self.build(tables, *self.args), self.path)
@@ -110,6 +111,7 @@ def forget_arrays(run_dir: str | Path) -> None:
 
 def _saved_arrays(run_dir: Path) -> str:
     """The arrays :func:`remember_arrays` named for ``run_dir`` if its merged files are unchanged since, else ""."""
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.runs.store import merged_stamp
 
     hit = _SAVED.get(folder_key(run_dir))
@@ -120,6 +122,7 @@ def load_arrays(path: str, run_dir: str) -> Any:
     """The tables written by :func:`save_arrays` (``allow_pickle=False``: only numbers and text are read)."""
     import numpy as np
 
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.reports.tables import RunTables
 
     parts: dict[str, Any] = {part: {} for part in _PARTS}
@@ -162,6 +165,7 @@ class _NpzColumns(Mapping[str, Any]):
 
 
 def _tables(batch: FigureBatch) -> Any:
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.reports.tables import load_tables
 
     source = batch.arrays or batch.run_dir

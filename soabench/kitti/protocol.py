@@ -92,6 +92,7 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
     Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])``. Wall-clock
     times go to ``record["timing"]``, so everything else is bit-identical for the same inputs and seed.
     """
+    # imported when called: numba would slow every start-up
     from soabench.gmphd.filter import GMPHDFilter
 
     mode = cfg.experiment.probabilities[0]

@@ -203,6 +203,7 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Pa
 
 def find_runs(folder: Path) -> list[Path]:
     """Every run folder (holding ``run.json``) under ``folder``, sorted by path."""
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.runs.store import RUN_FILE
 
     return sorted(p.parent for p in folder.rglob(RUN_FILE))

@@ -70,6 +70,7 @@ class TrialReplay:
 def read_run(run_dir: str | Path):
     """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runs.runmeta.validate_run_meta`) and its
     raw dict."""
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.runs.store import RUN_FILE, RunStore
 
     path = resolve(run_dir)
@@ -96,6 +97,7 @@ def replay_trial(
 ) -> TrialReplay:
     """Re-simulate trial ``trial`` of the run in ``run_dir`` for ``models`` (default: the run's birth models) in
     probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
+    # imported when called: numba, scipy would slow every start-up
     from soabench.experiment.trial.trial import RunKey, make_row
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.metrics import evaluate
@@ -158,6 +160,7 @@ class _Recorder:
 
 def _version_note(raw: dict) -> str:
     """One line: the package versions that differ between the run and this replay (or that they agree)."""
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.execution.runner import package_versions
 
     stored = raw.get("versions") if isinstance(raw.get("versions"), dict) else {}

@@ -246,6 +246,7 @@ def load_suite(path: str | Path) -> Suite:
 def _check_metric(metric: Any, where: str) -> None:
     """A threshold's metric must be a metric or timing column of trials.csv (a typo is a bad suite, not a failed
     check)."""
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.runs.store import METRIC_COLUMNS, TIMING_COLUMNS
 
     allowed = METRIC_COLUMNS + TIMING_COLUMNS
@@ -306,6 +307,7 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
 
 def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict[str, float], list[dict]]:
     """Run every scenario and seed; return the mean of every trials.csv metric per key, and the plugin failures."""
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.execution.runner import run_experiment
     from soabench.experiment.runs.store import RunStore
 

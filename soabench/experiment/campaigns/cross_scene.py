@@ -164,6 +164,7 @@ PANELS = (
 def figure(rows: Sequence[Mapping]):
     """S-OA's advantage vs occlusion density: one column per measure, one row per probability mode; per baseline
     one marker per scene with its 95% CI (small horizontal offsets keep the bars apart), scenes named on top."""
+    # imported when called: matplotlib would slow every start-up
     from soabench.figures import style as ps
 
     modes = list(dict.fromkeys(r["mode"] for r in rows))
@@ -213,6 +214,7 @@ def figure(rows: Sequence[Mapping]):
 
 def write_summary(out_dir: Path, scenes: Sequence[tuple[str, Mapping[str, Any], Path]], clutter: float = 3.0) -> str:
     """Write summary.md, summary.csv and the figure into ``out_dir`` from (scene, density, trials.csv) triples."""
+    # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
 
     rows = [r for name, dens, csv in scenes for r in advantage_rows(name, dens, paper.read_rows(csv), clutter)]

@@ -165,6 +165,7 @@ def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
                 f"| {c['wins']} / {c['ties']} / {c['losses']} / {c['na']} | {fmt_pct(c['card_reduction'])} "
                 f"| {fmt_pct(c['ospa_reduction'])} | {fmt_pct(100 * frac if math.isfinite(frac) else frac)} |"
             )
+    # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
 
     save_png(occlusion_figure(sweep_dir, meta["points"], rows), sweep_dir / "sweep_occlusion.png")
@@ -196,6 +197,7 @@ _PANELS = (
 def occlusion_figure(sweep_dir: Path, points: list[dict], rows: list[dict]) -> Figure:
     """Delay, cardinality error and OSPA per birth model and mode against the parked-car density, mean over trials
     with its 95 % confidence interval (Student t) as error bars (one style module)."""
+    # imported when called: matplotlib would slow every start-up
     from soabench.figures import style as ps
     from soabench.figures.results import mean_ci
 

@@ -63,6 +63,7 @@ class Settings:
 
     def validate(self, shipped: Sequence[str]) -> Settings:
         """Every size in its range (the bounds of soabench/config.py and of ``export kitti``), before any part runs."""
+        # imported when called: scipy would slow every start-up
         from soabench.kitti.export import MAX_EXPORT_TRIALS
 
         def count(name: str, low: int, high: int, why: str = "") -> None:
@@ -199,6 +200,7 @@ def study_kept(root: Path, s: Settings, trials: int | None = None) -> bool:
                 same &= same_settings(point, cfg)
     if not same or not all(part_complete(root / p) for p in STUDY_PARTS):
         return False
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.campaigns.sensitivity_runs import VARIANTS
 
     sens = root / "sensitivity"
@@ -222,6 +224,7 @@ def _study_part(
     """The study (:func:`soabench.experiment.campaigns.study.run_study`) of scene ``net`` in ``root``: kept when
     complete with
     these settings, else resumed or started; ``trials`` of its main protocol (default ``s.trials``)."""
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.campaigns.study import run_study
 
     if root.is_dir() and study_kept(root, s, trials):
@@ -259,6 +262,7 @@ def kitti_settings_check(base: Path, want: dict[str, Any]) -> dict | None:
 
 def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None], progress: bool) -> tuple[str, int]:
     """Export ``kitti_sequences`` SUMO trials of ``scene`` in the KITTI layout, then the KITTI protocol on them."""
+    # imported when called: matplotlib, scipy would slow every start-up
     from soabench.kitti.export import export_kitti
     from soabench.kitti.protocol import run_kitti
 
@@ -366,6 +370,7 @@ def run_results(
                 step(f"{scene} occlusion density", measure, banner=False)
 
             def summary() -> tuple[str, int]:
+                # imported when called: scipy would slow every start-up
                 from soabench.experiment.campaigns.cross_scene import write_summary
 
                 ready = [n for n in scenes if run_complete(mains[n])]

@@ -235,6 +235,7 @@ def _ratio_table(rows: list[dict]) -> str:
 
 def key_figure(main_rows: list[dict], clutter_rows: list[dict], path: Path) -> Path:
     """The README's key figure (:func:`soabench.figures.sweeps.key_figure`), written to ``path``."""
+    # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import key_figure as draw
 

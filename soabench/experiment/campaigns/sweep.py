@@ -364,6 +364,7 @@ def _episode_means(
 ) -> dict[tuple[str, str], tuple[float, float]]:
     """k̄_delay over all counted episodes of a run per (model, mode), and the half-width of its 95 % confidence
     interval over trials (:func:`~soabench.figures.results.pooled_mean_ci`)."""
+    # imported when called: matplotlib would slow every start-up
     from soabench.figures.results import pooled_mean_ci
 
     e = read_csv(run_dir / "episodes.csv")
@@ -414,6 +415,7 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     for r in table:
         lines.append(f"| {r['N_tot']} | {r['N_hat']:.4g} | " + " | ".join(fmt(r["delay"][c]) for c in cols) + " |")
     lines.append("| std over N_tot | | " + " | ".join(fmt(std[c]) for c in cols) + " |")
+    # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import births_figure
 
@@ -444,6 +446,7 @@ def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
             f"| {r['clutter']:g} | {LABEL.get(r['model'], r['model'])} | {r['mode']} | {fmt(r['precision_mean'])} "
             f"| {fmt(r['recall_mean'])} | {fmt(r['card_err_mean'])} | {fmt(r['ospa_mean'])} | {fmt(r['delay_mean'])} |"
         )
+    # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import clutter_figure
 

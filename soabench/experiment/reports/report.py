@@ -388,6 +388,7 @@ def write_report(run_dir: Path, figures: bool = True, store: RunStore | None = N
     summary = summarize(tables, store.failures(), store.sessions())
     fig_paths: list[str] = []
     if figures:
+        # imported when called: matplotlib would slow every start-up
         from soabench.figures.results import make_figures
 
         fig_paths = [str(p.relative_to(run_dir)) for p in make_figures(tables, run_dir / "figures")]

@@ -38,6 +38,7 @@ NAME_PATTERN = re.compile(r"^[A-Za-z][A-Za-z0-9._-]{0,63}$")
 
 def _builtin_trial(trial, config, scene, scenario, *, save_estimates=False):
     """The built-in trial kind: :func:`soabench.experiment.trial.trial.run_trial` (imported on first use)."""
+    # imported when called: scipy would slow every start-up
     from soabench.experiment.trial.trial import run_trial
 
     return run_trial(trial, config, scene, scenario, save_estimates=save_estimates)

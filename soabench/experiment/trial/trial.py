@@ -304,6 +304,7 @@ def _default_observe() -> Callable[..., Scans]:
 
 
 def _default_filter_cls() -> type:
+    # imported when called: numba would slow every start-up
     from soabench.gmphd.filter import GMPHDFilter
 
     return GMPHDFilter
