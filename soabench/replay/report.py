@@ -24,6 +24,7 @@ from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.files import write_text_atomic
 from soabench.experiment.runs.ownership import resolve
 from soabench.replay.page import asset, fill
+from soabench.replay.simulate import read_run
 
 GENERATOR = "soabench report"
 REPORT_FILE = "report.html"
@@ -191,8 +192,6 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Pa
     """Write the report page of a run folder (default ``RUN/report.html``); returns its path and size in bytes.
 
     An existing file at the target that this command did not write is left alone (an error says so)."""
-    from soabench.replay.simulate import read_run
-
     path, _, raw = read_run(run_dir)
     target = path / REPORT_FILE if out is None else Path(out)
     _check_ours(target)
@@ -223,8 +222,6 @@ def _folder_parts(folder: Path, runs: list[Path]) -> list[tuple[Path, list[Path]
 
 
 def _run_row(folder: Path, run: Path) -> str:
-    from soabench.replay.simulate import read_run
-
     rel = run.relative_to(folder).as_posix()
     try:
         _, meta, raw = read_run(run)
