@@ -37,7 +37,7 @@ from soabench.experiment.execution.executors import (
 )
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
-from soabench.experiment.reports.report import write_report
+from soabench.experiment.reports import report
 from soabench.experiment.runs.files import pack_table, to_jsonable, write_json_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, platform_info
@@ -482,7 +482,7 @@ def _run_locked(
         # a study's workers may have merged it already; the figures read the step columns the merge kept
         premerge.merge(store, *premerge.merge_args(config), step_columns=figures)
         with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
-            outcome.summary_markdown = write_report(store.run_dir, figures=figures, store=store)
+            outcome.summary_markdown = report.write_report(store.run_dir, figures=figures, store=store)
         outcome.model_failures = store.model_failures()
     except KeyboardInterrupt:
         raise Interrupted(
