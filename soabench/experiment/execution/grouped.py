@@ -35,7 +35,8 @@ from soabench.experiment.execution.runner import (
 )
 from soabench.experiment.runs.ownership import FolderLock
 from soabench.experiment.trial import registry
-from soabench.experiment.trial.trial import TrialShare, _config_key, run_trial
+from soabench.experiment.trial import trial as trial_module
+from soabench.experiment.trial.trial import TrialShare, _config_key
 from soabench.kernel_warmup import ensure_compiled
 
 
@@ -70,7 +71,7 @@ def run_group_task(trial: int, group: GroupSpec) -> dict:
         if trial not in group.todo[i]:
             continue
         if spec.trial_fn is None and builtin:  # the built-in trial kind: run_trial, with the share
-            spec = dataclasses.replace(spec, trial_fn=functools.partial(run_trial, share=share))
+            spec = dataclasses.replace(spec, trial_fn=functools.partial(trial_module.run_trial, share=share))
         records[i] = run_trial_task(trial, spec)
     return {"status": "group", "trial": int(trial), "records": records, "shared": dict(share.counts)}
 
