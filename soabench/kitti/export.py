@@ -35,6 +35,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Point, Polygon
 
+from soabench import scenario as sumo_scenario
 from soabench.config import Config, SensorConfig
 from soabench.errors import require
 from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
@@ -52,7 +53,7 @@ from soabench.kitti.formats import (
 from soabench.kitti.raycast import export_lidar
 from soabench.kitti.reader import CALIB_DIR, DETECTION_DIR, LABEL_DIR, OXTS_DIR, SEMANTICS_DIR
 from soabench.kitti.velodyne import CAR_H, GROUND_Z, PED_HWL, ego_frame, hole_free
-from soabench.scenario import load, simulate
+from soabench.scenario import load
 from soabench.seeding import trial_seeds
 from soabench.sensor import _static_occluder_arrays, observe, scan_steps
 
@@ -297,7 +298,7 @@ def _export_trials(
     rows = []
     for n in range(trials):
         seeds = trial_seeds(cfg.experiment.seed, n)
-        recording = simulate(scene, scen, seeds, duration=dur)
+        recording = sumo_scenario.simulate(scene, scen, seeds, duration=dur)
         scans = observe(recording, scene, sensor, seeds.sensor_rngs())
         rows.append(export_trial(n, recording, scans, scene, sensor, calib, out, cfg.experiment.seed))
         if lidar:
