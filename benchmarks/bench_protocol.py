@@ -147,7 +147,7 @@ def summarise(
 ) -> dict:
     """The numbers of one finished run folder (timing.csv, the session record) and the measured wall and memory."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from soabench.experiment.files import read_csv
+    from soabench.experiment.runs.files import read_csv
 
     tm = read_csv(run_dir / "timing.csv")
     first = np.unique(tm["trial"], return_index=True)[1]

@@ -38,10 +38,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 import bad_inputs  # noqa: E402
 import fake_trial as ft  # noqa: E402
 
-import soabench.experiment.report as report  # noqa: E402
+import soabench.experiment.reports.report as report  # noqa: E402
 from soabench.cli import main  # noqa: E402
 from soabench.config import Config  # noqa: E402
-from soabench.experiment.runner import run_experiment  # noqa: E402
+from soabench.experiment.execution.runner import run_experiment  # noqa: E402
 
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
@@ -167,7 +167,7 @@ sys.path.insert(0, {tests!r})
 import fake_trial as ft
 from pathlib import Path
 from soabench.config import Config
-from soabench.experiment.runner import run_experiment
+from soabench.experiment.execution.runner import run_experiment
 cfg = Config.from_dict({cfg!r}).validate()
 kw = dict(workers=2, trial_fn=ft.slow_trial, load_fn=ft.fake_load, progress=False, figures=False)
 if {resume!r}:
@@ -254,10 +254,9 @@ def executors(tmp: Path) -> dict:
 def filter_steps(n: int = 2000) -> dict:
     from shapely.geometry import Polygon
 
-    from soabench.birth.base import SOURCE_GRID, Births
     from soabench.config import FilterConfig, SensorConfig
     from soabench.gmphd import GMPHDFilter
-    from soabench.sensor import Scan
+    from soabench.types import SOURCE_GRID, Births, Scan
 
     rng = np.random.default_rng(0)
     filt = GMPHDFilter(FilterConfig(nonfinite="drop", J_max=100), SensorConfig(), "dynamic")

@@ -38,10 +38,10 @@ import time
 from pathlib import Path
 
 from soabench.config import Config
-from soabench.experiment import report as report_module
-from soabench.experiment import trial as trial_module
-from soabench.experiment.runner import run_experiment
-from soabench.experiment.study import run_study
+from soabench.experiment.campaigns.study import run_study
+from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports import report as report_module
+from soabench.experiment.trial import trial as trial_module
 
 
 def parse_args(argv=None) -> argparse.Namespace:

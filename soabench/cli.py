@@ -265,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress report")
 
     p = sub.add_parser("results", help="regenerate all of results/: study, every scene, summary, KITTI")
-    from soabench.experiment.results_suite import add_arguments as add_results_arguments
+    from soabench.experiment.campaigns.results_suite import add_arguments as add_results_arguments
 
     add_results_arguments(p, _csv_list)
 
@@ -429,20 +429,20 @@ def _prepare_out(path: str, suffix: str, flag: str = "--out") -> Path:
 
 
 def _save_figure(fig, out: Path) -> None:
-    from soabench.plotstyle import save_png
+    from soabench.figures.style import save_png
 
     save_png(fig, out)
 
 
 # ----------------------------------------------------------------------------------------------------- commands
 def cmd_scene(args: argparse.Namespace) -> int:
-    from soabench.scenario.plots import plot_scene, scene_figure
+    from soabench.figures.scene import plot_scene, scene_figure
 
     out = _prepare_out(args.out, ".png")
     scene, _, cfg, seeds, recording = _snapshot(args, args.time, include_end=True)
     fig, ax = scene_figure(scene, legend_rows=6 if args.sensor else 3)
     if args.sensor:
-        from soabench.sensor_plot import draw_sensor_overlay
+        from soabench.figures.sensor import draw_sensor_overlay
 
         scans = _observe(recording, scene, cfg, seeds)
         plot_scene(scene, recording, time=scans.scans[-1].t, ax=ax)  # the scene at the overlaid scan's time
@@ -476,12 +476,12 @@ def cmd_record(args: argparse.Namespace) -> int:
 def cmd_birth(args: argparse.Namespace) -> int:
     from soabench import plugins
     from soabench.birth import LABEL
-    from soabench.birth.base import BirthContext
-    from soabench.birth.plots import draw_births
-    from soabench.experiment.guard import check_births
+    from soabench.experiment.trial.guard import check_births
+    from soabench.figures.births import draw_births
+    from soabench.figures.scene import plot_scene, scene_figure
+    from soabench.figures.style import panel_title
     from soabench.gmphd.filter import GMPHDFilter
-    from soabench.plotstyle import panel_title
-    from soabench.scenario.plots import plot_scene, scene_figure
+    from soabench.types import BirthContext
 
     out = _prepare_out(args.out, ".png")
     plugins.allow_import_paths([args.model])
@@ -537,7 +537,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.resume is not None:  # --models/--trackers re-allow the run's import-path plugins (and are compared)
         _allow_typed_plugins(args)
     cfg = _config_from_args(args)  # also validates the flags given with --resume
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.runner import run_experiment
 
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the run in its folder")
@@ -560,7 +560,7 @@ def _report_outcome(outcome, finish: str = "soabench run --resume {dir}") -> int
     if getattr(outcome, "summary_markdown", None):
         print(outcome.summary_markdown)
     if outcome.complete:
-        from soabench.experiment.failures import failed_methods_line, outcome_model_failures
+        from soabench.experiment.runs.failures import failed_methods_line, outcome_model_failures
 
         print(f"results in {outcome.run_dir}")
         failed = failed_methods_line(outcome_model_failures(outcome))
@@ -581,7 +581,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the sweep in its folder")
         _allow_typed_plugins(args)
-        from soabench.experiment.sweep import run_sweep
+        from soabench.experiment.campaigns.sweep import run_sweep
 
         requested = {"kind": args.kind, **_requested(args, _config_from_args(args))}
         if args.values is not None or args.offsets is not None:
@@ -591,7 +591,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             **kwargs,
         )  # fmt: skip
         return _report_outcome(outcome, f"soabench sweep {args.kind} --resume {{dir}}")
-    from soabench.experiment.sweep import DEFAULT_VALUES, run_sweep
+    from soabench.experiment.campaigns.sweep import DEFAULT_VALUES, run_sweep
 
     if args.kind == "clutter":  # the sweep's points are its clutter rates: λ has no second home here
         given = cli_checks.requested_keys(args, getattr(args, "explicit", set()))
@@ -618,7 +618,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _all_figures(args: argparse.Namespace) -> bool | None:
-    """``--all-figures``: True; else None (each sweep kind's default, :func:`soabench.experiment.sweep.run_sweep`)."""
+    """``--all-figures``: True; else None (each sweep kind's default,
+    :func:`soabench.experiment.campaigns.sweep.run_sweep`)."""
     if args.all_figures:
         require(
             args.kind == "births",
@@ -649,7 +650,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         plugins.allow_import_paths(extra)
         cfg.experiment = dataclasses.replace(cfg.experiment, models=(*cfg.experiment.models, *extra))
         cfg.validate()
-    from soabench.experiment.study import run_study
+    from soabench.experiment.campaigns.study import run_study
 
     for key in ("save_estimates", "fail_fast"):
         kwargs.pop(key)
@@ -672,7 +673,7 @@ def cmd_study(args: argparse.Namespace) -> int:
 
 def cmd_sensitivity(args: argparse.Namespace) -> int:
     from soabench.config import MAX_TRIALS
-    from soabench.experiment.executors import MAX_WORKERS
+    from soabench.experiment.execution.executors import MAX_WORKERS
 
     require(
         args.trials is None or 1 <= args.trials <= MAX_TRIALS,
@@ -682,7 +683,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
         args.workers is None or 1 <= args.workers <= MAX_WORKERS,
         f"--workers {args.workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
     )
-    from soabench.experiment.sensitivity_runs import run_sensitivity
+    from soabench.experiment.campaigns.sensitivity_runs import run_sensitivity
 
     outcome = run_sensitivity(
         args.main, args.out, trials=args.trials, workers=args.workers, progress=not args.no_progress
@@ -691,7 +692,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
 
 
 def cmd_results(args: argparse.Namespace) -> int:
-    from soabench.experiment.results_suite import cmd_results as run
+    from soabench.experiment.campaigns.results_suite import cmd_results as run
 
     return run(args)
 
@@ -711,7 +712,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     require(args.workers >= 1, f"--workers {args.workers} must be >= 1")
     from soabench import plugins
-    from soabench.experiment.check import run_check
+    from soabench.experiment.campaigns.check import run_check
 
     for name in args.plugin:
         require(":" in name, f"--plugin {name!r} must be MODULE:CLASS (installed entry-point plugins need no --plugin)")

@@ -119,7 +119,7 @@ def check_out_file(path: str, suffix: str | None = None, flag: str = "--out") ->
         require(anc.is_dir(), f"{flag} {path!r} lies under {str(anc)!r}, which is a file, not a folder")
         raise SoabenchError(f"output folder {str(parent)!r} does not exist for {path!r}")
     require(parent.is_dir(), f"{flag} {path!r} lies under {str(parent)!r}, which is a file, not a folder")
-    from soabench.experiment.ownership import probe_writable
+    from soabench.experiment.runs.ownership import probe_writable
 
     probe_writable(parent, f"{flag} {path!r}: the folder {str(parent)!r}")
     return out
@@ -155,7 +155,7 @@ def requested_keys(args: argparse.Namespace, explicit: set[str]) -> set[str]:
 
 def requested_values(cfg: Any, keys: set[str], args: argparse.Namespace, explicit: set[str]) -> dict[str, Any]:
     """``{dotted key: value}`` of ``keys`` in the validated ``cfg``, plus ``net``/``polys``/``scenario`` if given."""
-    from soabench.experiment.runmeta import flatten_config
+    from soabench.experiment.runs.runmeta import flatten_config
 
     flat = flatten_config(cfg.to_dict())
     out = {k: flat[k] for k in keys if k in flat}

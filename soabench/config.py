@@ -22,10 +22,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from soabench.birth import REGISTRY as _BIRTH_REGISTRY
+from soabench import plugins
 from soabench.errors import SoabenchError, require
+from soabench.tomlfile import read_toml
 
-BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(_BIRTH_REGISTRY)  #: the built-in birth models (soabench.birth.REGISTRY)
+BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(plugins.BUILTIN_BIRTH_MODELS)  #: the built-in birth models
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
 
 
@@ -333,8 +334,6 @@ class ExperimentConfig:
         _int_range("trials", self.trials, 1, MAX_TRIALS)
         _positive("duration", self.duration, hi=86400.0)
         require(len(self.models) + len(self.trackers) >= 1, "models must name at least one birth model or tracker")
-        from soabench import plugins  # the closed list of names: built-ins, entry points, typed import paths
-
         for m in self.models:
             plugins.check_name(plugins.BIRTH, m)
         for t in self.trackers:
@@ -496,7 +495,6 @@ def load_config(path: str | Path | None, base: Config | None = None) -> Config:
     """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
     if path is None:
         return (base or Config()).validate()
-    from soabench.tomlfile import read_toml
 
     p = Path(path)
     require(p.is_file(), f"config file {str(p)!r} does not exist")

@@ -35,7 +35,7 @@ SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (docs/use
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Truth: one scenario run (moved from soabench.scenario.recording, which re-exports it)
+# Truth: one scenario run
 
 
 @dataclass
@@ -528,7 +528,7 @@ def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
 
 
 def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
-    from soabench.config import SensorConfig
+    from soabench.config import SensorConfig  # run time only: soabench.config sits above this bottom module
 
     if "sensor_json" not in a:
         return None

@@ -368,7 +368,7 @@ def _sensitivity(tmp: Path, out: str, finished: bool = True) -> list[str]:
     import fake_trial as ft
 
     from soabench.config import Config
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.runner import run_experiment
 
     cfg = Config()
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=2, duration=10.0, models=("soa",))
@@ -663,7 +663,7 @@ def stub_work(setattr_: Callable, setitem: Callable) -> None:
     import soabench.kitti.protocol
     import soabench.scenario
     import soabench.scenario.osm
-    from soabench.experiment import registry
+    from soabench.experiment.trial import registry
 
     setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, _started)
     setattr_(soabench.scenario, "simulate", _started)

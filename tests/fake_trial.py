@@ -1,4 +1,4 @@
-"""A fast, deterministic stand-in for ``soabench.experiment.trial.run_trial`` (same TrialResult schema).
+"""A fast, deterministic stand-in for ``soabench.experiment.trial.trial.run_trial`` (same TrialResult schema).
 
 Module-level functions so worker processes (process pool, Dask) can import them. Numbers depend only on
 ``(config.experiment.seed, trial)`` and the (clutter, model, mode) indices; the ``t_*`` timing columns are real
@@ -196,7 +196,7 @@ def crashing_trial(trial, config, scene, scenario, *, save_estimates=False):
 
 # the fakes are registered trial kinds / scene loaders, so a run made with them can be resumed by name (a run
 # folder names what it needs; it never spells out an import path)
-from soabench.experiment.registry import register_scene_loader, register_trial_kind  # noqa: E402
+from soabench.experiment.trial.registry import register_scene_loader, register_trial_kind  # noqa: E402
 
 register_scene_loader("fake-load", fake_load)
 for _name, _fn in (

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import soabench.api as sb
-from soabench.experiment.files import read_csv
-from soabench.experiment.store import METRIC_COLUMNS
+from soabench.experiment.runs.files import read_csv
+from soabench.experiment.runs.store import METRIC_COLUMNS
 
 NET = "arterial"  # walkers are seen within 20 s (the intersection's first walkers appear later)
 MODELS = "soa,pubm,atbm"  # a mode-free model, a per-mode one and one that reads the previous step
@@ -304,7 +304,7 @@ def test_run_on_two_processes_equals_the_serial_run(api_run) -> None:
 
 
 def test_failed_plugin_runs_and_failed_trials_are_listed(monkeypatch) -> None:
-    from soabench.experiment import runner
+    from soabench.experiment.execution import runner
 
     result = sb.run(net=NET, trials=1, duration=5, models=["soa", "plugin_fixtures:RaiseAtScan3"])
     assert set(result.trials["model"]) == {"soa"} and result.complete

@@ -13,13 +13,13 @@ from soabench.baselines.adaptive import AdaptiveBirth, newborn_likelihood, unexp
 from soabench.baselines.partially_uniform import PartiallyUniformBirth
 from soabench.baselines.standard_gm import StandardGMBirth, boundary_exits, entry_points
 from soabench.baselines.uniform import UniformBirth, grid_nodes
-from soabench.birth import REGISTRY, get_birth_model
-from soabench.birth.base import SOURCE_GM, SOURCE_GRID, SOURCE_MEAS, BirthContext, inside_any
+from soabench.birth import get_birth_model
+from soabench.birth.base import inside_any
 from soabench.config import BirthConfig, SensorConfig
 from soabench.geometry import clutter_intensity, fov_mask
-from soabench.gmphd.filter import StepResult
+from soabench.plugins import BUILTIN_BIRTH_MODELS
 from soabench.scenario.scene import SceneMap
-from soabench.sensor import Obstacles, Scan
+from soabench.types import SOURCE_GM, SOURCE_GRID, SOURCE_MEAS, BirthContext, Obstacles, Scan, StepResult
 
 
 def make_scene(box_=(-50.0, -50.0, 120.0, 50.0)) -> SceneMap:
@@ -64,7 +64,7 @@ def newborn_weight(births, A, kappa) -> np.ndarray:
 def test_registry_constructs_every_model_and_returns_births(name):
     scene = make_scene()
     cls = get_birth_model(name)
-    assert cls.name == name and name in REGISTRY
+    assert cls.name == name and name in BUILTIN_BIRTH_MODELS
     model = cls(BirthConfig(), SensorConfig(), scene, np.random.default_rng(0))
     scan = make_scan(scene, Z=[[10.0, 0.5]])
     scan.visible_region = scene.sidewalk.intersection(shapely.Point(10, 0).buffer(50))

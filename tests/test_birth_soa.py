@@ -11,20 +11,12 @@ import shapely
 from shapely.geometry import MultiLineString, Point, Polygon, box
 
 from soabench.birth import get_birth_model
-from soabench.birth.base import (
-    SOURCE_FOV,
-    SOURCE_OCCL,
-    SOURCE_SEM,
-    BirthContext,
-    FOVRule,
-    build_components,
-    inside_any,
-)
+from soabench.birth.base import FOVRule, build_components, inside_any
 from soabench.birth.soa import SOABirth, combined_weights, dedup, ego_inside, occlusion_layers
 from soabench.config import BirthConfig, SensorConfig
 from soabench.geometry import fov_mask, range_bearing, wrap
 from soabench.scenario.scene import SceneMap
-from soabench.sensor import Obstacles, Scan
+from soabench.types import SOURCE_FOV, SOURCE_OCCL, SOURCE_SEM, BirthContext, Obstacles, Scan
 
 # ---------------------------------------------------------------------------------------------------------------------
 # synthetic scene and scans (the spec geometry of §3.1.2 written out here, independent of the sensor module)

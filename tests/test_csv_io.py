@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from soabench.errors import SoabenchError
-from soabench.experiment.files import read_csv, write_csv
+from soabench.experiment.runs.files import read_csv, write_csv
 
 
 def csv_module_columns(path) -> dict[str, np.ndarray]:
@@ -56,7 +56,7 @@ TEXTS = {
 @pytest.mark.parametrize("name", sorted(TEXTS))
 def test_read_csv_reads_what_the_csv_module_reads(tmp_path, monkeypatch, name, block):
     """Whatever the block of rows parsed at a time (a column can turn out to be text in a later block)."""
-    from soabench.experiment import files
+    from soabench.experiment.runs import files
 
     monkeypatch.setattr(files, "_BLOCK", block)
     path = tmp_path / "t.csv"
@@ -91,11 +91,11 @@ def test_an_empty_file_is_one_clear_error(tmp_path):
 
 
 def test_steps_are_read_only_when_used(tmp_path, monkeypatch):
-    from soabench.experiment import tables as tables_module
+    from soabench.experiment.reports import tables as tables_module
 
     run = tmp_path / "run"
     run.mkdir()
-    from soabench.experiment.store import FORMAT_VERSION, RUN_FILE
+    from soabench.experiment.runs.store import FORMAT_VERSION, RUN_FILE
 
     meta = {"format": FORMAT_VERSION, "config": {"experiment": {"models": ["soa"], "probabilities": ["static"]}}}
     (run / RUN_FILE).write_text(json.dumps(meta))
@@ -112,8 +112,8 @@ def test_steps_are_read_only_when_used(tmp_path, monkeypatch):
 
 def _records(kind: str) -> list[dict]:
     """Three trials' records whose step rows arrive unsorted; ``kind`` makes one of them irregular."""
-    from soabench.experiment.files import pack_table
-    from soabench.experiment.store import STEP_COLUMNS
+    from soabench.experiment.runs.files import pack_table
+    from soabench.experiment.runs.store import STEP_COLUMNS
 
     rng = np.random.default_rng(5)
     out = []
@@ -135,7 +135,7 @@ def _records(kind: str) -> list[dict]:
 
 @pytest.mark.parametrize("kind", ["regular", "extra column", "out of order"])
 def test_merge_writes_steps_as_one_sort_of_every_row(tmp_path, kind):
-    from soabench.experiment import files, store
+    from soabench.experiment.runs import files, store
 
     run = store.RunStore(tmp_path / "run")
     run.create({"net": "test"})  # a run folder: its records carry its run_id
@@ -158,7 +158,7 @@ def test_merge_writes_steps_as_one_sort_of_every_row(tmp_path, kind):
 
 def test_model_failures_after_a_merge_are_the_records_own(tmp_path, monkeypatch):
     """The store that merged knows the model failures without reading the records again, until a record changes."""
-    from soabench.experiment import store
+    from soabench.experiment.runs import store
 
     run = store.RunStore(tmp_path / "run")
     run.create({"net": "test"})  # a run folder: its records carry its run_id
@@ -194,8 +194,8 @@ def test_merge_keeps_the_step_columns_read_csv_reads(tmp_path, column):
     """``merge(..., step_columns=True)`` keeps steps.csv's columns as ``read_csv`` reads the file it wrote, byte for
     byte and dtype for dtype, whatever the cells; it gives None where only the file decides, and nothing once a
     merged file changed."""
-    from soabench.experiment import store
-    from soabench.experiment.tables import load_tables
+    from soabench.experiment.reports.tables import load_tables
+    from soabench.experiment.runs import store
 
     run = store.RunStore(tmp_path / "run")
     run.create({"config": {"experiment": {"models": ["soa", "gmbm"], "probabilities": ["static"]}}})

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from soabench.birth import get_birth_model
-from soabench.birth.base import BirthContext
 from soabench.config import Config, filter_config_for_mode
 from soabench.gmphd import GMPHDFilter, cycle
 from soabench.gmphd.clock import monotonic
 from soabench.gmphd.filter import _birth_arrays, _mixture_arrays
+from soabench.types import BirthContext
 
 
 def test_compiled_clock_reads_perf_counter():

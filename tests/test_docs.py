@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from soabench.config import DERIVED_KEYS, Config
-from soabench.experiment.store import EPISODE_COLUMNS, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS
+from soabench.experiment.runs.store import EPISODE_COLUMNS, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -219,8 +219,8 @@ def test_a_link_out_of_docs_must_name_a_repository_file():
 
 
 def test_ci_page_documents_every_suite_key_with_its_default():
-    """The suite format of docs/user-guide/ci.md names exactly the keys soabench/experiment/check.py reads."""
-    from soabench.experiment import check
+    """The suite format of docs/user-guide/ci.md names exactly the keys soabench/experiment/campaigns/check.py reads."""
+    from soabench.experiment.campaigns import check
 
     text = (DOCS / "user-guide" / "ci.md").read_text(encoding="utf-8")
     sections = {

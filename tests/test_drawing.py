@@ -10,9 +10,11 @@ import fake_trial as ft
 import pytest
 
 from soabench.config import Config
-from soabench.experiment import drawing, plots
-from soabench.experiment.runner import PoolExecutor, SerialExecutor, run_experiment
-from soabench.experiment.tables import load_tables
+from soabench.experiment.execution.executors import PoolExecutor, SerialExecutor
+from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.tables import load_tables
+from soabench.figures import drawing
+from soabench.figures import results as plots
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +71,7 @@ def test_serial_executor_and_in_memory_tables_draw_here(run_dir, tmp_path, monke
 
 
 def test_a_failed_figure_raises_and_the_report_is_not_written(run_dir, tmp_path, monkeypatch):
-    from soabench.experiment.report import write_report
+    from soabench.experiment.reports.report import write_report
 
     def broken(tables, *args):
         raise ValueError("no figure today")

@@ -87,7 +87,7 @@ def test_example_plugins_run_beside_soa(installed, tmp_path) -> None:
     # the NN tracker really tracks: some of its confirmed estimates lie near true pedestrians
     assert stats["nnkf"]["n_trials"] == 1
     assert {c["baseline"] for c in summary["results"][0]["vs_soa"]} == {"edge", "nnkf"}
-    from soabench.experiment.files import read_csv
+    from soabench.experiment.runs.files import read_csv
 
     steps = read_csv(out / "steps.csv")
     nn = steps["model"] == "nnkf"

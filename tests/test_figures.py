@@ -17,11 +17,11 @@ from matplotlib.collections import LineCollection
 from matplotlib.colors import to_rgb
 from shapely.geometry import Point, Polygon, box
 
-from soabench import plotstyle as ps
-from soabench.experiment import plots
-from soabench.experiment.origin_plots import components_origin_figure, fig_components_origin
-from soabench.experiment.study_plots import births_figure, clutter_figure, key_figure
-from soabench.experiment.tables import RunTables
+from soabench.experiment.reports.tables import RunTables
+from soabench.figures import results as plots
+from soabench.figures import style as ps
+from soabench.figures.origins import components_origin_figure, fig_components_origin
+from soabench.figures.sweeps import births_figure, clutter_figure, key_figure
 from soabench.origins import ORIGIN_KEYS
 
 MODELS = ("soa", "atbm", "myplugin")
@@ -251,7 +251,7 @@ def test_pooled_mean_ci_is_the_trial_cluster_interval():
     """Pooled over trials with equal counts, the ratio estimator's CI is the Student-t CI of the trial means."""
     from scipy.stats import t as student_t
 
-    from soabench.experiment.plots import mean_ci, pooled_mean_ci
+    from soabench.figures.results import mean_ci, pooled_mean_ci
 
     rng = np.random.default_rng(4)
     values, trials = rng.exponential(1.5, 40), np.repeat(np.arange(8), 5)
@@ -321,7 +321,7 @@ def _fake_recording():
 
 
 def test_scene_legend_and_polygon_holes_keep_roads_visible(tmp_path):
-    from soabench.scenario.plots import ROAD, plot_scene, scene_figure
+    from soabench.figures.scene import ROAD, plot_scene, scene_figure
 
     scene = _ring_scene()
     fig, ax = scene_figure(scene)
@@ -341,9 +341,9 @@ def test_scene_legend_and_polygon_holes_keep_roads_visible(tmp_path):
 
 
 def test_birth_overlay_extends_the_scene_legend(tmp_path):
-    from soabench.birth.base import SOURCE_OCCL, SOURCE_SEM, Births
-    from soabench.birth.plots import draw_births
-    from soabench.scenario.plots import plot_scene, scene_figure
+    from soabench.figures.births import draw_births
+    from soabench.figures.scene import plot_scene, scene_figure
+    from soabench.types import SOURCE_OCCL, SOURCE_SEM, Births
 
     scene = _ring_scene()
     fig, ax = scene_figure(scene, legend_rows=5)

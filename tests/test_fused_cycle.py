@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from soabench.birth import REGISTRY, get_birth_model
-from soabench.birth.base import BirthContext, Births, NewbornTerms
+from soabench.birth import get_birth_model
 from soabench.config import PROBABILITY_MODES, Config, filter_config_for_mode
 from soabench.gmphd import GMPHDFilter, Mixture
 from soabench.gmphd.models import h
-from soabench.sensor import Scan
+from soabench.plugins import BUILTIN_BIRTH_MODELS
+from soabench.types import BirthContext, Births, NewbornTerms, Scan
 
 TOL = dict(rtol=1e-12, atol=1e-12)
 LOOSE = dict(rtol=1e-9, atol=1e-9)
@@ -74,7 +74,7 @@ def assert_same_step(a, b, tol: dict = TOL) -> None:
     assert a.origin_counts.sum() == a.n_reduced
 
 
-@pytest.mark.parametrize("model", list(REGISTRY))
+@pytest.mark.parametrize("model", list(BUILTIN_BIRTH_MODELS))
 @pytest.mark.parametrize("lam", [3.0, 10.0])
 def test_fused_equals_array_path_on_recorded_scans(recorded, model, lam):
     cfg, scene, scans_by_lam, seeds = recorded

@@ -12,14 +12,12 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from soabench.birth.base import Births
 from soabench.config import FilterConfig, SensorConfig
 from soabench.errors import SoabenchError
 from soabench.gmphd import GMPHDFilter, cycle
 from soabench.gmphd.inputs import births_finite
 from soabench.origins import N_SOURCES, origin_counts
-from soabench.sensor import Scan
-from soabench.types import SOURCE_GRID
+from soabench.types import SOURCE_GRID, Births, Scan
 
 
 def _births(w: np.ndarray) -> Births:

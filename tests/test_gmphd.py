@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from soabench.birth.base import SOURCE_GRID, SOURCE_MEAS, Births, NewbornTerms
 from soabench.config import FilterConfig, SensorConfig
 from soabench.errors import SoabenchError
 from soabench.geometry import wrap
@@ -26,7 +25,7 @@ from soabench.gmphd.models import (
 )
 from soabench.gmphd.probabilities import beta_inflate
 from soabench.gmphd.reduction import cap, extract, merge, merge_groups, prune, prune_merge_cap
-from soabench.sensor import Scan
+from soabench.types import SOURCE_GRID, SOURCE_MEAS, Births, NewbornTerms, Scan
 
 SIG_B = math.radians(5.0)
 R = measurement_noise(1.0, SIG_B)

@@ -11,13 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon
 
-from soabench.birth.base import SOURCE_GRID, Births, NewbornTerms
 from soabench.config import FilterConfig, SensorConfig
 from soabench.gmphd import GMPHDFilter, Mixture
 from soabench.gmphd.models import cv_model, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_prior
 from soabench.gmphd.reduction import extract, prune_merge_cap
-from soabench.sensor import Scan
+from soabench.types import SOURCE_GRID, Births, NewbornTerms, Scan
 
 R = measurement_noise(1.0, math.radians(5.0))
 SETTINGS = settings(max_examples=50, deadline=None)

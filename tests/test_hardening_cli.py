@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 import soabench.scenario
 from soabench.cli import main
-from soabench.experiment import registry
+from soabench.experiment.trial import registry
 
 HERE = Path(__file__).parent
 
@@ -78,7 +78,7 @@ def test_malformed_scheduler_is_refused_at_once(tmp_path, capsys):
 
 
 def test_report_stage_ctrl_c_is_one_line_with_the_resume_hint(tmp_path, capsys, monkeypatch):
-    import soabench.experiment.report as report
+    import soabench.experiment.reports.report as report
 
     def interrupted_report(*a, **k):
         raise KeyboardInterrupt
@@ -100,7 +100,7 @@ DRIVER = """
 import sys
 sys.path.insert(0, {here!r})
 import fake_trial as ft
-from soabench.experiment import registry
+from soabench.experiment.trial import registry
 registry._TRIAL_KINDS["soabench"] = ft.slow_trial
 registry._SCENE_LOADERS["sumo"] = ft.fake_load
 from soabench.cli import main
@@ -226,7 +226,7 @@ COMMANDS = st.sampled_from(["run", "sweep clutter", "sweep births", "study", "sc
 def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, command, options, with_out):
     """Random commands and option values: exit 0/1/2 (or argparse's 2), never another exception or a traceback;
     exit 2 is one line. Trials are the fake trial, figures and simulations are stubbed, so this stays fast."""
-    import soabench.experiment.report as report
+    import soabench.experiment.reports.report as report
 
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
@@ -259,7 +259,7 @@ def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, command,
 
 @pytest.fixture
 def fake_everything(monkeypatch):
-    import soabench.experiment.report as report
+    import soabench.experiment.reports.report as report
 
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
@@ -271,7 +271,7 @@ def _ctrl_c(*a, **k):
 
 
 def test_ctrl_c_in_the_sweep_report_names_the_sweep_resume(tmp_path, capsys, monkeypatch, fake_everything):
-    import soabench.experiment.sweep as sweep
+    import soabench.experiment.campaigns.sweep as sweep
 
     monkeypatch.setattr(sweep, "write_sweep_report", _ctrl_c)
     out = tmp_path / "sw"
@@ -282,8 +282,8 @@ def test_ctrl_c_in_the_sweep_report_names_the_sweep_resume(tmp_path, capsys, mon
 
 
 def test_ctrl_c_in_the_study_comparison_names_the_study_rerun(tmp_path, capsys, monkeypatch, fake_everything):
-    import soabench.experiment.study as study
-    import soabench.experiment.sweep as sweep
+    import soabench.experiment.campaigns.study as study
+    import soabench.experiment.campaigns.sweep as sweep
 
     monkeypatch.setattr(sweep, "write_sweep_report", lambda d: "sweep")
     monkeypatch.setattr(study, "write_comparison", _ctrl_c)

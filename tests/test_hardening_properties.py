@@ -16,11 +16,10 @@ from hypothesis import strategies as st
 from shapely.geometry import Polygon
 from test_gmphd_properties import scenes
 
-from soabench.birth.base import SOURCE_GRID, SOURCE_MEAS, Births, NewbornTerms
 from soabench.config import Config, FilterConfig, SensorConfig, load_config
 from soabench.errors import SoabenchError
 from soabench.gmphd import GMPHDFilter
-from soabench.sensor import Scan
+from soabench.types import SOURCE_GRID, SOURCE_MEAS, Births, NewbornTerms, Scan
 
 SETTINGS = settings(max_examples=60, deadline=None)
 

@@ -16,10 +16,10 @@ import pytest
 from soabench.cli import main
 from soabench.config import Config
 from soabench.errors import SoabenchError
-from soabench.experiment import registry
-from soabench.experiment.ownership import FolderLock
-from soabench.experiment.runner import TodoTrials, run_experiment
-from soabench.experiment.sweep import run_sweep
+from soabench.experiment.campaigns.sweep import run_sweep
+from soabench.experiment.execution.runner import TodoTrials, run_experiment
+from soabench.experiment.runs.ownership import FolderLock
+from soabench.experiment.trial import registry
 
 HERE = Path(__file__).parent
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
@@ -72,7 +72,7 @@ def one_error_line(capsys) -> str:
 
 @pytest.fixture
 def report_stub(monkeypatch):
-    import soabench.experiment.report as report
+    import soabench.experiment.reports.report as report
 
     monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
 
@@ -221,7 +221,7 @@ import sys
 sys.path.insert(0, {here!r})
 import fake_trial as ft
 from pathlib import Path
-from soabench.experiment.runner import run_experiment
+from soabench.experiment.execution.runner import run_experiment
 run_experiment(None, "x", resume=Path({run!r}), workers=1, trial_fn=ft.slow_trial, progress=False, figures=False)
 """
 
@@ -305,7 +305,7 @@ def test_sweep_resume_conflicts_and_more_trials(tmp_path, capsys, report_stub, m
     assert "experiment.duration: stored 10.0, requested 50.0" in one_error_line(capsys)
     assert main(["sweep", "births", "--resume", str(sw), "--offsets", "0,3"]) == 2
     assert "values: stored [-1.0, 0.0], requested [0.0, 3.0]" in one_error_line(capsys)
-    import soabench.experiment.sweep as sweep_mod
+    import soabench.experiment.campaigns.sweep as sweep_mod
 
     monkeypatch.setattr(sweep_mod, "write_sweep_report", lambda d: "sweep")
     assert main(["sweep", "births", "--resume", str(sw), "--trials", "3", "--workers", "1"]) == 0

@@ -18,9 +18,9 @@ from test_hardening_cli import test_bad_input_is_one_line_and_exit_2 as one_line
 from soabench.cli import main
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import SoabenchError
-from soabench.experiment import registry
-from soabench.experiment.files import read_csv
-from soabench.experiment.store import RunStore, run_identity, trial_of_name
+from soabench.experiment.runs.files import read_csv
+from soabench.experiment.runs.store import RunStore, run_identity, trial_of_name
+from soabench.experiment.trial import registry
 
 
 # ------------------------------------------------------------------------------------------ bad command lines
@@ -58,7 +58,7 @@ def test_distinct_values_are_accepted():
 # ------------------------------------------------------------------------------------------------ records
 @pytest.fixture
 def fake(monkeypatch):
-    import soabench.experiment.report as report
+    import soabench.experiment.reports.report as report
 
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)

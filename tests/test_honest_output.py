@@ -13,16 +13,16 @@ import fake_trial as ft
 import pytest
 
 from soabench.config import Config
-from soabench.experiment.files import write_csv
-from soabench.experiment.report import (
+from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.report import (
     load_tables,
     paper_protocol_mismatch,
     render_markdown,
     summarize,
     write_report,
 )
-from soabench.experiment.runner import run_experiment
-from soabench.experiment.store import RunStore
+from soabench.experiment.runs.files import write_csv
+from soabench.experiment.runs.store import RunStore
 from soabench.scenario import load, shipped_nets
 
 NET_DIR = Path(__file__).resolve().parents[1] / "sumo_nets" / "intersection"

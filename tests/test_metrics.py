@@ -11,7 +11,6 @@ from hypothesis import strategies as st
 from shapely.geometry import Polygon
 
 from soabench.config import MetricsConfig, SensorConfig
-from soabench.gmphd.filter import StepResult
 from soabench.metrics import (
     SERIES_KEYS,
     SUMMARY_KEYS,
@@ -24,7 +23,7 @@ from soabench.metrics import (
     ospa,
     visibility_runs,
 )
-from soabench.sensor import Scan, Scans
+from soabench.types import Scan, Scans, StepResult
 
 # ---------------------------------------------------------------------------------------------------------------------
 # helpers: hand-built Scans and StepResults

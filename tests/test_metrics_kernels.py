@@ -118,7 +118,7 @@ def test_constructed_edge_cases_match_the_numpy_path(gt_set, fov_deg):
 
 def test_filter_runs_of_a_trial_match_the_numpy_path(monkeypatch):
     """Every filter run of a short trial of the shipped scene (twelve runs), scored both ways."""
-    import soabench.experiment.trial as trial_mod
+    import soabench.experiment.trial.trial as trial_mod
     from soabench.scenario import load
 
     seen = []

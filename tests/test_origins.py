@@ -12,13 +12,11 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from soabench.birth.base import Births, NewbornTerms
 from soabench.config import FilterConfig, SensorConfig
 from soabench.gmphd import GMPHDFilter
 from soabench.gmphd.mixture import ORIGIN_PERSISTENT
 from soabench.metrics import SERIES_KEYS
 from soabench.origins import ORIGIN_KEYS, origin_counts, origin_counts_of
-from soabench.sensor import Scan
 from soabench.trackers import step_result_from
 from soabench.types import (
     SOURCE_FOV,
@@ -26,7 +24,10 @@ from soabench.types import (
     SOURCE_NAMES,
     SOURCE_OCCL,
     SOURCE_SEM,
+    Births,
     Estimates,
+    NewbornTerms,
+    Scan,
 )
 
 

@@ -15,8 +15,8 @@ import pytest
 from soabench.cli import DefaultsHelpFormatter, build_parser, main
 from soabench.config import SensorConfig
 from soabench.errors import SoabenchError
-from soabench.experiment.files import write_json_atomic, write_text_atomic
-from soabench.sensor import SENSOR_UNITS, Scans
+from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
+from soabench.types import SENSOR_UNITS, Scans
 
 
 @pytest.fixture

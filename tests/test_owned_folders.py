@@ -139,7 +139,7 @@ def test_check_scenario_names_are_names_never_paths(tmp_path, capsys, no_work, n
 
 
 def test_check_scenario_names_that_are_plain_pass():
-    from soabench.experiment.check import SCENARIO_NAME
+    from soabench.experiment.campaigns.check import SCENARIO_NAME
 
     assert all(SCENARIO_NAME.fullmatch(n) for n in ("intersection-static", "a.b_c-1", "X"))
 

@@ -12,7 +12,8 @@ import pytest
 
 import soabench.baselines
 import soabench.nets
-from soabench.birth import REGISTRY, get_birth_model
+from soabench.birth import get_birth_model
+from soabench.plugins import BUILTIN_BIRTH_MODELS
 from soabench.scenario import shipped_nets
 
 try:
@@ -50,7 +51,7 @@ def test_subpackages_are_the_repository_folders():
     assert Path(soabench.baselines.__file__).parent.name == "baselines"
     assert Path(soabench.nets.__file__).parent.name == "sumo_nets"
     assert "intersection" in shipped_nets()
-    for name, target in REGISTRY.items():
+    for name, target in BUILTIN_BIRTH_MODELS.items():
         assert get_birth_model(name).__module__ == target.split(":")[0]
 
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from soabench.experiment import paper
+from soabench.experiment.reports import paper
 
 
 def _rows(n=40, seed=0):

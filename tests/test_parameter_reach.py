@@ -20,10 +20,9 @@ from shapely.geometry import Polygon
 
 import soabench.config as config_module
 from soabench import plugins
-from soabench.birth.base import Births
 from soabench.config import DERIVED_KEYS, BirthConfig, Config, FilterConfig, MetricsConfig, SensorConfig
 from soabench.gmphd import GMPHDFilter
-from soabench.sensor import Scan
+from soabench.types import Births, Scan
 
 TRACKER = "plugin_fixtures:EchoTracker"
 
@@ -160,8 +159,8 @@ def test_every_documented_key_has_a_non_default_value():
 
 
 def test_a_run_records_every_key_and_its_rows_show_the_experiment(tmp_path):
-    from soabench.experiment.files import read_csv
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.runs.files import read_csv
 
     cfg = Config.from_dict(as_sections(NON_DEFAULT)).validate()
     out = run_experiment(cfg, "intersection", out=tmp_path / "run", workers=1, progress=False, figures=False)
@@ -209,7 +208,7 @@ def spy_config(values: dict[str, object], reads: dict[str, set]) -> Config:
 
 
 def test_every_key_reaches_its_consumer_with_its_value():
-    from soabench.experiment.trial import run_trial
+    from soabench.experiment.trial.trial import run_trial
     from soabench.scenario import load
 
     scene, scenario = load("intersection")

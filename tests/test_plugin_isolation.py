@@ -1,5 +1,5 @@
 """Plugins that fail or misbehave: a failed method is never a success, a plugin cannot end, hang or change the run
-(docs/user-guide/own-tracker.md, "When a plugin fails"; soabench.experiment.isolate).
+(docs/user-guide/own-tracker.md, "When a plugin fails"; soabench.experiment.trial.isolate).
 
 The plugins are the module-level classes of ``tests/plugin_fixtures.py``, named by import path as a user types them.
 """
@@ -17,9 +17,9 @@ from soabench import plugins
 from soabench.cli import main
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import Interrupted, SoabenchError
-from soabench.experiment.files import read_csv
-from soabench.experiment.runner import run_experiment
-from soabench.experiment.trial import run_trial
+from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.runs.files import read_csv
+from soabench.experiment.trial.trial import run_trial
 
 FX = "plugin_fixtures"
 
@@ -170,7 +170,7 @@ def test_a_plugin_that_changes_its_scan_changes_no_other_method(intersection) ->
 
 def test_private_scan_is_equal_and_shares_nothing(intersection) -> None:
     from soabench.config import SensorConfig
-    from soabench.experiment.isolate import private_scan
+    from soabench.experiment.trial.isolate import private_scan
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
     from soabench.sensor import observe
@@ -231,8 +231,8 @@ def test_birth_command_names_a_failing_plugin_in_one_line(tmp_path, capsys) -> N
 def test_failed_method_runs_of_sweep_and_study_outcomes_are_collected(tmp_path) -> None:
     from types import SimpleNamespace
 
-    from soabench.experiment.failures import failed_methods_line, outcome_model_failures
-    from soabench.experiment.runner import RunOutcome
+    from soabench.experiment.execution.runner import RunOutcome
+    from soabench.experiment.runs.failures import failed_methods_line, outcome_model_failures
 
     def run(*models):
         fails = [{"model": m, "trial": t, "k": 0} for t, m in enumerate(models)]

@@ -16,8 +16,8 @@ import pytest
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import SoabenchError
-from soabench.experiment import guard
-from soabench.experiment.trial import run_trial
+from soabench.experiment.trial import guard
+from soabench.experiment.trial.trial import run_trial
 from soabench.types import Births, Estimates, NewbornTerms, Scan
 
 FX = "plugin_fixtures"
@@ -36,12 +36,10 @@ def test_types_module_imports_no_stage() -> None:
     assert eval(out) == ["soabench", "soabench.errors", "soabench.protocols", "soabench.types"]
 
 
-def test_old_import_paths_are_the_same_classes() -> None:
+def test_api_hands_out_the_classes_of_types_and_protocols() -> None:
     from soabench import api
-    from soabench.birth.base import BirthContext, BirthModel, Births, NewbornTerms
-    from soabench.gmphd.filter import StepResult
-    from soabench.scenario.recording import Recording
-    from soabench.sensor import Scan, Scans
+    from soabench.protocols import BirthModel
+    from soabench.types import BirthContext, Births, NewbornTerms, Recording, Scan, Scans, StepResult
 
     assert (Births, NewbornTerms, BirthContext, BirthModel) == (
         api.Births,
@@ -226,8 +224,8 @@ def test_bad_plugins_are_recorded_and_others_kept(intersection) -> None:
 
 
 def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
-    from soabench.experiment.files import read_csv
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.runs.files import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
     plugins.allow_import_paths([one, echo, bad])
@@ -282,8 +280,8 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     from pathlib import Path
 
     distributed = pytest.importorskip("distributed")
-    from soabench.experiment.files import read_csv
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.runs.files import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
     plugins.allow_import_paths([one, echo, bad])
@@ -319,7 +317,7 @@ def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None
 
     from soabench.cli import main
     from soabench.config import BIRTH_MODEL_NAMES
-    from soabench.experiment import study
+    from soabench.experiment.campaigns import study
 
     seen = {}
 

@@ -1,4 +1,4 @@
-"""Run folders merged on the workers of a process pool (:mod:`soabench.experiment.premerge`, issue 19).
+"""Run folders merged on the workers of a process pool (:mod:`soabench.experiment.execution.premerge`, issue 19).
 
 * a grouped N̂ sweep on two workers (each point merged by a worker, its figure tables saved there) writes the files
   of the same sweep on one process, byte for byte: tables, model failures and every figure;
@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 
 from soabench.config import Config, ExperimentConfig
-from soabench.experiment import premerge
-from soabench.experiment.store import RunStore, merged_stamp
-from soabench.experiment.sweep import run_sweep
-from soabench.experiment.tables import load_tables
+from soabench.experiment.campaigns.sweep import run_sweep
+from soabench.experiment.execution import premerge
+from soabench.experiment.reports.tables import load_tables
+from soabench.experiment.runs.store import RunStore, merged_stamp
 
 POINTS = ("ntot_001", "ntot_002")
 COMPARED = ("trials.csv", "episodes.csv", "steps.csv", "model_failures.csv")

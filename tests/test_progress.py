@@ -7,9 +7,9 @@ import io
 import fake_trial as ft
 from test_runner import small_config
 
-from soabench.experiment import progress as pg
-from soabench.experiment.progress import Progress, format_duration
-from soabench.experiment.runner import run_experiment
+from soabench.experiment.execution import progress as pg
+from soabench.experiment.execution.progress import Progress, format_duration
+from soabench.experiment.execution.runner import run_experiment
 
 
 class Clock:

@@ -43,7 +43,7 @@ def page_data(page: Path) -> dict:
 
 def scene_sensor_scans(monkeypatch, tmp_path: Path, time: float):
     """The scans ``soabench scene --sensor --trial 1 --time T`` draws (captured at its drawing call)."""
-    import soabench.sensor_plot as sp
+    import soabench.figures.sensor as sp
 
     seen = {}
     original = sp.draw_sensor_overlay
@@ -81,7 +81,7 @@ def _truth_rows(scans, k: int) -> dict[str, tuple[float, float]]:
 @pytest.mark.parametrize("k", [DURATION - 1, 10])
 def test_frame_shows_what_scene_sensor_shows(replay_page: Path, monkeypatch, tmp_path: Path, k: int) -> None:
     from soabench.geometry import polar_to_world
-    from soabench.sensor import CLUTTER
+    from soabench.types import CLUTTER
 
     frame = page_data(replay_page)["frames"][k]
     scans, ks = scene_sensor_scans(monkeypatch, tmp_path, float(k))

@@ -12,11 +12,11 @@ import fake_trial as ft
 import numpy as np
 
 from soabench.config import Config
-from soabench.experiment.files import format_value, read_csv, write_csv
-from soabench.experiment.plots import cumulative_precision
-from soabench.experiment.report import RunTables, load_tables, summarize, write_report
-from soabench.experiment.runner import run_experiment
-from soabench.experiment.store import RunStore
+from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.report import RunTables, load_tables, summarize, write_report
+from soabench.experiment.runs.files import format_value, read_csv, write_csv
+from soabench.experiment.runs.store import RunStore
+from soabench.figures.results import cumulative_precision
 
 
 def small_config(trials: int = 3, models=("soa", "pubm", "atbm"), modes=("static",)) -> Config:

@@ -2,7 +2,7 @@
 
 Re-runs a small slice (a few trials, a few birth models) of each committed part with the configuration stored in
 its run folder and compares every metric column with the committed CSV as numbers, within
-``soabench.experiment.provenance.REPRODUCTION_TOLERANCE`` (also recorded in each summary.json). A filter run does
+``soabench.experiment.runs.provenance.REPRODUCTION_TOLERANCE`` (also recorded in each summary.json). A filter run does
 not depend on which other filters share its trial (common random numbers, §5.8), so a slice reproduces the rows of
 the full run. A failure names every differing value, the versions and CPU the results were generated with beside
 this machine's, and the command that regenerates results/.
@@ -18,11 +18,11 @@ from pathlib import Path
 import pytest
 
 from soabench.config import Config
-from soabench.experiment.files import format_value
-from soabench.experiment.provenance import REGENERATE_COMMAND, REPRODUCTION_TOLERANCE, cpu_model, within_tolerance
-from soabench.experiment.runner import package_versions
-from soabench.experiment.store import TRIAL_COLUMNS
-from soabench.experiment.trial import run_trial
+from soabench.experiment.execution.runner import package_versions
+from soabench.experiment.runs.files import format_value
+from soabench.experiment.runs.provenance import REGENERATE_COMMAND, REPRODUCTION_TOLERANCE, cpu_model, within_tolerance
+from soabench.experiment.runs.store import TRIAL_COLUMNS
+from soabench.experiment.trial.trial import run_trial
 from soabench.scenario import load
 
 RESULTS = Path(__file__).parents[1] / "results" / "intersection"

@@ -17,9 +17,11 @@ from shapely.geometry import box
 import soabench.scenario
 from soabench.cli import main
 from soabench.config import SensorConfig
-from soabench.experiment import cross_scene, paper, registry
-from soabench.experiment.files import read_json
-from soabench.experiment.occlusion_density import scan_occlusion
+from soabench.experiment.campaigns import cross_scene
+from soabench.experiment.campaigns.occlusion_density import scan_occlusion
+from soabench.experiment.reports import paper
+from soabench.experiment.runs.files import read_json
+from soabench.experiment.trial import registry
 
 TINY = [
     "--scenes", "intersection,tjunction", "--trials", "2", "--duration", "10", "--births-trials", "1",
@@ -48,7 +50,7 @@ def suite(tmp_path_factory):
         return real_simulate(*a, **k)
 
     with pytest.MonkeyPatch.context() as mp:
-        import soabench.experiment.plots as plots
+        import soabench.figures.results as plots
 
         mp.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, counting_trial)
         mp.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
@@ -146,7 +148,7 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, flags
 
 
 def test_ctrl_c_names_the_command_that_finishes(tmp_path, capsys, monkeypatch):
-    import soabench.experiment.occlusion_density as od
+    import soabench.experiment.campaigns.occlusion_density as od
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
@@ -156,7 +158,7 @@ def test_ctrl_c_names_the_command_that_finishes(tmp_path, capsys, monkeypatch):
     argv = ["results", "--out", str(out), "--scenes", "grid_block", "--scene-trials", "1", "--duration", "5"]
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
-    import soabench.experiment.plots as plots
+    import soabench.figures.results as plots
 
     monkeypatch.setattr(plots, "make_figures", lambda tables, folder: [])
     assert main([*argv, "--workers", "1", "--no-progress", "--kitti-scenes", "none"]) == 130
@@ -237,7 +239,7 @@ def test_a_study_is_kept_only_when_every_part_folder_is_complete(suite, tmp_path
     """A part the study gained later (a run or sweep folder beside main/, clutter/, births/) must be complete too."""
     import shutil
 
-    from soabench.experiment.results_suite import Settings, study_kept
+    from soabench.experiment.campaigns.results_suite import Settings, study_kept
 
     root = tmp_path / "intersection"
     shutil.copytree(suite.out / "intersection", root)
@@ -265,7 +267,7 @@ def test_a_part_made_with_other_models_is_refused_with_the_way_out(suite, tmp_pa
     import shutil
 
     from soabench.errors import SoabenchError
-    from soabench.experiment.results_suite import Settings, _base_config, same_settings
+    from soabench.experiment.campaigns.results_suite import Settings, _base_config, same_settings
 
     run = tmp_path / "main"
     shutil.copytree(suite.out / "tjunction" / "main", run)

@@ -15,7 +15,7 @@ import pytest
 
 from soabench.config import Config
 from soabench.errors import SoabenchError
-from soabench.experiment.runner import run_experiment
+from soabench.experiment.execution.runner import run_experiment
 
 HERE = Path(__file__).parent
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
@@ -26,7 +26,7 @@ from pathlib import Path
 sys.path.insert(0, {here!r})
 import fake_trial as ft
 from soabench.config import Config
-from soabench.experiment.runner import run_experiment
+from soabench.experiment.execution.runner import run_experiment
 cfg = Config.from_dict({cfg!r}).validate()
 run_experiment(cfg, "intersection", out=Path({out!r}), workers=1, trial_fn=ft.slow_trial, load_fn=ft.fake_load,
                progress=False, figures=False)

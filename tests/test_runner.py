@@ -19,10 +19,10 @@ import pytest
 
 from soabench.config import Config
 from soabench.errors import SoabenchError
-from soabench.experiment.files import read_csv
-from soabench.experiment.report import LABEL, fmt, fmt_pct
-from soabench.experiment.runner import run_experiment
-from soabench.experiment.sweep import run_sweep, sweep_points
+from soabench.experiment.campaigns.sweep import run_sweep, sweep_points
+from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.report import LABEL, fmt, fmt_pct
+from soabench.experiment.runs.files import read_csv
 
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 

@@ -16,8 +16,8 @@ from shapely.geometry import box
 from soabench.birth.base import FOVRule, inside_any
 from soabench.config import FilterConfig, SensorConfig
 from soabench.errors import SoabenchError
-from soabench.experiment.files import format_value, pack_table, unpack_table, write_csv, write_csv_lists
-from soabench.experiment.store import _rows_of
+from soabench.experiment.runs.files import format_value, pack_table, unpack_table, write_csv, write_csv_lists
+from soabench.experiment.runs.store import _rows_of
 from soabench.gmphd.filter import GMPHDFilter
 from soabench.gmphd.inputs import births_finite
 from soabench.sensor import _padded, line_of_sight, line_of_sight_past, sight_blockers

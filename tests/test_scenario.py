@@ -13,10 +13,11 @@ import sumolib  # noqa: E402
 from shapely.geometry import LineString  # noqa: E402
 
 from soabench.errors import SoabenchError  # noqa: E402
-from soabench.scenario import Recording, load, simulate  # noqa: E402
-from soabench.scenario.plots import plot_scene  # noqa: E402
+from soabench.figures.scene import plot_scene  # noqa: E402
+from soabench.scenario import load, simulate
 from soabench.scenario.simulation import _footprint, _heading  # noqa: E402
 from soabench.seeding import trial_seeds  # noqa: E402
+from soabench.types import Recording
 
 SEEDS = (1, 2, 3, 4, 5, 6)
 
@@ -268,7 +269,7 @@ def test_scene_figure(shipped, rec, tmp_path):
     ax = plot_scene(scene, rec, time=50.0)
     assert ax.get_xlim() == (-50.0, 120.0) and ax.get_ylim() == (-50.0, 50.0)
     assert len(ax.patches) > 4 + 17 + 1  # buildings, parked cars, ego, vehicles, regions
-    assert "t = 50.0 s" in ax.get_title(loc="left")  # panel titles sit on the left (soabench.plotstyle)
+    assert "t = 50.0 s" in ax.get_title(loc="left")  # panel titles sit on the left (soabench.figures.style)
     out = tmp_path / "scene.png"
     ax.figure.savefig(out, dpi=60)
     assert out.stat().st_size > 10_000

@@ -14,9 +14,9 @@ import fake_trial as ft
 import pytest
 
 from soabench.cli import main
-from soabench.experiment import registry
-from soabench.experiment import sensitivity as sens
-from soabench.experiment.files import write_csv
+from soabench.experiment.campaigns import sensitivity as sens
+from soabench.experiment.runs.files import write_csv
+from soabench.experiment.trial import registry
 
 COLS = ["trial", "clutter", "model", "mode", "delay_mean", "delay_std", "card_err", "ospa", "mean_components"]
 
@@ -160,8 +160,8 @@ def switch_aware_trial(trial, config, scene, scenario, *, save_estimates=False):
 
 @pytest.fixture
 def fake_study(monkeypatch):
-    import soabench.experiment.report as report
-    import soabench.experiment.sweep as sweep
+    import soabench.experiment.campaigns.sweep as sweep
+    import soabench.experiment.reports.report as report
 
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, switch_aware_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)

@@ -11,13 +11,11 @@ from shapely.geometry import Polygon, box
 
 from soabench.config import SensorConfig
 from soabench.errors import SoabenchError
+from soabench.figures.sensor import draw_sensor_overlay
 from soabench.geometry import fov_mask, range_bearing, wrap
-from soabench.scenario.recording import Recording
 from soabench.scenario.scene import SceneMap
 from soabench.seeding import trial_seeds
 from soabench.sensor import (
-    CLUTTER,
-    Scans,
     circle_tangents,
     compute_obstacles,
     fov_polygon,
@@ -29,7 +27,7 @@ from soabench.sensor import (
     target_visibility,
     visible_region,
 )
-from soabench.sensor_plot import draw_sensor_overlay
+from soabench.types import CLUTTER, Recording, Scans
 
 # ----------------------------------------------------------------------------------------------------------------
 # synthetic scene and recording (no SUMO needed); also imported by test_sensor_stats.py

@@ -12,7 +12,8 @@ from test_sensor import open_scene, static_recording
 from soabench.config import SensorConfig
 from soabench.geometry import range_bearing, wrap
 from soabench.seeding import trial_seeds
-from soabench.sensor import CLUTTER, Scans, draw_clutter, observe
+from soabench.sensor import draw_clutter, observe
+from soabench.types import CLUTTER, Scans
 
 N_DRAWS = 20000  # scans for the clutter-only statistics (draw_clutter is cheap)
 N_SCANS = 1000  # scans for statistics through observe()

@@ -148,7 +148,8 @@ def _sweep_figure_has_error_bars(sweep_dir: Path) -> None:
 
     from matplotlib.container import ErrorbarContainer
 
-    from soabench.experiment.occlusion import occlusion_figure, occlusion_report
+    from soabench.experiment.campaigns.occlusion import occlusion_report
+    from soabench.figures.occlusion import occlusion_figure
 
     meta = json.loads((sweep_dir / "sweep.json").read_text())
     report, _ = occlusion_report(sweep_dir, meta)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from soabench.config import Config, ExperimentConfig
-from soabench.experiment.trial import run_trial
+from soabench.experiment.trial.trial import run_trial
 from soabench.geometry import range_bearing
 from soabench.seeding import trial_seeds
 

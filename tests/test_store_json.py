@@ -1,4 +1,4 @@
-"""A trial record's compact JSON (soabench.experiment.files) is written by json's C encoder, asking to_jsonable
+"""A trial record's compact JSON (soabench.experiment.runs.files) is written by json's C encoder, asking to_jsonable
 only for what json cannot write: the text is the one to_jsonable's walk gives."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from soabench.experiment import files
+from soabench.experiment.runs import files
 
 
 def _walked(obj) -> str:

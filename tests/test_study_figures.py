@@ -9,14 +9,14 @@ import fake_trial as ft
 import pytest
 
 from soabench.cli import main
-from soabench.experiment import registry
+from soabench.experiment.trial import registry
 
 
 @pytest.fixture
 def drawn(monkeypatch) -> dict[str, bool]:
     """Fake trials and scenes; every report's folder (relative to the study) -> whether it drew figures."""
-    import soabench.experiment.report as report
-    import soabench.experiment.study as study
+    import soabench.experiment.campaigns.study as study
+    import soabench.experiment.reports.report as report
 
     monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
     monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)

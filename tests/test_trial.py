@@ -14,10 +14,9 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from soabench.birth.base import BirthContext, Births
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import SoabenchError
-from soabench.experiment.trial import (
+from soabench.experiment.trial.trial import (
     EPISODE_KEYS,
     ESTIMATE_KEYS,
     ROW_KEYS,
@@ -27,10 +26,8 @@ from soabench.experiment.trial import (
     run_trial,
 )
 from soabench.geometry import fov_mask, polar_to_world, range_bearing
-from soabench.gmphd.filter import StepResult
 from soabench.origins import ORIGIN_KEYS
-from soabench.sensor import CLUTTER, Scan, Scans
-from soabench.types import SOURCE_NAMES
+from soabench.types import CLUTTER, SOURCE_NAMES, BirthContext, Births, Scan, Scans, StepResult
 
 # ---------------------------------------------------------------------------------------------------------------------
 # fakes

@@ -18,9 +18,9 @@ import pytest
 
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
-from soabench.experiment.files import read_csv
-from soabench.experiment.sweep import run_sweep, scans_per_run
-from soabench.experiment.trial import ROW_TIME_KEYS, TrialShare, run_trial
+from soabench.experiment.campaigns.sweep import run_sweep, scans_per_run
+from soabench.experiment.runs.files import read_csv
+from soabench.experiment.trial.trial import ROW_TIME_KEYS, TrialShare, run_trial
 
 MODELS = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
 MODE_FREE = {"soa", "ubm", "ubm-ws", "gmbm"}
@@ -116,8 +116,8 @@ def test_sensitivity_variants_share_the_recording_and_rescore_the_filter_runs(in
     """The study's sensitivity runs in one share with the main run: the gate-off run reuses the recording and the
     scans; the visible-truth run (another metrics config only) scores the main run's filter runs again instead of
     running the filters, with exactly the results of running it alone."""
-    from soabench.experiment.grouped import rescored
-    from soabench.experiment.runner import TaskSpec
+    from soabench.experiment.execution.grouped import rescored
+    from soabench.experiment.execution.runner import TaskSpec
 
     scene, scenario = intersection
     main = config(models=("soa", "pubm"))
@@ -224,7 +224,7 @@ def test_sensor_geometry_once_for_every_clutter_rate(intersection):
 def test_grouped_sweep_fail_fast_then_resume(tmp_path, monkeypatch):
     """A trial failing in one folder of a group: that folder records the failure, --fail-fast stops the group with
     every finished record on disk, and the resume gives the folders of a run that never failed."""
-    import soabench.experiment.trial as trial_mod
+    import soabench.experiment.trial.trial as trial_mod
 
     cfg = config(models=("soa", "pubm"), probabilities=("static",), trials=3, duration=4.0)
     kw = dict(workers=1, progress=False, figures=False, n_true=2)
@@ -255,7 +255,7 @@ def test_grouped_sweep_fail_fast_then_resume(tmp_path, monkeypatch):
 
 
 def test_a_second_session_of_the_same_name_is_kept_and_sorts_after(tmp_path):
-    from soabench.experiment.store import RunStore
+    from soabench.experiment.runs.store import RunStore
 
     store = RunStore(tmp_path)
     for i in range(3):

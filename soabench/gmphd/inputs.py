@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from soabench.birth.base import Births, NewbornTerms
 from soabench.errors import SoabenchError
+from soabench.types import Births, NewbornTerms
 
 NONFINITE_POLICIES = ("raise", "drop")
 

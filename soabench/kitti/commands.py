@@ -13,8 +13,8 @@ from soabench.errors import require
 def cmd_kitti(args: argparse.Namespace) -> int:
     """The paper's KITTI protocol on a KITTI-format folder (``soabench kitti --root DIR ... --out RUN``)."""
     from soabench.config import require_distinct
-    from soabench.kitti.config import load_kitti_config
-    from soabench.kitti.protocol import KittiSpec, run_kitti
+    from soabench.kitti.config import KittiSpec, load_kitti_config
+    from soabench.kitti.protocol import run_kitti
     from soabench.kitti.reader import parse_sequences
 
     if args.resume is not None:

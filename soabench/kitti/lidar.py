@@ -39,6 +39,7 @@ from soabench.errors import require
 from soabench.kitti.config import KittiConfig
 from soabench.kitti.formats import ReadError
 from soabench.kitti.reader import KittiSequence, sensor_for
+from soabench.kitti.velodyne import hole_free
 
 #: SemanticKITTI class ids (lower 16 bits of a .label value) by class name, as in the dataset's semantic-kitti.yaml
 SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
@@ -186,7 +187,6 @@ def frame_regions(
 ) -> list[tuple[str, np.ndarray]]:
     """``(class, (n, 2) vertices)`` hole-free polygons of one frame, per configured class, from the points within
     r_max and within ``FOV_MARGIN_DEG`` of the sensor's sector (Omega_k never reaches beyond it)."""
-    from soabench.kitti.export import _hole_free
 
     out = []
     xy = pts[:, :2].astype(float)
@@ -199,7 +199,7 @@ def frame_regions(
         is_cls = np.isin(lab, cid)
         extra = ray_fill(xy, is_cls, params, by_sector)
         geom = region_from_points(np.concatenate([xy[is_cls], extra]), params, r_max)
-        out.extend((name, np.asarray(p.exterior.coords)[:-1]) for p in _hole_free(geom))
+        out.extend((name, np.asarray(p.exterior.coords)[:-1]) for p in hole_free(geom))
     return out
 
 
@@ -275,7 +275,7 @@ def sequence_regions(
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# the protocol's hooks (``spec.lidar`` of :class:`~soabench.kitti.protocol.KittiSpec`)
+# the protocol's hooks (``spec.lidar`` of :class:`~soabench.kitti.config.KittiSpec`)
 
 
 def lidar_files(lidar: dict, seq: KittiSequence) -> None:

@@ -97,7 +97,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from soabench.experiment.store import RUN_FILE
+    from soabench.experiment.runs.store import RUN_FILE
     from soabench.replay.report import extreme_trials, write_index, write_report
     from soabench.replay.simulate import read_run
 

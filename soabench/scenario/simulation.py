@@ -29,10 +29,10 @@ from shapely.geometry import LineString, Point, box
 from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import wrap
 from soabench.scenario.config import ScenarioConfig
-from soabench.scenario.recording import Recording
 from soabench.scenario.scene import SceneMap
 from soabench.scenario.watchdog import INSERTING, STARTING, STEPPING, Progress, run_watched
 from soabench.seeding import TrialSeeds
+from soabench.types import Recording
 
 #: steps run before the first recorded sample (insertion; the first sample of a new person is dropped anyway).
 WARMUP_STEPS = 3

@@ -6,18 +6,20 @@ import copy
 from collections.abc import Callable
 from pathlib import Path
 
+from soabench.errors import SoabenchError, require
+from soabench.scenario import load, shipped_nets
+from soabench.scenario.network import read_net
+
 SNAPSHOT_COMMANDS = ("scene", "record", "birth")
 
 
 def scene_rows() -> list[dict]:
     """One row per shipped scene: name, world-box size, vehicle lanes, pedestrians, occluders, what it tests."""
-    from soabench.scenario import load, shipped_nets
 
     rows = []
     for name in shipped_nets():
         scene, cfg = load(name, quiet=True)
         x0, y0, x1, y1 = scene.bounds
-        from soabench.scenario.network import read_net
 
         net = read_net(cfg.net_file)
         from shapely.geometry import LineString
@@ -59,8 +61,6 @@ def scenes_table() -> str:
 
 def run_on_all(args, command: Callable, command_name: str) -> int:
     """Run ``command(args)`` once per shipped scene (``--net all``); outputs go per scene; report per scene."""
-    from soabench.errors import SoabenchError, require
-    from soabench.scenario import shipped_nets
 
     require(getattr(args, "resume", None) is None, "--net all cannot --resume; resume each scene's folder")
     names = shipped_nets()
