@@ -39,7 +39,7 @@ import bad_inputs  # noqa: E402
 import fake_trial as ft  # noqa: E402
 
 import soabench.experiment.report as report  # noqa: E402
-from soabench.cli import main  # noqa: E402
+from soabench.cli.main import main  # noqa: E402
 from soabench.config import Config  # noqa: E402
 from soabench.experiment.runner import run_experiment  # noqa: E402
 

@@ -1,6 +1,6 @@
 """The catalogue of bad inputs: every case must give ONE line on stderr and exit status 2, without a traceback,
 without running a trial or a simulation, and without writing into a folder that is not the command's own. Used by
-tests/test_hardening_cli.py (in-process, through :func:`soabench.cli.main`) and benchmarks/bench_reliability.py
+tests/test_hardening_cli.py (in-process, through :func:`soabench.cli.main.main`) and benchmarks/bench_reliability.py
 (each case in a forked process with a time bound, counted as clean / traceback / silent / hang / unclear).
 
 Each case is ``(name, make_argv(tmp) -> argv, needle)``: ``make_argv`` may write files under ``tmp`` (a fresh

@@ -13,7 +13,7 @@ from pathlib import Path
 import fake_trial as ft
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment import registry

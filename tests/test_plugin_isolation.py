@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from soabench import plugins
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import Interrupted, SoabenchError
 from soabench.experiment.files import read_csv

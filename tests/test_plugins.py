@@ -265,7 +265,7 @@ def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
 
 
 def test_cli_plugin_errors_are_one_line(capsys) -> None:
-    from soabench.cli import main
+    from soabench.cli.main import main
 
     assert main(["run", "--models", "soa", "--trackers", "nosuch", "--trials", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -317,7 +317,7 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
 def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None:
     from types import SimpleNamespace
 
-    from soabench.cli import main
+    from soabench.cli.main import main
     from soabench.config import BIRTH_MODEL_NAMES
     from soabench.experiment import study
 

@@ -15,7 +15,7 @@ import pytest
 from shapely.geometry import box
 
 import soabench.scenario
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.config import SensorConfig
 from soabench.experiment import cross_scene, paper, registry
 from soabench.experiment.files import read_json

@@ -13,7 +13,7 @@ import json
 import fake_trial as ft
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.experiment import registry
 from soabench.experiment import sensitivity as sens
 from soabench.experiment.files import write_csv

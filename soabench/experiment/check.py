@@ -28,6 +28,7 @@ import math
 import re
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -447,8 +448,21 @@ def table(outcome: CheckOutcome) -> str:
     return "\n".join(out) + f"\n\nsoabench check {outcome.suite}: {verdict}\n"
 
 
-def run_check(suite_path: str | Path, out: Path, update_baseline: bool = False, workers: int | None = 1) -> int:
-    """The ``check`` command: exit status 0 (every check passed) or 1 (a regression)."""
+def run_check(
+    suite_path: str | Path,
+    out: Path,
+    update_baseline: bool = False,
+    workers: int | None = 1,
+    plugin_paths: Sequence[str] = (),
+) -> int:
+    """The ``check`` command: exit status 0 (every check passed) or 1 (a regression). ``plugin_paths``: the
+    ``module:Class`` plugins the suite may name (entry-point plugins need none)."""
+    from soabench import plugins
+
+    require(workers is None or workers >= 1, f"--workers {workers} must be >= 1")
+    for name in plugin_paths:
+        require(":" in name, f"--plugin {name!r} must be MODULE:CLASS (installed entry-point plugins need no --plugin)")
+    plugins.allow_import_paths(plugin_paths)
     t0 = time.perf_counter()
     suite = load_suite(suite_path)
     baseline = None

@@ -18,7 +18,6 @@ difference. Ctrl-C leaves every finished trial on disk and names the command tha
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import shutil
 import sys
@@ -53,8 +52,7 @@ class Settings:
 
     def validate(self, shipped: Sequence[str]) -> Settings:
         """Every size in its range (the bounds of soabench/config.py and of ``export kitti``), before any part runs."""
-        from soabench.cli_checks import check_time
-        from soabench.config import MAX_SEED, MAX_TRIALS
+        from soabench.config import MAX_SEED, MAX_TRIALS, check_time
         from soabench.kitti.export import MAX_EXPORT_TRIALS
 
         def count(name: str, low: int, high: int, why: str = "") -> None:
@@ -311,6 +309,12 @@ def run_results(
     log: Callable[[str], None] | None = None,
 ) -> ResultsOutcome:
     """Make (or finish) every part of results/ in ``out``; see the module docstring."""
+    from soabench.experiment.executors import MAX_WORKERS
+
+    require(
+        workers is None or 1 <= workers <= MAX_WORKERS,
+        f"--workers {workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
     from soabench.experiment.occlusion_density import write_density
     from soabench.experiment.ownership import FolderLock, check_own_folder, resolve
     from soabench.scenario import shipped_nets
@@ -386,67 +390,3 @@ def run_results(
                 f"interrupted during the {part}: finished parts and trials are on disk in {root}; {hint}"
             ) from None
     return outcome
-
-
-def add_arguments(p: argparse.ArgumentParser, csv_list: Callable[[str], Callable[[str], tuple[str, ...]]]) -> None:
-    """The options of ``soabench results`` (defaults: :class:`Settings`)."""
-    d = Settings()
-    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default results)")
-    p.add_argument("--scenes", type=csv_list("scene"), help="shipped scenes of the summary (default: every one)")
-    p.add_argument("--trials", type=int, default=d.trials, help="trials of the intersection study's main protocol")
-    p.add_argument("--duration", type=float, default=d.duration, help="seconds per SUMO trial")
-    p.add_argument("--seed", type=int, default=d.seed, help="base seed of every part")
-    p.add_argument("--births-trials", type=int, default=d.births_trials, help="trials per point of the N_hat sweep")
-    p.add_argument(
-        "--scene-trials",
-        type=int,
-        default=d.scene_trials,
-        help="trials of the main protocol of each other scene's study",
-    )
-    p.add_argument("--density-trials", type=int, default=d.density_trials, help="trials per scene for its density")
-    p.add_argument(
-        "--kitti-scenes",
-        type=csv_list("scene"),
-        default=",".join(d.kitti_scenes),
-        help="scenes exported in the KITTI layout, or none",
-    )
-    p.add_argument("--kitti-sequences", type=int, default=d.kitti_sequences, help="KITTI sequences per scene")
-    p.add_argument("--kitti-duration", type=float, default=d.kitti_duration, help="seconds per KITTI sequence")
-    p.add_argument("--kitti-folds", type=int, default=d.kitti_folds, help="cross-validation folds of N_hat")
-    p.add_argument("--workers", type=int, help="process workers (default: every core)")
-    p.add_argument("--no-progress", action="store_true", help="no progress report")
-
-
-def cmd_results(args: argparse.Namespace) -> int:
-    """Handler of ``soabench results``."""
-    from soabench.experiment.executors import MAX_WORKERS
-
-    require(
-        args.workers is None or 1 <= args.workers <= MAX_WORKERS,
-        f"--workers {args.workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
-    )
-    settings = Settings(
-        scenes=tuple(args.scenes) if args.scenes else None,
-        trials=args.trials,
-        duration=args.duration,
-        seed=args.seed,
-        births_trials=args.births_trials,
-        scene_trials=args.scene_trials,
-        density_trials=args.density_trials,
-        kitti_scenes=() if tuple(args.kitti_scenes) == ("none",) else tuple(args.kitti_scenes),
-        kitti_sequences=args.kitti_sequences,
-        kitti_duration=args.kitti_duration,
-        kitti_folds=args.kitti_folds,
-    )
-    o = run_results(args.out, settings, workers=args.workers, progress=not args.no_progress)
-    rows = [f"| {k} | {v} | {o.seconds.get(k, 0.0):.0f} |" for k, v in o.parts.items()]
-    print("\n".join(["| part | result | wall time (s) |", "|---|---|---:|", *rows]))
-    if o.complete:
-        print(f"results in {o.run_dir}")
-        return 0
-    print(
-        f"results incomplete ({o.n_missing} trial(s) missing); finish with: soabench results --out {o.run_dir} "
-        "(and the same options)",
-        file=sys.stderr,
-    )
-    return 1

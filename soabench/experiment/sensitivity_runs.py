@@ -14,9 +14,10 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from soabench.config import Config
+from soabench.config import MAX_TRIALS, Config
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment import sensitivity as sens
+from soabench.experiment.executors import MAX_WORKERS
 from soabench.experiment.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runmeta import config_differences, validate_run_meta
 from soabench.experiment.runner import RunOutcome, run_experiment
@@ -122,6 +123,15 @@ def run_sensitivity(main_dir: Path, out: Path | None = None, *, trials: int | No
 
     ``out`` defaults to ``<main_dir>_sensitivity`` beside the run. Re-running finishes an interrupted one.
     """
+    workers = exe.get("workers")
+    require(
+        trials is None or 1 <= trials <= MAX_TRIALS,
+        f"--trials {trials} is out of range; allowed: integers in [1, {MAX_TRIALS}]",
+    )
+    require(
+        workers is None or 1 <= workers <= MAX_WORKERS,
+        f"--workers {workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
     main_dir = resolve(Path(main_dir))
     require((main_dir / "run.json").is_file(), f"--main {main_dir}: not a run folder (no run.json)")
     meta = validate_run_meta(RunStore(main_dir).meta(), str(main_dir / "run.json"))

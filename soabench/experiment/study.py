@@ -27,9 +27,10 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from soabench import plugins
 from soabench.birth import CORE_MODELS
 from soabench.config import Config
-from soabench.errors import Interrupted
+from soabench.errors import Interrupted, require
 from soabench.experiment import paper
 from soabench.experiment import sensitivity as sens
 from soabench.experiment.files import write_text_atomic
@@ -64,6 +65,26 @@ class StudyOutcome:
     @property
     def n_missing(self) -> int:
         return sum(p.n_missing for p in (self.main, self.clutter, self.births, *self.sensitivity))
+
+
+def with_plugin_models(config: Config, extra: tuple[str, ...]) -> Config:
+    """The study's configuration with plugin birth models ``extra`` beside the six built-in ones (a built-in name
+    is refused: the study runs those already)."""
+    bad = [m for m in extra if plugins.is_builtin_birth(m)]
+    require(not bad, f"`study` runs the six built-in models; --models {','.join(bad)} adds plugins only")
+    if not extra:
+        return config
+    plugins.allow_import_paths(extra)
+    config.experiment = dataclasses.replace(config.experiment, models=(*config.experiment.models, *extra))
+    return config.validate()
+
+
+def check_part_trials(sweep_trials: int | None, births_trials: int | None, sensitivity_trials: int | None) -> None:
+    """Each part's number of trials, when given, is at least 1."""
+    for flag, value in (
+        ("sweep_trials", sweep_trials), ("births_trials", births_trials), ("sensitivity_trials", sensitivity_trials)
+    ):  # fmt: skip
+        require(value is None or value >= 1, f"--{flag.replace('_', '-')} {value} must be >= 1")
 
 
 def _with_experiment(cfg: Config, **changes) -> Config:

@@ -64,6 +64,27 @@ DEFAULT_VALUES: dict[str, tuple[float, ...]] = {
 N_TRUE = 6
 
 
+def sweep_values(
+    kind: str, values: Sequence[float] | None, offsets: Sequence[int] | None, given_keys: set[str]
+) -> tuple[float, ...]:
+    """The points of a new sweep: ``values`` (clutter rates, parked cars per 100 m) or ``offsets`` (N_tot offsets of
+    ``births``), each kind's :data:`DEFAULT_VALUES` when not given. ``given_keys``: the dotted config keys the user
+    set; ``clutter`` refuses ``experiment.clutter`` beside its points (λ has one home, docs/user-guide/parameters.md).
+    """
+    if kind == "clutter":
+        require(
+            "experiment.clutter" not in given_keys,
+            "`sweep clutter` takes its clutter rates from --values; drop --clutter and [experiment] clutter",
+        )
+    if kind in ("clutter", "occlusion"):
+        require(offsets is None, f"--offsets belongs to `sweep births`; use --values for `sweep {kind}`")
+        return tuple(values or DEFAULT_VALUES[kind])
+    require(
+        values is None, "--values belongs to `sweep clutter` and `sweep occlusion`; use --offsets for `sweep births`"
+    )
+    return tuple(offsets) if offsets is not None else DEFAULT_VALUES["births"]
+
+
 @dataclass
 class SweepOutcome:
     """Like :class:`~soabench.experiment.runner.RunOutcome`, summed over the sweep points."""
