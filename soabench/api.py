@@ -318,11 +318,11 @@ def run(
     if out is None:
         return run_in_memory(cfg, str(net), workers=workers, executor=executor, progress=progress)
     from soabench.experiment.memory import from_run_folder
+    from soabench.experiment.options import RunOptions
     from soabench.experiment.runner import run_experiment
 
-    outcome = run_experiment(
-        cfg, str(net), out=_Path(out), workers=workers, executor=executor, progress=progress, figures=False
-    )
+    options = RunOptions(workers=workers, progress=progress, figures=False)
+    outcome = run_experiment(cfg, str(net), out=_Path(out), options=options, executor=executor)
     return from_run_folder(outcome.run_dir, cfg, str(net))
 
 

@@ -22,6 +22,7 @@ import soabench.config as config_module
 from soabench import plugins
 from soabench.birth.base import Births
 from soabench.config import DERIVED_KEYS, BirthConfig, Config, FilterConfig, MetricsConfig, SensorConfig
+from soabench.experiment.options import RunOptions
 from soabench.gmphd import GMPHDFilter
 from soabench.sensor import Scan
 
@@ -164,7 +165,9 @@ def test_a_run_records_every_key_and_its_rows_show_the_experiment(tmp_path):
     from soabench.experiment.runner import run_experiment
 
     cfg = Config.from_dict(as_sections(NON_DEFAULT)).validate()
-    out = run_experiment(cfg, "intersection", out=tmp_path / "run", workers=1, progress=False, figures=False)
+    out = run_experiment(
+        cfg, "intersection", out=tmp_path / "run", options=RunOptions(workers=1, progress=False, figures=False)
+    )
     assert out.complete and out.failures == []
     stored = json.loads((tmp_path / "run" / "run.json").read_text())["config"]
     for key, value in NON_DEFAULT.items():

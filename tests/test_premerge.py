@@ -14,6 +14,7 @@ import pytest
 
 from soabench.config import Config, ExperimentConfig
 from soabench.experiment import premerge
+from soabench.experiment.options import RunOptions
 from soabench.experiment.store import RunStore, merged_stamp
 from soabench.experiment.sweep import run_sweep
 from soabench.experiment.tables import load_tables
@@ -47,10 +48,26 @@ def sweeps(tmp_path_factory):
     mp = pytest.MonkeyPatch()
     mp.setattr(RunStore, "adopt_merge", spy)
     try:
-        kw = dict(progress=False, figures=True, n_true=2)
-        run_sweep("births", (-1, 0), config(), "intersection", out=root / "pool", workers=2, **kw)
+        kw = dict(n_true=2)
+        run_sweep(
+            "births",
+            (-1, 0),
+            config(),
+            "intersection",
+            out=root / "pool",
+            options=RunOptions(workers=2, progress=False, figures=True),
+            **kw,
+        )
         pool_adopted = list(adopted)
-        run_sweep("births", (-1, 0), config(), "intersection", out=root / "serial", workers=1, **kw)
+        run_sweep(
+            "births",
+            (-1, 0),
+            config(),
+            "intersection",
+            out=root / "serial",
+            options=RunOptions(workers=1, progress=False, figures=True),
+            **kw,
+        )
     finally:
         mp.undo()
     return root, pool_adopted, adopted[len(pool_adopted) :]

@@ -10,7 +10,7 @@ import sys
 from soabench import plugins
 from soabench.cli import checks
 from soabench.config import Config, load_config
-from soabench.errors import require
+from soabench.experiment.options import RunOptions
 
 
 def allow_typed_plugins(args: argparse.Namespace) -> None:
@@ -33,23 +33,17 @@ def requested(args: argparse.Namespace, cfg: Config) -> dict:
     return checks.requested_values(cfg, checks.requested_keys(args, explicit), args, explicit)
 
 
-def executor_kwargs(args: argparse.Namespace) -> dict:
-    """The executor and output options of ``run``, ``sweep`` and ``study``, checked."""
-    from soabench.experiment.executors import check_scheduler_address
-
-    require(args.workers is None or args.workers >= 1, f"--workers {args.workers} must be >= 1")
-    require(
-        not (args.scheduler and args.dask), "--scheduler and --dask local are alternatives; give one of them, not both"
-    )
-    check_scheduler_address(args.scheduler)
-    return dict(
+def run_options(args: argparse.Namespace, figures: bool | None = None) -> RunOptions:
+    """The run options of ``run``, ``sweep`` and ``study`` (``figures``: None, each folder's default), checked."""
+    return RunOptions(
         workers=args.workers,
         scheduler=args.scheduler,
         dask_local=args.dask == "local",
         fail_fast=args.fail_fast,
         save_estimates=args.save_estimates,
         progress=not args.no_progress,
-    )
+        figures=figures,
+    ).validate()
 
 
 def report_outcome(outcome, finish: str = "soabench run --resume {dir}") -> int:

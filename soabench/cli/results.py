@@ -7,11 +7,11 @@ import sys
 from pathlib import Path
 
 from soabench.cli.parsing import csv_list
+from soabench.experiment.options import RunOptions
+from soabench.experiment.results_suite import Settings
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from soabench.experiment.results_suite import Settings  # a plain dataclass: its defaults are the options'
-
     p = sub.add_parser("results", help="regenerate all of results/: study, every scene, summary, KITTI")
     d = Settings()
     p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default results)")
@@ -41,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.results_suite import Settings, run_results
+    from soabench.experiment.results_suite import run_results
 
     settings = Settings(
         scenes=tuple(args.scenes) if args.scenes else None,
@@ -56,7 +56,7 @@ def handle(args: argparse.Namespace) -> int:
         kitti_duration=args.kitti_duration,
         kitti_folds=args.kitti_folds,
     )
-    o = run_results(args.out, settings, workers=args.workers, progress=not args.no_progress)
+    o = run_results(args.out, settings, options=RunOptions(workers=args.workers, progress=not args.no_progress))
     rows = [f"| {k} | {v} | {o.seconds.get(k, 0.0):.0f} |" for k, v in o.parts.items()]
     print("\n".join(["| part | result | wall time (s) |", "|---|---|---:|", *rows]))
     if o.complete:

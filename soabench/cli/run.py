@@ -22,7 +22,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def handle(args: argparse.Namespace) -> int:
     from soabench.experiment.runner import run_experiment
 
-    kwargs = common.executor_kwargs(args)
+    options = common.run_options(args)
     if args.resume is not None:  # --models/--trackers re-allow the run's import-path plugins (and are compared)
         common.allow_typed_plugins(args)
     cfg = common.config_from_args(args)  # also validates the flags given with --resume
@@ -30,8 +30,8 @@ def handle(args: argparse.Namespace) -> int:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the run in its folder")
         requested = common.requested(args, cfg)
         outcome = run_experiment(
-            None, args.net, tuple(args.poly), args.scenario, resume=args.resume, requested=requested, **kwargs
+            None, args.net, tuple(args.poly), args.scenario, resume=args.resume, requested=requested, options=options
         )
     else:
-        outcome = run_experiment(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, **kwargs)
+        outcome = run_experiment(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options)
     return common.report_outcome(outcome)

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from soabench.cli import common
+from soabench.experiment.options import RunOptions
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +23,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def handle(args: argparse.Namespace) -> int:
     from soabench.experiment.sensitivity_runs import run_sensitivity
 
-    outcome = run_sensitivity(
-        args.main, args.out, trials=args.trials, workers=args.workers, progress=not args.no_progress
-    )
+    options = RunOptions(workers=args.workers, progress=not args.no_progress)
+    outcome = run_sensitivity(args.main, args.out, trials=args.trials, options=options)
     return common.report_outcome(outcome, f"soabench sensitivity --main {args.main} --out {{dir}}")

@@ -32,19 +32,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def handle(args: argparse.Namespace) -> int:
     from soabench.experiment.study import check_part_trials, run_study, with_plugin_models
 
-    kwargs = common.executor_kwargs(args)
+    options = common.run_options(args, True if args.all_figures else None)
     check_part_trials(args.sweep_trials, args.births_trials, args.sensitivity_trials)
-    # the run options `study` does not offer (the parser shares them with `run` and `sweep`)
-    require(not args.save_estimates, "--save-estimates is not offered by `study`; use `run`")
-    require(not args.fail_fast, "--fail-fast is not offered by `study`; use `run`")
     require(args.probabilities is None, "`study` runs the paper's probability modes")
     for flag, value in (("--poly", args.poly[0] if args.poly else None), ("--scenario", args.scenario)):
         require(value is None, f"{flag} {value!r} is not offered by `study`: give a scene folder with --net")
     extra = tuple(args.models or ())  # plugins ride along with the built-in six (--trackers too)
     args.models = None
     cfg = with_plugin_models(common.config_from_args(args), extra)
-    for key in ("save_estimates", "fail_fast"):
-        kwargs.pop(key)
     explicit = getattr(args, "explicit", set())
     parts = ("sweep_trials", "births_trials", "sensitivity_trials")
     keys = checks.requested_keys(args, explicit) | {k for k in parts if k in explicit}
@@ -55,8 +50,7 @@ def handle(args: argparse.Namespace) -> int:
         sweep_trials=args.sweep_trials,
         births_trials=args.births_trials,
         sensitivity_trials=args.sensitivity_trials,
+        options=options,
         explicit=keys,
-        all_figures=args.all_figures,
-        **kwargs,
     )
     return common.report_outcome(outcome, "soabench study --out {dir}")

@@ -50,7 +50,7 @@ def _all_figures(args: argparse.Namespace) -> bool | None:
 def handle(args: argparse.Namespace) -> int:
     from soabench.experiment.sweep import run_sweep, sweep_values
 
-    kwargs = common.executor_kwargs(args)
+    options = common.run_options(args, _all_figures(args))
     finish = f"soabench sweep {args.kind} --resume {{dir}}"
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the sweep in its folder")
@@ -58,16 +58,12 @@ def handle(args: argparse.Namespace) -> int:
         requested = {"kind": args.kind, **common.requested(args, common.config_from_args(args))}
         if args.values is not None or args.offsets is not None:
             requested["values"] = list(args.values if args.values is not None else args.offsets)
-        outcome = run_sweep(
-            args.kind, (), None, args.net, resume=args.resume, requested=requested, figures=_all_figures(args),
-            **kwargs,
-        )  # fmt: skip
+        outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, requested=requested, options=options)
         return common.report_outcome(outcome, finish)
     given = checks.requested_keys(args, getattr(args, "explicit", set()))
     values = sweep_values(args.kind, args.values, args.offsets, given)
     cfg = common.config_from_args(args)
     outcome = run_sweep(
-        args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out,
-        figures=_all_figures(args), **kwargs,
-    )  # fmt: skip
+        args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options
+    )
     return common.report_outcome(outcome, finish)

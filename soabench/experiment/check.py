@@ -305,6 +305,7 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
 def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict[str, float], list[dict]]:
     """Run every scenario and seed; return the mean of every trials.csv metric per key, and the plugin failures."""
     from soabench.experiment.files import read_csv
+    from soabench.experiment.options import RunOptions
     from soabench.experiment.runner import run_experiment
     from soabench.experiment.store import RunStore
 
@@ -323,9 +324,8 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
 
                 shutil.rmtree(run_dir)
             cfg = _config_for(base, s, seed)
-            o = run_experiment(
-                cfg, s.net, s.polys, s.scenario, out=run_dir, workers=workers, progress=False, figures=False
-            )
+            options = RunOptions(workers=workers, progress=False, figures=False)
+            o = run_experiment(cfg, s.net, s.polys, s.scenario, out=run_dir, options=options)
             require(o.complete, f"scenario {s.name!r} seed {seed}: {o.n_missing} trial(s) failed; see {run_dir}")
             failures += [{**f, "scenario": s.name, "seed": seed} for f in RunStore(run_dir).model_failures()]
             table = read_csv(run_dir / "trials.csv")

@@ -11,9 +11,7 @@ item (:func:`failure_record`); the run goes on.
 
 from __future__ import annotations
 
-import ipaddress
 import os
-import re
 import shutil
 import signal
 import socket
@@ -26,36 +24,11 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from soabench.errors import SoabenchError, require
+from soabench.experiment.options import check_scheduler_address
 from soabench.experiment.workers import init_worker, last_activity, sigint_ignored_by_children
 from soabench.seeding import trial_seeds
 
 MAX_WORKERS = 1024  #: upper bound of --workers (processes or LocalCluster workers on one machine)
-
-#: ``[scheme://]host:port``; the schemes Dask's communication layer speaks over a network
-SCHEDULER_ADDRESS = re.compile(
-    r"^(?:(?P<scheme>tcp|tls|ws|wss|ucx)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]{0,252})):(?P<port>\d{1,5})$"
-)
-
-
-def _is_host(host: str) -> bool:
-    """A host name (with a letter), a dotted-quad IPv4 or a bracketed IPv6 address: a bare number such as ``3``
-    (which the resolver would read as 0.0.0.3) is not."""
-    literal = host.strip("[]")
-    if host.startswith("[") or not any(c.isalpha() for c in literal):
-        try:
-            ipaddress.ip_address(literal)
-        except ValueError:
-            return False
-    return True
-
-
-def check_scheduler_address(address: str | None) -> None:
-    """Refuse a malformed ``--scheduler`` at once (instead of a connection timeout later)."""
-    if address is None:
-        return
-    m = SCHEDULER_ADDRESS.match(address.strip())
-    ok = m is not None and 1 <= int(m.group("port")) <= 65535 and _is_host(m.group("host"))
-    require(ok, f"--scheduler {address!r} is not a scheduler address; expected tcp://HOST:PORT (port 1-65535)")
 
 
 def failure_record(trial: int, base_seed: int, error: str, tb: str = "") -> dict:

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from soabench.errors import Interrupted, SoabenchError, require
+from soabench.experiment.options import RUN_DEFAULTS, RunOptions
 
 #: the study's part folders; a study is kept only when each is complete (a part added to the study belongs here)
 STUDY_PARTS = ("main", "clutter", "births")  # and sensitivity/ (two run folders and its table; see study_kept)
@@ -211,7 +212,12 @@ def _base_config(s: Settings, trials: int, **experiment: Any):
 
 
 def _study_part(
-    root: Path, s: Settings, exe: dict, log: Callable[[str], None], net: str = "intersection", trials: int | None = None
+    root: Path,
+    s: Settings,
+    exe: RunOptions,
+    log: Callable[[str], None],
+    net: str = "intersection",
+    trials: int | None = None,
 ) -> tuple[str, int]:
     """The study (:func:`soabench.experiment.study.run_study`) of scene ``net`` in ``root``: kept when complete with
     these settings, else resumed or started; ``trials`` of its main protocol (default ``s.trials``)."""
@@ -222,7 +228,7 @@ def _study_part(
         return "kept", 0
     explicit = {*SIZE_KEYS, "births_trials"}
     cfg = _base_config(s, trials or s.trials)
-    o = run_study(cfg, net, out=root, births_trials=s.births_trials, explicit=explicit, **exe)
+    o = run_study(cfg, net, out=root, births_trials=s.births_trials, explicit=explicit, options=exe)
     return ("done" if o.complete else "incomplete"), o.n_missing
 
 
@@ -304,13 +310,14 @@ def run_results(
     out: Path,
     settings: Settings | None = None,
     *,
-    workers: int | None = None,
-    progress: bool = True,
+    options: RunOptions = RUN_DEFAULTS,
     log: Callable[[str], None] | None = None,
 ) -> ResultsOutcome:
-    """Make (or finish) every part of results/ in ``out``; see the module docstring."""
+    """Make (or finish) every part of results/ in ``out``; see the module docstring. ``options``: workers and
+    progress of every part (the others are each part's own)."""
     from soabench.experiment.executors import MAX_WORKERS
 
+    workers, progress = options.workers, options.progress
     require(
         workers is None or 1 <= workers <= MAX_WORKERS,
         f"--workers {workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
@@ -328,7 +335,7 @@ def run_results(
     check_own_folder(root, "results folder", own)
     root.mkdir(parents=True, exist_ok=True)
     hint = f"finish with: soabench results --out {root} (and the same options)"
-    exe = dict(workers=workers, progress=progress)
+    exe = RunOptions(workers=workers, progress=progress)
     outcome = ResultsOutcome(root)
     part = "start"
 

@@ -34,6 +34,7 @@ from soabench.errors import Interrupted, require
 from soabench.experiment import paper
 from soabench.experiment import sensitivity as sens
 from soabench.experiment.files import write_text_atomic
+from soabench.experiment.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.report import paper_protocol_mismatch
 from soabench.experiment.runmeta import flatten_config
@@ -101,13 +102,9 @@ def run_study(
     sweep_trials: int | None = None,
     births_trials: int = 30,
     sensitivity_trials: int | None = None,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    dask_local: bool = False,
-    progress: bool = True,
+    options: RunOptions = RUN_DEFAULTS,
     explicit: set[str] | None = None,
     grouped: bool = True,
-    all_figures: bool = False,
 ) -> StudyOutcome:
     """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
 
@@ -118,10 +115,13 @@ def run_study(
     a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
     refuses differences, except more trials (see :mod:`~soabench.experiment.runmeta`); None compares nothing.
     ``grouped``: False runs the parts one after another (the same results, slower; for benchmarks).
-    ``all_figures``: also draw the figures of every N̂ point and of both sensitivity runs (by default
-    ``births/sweep_births.png`` and ``sensitivity/sensitivity.md`` summarise those folders, which get tables and
-    summaries only).
+    ``options``: how every part runs (:class:`~soabench.experiment.runner.RunOptions`; fail_fast and save_estimates
+    are not the study's: refused); ``options.figures`` True also draws the figures of every N̂ point and of both
+    sensitivity runs (by default ``births/sweep_births.png`` and ``sensitivity/sensitivity.md`` summarise those
+    folders, which get tables and summaries only).
     """
+    require(not options.save_estimates, "--save-estimates is not offered by `study`; use `run`")
+    require(not options.fail_fast, "--fail-fast is not offered by `study`; use `run`")
     root = resolve(out if out is not None else Path("results") / net_name(net))
     check_own_folder(root, "study folder", STUDY_ENTRIES)
     hint = f"finish with: soabench study --out {root}"
@@ -138,9 +138,10 @@ def run_study(
         flat = flatten_config(cfg.to_dict())
         return {k: flat[k] for k in keys if k in flat}
 
-    exe = dict(workers=workers, scheduler=scheduler, dask_local=dask_local, progress=progress)
-    births_figures = True if all_figures else None
-    sens_exe = dict(exe, figures=all_figures)
+    all_figures = options.figures is True
+    exe = dict(options=dataclasses.replace(options, figures=None))  # main run, clutter sweep: their own defaults
+    births_exe = dict(options=dataclasses.replace(options, figures=True if all_figures else None))
+    sens_options = dataclasses.replace(options, figures=all_figures)
     main_dir, clutter_dir, births_dir = root / "main", root / "clutter", root / "births"
 
     def parts(**kw) -> tuple[RunOutcome, SweepOutcome, SweepOutcome]:
@@ -162,13 +163,12 @@ def run_study(
             trials_key = "experiment.trials" if "births_trials" in explicit else None
             req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
             births = run_sweep(
-                "births", (), None, net, resume=births_dir, requested=req, grouped=grouped, figures=births_figures,
-                **exe, **kw,
+                "births", (), None, net, resume=births_dir, requested=req, grouped=grouped, **births_exe, **kw,
             )  # fmt: skip
         else:
             births = run_sweep(
                 "births", DEFAULT_VALUES["births"], births_cfg, net, out=births_dir, grouped=grouped,
-                figures=births_figures, **exe, **kw,
+                **births_exe, **kw,
             )  # fmt: skip
         return main, clutter, births
 
@@ -181,18 +181,24 @@ def run_study(
                 deferred: list = []
                 parts(defer=deferred)
                 run_variants(
-                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, defer=deferred, **sens_exe
+                    sens_dir,
+                    main_dir,
+                    trials=sensitivity_trials,
+                    follow_main=follow,
+                    defer=deferred,
+                    options=sens_options,
                 )
                 from soabench.experiment.drawing import parallel
                 from soabench.experiment.grouped import run_group
                 from soabench.experiment.premerge import merged_on
                 from soabench.experiment.runner import open_executor
 
-                pool = open_executor(workers, scheduler, dask_local)  # the trials', then the figures' workers
+                # the trials', then the figures' workers
+                pool = open_executor(options.workers, options.scheduler, options.dask_local)
                 aborted = True
                 try:
                     if deferred:
-                        run_group(deferred, pool, progress=progress, label=root.name)
+                        run_group(deferred, pool, progress=options.progress, label=root.name)
                     # the reports of the parts that attempted every trial, each merged by a worker first
                     with parallel(pool), merged_on(pool, deferred):
                         main, clutter, births = parts(run_trials=False)
@@ -202,7 +208,7 @@ def run_study(
                             trials=sensitivity_trials,
                             follow_main=follow,
                             run_trials=False,
-                            **sens_exe,
+                            options=sens_options,
                         )
                     aborted = False
                 finally:
@@ -210,7 +216,7 @@ def run_study(
             else:
                 main, clutter, births = parts()
                 sensitivity = run_variants(
-                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, **sens_exe
+                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, options=sens_options
                 )
 
             md = ""
