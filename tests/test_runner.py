@@ -36,11 +36,10 @@ def small_config(trials: int = 4, clutter=(3.0,), duration: float = 20.0, seed: 
     return cfg.validate()
 
 
-def run(cfg: Config, out: Path, **kw):
-    kw.setdefault("trial_fn", ft.fake_trial)
-    kw.setdefault("figures", False)
-    kw.setdefault("workers", 1)
-    return run_experiment(cfg, "intersection", out=out, load_fn=ft.fake_load, options=RunOptions(progress=False), **kw)
+def run(cfg: Config, out: Path, trial_fn=ft.fake_trial, **options):
+    """A run of the fake trial; ``options``: fields of :class:`RunOptions` (default: one worker, no figures)."""
+    options = RunOptions(**{"workers": 1, "figures": False, "progress": False, **options})
+    return run_experiment(cfg, "intersection", out=out, load_fn=ft.fake_load, trial_fn=trial_fn, options=options)
 
 
 @pytest.fixture(scope="module")
