@@ -222,8 +222,10 @@ import sys
 sys.path.insert(0, {here!r})
 import fake_trial as ft
 from pathlib import Path
+from soabench.experiment.options import RunOptions
 from soabench.experiment.runner import run_experiment
-run_experiment(None, "x", resume=Path({run!r}), workers=1, trial_fn=ft.slow_trial, progress=False, figures=False)
+options = RunOptions(workers=1, progress=False, figures=False)
+run_experiment(None, "x", resume=Path({run!r}), options=options, trial_fn=ft.slow_trial)
 """
 
 

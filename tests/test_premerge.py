@@ -48,26 +48,14 @@ def sweeps(tmp_path_factory):
     mp = pytest.MonkeyPatch()
     mp.setattr(RunStore, "adopt_merge", spy)
     try:
-        kw = dict(n_true=2)
-        run_sweep(
-            "births",
-            (-1, 0),
-            config(),
-            "intersection",
-            out=root / "pool",
-            options=RunOptions(workers=2, progress=False, figures=True),
-            **kw,
-        )
+
+        def sweep(name: str, workers: int) -> None:
+            options = RunOptions(workers=workers, progress=False, figures=True)
+            run_sweep("births", (-1, 0), config(), "intersection", out=root / name, options=options, n_true=2)
+
+        sweep("pool", 2)
         pool_adopted = list(adopted)
-        run_sweep(
-            "births",
-            (-1, 0),
-            config(),
-            "intersection",
-            out=root / "serial",
-            options=RunOptions(workers=1, progress=False, figures=True),
-            **kw,
-        )
+        sweep("serial", 1)
     finally:
         mp.undo()
     return root, pool_adopted, adopted[len(pool_adopted) :]

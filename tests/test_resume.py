@@ -30,8 +30,8 @@ from soabench.config import Config
 from soabench.experiment.runner import run_experiment
 from soabench.experiment.options import RunOptions
 cfg = Config.from_dict({cfg!r}).validate()
-run_experiment(cfg, "intersection", out=Path({out!r}), workers=1, trial_fn=ft.slow_trial, load_fn=ft.fake_load,
-               progress=False, figures=False)
+options = RunOptions(workers=1, progress=False, figures=False)
+run_experiment(cfg, "intersection", out=Path({out!r}), options=options, trial_fn=ft.slow_trial, load_fn=ft.fake_load)
 """
 
 

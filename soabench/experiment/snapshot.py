@@ -4,7 +4,6 @@ commands ``scene``, ``record`` and ``birth``; docs/method.md §5.8 for the trial
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 from soabench import plugins
 from soabench import scenario as scenarios  # by attribute: a test may stand in for its simulate
@@ -13,6 +12,8 @@ from soabench.config import MAX_SEED, MAX_TRIALS, Config, check_time, filter_con
 from soabench.errors import require
 from soabench.experiment.guard import check_births
 from soabench.gmphd.filter import GMPHDFilter
+from soabench.scenario.config import ScenarioConfig
+from soabench.scenario.scene import SceneMap
 from soabench.seeding import TrialSeeds, trial_seeds
 from soabench.sensor import observe
 from soabench.types import Births, Recording, Scan, Scans
@@ -22,8 +23,8 @@ from soabench.types import Births, Recording, Scan, Scans
 class Snapshot:
     """Scene, scenario, config, the trial's seeds and the recording up to the snapshot's time."""
 
-    scene: Any
-    scenario: Any
+    scene: SceneMap
+    scenario: ScenarioConfig
     config: Config
     seeds: TrialSeeds
     recording: Recording
