@@ -41,11 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
-_CLI = "import sys; from soabench.cli import main; sys.exit(main())"
+_CLI = "import sys; from soabench.cli.main import main; sys.exit(main())"
 #: the command run in a child that reports its own and its (waited) workers' ru_maxrss to the file in argv[1]
 _CLI_RUSAGE = (
     "import json, resource, sys\n"
-    "from soabench.cli import main\n"
+    "from soabench.cli.main import main\n"
     "path = sys.argv.pop(1)\n"
     "try:\n"
     "    rc = main()\n"

@@ -39,8 +39,9 @@ import bad_inputs  # noqa: E402
 import fake_trial as ft  # noqa: E402
 
 import soabench.experiment.reports.report as report  # noqa: E402
-from soabench.cli import main  # noqa: E402
+from soabench.cli.main import main  # noqa: E402
 from soabench.config import Config  # noqa: E402
+from soabench.experiment.execution.options import RunOptions  # noqa: E402
 from soabench.experiment.execution.runner import run_experiment  # noqa: E402
 
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
@@ -141,8 +142,14 @@ def run_meta_cases(tmp: Path) -> tuple[int, int]:
     tried = refused = 0
     for i, changes in enumerate([*POISONS, *(c for c, _ in BAD_META)]):
         run = tmp / f"meta{i}"
-        run_experiment(_cfg(3), "x", out=run, workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load,
-                       progress=False, figures=False)  # fmt: skip
+        run_experiment(
+            _cfg(3),
+            "x",
+            out=run,
+            options=RunOptions(workers=1, progress=False, figures=False),
+            trial_fn=ft.fake_trial,
+            load_fn=ft.fake_load,
+        )
         meta = json.loads((run / "run.json").read_text())
         for k, v in changes.items():
             meta.pop(k, None) if v is ... else meta.__setitem__(k, v)
@@ -167,9 +174,10 @@ sys.path.insert(0, {tests!r})
 import fake_trial as ft
 from pathlib import Path
 from soabench.config import Config
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
 cfg = Config.from_dict({cfg!r}).validate()
-kw = dict(workers=2, trial_fn=ft.slow_trial, load_fn=ft.fake_load, progress=False, figures=False)
+kw = dict(options=RunOptions(workers=2, progress=False, figures=False), trial_fn=ft.slow_trial, load_fn=ft.fake_load)
 if {resume!r}:
     run_experiment(None, "x", resume=Path({out!r}), **kw)
 else:
@@ -224,8 +232,14 @@ def kill_resume_cycles(tmp: Path, n_trials: int = 16) -> dict:
                 os.kill(p, signal.SIGKILL)
         resume = True
     ref = tmp / "ref"
-    run_experiment(cfg, "intersection", out=ref, workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load,
-                   progress=False, figures=False)  # fmt: skip
+    run_experiment(
+        cfg,
+        "intersection",
+        out=ref,
+        options=RunOptions(workers=1, progress=False, figures=False),
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+    )
     same = all((out / f).read_bytes() == (ref / f).read_bytes() for f in CSV_FILES)
     return {"cycles": cycles, "orphans": orphans, "identical": same}
 
@@ -234,18 +248,25 @@ def executors(tmp: Path) -> dict:
     from distributed import LocalCluster
 
     cfg = _cfg(6)
-    kw = dict(trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, figures=False)
+    kw = dict(trial_fn=ft.fake_trial, load_fn=ft.fake_load)
+    quiet = dict(progress=False, figures=False)
     runs = {
-        "serial": dict(workers=1),
-        "process pool (2)": dict(workers=2),
-        "Dask LocalCluster (2)": dict(dask_local=True, workers=2),
+        "serial": RunOptions(workers=1, **quiet),
+        "process pool (2)": RunOptions(workers=2, **quiet),
+        "Dask LocalCluster (2)": RunOptions(dask_local=True, workers=2, **quiet),
     }
     out = {}
     for name, ex in runs.items():
-        run_experiment(cfg, "intersection", out=tmp / name.split()[0], **ex, **kw)
+        run_experiment(cfg, "intersection", out=tmp / name.split()[0], options=ex, **kw)
         out[name] = tmp / name.split()[0]
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        run_experiment(cfg, "intersection", out=tmp / "external", scheduler=cluster.scheduler_address, **kw)
+        run_experiment(
+            cfg,
+            "intersection",
+            out=tmp / "external",
+            options=RunOptions(scheduler=cluster.scheduler_address, **quiet),
+            **kw,
+        )
         out["external Dask scheduler"] = tmp / "external"
     ref = out["serial"]
     return {name: all((d / f).read_bytes() == (ref / f).read_bytes() for f in CSV_FILES) for name, d in out.items()}

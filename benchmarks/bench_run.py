@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
 from soabench.experiment.runs.files import read_csv
 from soabench.experiment.runs.store import RunStore
@@ -101,7 +102,7 @@ def main(argv=None) -> int:
         kwargs = {"trial_fn": fake_trial.fake_trial, "load_fn": fake_trial.fake_load}
     t0 = time.perf_counter()
     outcome = run_experiment(
-        cfg, args.net, out=out, workers=args.workers, dask_local=args.dask, figures=False, **kwargs
+        cfg, args.net, out=out, options=RunOptions(workers=args.workers, dask_local=args.dask, figures=False), **kwargs
     )
     t_run = time.perf_counter() - t0
     if not outcome.complete:

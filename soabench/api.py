@@ -166,7 +166,7 @@ def simulate_trial(
         clutter rate uses.
     """
     from soabench.experiment.execution.runner import check_against_scenario
-    from soabench.experiment.trial.registry import load_scene_cached
+    from soabench.experiment.trial.trial.registry import load_scene_cached
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
     from soabench.sensor import observe
@@ -215,7 +215,7 @@ def make_tracker(
         results of that run of ``soabench run``.
     """
     from soabench.config import filter_config_for_mode
-    from soabench.experiment.trial import guard
+    from soabench.experiment.trial.trial import guard
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.seeding import trial_seeds
 
@@ -319,11 +319,11 @@ def run(
     if out is None:
         return run_in_memory(cfg, str(net), workers=workers, executor=executor, progress=progress)
     from soabench.experiment.execution.memory import from_run_folder
+    from soabench.experiment.execution.options import RunOptions
     from soabench.experiment.execution.runner import run_experiment
 
-    outcome = run_experiment(
-        cfg, str(net), out=_Path(out), workers=workers, executor=executor, progress=progress, figures=False
-    )
+    options = RunOptions(workers=workers, progress=progress, figures=False)
+    outcome = run_experiment(cfg, str(net), out=_Path(out), options=options, executor=executor)
     return from_run_folder(outcome.run_dir, cfg, str(net))
 
 

@@ -35,6 +35,7 @@ DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
+MAX_DURATION = 86400.0  #: longest simulated time (s): experiment.duration and a snapshot's --time / --duration
 
 
 def _one_of(name: str, value: Any, allowed: tuple) -> None:
@@ -71,6 +72,16 @@ def _positive(name: str, value: float, hi: float = 1e6) -> None:
 
 def _non_negative(name: str, value: float, hi: float = 1e6) -> None:
     _in_range(name, value, 0.0, hi)
+
+
+def check_time(flag: str, value: float | None) -> None:
+    """A finite, positive time of at most :data:`MAX_DURATION` seconds (None: not given)."""
+    if value is None:
+        return
+    require(
+        math.isfinite(value) and 0 < value <= MAX_DURATION,
+        f"{flag} {value!r} is out of range; allowed: (0, {MAX_DURATION:g}] seconds",
+    )
 
 
 def require_distinct(name: str, values: tuple) -> None:
@@ -332,7 +343,7 @@ class ExperimentConfig:
 
     def validate(self) -> None:
         _int_range("trials", self.trials, 1, MAX_TRIALS)
-        _positive("duration", self.duration, hi=86400.0)
+        _positive("duration", self.duration, hi=MAX_DURATION)
         require(len(self.models) + len(self.trackers) >= 1, "models must name at least one birth model or tracker")
         for m in self.models:
             plugins.check_name(plugins.BIRTH, m)

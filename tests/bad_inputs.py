@@ -1,6 +1,6 @@
 """The catalogue of bad inputs: every case must give ONE line on stderr and exit status 2, without a traceback,
 without running a trial or a simulation, and without writing into a folder that is not the command's own. Used by
-tests/test_hardening_cli.py (in-process, through :func:`soabench.cli.main`) and benchmarks/bench_reliability.py
+tests/test_hardening_cli.py (in-process, through :func:`soabench.cli.main.main`) and benchmarks/bench_reliability.py
 (each case in a forked process with a time bound, counted as clean / traceback / silent / hang / unclear).
 
 Each case is ``(name, make_argv(tmp) -> argv, needle)``: ``make_argv`` may write files under ``tmp`` (a fresh
@@ -11,9 +11,12 @@ exists (its ``CASES`` list has the same format).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable
 from pathlib import Path
+
+from soabench.experiment.execution.options import RunOptions
 
 Case = tuple[str, Callable[[Path], list[str]], str]
 
@@ -363,7 +366,6 @@ def _usage_cases() -> list[Case]:
 # ------------------------------------------------------------------------------------------------ output paths
 def _sensitivity(tmp: Path, out: str, finished: bool = True) -> list[str]:
     """``sensitivity --main`` a (fake) run of 2 trials, finished or with one trial missing."""
-    import dataclasses
 
     import fake_trial as ft
 
@@ -372,7 +374,9 @@ def _sensitivity(tmp: Path, out: str, finished: bool = True) -> list[str]:
 
     cfg = Config()
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=2, duration=10.0, models=("soa",))
-    kw = dict(workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, figures=False)
+    kw = dict(
+        options=RunOptions(workers=1, progress=False, figures=False), trial_fn=ft.fake_trial, load_fn=ft.fake_load
+    )
     run_experiment(cfg.validate(), "intersection", out=tmp / "main", **kw)
     if not finished:
         (tmp / "main" / "trials" / "trial_00001.json").unlink()

@@ -8,7 +8,7 @@ import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from soabench.cli import main
+from soabench.cli.main import main
 
 SUITE = Path(__file__).resolve().parents[1] / "examples" / "check" / "suite.toml"
 

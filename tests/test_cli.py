@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 
 
 def _run(argv, capsys):

@@ -116,7 +116,7 @@ def test_a_run_record_with_the_sensor_rate_is_read():
 
 
 def test_the_clutter_sweep_takes_its_rates_from_values_only(tmp_path, capsys):
-    from soabench.cli import main
+    from soabench.cli.main import main
 
     cfg = tmp_path / "c.toml"
     cfg.write_text("[experiment]\nclutter = [5.0]\n")

@@ -104,7 +104,7 @@ def test_a_stale_block_is_found_and_rewritten():
 
 
 def _parser_commands() -> dict[str, argparse.ArgumentParser]:
-    from soabench.cli import build_parser
+    from soabench.cli.main import build_parser
 
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     return dict(sub.choices)

@@ -10,7 +10,7 @@ import csv
 import re
 from pathlib import Path
 
-from soabench.cli import main
+from soabench.cli.main import main
 
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "user-guide"
 

@@ -11,6 +11,7 @@ import pytest
 
 from soabench.config import Config
 from soabench.experiment.execution.executors import PoolExecutor, SerialExecutor
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
 from soabench.experiment.reports.tables import load_tables
 from soabench.figures import drawing
@@ -23,9 +24,13 @@ def run_dir(tmp_path_factory) -> Path:
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=2, duration=6.0, models=("soa", "atbm"))
     out = tmp_path_factory.mktemp("drawing") / "run"
     run_experiment(
-        cfg.validate(), "intersection", out=out, trial_fn=ft.fake_trial, load_fn=ft.fake_load, figures=False,
-        workers=1, progress=False,
-    )  # fmt: skip
+        cfg.validate(),
+        "intersection",
+        out=out,
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+        options=RunOptions(figures=False, workers=1, progress=False),
+    )
     return out
 
 

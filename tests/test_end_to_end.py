@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.origins import ORIGIN_KEYS
 
 MODELS = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")

@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import soabench.scenario
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.experiment.trial import registry
 
 HERE = Path(__file__).parent
@@ -65,7 +65,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch, no_work
 def test_the_bad_input_catalogue_is_large_distinct_and_covers_every_command():
     names = [c[0] for c in bad_inputs.CASES]
     assert len(names) == len(set(names)) and len(names) >= 400
-    from soabench.cli import COMMANDS
+    from soabench.cli.main import COMMANDS
 
     assert set(COMMANDS) <= {name.split()[0].rstrip(":") for name in names}
 
@@ -103,7 +103,7 @@ import fake_trial as ft
 from soabench.experiment.trial import registry
 registry._TRIAL_KINDS["soabench"] = ft.slow_trial
 registry._SCENE_LOADERS["sumo"] = ft.fake_load
-from soabench.cli import main
+from soabench.cli.main import main
 sys.exit(main({argv!r}))
 """
 

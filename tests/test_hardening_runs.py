@@ -13,10 +13,11 @@ from pathlib import Path
 import fake_trial as ft
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment.campaigns.sweep import run_sweep
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import TodoTrials, run_experiment
 from soabench.experiment.runs.ownership import FolderLock
 from soabench.experiment.trial import registry
@@ -43,11 +44,9 @@ def make_run(out: Path, trials: int = 3, **kw) -> Path:
         small_config(trials),
         "intersection",
         out=out,
-        workers=1,
+        options=RunOptions(workers=1, progress=False, figures=False),
         trial_fn=ft.fake_trial,
         load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
         **kw,
     )
     return out
@@ -133,7 +132,9 @@ def test_a_poisoned_run_folder_runs_nothing(tmp_path, capsys, poison_module, cha
 
 def test_a_poisoned_sweep_point_name_is_refused(tmp_path, capsys):
     cfg = small_config(2)
-    kw = dict(trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, figures=False, workers=1)
+    kw = dict(
+        trial_fn=ft.fake_trial, load_fn=ft.fake_load, options=RunOptions(progress=False, figures=False, workers=1)
+    )
     run_sweep("births", (-1, 0), cfg, "intersection", out=tmp_path / "sw", **kw)
     meta = json.loads((tmp_path / "sw" / "sweep.json").read_text())
     meta["points"][0]["name"] = "../../../evil"
@@ -187,7 +188,7 @@ def test_foreign_folder_is_never_adopted(tmp_path):
     with pytest.raises(SoabenchError, match="stale or foreign"):
         make_run(tmp_path / "f")
     with pytest.raises(SoabenchError, match="no run.json"):
-        run_experiment(None, "x", resume=tmp_path / "f", progress=False)
+        run_experiment(None, "x", resume=tmp_path / "f", options=RunOptions(progress=False))
 
 
 def test_trial_records_beyond_the_run_are_foreign(tmp_path):
@@ -195,7 +196,7 @@ def test_trial_records_beyond_the_run_are_foreign(tmp_path):
     rec = json.loads((run / "trials" / "trial_00000.json").read_text())  # a record of this run, as trial 99
     (run / "trials" / "trial_00099.json").write_text(json.dumps({**rec, "trial": 99}))
     with pytest.raises(SoabenchError, match="beyond its 3 trials"):
-        run_experiment(None, "x", resume=run, progress=False, figures=False)
+        run_experiment(None, "x", resume=run, options=RunOptions(progress=False, figures=False))
 
 
 def test_a_locked_folder_names_its_holder(tmp_path, capsys):
@@ -212,7 +213,7 @@ def test_a_locked_folder_names_its_holder(tmp_path, capsys):
 def test_a_stale_lock_of_a_dead_process_does_not_block(tmp_path, report_stub):
     run = make_run(tmp_path / "run")
     (run / ".lock").write_text(json.dumps({"pid": 999999, "host": "gone", "since": "earlier"}))
-    o = run_experiment(None, "x", resume=run, progress=False, figures=False)
+    o = run_experiment(None, "x", resume=run, options=RunOptions(progress=False, figures=False))
     assert o.complete
 
 
@@ -221,8 +222,10 @@ import sys
 sys.path.insert(0, {here!r})
 import fake_trial as ft
 from pathlib import Path
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
-run_experiment(None, "x", resume=Path({run!r}), workers=1, trial_fn=ft.slow_trial, progress=False, figures=False)
+options = RunOptions(workers=1, progress=False, figures=False)
+run_experiment(None, "x", resume=Path({run!r}), options=options, trial_fn=ft.slow_trial)
 """
 
 
@@ -296,7 +299,9 @@ def test_resume_with_more_trials_extends_the_run_exactly(tmp_path, report_stub):
 
 
 def test_sweep_resume_conflicts_and_more_trials(tmp_path, capsys, report_stub, monkeypatch):
-    kw = dict(trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, figures=False, workers=1)
+    kw = dict(
+        trial_fn=ft.fake_trial, load_fn=ft.fake_load, options=RunOptions(progress=False, figures=False, workers=1)
+    )
     sw = tmp_path / "sw"
     run_sweep("births", (-1, 0), small_config(2), "intersection", out=sw, **kw)
     assert main(["sweep", "clutter", "--resume", str(sw)]) == 2

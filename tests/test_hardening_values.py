@@ -15,7 +15,7 @@ import pytest
 from test_hardening_cli import no_work  # noqa: F401  (a fixture)
 from test_hardening_cli import test_bad_input_is_one_line_and_exit_2 as one_line_and_exit_2
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import SoabenchError
 from soabench.experiment.runs.files import read_csv

@@ -13,6 +13,7 @@ import fake_trial as ft
 import pytest
 
 from soabench.config import Config
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
 from soabench.experiment.reports.report import (
     load_tables,
@@ -96,9 +97,13 @@ def test_paper_protocol_is_recognised():
 def test_against_the_paper_only_on_the_shipped_intersection(tmp_path, net, paper):
     out = tmp_path / "run"
     o = run_experiment(
-        _config(trials=3), net, out=out, workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False,
-        figures=False,
-    )  # fmt: skip
+        _config(trials=3),
+        net,
+        out=out,
+        options=RunOptions(workers=1, progress=False, figures=False),
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+    )
     md = o.summary_markdown
     assert ("## Against the paper" in md) is paper
     if not paper:
@@ -113,9 +118,13 @@ def named_load(net, polys=(), scenario=None):
 def test_default_run_folder_and_labels_use_the_scenario_name(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     o = run_experiment(
-        _config(trials=1, duration=10.0), "intersection", scenario="x.toml", workers=1, trial_fn=ft.fake_trial,
-        load_fn=named_load, progress=False, figures=False,
-    )  # fmt: skip
+        _config(trials=1, duration=10.0),
+        "intersection",
+        scenario="x.toml",
+        options=RunOptions(workers=1, progress=False, figures=False),
+        trial_fn=ft.fake_trial,
+        load_fn=named_load,
+    )
     assert o.run_dir.parent == (Path("results") / "rush_hour").resolve()
     assert o.summary_markdown.startswith("# soabench run: rush_hour")
     assert json.loads((o.run_dir / "run.json").read_text())["net_name"] == "rush_hour"

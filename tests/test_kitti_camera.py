@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.kitti.config import kitti_base_config
 from soabench.kitti.export import GRAVITY, GROUND_Z, PED_HWL, export_calib, export_default_fov, oxts_text
 from soabench.kitti.formats import lat_to_scale, latlon_to_mercator, parse_calib, parse_objects

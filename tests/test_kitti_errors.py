@@ -7,7 +7,7 @@ import json
 import pytest
 from kitti_files import write_dataset
 
-from soabench.cli import main
+from soabench.cli.main import main
 
 
 def _run(capsys, *argv: str) -> tuple[int, str, str]:

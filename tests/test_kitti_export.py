@@ -13,7 +13,7 @@ import shutil
 import numpy as np
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.geometry import range_bearing
 from soabench.kitti.config import KittiConfig, kitti_base_config
 from soabench.kitti.export import export_default_fov

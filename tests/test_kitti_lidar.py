@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import shapely
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.kitti.config import KittiConfig, kitti_base_config
 from soabench.kitti.lidar import LidarParams, frame_files, region_from_points, sequence_regions
 from soabench.kitti.raycast import SIDEWALK, beam_pattern

@@ -12,7 +12,8 @@ import stat
 import numpy as np
 import pytest
 
-from soabench.cli import DefaultsHelpFormatter, build_parser, main
+from soabench.cli.main import build_parser, main
+from soabench.cli.parsing import DefaultsHelpFormatter
 from soabench.config import SensorConfig
 from soabench.errors import SoabenchError
 from soabench.experiment.runs.files import write_json_atomic, write_text_atomic

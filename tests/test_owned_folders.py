@@ -15,7 +15,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import soabench.scenario.osm as osm
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.tomlfile import tomllib
 
 DATA = Path(__file__).parent / "data"

@@ -1,16 +1,19 @@
 """Every documented config key reaches the code that uses it (docs/user-guide/parameters.md).
 
-Each key of :class:`soabench.config.Config` (the generated tables of the parameters page) is set to a non-default
-valid value. A short run records every one in its resolved configuration (``run.json``), and in one trial a spy on
-the configuration's sections sees each sensor, filter, birth and metrics key read, with the value set, by the code
-outside ``soabench/config.py`` that uses it; the experiment keys show in the run's rows. A key that is set but never
-read with its value, such as a clutter rate the trial overwrote, fails here.
+The keys are read from the parameters page itself (its generated tables), so a key added to
+:class:`soabench.config.Config` without a row on the page, or a row without a key, fails here. Each key is set to a
+non-default valid value; per key, a short run records it in its resolved configuration (``run.json``), and in one
+trial a spy on the configuration's sections sees it read, with the value set, by the code outside
+``soabench/config.py`` that uses it (the keys a trial does not read show in the run's rows instead: the number of
+trials, the seed, the scans). A key that is set but never read with its value, such as a clutter rate the trial
+overwrote, fails here.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -20,11 +23,21 @@ from shapely.geometry import Polygon
 
 import soabench.config as config_module
 from soabench import plugins
-from soabench.config import DERIVED_KEYS, BirthConfig, Config, FilterConfig, MetricsConfig, SensorConfig
+from soabench.config import (
+    DERIVED_KEYS,
+    BirthConfig,
+    Config,
+    ExperimentConfig,
+    FilterConfig,
+    MetricsConfig,
+    SensorConfig,
+)
+from soabench.experiment.execution.options import RunOptions
 from soabench.gmphd import GMPHDFilter
 from soabench.types import Births, Scan
 
 TRACKER = "plugin_fixtures:EchoTracker"
+PAGE = Path(__file__).resolve().parents[1] / "docs" / "user-guide" / "parameters.md"
 
 #: a valid value other than the default for every key of the parameters page
 NON_DEFAULT: dict[str, object] = {
@@ -109,7 +122,8 @@ NON_DEFAULT: dict[str, object] = {
     "experiment.probabilities": ("static", "dynamic", "dynamic+occ"),
     "experiment.clutter": (5.0,),
     "experiment.seed": 4,
-    "experiment.plugin_budget": 30.0,  # its reach: tests/test_plugin_isolation.py (a plugin past its budget)
+    "experiment.plugin_budget": 30.0,  # read by the trial for the tracker plugin; tests/test_plugin_isolation.py:
+    # a plugin past its budget fails the run
 }
 
 #: the switches that select which other keys are read: the second trial sets them back to their defaults so that
@@ -122,18 +136,47 @@ SWITCHES_BACK = {
     "filter.extraction": "vo_ma",
 }
 
-SPIED = {"sensor": SensorConfig, "filter": FilterConfig, "birth": BirthConfig, "metrics": MetricsConfig}
+SPIED = {
+    "sensor": SensorConfig,
+    "filter": FilterConfig,
+    "birth": BirthConfig,
+    "metrics": MetricsConfig,
+    "experiment": ExperimentConfig,
+}
 #: properties that read a key: the consumer uses the radians of a key given in degrees
 PROPERTY_KEYS = {"sigma_b": "sigma_b_deg", "fov": "fov_deg"}
 
 
-def documented_keys() -> set[str]:
+def config_keys() -> set[str]:
+    """The keys of :class:`Config` (without the derived fields, which are not keys)."""
     cfg = Config()
     return {
         f"{sec}.{f.name}"
         for sec in ("sensor", "filter", "birth", "metrics", "experiment")
         for f in dataclasses.fields(getattr(cfg, sec))
     } - set(DERIVED_KEYS)
+
+
+def page_keys() -> set[str]:
+    """The keys the parameters page documents: a row ``| `key` | ...`` under a ``### `[section]``` heading of its
+    generated block (``[plugins]`` holds each plugin's own options, no key of ours)."""
+    text = PAGE.read_text(encoding="utf-8")
+    block = text.split("<!-- soabench:parameters -->", 1)[1].split("<!-- /soabench -->", 1)[0]
+    keys, section = set(), None
+    for line in block.splitlines():
+        heading = re.match(r"### `\[(\w+)\]`", line)
+        if heading:
+            section = heading.group(1)
+            continue
+        row = re.match(r"\| `(\w+)` \|", line)
+        if row and section != "plugins":
+            keys.add(f"{section}.{row.group(1)}")
+    return keys
+
+
+DOCUMENTED = sorted(page_keys())
+#: the documented keys a trial does not read, and what of the run shows them instead
+SHOWN_BY_THE_RUN = {"experiment.trials", "experiment.duration", "experiment.seed"}
 
 
 def as_sections(values: dict[str, object]) -> dict[str, dict[str, object]]:
@@ -149,8 +192,12 @@ def _tracker_plugin():
     plugins.allow_import_paths([TRACKER])
 
 
+def test_the_page_documents_every_key_and_no_other():
+    assert page_keys() == config_keys()
+
+
 def test_every_documented_key_has_a_non_default_value():
-    assert set(NON_DEFAULT) == documented_keys()
+    assert set(NON_DEFAULT) == set(DOCUMENTED)
     defaults = Config().to_dict()
     for key, value in NON_DEFAULT.items():
         sec, name = key.split(".")
@@ -158,26 +205,49 @@ def test_every_documented_key_has_a_non_default_value():
         assert (list(value) if isinstance(value, tuple) else value) != default, key
 
 
-def test_a_run_records_every_key_and_its_rows_show_the_experiment(tmp_path):
+@pytest.fixture(scope="module")
+def recorded_run(tmp_path_factory):
+    """A one-trial run of every non-default value: its stored configuration, its trial rows and its scan rows."""
     from soabench.experiment.execution.runner import run_experiment
     from soabench.experiment.runs.files import read_csv
 
+    plugins.allow_import_paths([TRACKER])
+    run = tmp_path_factory.mktemp("reach") / "run"
     cfg = Config.from_dict(as_sections(NON_DEFAULT)).validate()
-    out = run_experiment(cfg, "intersection", out=tmp_path / "run", workers=1, progress=False, figures=False)
+    out = run_experiment(cfg, "intersection", out=run, options=RunOptions(workers=1, progress=False, figures=False))
     assert out.complete and out.failures == []
-    stored = json.loads((tmp_path / "run" / "run.json").read_text())["config"]
-    for key, value in NON_DEFAULT.items():
-        sec, name = key.split(".")
-        assert stored[sec][name] == (list(value) if isinstance(value, tuple) else value), key
-    assert "lambda_c" not in stored["sensor"]
-    rows = read_csv(tmp_path / "run" / "trials.csv")
-    exp = cfg.experiment
-    assert set(rows["trial"]) == {0} and set(rows["seed"]) == {exp.seed}
+    stored = json.loads((run / "run.json").read_text())["config"]
+    return stored, read_csv(run / "trials.csv"), read_csv(run / "steps.csv")
+
+
+@pytest.mark.parametrize("key", DOCUMENTED)
+def test_a_run_records_the_key(key, recorded_run):
+    stored, _, _ = recorded_run
+    sec, name = key.split(".")
+    value = NON_DEFAULT[key]
+    assert stored[sec][name] == (list(value) if isinstance(value, tuple) else value)
+    assert "lambda_c" not in stored["sensor"]  # λ is recorded once, as experiment.clutter
+
+
+@pytest.mark.parametrize("key", sorted(SHOWN_BY_THE_RUN))
+def test_the_run_shows_the_key(key, recorded_run):
+    _, rows, steps = recorded_run
+    exp = Config.from_dict(as_sections(NON_DEFAULT)).experiment
+    shown = {
+        "experiment.trials": set(rows["trial"]) == set(range(exp.trials)),
+        "experiment.seed": set(rows["seed"]) == {exp.seed},
+        # one row per scan k = 0 .. duration / dt - 1
+        "experiment.duration": set(steps["k"]) == set(range(int(exp.duration / NON_DEFAULT["sensor.dt"]))),
+    }
+    assert shown[key]
+
+
+def test_the_rows_hold_every_method_mode_and_rate(recorded_run):
+    _, rows, _ = recorded_run
+    exp = Config.from_dict(as_sections(NON_DEFAULT)).experiment
     assert set(rows["clutter"]) == set(exp.clutter)
     assert set(rows["model"]) == {*exp.models, *exp.trackers}
     assert set(rows["mode"]) == set(exp.probabilities)
-    steps = read_csv(tmp_path / "run" / "steps.csv")  # one row per scan k = 0 .. duration / dt - 1
-    assert set(steps["k"]) == set(range(int(exp.duration / cfg.sensor.dt)))
 
 
 def spy_config(values: dict[str, object], reads: dict[str, set]) -> Config:
@@ -200,33 +270,39 @@ def spy_config(values: dict[str, object], reads: dict[str, set]) -> Config:
         return type(cls.__name__, (cls,), {"__getattribute__": getattribute})
 
     plain = Config.from_dict(as_sections(values)).validate()
-    cfg = Config(
-        **{sec: spied(sec, cls)(**dataclasses.asdict(getattr(plain, sec))) for sec, cls in SPIED.items()},
-        experiment=plain.experiment,
-    )
+    cfg = Config(**{sec: spied(sec, cls)(**dataclasses.asdict(getattr(plain, sec))) for sec, cls in SPIED.items()})
+    cfg.plugins = plain.plugins
     return cfg.validate()
 
 
-def test_every_key_reaches_its_consumer_with_its_value():
+@pytest.fixture(scope="module")
+def reads() -> dict[str, set]:
+    """``{key: values read}`` by the code outside soabench/config.py over two trials: every non-default value, then
+    the switches back at their defaults (so that the keys they gate are read too), and one scan with a NaN."""
     from soabench.experiment.trial.trial import run_trial
     from soabench.scenario import load
 
+    plugins.allow_import_paths([TRACKER])
     scene, scenario = load("intersection")
-    reads: dict[str, set] = {}
+    seen: dict[str, set] = {}
     for values in (NON_DEFAULT, {**NON_DEFAULT, **SWITCHES_BACK}):
-        cfg = spy_config(values, reads)
+        cfg = spy_config(values, seen)
         result = run_trial(0, cfg, scene, scenario)
         assert result.failures == [] and result.rows
     # filter.nonfinite is read only when an input is not finite: one scan with a NaN measurement
     scan = Scan(0, 0.0, np.zeros(3), np.array([[10.0, 0.1], [np.nan, 0.2]]), None, [], Polygon())
     assert GMPHDFilter(cfg.filter, cfg.sensor).step(scan, Births.empty()).n_dropped == 1
+    return seen
+
+
+def test_the_scans_clutter_rate_is_the_experiments(reads):
     assert reads["sensor.lambda_c"] == {"5.0"}  # the scans' clutter rate is experiment.clutter's, unchanged
-    missing = []
-    for key in sorted(documented_keys()):
-        if key.startswith("experiment."):
-            continue  # the run's rows show these (test above)
-        tuple_value = NON_DEFAULT[key]
-        want = repr(tuple(tuple_value) if isinstance(tuple_value, (tuple, list)) else tuple_value)
-        if want not in reads.get(key, set()):
-            missing.append(f"{key} = {want} (read: {sorted(reads.get(key, set()))})")
-    assert missing == [], "keys that never reach their consumer:\n" + "\n".join(missing)
+
+
+@pytest.mark.parametrize("key", [k for k in DOCUMENTED if k not in SHOWN_BY_THE_RUN])
+def test_the_key_reaches_its_consumer_with_its_value(key, reads):
+    value = NON_DEFAULT[key]
+    want = repr(tuple(value) if isinstance(value, (tuple, list)) else value)
+    assert want in reads.get(key, set()), (
+        f"{key} = {want} never reaches its consumer (read: {sorted(reads.get(key, set()))})"
+    )

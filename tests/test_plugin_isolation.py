@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 from soabench import plugins
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import Interrupted, SoabenchError
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
 from soabench.experiment.runs.files import read_csv
 from soabench.experiment.trial.trial import run_trial
@@ -75,7 +76,9 @@ def test_a_run_without_failures_still_exits_0(tmp_path, capsys) -> None:
 
 def test_fail_fast_stops_at_a_failed_method_run(tmp_path) -> None:
     cfg = _cfg(trackers=(f"{FX}:AlwaysRaises",), trials=3, duration=4.0)
-    o = run_experiment(cfg, "intersection", out=tmp_path / "r", workers=1, fail_fast=True, progress=False)
+    o = run_experiment(
+        cfg, "intersection", out=tmp_path / "r", options=RunOptions(workers=1, fail_fast=True, progress=False)
+    )
     assert not o.complete and o.n_done == 1 and o.n_missing == 2
     assert not (tmp_path / "r" / "summary.md").exists()  # no report passed off as complete
 
@@ -93,25 +96,29 @@ def test_a_plugin_cannot_end_the_run(tmp_path, tracker, message) -> None:
     name = f"{FX}:{tracker}"
     cfg = _cfg(trackers=(name,), trials=2, duration=4.0)
     out = tmp_path / "r"
-    o = run_experiment(cfg, "intersection", out=out, workers=1, progress=False, figures=False)
+    o = run_experiment(cfg, "intersection", out=out, options=RunOptions(workers=1, progress=False, figures=False))
     assert o.complete and o.n_done == 2
     assert [(f["model"], f["k"], f["error"]) for f in o.model_failures] == [(name, 0, message)] * 2
     # the same on --resume
     (out / "trials" / "trial_00001.json").unlink()
-    o2 = run_experiment(None, "ignored", resume=out, workers=1, progress=False, figures=False)
+    o2 = run_experiment(None, "ignored", resume=out, options=RunOptions(workers=1, progress=False, figures=False))
     assert o2.complete and [f["error"] for f in o2.model_failures] == [message] * 2
 
 
 def test_os_exit_in_a_pool_worker_is_the_plugins_failure(tmp_path) -> None:
     cfg = _cfg(trackers=(f"{FX}:OsExit",), trials=2, duration=4.0)
-    o = run_experiment(cfg, "intersection", out=tmp_path / "r", workers=2, progress=False, figures=False)
+    o = run_experiment(
+        cfg, "intersection", out=tmp_path / "r", options=RunOptions(workers=2, progress=False, figures=False)
+    )
     assert o.complete and [f["error"] for f in o.model_failures] == ["the plugin called os._exit(0)"] * 2
 
 
 def test_a_dying_worker_is_named_with_its_trial_and_plugin(tmp_path) -> None:
     name = f"{FX}:KillsItsProcess"
     cfg = _cfg(trackers=(name,), trials=2, duration=4.0)
-    o = run_experiment(cfg, "intersection", out=tmp_path / "r", workers=2, progress=False, figures=False)
+    o = run_experiment(
+        cfg, "intersection", out=tmp_path / "r", options=RunOptions(workers=2, progress=False, figures=False)
+    )
     assert not o.complete
     errors = {f["trial"]: f["error"] for f in o.failures}
     assert errors, o
@@ -125,7 +132,9 @@ def test_a_dying_worker_is_named_with_its_trial_and_plugin(tmp_path) -> None:
 def test_a_real_ctrl_c_while_a_plugin_runs_still_stops_the_run(tmp_path) -> None:
     cfg = _cfg(trackers=(f"{FX}:CtrlCWhileRunning",), trials=2, duration=4.0)
     with pytest.raises(Interrupted, match="soabench run --resume"):
-        run_experiment(cfg, "intersection", out=tmp_path / "r", workers=1, progress=False, figures=False)
+        run_experiment(
+            cfg, "intersection", out=tmp_path / "r", options=RunOptions(workers=1, progress=False, figures=False)
+        )
 
 
 # ------------------------------------------------------------------------------------------------ hangs and prints

@@ -16,6 +16,7 @@ import pytest
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import SoabenchError
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.trial import guard
 from soabench.experiment.trial.trial import run_trial
 from soabench.types import Births, Estimates, NewbornTerms, Scan
@@ -232,7 +233,7 @@ def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
     cfg = _cfg(("soa", one, bad), (echo,), **{one: {"ahead": 5.0}})
     cfg.experiment.trials = 2
     out = tmp_path / "run"
-    o = run_experiment(cfg, "intersection", out=out, workers=2, progress=False, figures=False)
+    o = run_experiment(cfg, "intersection", out=out, options=RunOptions(workers=2, progress=False, figures=False))
     assert o.complete
     rows = read_csv(out / "trials.csv")
     assert sorted(set(rows["model"])) == sorted({"soa", one, echo}) and len(rows["model"]) == 6
@@ -249,9 +250,9 @@ def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
     (out / "trials" / "trial_00001.json").unlink()
     plugins._TYPED.clear()
     with pytest.raises(SoabenchError, match="not given on this command line"):
-        run_experiment(None, "ignored", resume=out, workers=1, progress=False, figures=False)
+        run_experiment(None, "ignored", resume=out, options=RunOptions(workers=1, progress=False, figures=False))
     plugins.allow_import_paths([one, echo, bad])
-    o2 = run_experiment(None, "ignored", resume=out, workers=1, progress=False, figures=False)
+    o2 = run_experiment(None, "ignored", resume=out, options=RunOptions(workers=1, progress=False, figures=False))
     assert o2.complete
     again = read_csv(out / "trials.csv")
     for col in ("model", "ospa", "card_err", "gospa", "n_episodes"):
@@ -263,7 +264,7 @@ def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
 
 
 def test_cli_plugin_errors_are_one_line(capsys) -> None:
-    from soabench.cli import main
+    from soabench.cli.main import main
 
     assert main(["run", "--models", "soa", "--trackers", "nosuch", "--trials", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -286,7 +287,9 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
     plugins.allow_import_paths([one, echo, bad])
     cfg = _cfg(("soa", one, bad), (echo,))
-    serial = run_experiment(cfg, "intersection", out=tmp_path / "s", workers=1, progress=False, figures=False)
+    serial = run_experiment(
+        cfg, "intersection", out=tmp_path / "s", options=RunOptions(workers=1, progress=False, figures=False)
+    )
     old = os.environ.get("PYTHONPATH")
     os.environ["PYTHONPATH"] = str(Path(__file__).parent) + (os.pathsep + old if old else "")
     cluster = distributed.LocalCluster(
@@ -294,7 +297,10 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     )
     try:
         dask = run_experiment(
-            cfg, "intersection", out=tmp_path / "d", scheduler=cluster.scheduler_address, progress=False, figures=False
+            cfg,
+            "intersection",
+            out=tmp_path / "d",
+            options=RunOptions(scheduler=cluster.scheduler_address, progress=False, figures=False),
         )
     finally:
         cluster.close()
@@ -315,7 +321,7 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
 def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None:
     from types import SimpleNamespace
 
-    from soabench.cli import main
+    from soabench.cli.main import main
     from soabench.config import BIRTH_MODEL_NAMES
     from soabench.experiment.campaigns import study
 

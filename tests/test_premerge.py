@@ -15,6 +15,7 @@ import pytest
 from soabench.config import Config, ExperimentConfig
 from soabench.experiment.campaigns.sweep import run_sweep
 from soabench.experiment.execution import premerge
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.reports.tables import load_tables
 from soabench.experiment.runs.store import RunStore, merged_stamp
 
@@ -47,10 +48,14 @@ def sweeps(tmp_path_factory):
     mp = pytest.MonkeyPatch()
     mp.setattr(RunStore, "adopt_merge", spy)
     try:
-        kw = dict(progress=False, figures=True, n_true=2)
-        run_sweep("births", (-1, 0), config(), "intersection", out=root / "pool", workers=2, **kw)
+
+        def sweep(name: str, workers: int) -> None:
+            options = RunOptions(workers=workers, progress=False, figures=True)
+            run_sweep("births", (-1, 0), config(), "intersection", out=root / name, options=options, n_true=2)
+
+        sweep("pool", 2)
         pool_adopted = list(adopted)
-        run_sweep("births", (-1, 0), config(), "intersection", out=root / "serial", workers=1, **kw)
+        sweep("serial", 1)
     finally:
         mp.undo()
     return root, pool_adopted, adopted[len(pool_adopted) :]

@@ -8,6 +8,7 @@ import fake_trial as ft
 from test_runner import small_config
 
 from soabench.experiment.execution import progress as pg
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.progress import Progress, format_duration
 from soabench.experiment.execution.runner import run_experiment
 
@@ -74,7 +75,7 @@ def test_format_duration():
 def test_a_run_with_redirected_stderr_reports_progress(tmp_path, capsys):
     run_experiment(
         small_config(trials=3), "intersection", out=tmp_path / "r", load_fn=ft.fake_load, trial_fn=ft.fake_trial,
-        workers=1, figures=False,
+        options=RunOptions(workers=1, figures=False),
     )  # fmt: skip
     err = capsys.readouterr().err.splitlines()
     progress = [ln for ln in err if ln.startswith("progress: r: ")]

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 
 DURATION = 30  # pedestrians of seed 0 enter the sensor's range after about 27 s
 

@@ -12,6 +12,7 @@ import fake_trial as ft
 import numpy as np
 
 from soabench.config import Config
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
 from soabench.experiment.reports.report import RunTables, load_tables, summarize, write_report
 from soabench.experiment.runs.files import format_value, read_csv, write_csv
@@ -33,11 +34,9 @@ def test_report_is_rebuilt_from_the_csv_files_alone(tmp_path):
         small_config(),
         "intersection",
         out=out,
-        workers=1,
+        options=RunOptions(workers=1, progress=False, save_estimates=True),
         trial_fn=ft.fake_trial,
         load_fn=ft.fake_load,
-        progress=False,
-        save_estimates=True,
     )
     md = (out / "summary.md").read_text()
     js = json.loads((out / "summary.json").read_text())

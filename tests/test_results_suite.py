@@ -15,7 +15,7 @@ import pytest
 from shapely.geometry import box
 
 import soabench.scenario
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.config import SensorConfig
 from soabench.experiment.campaigns import cross_scene
 from soabench.experiment.campaigns.occlusion_density import scan_occlusion

@@ -15,6 +15,7 @@ import pytest
 
 from soabench.config import Config
 from soabench.errors import SoabenchError
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
 
 HERE = Path(__file__).parent
@@ -27,9 +28,10 @@ sys.path.insert(0, {here!r})
 import fake_trial as ft
 from soabench.config import Config
 from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.execution.options import RunOptions
 cfg = Config.from_dict({cfg!r}).validate()
-run_experiment(cfg, "intersection", out=Path({out!r}), workers=1, trial_fn=ft.slow_trial, load_fn=ft.fake_load,
-               progress=False, figures=False)
+options = RunOptions(workers=1, progress=False, figures=False)
+run_experiment(cfg, "intersection", out=Path({out!r}), options=options, trial_fn=ft.slow_trial, load_fn=ft.fake_load)
 """
 
 
@@ -58,11 +60,9 @@ def assert_same_as_uninterrupted(out: Path, cfg: Config, ref_dir: Path) -> None:
         cfg,
         "intersection",
         out=ref_dir,
-        workers=1,
+        options=RunOptions(workers=1, progress=False, figures=False),
         trial_fn=ft.fake_trial,
         load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
     )
     assert ref.complete
     for name in CSV_FILES:
@@ -84,7 +84,7 @@ def test_killed_run_resumes_to_the_uninterrupted_result(tmp_path):
     stamp = {p.name: p.stat().st_mtime_ns for p in (out / "trials").glob("trial_*.json")}
 
     # resume uses the run's stored config and functions (run.json); the net argument is ignored
-    o = run_experiment(None, "ignored", resume=out, workers=1, progress=False, figures=False)
+    o = run_experiment(None, "ignored", resume=out, options=RunOptions(workers=1, progress=False, figures=False))
     assert o.complete and o.n_done == 10 and o.n_missing == 0
     assert {p.name: p.stat().st_mtime_ns for p in (out / "trials").glob("trial_*.json") if p.name in stamp} == stamp
     sessions = [json.loads(p.read_text()) for p in (out / "sessions").glob("*.json")]
@@ -118,14 +118,14 @@ def test_resume_of_a_complete_run_reruns_nothing(tmp_path):
         cfg,
         "intersection",
         out=out,
-        workers=1,
+        options=RunOptions(workers=1, progress=False, figures=False),
         trial_fn=ft.fake_trial,
         load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
     )
     before = (out / "trials.csv").read_bytes()
-    o = run_experiment(None, "x", resume=out, trial_fn=ft.failing_trial, progress=False, figures=False)
+    o = run_experiment(
+        None, "x", resume=out, trial_fn=ft.failing_trial, options=RunOptions(progress=False, figures=False)
+    )
     assert o.complete and o.n_done == 3 and not o.failures  # failing_trial would fail trial 2 if it ran
     assert (out / "trials.csv").read_bytes() == before
     assert len(list((out / "sessions").glob("*.json"))) == 1
@@ -133,7 +133,7 @@ def test_resume_of_a_complete_run_reruns_nothing(tmp_path):
 
 def test_resume_needs_a_run_folder(tmp_path):
     with pytest.raises(SoabenchError, match="not a run folder"):
-        run_experiment(None, "intersection", resume=tmp_path, progress=False)
+        run_experiment(None, "intersection", resume=tmp_path, options=RunOptions(progress=False))
 
 
 def test_lost_worker_loses_only_trials_in_flight(tmp_path, capsys):
@@ -143,17 +143,17 @@ def test_lost_worker_loses_only_trials_in_flight(tmp_path, capsys):
         cfg,
         "intersection",
         out=out,
-        workers=2,
+        options=RunOptions(workers=2, progress=False, figures=False),
         trial_fn=ft.crashing_trial,
         load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
     )
     failed = [f["trial"] for f in o.failures]
     assert 3 in failed and len(failed) <= 4  # at most 2 x workers trials in flight
     assert all("worker process died" in f["error"] and f["sumo_seed"] > 0 for f in o.failures)
     assert o.n_done == 10 - len(failed) and not o.complete
     assert "trial 3 failed" in capsys.readouterr().err
-    o2 = run_experiment(None, "x", resume=out, workers=1, trial_fn=ft.fake_trial, progress=False, figures=False)
+    o2 = run_experiment(
+        None, "x", resume=out, options=RunOptions(workers=1, progress=False, figures=False), trial_fn=ft.fake_trial
+    )
     assert o2.complete
     assert_same_as_uninterrupted(out, cfg, tmp_path / "ref")

@@ -20,6 +20,7 @@ import pytest
 from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment.campaigns.sweep import run_sweep, sweep_points
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import run_experiment
 from soabench.experiment.reports.report import LABEL, fmt, fmt_pct
 from soabench.experiment.runs.files import read_csv
@@ -35,11 +36,10 @@ def small_config(trials: int = 4, clutter=(3.0,), duration: float = 20.0, seed: 
     return cfg.validate()
 
 
-def run(cfg: Config, out: Path, **kw):
-    kw.setdefault("trial_fn", ft.fake_trial)
-    kw.setdefault("figures", False)
-    kw.setdefault("workers", 1)
-    return run_experiment(cfg, "intersection", out=out, load_fn=ft.fake_load, progress=False, **kw)
+def run(cfg: Config, out: Path, trial_fn=ft.fake_trial, **options):
+    """A run of the fake trial; ``options``: fields of :class:`RunOptions` (default: one worker, no figures)."""
+    options = RunOptions(**{"workers": 1, "figures": False, "progress": False, **options})
+    return run_experiment(cfg, "intersection", out=out, load_fn=ft.fake_load, trial_fn=trial_fn, options=options)
 
 
 @pytest.fixture(scope="module")
@@ -161,7 +161,12 @@ def test_failed_trial_is_reported_and_others_complete(tmp_path, capsys):
     assert json.loads((out / "summary.json").read_text())["complete"] is False
     # --resume retries the failed trial; the result equals an uninterrupted run
     o2 = run_experiment(
-        None, "ignored", resume=out, trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, figures=False
+        None,
+        "ignored",
+        resume=out,
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+        options=RunOptions(progress=False, figures=False),
     )
     assert o2.complete and o2.n_done == 5 and not o2.failures
     run(cfg, tmp_path / "ref")
@@ -182,7 +187,13 @@ def test_fail_fast_stops_at_first_failure(tmp_path):
 
 def test_bad_network_fails_before_any_output(tmp_path):
     with pytest.raises(SoabenchError, match="no-such-net"):
-        run_experiment(small_config(), "no-such-net", out=tmp_path / "run", load_fn=ft.fake_load, progress=False)
+        run_experiment(
+            small_config(),
+            "no-such-net",
+            out=tmp_path / "run",
+            load_fn=ft.fake_load,
+            options=RunOptions(progress=False),
+        )
     assert not (tmp_path / "run").exists()
 
 
@@ -199,9 +210,7 @@ def test_default_out_dir_and_dask_missing(tmp_path, monkeypatch):
         "sumo_nets/foo/foo.net.xml",
         load_fn=ft.fake_load,
         trial_fn=ft.fake_trial,
-        workers=1,
-        progress=False,
-        figures=False,
+        options=RunOptions(workers=1, progress=False, figures=False),
     )
     # run folders are resolved before any check, so the outcome names the absolute folder
     assert o.run_dir.parent == (tmp_path / "results" / "foo").resolve() and o.run_dir.name.endswith("Z")
@@ -232,11 +241,9 @@ def test_births_sweep_runs_and_tabulates(tmp_path):
         cfg,
         "intersection",
         out=tmp_path / "sw",
-        workers=1,
+        options=RunOptions(workers=1, progress=False, figures=False),
         trial_fn=ft.fake_trial,
         load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
     )
     assert o.complete and o.n_done == 6
     assert sorted(p.name for p in (tmp_path / "sw" / "points").iterdir()) == ["ntot_001", "ntot_006", "ntot_010"]
@@ -255,9 +262,17 @@ def test_births_sweep_points_draw_their_figures_only_on_request(tmp_path):
     """The N̂ sweep's points write tables and summaries; their own figures only with ``figures=True``
     (``--all-figures``): ``sweep_births.png`` summarises them."""
     cfg = small_config(trials=1, duration=10.0)
-    kw = dict(workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, models=("soa", "atbm"))
+    kw = dict(trial_fn=ft.fake_trial, load_fn=ft.fake_load, models=("soa", "atbm"))
     for name, figures in (("default", None), ("all", True)):
-        o = run_sweep("births", (-1, 0), cfg, "intersection", out=tmp_path / name, figures=figures, **kw)
+        o = run_sweep(
+            "births",
+            (-1, 0),
+            cfg,
+            "intersection",
+            out=tmp_path / name,
+            options=RunOptions(workers=1, progress=False, figures=figures),
+            **kw,
+        )
         assert o.complete and (tmp_path / name / "sweep_births.png").is_file()
         for point in ("ntot_005", "ntot_006"):
             pdir = tmp_path / name / "points" / point
@@ -275,11 +290,10 @@ def test_clutter_sweep_one_run_per_sweep(tmp_path):
         cfg,
         "intersection",
         out=tmp_path / "sw",
-        workers=1,
+        options=RunOptions(workers=1, progress=False),
         models=("soa", "atbm"),
         trial_fn=ft.fake_trial,
         load_fn=ft.fake_load,
-        progress=False,
     )
     assert o.complete
     tr = read_csv(tmp_path / "sw" / "points" / "clutter" / "trials.csv")
@@ -290,12 +304,20 @@ def test_clutter_sweep_one_run_per_sweep(tmp_path):
 
 def test_sweep_stops_with_fail_fast_and_resumes(tmp_path):
     cfg = small_config(trials=3, duration=10.0)
-    kw = dict(load_fn=ft.fake_load, progress=False, figures=False, workers=1)
+    kw = dict(load_fn=ft.fake_load)
+    options = RunOptions(progress=False, figures=False, workers=1)
     o = run_sweep(
-        "births", (-2, 0), cfg, "intersection", out=tmp_path / "sw", trial_fn=ft.failing_trial, fail_fast=True, **kw
+        "births",
+        (-2, 0),
+        cfg,
+        "intersection",
+        out=tmp_path / "sw",
+        trial_fn=ft.failing_trial,
+        options=dataclasses.replace(options, fail_fast=True),
+        **kw,
     )
     assert not o.complete and o.summary_markdown == "" and [f["trial"] for f in o.failures] == [2]
     assert [p.name for p in (tmp_path / "sw" / "points").iterdir()] == ["ntot_004"]
-    o2 = run_sweep("births", (), None, "ignored", resume=tmp_path / "sw", trial_fn=ft.fake_trial, **kw)
+    o2 = run_sweep("births", (), None, "ignored", resume=tmp_path / "sw", trial_fn=ft.fake_trial, options=options, **kw)
     assert o2.complete and o2.n_done == 6 and "std over N_tot" in o2.summary_markdown
     assert sorted(p.name for p in (tmp_path / "sw" / "points").iterdir()) == ["ntot_004", "ntot_006"]

@@ -13,7 +13,7 @@ import json
 import fake_trial as ft
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.experiment.campaigns import sensitivity as sens
 from soabench.experiment.runs.files import write_csv
 from soabench.experiment.trial import registry

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import re
 
-from soabench.cli import main
+from soabench.cli.main import main
 
 
 def _run(tmp_path, name: str, duration: float, *extra: str) -> dict:

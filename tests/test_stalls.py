@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import sumo
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.errors import SoabenchError
 from soabench.scenario import load, simulate
 from soabench.scenario.simulation import _simulate_here
@@ -23,7 +23,7 @@ from soabench.seeding import trial_seeds
 
 BIN = Path(sumo.SUMO_HOME) / "bin"
 ENV = {**os.environ, "SUMO_HOME": sumo.SUMO_HOME}
-RUN = "from soabench.cli import main; raise SystemExit(main())"  # the console script, in a child we can time out
+RUN = "from soabench.cli.main import main; raise SystemExit(main())"  # the console script, in a child we can time out
 
 
 def _tool(*args: str) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import sumo
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.errors import SoabenchError
 from soabench.scenario import load, shipped_nets, shipped_root, simulate
 from soabench.scenario.network import fringe_edges, read_net

@@ -8,7 +8,7 @@ from pathlib import Path
 import fake_trial as ft
 import pytest
 
-from soabench.cli import main
+from soabench.cli.main import main
 from soabench.experiment.trial import registry
 
 

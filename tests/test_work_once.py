@@ -19,6 +19,7 @@ import pytest
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
 from soabench.experiment.campaigns.sweep import run_sweep, scans_per_run
+from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.runs.files import read_csv
 from soabench.experiment.trial.trial import ROW_TIME_KEYS, TrialShare, run_trial
 
@@ -150,7 +151,8 @@ def _same(a: dict, b: dict) -> bool:
 
 def test_grouped_births_sweep_equals_point_by_point_and_resumes(tmp_path):
     cfg = config(models=("soa", "pubm", "ubm"), probabilities=("static",), trials=2, duration=6.0)
-    kw = dict(workers=1, progress=False, figures=False, n_true=2)
+    options = RunOptions(workers=1, progress=False, figures=False)
+    kw = dict(options=options, n_true=2)
     run_sweep("births", (-1, 0), cfg, "intersection", out=tmp_path / "grouped", **kw)
     run_sweep("births", (-1, 0), cfg, "intersection", out=tmp_path / "serial", grouped=False, **kw)
     points = ("ntot_001", "ntot_002")
@@ -227,7 +229,8 @@ def test_grouped_sweep_fail_fast_then_resume(tmp_path, monkeypatch):
     import soabench.experiment.trial.trial as trial_mod
 
     cfg = config(models=("soa", "pubm"), probabilities=("static",), trials=3, duration=4.0)
-    kw = dict(workers=1, progress=False, figures=False, n_true=2)
+    options = RunOptions(workers=1, progress=False, figures=False)
+    kw = dict(options=options, n_true=2)
     real = trial_mod.run_trial
     second = 2 / scans_per_run(cfg)  # N_hat of point ntot_002
 
@@ -238,7 +241,14 @@ def test_grouped_sweep_fail_fast_then_resume(tmp_path, monkeypatch):
 
     monkeypatch.setattr(trial_mod, "run_trial", failing)
     sw = tmp_path / "sw"
-    o = run_sweep("births", (-1, 0), cfg, "intersection", out=sw, fail_fast=True, **kw)
+    o = run_sweep(
+        "births",
+        (-1, 0),
+        cfg,
+        "intersection",
+        out=sw,
+        **{**kw, "options": dataclasses.replace(options, fail_fast=True)},
+    )
     assert not o.complete and o.summary_markdown == "" and not (sw / "sweep.md").exists()
     first, second = sw / "points" / "ntot_001", sw / "points" / "ntot_002"
     assert sorted(p.name for p in (first / "trials").iterdir()) == ["trial_00000.json", "trial_00001.json"]

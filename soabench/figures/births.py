@@ -14,10 +14,12 @@ from matplotlib.collections import EllipseCollection, LineCollection
 from matplotlib.lines import Line2D
 
 from soabench.figures import style as ps
+from soabench.figures.scene import plot_scene, scene_figure
 from soabench.types import SOURCE_MEAS, SOURCE_NAMES, Births
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
     from soabench.types import Scan
 
@@ -98,3 +100,16 @@ def _draw_scan(ax: Axes, scan: Scan) -> list[Line2D]:
         Line2D([], [], color="0.35", ls=":", label="tangent rays"),
         Line2D([], [], color="tab:cyan", marker=(3, 0, 0), mec="k", ls="", ms=7, label="sensor pose"),
     ]
+
+
+def births_snapshot_figure(scene, recording, births: Births, scan: Scan, label: str) -> Figure:
+    """The scene at ``scan``'s time with one model's birth components (paper Fig. 2 colours); the title names the
+    model (``label``) and counts its components and newborn terms."""
+    fig, ax = scene_figure(scene, legend_rows=5)
+    plot_scene(scene, recording, time=scan.t, ax=ax)
+    draw_births(ax, births, scan)
+    n_new = 0 if births.newborn is None else len(births.newborn.m)
+    ps.panel_title(
+        ax, None, f"{ax.get_title(loc='left')}; {label}: {len(births)} birth components, {n_new} newborn terms"
+    )
+    return fig

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from soabench.config import SensorConfig
 from soabench.figures import style as ps
+from soabench.figures.scene import plot_scene, scene_figure
 from soabench.geometry import polar_to_world
 from soabench.sensor import fov_polygon, shadow_polygons
 from soabench.types import CLUTTER, Scans
@@ -100,3 +102,17 @@ def _legend_handles() -> list:
         Line2D([], [], color="k", marker="o", ls="none", label="sensor origin (arrow: heading)"),
         Line2D([], [], color="k", marker="o", mfc="none", ls="none", ms=7, label="present pedestrian"),
     ]
+
+
+def scene_snapshot_figure(
+    scene, recording, time: float, scans: Scans | None = None, sensor: SensorConfig | None = None
+) -> Figure:
+    """The bird's-eye view at ``time`` (paper Fig. 3); with ``scans`` and ``sensor``, the scene at the last scan's
+    time under the sensor overlay of that scan (FOV, sight lines, measurements, obstacle cones)."""
+    fig, ax = scene_figure(scene, legend_rows=6 if scans is not None else 3)
+    if scans is None or sensor is None:
+        plot_scene(scene, recording, time=time, ax=ax)
+        return fig
+    plot_scene(scene, recording, time=scans.scans[-1].t, ax=ax)  # the scene at the overlaid scan's time
+    draw_sensor_overlay(ax, scans, len(scans) - 1, sensor)
+    return fig

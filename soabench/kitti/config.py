@@ -170,3 +170,26 @@ class KittiSpec:
             kitti=kitti_from_dict(meta["kitti"]),
             lidar=meta.get("lidar"),
         )
+
+
+def kitti_run_config(
+    path: str | Path | None,
+    models: tuple[str, ...] | None = None,
+    seed: int | None = None,
+    probability: str | None = None,
+    classes: tuple[str, ...] | None = None,
+    score_min: float | None = None,
+) -> tuple[Config, KittiConfig]:
+    """The configuration of a new KITTI run: the file ``path`` (:func:`load_kitti_config`) overlaid by the given
+    values (None: the file's), validated."""
+    cfg, kcfg = load_kitti_config(path)
+    overrides: dict[str, Any] = {"models": models, "seed": seed}
+    if probability is not None:
+        overrides["probabilities"] = (probability,)
+    cfg.experiment = dataclasses.replace(cfg.experiment, **{k: v for k, v in overrides.items() if v is not None})
+    cfg.validate()
+    if classes is not None:
+        kcfg = dataclasses.replace(kcfg, classes=tuple(classes)).validate()
+    if score_min is not None:
+        kcfg = dataclasses.replace(kcfg, score_min=float(score_min)).validate()
+    return cfg, kcfg

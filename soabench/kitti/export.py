@@ -36,7 +36,7 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from soabench import scenario as sumo_scenario
-from soabench.config import Config, SensorConfig
+from soabench.config import Config, SensorConfig, check_time
 from soabench.errors import require
 from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
@@ -246,6 +246,15 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
     return {"sequence": seq, "frames": len(scans), "pedestrians": P, "measurements": n_meas}
 
 
+def check_export_size(trials: int, duration: float | None) -> None:
+    """``trials`` sequences (ids 0000-9999) of ``duration`` seconds each (None: the scenario's)."""
+    require(
+        isinstance(trials, int) and 1 <= trials <= MAX_EXPORT_TRIALS,
+        f"--trials {trials!r} is out of range; allowed: integers in [1, {MAX_EXPORT_TRIALS}] (sequence ids 0000-9999)",
+    )
+    check_time("--duration", duration)
+
+
 def export_kitti(
     cfg: Config,
     net: str,
@@ -261,10 +270,7 @@ def export_kitti(
     """Simulate, observe and write ``trials`` SUMO trials as KITTI sequences 0000, 0001, ... under ``out`` (with
     ``lidar``, also their synthetic segmented scans: :mod:`soabench.kitti.raycast`)."""
 
-    require(
-        isinstance(trials, int) and 1 <= trials <= MAX_EXPORT_TRIALS,
-        f"--trials {trials!r} is out of range; allowed: integers in [1, {MAX_EXPORT_TRIALS}] (sequence ids 0000-9999)",
-    )
+    check_export_size(trials, duration)
     out = resolve(out)
     check_new_folder(out, EXPORT_FILE, "KITTI export", "remove it to export again")
     fov = float(fov_deg) if fov_deg is not None else export_default_fov(cfg.sensor)

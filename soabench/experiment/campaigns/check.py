@@ -28,6 +28,7 @@ import math
 import re
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -308,6 +309,7 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
 def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict[str, float], list[dict]]:
     """Run every scenario and seed; return the mean of every trials.csv metric per key, and the plugin failures."""
     # imported when called: scipy would slow every start-up
+    from soabench.experiment.execution.options import RunOptions
     from soabench.experiment.execution.runner import run_experiment
     from soabench.experiment.runs.store import RunStore
 
@@ -326,9 +328,8 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
 
                 shutil.rmtree(run_dir)
             cfg = _config_for(base, s, seed)
-            o = run_experiment(
-                cfg, s.net, s.polys, s.scenario, out=run_dir, workers=workers, progress=False, figures=False
-            )
+            options = RunOptions(workers=workers, progress=False, figures=False)
+            o = run_experiment(cfg, s.net, s.polys, s.scenario, out=run_dir, options=options)
             require(o.complete, f"scenario {s.name!r} seed {seed}: {o.n_missing} trial(s) failed; see {run_dir}")
             failures += [{**f, "scenario": s.name, "seed": seed} for f in RunStore(run_dir).model_failures()]
             table = read_csv(run_dir / "trials.csv")
@@ -450,8 +451,21 @@ def table(outcome: CheckOutcome) -> str:
     return "\n".join(out) + f"\n\nsoabench check {outcome.suite}: {verdict}\n"
 
 
-def run_check(suite_path: str | Path, out: Path, update_baseline: bool = False, workers: int | None = 1) -> int:
-    """The ``check`` command: exit status 0 (every check passed) or 1 (a regression)."""
+def run_check(
+    suite_path: str | Path,
+    out: Path,
+    update_baseline: bool = False,
+    workers: int | None = 1,
+    plugin_paths: Sequence[str] = (),
+) -> int:
+    """The ``check`` command: exit status 0 (every check passed) or 1 (a regression). ``plugin_paths``: the
+    ``module:Class`` plugins the suite may name (entry-point plugins need none)."""
+    from soabench import plugins
+
+    require(workers is None or workers >= 1, f"--workers {workers} must be >= 1")
+    for name in plugin_paths:
+        require(":" in name, f"--plugin {name!r} must be MODULE:CLASS (installed entry-point plugins need no --plugin)")
+    plugins.allow_import_paths(plugin_paths)
     t0 = time.perf_counter()
     suite = load_suite(suite_path)
     baseline = None

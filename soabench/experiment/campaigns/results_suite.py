@@ -18,7 +18,6 @@ difference. Ctrl-C leaves every finished trial on disk and names the command tha
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import shutil
 import sys
@@ -29,11 +28,11 @@ from pathlib import Path
 from typing import Any
 
 from soabench.birth import CORE_MODELS
-from soabench.cli_checks import check_time
-from soabench.config import MAX_SEED, MAX_TRIALS, Config
+from soabench.config import MAX_SEED, MAX_TRIALS, Config, check_time
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns.occlusion_density import write_density
 from soabench.experiment.execution.executors import MAX_WORKERS
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.runs.files import read_json, write_json_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runs.runmeta import flatten_config
@@ -219,7 +218,12 @@ def _base_config(s: Settings, trials: int, **experiment: Any):
 
 
 def _study_part(
-    root: Path, s: Settings, exe: dict, log: Callable[[str], None], net: str = "intersection", trials: int | None = None
+    root: Path,
+    s: Settings,
+    exe: RunOptions,
+    log: Callable[[str], None],
+    net: str = "intersection",
+    trials: int | None = None,
 ) -> tuple[str, int]:
     """The study (:func:`soabench.experiment.campaigns.study.run_study`) of scene ``net`` in ``root``: kept when
     complete with
@@ -232,7 +236,7 @@ def _study_part(
         return "kept", 0
     explicit = {*SIZE_KEYS, "births_trials"}
     cfg = _base_config(s, trials or s.trials)
-    o = run_study(cfg, net, out=root, births_trials=s.births_trials, explicit=explicit, **exe)
+    o = run_study(cfg, net, out=root, births_trials=s.births_trials, explicit=explicit, options=exe)
     return ("done" if o.complete else "incomplete"), o.n_missing
 
 
@@ -313,11 +317,17 @@ def run_results(
     out: Path,
     settings: Settings | None = None,
     *,
-    workers: int | None = None,
-    progress: bool = True,
+    options: RunOptions = RUN_DEFAULTS,
     log: Callable[[str], None] | None = None,
 ) -> ResultsOutcome:
-    """Make (or finish) every part of results/ in ``out``; see the module docstring."""
+    """Make (or finish) every part of results/ in ``out``; see the module docstring. ``options``: workers and
+    progress of every part (the others are each part's own)."""
+
+    workers, progress = options.workers, options.progress
+    require(
+        workers is None or 1 <= workers <= MAX_WORKERS,
+        f"--workers {workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
 
     shipped = shipped_nets()
     s = (settings or Settings()).validate(shipped)
@@ -328,7 +338,7 @@ def run_results(
     check_own_folder(root, "results folder", own)
     root.mkdir(parents=True, exist_ok=True)
     hint = f"finish with: soabench results --out {root} (and the same options)"
-    exe = dict(workers=workers, progress=progress)
+    exe = RunOptions(workers=workers, progress=progress)
     outcome = ResultsOutcome(root)
     part = "start"
 
@@ -391,66 +401,3 @@ def run_results(
                 f"interrupted during the {part}: finished parts and trials are on disk in {root}; {hint}"
             ) from None
     return outcome
-
-
-def add_arguments(p: argparse.ArgumentParser, csv_list: Callable[[str], Callable[[str], tuple[str, ...]]]) -> None:
-    """The options of ``soabench results`` (defaults: :class:`Settings`)."""
-    d = Settings()
-    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default results)")
-    p.add_argument("--scenes", type=csv_list("scene"), help="shipped scenes of the summary (default: every one)")
-    p.add_argument("--trials", type=int, default=d.trials, help="trials of the intersection study's main protocol")
-    p.add_argument("--duration", type=float, default=d.duration, help="seconds per SUMO trial")
-    p.add_argument("--seed", type=int, default=d.seed, help="base seed of every part")
-    p.add_argument("--births-trials", type=int, default=d.births_trials, help="trials per point of the N_hat sweep")
-    p.add_argument(
-        "--scene-trials",
-        type=int,
-        default=d.scene_trials,
-        help="trials of the main protocol of each other scene's study",
-    )
-    p.add_argument("--density-trials", type=int, default=d.density_trials, help="trials per scene for its density")
-    p.add_argument(
-        "--kitti-scenes",
-        type=csv_list("scene"),
-        default=",".join(d.kitti_scenes),
-        help="scenes exported in the KITTI layout, or none",
-    )
-    p.add_argument("--kitti-sequences", type=int, default=d.kitti_sequences, help="KITTI sequences per scene")
-    p.add_argument("--kitti-duration", type=float, default=d.kitti_duration, help="seconds per KITTI sequence")
-    p.add_argument("--kitti-folds", type=int, default=d.kitti_folds, help="cross-validation folds of N_hat")
-    p.add_argument("--workers", type=int, help="process workers (default: every core)")
-    p.add_argument("--no-progress", action="store_true", help="no progress report")
-
-
-def cmd_results(args: argparse.Namespace) -> int:
-    """Handler of ``soabench results``."""
-
-    require(
-        args.workers is None or 1 <= args.workers <= MAX_WORKERS,
-        f"--workers {args.workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
-    )
-    settings = Settings(
-        scenes=tuple(args.scenes) if args.scenes else None,
-        trials=args.trials,
-        duration=args.duration,
-        seed=args.seed,
-        births_trials=args.births_trials,
-        scene_trials=args.scene_trials,
-        density_trials=args.density_trials,
-        kitti_scenes=() if tuple(args.kitti_scenes) == ("none",) else tuple(args.kitti_scenes),
-        kitti_sequences=args.kitti_sequences,
-        kitti_duration=args.kitti_duration,
-        kitti_folds=args.kitti_folds,
-    )
-    o = run_results(args.out, settings, workers=args.workers, progress=not args.no_progress)
-    rows = [f"| {k} | {v} | {o.seconds.get(k, 0.0):.0f} |" for k, v in o.parts.items()]
-    print("\n".join(["| part | result | wall time (s) |", "|---|---|---:|", *rows]))
-    if o.complete:
-        print(f"results in {o.run_dir}")
-        return 0
-    print(
-        f"results incomplete ({o.n_missing} trial(s) missing); finish with: soabench results --out {o.run_dir} "
-        "(and the same options)",
-        file=sys.stderr,
-    )
-    return 1

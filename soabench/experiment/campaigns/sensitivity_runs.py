@@ -15,11 +15,12 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from soabench.config import Config
+from soabench.config import MAX_TRIALS, Config
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns import sensitivity as sens
-from soabench.experiment.execution.executors import open_executor
+from soabench.experiment.execution.executors import MAX_WORKERS, open_executor
 from soabench.experiment.execution.grouped import run_group
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.runner import RunOutcome, run_experiment
 from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runs.runmeta import config_differences, validate_run_meta
@@ -42,17 +43,24 @@ def variant_config(main: Config, key: str, trials: int) -> Config:
 
 
 def run_variants(
-    out_dir: Path, main_dir: Path, *, trials: int | None = None, follow_main: bool = False, **exe
+    out_dir: Path,
+    main_dir: Path,
+    *,
+    trials: int | None = None,
+    follow_main: bool = False,
+    options: RunOptions = RUN_DEFAULTS,
+    **run_kw,
 ) -> list[RunOutcome]:
     """Run (or finish) every variant of the run in ``main_dir`` under ``out_dir``.
 
     ``trials``: trials of a new variant (default: the main run's); for an existing one, more trials than it has
     extend it, fewer are refused. ``follow_main``: without ``trials``, extend an existing variant to the main run's
     trials when the main run has more. An existing variant made from another main protocol is refused (one line
-    naming the first differing keys), so the table never pairs runs of different protocols. ``exe``: executor
-    options of :func:`~soabench.experiment.execution.runner.run_experiment`.
+    naming the first differing keys), so the table never pairs runs of different protocols. ``options`` and
+    ``run_kw`` (``defer``, ``run_trials``) go to each :func:`~soabench.experiment.execution.runner.run_experiment`.
     """
     main_dir, out_dir = Path(main_dir), Path(out_dir)
+    exe = dict(options=options, **run_kw)
     meta = validate_run_meta(RunStore(main_dir).meta(), str(main_dir / "run.json"))
     outcomes = []
     for key in VARIANTS:
@@ -81,21 +89,20 @@ def run_variants(
     return outcomes
 
 
-def _run_variants_grouped(root: Path, main_dir: Path, trials: int | None, exe: dict) -> list[RunOutcome]:
-    """:func:`run_variants` with the variants' trials together (:mod:`soabench.experiment.execution.grouped`: SUMO and
-    the
-    sensor once per trial; each variant runs its own filters, the main run's are not at hand), then their reports,
-    figures drawn on the same worker processes."""
+def _run_variants_grouped(root: Path, main_dir: Path, trials: int | None, options: RunOptions) -> list[RunOutcome]:
+    """:func:`run_variants` with the variants' trials together (:mod:`soabench.experiment.execution.grouped`: SUMO
+    and the sensor once per trial; each variant runs its own filters, the main run's are not at hand), then their
+    reports, figures drawn on the same worker processes."""
 
     deferred: list = []
-    run_variants(root, main_dir, trials=trials, defer=deferred, **exe)
-    pool = open_executor(exe.get("workers"), exe.get("scheduler"), bool(exe.get("dask_local")))
+    run_variants(root, main_dir, trials=trials, defer=deferred, options=options)
+    pool = open_executor(options.workers, options.scheduler, options.dask_local)
     aborted = True
     try:
         if deferred:
-            run_group(deferred, pool, progress=exe.get("progress", True), label=root.name)
+            run_group(deferred, pool, progress=options.progress, label=root.name)
         with parallel(pool):
-            runs = run_variants(root, main_dir, trials=trials, run_trials=False, **exe)
+            runs = run_variants(root, main_dir, trials=trials, run_trials=False, options=options)
         aborted = False
     finally:
         pool.close(abort=aborted)
@@ -119,11 +126,22 @@ class SensitivityOutcome:
         return sum(r.n_missing for r in self.runs)
 
 
-def run_sensitivity(main_dir: Path, out: Path | None = None, *, trials: int | None = None, **exe) -> SensitivityOutcome:
+def run_sensitivity(
+    main_dir: Path, out: Path | None = None, *, trials: int | None = None, options: RunOptions = RUN_DEFAULTS
+) -> SensitivityOutcome:
     """``soabench sensitivity``: the variants of a finished run and its sensitivity table in ``out``.
 
     ``out`` defaults to ``<main_dir>_sensitivity`` beside the run. Re-running finishes an interrupted one.
     """
+    workers = options.workers
+    require(
+        trials is None or 1 <= trials <= MAX_TRIALS,
+        f"--trials {trials} is out of range; allowed: integers in [1, {MAX_TRIALS}]",
+    )
+    require(
+        workers is None or 1 <= workers <= MAX_WORKERS,
+        f"--workers {workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
     main_dir = resolve(Path(main_dir))
     require((main_dir / "run.json").is_file(), f"--main {main_dir}: not a run folder (no run.json)")
     meta = validate_run_meta(RunStore(main_dir).meta(), str(main_dir / "run.json"))
@@ -138,7 +156,7 @@ def run_sensitivity(main_dir: Path, out: Path | None = None, *, trials: int | No
     with FolderLock(root, "sensitivity folder"):
         check_own_folder(root, "sensitivity folder", SENSITIVITY_ENTRIES)
         try:
-            runs = _run_variants_grouped(root, main_dir, trials, exe)
+            runs = _run_variants_grouped(root, main_dir, trials, options)
             md = ""
             if all(r.complete for r in runs):
                 md = sens.write_sensitivity(root, main_dir, {k: root / k for k in VARIANTS})

@@ -28,14 +28,16 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from soabench import plugins
 from soabench.birth import CORE_MODELS
 from soabench.config import Config
-from soabench.errors import Interrupted
+from soabench.errors import Interrupted, require
 from soabench.experiment.campaigns import sensitivity as sens
 from soabench.experiment.campaigns.sensitivity_runs import VARIANTS, run_variants
 from soabench.experiment.campaigns.sweep import DEFAULT_VALUES, SweepOutcome, run_sweep
 from soabench.experiment.execution.executors import open_executor
 from soabench.experiment.execution.grouped import run_group
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.premerge import merged_on
 from soabench.experiment.execution.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.reports import paper
@@ -71,6 +73,26 @@ class StudyOutcome:
         return sum(p.n_missing for p in (self.main, self.clutter, self.births, *self.sensitivity))
 
 
+def with_plugin_models(config: Config, extra: tuple[str, ...]) -> Config:
+    """The study's configuration with plugin birth models ``extra`` beside the six built-in ones (a built-in name
+    is refused: the study runs those already)."""
+    bad = [m for m in extra if plugins.is_builtin_birth(m)]
+    require(not bad, f"`study` runs the six built-in models; --models {','.join(bad)} adds plugins only")
+    if not extra:
+        return config
+    plugins.allow_import_paths(extra)
+    config.experiment = dataclasses.replace(config.experiment, models=(*config.experiment.models, *extra))
+    return config.validate()
+
+
+def check_part_trials(sweep_trials: int | None, births_trials: int | None, sensitivity_trials: int | None) -> None:
+    """Each part's number of trials, when given, is at least 1."""
+    for flag, value in (
+        ("sweep_trials", sweep_trials), ("births_trials", births_trials), ("sensitivity_trials", sensitivity_trials)
+    ):  # fmt: skip
+        require(value is None or value >= 1, f"--{flag.replace('_', '-')} {value} must be >= 1")
+
+
 def _with_experiment(cfg: Config, **changes) -> Config:
     out = Config.from_dict(cfg.to_dict())
     out.experiment = dataclasses.replace(out.experiment, **changes)
@@ -85,13 +107,9 @@ def run_study(
     sweep_trials: int | None = None,
     births_trials: int = 30,
     sensitivity_trials: int | None = None,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    dask_local: bool = False,
-    progress: bool = True,
+    options: RunOptions = RUN_DEFAULTS,
     explicit: set[str] | None = None,
     grouped: bool = True,
-    all_figures: bool = False,
 ) -> StudyOutcome:
     """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
 
@@ -102,10 +120,13 @@ def run_study(
     a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
     refuses differences, except more trials (see :mod:`~soabench.experiment.runs.runmeta`); None compares nothing.
     ``grouped``: False runs the parts one after another (the same results, slower; for benchmarks).
-    ``all_figures``: also draw the figures of every N̂ point and of both sensitivity runs (by default
-    ``births/sweep_births.png`` and ``sensitivity/sensitivity.md`` summarise those folders, which get tables and
-    summaries only).
+    ``options``: how every part runs (:class:`~soabench.experiment.execution.options.RunOptions`; fail_fast and
+    save_estimates are not the study's: refused); ``options.figures`` True also draws the figures of every N̂ point
+    and of both sensitivity runs (by default ``births/sweep_births.png`` and ``sensitivity/sensitivity.md``
+    summarise those folders, which get tables and summaries only).
     """
+    require(not options.save_estimates, "--save-estimates is not offered by `study`; use `run`")
+    require(not options.fail_fast, "--fail-fast is not offered by `study`; use `run`")
     root = resolve(out if out is not None else Path("results") / net_name(net))
     check_own_folder(root, "study folder", STUDY_ENTRIES)
     hint = f"finish with: soabench study --out {root}"
@@ -122,9 +143,10 @@ def run_study(
         flat = flatten_config(cfg.to_dict())
         return {k: flat[k] for k in keys if k in flat}
 
-    exe = dict(workers=workers, scheduler=scheduler, dask_local=dask_local, progress=progress)
-    births_figures = True if all_figures else None
-    sens_exe = dict(exe, figures=all_figures)
+    all_figures = options.figures is True
+    exe = dict(options=dataclasses.replace(options, figures=None))  # main run, clutter sweep: their own defaults
+    births_exe = dict(options=dataclasses.replace(options, figures=True if all_figures else None))
+    sens_options = dataclasses.replace(options, figures=all_figures)
     main_dir, clutter_dir, births_dir = root / "main", root / "clutter", root / "births"
 
     def parts(**kw) -> tuple[RunOutcome, SweepOutcome, SweepOutcome]:
@@ -146,13 +168,12 @@ def run_study(
             trials_key = "experiment.trials" if "births_trials" in explicit else None
             req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
             births = run_sweep(
-                "births", (), None, net, resume=births_dir, requested=req, grouped=grouped, figures=births_figures,
-                **exe, **kw,
+                "births", (), None, net, resume=births_dir, requested=req, grouped=grouped, **births_exe, **kw,
             )  # fmt: skip
         else:
             births = run_sweep(
                 "births", DEFAULT_VALUES["births"], births_cfg, net, out=births_dir, grouped=grouped,
-                figures=births_figures, **exe, **kw,
+                **births_exe, **kw,
             )  # fmt: skip
         return main, clutter, births
 
@@ -165,14 +186,20 @@ def run_study(
                 deferred: list = []
                 parts(defer=deferred)
                 run_variants(
-                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, defer=deferred, **sens_exe
+                    sens_dir,
+                    main_dir,
+                    trials=sensitivity_trials,
+                    follow_main=follow,
+                    defer=deferred,
+                    options=sens_options,
                 )
 
-                pool = open_executor(workers, scheduler, dask_local)  # the trials', then the figures' workers
+                # the trials', then the figures' workers
+                pool = open_executor(options.workers, options.scheduler, options.dask_local)
                 aborted = True
                 try:
                     if deferred:
-                        run_group(deferred, pool, progress=progress, label=root.name)
+                        run_group(deferred, pool, progress=options.progress, label=root.name)
                     # the reports of the parts that attempted every trial, each merged by a worker first
                     with parallel(pool), merged_on(pool, deferred):
                         main, clutter, births = parts(run_trials=False)
@@ -182,7 +209,7 @@ def run_study(
                             trials=sensitivity_trials,
                             follow_main=follow,
                             run_trials=False,
-                            **sens_exe,
+                            options=sens_options,
                         )
                     aborted = False
                 finally:
@@ -190,7 +217,7 @@ def run_study(
             else:
                 main, clutter, births = parts()
                 sensitivity = run_variants(
-                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, **sens_exe
+                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, options=sens_options
                 )
 
             md = ""

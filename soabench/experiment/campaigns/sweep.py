@@ -44,8 +44,7 @@ from soabench.experiment.campaigns.occlusion import (
     write_point_scenarios,
 )
 from soabench.experiment.execution.executors import open_executor
-from soabench.experiment.execution.grouped import group_trials, run_group
-from soabench.experiment.execution.premerge import merged_on
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.runner import (
     LoadFn,
     RunOutcome,
@@ -61,7 +60,6 @@ from soabench.experiment.runs.files import read_csv, read_json, write_json_atomi
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.runs.runmeta import check_requested, flatten_config, validate_sweep_meta
 from soabench.experiment.trial.registry import load_scene_cached
-from soabench.figures.drawing import parallel
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births", "occlusion")
@@ -72,6 +70,27 @@ DEFAULT_VALUES: dict[str, tuple[float, ...]] = {
     "occlusion": (0.0, 4.0, 8.0, 12.0),
 }
 N_TRUE = 6
+
+
+def sweep_values(
+    kind: str, values: Sequence[float] | None, offsets: Sequence[int] | None, given_keys: set[str]
+) -> tuple[float, ...]:
+    """The points of a new sweep: ``values`` (clutter rates, parked cars per 100 m) or ``offsets`` (N_tot offsets of
+    ``births``), each kind's :data:`DEFAULT_VALUES` when not given. ``given_keys``: the dotted config keys the user
+    set; ``clutter`` refuses ``experiment.clutter`` beside its points (λ has one home, docs/user-guide/parameters.md).
+    """
+    if kind == "clutter":
+        require(
+            "experiment.clutter" not in given_keys,
+            "`sweep clutter` takes its clutter rates from --values; drop --clutter and [experiment] clutter",
+        )
+    if kind in ("clutter", "occlusion"):
+        require(offsets is None, f"--offsets belongs to `sweep births`; use --values for `sweep {kind}`")
+        return tuple(values or DEFAULT_VALUES[kind])
+    require(
+        values is None, "--values belongs to `sweep clutter` and `sweep occlusion`; use --offsets for `sweep births`"
+    )
+    return tuple(offsets) if offsets is not None else DEFAULT_VALUES["births"]
 
 
 @dataclass
@@ -134,40 +153,33 @@ def run_sweep(
     scenario: str | None = None,
     *,
     out: Path | None = None,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    dask_local: bool = False,
     resume: Path | None = None,
-    fail_fast: bool = False,
-    save_estimates: bool = False,
-    progress: bool = True,
+    requested: dict[str, Any] | None = None,
+    options: RunOptions = RUN_DEFAULTS,
     trial_fn: TrialFn | None = None,
     load_fn: LoadFn | None = None,
     models: Sequence[str] | None = None,
     n_true: int = N_TRUE,
-    figures: bool | None = None,
-    requested: dict[str, Any] | None = None,
     defer: list | None = None,
     run_trials: bool = True,
     grouped: bool = True,
 ) -> SweepOutcome:
     """Run (or resume) a ``clutter`` or ``births`` sweep; each point is its own run folder under ``points/``.
 
-    Executor options are those of :func:`~soabench.experiment.execution.runner.run_experiment`; one executor (pool or
-    Dask
-    cluster) serves every point. The sweep table and figure are written once every point has attempted all trials.
+    ``options`` (:class:`~soabench.experiment.execution.options.RunOptions`) serve every point; one executor (pool
+    or Dask cluster) serves them all. The sweep table and figure are written once every point has attempted all trials.
     The folder is resolved, checked and locked like a run folder; on ``resume``, every value of ``sweep.json`` is
     validated and ``requested`` (dotted config keys, ``net``, ``polys``, ``scenario``, ``values``, ``kind``) is
     compared with it: differences are refused except more ``experiment.trials``, which extends every point.
     ``defer`` and ``run_trials`` are those of :func:`~soabench.experiment.execution.runner.run_experiment`, for every
     point.
     ``grouped``: an N̂ sweep runs its points' trials together (module docstring); False runs point after point
-    (the same results, slower; for benchmarks). ``figures``: draw each point's own figures (its ``figures/``);
-    None draws them for the clutter and occlusion points and not for the N̂ sweep's, whose ``sweep_births.png``
-    summarises its points (their tables and summaries are written either way).
+    (the same results, slower; for benchmarks). ``options.figures``: draw each point's own figures (its
+    ``figures/``); None draws them for the clutter and occlusion points and not for the N̂ sweep's, whose
+    ``sweep_births.png`` summarises its points (their tables and summaries are written either way).
     """
-    if figures is None:
-        figures = kind != "births"
+    if options.figures is None:
+        options = dataclasses.replace(options, figures=kind != "births")
     locks: list[FolderLock] = []
     try:
         if resume is not None:
@@ -226,9 +238,7 @@ def run_sweep(
             write_json_atomic(sweep_dir / SWEEP_FILE, meta)
             more = None
         return _run_points(
-            sweep_dir, kind, points, net, polys, scenario, more,
-            workers=workers, scheduler=scheduler, dask_local=dask_local, fail_fast=fail_fast,
-            save_estimates=save_estimates, progress=progress, trial_fn=trial_fn, load_fn=load_fn, figures=figures,
+            sweep_dir, kind, points, net, polys, scenario, more, options=options, trial_fn=trial_fn, load_fn=load_fn,
             defer=defer, run_trials=run_trials, grouped=grouped,
         )  # fmt: skip
     finally:
@@ -245,15 +255,9 @@ def _run_points(
     scenario: str | None,
     more: int | None,
     *,
-    workers: int | None,
-    scheduler: str | None,
-    dask_local: bool,
-    fail_fast: bool,
-    save_estimates: bool,
-    progress: bool,
+    options: RunOptions,
     trial_fn: TrialFn | None,
     load_fn: LoadFn | None,
-    figures: bool,
     defer: list | None = None,
     run_trials: bool = True,
     grouped: bool = True,
@@ -267,24 +271,30 @@ def _run_points(
     if grouped:
         deferred: list = []
         _run_points(
-            sweep_dir, kind, points, net, polys, scenario, more, workers=workers, scheduler=scheduler,
-            dask_local=dask_local, fail_fast=fail_fast, save_estimates=save_estimates, progress=progress,
-            trial_fn=trial_fn, load_fn=load_fn, figures=figures, defer=deferred,
+            sweep_dir, kind, points, net, polys, scenario, more, options=options, trial_fn=trial_fn, load_fn=load_fn,
+            defer=deferred,
         )  # fmt: skip
         if deferred:
-            exe = open_executor(workers, scheduler, dask_local, n_trials=len(group_trials(deferred)))
+            from soabench.experiment.execution.grouped import group_trials, run_group
+            from soabench.experiment.execution.premerge import merged_on
+            from soabench.figures.drawing import parallel
+
+            exe = open_executor(
+                options.workers, options.scheduler, options.dask_local, n_trials=len(group_trials(deferred))
+            )
             aborted = True
             try:
-                stopped, _ = run_group(deferred, exe, fail_fast=fail_fast, progress=progress, label=sweep_dir.name)
+                stopped, _ = run_group(
+                    deferred, exe, fail_fast=options.fail_fast, progress=options.progress, label=sweep_dir.name
+                )
                 if stopped:
                     return _sweep_outcome(sweep_dir, points, [_stopped_outcome(d) for d in deferred])
                 # every trial is attempted: the points merged on the workers, then the points' reports (their
                 # figures drawn on the same workers) and the sweep's
                 with parallel(exe), merged_on(exe, deferred):
                     outcome = _run_points(
-                        sweep_dir, kind, points, net, polys, scenario, None, workers=workers, scheduler=scheduler,
-                        dask_local=dask_local, fail_fast=fail_fast, save_estimates=save_estimates, progress=progress,
-                        trial_fn=trial_fn, load_fn=load_fn, figures=figures, run_trials=False,
+                        sweep_dir, kind, points, net, polys, scenario, None, options=options, trial_fn=trial_fn,
+                        load_fn=load_fn, run_trials=False,
                     )  # fmt: skip
                 aborted = False
                 return outcome
@@ -295,23 +305,18 @@ def _run_points(
         more, run_trials = None, False  # every trial is attempted: the points' reports and the sweep's
     deferring = defer is not None or not run_trials
     outcomes: list[RunOutcome] = []
-    exe = None if deferring else open_executor(workers, scheduler, dask_local, n_trials=n_trials_total)
+    exe = None if deferring else open_executor(options.workers, options.scheduler, options.dask_local, n_trials_total)
+    # the points run on this sweep's executor; a report's figures on its pool, or on one process per core
+    point_options = dataclasses.replace(options, workers=None, scheduler=None, dask_local=False)
     stopped = False
     aborted = True  # until the loop ends normally (Ctrl-C, errors): terminate the workers on the way out
     try:
         for p in points:
             pdir = sweep_dir / "points" / p["name"]
             kwargs: dict[str, Any] = dict(
-                fail_fast=fail_fast,
-                save_estimates=save_estimates,
-                progress=progress,
-                trial_fn=trial_fn,
-                load_fn=load_fn,
-                executor=exe,
-                figures=figures,
-                defer=defer,
+                options=point_options, trial_fn=trial_fn, load_fn=load_fn, executor=exe, defer=defer,
                 run_trials=run_trials,
-            )
+            )  # fmt: skip
             sc = p.get("scenario", scenario)  # occlusion points carry their own scenario
             if (pdir / "run.json").is_file():
                 req = {"experiment.trials": more} if more is not None else None

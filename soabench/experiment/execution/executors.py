@@ -24,8 +24,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from soabench.cli_checks import check_scheduler_address
 from soabench.errors import SoabenchError, require
+from soabench.experiment.execution.options import check_scheduler_address
 from soabench.experiment.execution.workers import init_worker, last_activity, sigint_ignored_by_children
 from soabench.seeding import trial_seeds
 

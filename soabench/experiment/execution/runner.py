@@ -35,6 +35,7 @@ from soabench.experiment.execution.executors import (
     failure_record,
     open_executor,
 )
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.reports import report
@@ -264,18 +265,12 @@ def run_experiment(
     scenario: str | None = None,
     *,
     out: Path | None = None,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    dask_local: bool = False,
     resume: Path | None = None,
-    fail_fast: bool = False,
-    save_estimates: bool = False,
-    progress: bool = True,
+    requested: dict[str, Any] | None = None,
+    options: RunOptions = RUN_DEFAULTS,
     trial_fn: TrialFn | None = None,
     load_fn: LoadFn | None = None,
     executor: Any = None,
-    figures: bool = True,
-    requested: dict[str, Any] | None = None,
     defer: list | None = None,
     run_trials: bool = True,
 ) -> RunOutcome:
@@ -285,25 +280,19 @@ def run_experiment(
         config: the resolved configuration; ignored (may be None) with ``resume``, which reads the run's own.
         net, polys, scenario: passed to :func:`soabench.scenario.load` (ignored with ``resume``).
         out: run folder (default ``results/<net>/<UTC timestamp>/``); resolved, and refused unless new or empty.
-        workers: process workers (default: every core; 1 runs in this process); with ``dask_local`` the number
-            of LocalCluster workers.
-        scheduler: address of an existing Dask scheduler (``tcp://HOST:PORT``).
-        dask_local: start a Dask LocalCluster (processes, one thread per worker).
         resume: an earlier run folder: run only its trials without a result, with its stored config. Every value of
             its ``run.json`` is validated; its trial kind and scene loader are names looked up in
             :mod:`~soabench.experiment.trial.registry` (nothing from the folder is imported).
-        fail_fast: stop at the first failed trial or failed method run (trials in flight are still recorded).
-        save_estimates: also store the per-scan estimates (``estimates/``, format in :mod:`.store`).
-        progress: report progress on stderr (a bar on a terminal, periodic lines otherwise: :mod:`.progress`).
+        requested: with ``resume``, what the caller asked for (dotted keys such as ``experiment.clutter``, ``net``,
+            ``polys``, ``scenario``); every value that differs from the stored run is refused, except more
+            ``experiment.trials``, which extends the run (see :mod:`~soabench.experiment.runs.runmeta`).
+        options: how the trials run and what is written beside the tables (:class:`RunOptions`; figures None:
+            drawn); with ``resume``, ``save_estimates`` is the run's own (asking for it on a run without is refused).
         trial_fn: ``run_trial(trial, config, scene, scenario, *, save_estimates)``; must be importable by
             worker processes (a module-level function). Default: the registered trial kind ``soabench``
             (:func:`soabench.experiment.trial.trial.run_trial`); run.json records its registered name.
         load_fn: ``load(net, polys, scenario) -> (SceneMap, ScenarioConfig)``; default: scene loader ``sumo``.
         executor: an open executor (from :func:`open_executor`) to reuse, e.g. across the points of a sweep.
-        figures: draw the figures (``write_report`` can draw them later from the CSV files).
-        requested: with ``resume``, what the caller asked for (dotted keys such as ``experiment.clutter``, ``net``,
-            ``polys``, ``scenario``); every value that differs from the stored run is refused, except more
-            ``experiment.trials``, which extends the run (see :mod:`~soabench.experiment.runs.runmeta`).
         defer: a list: create (or check) the folder, append its :class:`DeferredRun` (the trials to run) instead of
             running them, and return (:mod:`soabench.experiment.execution.grouped` runs several folders' trials
             together).
@@ -333,7 +322,7 @@ def run_experiment(
                     write_json_atomic(store.run_file, raw)
                     meta = validate_run_meta(raw, str(store.run_file))
             require(
-                meta.save_estimates or not save_estimates,
+                meta.save_estimates or not options.save_estimates,
                 f"--save-estimates does not apply to --resume of {str(run_dir)!r}: the run was started without it, "
                 "so its finished trials have no estimates; start a new run with --save-estimates --out",
             )
@@ -341,7 +330,7 @@ def run_experiment(
                 print(f"soabench: {line}", file=sys.stderr)
             config = meta.config
             net, polys, scenario = meta.net, meta.polys, meta.scenario
-            save_estimates = meta.save_estimates
+            options = dataclasses.replace(options, save_estimates=meta.save_estimates)
             trial_fn = trial_fn or registry.trial_kind(meta.trial_kind)
             load_fn = load_fn or registry.scene_loader(meta.scene_loader)
         else:
@@ -354,10 +343,8 @@ def run_experiment(
             check_new_folder(run_dir, RUN_FILE, "run", f"finish it with --resume {run_dir}")
             store = RunStore(run_dir)
         return _run_locked(
-            store, config, net, tuple(str(p) for p in polys), scenario, resume is not None, locks,
-            workers=workers, scheduler=scheduler, dask_local=dask_local, fail_fast=fail_fast,
-            save_estimates=save_estimates, progress=progress, trial_fn=trial_fn, load_fn=load_fn,
-            executor=executor, figures=figures, defer=defer, run_trials=run_trials,
+            store, config, net, tuple(str(p) for p in polys), scenario, resume is not None, locks, options=options,
+            trial_fn=trial_fn, load_fn=load_fn, executor=executor, defer=defer, run_trials=run_trials,
         )  # fmt: skip
     finally:
         for lock in locks:
@@ -373,20 +360,16 @@ def _run_locked(
     resumed: bool,
     locks: list[FolderLock],
     *,
-    workers: int | None,
-    scheduler: str | None,
-    dask_local: bool,
-    fail_fast: bool,
-    save_estimates: bool,
-    progress: bool,
+    options: RunOptions,
     trial_fn: TrialFn | None,
     load_fn: LoadFn | None,
     executor: Any,
-    figures: bool,
     defer: list | None = None,
     run_trials: bool = True,
 ) -> RunOutcome:
     """The body of :func:`run_experiment` once the folder is checked (and, for a resume, locked)."""
+    figures = options.figures is not False
+    save_estimates = options.save_estimates
     plugins.preflight(config)  # a plugin that cannot be imported or configured stops the run before any trial
     n_trials = config.experiment.trials
     hint = f"finish with: soabench run --resume {store.run_dir}"
@@ -402,7 +385,11 @@ def _run_locked(
     todo = TodoTrials(n_trials, done) if run_trials else TodoTrials(0, set())
     # connect to the executor before creating the run folder (an unreachable scheduler leaves nothing behind)
     own_executor = executor is None and len(todo) > 0 and defer is None
-    exe = open_executor(workers, scheduler, dask_local, n_trials=len(todo)) if own_executor else executor
+    exe = (
+        open_executor(options.workers, options.scheduler, options.dask_local, n_trials=len(todo))
+        if own_executor
+        else executor
+    )
     interrupted = stopped = False
     try:
         if not resumed:
@@ -444,7 +431,9 @@ def _run_locked(
                 load_fn,
                 plugins.session_import_paths(),
             )
-            interrupted, stopped, times = _run_trials(store, exe, spec, todo, n_trials, len(done), fail_fast, progress)
+            interrupted, stopped, times = _run_trials(
+                store, exe, spec, todo, n_trials, len(done), options.fail_fast, options.progress
+            )
             store.write_session(
                 f"{_utc_stamp()}-{os.getpid()}",
                 {
@@ -481,7 +470,8 @@ def _run_locked(
     try:
         # a study's workers may have merged it already; the figures read the step columns the merge kept
         premerge.merge(store, *premerge.merge_args(config), step_columns=figures)
-        with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
+        local = not (options.scheduler or options.dask_local)
+        with report_pool(options.workers if local else None, executor):  # figures on local processes
             outcome.summary_markdown = report.write_report(store.run_dir, figures=figures, store=store)
         outcome.model_failures = store.model_failures()
     except KeyboardInterrupt:

@@ -192,3 +192,28 @@ class FolderLock:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+def check_out_file(path: str, suffix: str | None = None, flag: str = "--out") -> Path:
+    """An output file path: resolved, not a folder, in an existing writable folder, ending in ``suffix`` (the
+    format it is written in) when given."""
+    require(bool(path), f"{flag} needs a file name")
+    try:
+        out = Path(path).expanduser().resolve()
+    except (OSError, RuntimeError) as exc:
+        raise SoabenchError(f"cannot resolve {flag} {path!r}: {exc}") from None
+    require(not out.is_dir(), f"{flag} {path!r} is a folder; give a file name")
+    require(
+        suffix is None or out.suffix.lower() == suffix,
+        f"{flag} {path!r} must end in {suffix}: the file is written in that format",
+    )
+    parent = out.parent
+    if not parent.exists():
+        anc = parent
+        while not anc.exists():
+            anc = anc.parent
+        require(anc.is_dir(), f"{flag} {path!r} lies under {str(anc)!r}, which is a file, not a folder")
+        raise SoabenchError(f"output folder {str(parent)!r} does not exist for {path!r}")
+    require(parent.is_dir(), f"{flag} {path!r} lies under {str(parent)!r}, which is a file, not a folder")
+    probe_writable(parent, f"{flag} {path!r}: the folder {str(parent)!r}")
+    return out
