@@ -5,7 +5,7 @@
    and a memory bound, and is counted per command as clean (exit 2, one line ``soabench: error: ...`` naming the
    value), traceback, silent (another exit status, real work started, or a write into a foreign folder), hang
    (killed at the time bound) or unclear (exit 2 without one line naming the value); every case that is not clean
-   is listed. The poisoned and invalid ``run.json`` files of ``tests/test_hardening_runs.py`` are counted too.
+   is listed. The poisoned and invalid ``run.json`` files of ``tests/hardening/test_run_folders.py`` are counted too.
 2. Kill/resume cycles: a 16-trial process-pool run (the tests' slow fake trial) is SIGKILLed after some trials,
    resumed, killed again, ... until it completes; after each kill no pool worker may survive; the result must equal
    an uninterrupted serial run byte for byte.
@@ -132,7 +132,7 @@ def catalogue_counts(tmp: Path, timeout_s: float = 30.0, limit_gb: float = 3.0) 
 
 
 def run_meta_cases(tmp: Path) -> tuple[int, int]:
-    """(tried, refused) over the poisoned and invalid run.json files of tests/test_hardening_runs.py."""
+    """(tried, refused) over the poisoned and invalid run.json files of tests/hardening/test_run_folders.py."""
     import contextlib
     import io
 
