@@ -196,7 +196,39 @@ def crashing_trial(trial, config, scene, scenario, *, save_estimates=False):
 
 # the fakes are registered trial kinds / scene loaders, so a run made with them can be resumed by name (a run
 # folder names what it needs; it never spells out an import path)
+from soabench.experiment import registry  # noqa: E402
 from soabench.experiment.registry import register_scene_loader, register_trial_kind  # noqa: E402
+
+
+def small_config(**experiment):
+    """The default configuration with ``experiment``'s keys replaced in its ``[experiment]`` table, validated."""
+    import dataclasses
+
+    from soabench.config import Config
+
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(cfg.experiment, **experiment)
+    return cfg.validate()
+
+
+def run_fake(config, out, net="intersection", **kw):
+    """:func:`soabench.experiment.runner.run_experiment` of ``config`` on ``net`` with :func:`fake_trial` and
+    :func:`fake_load`, serial, without progress or figures (``kw`` overrides any of these): the fake run the tests
+    share. Returns the run's outcome."""
+    from soabench.experiment.runner import run_experiment
+
+    options = dict(workers=1, trial_fn=fake_trial, load_fn=fake_load, progress=False, figures=False)
+    return run_experiment(config, net, out=out, **(options | kw))
+
+
+def as_builtins(trial=fake_trial, loader=fake_load):
+    """A block in which the built-in trial kind and scene loader (the names ``soabench run`` uses) are ``trial`` and
+    ``loader`` (None: that one stays the real one), through the public hook :func:`registry.registered`."""
+    return registry.registered(
+        {registry.DEFAULT_TRIAL_KIND: trial} if trial is not None else None,
+        {registry.DEFAULT_SCENE_LOADER: loader} if loader is not None else None,
+    )
+
 
 register_scene_loader("fake-load", fake_load)
 for _name, _fn in (

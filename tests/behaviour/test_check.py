@@ -6,11 +6,12 @@ from __future__ import annotations
 import json
 import shutil
 import xml.etree.ElementTree as ET
-from pathlib import Path
+
+from repo_paths import ROOT
 
 from soabench.cli import main
 
-SUITE = Path(__file__).resolve().parents[1] / "examples" / "check" / "suite.toml"
+SUITE = ROOT / "examples" / "check" / "suite.toml"
 
 
 def test_example_suite_passes_then_catches_a_regression(tmp_path, capsys) -> None:

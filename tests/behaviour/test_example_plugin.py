@@ -16,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from repo_paths import ROOT
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "soabench-example-plugin"
+EXAMPLE = ROOT / "examples" / "soabench-example-plugin"
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Honest output on any scene (issue 13, item 5): nothing observed -> a warning and no percentages; the scenario's
+"""Honest output on any scene: nothing observed -> a warning and no percentages; the scenario's
 own name; the paper's numbers only beside the paper's protocol on the shipped intersection."""
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from types import SimpleNamespace
 
 import fake_trial as ft
 import pytest
+from repo_paths import ROOT
 
 from soabench.config import Config
 from soabench.experiment.files import write_csv
@@ -21,11 +22,10 @@ from soabench.experiment.report import (
     summarize,
     write_report,
 )
-from soabench.experiment.runner import run_experiment
 from soabench.experiment.store import RunStore
 from soabench.scenario import load, shipped_nets
 
-NET_DIR = Path(__file__).resolve().parents[1] / "sumo_nets" / "intersection"
+NET_DIR = ROOT / "sumo_nets" / "intersection"
 
 
 def _config(trials=2, duration=100.0, models=("soa", "pubm")) -> Config:
@@ -95,10 +95,7 @@ def test_paper_protocol_is_recognised():
 @pytest.mark.parametrize(("net", "paper"), [("intersection", True), ("elsewhere/mine.net.xml", False)])
 def test_against_the_paper_only_on_the_shipped_intersection(tmp_path, net, paper):
     out = tmp_path / "run"
-    o = run_experiment(
-        _config(trials=3), net, out=out, workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False,
-        figures=False,
-    )  # fmt: skip
+    o = ft.run_fake(_config(trials=3), out, net)
     md = o.summary_markdown
     assert ("## Against the paper" in md) is paper
     if not paper:
@@ -112,10 +109,7 @@ def named_load(net, polys=(), scenario=None):
 
 def test_default_run_folder_and_labels_use_the_scenario_name(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    o = run_experiment(
-        _config(trials=1, duration=10.0), "intersection", scenario="x.toml", workers=1, trial_fn=ft.fake_trial,
-        load_fn=named_load, progress=False, figures=False,
-    )  # fmt: skip
+    o = ft.run_fake(_config(trials=1, duration=10.0), None, scenario="x.toml", load_fn=named_load)
     assert o.run_dir.parent == (Path("results") / "rush_hour").resolve()
     assert o.summary_markdown.startswith("# soabench run: rush_hour")
     assert json.loads((o.run_dir / "run.json").read_text())["net_name"] == "rush_hour"

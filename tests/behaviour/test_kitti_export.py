@@ -1,6 +1,6 @@
 """SUMO -> KITTI files -> reader: the same measurements and truth in the camera's view as the direct path;
 `soabench kitti` end to end on the exported sequences (2 trials x 30 s at 10 Hz; the first ~20 s of a trial see few
-pedestrians). The files' own conventions: tests/test_kitti_camera.py."""
+pedestrians). The files' own conventions: tests/behaviour/test_kitti_camera.py."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Output files a user gets (issue 13, item 7): modes from the user's umask, sensor parameters in the scans file,
+"""Output files a user gets: modes from the user's umask, sensor parameters in the scans file,
 defaults in every ``--help``."""
 
 from __future__ import annotations

@@ -110,7 +110,7 @@ NON_DEFAULT: dict[str, object] = {
     "experiment.probabilities": ("static", "dynamic", "dynamic+occ"),
     "experiment.clutter": (5.0,),
     "experiment.seed": 4,
-    "experiment.plugin_budget": 30.0,  # its reach: tests/test_plugin_isolation.py (a plugin past its budget)
+    "experiment.plugin_budget": 30.0,  # its reach: tests/hardening/test_plugin_isolation.py (a plugin past its budget)
 }
 
 #: the switches that select which other keys are read: the second trial sets them back to their defaults so that

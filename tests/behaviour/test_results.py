@@ -1,4 +1,4 @@
-"""The committed results are what `soabench study` produces for its seeds (issue 8), to a stated tolerance.
+"""The committed results are what `soabench study` produces for its seeds, to a stated tolerance.
 
 Re-runs a small slice (a few trials, a few birth models) of each committed part with the configuration stored in
 its run folder and compares every metric column with the committed CSV as numbers, within
@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 
 import pytest
+from repo_paths import ROOT
 
 from soabench.config import Config
 from soabench.experiment.files import format_value
@@ -25,7 +26,7 @@ from soabench.experiment.store import TRIAL_COLUMNS
 from soabench.experiment.trial import run_trial
 from soabench.scenario import load
 
-RESULTS = Path(__file__).parents[1] / "results" / "intersection"
+RESULTS = ROOT / "results" / "intersection"
 
 
 def _committed(run_dir: Path) -> dict[tuple, dict]:

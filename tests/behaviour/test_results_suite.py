@@ -1,4 +1,4 @@
-"""Issue 18 item 5: ``soabench results`` regenerates all of results/ in one command, every part resumable.
+"""``soabench results`` regenerates all of results/ in one command, every part resumable.
 
 The protocol runs use the fake trial (tests/fake_trial.py) and no run figures; the occlusion density and the KITTI
 export run real SUMO on tiny settings (one 10 s trial per scene, two 10 s sequences).
@@ -17,7 +17,7 @@ from shapely.geometry import box
 import soabench.scenario
 from soabench.cli import main
 from soabench.config import SensorConfig
-from soabench.experiment import cross_scene, paper, registry
+from soabench.experiment import cross_scene, paper
 from soabench.experiment.files import read_json
 from soabench.experiment.occlusion_density import scan_occlusion
 
@@ -47,11 +47,9 @@ def suite(tmp_path_factory):
         calls["simulate"] += 1
         return real_simulate(*a, **k)
 
-    with pytest.MonkeyPatch.context() as mp:
+    with pytest.MonkeyPatch.context() as mp, ft.as_builtins(trial=counting_trial):
         import soabench.experiment.plots as plots
 
-        mp.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, counting_trial)
-        mp.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
         mp.setattr(plots, "make_figures", lambda tables, folder: [])
         mp.setattr(soabench.scenario, "simulate", counting_simulate)
         first = main(["results", "--out", str(out), *TINY])
@@ -116,9 +114,9 @@ def test_other_settings_are_refused_in_one_line_before_any_work(suite, capsys, m
     def no_trial(*a, **k):
         raise AssertionError("a trial ran")
 
-    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, no_trial)
     argv = ["results", "--out", str(suite.out), *TINY, "--kitti-folds", "3"]
-    assert main(argv) == 2
+    with ft.as_builtins(trial=no_trial, loader=None):
+        assert main(argv) == 2
     lines = _messages(capsys.readouterr().err)
     assert len(lines) == 1 and "folds: stored 2, requested 3" in lines[0], lines
     assert main(["results", "--out", str(suite.out), *TINY, "--scene-trials", "1"]) == 2
@@ -145,7 +143,7 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, flags
     assert not out.exists() or not any(out.iterdir())
 
 
-def test_ctrl_c_names_the_command_that_finishes(tmp_path, capsys, monkeypatch):
+def test_ctrl_c_names_the_command_that_finishes(tmp_path, capsys, monkeypatch, fake_builtins):
     import soabench.experiment.occlusion_density as od
 
     def interrupted(*a, **k):
@@ -154,8 +152,6 @@ def test_ctrl_c_names_the_command_that_finishes(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(od, "scene_density", interrupted)
     out = tmp_path / "res"
     argv = ["results", "--out", str(out), "--scenes", "grid_block", "--scene-trials", "1", "--duration", "5"]
-    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
-    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
     import soabench.experiment.plots as plots
 
     monkeypatch.setattr(plots, "make_figures", lambda tables, folder: [])

@@ -1,4 +1,4 @@
-"""Resumable runs (issue 7): a run killed midway and resumed equals an uninterrupted run."""
+"""Resumable runs: a run killed midway and resumed equals an uninterrupted run."""
 
 from __future__ import annotations
 
@@ -12,12 +12,13 @@ from pathlib import Path
 
 import fake_trial as ft
 import pytest
+from repo_paths import TESTS
 
 from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment.runner import run_experiment
 
-HERE = Path(__file__).parent
+HERE = TESTS
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
 SCRIPT = """
@@ -54,16 +55,7 @@ def wait_for_trials(out: Path, n: int, proc: subprocess.Popen, timeout: float = 
 
 def assert_same_as_uninterrupted(out: Path, cfg: Config, ref_dir: Path) -> None:
     """An uninterrupted serial run of ``cfg`` writes the same CSV files, byte for byte, as the run in ``out``."""
-    ref = run_experiment(
-        cfg,
-        "intersection",
-        out=ref_dir,
-        workers=1,
-        trial_fn=ft.fake_trial,
-        load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
-    )
+    ref = ft.run_fake(cfg, ref_dir)
     assert ref.complete
     for name in CSV_FILES:
         assert (out / name).read_bytes() == (ref_dir / name).read_bytes(), name
@@ -114,16 +106,7 @@ def test_interrupted_run_says_how_to_resume(tmp_path):
 def test_resume_of_a_complete_run_reruns_nothing(tmp_path):
     cfg = small_config(trials=3)
     out = tmp_path / "run"
-    run_experiment(
-        cfg,
-        "intersection",
-        out=out,
-        workers=1,
-        trial_fn=ft.fake_trial,
-        load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
-    )
+    ft.run_fake(cfg, out)
     before = (out / "trials.csv").read_bytes()
     o = run_experiment(None, "x", resume=out, trial_fn=ft.failing_trial, progress=False, figures=False)
     assert o.complete and o.n_done == 3 and not o.failures  # failing_trial would fail trial 2 if it ran

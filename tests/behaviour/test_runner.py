@@ -1,4 +1,4 @@
-"""The Monte Carlo harness (issue 6/7): outputs agree with each other, executors agree bit for bit, failures.
+"""The Monte Carlo harness: outputs agree with each other, executors agree bit for bit, failures.
 
 Uses the deterministic fake trial function of ``tests/fake_trial.py`` (the real pipeline has its own end-to-end
 test).
@@ -16,6 +16,7 @@ from pathlib import Path
 import fake_trial as ft
 import numpy as np
 import pytest
+from repo_paths import TESTS
 
 from soabench.config import Config
 from soabench.errors import SoabenchError
@@ -36,10 +37,7 @@ def small_config(trials: int = 4, clutter=(3.0,), duration: float = 20.0, seed: 
 
 
 def run(cfg: Config, out: Path, **kw):
-    kw.setdefault("trial_fn", ft.fake_trial)
-    kw.setdefault("figures", False)
-    kw.setdefault("workers", 1)
-    return run_experiment(cfg, "intersection", out=out, load_fn=ft.fake_load, progress=False, **kw)
+    return ft.run_fake(cfg, out, **kw)
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +45,7 @@ def dask_scheduler():
     """One Dask LocalCluster (2 processes, 1 thread each) for the module; workers can import fake_trial."""
     import distributed
 
-    here = str(Path(__file__).parent)
+    here = str(TESTS)
     old = os.environ.get("PYTHONPATH")
     os.environ["PYTHONPATH"] = here + (os.pathsep + old if old else "")
     import logging

@@ -1,4 +1,4 @@
-"""The sensitivity table (issue 18): headline numbers under gate on/off, truth set and probability mode.
+"""The sensitivity table: headline numbers under gate on/off, truth set and probability mode.
 
 The table builder on small synthetic trials.csv files (a number that moves gets the right sentence, an unchanged
 one says so, a sign flip is called out), and a short ``soabench study`` (fake trial function) whose sensitivity
@@ -14,7 +14,6 @@ import fake_trial as ft
 import pytest
 
 from soabench.cli import main
-from soabench.experiment import registry
 from soabench.experiment import sensitivity as sens
 from soabench.experiment.files import write_csv
 
@@ -163,10 +162,10 @@ def fake_study(monkeypatch):
     import soabench.experiment.report as report
     import soabench.experiment.sweep as sweep
 
-    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, switch_aware_trial)
-    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
     monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
     monkeypatch.setattr(sweep, "write_sweep_report", lambda d: "sweep")
+    with ft.as_builtins(trial=switch_aware_trial):
+        yield
 
 
 STUDY = ["study", "--trials", "3", "--births-trials", "1", "--duration", "10", "--workers", "1", "--no-progress"]

@@ -1,4 +1,4 @@
-"""Issue 16 "Any street": user networks of every kind, OSM import, the shipped scene suite, the occlusion sweep."""
+"""Any street: user networks of every kind, OSM import, the shipped scene suite, the occlusion sweep."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sumo
+from repo_paths import DATA, ROOT
 
 from soabench.cli import main
 from soabench.errors import SoabenchError
@@ -16,7 +17,6 @@ from soabench.scenario import load, shipped_nets, shipped_root, simulate
 from soabench.scenario.network import fringe_edges, read_net
 from soabench.seeding import trial_seeds
 
-DATA = Path(__file__).resolve().parent / "data"
 BIN = Path(sumo.SUMO_HOME) / "bin"
 ENV = {**os.environ, "SUMO_HOME": sumo.SUMO_HOME}
 
@@ -178,7 +178,7 @@ def test_suite_has_four_scenes_with_sources_and_package_data():
         d = shipped_root() / n
         for pattern in ("*.nod.xml", "*.edg.xml", "*.net.xml", "*.poly.xml", "build.sh", "README.md"):
             assert list(d.glob(pattern)), f"{n}: no {pattern}"
-        assert (Path(__file__).resolve().parents[1] / "docs" / "scenes" / f"{n}.png").is_file()
+        assert (ROOT / "docs" / "scenes" / f"{n}.png").is_file()
 
 
 def test_scene_files_match_the_package_data_globs():
@@ -190,7 +190,7 @@ def test_scene_files_match_the_package_data_globs():
         import tomllib
     else:  # pragma: no cover
         import tomli as tomllib
-    pyproject = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
     data = pyproject["tool"]["setuptools"]["package-data"]
     globs = [g.rsplit("/", 1)[-1] for key, gs in data.items() if "nets" in key for g in gs]
     assert globs

@@ -1,4 +1,4 @@
-"""Figures drawn in parallel (issue 19 item 4): the same PNG bytes as drawn one after another, and no report
+"""Figures drawn in parallel: the same PNG bytes as drawn one after another, and no report
 passed off as complete when a figure fails."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 from soabench.config import Config
 from soabench.experiment import drawing, plots
-from soabench.experiment.runner import PoolExecutor, SerialExecutor, run_experiment
+from soabench.experiment.runner import PoolExecutor, SerialExecutor
 from soabench.experiment.tables import load_tables
 
 
@@ -20,10 +20,7 @@ def run_dir(tmp_path_factory) -> Path:
     cfg = Config()
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=2, duration=6.0, models=("soa", "atbm"))
     out = tmp_path_factory.mktemp("drawing") / "run"
-    run_experiment(
-        cfg.validate(), "intersection", out=out, trial_fn=ft.fake_trial, load_fn=ft.fake_load, figures=False,
-        workers=1, progress=False,
-    )  # fmt: skip
+    ft.run_fake(cfg.validate(), out)
     return out
 
 

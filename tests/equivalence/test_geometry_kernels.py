@@ -77,7 +77,7 @@ def test_segments_equal_the_numpy_form_on_obstacle_hulls():
 
 
 def _ego_inside_numpy(polygons: list[np.ndarray], e: np.ndarray) -> np.ndarray:
-    """The numpy form of soabench.birth.soa.ego_inside before it was compiled."""
+    """The numpy form of soabench.birth.soa.ego_inside: the reference of the compiled kernel."""
     n = np.array([len(v) for v in polygons])
     V = np.concatenate([np.asarray(v, dtype=float).reshape(-1, 2) for v in polygons])
     start = np.concatenate([[0], np.cumsum(n)[:-1]])

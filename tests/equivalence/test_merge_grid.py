@@ -1,5 +1,5 @@
 """The grid index of the Vo-Ma merge (docs/method.md §2.9, ``kernels.merge_groups_grid``): exactly the groups of
-the x-sorted window (itself checked against the literal Table II loop in ``tests/test_merge_index.py``), for
+the x-sorted window (itself checked against the literal Table II loop in ``tests/equivalence/test_merge_index.py``), for
 clustered and spread mixtures, wide components, far outliers, ties, duplicates and bad covariances."""
 
 from __future__ import annotations

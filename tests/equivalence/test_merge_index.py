@@ -1,8 +1,8 @@
 """The spatial index of the Vo-Ma merge (docs/method.md §2.9): exactly the groups of the literal Table II loop.
 
 ``merge_groups`` picks the x-sorted window for small mixtures and the grid above that (the grid's own edge cases:
-``tests/test_merge_grid.py``); the window and the 2-d tree must give the same labels and centres as the literal loop
-(``reference_merge_groups``), at every size, for clustered and spread mixtures, with wide components, ties,
+``tests/equivalence/test_merge_grid.py``); the window and the 2-d tree must give the same labels and centres as the
+literal loop (``reference_merge_groups``), at every size, for clustered and spread mixtures, with wide components, ties,
 duplicates and covariances that are not positive definite.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_gmphd import reference_merge_groups
+from gmphd_cases import reference_merge_groups
 
 from soabench.gmphd import kernels
 from soabench.gmphd.reduction import merge_groups

@@ -1,4 +1,4 @@
-"""Run folders merged on the workers of a process pool (:mod:`soabench.experiment.premerge`, issue 19).
+"""Run folders merged on the workers of a process pool (:mod:`soabench.experiment.premerge`).
 
 * a grouped N̂ sweep on two workers (each point merged by a worker, its figure tables saved there) writes the files
   of the same sweep on one process, byte for byte: tables, model failures and every figure;

@@ -122,7 +122,7 @@ def test_filter_scan_inputs_checked_once_per_scan_and_errors_still_raised():
 
 
 def _slow_csv(rows, columns) -> str:
-    """write_csv as it was written before its fast path."""
+    """write_csv without its fast path: the reference the fast path must match."""
     cols = list(columns) + sorted({k for r in rows for k in r} - set(columns))
     lines = [",".join(cols)]
     for r in rows:

@@ -1,4 +1,4 @@
-"""Work done once (issue 19 item 3): the shared paths give exactly the results of the paths that recompute.
+"""Work done once: the shared paths give exactly the results of the paths that recompute.
 
 * births of a mode-free model (S-OA, UBM, UBM (workspace), GMBM) computed once per scan and shared by every
   probability mode, clutter rate and N̂ (weight-free candidates, weighed per N̂) vs one birth model per run;

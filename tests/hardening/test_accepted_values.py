@@ -10,15 +10,12 @@ import shutil
 
 import bad_inputs
 import bad_inputs_more
-import fake_trial as ft
 import pytest
-from test_hardening_cli import no_work  # noqa: F401  (a fixture)
-from test_hardening_cli import test_bad_input_is_one_line_and_exit_2 as one_line_and_exit_2
+from test_command_line import test_bad_input_is_one_line_and_exit_2 as one_line_and_exit_2
 
 from soabench.cli import main
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import SoabenchError
-from soabench.experiment import registry
 from soabench.experiment.files import read_csv
 from soabench.experiment.store import RunStore, run_identity, trial_of_name
 
@@ -56,15 +53,6 @@ def test_distinct_values_are_accepted():
 
 
 # ------------------------------------------------------------------------------------------------ records
-@pytest.fixture
-def fake(monkeypatch):
-    import soabench.experiment.report as report
-
-    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
-    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
-    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
-
-
 def _new_run(tmp_path, trials: int = 3, *extra: str):
     out = tmp_path / "run"
     argv = ["run", "--trials", str(trials), "--duration", "10", "--workers", "1", "--no-progress", "--out", str(out)]
@@ -77,7 +65,7 @@ def _rows(out) -> list[tuple[int, float, str, str]]:
     return sorted(zip(t["trial"].astype(int), t["clutter"], t["model"], t["mode"], strict=True))
 
 
-def test_run_json_and_every_record_carry_the_run_identity(tmp_path, fake):
+def test_run_json_and_every_record_carry_the_run_identity(tmp_path, fake_cli_runs):
     out = _new_run(tmp_path)
     meta = json.loads((out / "run.json").read_text())
     assert meta["run_id"] == run_identity(meta) and len(meta["run_id"]) == 64
@@ -85,7 +73,7 @@ def test_run_json_and_every_record_carry_the_run_identity(tmp_path, fake):
         assert json.loads(p.read_text())["run_id"] == meta["run_id"]
 
 
-def test_the_identity_ignores_the_trial_count_and_nothing_else(tmp_path, fake):
+def test_the_identity_ignores_the_trial_count_and_nothing_else(tmp_path, fake_cli_runs):
     meta = json.loads((_new_run(tmp_path) / "run.json").read_text())
     more = json.loads(json.dumps(meta))
     more["config"]["experiment"]["trials"] = 50  # a resume may raise the trial count
@@ -97,7 +85,7 @@ def test_the_identity_ignores_the_trial_count_and_nothing_else(tmp_path, fake):
     assert run_identity({**meta, "net": "arterial"}) != run_identity(meta)
 
 
-def test_a_copy_of_trial_0_saved_as_trial_2_is_moved_aside_and_trial_2_runs(tmp_path, fake, capsys):
+def test_a_copy_of_trial_0_saved_as_trial_2_is_moved_aside_and_trial_2_runs(tmp_path, fake_cli_runs, capsys):
     out = _new_run(tmp_path)
     before = _rows(out)
     trials = out / "trials"
@@ -121,7 +109,9 @@ def test_a_copy_of_trial_0_saved_as_trial_2_is_moved_aside_and_trial_2_runs(tmp_
         ("trial_00001.json", '{"trial": "1", "status": "ok"}', "it holds trial '1'"),
     ],
 )
-def test_stray_or_malformed_records_are_moved_aside_and_the_run_finishes(tmp_path, fake, capsys, name, content, says):
+def test_stray_or_malformed_records_are_moved_aside_and_the_run_finishes(
+    tmp_path, fake_cli_runs, capsys, name, content, says
+):
     out = _new_run(tmp_path)
     before = _rows(out)
     (out / "trials" / name).write_text(content)
@@ -134,7 +124,7 @@ def test_stray_or_malformed_records_are_moved_aside_and_the_run_finishes(tmp_pat
     assert "rejected" not in capsys.readouterr().err
 
 
-def test_a_record_of_another_run_is_moved_aside(tmp_path, fake, capsys):
+def test_a_record_of_another_run_is_moved_aside(tmp_path, fake_cli_runs, capsys):
     out = _new_run(tmp_path)
     before = _rows(out)
     other = _new_run(tmp_path / "o", 3, "--seed", "5")  # other settings: other numbers
@@ -144,7 +134,7 @@ def test_a_record_of_another_run_is_moved_aside(tmp_path, fake, capsys):
     assert _rows(out) == before
 
 
-def test_a_failure_record_of_another_trial_is_moved_aside(tmp_path, fake, capsys):
+def test_a_failure_record_of_another_trial_is_moved_aside(tmp_path, fake_cli_runs, capsys):
     out = _new_run(tmp_path)
     (out / "failed").mkdir()
     (out / "failed" / "trial_00001.json").write_text('{"trial": 0, "status": "failed"}')
@@ -152,7 +142,7 @@ def test_a_failure_record_of_another_trial_is_moved_aside(tmp_path, fake, capsys
     assert "failed/trial_00001.json: it is not trial 1 of this run" in capsys.readouterr().err
 
 
-def test_the_merge_refuses_a_record_that_is_not_its_trial(tmp_path, fake):
+def test_the_merge_refuses_a_record_that_is_not_its_trial(tmp_path, fake_cli_runs):
     out = _new_run(tmp_path)
     trials = out / "trials"
     shutil.copy(trials / "trial_00000.json", trials / "trial_00001.json")
@@ -161,7 +151,7 @@ def test_the_merge_refuses_a_record_that_is_not_its_trial(tmp_path, fake):
         store.merge(("soa",), ("static",))
 
 
-def test_a_folder_made_before_records_carried_an_identity_still_checks_the_trial_index(tmp_path, fake):
+def test_a_folder_made_before_records_carried_an_identity_still_checks_the_trial_index(tmp_path, fake_cli_runs):
     out = _new_run(tmp_path)
     meta = json.loads((out / "run.json").read_text())
     del meta["run_id"]
@@ -177,7 +167,7 @@ def test_a_folder_made_before_records_carried_an_identity_still_checks_the_trial
     assert len(RunStore(out).reject_foreign_records()) == 1
 
 
-def test_a_run_id_that_is_not_an_identity_is_refused(tmp_path, fake):
+def test_a_run_id_that_is_not_an_identity_is_refused(tmp_path, fake_cli_runs):
     out = _new_run(tmp_path)
     meta = json.loads((out / "run.json").read_text())
     (out / "run.json").write_text(json.dumps({**meta, "run_id": ["x"]}))
@@ -194,12 +184,12 @@ def test_trial_of_name(name, trial):
     assert trial_of_name(name) == trial
 
 
-def test_resume_with_save_estimates_of_a_run_that_saves_them_is_accepted(tmp_path, fake):
+def test_resume_with_save_estimates_of_a_run_that_saves_them_is_accepted(tmp_path, fake_cli_runs):
     out = _new_run(tmp_path, 2, "--save-estimates")
     assert main(["run", "--resume", str(out), "--save-estimates", "--no-progress"]) == 0
 
 
-def test_config_from_a_run_with_duplicates_is_refused_on_resume(tmp_path, fake, capsys):
+def test_config_from_a_run_with_duplicates_is_refused_on_resume(tmp_path, fake_cli_runs, capsys):
     out = _new_run(tmp_path)
     meta = json.loads((out / "run.json").read_text())
     meta["config"]["experiment"]["clutter"] = [3.0, 3.0]

@@ -1,4 +1,4 @@
-"""Issue 14, the command line: one line and exit 2 for every bad input (a table), a scheduler address refused at
+"""Bad input on the command line: one line and exit 2 for every bad input (a table), a scheduler address refused at
 once, Ctrl-C as one line with the resume hint (the report stage included, no worker tracebacks), pool workers
 that die with their driver, and a bounded fuzz test of the argument space."""
 
@@ -17,12 +17,12 @@ import fake_trial as ft
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from repo_paths import TESTS
 
 import soabench.scenario
 from soabench.cli import main
-from soabench.experiment import registry
 
-HERE = Path(__file__).parent
+HERE = TESTS
 
 
 class Simulated(Exception):
@@ -32,15 +32,6 @@ class Simulated(Exception):
 def _messages(err: str) -> list[str]:
     """stderr without the periodic progress lines (off a terminal a run reports progress there)."""
     return [ln for ln in err.strip().splitlines() if not ln.startswith("progress:")]
-
-
-@pytest.fixture
-def no_work(monkeypatch):
-    """Any trial, simulation, KITTI sequence or netconvert started by a case fails the test (bad inputs must be
-    refused before): the stubs of bad_inputs.stub_work raise WorkStarted and note the call."""
-    bad_inputs.stub_work(monkeypatch.setattr, monkeypatch.setitem)
-    monkeypatch.setattr(bad_inputs, "STARTED", [])
-    return bad_inputs.STARTED
 
 
 CATALOGUE = bad_inputs.catalogue()
@@ -83,28 +74,25 @@ def test_report_stage_ctrl_c_is_one_line_with_the_resume_hint(tmp_path, capsys, 
     def interrupted_report(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
-    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
     monkeypatch.setattr(report, "write_report", interrupted_report)
     out = tmp_path / "run"
-    assert main(["run", "--trials", "2", "--duration", "10", "--workers", "1", "--out", str(out)]) == 130
+    with ft.as_builtins():
+        assert main(["run", "--trials", "2", "--duration", "10", "--workers", "1", "--out", str(out)]) == 130
     lines = _messages(capsys.readouterr().err)
     assert len(lines) == 1 and f"soabench run --resume {out}" in lines[0] and "report" in lines[0]
-    monkeypatch.undo()
-    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
     monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
-    assert main(["run", "--resume", str(out)]) == 0  # nothing left to run: the report is written now
+    with ft.as_builtins(trial=None):  # the real trial kind: nothing is left to run
+        assert main(["run", "--resume", str(out)]) == 0  # the report is written now
 
 
 DRIVER = """
 import sys
 sys.path.insert(0, {here!r})
 import fake_trial as ft
-from soabench.experiment import registry
-registry._TRIAL_KINDS["soabench"] = ft.slow_trial
-registry._SCENE_LOADERS["sumo"] = ft.fake_load
 from soabench.cli import main
-sys.exit(main({argv!r}))
+with ft.as_builtins(trial=ft.slow_trial):
+    code = main({argv!r})
+sys.exit(code)
 """
 
 
@@ -223,13 +211,11 @@ COMMANDS = st.sampled_from(["run", "sweep clutter", "sweep births", "study", "sc
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(COMMANDS, st.lists(st.tuples(OPTIONS, VALUES), max_size=4), st.booleans())
-def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, command, options, with_out):
+def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, fake_builtins, command, options, with_out):
     """Random commands and option values: exit 0/1/2 (or argparse's 2), never another exception or a traceback;
     exit 2 is one line. Trials are the fake trial, figures and simulations are stubbed, so this stays fast."""
     import soabench.experiment.report as report
 
-    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
-    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
     monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
     monkeypatch.setattr(soabench.scenario, "load", lambda *a, **k: (None, SimpleNamespace(step_length=0.1, duration=5)))
     monkeypatch.setattr(soabench.scenario, "simulate", lambda *a, **k: (_ for _ in ()).throw(Simulated()))
@@ -257,20 +243,11 @@ def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, command,
         assert len(_messages(err)) == 1, (argv, err)
 
 
-@pytest.fixture
-def fake_everything(monkeypatch):
-    import soabench.experiment.report as report
-
-    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
-    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
-    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
-
-
 def _ctrl_c(*a, **k):
     raise KeyboardInterrupt
 
 
-def test_ctrl_c_in_the_sweep_report_names_the_sweep_resume(tmp_path, capsys, monkeypatch, fake_everything):
+def test_ctrl_c_in_the_sweep_report_names_the_sweep_resume(tmp_path, capsys, monkeypatch, fake_cli_runs):
     import soabench.experiment.sweep as sweep
 
     monkeypatch.setattr(sweep, "write_sweep_report", _ctrl_c)
@@ -281,7 +258,7 @@ def test_ctrl_c_in_the_sweep_report_names_the_sweep_resume(tmp_path, capsys, mon
     assert len(lines) == 1 and f"finish with: soabench sweep births --resume {out}" in lines[0], lines
 
 
-def test_ctrl_c_in_the_study_comparison_names_the_study_rerun(tmp_path, capsys, monkeypatch, fake_everything):
+def test_ctrl_c_in_the_study_comparison_names_the_study_rerun(tmp_path, capsys, monkeypatch, fake_cli_runs):
     import soabench.experiment.study as study
     import soabench.experiment.sweep as sweep
 

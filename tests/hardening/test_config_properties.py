@@ -1,4 +1,4 @@
-"""Issue 14, property-based: the configuration loader (any table in: a validated config with exact types and
+"""Bad input, property-based: the configuration loader (any table in: a validated config with exact types and
 finite values, or one SoabenchError line) and the filter step at its API boundary (random mixtures and scans with
 NaN/inf injected: a clear error, or dropped and counted; weights non-negative and finite, mass conserved where it
 must be, never a NaN)."""
@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 import pytest
+from gmphd_cases import scenes
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon
-from test_gmphd_properties import scenes
 
 from soabench.birth.base import SOURCE_GRID, SOURCE_MEAS, Births, NewbornTerms
 from soabench.config import Config, FilterConfig, SensorConfig, load_config

@@ -13,12 +13,11 @@ import bad_inputs
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from repo_paths import DATA
 
 import soabench.scenario.osm as osm
 from soabench.cli import main
 from soabench.tomlfile import tomllib
-
-DATA = Path(__file__).parent / "data"
 
 
 def _one_error(capsys) -> str:
@@ -29,13 +28,6 @@ def _one_error(capsys) -> str:
 
 def _snapshot(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
-
-
-@pytest.fixture
-def no_work(monkeypatch):
-    bad_inputs.stub_work(monkeypatch.setattr, monkeypatch.setitem)
-    monkeypatch.setattr(bad_inputs, "STARTED", [])
-    return bad_inputs.STARTED
 
 
 # ------------------------------------------------------------------------------------------ folders not ours

@@ -1,4 +1,4 @@
-"""Issue 14, run folders: data never code (a poisoned run.json runs nothing), every value validated, owned folders
+"""Bad input in run folders: data never code (a poisoned run.json runs nothing), every value validated, owned folders
 (resolved paths, stale/foreign folders refused, one process per folder), requested-vs-stored conflicts refused."""
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import fake_trial as ft
 import pytest
+from repo_paths import TESTS
 
 from soabench.cli import main
 from soabench.config import Config
@@ -21,7 +22,7 @@ from soabench.experiment.ownership import FolderLock
 from soabench.experiment.runner import TodoTrials, run_experiment
 from soabench.experiment.sweep import run_sweep
 
-HERE = Path(__file__).parent
+HERE = TESTS
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
 
@@ -39,17 +40,7 @@ def small_config(trials: int = 3, **exp) -> Config:
 
 
 def make_run(out: Path, trials: int = 3, **kw) -> Path:
-    run_experiment(
-        small_config(trials),
-        "intersection",
-        out=out,
-        workers=1,
-        trial_fn=ft.fake_trial,
-        load_fn=ft.fake_load,
-        progress=False,
-        figures=False,
-        **kw,
-    )
+    ft.run_fake(small_config(trials), out, **kw)
     return out
 
 

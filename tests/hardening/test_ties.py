@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 import shapely
-from test_gmphd import reference_merge_groups
+from gmphd_cases import reference_merge_groups
 
 from soabench.birth.soa import occlusion_layers
 from soabench.config import BirthConfig, FilterConfig, SensorConfig

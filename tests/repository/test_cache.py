@@ -1,4 +1,4 @@
-"""Compiled filter kernels are cached in a per-user folder, never inside the installed package (issue 13, item 1)."""
+"""Compiled filter kernels are cached in a per-user folder, never inside the installed package."""
 
 from __future__ import annotations
 

@@ -18,11 +18,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from repo_paths import ROOT
 
 from soabench.config import DERIVED_KEYS, Config
 from soabench.experiment.store import EPISODE_COLUMNS, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS
 
-ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 
 

@@ -10,9 +10,11 @@ import csv
 import re
 from pathlib import Path
 
+from repo_paths import ROOT
+
 from soabench.cli import main
 
-DOCS = Path(__file__).resolve().parent.parent / "docs" / "user-guide"
+DOCS = ROOT / "docs" / "user-guide"
 
 
 def _example_package(page: str, tmp_path: Path, monkeypatch, package: str) -> str:

@@ -13,7 +13,8 @@ import re
 import subprocess
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from repo_paths import ROOT
+
 SCOPE = ("README.md", "docs", "soabench", "tests", "baselines", "benchmarks", "sumo_nets", "results", "pyproject.toml")
 TEXT = {".py", ".md", ".toml", ".txt", ".cfg", ".sh", ".yml", ".yaml", ".xml", ""}
 # the names are split so that this file does not match itself

@@ -9,6 +9,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from repo_paths import ROOT
 
 import soabench.baselines
 import soabench.nets
@@ -20,7 +21,6 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
 
 

@@ -1,18 +1,17 @@
 """The README is the front door: short, its Quickstart is what CI runs, and one click reaches each manual page.
 
-docs/ is the manual (tests/test_docs.py); the README says what the benchmark is, shows the two Quickstart commands
-that `.ci/run` runs, and links each "what you can do" example to its page.
+docs/ is the manual (tests/repository/test_docs.py); the README says what the benchmark is, shows the two Quickstart
+commands that `.ci/run` runs, and links each "what you can do" example to its page.
 """
 
 from __future__ import annotations
 
 import re
 import subprocess
-from pathlib import Path
 
 import pytest
+from repo_paths import ROOT
 
-ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
 MAX_LINES = 150
 QUICKSTART = {

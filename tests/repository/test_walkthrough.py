@@ -8,8 +8,8 @@ import re
 from pathlib import Path
 
 import pytest
+from repo_paths import ROOT
 
-ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "user-guide" / "python.md"
 NOTEBOOK = ROOT / "examples" / "walkthrough.ipynb"
 

@@ -1,5 +1,5 @@
 """Every figure function renders a reviewer-grade PNG: a non-empty file, labelled axes with units, a legend where
-the figure needs one, and the specific defects of issue 13 fixed (no ±σ below 0 s, shared y-ranges, the OSPA
+the figure needs one, and the defects these tests guard against absent (no ±σ below 0 s, shared y-ranges, the OSPA
 cut-off, all models in Fig. 5h, dashed "dynamic" in the clutter legend, holes of map polygons left open).
 
 Synthetic run tables (two clutter rates, three models including a plugin name, two modes, six trials) keep

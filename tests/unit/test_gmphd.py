@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from gmphd_cases import reference_merge_groups
 from shapely.geometry import Polygon
 
 from soabench.birth.base import SOURCE_GRID, SOURCE_MEAS, Births, NewbornTerms
@@ -225,25 +226,6 @@ def test_t8_predict_mass_and_covariance():
 
 # ---------------------------------------------------------------------------------------------------------------------
 # T9: merging
-
-
-def reference_merge_groups(m, P, w, U):
-    """Literal Vo-Ma Table II loop (one vectorised Mahalanobis pass per merged component), with the tie rule of
-    register row 35: d^2 <= U (1 + 1e-9)."""
-    Pinv = np.linalg.inv(P)
-    alive = np.ones(len(w), bool)
-    label = np.full(len(w), -1)
-    g = 0
-    while alive.any():
-        idx = np.flatnonzero(alive)
-        j = idx[np.argmax(w[idx])]
-        d = m[idx] - m[j]
-        d2 = np.einsum("ni,nij,nj->n", d, Pinv[idx], d)
-        members = idx[d2 <= U * (1.0 + 1e-9)]
-        label[members] = g
-        alive[members] = False
-        g += 1
-    return label
 
 
 def test_t9_identical_components_merge():

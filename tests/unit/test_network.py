@@ -1,21 +1,21 @@
-"""The shipped intersection and the network -> SceneMap loader (issue 2), without running SUMO."""
+"""The shipped intersection and the network -> SceneMap loader, without running SUMO."""
 
 from __future__ import annotations
 
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 import shapely
 import sumo
+from repo_paths import ROOT
 from shapely.geometry import Point
 
 from soabench.errors import SoabenchError
 from soabench.scenario import load, load_scenario, shipped_nets
 from soabench.scenario.network import read_net
 
-NET_DIR = Path(__file__).resolve().parents[1] / "sumo_nets" / "intersection"
+NET_DIR = ROOT / "sumo_nets" / "intersection"
 NET = NET_DIR / "intersection.net.xml"
 
 
@@ -110,9 +110,12 @@ def test_user_scenario_on_user_net(tmp_path):
 
 
 def test_rebuild_script_holds_the_netconvert_command():
+    """The scene's build.sh builds its own sources with the one netconvert command of sumo_nets/netbuild.sh."""
+    shared = (NET_DIR.parent / "netbuild.sh").read_text()
+    for opt in ("--crossings.guess", "--offset.disable-normalization", '"$1.nod.xml"', '"$1.edg.xml"'):
+        assert opt in shared
     text = (NET_DIR / "build.sh").read_text()
-    for opt in ("--crossings.guess", "--offset.disable-normalization", "intersection.nod.xml", "intersection.edg.xml"):
-        assert opt in text
+    assert "source ../netbuild.sh" in text and "build_net intersection" in text
 
 
 # ----------------------------------------------------------------------------------------------------- bad input

@@ -3,7 +3,7 @@ into components born at this scan per birth source and components surviving from
 
 A hand-built two-scan case whose every component's fate is known (weights chosen against the pruning threshold T,
 means placed for or against merging) checks the split on both filter paths; the columns' sum is checked here and
-in tests/test_trial.py (real pipeline) and tests/test_fused_cycle.py (fused against array path).
+in tests/unit/test_trial.py (real pipeline) and tests/equivalence/test_fused_cycle.py (fused against array path).
 """
 
 from __future__ import annotations

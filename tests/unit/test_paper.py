@@ -1,4 +1,4 @@
-"""The paper-comparison statistics (issue 8): win counts, reductions, Wilcoxon and bootstrap on constructed rows."""
+"""The paper-comparison statistics: win counts, reductions, Wilcoxon and bootstrap on constructed rows."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Public API, plugin registry, plugin checks and failure records (issue 15).
+"""Public API, plugin registry, plugin checks and failure records.
 
 The broken plugins of ``tests/plugin_fixtures.py`` are named by import path, as a user would type them.
 """
@@ -12,6 +12,7 @@ import sys
 
 import numpy as np
 import pytest
+from repo_paths import TESTS
 
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
@@ -279,7 +280,6 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     """Dask workers get the typed import paths from the task (not from a file) and compute the same numbers."""
     import logging
     import os
-    from pathlib import Path
 
     distributed = pytest.importorskip("distributed")
     from soabench.experiment.files import read_csv
@@ -290,7 +290,7 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     cfg = _cfg(("soa", one, bad), (echo,))
     serial = run_experiment(cfg, "intersection", out=tmp_path / "s", workers=1, progress=False, figures=False)
     old = os.environ.get("PYTHONPATH")
-    os.environ["PYTHONPATH"] = str(Path(__file__).parent) + (os.pathsep + old if old else "")
+    os.environ["PYTHONPATH"] = str(TESTS) + (os.pathsep + old if old else "")
     cluster = distributed.LocalCluster(
         n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
     )

@@ -1,15 +1,13 @@
-"""Progress on stderr wherever it goes: a bar on a terminal, periodic lines with an ETA otherwise (issue 13)."""
+"""Progress on stderr wherever it goes: a bar on a terminal, periodic lines with an ETA otherwise."""
 
 from __future__ import annotations
 
 import io
 
 import fake_trial as ft
-from test_runner import small_config
 
 from soabench.experiment import progress as pg
 from soabench.experiment.progress import Progress, format_duration
-from soabench.experiment.runner import run_experiment
 
 
 class Clock:
@@ -72,10 +70,7 @@ def test_format_duration():
 
 
 def test_a_run_with_redirected_stderr_reports_progress(tmp_path, capsys):
-    run_experiment(
-        small_config(trials=3), "intersection", out=tmp_path / "r", load_fn=ft.fake_load, trial_fn=ft.fake_trial,
-        workers=1, figures=False,
-    )  # fmt: skip
+    ft.run_fake(ft.small_config(trials=3, duration=20.0, clutter=(3.0,), seed=11), tmp_path / "r", progress=True)
     err = capsys.readouterr().err.splitlines()
     progress = [ln for ln in err if ln.startswith("progress: r: ")]
     assert progress[0].startswith("progress: r: 0/3 trials") and progress[-1].startswith("progress: r: 3/3 trials")

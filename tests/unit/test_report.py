@@ -15,7 +15,6 @@ from soabench.config import Config
 from soabench.experiment.files import format_value, read_csv, write_csv
 from soabench.experiment.plots import cumulative_precision
 from soabench.experiment.report import RunTables, load_tables, summarize, write_report
-from soabench.experiment.runner import run_experiment
 from soabench.experiment.store import RunStore
 
 
@@ -29,16 +28,7 @@ def small_config(trials: int = 3, models=("soa", "pubm", "atbm"), modes=("static
 
 def test_report_is_rebuilt_from_the_csv_files_alone(tmp_path):
     out = tmp_path / "run"
-    o = run_experiment(
-        small_config(),
-        "intersection",
-        out=out,
-        workers=1,
-        trial_fn=ft.fake_trial,
-        load_fn=ft.fake_load,
-        progress=False,
-        save_estimates=True,
-    )
+    o = ft.run_fake(small_config(), out, figures=True, save_estimates=True)
     md = (out / "summary.md").read_text()
     js = json.loads((out / "summary.json").read_text())
     # the per-trial records are not needed once merged: the report reads the CSV files (and run.json)

@@ -1,8 +1,9 @@
-"""libsumo runs of the shipped intersection -> Recording (issue 2): determinism, physical plausibility, events."""
+"""libsumo runs of the shipped intersection -> Recording: determinism, physical plausibility, events."""
 
 from __future__ import annotations
 
 import matplotlib
+from repo_paths import ROOT
 
 matplotlib.use("Agg")
 
@@ -225,11 +226,10 @@ def test_npz_round_trip(rec, tmp_path):
 
 
 def test_docs_recording_format_lists_every_array(rec, tmp_path):
-    from pathlib import Path
 
     path = tmp_path / "rec.npz"
     rec.save_npz(path)
-    page = (Path(__file__).parents[1] / "docs" / "user-guide" / "outputs.md").read_text(encoding="utf-8")
+    page = (ROOT / "docs" / "user-guide" / "outputs.md").read_text(encoding="utf-8")
     doc = page.split("## Recording format", 1)[1].split("\n## ", 1)[0]
     with np.load(path, allow_pickle=False) as data:
         assert [name for name in data.files if f"`{name}`" not in doc] == []

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import shapely
+from repo_paths import ROOT
 from shapely.geometry import Polygon, box
 
 from soabench.config import SensorConfig
@@ -468,7 +467,7 @@ def test_docs_scans_format_lists_every_array(run, tmp_path):
     _, _, scans = run
     path = tmp_path / "scans.npz"
     scans.save_npz(path)
-    page = (Path(__file__).parents[1] / "docs" / "user-guide" / "outputs.md").read_text(encoding="utf-8")
+    page = (ROOT / "docs" / "user-guide" / "outputs.md").read_text(encoding="utf-8")
     doc = page.split("## Scans format", 1)[1].split("\n## ", 1)[0]
     with np.load(path, allow_pickle=False) as data:
         missing = [name for name in data.files if f"`{name}`" not in doc]

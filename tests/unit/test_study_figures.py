@@ -5,21 +5,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import fake_trial as ft
 import pytest
 
 from soabench.cli import main
-from soabench.experiment import registry
 
 
 @pytest.fixture
-def drawn(monkeypatch) -> dict[str, bool]:
+def drawn(monkeypatch, fake_builtins) -> dict[str, bool]:
     """Fake trials and scenes; every report's folder (relative to the study) -> whether it drew figures."""
     import soabench.experiment.report as report
     import soabench.experiment.study as study
 
-    monkeypatch.setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, ft.fake_trial)
-    monkeypatch.setitem(registry._SCENE_LOADERS, registry.DEFAULT_SCENE_LOADER, ft.fake_load)
     monkeypatch.setattr(study, "paper_protocol_mismatch", lambda meta: "fake trials")
     calls: dict[str, bool] = {}
     real = report.write_report
