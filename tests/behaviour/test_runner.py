@@ -16,7 +16,7 @@ from pathlib import Path
 import fake_trial as ft
 import numpy as np
 import pytest
-from repo_paths import TESTS
+from local_dask import local_cluster
 
 from soabench.config import Config
 from soabench.errors import SoabenchError
@@ -43,24 +43,8 @@ def run(cfg: Config, out: Path, **kw):
 @pytest.fixture(scope="module")
 def dask_scheduler():
     """One Dask LocalCluster (2 processes, 1 thread each) for the module; workers can import fake_trial."""
-    import distributed
-
-    here = str(TESTS)
-    old = os.environ.get("PYTHONPATH")
-    os.environ["PYTHONPATH"] = here + (os.pathsep + old if old else "")
-    import logging
-
-    cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
-    )
-    try:
-        yield cluster.scheduler_address
-    finally:
-        cluster.close()
-        if old is None:
-            os.environ.pop("PYTHONPATH", None)
-        else:
-            os.environ["PYTHONPATH"] = old
+    with local_cluster(2) as address:
+        yield address
 
 
 def test_end_to_end_files_agree(tmp_path):

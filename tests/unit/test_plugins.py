@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 import pytest
-from repo_paths import TESTS
+from local_dask import local_cluster
 
 from soabench import plugins
 from soabench.config import Config, ExperimentConfig
@@ -278,10 +278,6 @@ def test_cli_plugin_errors_are_one_line(capsys) -> None:
 
 def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     """Dask workers get the typed import paths from the task (not from a file) and compute the same numbers."""
-    import logging
-    import os
-
-    distributed = pytest.importorskip("distributed")
     from soabench.experiment.files import read_csv
     from soabench.experiment.runner import run_experiment
 
@@ -289,21 +285,8 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     plugins.allow_import_paths([one, echo, bad])
     cfg = _cfg(("soa", one, bad), (echo,))
     serial = run_experiment(cfg, "intersection", out=tmp_path / "s", workers=1, progress=False, figures=False)
-    old = os.environ.get("PYTHONPATH")
-    os.environ["PYTHONPATH"] = str(TESTS) + (os.pathsep + old if old else "")
-    cluster = distributed.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
-    )
-    try:
-        dask = run_experiment(
-            cfg, "intersection", out=tmp_path / "d", scheduler=cluster.scheduler_address, progress=False, figures=False
-        )
-    finally:
-        cluster.close()
-        if old is None:
-            os.environ.pop("PYTHONPATH", None)
-        else:
-            os.environ["PYTHONPATH"] = old
+    with local_cluster(1) as address:
+        dask = run_experiment(cfg, "intersection", out=tmp_path / "d", scheduler=address, progress=False, figures=False)
     assert serial.complete and dask.complete
     a, b = read_csv(tmp_path / "s" / "trials.csv"), read_csv(tmp_path / "d" / "trials.csv")
     assert list(a["model"]) == list(b["model"]) == ["soa", one, echo]
