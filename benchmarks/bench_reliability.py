@@ -53,12 +53,11 @@ def _case_in_child(make, needle: str, case_dir: Path, limit_bytes: int, say_comm
     """Run one catalogue case in this (forked) process; return its verdict and first lines."""
     import contextlib
     import io
-    import operator
     import resource
     import traceback
 
     resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
-    bad_inputs.stub_work(setattr, operator.setitem)
+    bad_inputs.work_stubbed(setattr).__enter__()  # for the rest of this forked process
     os.chdir(case_dir)
     out, err = io.StringIO(), io.StringIO()
     started = False
@@ -136,7 +135,8 @@ def run_meta_cases(tmp: Path) -> tuple[int, int]:
     import contextlib
     import io
 
-    from test_hardening_runs import BAD_META, POISONS
+    sys.path.insert(0, str(ROOT / "tests" / "hardening"))
+    from test_run_folders import BAD_META, POISONS
 
     tried = refused = 0
     for i, changes in enumerate([*POISONS, *(c for c, _ in BAD_META)]):
