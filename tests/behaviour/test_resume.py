@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import signal
 import subprocess
@@ -35,9 +34,7 @@ run_experiment(cfg, "intersection", out=Path({out!r}), workers=1, trial_fn=ft.sl
 
 
 def small_config(trials: int) -> Config:
-    cfg = Config()
-    cfg.experiment = dataclasses.replace(cfg.experiment, trials=trials, duration=15.0, clutter=(0.5, 3.0), seed=5)
-    return cfg.validate()
+    return ft.small_config(trials=trials, duration=15.0, clutter=(0.5, 3.0), seed=5)
 
 
 def start_run(cfg: Config, out: Path) -> subprocess.Popen:

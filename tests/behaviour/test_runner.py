@@ -6,7 +6,6 @@ test).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os
@@ -29,11 +28,7 @@ CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
 
 def small_config(trials: int = 4, clutter=(3.0,), duration: float = 20.0, seed: int = 11) -> Config:
-    cfg = Config()
-    cfg.experiment = dataclasses.replace(
-        cfg.experiment, trials=trials, duration=duration, clutter=tuple(clutter), seed=seed
-    )
-    return cfg.validate()
+    return ft.small_config(trials=trials, duration=duration, clutter=tuple(clutter), seed=seed)
 
 
 def run(cfg: Config, out: Path, **kw):

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import subprocess
 import sys
@@ -32,11 +31,7 @@ def _messages(err: str) -> list[str]:
 
 
 def small_config(trials: int = 3, **exp) -> Config:
-    cfg = Config()
-    cfg.experiment = dataclasses.replace(
-        cfg.experiment, trials=trials, duration=10.0, clutter=(0.5, 3.0), seed=5, models=("soa", "ubm"), **exp
-    )
-    return cfg.validate()
+    return ft.small_config(trials=trials, duration=10.0, clutter=(0.5, 3.0), seed=5, models=("soa", "ubm"), **exp)
 
 
 def make_run(out: Path, trials: int = 3, **kw) -> Path:

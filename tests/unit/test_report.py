@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import gzip
 import json
 import math
@@ -19,11 +18,7 @@ from soabench.experiment.store import RunStore
 
 
 def small_config(trials: int = 3, models=("soa", "pubm", "atbm"), modes=("static",)) -> Config:
-    cfg = Config()
-    cfg.experiment = dataclasses.replace(
-        cfg.experiment, trials=trials, duration=12.0, models=tuple(models), probabilities=tuple(modes), seed=3
-    )
-    return cfg.validate()
+    return ft.small_config(trials=trials, duration=12.0, models=tuple(models), probabilities=tuple(modes), seed=3)
 
 
 def test_report_is_rebuilt_from_the_csv_files_alone(tmp_path):
