@@ -74,27 +74,21 @@ def test_a_suite_config_that_sets_the_protocol_is_refused(tmp_path, capsys) -> N
     )
 
 
-def test_import_path_plugins_need_plugin_flag_and_a_failed_plugin_fails(tmp_path, capsys) -> None:
-    from soabench import plugins
-
-    saved = set(plugins._TYPED)
-    plugins._TYPED.clear()
-    try:
-        suite = tmp_path / "s.toml"
-        suite.write_text(
-            '[[scenario]]\nname = "a"\nnet = "intersection"\nduration = 6\n'
-            'models = ["soa", "plugin_fixtures:RaiseAtScan3"]\ntrackers = ["plugin_fixtures:EchoTracker"]\n'
-            '[[threshold]]\nmetric = "gospa"\nmodel = "plugin_fixtures:EchoTracker"\nmin = 0\n'
-        )
-        assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2
-        err = capsys.readouterr().err.strip().splitlines()  # the check command's advice, not run's --models
-        assert len(err) == 1 and "add --plugin plugin_fixtures:RaiseAtScan3" in err[0] and "--models" not in err[0]
-        argv = ["check", "--suite", str(suite), "--out", str(tmp_path / "o")]
-        argv += ["--plugin", "plugin_fixtures:RaiseAtScan3", "--plugin", "plugin_fixtures:EchoTracker"]
-        assert main(argv) == 1
-        out = capsys.readouterr().out
-        assert "a/plugin_fixtures:EchoTracker/static/lambda=3/gospa" in out and "FAIL (1 of 2 checks)" in out
-        assert "'plugin_fixtures:RaiseAtScan3' failed in trial 0 at scan 3" in out
-    finally:
-        plugins._TYPED.clear()
-        plugins._TYPED.update(saved)
+def test_import_path_plugins_need_plugin_flag_and_a_failed_plugin_fails(
+    tmp_path, capsys, typed_plugins_cleared
+) -> None:
+    suite = tmp_path / "s.toml"
+    suite.write_text(
+        '[[scenario]]\nname = "a"\nnet = "intersection"\nduration = 6\n'
+        'models = ["soa", "plugin_fixtures:RaiseAtScan3"]\ntrackers = ["plugin_fixtures:EchoTracker"]\n'
+        '[[threshold]]\nmetric = "gospa"\nmodel = "plugin_fixtures:EchoTracker"\nmin = 0\n'
+    )
+    assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()  # the check command's advice, not run's --models
+    assert len(err) == 1 and "add --plugin plugin_fixtures:RaiseAtScan3" in err[0] and "--models" not in err[0]
+    argv = ["check", "--suite", str(suite), "--out", str(tmp_path / "o")]
+    argv += ["--plugin", "plugin_fixtures:RaiseAtScan3", "--plugin", "plugin_fixtures:EchoTracker"]
+    assert main(argv) == 1
+    out = capsys.readouterr().out
+    assert "a/plugin_fixtures:EchoTracker/static/lambda=3/gospa" in out and "FAIL (1 of 2 checks)" in out
+    assert "'plugin_fixtures:RaiseAtScan3' failed in trial 0 at scan 3" in out
