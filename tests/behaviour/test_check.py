@@ -7,9 +7,12 @@ import json
 import shutil
 import xml.etree.ElementTree as ET
 
+import pytest
 from repo_paths import ROOT
 
 from soabench.cli import main
+
+pytestmark = pytest.mark.slow  # `soabench check` of the example suite: real runs
 
 SUITE = ROOT / "examples" / "check" / "suite.toml"
 

@@ -16,6 +16,8 @@ import pytest
 from soabench.cli import main
 from soabench.origins import ORIGIN_KEYS
 
+pytestmark = pytest.mark.slow  # the real pipeline through the CLI
+
 MODELS = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
 MODES = ("static", "dynamic")
 

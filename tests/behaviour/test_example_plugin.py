@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 from repo_paths import ROOT
 
+pytestmark = pytest.mark.slow  # pip-installs the example plugin, then real runs
+
 EXAMPLE = ROOT / "examples" / "soabench-example-plugin"
 
 

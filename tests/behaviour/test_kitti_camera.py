@@ -17,6 +17,8 @@ from soabench.kitti.export import GRAVITY, GROUND_Z, PED_HWL, export_calib, expo
 from soabench.kitti.formats import lat_to_scale, latlon_to_mercator, parse_calib, parse_objects
 from soabench.kitti.reader import centres_ego, footprints_ego
 
+pytestmark = pytest.mark.slow  # a KITTI export from SUMO runs
+
 DURATION = 30.0
 W, H = 1242, 375
 

@@ -19,6 +19,8 @@ from soabench.kitti.config import KittiConfig, kitti_base_config
 from soabench.kitti.export import export_default_fov
 from soabench.kitti.reader import open_dataset, read_sequence, to_scans
 
+pytestmark = pytest.mark.slow  # SUMO runs exported to KITTI files
+
 DURATION = 30.0
 
 

@@ -14,6 +14,8 @@ import pytest
 
 from soabench.cli import main
 
+pytestmark = pytest.mark.slow  # real trials and a headless browser
+
 DURATION = 30  # pedestrians of seed 0 enter the sensor's range after about 27 s
 
 

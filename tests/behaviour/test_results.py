@@ -26,6 +26,8 @@ from soabench.experiment.store import TRIAL_COLUMNS
 from soabench.experiment.trial import run_trial
 from soabench.scenario import load
 
+pytestmark = pytest.mark.slow  # re-runs parts of the committed study
+
 RESULTS = ROOT / "results" / "intersection"
 
 

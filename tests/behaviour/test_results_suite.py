@@ -21,6 +21,8 @@ from soabench.experiment import cross_scene, paper
 from soabench.experiment.files import read_json
 from soabench.experiment.occlusion_density import scan_occlusion
 
+pytestmark = pytest.mark.slow  # `soabench results` with SUMO scenes
+
 TINY = [
     "--scenes", "intersection,tjunction", "--trials", "2", "--duration", "10", "--births-trials", "1",
     "--scene-trials", "2", "--density-trials", "1", "--kitti-sequences", "2",

@@ -17,6 +17,8 @@ from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment.runner import run_experiment
 
+pytestmark = pytest.mark.slow  # runs killed and resumed in subprocesses
+
 HERE = TESTS
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 

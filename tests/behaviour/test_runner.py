@@ -24,6 +24,8 @@ from soabench.experiment.report import LABEL, fmt, fmt_pct
 from soabench.experiment.runner import run_experiment
 from soabench.experiment.sweep import run_sweep, sweep_points
 
+pytestmark = pytest.mark.slow  # process pools and a Dask cluster
+
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
 

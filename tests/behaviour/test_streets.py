@@ -17,6 +17,8 @@ from soabench.scenario import load, shipped_nets, shipped_root, simulate
 from soabench.scenario.network import fringe_edges, read_net
 from soabench.seeding import trial_seeds
 
+pytestmark = pytest.mark.slow  # OSM import, every shipped scene, the occlusion sweep
+
 BIN = Path(sumo.SUMO_HOME) / "bin"
 ENV = {**os.environ, "SUMO_HOME": sumo.SUMO_HOME}
 

@@ -34,6 +34,7 @@ def test_tables_travel_as_plain_arrays(run_dir, tmp_path):
         assert list(a) == list(b) and all(a[c].dtype == b[c].dtype and a[c].tobytes() == b[c].tobytes() for c in a)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("arrays", [True, False], ids=["arrays", "workers-read-the-folder"])
 def test_parallel_figures_are_the_serial_ones_byte_for_byte(run_dir, tmp_path, monkeypatch, arrays):
     tables = load_tables(run_dir)

@@ -18,6 +18,8 @@ from soabench.experiment.store import RunStore, merged_stamp
 from soabench.experiment.sweep import run_sweep
 from soabench.experiment.tables import load_tables
 
+pytestmark = pytest.mark.slow  # merges on a process pool
+
 POINTS = ("ntot_001", "ntot_002")
 COMPARED = ("trials.csv", "episodes.csv", "steps.csv", "model_failures.csv")
 

@@ -22,6 +22,8 @@ from soabench.experiment.files import read_csv
 from soabench.experiment.sweep import run_sweep, scans_per_run
 from soabench.experiment.trial import ROW_TIME_KEYS, TrialShare, run_trial
 
+pytestmark = pytest.mark.slow  # real trials, shared and recomputed
+
 MODELS = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
 MODE_FREE = {"soa", "ubm", "ubm-ws", "gmbm"}
 

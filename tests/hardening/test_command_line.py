@@ -150,6 +150,7 @@ def test_ctrl_c_with_pool_workers_prints_one_line_and_no_worker_traceback(tmp_pa
     assert len(lines) == 1 and f"finish with: soabench run --resume {out}" in lines[0], err
 
 
+@pytest.mark.slow
 def test_ctrl_c_with_dask_local_workers_prints_one_line_and_no_worker_traceback(tmp_path):
     out = tmp_path / "run"
     proc = _driver(
@@ -168,6 +169,7 @@ def test_ctrl_c_with_dask_local_workers_prints_one_line_and_no_worker_traceback(
     assert f"finish with: soabench run --resume {out}" in err.strip().splitlines()[-1]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_pool_workers_die_with_a_killed_driver(tmp_path):
     out = tmp_path / "run"
@@ -209,6 +211,7 @@ OPTIONS = st.sampled_from(
 COMMANDS = st.sampled_from(["run", "sweep clutter", "sweep births", "study", "scene", "record", "birth", "nope"])
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(COMMANDS, st.lists(st.tuples(OPTIONS, VALUES), max_size=4), st.booleans())
 def test_fuzz_the_argument_space(tmp_path_factory, monkeypatch, capsys, fake_builtins, command, options, with_out):

@@ -212,6 +212,7 @@ run_experiment(None, "x", resume=Path({run!r}), workers=1, trial_fn=ft.slow_tria
 """
 
 
+@pytest.mark.slow
 def test_two_processes_never_work_one_folder(tmp_path, capsys):
     run = make_run(tmp_path / "run", trials=12)
     for p in (run / "trials").glob("*.json"):

@@ -21,6 +21,8 @@ from soabench.scenario.simulation import _simulate_here
 from soabench.scenario.watchdog import INSERTING, STALL_ENV, STEPPING, Progress, run_watched, stall_timeout
 from soabench.seeding import trial_seeds
 
+pytestmark = pytest.mark.slow  # SUMO runs that stall until a watchdog stops them
+
 BIN = Path(sumo.SUMO_HOME) / "bin"
 ENV = {**os.environ, "SUMO_HOME": sumo.SUMO_HOME}
 RUN = "from soabench.cli import main; raise SystemExit(main())"  # the console script, in a child we can time out

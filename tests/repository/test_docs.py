@@ -23,6 +23,8 @@ from repo_paths import ROOT
 from soabench.config import DERIVED_KEYS, Config
 from soabench.experiment.store import EPISODE_COLUMNS, STEP_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS
 
+pytestmark = pytest.mark.slow  # builds the manual with mkdocs
+
 DOCS = ROOT / "docs"
 
 

@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 from repo_paths import ROOT
 
+pytestmark = pytest.mark.slow  # runs every block of the walk-through
+
 PAGE = ROOT / "docs" / "user-guide" / "python.md"
 NOTEBOOK = ROOT / "examples" / "walkthrough.ipynb"
 

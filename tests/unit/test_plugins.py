@@ -276,6 +276,7 @@ def test_cli_plugin_errors_are_one_line(capsys) -> None:
     assert len(err) == 1 and "'no_such_module_xyz:Thing' cannot be imported" in err[0]
 
 
+@pytest.mark.slow
 def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     """Dask workers get the typed import paths from the task (not from a file) and compute the same numbers."""
     from soabench.experiment.files import read_csv

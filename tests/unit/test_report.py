@@ -9,6 +9,7 @@ import shutil
 
 import fake_trial as ft
 import numpy as np
+import pytest
 
 from soabench.config import Config
 from soabench.experiment.files import format_value, read_csv, write_csv
@@ -21,6 +22,7 @@ def small_config(trials: int = 3, models=("soa", "pubm", "atbm"), modes=("static
     return ft.small_config(trials=trials, duration=12.0, models=tuple(models), probabilities=tuple(modes), seed=3)
 
 
+@pytest.mark.slow
 def test_report_is_rebuilt_from_the_csv_files_alone(tmp_path):
     out = tmp_path / "run"
     o = ft.run_fake(small_config(), out, figures=True, save_estimates=True)

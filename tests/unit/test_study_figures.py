@@ -28,6 +28,7 @@ def drawn(monkeypatch, fake_builtins) -> dict[str, bool]:
     return calls
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("all_figures", [False, True])
 def test_study_draws_the_figures_of_the_folders_it_does_not_summarise(tmp_path, drawn, all_figures):
     out = tmp_path / "study"
