@@ -37,6 +37,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import bad_inputs  # noqa: E402
 import fake_trial as ft  # noqa: E402
+from processes import alive, children  # noqa: E402
 
 import soabench.experiment.report as report  # noqa: E402
 from soabench.cli import main  # noqa: E402
@@ -177,23 +178,6 @@ else:
 """
 
 
-def _children(pid: int) -> list[int]:
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            out += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
 def kill_resume_cycles(tmp: Path, n_trials: int = 16) -> dict:
     cfg = _cfg(n_trials)
     out = tmp / "killed"
@@ -211,16 +195,16 @@ def kill_resume_cycles(tmp: Path, n_trials: int = 16) -> dict:
             proc.communicate()
             assert proc.returncode == 0
             break
-        workers = _children(proc.pid)
+        workers = children(proc.pid)
         proc.send_signal(signal.SIGKILL)
         proc.communicate()
         cycles += 1
         t0 = time.monotonic()
-        while any(_alive(p) for p in workers) and time.monotonic() - t0 < 10:
+        while any(alive(p) for p in workers) and time.monotonic() - t0 < 10:
             time.sleep(0.1)
-        orphans += sum(_alive(p) for p in workers)
+        orphans += sum(alive(p) for p in workers)
         for p in workers:
-            if _alive(p):
+            if alive(p):
                 os.kill(p, signal.SIGKILL)
         resume = True
     ref = tmp / "ref"

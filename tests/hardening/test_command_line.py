@@ -17,6 +17,7 @@ import fake_trial as ft
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from processes import alive, children
 from repo_paths import TESTS
 
 import soabench.scenario
@@ -115,24 +116,6 @@ def _wait_for(out: Path, n: int, proc: subprocess.Popen, timeout: float = 60.0) 
         time.sleep(0.05)
 
 
-def _children(pid: int) -> list[int]:
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            out += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_ctrl_c_with_pool_workers_prints_one_line_and_no_worker_traceback(tmp_path):
     out = tmp_path / "run"
@@ -176,14 +159,14 @@ def test_pool_workers_die_with_a_killed_driver(tmp_path):
     proc = _driver(["run", "--trials", "40", "--duration", "10", "--workers", "2", "--out", str(out)])
     try:
         _wait_for(out, 2, proc)
-        workers = _children(proc.pid)
+        workers = children(proc.pid)
         assert workers, "the driver has no worker processes"
         proc.send_signal(signal.SIGKILL)
         proc.communicate(timeout=30)
         t0 = time.monotonic()
-        while any(_alive(p) for p in workers) and time.monotonic() - t0 < 10:
+        while any(alive(p) for p in workers) and time.monotonic() - t0 < 10:
             time.sleep(0.1)
-        assert not any(_alive(p) for p in workers), "orphaned workers still run"
+        assert not any(alive(p) for p in workers), "orphaned workers still run"
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
