@@ -171,6 +171,7 @@ def fake_study(monkeypatch):
 STUDY = ["study", "--trials", "3", "--births-trials", "1", "--duration", "10", "--workers", "1", "--no-progress"]
 
 
+@pytest.mark.slow
 def test_study_runs_the_sensitivity_part(tmp_path, capsys, fake_study):
     out = tmp_path / "study"
     assert main([*STUDY, "--out", str(out)]) == 0

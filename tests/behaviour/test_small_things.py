@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import re
 
+import pytest
+
 from soabench.cli import main
 
 
@@ -17,6 +19,7 @@ def _run(tmp_path, name: str, duration: float, *extra: str) -> dict:
     return {"summary": json.loads((out / "summary.json").read_text()), "md": (out / "summary.md").read_text()}
 
 
+@pytest.mark.slow
 def test_unobserved_run_names_the_shortest_useful_duration_and_it_is(tmp_path):
     """10 s of the default scene observe nobody; the warning says from the scene when somebody becomes observable,
     and a run of the suggested duration does observe somebody."""

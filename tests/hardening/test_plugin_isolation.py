@@ -68,6 +68,7 @@ def test_a_method_that_fails_everywhere_is_not_a_success(tmp_path, capsys) -> No
     assert "traceback" not in (run / "model_failures.csv").read_text().splitlines()[0]  # the table keeps its columns
 
 
+@pytest.mark.slow
 def test_a_run_without_failures_still_exits_0(tmp_path, capsys) -> None:
     rc, out, err = _cli_run(tmp_path, capsys, "--trackers", f"{FX}:EchoTracker")
     assert rc == 0 and "method run(s) failed" not in err
@@ -129,6 +130,7 @@ def test_a_real_ctrl_c_while_a_plugin_runs_still_stops_the_run(tmp_path) -> None
 
 
 # ------------------------------------------------------------------------------------------------ hangs and prints
+@pytest.mark.slow
 def test_a_plugin_that_hangs_is_stopped_by_the_budget(tmp_path, capsys) -> None:
     (tmp_path / "c.toml").write_text("[experiment]\nplugin_budget = 1.0\n")
     t0 = time.perf_counter()
@@ -147,6 +149,7 @@ def test_the_budget_is_a_validated_config_key() -> None:
     assert Config.from_dict({"experiment": {"plugin_budget": 0}}).experiment.plugin_budget == 0.0
 
 
+@pytest.mark.slow
 def test_plugin_prints_stay_off_stdout(tmp_path, capsys) -> None:
     rc, out, err = _cli_run(tmp_path, capsys, "--trackers", f"{FX}:Prints")
     assert rc == 0

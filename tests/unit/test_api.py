@@ -52,6 +52,7 @@ def test_dir_lists_only_public_names() -> None:
     assert (sb.BIRTH_MODEL, sb.TRACKER) == ("birth model", "tracker")
 
 
+@pytest.mark.slow
 def test_run_in_memory_equals_the_cli_tables_bit_for_bit(cli_run, api_run, tmp_path) -> None:
     result, cwd = api_run
     assert list(cwd.iterdir()) == [], "an in-memory run wrote files"

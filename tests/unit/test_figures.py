@@ -170,6 +170,7 @@ def test_fig5_delay_markers_no_band_below_zero_and_shared_range(tables, tmp_path
     assert any(lab.startswith("static: k̄ =") for lab in labels) and any(lab.startswith("dynamic") for lab in labels)
 
 
+@pytest.mark.slow
 def test_make_figures_shares_the_delay_axis_across_models(tables, tmp_path):
     paths = plots.make_figures(tables, tmp_path / "figures")
     names = {p.name for p in paths}
@@ -374,6 +375,7 @@ def test_fig7b_components_by_origin(tables, tmp_path):
     assert "mean J = 15.5, born this scan 5.0" in [t.get_text() for t in panels[0].texts]
 
 
+@pytest.mark.slow
 def test_fig7b_is_skipped_for_a_run_without_origin_columns(tables, tmp_path):
     old = dataclasses.replace(tables, steps={c: v for c, v in tables.steps.items() if c not in ORIGIN_KEYS})
     assert fig_components_origin(old, 3.0, tmp_path / "fig7b.png") is None and not (tmp_path / "fig7b.png").exists()

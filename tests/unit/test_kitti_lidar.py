@@ -85,6 +85,7 @@ def test_regions_are_cached_by_files_and_parameters(tmp_path):
     assert not hit and sorted(sem) == [0]
 
 
+@pytest.mark.slow
 def test_synthetic_scans_follow_the_hdl64_pattern(runs):
     exp = runs[0]
     files = frame_files(exp / "velodyne", exp / "point_labels", "0000", 300)
@@ -95,6 +96,7 @@ def test_synthetic_scans_follow_the_hdl64_pattern(runs):
     assert (lab == SIDEWALK).any() and set(np.unique(lab)) <= {10, 30, 40, 48, 50}
 
 
+@pytest.mark.slow
 def test_region_from_synthetic_scans_matches_the_visible_sidewalk(runs):
     exp, _, lidar_run = runs
     cfg, kc = kitti_base_config(), KittiConfig()
@@ -116,6 +118,7 @@ def test_region_from_synthetic_scans_matches_the_visible_sidewalk(runs):
         assert union > 0 and inter / union >= bound, (radius, inter / union)
 
 
+@pytest.mark.slow
 def test_soa_with_point_cloud_semantics_matches_the_scene_polygons(runs):
     _, poly_run, lidar_run = runs
     for seq in ("0000", "0001"):
@@ -128,6 +131,7 @@ def test_soa_with_point_cloud_semantics_matches_the_scene_polygons(runs):
         assert abs(np.mean(da) - np.mean(db)) <= DELAY_TOL, (np.mean(da), np.mean(db), len(da), len(db))
 
 
+@pytest.mark.slow
 def test_report_names_the_semantic_source_and_resume_reads_the_cache(runs, capsys):
     _, poly_run, lidar_run = runs
     assert "point labels" in (lidar_run / "report.md").read_text()
@@ -138,6 +142,7 @@ def test_report_names_the_semantic_source_and_resume_reads_the_cache(runs, capsy
     assert "read from lidar/0001.npz" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("damage", "message"),
     [
@@ -174,6 +179,7 @@ def test_bad_scans_or_labels_stop_with_one_line(runs, tmp_path, capsys, damage, 
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.slow
 def test_option_errors(runs, tmp_path, capsys):
     exp = runs[0]
     base = ["kitti", "--root", str(exp), "--out", str(tmp_path / "run")]
