@@ -33,6 +33,7 @@ def test_unobserved_run_names_the_shortest_useful_duration_and_it_is(tmp_path):
     assert not _run(tmp_path, "long", shortest)["summary"]["warnings"]
 
 
+@pytest.mark.slow
 def test_summary_legend_defines_censored_and_the_cut_offs_used(tmp_path):
     cfg = tmp_path / "c.toml"
     cfg.write_text("[metrics]\nospa_c = 40.0\ngospa_c = 3.0\n")
