@@ -5,7 +5,7 @@
    and a memory bound, and is counted per command as clean (exit 2, one line ``soabench: error: ...`` naming the
    value), traceback, silent (another exit status, real work started, or a write into a foreign folder), hang
    (killed at the time bound) or unclear (exit 2 without one line naming the value); every case that is not clean
-   is listed. The poisoned and invalid ``run.json`` files of ``tests/test_hardening_runs.py`` are counted too.
+   is listed. The poisoned and invalid ``run.json`` files of ``tests/hardening/test_run_folders.py`` are counted too.
 2. Kill/resume cycles: a 16-trial process-pool run (the tests' slow fake trial) is SIGKILLed after some trials,
    resumed, killed again, ... until it completes; after each kill no pool worker may survive; the result must equal
    an uninterrupted serial run byte for byte.
@@ -37,6 +37,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import bad_inputs  # noqa: E402
 import fake_trial as ft  # noqa: E402
+from processes import alive, children  # noqa: E402
 
 import soabench.experiment.reports.report as report  # noqa: E402
 from soabench.cli.main import main  # noqa: E402
@@ -54,12 +55,11 @@ def _case_in_child(make, needle: str, case_dir: Path, limit_bytes: int, say_comm
     """Run one catalogue case in this (forked) process; return its verdict and first lines."""
     import contextlib
     import io
-    import operator
     import resource
     import traceback
 
     resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
-    bad_inputs.stub_work(setattr, operator.setitem)
+    bad_inputs.work_stubbed(setattr).__enter__()  # for the rest of this forked process
     os.chdir(case_dir)
     out, err = io.StringIO(), io.StringIO()
     started = False
@@ -133,11 +133,12 @@ def catalogue_counts(tmp: Path, timeout_s: float = 30.0, limit_gb: float = 3.0) 
 
 
 def run_meta_cases(tmp: Path) -> tuple[int, int]:
-    """(tried, refused) over the poisoned and invalid run.json files of tests/test_hardening_runs.py."""
+    """(tried, refused) over the poisoned and invalid run.json files of tests/hardening/test_run_folders.py."""
     import contextlib
     import io
 
-    from test_hardening_runs import BAD_META, POISONS
+    sys.path.insert(0, str(ROOT / "tests" / "hardening"))
+    from test_run_folders import BAD_META, POISONS
 
     tried = refused = 0
     for i, changes in enumerate([*POISONS, *(c for c, _ in BAD_META)]):
@@ -185,23 +186,6 @@ else:
 """
 
 
-def _children(pid: int) -> list[int]:
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            out += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
 def kill_resume_cycles(tmp: Path, n_trials: int = 16) -> dict:
     cfg = _cfg(n_trials)
     out = tmp / "killed"
@@ -219,16 +203,16 @@ def kill_resume_cycles(tmp: Path, n_trials: int = 16) -> dict:
             proc.communicate()
             assert proc.returncode == 0
             break
-        workers = _children(proc.pid)
+        workers = children(proc.pid)
         proc.send_signal(signal.SIGKILL)
         proc.communicate()
         cycles += 1
         t0 = time.monotonic()
-        while any(_alive(p) for p in workers) and time.monotonic() - t0 < 10:
+        while any(alive(p) for p in workers) and time.monotonic() - t0 < 10:
             time.sleep(0.1)
-        orphans += sum(_alive(p) for p in workers)
+        orphans += sum(alive(p) for p in workers)
         for p in workers:
-            if _alive(p):
+            if alive(p):
                 os.kill(p, signal.SIGKILL)
         resume = True
     ref = tmp / "ref"

@@ -1,4 +1,4 @@
-"""Wall time of ``soabench study`` relative to its main run, with and without the work done once (issue 19).
+"""Wall time of ``soabench study`` relative to its main run, with and without the work done once.
 
 In one process, on the same short protocol, one after another:
 
@@ -14,7 +14,7 @@ In one process, on the same short protocol, one after another:
    their own, and every folder's figures drawn one per task on the study's ``--workers`` processes.
 
 The "before" side is what can still be switched off in today's code, not main @ e59db79 as a whole: its parts
-one after another also draw their figures on ``--workers`` processes (``soabench run`` does since issue 19), so
+one after another also draw their figures on ``--workers`` processes (as ``soabench run`` does), so
 compare only the ratios printed by one invocation.
 
 It prints each wall time split into trials (the sessions' wall time) and reports (summaries and figures of every

@@ -17,7 +17,7 @@ with KIND one of
 * ``commands``: a section per command of :func:`soabench.cli.main.build_parser` with its ``--help`` text.
 
 ``python docs/hooks.py`` rewrites the blocks of every page from the installed code; ``python docs/hooks.py --check``
-lists the pages whose blocks are stale (``tests/test_docs.py`` runs the check).
+lists the pages whose blocks are stale (``tests/repository/test_docs.py`` runs the check).
 
 Three things only the built site can show are filled in at build time and stay a sentence in the page file:
 

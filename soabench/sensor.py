@@ -348,7 +348,7 @@ class VisibleRegion(DeferredRegion):
     :meth:`build` is :func:`visible_region` (the same polygon overlay, bit for bit). :meth:`contains_xy` answers
     which points lie in its interior from the overlay's inputs, without the overlay. A trial's birth models ask the
     second question of a few dozen points per scan; the overlay (a union of the shadow polygons and a set
-    difference, about 2 ms per scan) is then computed only for a scan whose geometry is read (a figure, an
+    difference, the costly part) is then computed only for a scan whose geometry is read (a figure, an
     exported scans file, a birth model that samples in Omega_k itself).
     """
 

@@ -154,7 +154,7 @@ _RECORDING_KEYS = (
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Scans: what a tracker receives, plus the per-scan truth the metrics need (moved from soabench.sensor)
+# Scans: what a tracker receives, plus the per-scan truth the metrics need
 
 
 @dataclass
@@ -539,7 +539,7 @@ def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | 
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Births: what a birth model hands the GM-PHD filter (moved from soabench.birth.base; docs/method.md §2.11, §3.0)
+# Births: what a birth model hands the GM-PHD filter (docs/method.md §2.11, §3.0)
 
 # source codes of birth components (Births.source), for figures and diagnostics
 SOURCE_OCCL, SOURCE_SEM, SOURCE_FOV, SOURCE_GRID, SOURCE_GM, SOURCE_MEAS = range(6)

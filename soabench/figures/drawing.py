@@ -1,11 +1,11 @@
-"""A run's figures drawn in parallel (issue 19: fixed costs): one task per figure on a local process pool.
+"""A run's figures drawn in parallel (a fixed cost of every run): one task per figure on a local process pool.
 
 A report's figures (:func:`soabench.figures.results.figure_jobs`) are independent: each is a builder called with
 the run's tables and a few arguments, then written atomically (:func:`soabench.figures.style.save_png`). Inside
 ``with parallel(executor):`` :func:`draw_all` hands them to the executor's worker processes, one figure per task.
 The tables go to the workers once per report as plain arrays in a temporary ``.npz`` file (numbers and text only,
-read with ``allow_pickle=False``: data, never code; about 0.05 s where parsing the CSV files again takes seconds
-at the paper's sizes), or, should a column not be plain, each worker reads the run folder itself; either way each
+read with ``allow_pickle=False``: data, never code; far cheaper than parsing the CSV files again at the paper's
+sizes), or, should a column not be plain, each worker reads the run folder itself; either way each
 worker draws the figure exactly as the serial path does, so the PNG files are byte for byte the same however many
 processes draw them. :func:`draw_all` returns only once every figure is on disk (the report's ``summary.json`` is
 written after it, so a report is never passed off as complete with a figure missing); a figure that fails raises.

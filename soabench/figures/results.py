@@ -501,7 +501,7 @@ def figure_jobs(tables: RunTables, out_dir: Path) -> list[FigureJob]:
         jobs.append(FigureJob(out_dir / f"fig6_delay_hist{sfx}.png", delay_hist_figure, (lam,), weight=1.5))
         jobs.append(FigureJob(out_dir / f"fig7_components{sfx}.png", components_figure, (lam,), weight=1.5))
         if origins:
-            panels = len(tables.models) * len(tables.modes)  # measured: about 0.15 s per panel, 0.4 s a figure
+            panels = len(tables.models) * len(tables.modes)  # its drawing time grows with the panels
             name = f"fig7b_components_origin{sfx}.png"
             jobs.append(FigureJob(out_dir / name, components_origin_figure, (lam,), weight=0.4 * panels))
     jobs.append(FigureJob(out_dir / "fig5h_precision.png", precision_figure, (), weight=1.5))

@@ -1,4 +1,4 @@
-"""The filter's API boundary: measurements, ego pose and birth components checked before a cycle (issue 14).
+"""The filter's API boundary: measurements, ego pose and birth components checked before a cycle.
 
 A NaN or inf in Z_k, in the ego pose or in a birth component would otherwise flow into the means, the weights and
 the extracted states (a NaN measurement with PUBM or ATBM builds a NaN newborn). ``filter.nonfinite`` chooses:

@@ -165,7 +165,7 @@ def simulate(scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, durat
         seeds: trial seeds; SUMO gets ``seeds.sumo_seed``, every scenario choice uses ``seeds.scenario_rng()``.
         duration: recorded time (s), overriding ``scenario.duration``.
     """
-    import libsumo  # noqa: F401  (imported once here, about 1 s; every forked SUMO run inherits it)
+    import libsumo  # noqa: F401  (imported once here: every forked SUMO run inherits it)
 
     hint = "load both with soabench.scenario.load(net), or call soabench.api.simulate_trial(net, seed, trial)"
     require_type(scene, SceneMap, "simulate's scene", hint)

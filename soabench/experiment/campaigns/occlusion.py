@@ -1,4 +1,4 @@
-"""``soabench sweep occlusion``: occluder density as an experimental axis (issue 16; paper §V on occlusion).
+"""``soabench sweep occlusion``: occluder density as an experimental axis (paper §V on occlusion).
 
 Each point is an ordinary run on the same scene with ``[parking] density = v`` parked cars per 100 m of parking lane
 (:mod:`soabench.scenario.parking`); trial n of every point uses the same seeds (:mod:`soabench.seeding`), so the

@@ -1,4 +1,4 @@
-"""``soabench results``: every part of results/ from one command, each part resumable (issue 18).
+"""``soabench results``: every part of results/ from one command, each part resumable.
 
 Parts, in order, under ``OUT`` (default ``results/``):
 
@@ -46,7 +46,7 @@ SETTINGS_FILE = "settings.json"  #: what a KITTI part was made with (sequences, 
 
 @dataclass(frozen=True)
 class Settings:
-    """Sizes of every part (the defaults take about an hour on a shared 2-core machine)."""
+    """Sizes of every part (the defaults are the paper's: an hour-long job, ``benchmarks/README.md``)."""
 
     scenes: tuple[str, ...] | None = None  #: shipped scenes of the summary (None: every shipped scene)
     trials: int = 100  #: main protocol and clutter sweep of the intersection study (the paper's 100)

@@ -1,4 +1,4 @@
-"""Sensitivity of the headline numbers to the modelling choices (issue 18): ``sensitivity.md`` and ``sensitivity.csv``.
+"""Sensitivity of the headline numbers to the modelling choices: ``sensitivity.md`` and ``sensitivity.csv``.
 
 The headline numbers are those of the paper comparison (docs/method.md §5.9, :mod:`soabench.experiment.reports.paper`):
 S-OA's delay win counts against each baseline, every model's mean delay k̄ and σ̄, and S-OA's percent reduction of

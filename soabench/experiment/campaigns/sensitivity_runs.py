@@ -1,4 +1,4 @@
-"""The runs behind the sensitivity table (issue 18): a finished run's protocol again with one switch changed.
+"""The runs behind the sensitivity table: a finished run's protocol again with one switch changed.
 
 Each variant (:data:`VARIANTS`) is an ordinary run folder ``<out>/<setting>/`` made from the main run's stored
 configuration, net and scene files with one option changed

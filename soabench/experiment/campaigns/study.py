@@ -1,4 +1,4 @@
-"""The paper's simulation study as one command (issue 8): ``soabench study``.
+"""The paper's simulation study as one command: ``soabench study``.
 
 Four parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (default ``results/<net>/``):
 

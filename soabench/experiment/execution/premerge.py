@@ -1,4 +1,4 @@
-"""The merges of several finished run folders at once, on the workers of a process pool (issue 19: the report
+"""The merges of several finished run folders at once, on the workers of a process pool (the report
 phase of ``soabench study``).
 
 A study ends with about twenty finished folders (main run, clutter points, N̂ points, sensitivity runs). Each one's

@@ -137,7 +137,7 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
                 scene, scenario = registry.load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
             fn = spec.trial_fn or _default_trial_fn()
             result = fn(trial, config, scene, scenario, save_estimates=spec.save_estimates)
-    except Exception as exc:  # a failed trial must not stop the run (issue 7)
+    except Exception as exc:  # a failed trial must not stop the run
         rec = failure_record(trial, base_seed, f"{type(exc).__name__}: {exc}", traceback.format_exc())
         rec["worker"] = _where()
         return rec

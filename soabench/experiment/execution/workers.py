@@ -51,7 +51,7 @@ def _watch_parent(parent: int, period: float = 1.0) -> None:
 
 
 def init_worker(parent: int | None = None, notes: str | None = None) -> None:
-    """Initializer of a pool worker; ``parent`` is the pid the worker must outlive no longer (its parent now);
+    """Initializer of a pool worker; ``parent`` is the pid of the worker's parent, which the worker must not outlive;
     ``notes``: the folder of :func:`note_activity`."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _NOTES[0] = notes

@@ -12,6 +12,9 @@ Built-ins: trial kind ``soabench`` (:func:`soabench.experiment.trial.trial.run_t
     from soabench.experiment.trial.registry import register_trial_kind
     register_trial_kind("my-trial", my_package.trials.run_trial)
 
+A test or benchmark that stands in for the real trial or scene (the built-in names included) does so for one
+block with :func:`registered`, which puts every name back as it was on exit.
+
 Signatures: a trial kind is ``fn(trial, config, scene, scenario, *, save_estimates) -> TrialResult``; a scene
 loader ``fn(net, polys, scenario) -> (SceneMap, ScenarioConfig)``. Both must be module-level functions so that worker
 processes can unpickle them. Registering is done by code the user installed (entry points), never by a run folder.
@@ -20,7 +23,8 @@ processes can unpickle them. Registering is done by code the user installed (ent
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 from soabench.errors import SoabenchError, require
@@ -70,6 +74,33 @@ def register_trial_kind(name: str, fn: TrialFn) -> None:
 def register_scene_loader(name: str, fn: LoadFn) -> None:
     """Make ``fn`` available to runs as scene loader ``name`` (re-registering the same function is a no-op)."""
     _register(_SCENE_LOADERS, "scene loader", name, fn)
+
+
+@contextmanager
+def registered(
+    trial_kinds: Mapping[str, TrialFn] | None = None, scene_loaders: Mapping[str, LoadFn] | None = None
+) -> Iterator[None]:
+    """Within the block, each name of ``trial_kinds`` / ``scene_loaders`` stands for the given function, a registered
+    name (a built-in included) being replaced; on exit every name is as before. Names are checked as in
+    :func:`register_trial_kind`. For code that stands in for the real trial or scene (tests, benchmarks)::
+
+        with registered(trial_kinds={DEFAULT_TRIAL_KIND: fake_trial}):
+            run_experiment(...)
+    """
+    saved = [(table, dict(table)) for table in (_TRIAL_KINDS, _SCENE_LOADERS)]
+    try:
+        for table, what, given in (
+            (_TRIAL_KINDS, "trial kind", trial_kinds or {}),
+            (_SCENE_LOADERS, "scene loader", scene_loaders or {}),
+        ):
+            for name, fn in given.items():
+                table.pop(name, None)
+                _register(table, what, name, fn)
+        yield
+    finally:
+        for table, before in saved:
+            table.clear()
+            table.update(before)
 
 
 def _lookup(table: dict[str, Callable], what: str, name: Any) -> Callable:
