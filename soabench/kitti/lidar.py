@@ -52,7 +52,7 @@ SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
 }  # fmt: skip
 POINT_BYTES = 16  #: float32 x, y, z, intensity
 CACHE_DIR = "lidar"
-CACHE_FORMAT = "soabench-lidar-regions-1"
+CACHE_FORMAT = "soabench-lidar-regions-2"
 FOV_MARGIN_DEG = 5.0  #: points this far outside the sensor's sector still shape the region at its edges
 
 
