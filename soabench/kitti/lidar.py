@@ -38,7 +38,7 @@ from soabench.config import SensorConfig
 from soabench.errors import require
 from soabench.kitti.config import KittiConfig
 from soabench.kitti.formats import ReadError
-from soabench.kitti.lidar_raster import closed_raster, frame_cells, outline_rings, simplify_rings
+from soabench.kitti.lidar_raster import closed_raster, frame_cells, ring_polygons
 from soabench.kitti.reader import KittiSequence, sensor_for
 
 #: SemanticKITTI class ids (lower 16 bits of a .label value) by class name, as in the dataset's semantic-kitti.yaml
@@ -134,40 +134,22 @@ def _polygons(occ: np.ndarray, i0: int, j0: int, grid: float) -> list[np.ndarray
     """The occupied cells of a raster whose cell (0, 0) is the ego frame's cell (i0, j0), as the (n, 2) vertices of
     hole-free polygons: each 4-connected set of cells is bounded by its traced outline (staircase corners only) and
     its holes, every ring simplified within half a cell (Douglas-Peucker from the ring's lowest vertex, as
-    ``shapely.simplify`` does the outline of the union of the cells); a set with holes is cut into hole-free pieces,
-    and the rare polygon the simplification leaves invalid (rings touching where cells meet at a corner) is made
-    valid first."""
+    ``shapely.simplify`` does the outline of the union of the cells; :func:`.lidar_raster.ring_polygons`); a set
+    with holes is cut into hole-free pieces, and the rare polygon the simplification leaves invalid (rings
+    touching where cells meet at a corner) is made valid first."""
     from soabench.kitti.export import _hole_free
 
-    vi, vj, starts, counts, area2, comp = outline_rings(occ)
-    # each ring from its lowest vertex clockwise (shells) or counter-clockwise (holes), the order GEOS's overlay writes
-    first, count = np.repeat(starts, counts), np.repeat(counts, counts)
-    back = first + (first - np.arange(len(vi))) % count
-    x, y = (vi[back] + i0) * grid, (vj[back] + j0) * grid
-    keep = simplify_rings(x, y, starts, counts, 0.5 * grid)
-    n_kept = np.add.reduceat(keep.astype(np.int64), starts) if len(starts) else np.zeros(0, dtype=np.int64)
-    ring_of = np.repeat(np.arange(len(starts)), counts)
-    solid = n_kept >= 3  # a ring left with fewer vertices has no area
-    shell = solid & (area2 > 0)
-    holed = np.isin(comp, comp[solid & (area2 < 0)])
-    plain = np.flatnonzero(shell & ~holed)
-    sel = keep & np.isin(ring_of, plain)
-    xy = np.column_stack([x[sel], y[sel]])
-    rings = np.split(xy, np.cumsum(n_kept[plain])[:-1]) if len(plain) else []
-    closed = np.insert(xy, np.cumsum(n_kept[plain]), xy[np.cumsum(n_kept[plain]) - n_kept[plain]], axis=0)
-    offsets = np.concatenate([[0], np.cumsum(n_kept[plain] + 1)])
-    geoms = shapely.from_ragged_array(
-        shapely.GeometryType.POLYGON, closed, (offsets, np.arange(len(plain) + 1))
-    ) if len(plain) else np.zeros(0, dtype=object)  # fmt: skip
-    valid = shapely.is_valid(geoms)
-    out = [r for r, ok in zip(rings, valid, strict=True) if ok]
-    rest = [shapely.make_valid(g) for g, ok in zip(geoms, valid, strict=True) if not ok]
-    for c in np.unique(comp[shell & holed]):
-        mine = [r for r in np.flatnonzero(solid & (comp == c))]
-        ring = {r: np.column_stack([x[starts[r] : starts[r] + counts[r]], y[starts[r] : starts[r] + counts[r]]])[
-            keep[starts[r] : starts[r] + counts[r]]] for r in mine}  # fmt: skip
-        outer = [ring[r] for r in mine if area2[r] > 0][0]
-        g = Polygon(outer, [ring[r] for r in mine if area2[r] < 0])
+    xy, off, xy_h, off_h, comp_h, shell_h = ring_polygons(occ, i0, j0, grid, 0.5 * grid)
+    plain = shapely.from_ragged_array(shapely.GeometryType.POLYGON, xy, (off, np.arange(len(off))))
+    valid = shapely.is_valid(plain)
+    out = [xy[a : b - 1] for a, b, ok in zip(off[:-1], off[1:], valid, strict=True) if ok]
+    rest = list(shapely.make_valid(plain[~valid])) if not valid.all() else []
+    rings = [xy_h[a:b] for a, b in zip(off_h[:-1], off_h[1:], strict=True)]
+    for c in np.unique(comp_h):
+        mine = np.flatnonzero(comp_h == c)
+        if not shell_h[mine].any():  # its outline collapsed: no area
+            continue
+        g = Polygon(rings[mine[shell_h[mine]][0]], [rings[r] for r in mine[~shell_h[mine]]])
         rest.append(g if g.is_valid else shapely.make_valid(g))
     for g in rest:
         out.extend(np.asarray(p.exterior.coords)[:-1] for p in _hole_free(g))

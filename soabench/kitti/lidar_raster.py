@@ -318,3 +318,72 @@ def simplify_rings(x, y, starts, counts, tol):  # pragma: no cover - compiled
                 lo[top + 1], hi[top + 1] = far, b
                 top += 2
     return keep
+
+
+@njit(cache=True)
+def ring_polygons(occ, i0, j0, grid, tol):  # pragma: no cover - compiled
+    """The outline of a raster whose cell (0, 0) is the ego frame's cell (i0, j0) as simplified closed rings (first
+    vertex repeated at the end), in ego coordinates: :func:`outline_rings`, each ring taken from its lowest vertex
+    clockwise (shells) or counter-clockwise (holes), the order GEOS's overlay writes, and :func:`simplify_rings`
+    within ``tol``; rings left with fewer than 3 vertices (no area) dropped.
+
+    Returns the shells of the components without holes (vertices, ring offsets), then the rings of the components
+    with holes (vertices, ring offsets, component, True for its shell).
+    """
+    vi, vj, starts, counts, area2, comp = outline_rings(occ)
+    nv, nr = len(vi), len(starts)
+    x, y = np.empty(nv), np.empty(nv)
+    for r in range(nr):
+        s, n = starts[r], counts[r]
+        for k in range(n):
+            b = s + (n - k) % n
+            x[s + k], y[s + k] = (vi[b] + i0) * grid, (vj[b] + j0) * grid
+    keep = simplify_rings(x, y, starts, counts, tol)
+    n_kept = np.zeros(nr, dtype=np.int64)
+    for r in range(nr):
+        for k in range(starts[r], starts[r] + counts[r]):
+            n_kept[r] += keep[k]
+    n_comp = comp.max() + 1 if nr else 0
+    holed = np.zeros(n_comp, dtype=np.bool_)
+    for r in range(nr):
+        if n_kept[r] >= 3 and area2[r] < 0:
+            holed[comp[r]] = True
+    # sizes, then the two groups
+    n_a = n_b = m_a = m_b = 0
+    for r in range(nr):
+        if n_kept[r] < 3 or (area2[r] < 0 and not holed[comp[r]]):
+            continue
+        if holed[comp[r]]:
+            n_b += n_kept[r] + 1
+            m_b += 1
+        elif area2[r] > 0:
+            n_a += n_kept[r] + 1
+            m_a += 1
+    xy_a, off_a = np.empty((n_a, 2)), np.zeros(m_a + 1, dtype=np.int64)
+    xy_b, off_b = np.empty((n_b, 2)), np.zeros(m_b + 1, dtype=np.int64)
+    comp_b, shell_b = np.empty(m_b, dtype=np.int64), np.empty(m_b, dtype=np.bool_)
+    wa = wb = ra = rb = 0
+    for r in range(nr):
+        if n_kept[r] < 3 or (area2[r] < 0 and not holed[comp[r]]):
+            continue
+        s, n = starts[r], counts[r]
+        if holed[comp[r]]:
+            for k in range(s, s + n):
+                if keep[k]:
+                    xy_b[wb, 0], xy_b[wb, 1] = x[k], y[k]
+                    wb += 1
+            xy_b[wb, 0], xy_b[wb, 1] = x[s], y[s]
+            wb += 1
+            comp_b[rb], shell_b[rb] = comp[r], area2[r] > 0
+            rb += 1
+            off_b[rb] = wb
+        else:
+            for k in range(s, s + n):
+                if keep[k]:
+                    xy_a[wa, 0], xy_a[wa, 1] = x[k], y[k]
+                    wa += 1
+            xy_a[wa, 0], xy_a[wa, 1] = x[s], y[s]
+            wa += 1
+            ra += 1
+            off_a[ra] = wa
+    return xy_a, off_a, xy_b, off_b, comp_b, shell_b
