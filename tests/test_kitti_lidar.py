@@ -145,6 +145,11 @@ def test_closing_and_traced_outline_are_exact(seed):
     assert sum(area2) == 2 * occ.sum() and sum(p.area for p in polys) == occ.sum()
     cells = shapely.union_all(shapely.box(ci, cj, ci + 1, cj + 1))
     assert shapely.symmetric_difference(shapely.union_all(polys), cells).area == 0.0
+    # simplified, made valid where rings touch, cut into hole-free pieces that do not overlap
+    pieces = [shapely.Polygon(xy) for xy in _polygons(occ, 0, 0, 1.0)]
+    assert all(p.is_valid and not p.interiors for p in pieces)
+    union = shapely.union_all(pieces)
+    assert union.area == pytest.approx(sum(p.area for p in pieces)) and union.area == pytest.approx(occ.sum(), rel=0.1)
 
 
 @pytest.mark.parametrize("seed", range(6))
