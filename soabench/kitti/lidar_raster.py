@@ -320,6 +320,18 @@ def simplify_rings(x, y, starts, counts, tol):  # pragma: no cover - compiled
     return keep
 
 
+@njit(cache=True, inline="always")
+def _put_ring(out, w, x, y, keep, s, n):  # pragma: no cover - compiled
+    """Write the kept vertices of the ring ``s .. s + n - 1`` and its first vertex again into ``out`` from row ``w``;
+    returns the next free row."""
+    for k in range(s, s + n):
+        if keep[k]:
+            out[w, 0], out[w, 1] = x[k], y[k]
+            w += 1
+    out[w, 0], out[w, 1] = x[s], y[s]
+    return w + 1
+
+
 @njit(cache=True)
 def ring_polygons(occ, i0, j0, grid, tol):  # pragma: no cover - compiled
     """The outline of a raster whose cell (0, 0) is the ego frame's cell (i0, j0) as simplified closed rings (first
@@ -366,24 +378,13 @@ def ring_polygons(occ, i0, j0, grid, tol):  # pragma: no cover - compiled
     for r in range(nr):
         if n_kept[r] < 3 or (area2[r] < 0 and not holed[comp[r]]):
             continue
-        s, n = starts[r], counts[r]
         if holed[comp[r]]:
-            for k in range(s, s + n):
-                if keep[k]:
-                    xy_b[wb, 0], xy_b[wb, 1] = x[k], y[k]
-                    wb += 1
-            xy_b[wb, 0], xy_b[wb, 1] = x[s], y[s]
-            wb += 1
+            wb = _put_ring(xy_b, wb, x, y, keep, starts[r], counts[r])
             comp_b[rb], shell_b[rb] = comp[r], area2[r] > 0
             rb += 1
             off_b[rb] = wb
         else:
-            for k in range(s, s + n):
-                if keep[k]:
-                    xy_a[wa, 0], xy_a[wa, 1] = x[k], y[k]
-                    wa += 1
-            xy_a[wa, 0], xy_a[wa, 1] = x[s], y[s]
-            wa += 1
+            wa = _put_ring(xy_a, wa, x, y, keep, starts[r], counts[r])
             ra += 1
             off_a[ra] = wa
     return xy_a, off_a, xy_b, off_b, comp_b, shell_b
