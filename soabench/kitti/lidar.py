@@ -11,9 +11,10 @@ Per frame and configured class (``kitti.semantic_classes``: birth region, ``kitt
 bird's-eye points of that class within r_max and near the sensor's sector, with the ground between consecutive
 returns of the class along a scan sector (gap fill, ``fill`` m at most), are rasterised on a grid of ``grid`` m
 cells aligned with the ego frame; the occupancy is closed morphologically with a disc of radius ``closing`` m (it
-fills the gaps between beams and azimuths), and the occupied cells are merged into polygons (coverage union,
-simplified within half a cell), cut into hole-free pieces: the same ``(class, vertices)`` rows a ``--semantics``
-file gives.
+fills the gaps between beams and azimuths), and the outline of the occupied cells is traced along the cell edges
+(the union of the cells exactly), simplified within half a cell and cut into hole-free pieces: the same
+``(class, vertices)`` rows a ``--semantics`` file gives. The loops over points and cells are compiled
+(:mod:`soabench.kitti.lidar_raster`).
 
 The regions of a sequence are cached in ``RUN/lidar/XXXX.npz`` with a key made of the input files' names, sizes and
 modification times and the parameters, so a resumed or repeated run reads them back instead of rebuilding them.
