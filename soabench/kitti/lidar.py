@@ -28,6 +28,7 @@ import os
 import time
 import zipfile
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -41,6 +42,7 @@ from soabench.kitti.config import KittiConfig
 from soabench.kitti.formats import ReadError
 from soabench.kitti.lidar_raster import closed_raster, frame_cells, ring_polygons
 from soabench.kitti.reader import KittiSequence, sensor_for
+from soabench.notice import first_use_notice
 
 #: SemanticKITTI class ids (lower 16 bits of a .label value) by class name, as in the dataset's semantic-kitti.yaml
 SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
@@ -265,7 +267,10 @@ def sequence_regions(
     lut = _label_lut(ids)
     for k, (scan, lab, _) in enumerate(files):
         pts, cl = read_frame(scan, lab)
-        if polys := frame_regions(pts, cl, ids, params, r_max, fov_deg, lut):
+        # the first frame compiles the loops of lidar_raster after installation: one line if that takes a while
+        with first_use_notice("lidar_raster") if k == 0 else nullcontext():
+            polys = frame_regions(pts, cl, ids, params, r_max, fov_deg, lut)
+        if polys:
             sem[k] = polys
     if path is not None:
         _save(path, key, names, sem)
