@@ -42,7 +42,7 @@ def frame_cells(pts, lab, lut, n_cls, r_max, half_fov_deg, grid, sector_rad, fil
     n = len(pts)
     keep = np.empty(n, dtype=np.int64)
     m = 0
-    # below 90 deg, the sector test needs the angle only near the sector's edges: points with x <= 0 lie outside,
+    # below 90 deg, the sector test needs the angle only near the sector's edges: points with x < 0 lie outside,
     # points with |y| < x tan(half) (less a relative margin far above rounding) inside
     narrow = 0.0 <= half_fov_deg < 89.0
     slope = math.tan(math.radians(half_fov_deg)) * (1.0 - 1e-6) if narrow else 0.0
@@ -50,7 +50,7 @@ def frame_cells(pts, lab, lut, n_cls, r_max, half_fov_deg, grid, sector_rad, fil
         x, y = np.float64(pts[p, 0]), np.float64(pts[p, 1])
         if abs(x) <= r_max and abs(y) <= r_max:
             if half_fov_deg >= 0.0:
-                if narrow and x <= 0.0:
+                if narrow and x < 0.0:
                     continue
                 if not (narrow and abs(y) < x * slope):
                     if abs(math.atan2(y, x) * (180.0 / math.pi)) > half_fov_deg:
