@@ -58,6 +58,14 @@ def scene_sensor_scans(monkeypatch, tmp_path: Path, time: float):
     return seen["scans"], seen["k"]
 
 
+def test_a_run_writes_its_report(run_dir: Path) -> None:
+    """A plain `soabench run` leaves report.html in its folder: the page to open."""
+    from soabench.replay.report import REPORT_FILE
+
+    text = (run_dir / REPORT_FILE).read_text(encoding="utf-8")
+    assert '<meta name="generator" content="soabench report">' in text and "Best and worst trials" in text
+
+
 def test_replay_reproduces_the_run(replay_page: Path, capsys) -> None:
     data = page_data(replay_page)
     assert data["reproduced"] is True, data["notes"]

@@ -485,12 +485,14 @@ def _run_locked(
     from soabench.experiment import premerge
     from soabench.experiment.drawing import report_pool
     from soabench.experiment.report import write_report
+    from soabench.replay.report import refresh_report
 
     try:
         # a study's workers may have merged it already; the figures read the step columns the merge kept
         premerge.merge(store, *premerge.merge_args(config), step_columns=figures)
         with report_pool(None if scheduler or dask_local else workers, executor):  # figures on local processes
             outcome.summary_markdown = write_report(store.run_dir, figures=figures, store=store)
+        refresh_report(store.run_dir)  # report.html: the one page to open in a run folder
         outcome.model_failures = store.model_failures()
     except KeyboardInterrupt:
         raise Interrupted(

@@ -42,7 +42,7 @@ from soabench.experiment.store import RunStore
 from soabench.experiment.sweep import DEFAULT_VALUES, SweepOutcome, run_sweep
 
 #: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
-STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png")
+STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png", "index.html")
 
 
 @dataclass
@@ -201,6 +201,10 @@ def run_study(
                 sens.write_sensitivity(sens_dir, main_dir, variants)
                 where = sens_dir / "sensitivity.md"
                 md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
+            from soabench.replay.report import write_index
+
+            index = write_index(root, reports=False)[0]  # each finished run wrote its report.html
+            md += f"\nEvery part on one page: {index}\n"
         except KeyboardInterrupt:
             raise Interrupted(
                 f"interrupted: the study in {root} is incomplete (finished trials are on disk); {hint}"
