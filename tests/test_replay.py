@@ -77,6 +77,9 @@ def test_replay_reproduces_the_run(replay_page: Path, capsys) -> None:
     soa_src = {b[5] for f in data["frames"] for b in f["models"][0]["births"]}
     ubm_src = {b[5] for f in data["frames"] for b in f["models"][1]["births"]}
     assert soa_src <= {0, 1, 2} and 0 in soa_src and ubm_src == {3}
+    # a GM-PHD's estimates carry no track labels: no track list, label index -1
+    assert all(m["tracks"] == [] for m in data["models"])
+    assert {e[2] for f in data["frames"] for m in f["models"] for e in m["est"]} == {-1}
 
 
 def _truth_rows(scans, k: int) -> dict[str, tuple[float, float]]:
@@ -130,16 +133,89 @@ def test_replay_scans_equal_scene_sensor_arrays(run_dir: Path, monkeypatch, tmp_
         np.testing.assert_array_equal(getattr(rep.scans, flag)[k], getattr(scans, flag)[k])
 
 
-def test_replay_gif(run_dir: Path, tmp_path: Path) -> None:
+def test_replay_videos(run_dir: Path, replay_page: Path, tmp_path: Path) -> None:
+    """--out picks the format by its ending: an MP4 (read back with ffmpeg) and a GIF of one frame per scan."""
+    import imageio_ffmpeg
     from PIL import Image
 
-    out, gif = tmp_path / "t0.html", tmp_path / "t0.gif"
-    assert main(["replay", str(run_dir), "--trial", "0", "--models", "soa", "--out", str(out), "--gif", str(gif)]) == 0
+    mp4, gif = tmp_path / "t0.mp4", tmp_path / "t0.gif"
+    argv = ["replay", str(run_dir), "--trial", "0", "--models", "soa,ubm", "--out", str(mp4), "--out", str(gif)]
+    assert main(argv) == 0
+    reader = imageio_ffmpeg.read_frames(str(mp4))
+    meta = reader.__next__()
+    frames = [np.frombuffer(f, dtype=np.uint8) for f in reader]
+    w, h = meta["size"]
+    assert len(frames) == DURATION and meta["fps"] == 5.0  # 1 s scans at 5x real time
+    _, _, vw, vh = page_data(replay_page)["scene"]["viewBox"]
+    up16 = lambda v: -(-v // 16) * 16  # noqa: E731  (codec-friendly sizes)
+    assert (w, h) == (up16(2 * 420), up16(int(420 * vh / vw) + 48))  # two 420-px panels and a title line
+    assert all(f.size == w * h * 3 for f in frames)
+    last = frames[-1].reshape(h, w, 3)
+    assert len(np.unique(last.reshape(-1, 3) // 16, axis=0)) > 10  # a drawn frame, not a blank one
     with Image.open(gif) as img:
-        assert img.n_frames == DURATION and img.info["duration"] == 200  # 1 s scans at 5x
-        img.seek(DURATION - 1)
-        assert len(img.convert("RGB").getcolors(maxcolors=1 << 16) or ()) > 10
-    assert main(["replay", str(run_dir), "--trial", "0", "--gif", str(tmp_path / "t0.png")]) == 2
+        assert img.n_frames == DURATION and img.info["duration"] == 200 and img.size == (w, h)
+    assert not list(tmp_path.glob(".*part*"))  # no temporary file left
+    assert main(["replay", str(run_dir), "--trial", "0", "--out", str(tmp_path / "t0.png")]) == 2
+
+
+def test_mp4_without_its_extra_says_how_to_install(run_dir: Path, tmp_path: Path, monkeypatch, capsys) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if not installed: the import fails
+    assert main(["replay", str(run_dir), "--trial", "0", "--out", str(tmp_path / "t.mp4")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pip install 'soabench[video]'" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+class _Labelled:
+    """A scan result with track labels beside its estimates (a tracker that keeps identities)."""
+
+    def __init__(self, result, labels) -> None:
+        self.result, self.labels = result, labels
+
+    def __getattr__(self, name: str):
+        return getattr(self.result, name)
+
+
+@pytest.fixture(scope="module")
+def labelled_page(run_dir: Path) -> tuple[Path, dict, list[list[str]]]:
+    """Trial 1's replay with each estimate labelled by its nearest truth pedestrian (a stand-in tracker's ids)."""
+    from soabench.replay import replay_data, replay_trial, write_replay
+
+    rep = replay_trial(run_dir, 1, ("soa",))
+    scans, model, given = rep.scans, rep.models[0], []
+    for k, res in enumerate(model.results):
+        X = np.asarray(res.X)[:, :2]
+        truth = np.where(scans.present[k][:, None], scans.truth_xy[k], np.inf)
+        near = [int(np.argmin(np.linalg.norm(truth - x, axis=1))) for x in X]
+        given.append([f"trk-{scans.ped_ids[j]}" for j in near])
+        model.results[k] = _Labelled(res, np.array(given[-1], dtype=object))
+    page = run_dir.parent / "labelled.html"
+    data = replay_data(rep)
+    write_replay(data, page)
+    return page, data, given
+
+
+def test_track_labels_keep_one_colour_per_label(labelled_page) -> None:
+    _, data, given = labelled_page
+    tracks = data["models"][0]["tracks"]
+    assert tracks and len(tracks) == len(set(tracks))
+    shown = [[tracks[e[2]] for e in f["models"][0]["est"]] for f in data["frames"]]
+    assert shown == given and sum(map(len, given)) >= 3  # every estimate keeps its own label, index = colour
+
+
+def test_labels_drawn_in_the_browser_and_the_video(labelled_page, tmp_path: Path) -> None:
+    from soabench.replay.animation import TRACK_COLORS, render_frames
+
+    page, data, given = labelled_page
+    k = max(range(len(given)), key=lambda i: len(given[i]))
+    attrs = body_attrs(browse(page, f"#frame={k}", tmp_path))
+    assert attrs["status"] == "ok" and attrs["tracks"] == str(len(given[k])), attrs
+    frame = next(render_frames({**data, "frames": [data["frames"][k]]}))
+    colour = TRACK_COLORS[data["frames"][k]["models"][0]["est"][0][2] % len(TRACK_COLORS)]
+    rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
+    assert (np.abs(frame.reshape(-1, 3).astype(int) - rgb).sum(axis=1) < 30).sum() > 20  # the label's colour drawn
 
 
 def test_replay_bad_input(run_dir: Path, tmp_path: Path, capsys) -> None:

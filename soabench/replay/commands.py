@@ -22,8 +22,13 @@ def add_replay_parser(sub: argparse._SubParsersAction, csv_list) -> None:
     )
     p.add_argument("--mode", help="probability mode (default: the run's first)")
     p.add_argument("--clutter", type=float, help="clutter rate lambda (default: the run's first)")
-    p.add_argument("--out", help="HTML file to write (default RUN/replays/trial_NNNNN.html)")
-    p.add_argument("--gif", metavar="FILE.gif", help="also an animated GIF, 5x real time (default: none)")
+    p.add_argument(
+        "--out",
+        action="append",
+        metavar="FILE",
+        help="file to write, its format by its ending: .html the interactive page, .mp4 a video (needs the video "
+        "extra), .gif an animated GIF (videos at 5x real time); repeatable (default RUN/replays/trial_NNNNN.html)",
+    )
 
 
 def add_report_parser(sub: argparse._SubParsersAction) -> None:
@@ -43,41 +48,53 @@ def add_report_parser(sub: argparse._SubParsersAction) -> None:
     )
 
 
-def _replay_out(run_dir: Path, trial: int, out: str | None) -> Path:
+PAGE_SUFFIXES = (".html", ".htm")
+
+
+def _replay_outs(run_dir: Path, trial: int, outs: list[str] | None) -> list[Path]:
+    """The files to write, each ending in a format we write (checked before any simulation)."""
     from soabench.cli_checks import check_out_file
+    from soabench.replay.animation import VIDEO_SUFFIXES, require_mp4
     from soabench.replay.report import REPLAYS_DIR, replay_file
 
-    if out is not None:
-        return check_out_file(out)
-    folder = run_dir / REPLAYS_DIR
-    folder.mkdir(exist_ok=True)
-    return check_out_file(str(folder / replay_file(trial)))
+    if not outs:
+        folder = run_dir / REPLAYS_DIR
+        folder.mkdir(exist_ok=True)
+        return [check_out_file(str(folder / replay_file(trial)))]
+    paths = []
+    for out in outs:
+        path = check_out_file(out)
+        suffix = path.suffix.lower()
+        allowed = (*PAGE_SUFFIXES, *VIDEO_SUFFIXES)
+        require(
+            suffix in allowed, f"--out {out!r} must end in one of {', '.join(allowed)}: the format it is written in"
+        )
+        if suffix == ".mp4":
+            require_mp4()
+        paths.append(path)
+    return paths
 
 
 def write_trial_replay(
-    run: str | Path, trial: int, models=None, mode=None, clutter=None, out: str | None = None, gif: str | None = None
+    run: str | Path, trial: int, models=None, mode=None, clutter=None, outs: list[str] | None = None
 ):
-    """Re-simulate and write one replay page (and a GIF if ``gif``); returns (path, size in bytes, the replay,
-    seconds simulating, seconds rendering the page)."""
-    from soabench.cli_checks import check_out_file
+    """Re-simulate a trial and write each of ``outs`` (default: its page under ``RUN/replays/``); returns (the
+    paths and sizes in bytes written, the replay, seconds simulating, seconds writing)."""
     from soabench.replay import replay_data, replay_trial, write_replay
+    from soabench.replay.animation import write_video
     from soabench.replay.simulate import read_run
 
     run_dir, _, _ = read_run(run)
-    gif_out = None if gif is None else check_out_file(gif)
-    require(gif_out is None or gif_out.suffix.lower() == ".gif", f"--gif {gif!r} must name a .gif file")
-    target = _replay_out(run_dir, trial, out)
+    targets = _replay_outs(run_dir, trial, outs)
     t0 = time.perf_counter()
     rep = replay_trial(run_dir, trial, models, mode, clutter)
     t1 = time.perf_counter()
     data = replay_data(rep)
-    size = write_replay(data, target)
-    t2 = time.perf_counter()
-    if gif_out is not None:
-        from soabench.replay.gif import write_gif
-
-        print(f"wrote {gif_out} ({write_gif(data, gif_out) / 1e6:.2f} MB)")
-    return target, size, rep, t1 - t0, t2 - t1
+    written = []
+    for target in targets:
+        write = write_replay if target.suffix.lower() in PAGE_SUFFIXES else write_video
+        written.append((target, write(data, target)))
+    return written, rep, t1 - t0, time.perf_counter() - t1
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -86,13 +103,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     # a run's import-path plugin is imported only when typed here (as with run --resume): run.json is data
     plugins.allow_import_paths(args.models or ())
-    target, size, rep, t_sim, t_draw = write_trial_replay(
-        args.run, args.trial, args.models, args.mode, args.clutter, args.out, args.gif
+    written, rep, t_sim, t_draw = write_trial_replay(
+        args.run, args.trial, args.models, args.mode, args.clutter, args.out
     )
     for note in rep.notes:
         print(note)
-    print(f"wrote {target} ({len(rep.scans)} scans x {len(rep.models)} models, {size / 1e6:.2f} MB; "
-          f"simulated in {t_sim:.1f} s, page in {t_draw:.1f} s)")  # fmt: skip
+    for target, size in written:
+        print(f"wrote {target} ({len(rep.scans)} scans x {len(rep.models)} models, {size / 1e6:.2f} MB)")
+    print(f"simulated in {t_sim:.1f} s, written in {t_draw:.1f} s")
     return 0
 
 
@@ -111,7 +129,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     if args.replays:
         trials = sorted({r[w][1] for r in extreme_trials(run_dir) for w in ("best", "worst")})
         for trial in trials:
-            target, size, rep, _, _ = write_trial_replay(run_dir, trial)
+            ((target, size),), rep, _, _ = write_trial_replay(run_dir, trial)
             print(f"wrote {target} ({size / 1e6:.2f} MB; {rep.notes[-1]})")
     target, size = write_report(run_dir, args.out)
     print(f"wrote {target} ({size / 1e6:.2f} MB)")

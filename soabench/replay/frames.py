@@ -128,9 +128,41 @@ def _hidden(scene: Any, fov: Any, omega: Any) -> Any:
     return base.difference(omega) if not base.is_empty else base
 
 
-def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndarray]) -> dict[str, Any]:
+def estimate_labels(result: Any) -> list[str] | None:
+    """The track label of each estimate of a scan's result, as text, when the tracker gives them (an optional
+    ``labels`` sequence beside ``X``, one per row); None otherwise (a GM-PHD's estimates carry no identity)."""
+    labels = getattr(result, "labels", None)
+    if labels is None:
+        return None
+    labels = [str(v) for v in np.asarray(labels, dtype=object).reshape(-1).tolist()]
+    return labels if len(labels) == len(np.asarray(result.X)) else None
+
+
+def track_labels(results: list[Any]) -> list[str]:
+    """Every track label of a model's run in order of first appearance: label i is drawn in colour i of the page's
+    palette in every frame, so a track keeps its colour (and a label switch shows as a colour change)."""
+    seen: dict[str, None] = {}
+    for res in results:
+        for lab in estimate_labels(res) or ():
+            seen.setdefault(lab, None)
+    return list(seen)
+
+
+def _label_index(result: Any, tracks: list[str]) -> list[int]:
+    """Per estimate: the index of its label in ``tracks`` (-1: no label)."""
+    labels = estimate_labels(result)
+    if labels is None:
+        return [-1] * len(np.asarray(result.X))
+    where = {lab: i for i, lab in enumerate(tracks)}
+    return [where[lab] for lab in labels]
+
+
+def frame_data(
+    rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndarray], tracks: list[list[str]]
+) -> dict[str, Any]:
     """Scan ``k`` (recording step ``idx``) of a :class:`~soabench.replay.simulate.TrialReplay` as a JSON-able
-    record; ``peds`` from :func:`ped_states`, ``inits`` one :func:`init_states` per model."""
+    record; ``peds`` from :func:`ped_states`, ``inits`` one :func:`init_states` per model, ``tracks`` one
+    :func:`track_labels` per model. An estimate is ``[x, y, i]``: its label is ``tracks[model][i]`` (i = -1: none)."""
     from soabench.geometry import polar_to_world
     from soabench.sensor import CLUTTER, fov_polygon
 
@@ -150,9 +182,10 @@ def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndar
                          [int(s[k, j]) for s in inits]])  # fmt: skip
     fov, omega = fov_polygon(ego, rep.scans.sensor), scan.visible_region
     models = []
-    for m in rep.models:
+    for m, labels in zip(rep.models, tracks, strict=True):
         res = m.results[k]
-        models.append({"births": _births_of(m.births[k]), "est": _xy(np.asarray(res.X)[:, :2]),
+        est = [[*xy, i] for xy, i in zip(_xy(np.asarray(res.X)[:, :2]), _label_index(res, labels), strict=True)]
+        models.append({"births": _births_of(m.births[k]), "est": est,
                        "n_comp": int(res.n_reduced), "sum_w": round(float(res.sum_w), 2)})  # fmt: skip
     return {
         "k": k,
@@ -177,6 +210,7 @@ def replay_data(rep: Any) -> dict[str, Any]:
     K, P = np.shape(scans.present)
     peds = ped_states(scans)
     inits = [init_states(m.metrics, K, P) for m in rep.models]
+    tracks = [track_labels(m.results) for m in rep.models]
     steps = scan_steps(rep.recording.t, rep.recording.step_length, scans.dt)
     exp = rep.config.experiment
     return {
@@ -203,14 +237,15 @@ def replay_data(rep: Any) -> dict[str, Any]:
                 "label": m.label,
                 "delay_mean": _num(m.row.get("delay_mean")),
                 "ospa": _num(m.row.get("ospa")),
+                "tracks": labels,
                 "episodes": [
                     [str(scans.ped_ids[e.target]), e.k0, e.k_end, e.k_d, e.k_t, _num(e.delay), bool(e.censored)]
                     for e in m.metrics.episodes
                 ],
             }
-            for m in rep.models
+            for m, labels in zip(rep.models, tracks, strict=True)
         ],
-        "frames": [frame_data(rep, k, int(idx), peds, inits) for k, idx in enumerate(steps)],
+        "frames": [frame_data(rep, k, int(idx), peds, inits, tracks) for k, idx in enumerate(steps)],
     }
 
 

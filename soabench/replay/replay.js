@@ -8,6 +8,9 @@ const NS="http://www.w3.org/2000/svg";
 const K=D.frames.length;
 const PED_FILL=["#111","#999","#fff","#8b4513"];
 const AWAIT="#e6007e", EST="#5b2a86";
+// one colour per track label (soabench/replay/animation.py's TRACK_COLORS): label i of a model in colour i
+const TRACK=["#e6194b","#3cb44b","#4363d8","#f58231","#911eb4","#42d4f4","#f032e6","#9a6324","#469990","#800000",
+  "#808000","#000075"];
 function esc(s){return String(s).replace(/[&<>"']/g,c=>"&#"+c.charCodeAt(0)+";");}
 function pts(a){return a.map(p=>p[0]+","+p[1]).join(" ");}
 function el(tag,attrs){const e=document.createElementNS(NS,tag);for(const k in attrs)e.setAttribute(k,attrs[k]);return e;}
@@ -33,6 +36,9 @@ swatch('<circle cx="9" cy="7" r="5" fill="none" stroke="'+AWAIT+'" stroke-width=
 swatch('<circle cx="9" cy="7" r="3" fill="#1f77b4"/>',"measurement (target)");
 swatch('<path d="M5 3L13 11M13 3L5 11" stroke="#ff7f0e" stroke-width="2"/>',"measurement (clutter)");
 swatch('<path d="M9 1V13M3 7H15" stroke="'+EST+'" stroke-width="2.5"/>',"estimate");
+if(D.models.some(m=>m.tracks&&m.tracks.length))swatch('<path d="M9 1V13M3 7H15" stroke="'+TRACK[0]+'" stroke-width="2.5"/>'+
+  '<path d="M9 1V13M3 7H15" stroke="'+TRACK[1]+'" stroke-width="2.5" transform="translate(6 0)"/>',
+  "estimate with its track label (one colour per track)");
 D.sources.forEach(function(s){swatch('<ellipse cx="9" cy="7" rx="7" ry="4" fill="none" stroke="'+s.color+'" stroke-width="1.5"/>',
   "birth: "+s.label);});
 // panels: the static scene once per panel, a dynamic layer redrawn per frame
@@ -75,7 +81,7 @@ function draw(k){
   const c=(0.7*R).toFixed(2), c2=(1.4*R).toFixed(2);
   f.z.forEach(function(z){zs+=z[2]?'<path d="M'+(z[0]-c)+" "+(z[1]-c)+"l"+c2+" "+c2+"m0 -"+c2+"l-"+c2+" "+c2+
     '" stroke="#ff7f0e" stroke-width="'+(0.3*R)+'"/>':'<circle cx="'+z[0]+'" cy="'+z[1]+'" r="'+(0.55*R)+'" fill="#1f77b4"/>';});
-  let nDrawn=0;
+  let nDrawn=0,nTracks=0;
   D.models.forEach(function(m,i){
     const mf=f.models[i];
     let s=common, counts={};
@@ -94,9 +100,12 @@ function draw(k){
         '" paint-order="stroke">'+esc(p[0])+'</text>';});
     s+=zs;
     const e1=1.5*R, e2=3*R;
-    mf.est.forEach(function(x){s+='<path d="M'+x[0]+" "+(x[1]-e1)+"v"+e2+"M"+(x[0]-e1)+" "+x[1]+"h"+e2+'" stroke="'+EST+
-      '" stroke-width="'+(0.45*R)+'"/>';});
-    layers[i].innerHTML=s;nDrawn+=layers[i].childElementCount;
+    mf.est.forEach(function(x){const lab=x[2]>=0?m.tracks[x[2]]:null, col=lab===null?EST:TRACK[x[2]%TRACK.length];
+      s+='<path d="M'+x[0]+" "+(x[1]-e1)+"v"+e2+"M"+(x[0]-e1)+" "+x[1]+"h"+e2+'" stroke="'+col+
+      '" stroke-width="'+(0.45*R)+'"/>';
+      if(lab!==null)s+='<text class="track" x="'+(x[0]+1.3*R)+'" y="'+(x[1]+2.2*R)+'" font-size="'+fs+'" font-weight="bold" fill="'+
+        col+'" stroke="#fff" stroke-width="'+(fs/6)+'" paint-order="stroke">'+esc(lab)+'</text>';});
+    layers[i].innerHTML=s;nDrawn+=layers[i].childElementCount;nTracks+=layers[i].querySelectorAll("text.track").length;
     const parts=Object.keys(counts).map(c=>counts[c]+" "+D.sources[c].label);
     stats[i].textContent="births: "+(parts.length?parts.join(", "):"none")+" | estimates "+mf.est.length+
       " | components "+mf.n_comp+" (mass "+mf.sum_w+")"+(waiting.length?" | awaiting initiation: "+waiting.join(", "):"");
@@ -105,6 +114,7 @@ function draw(k){
   document.getElementById("clock").textContent="scan k = "+k+" / "+(K-1)+", t = "+f.t.toFixed(1)+" s";
   body.dataset.frame=String(k);body.dataset.t=String(f.t);body.dataset.measurements=String(f.z.length);
   body.dataset.pedestrians=String(f.peds.length);body.dataset.drawn=String(nDrawn);
+  body.dataset.tracks=String(nTracks);
 }
 const slider=document.getElementById("slider");slider.max=String(K-1);
 let cur=0,timer=null,focus=null;  // focus: the pedestrian the zoomed views centre on (else the ego)
