@@ -77,6 +77,12 @@ def test_replay_reproduces_the_run(replay_page: Path, capsys) -> None:
     soa_src = {b[5] for f in data["frames"] for b in f["models"][0]["births"]}
     ubm_src = {b[5] for f in data["frames"] for b in f["models"][1]["births"]}
     assert soa_src <= {0, 1, 2} and 0 in soa_src and ubm_src == {3}
+    # each pedestrian awaiting initiation names the model's nearest birth term of the scan
+    why = [(f, i, w) for f in data["frames"] for i, m in enumerate(f["models"]) for w in m["why"]]
+    assert why
+    for f, i, (pid, sigmas, metres, source, _, _) in why:
+        assert next(p for p in f["peds"] if p[0] == pid)[5][i] == 1 and sigmas >= 0 and metres >= 0
+        assert source in {b[5] for b in f["models"][i]["births"]}
     # a GM-PHD's estimates carry no track labels: no track list, label index -1
     assert all(m["tracks"] == [] for m in data["models"])
     assert {e[2] for f in data["frames"] for m in f["models"] for e in m["est"]} == {-1}
@@ -117,6 +123,17 @@ def test_frame_shows_what_scene_sensor_shows(replay_page: Path, monkeypatch, tmp
         # the trial's, but the noise and the clutter positions are drawn for fewer scans (soabench.sensor.observe
         # draws them for the whole recording), so the measurement values differ
         assert sorted(z[2] for z in frame["z"]) == sorted(z[2] for z in want_z)
+
+
+def test_nearest_birth_known_answer() -> None:
+    from soabench.replay.frames import nearest_birth
+
+    m = np.array([[0.0, 0.0, 0, 0], [10.0, 0.0, 0, 0]])
+    P = np.array([np.diag([4.0, 1.0, 1, 1]), np.diag([100.0, 100.0, 1, 1])])
+    # (3, 0): 1.5 sigma from the first term (sd 2 m along x), 0.7 from the wide second one 7 m away
+    assert nearest_birth((m, P, np.array([1, 0])), np.array([3.0, 0.0])) == [0.7, 7.0, 0, 10.0, -0.0]
+    assert nearest_birth((m[:1], P[:1], np.array([1])), np.array([0.0, 2.0])) == [2.0, 2.0, 1, 0.0, -0.0]
+    assert nearest_birth((m[:0], P[:0], np.array([], dtype=int)), np.array([0.0, 0.0])) is None
 
 
 def test_replay_scans_equal_scene_sensor_arrays(run_dir: Path, monkeypatch, tmp_path: Path) -> None:

@@ -16,7 +16,7 @@ from soabench.errors import SoabenchError
 
 #: pedestrian fill per state (visible, occluded, outside FOV, in building), as on the page
 _PED_FILL = ("#111111", "#999999", "#ffffff", "#8b4513")
-_AWAIT, _EST = "#e6007e", "#5b2a86"
+_AWAIT, _EST, _HIDE = "#e6007e", "#5b2a86", "#4b2e83"
 #: one colour per track label (the page's palette; label i of a model in colour i modulo its length)
 TRACK_COLORS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#9a6324", "#469990",
                 "#800000", "#808000", "#000075")  # fmt: skip
@@ -93,7 +93,7 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
         for i, ax in enumerate(axes):
             mf = f["models"][i]
             drawn += _add(ax, f["omega"], fc="#7fd37f", alpha=0.45, ec="none")
-            drawn += _add(ax, f["hidden"], fc="#6d6d6d", alpha=0.35, ec="none")
+            drawn += _add(ax, f["hidden"], fc=_HIDE + "2e", ec=_HIDE, hatch="////", lw=0)
             drawn += _add(ax, f["fov"], fc="none", ec="black", lw=0.6, ls="--")
             for v in f["vehicles"]:
                 drawn += _add(ax, "M" + " ".join(f"{x} {y}" for x, y in v) + "Z", fc="#377eb8", ec="k", lw=0.4)
@@ -112,6 +112,10 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
             z = np.asarray(f["z"], dtype=float).reshape(-1, 3)
             drawn += ax.plot(z[z[:, 2] == 0, 0], z[z[:, 2] == 0, 1], ".", color="#1f77b4", ms=6)
             drawn += ax.plot(z[z[:, 2] == 1, 0], z[z[:, 2] == 1, 1], "x", color="#ff7f0e", ms=4)
+            at = {p[0]: p for p in f["peds"]}
+            for w in mf.get("why", ()):  # awaiting pedestrian -> its nearest birth term
+                p = at[w[0]]
+                drawn += ax.plot([p[1], w[4]], [p[2], w[5]], color=_AWAIT, lw=1.0, ls="--")
             tracks = models[i].get("tracks") or []
             for x, y, lab in mf["est"]:
                 colour = _EST if lab < 0 else TRACK_COLORS[lab % len(TRACK_COLORS)]

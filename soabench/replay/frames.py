@@ -103,8 +103,9 @@ def init_states(metrics: Any, K: int, P: int) -> np.ndarray:
     return out
 
 
-def _births_of(births: Any) -> list:
-    """[[x, -y, width, height, angle_deg, source], ...]: the 2-sigma ellipses of the position blocks."""
+def _birth_arrays(births: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The scan's birth terms (those of measurement newborns included): means (n, 4), covariances (n, 4, 4) and
+    origins (n,)."""
     m = [np.asarray(births.m, dtype=float).reshape(-1, 4)]
     P = [np.asarray(births.P, dtype=float).reshape(-1, 4, 4)]
     src = [np.asarray(births.source, dtype=int).reshape(-1)]
@@ -112,12 +113,31 @@ def _births_of(births: Any) -> list:
         m.append(np.asarray(births.newborn.m, dtype=float).reshape(-1, 4))
         P.append(np.asarray(births.newborn.P, dtype=float).reshape(-1, 4, 4))
         src.append(np.full(len(m[-1]), SOURCE_MEAS))
-    mm, PP, ss = np.concatenate(m), np.concatenate(P), np.concatenate(src)
+    return np.concatenate(m), np.concatenate(P), np.concatenate(src)
+
+
+def _births_of(arrays: tuple[np.ndarray, np.ndarray, np.ndarray]) -> list:
+    """[[x, -y, width, height, angle_deg, source], ...]: the 2-sigma ellipses of the position blocks."""
+    mm, PP, ss = arrays
     if not len(mm):
         return []
     w, h, a = ellipse_params(PP[:, :2, :2])
     rows = np.column_stack([mm[:, 0], -mm[:, 1], w, h, -a])  # the page's y is negated: angles turn the other way
     return [[*r, int(s)] for r, s in zip(np.round(rows, 2).tolist(), ss.tolist(), strict=True)]
+
+
+def nearest_birth(arrays: tuple[np.ndarray, np.ndarray, np.ndarray], xy: np.ndarray) -> list | None:
+    """The birth term of the scan nearest to the world point ``xy`` in its own position covariance:
+    ``[sigmas, metres, source, x, -y]`` (Mahalanobis distance, Euclidean distance, origin, its mean in page
+    coordinates), None without births. Its drawn ellipse is 2 sigma: a pedestrian outside every ellipse has no
+    birth term there, which is why a model's delay runs (docs/method.md §3.6, §5.4)."""
+    mm, PP, ss = arrays
+    if not len(mm):
+        return None
+    d = np.asarray(xy, dtype=float)[None, :] - mm[:, :2]
+    sig = np.sqrt(np.einsum("ni,ni->n", d, np.linalg.solve(PP[:, :2, :2], d[:, :, None])[:, :, 0]))
+    i = int(np.argmin(sig))
+    return [round(float(sig[i]), 2), round(float(np.hypot(*d[i])), 2), int(ss[i]), *_xy(mm[i, :2])[0]]
 
 
 def _hidden(scene: Any, fov: Any, omega: Any) -> Any:
@@ -182,10 +202,12 @@ def frame_data(
                          [int(s[k, j]) for s in inits]])  # fmt: skip
     fov, omega = fov_polygon(ego, rep.scans.sensor), scan.visible_region
     models = []
-    for m, labels in zip(rep.models, tracks, strict=True):
-        res = m.results[k]
-        est = [[*xy, i] for xy, i in zip(_xy(np.asarray(res.X)[:, :2]), _label_index(res, labels), strict=True)]
-        models.append({"births": _births_of(m.births[k]), "est": est,
+    for i, (m, labels) in enumerate(zip(rep.models, tracks, strict=True)):
+        res, arrays = m.results[k], _birth_arrays(m.births[k])
+        est = [[*xy, n] for xy, n in zip(_xy(np.asarray(res.X)[:, :2]), _label_index(res, labels), strict=True)]
+        waiting = np.flatnonzero((inits[i][k] == 1) & np.asarray(scans.present[k], dtype=bool))
+        why = [[str(scans.ped_ids[j]), *near] for j in waiting if (near := nearest_birth(arrays, scans.truth_xy[k, j]))]
+        models.append({"births": _births_of(arrays), "est": est, "why": why,
                        "n_comp": int(res.n_reduced), "sum_w": round(float(res.sum_w), 2)})  # fmt: skip
     return {
         "k": k,
