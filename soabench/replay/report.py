@@ -283,11 +283,13 @@ def _run_row(folder: Path, run: Path) -> str:
 
 
 def index_html(folder: Path, runs: list[Path]) -> str:
-    """The index page of a folder of run folders (a study, ``results/``): its own Markdown and figures, and a table
-    linking every run's report page."""
+    """The index page of a folder of run folders (a study, ``results/``): its own Markdown and figures, a table
+    linking every run's report page (shallow folders first: a study's main run before its sweep points), then the
+    folders below with their index pages, Markdown and figures."""
     head = "".join(f"<th>{h}</th>" for h in ("run folder", "scene", "trials", "duration", "models", "λ", "seed"))
+    shallow_first = sorted(runs, key=lambda r: (len(r.relative_to(folder).parts), r))  # main/ before sweep points
     table = (f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>'
-             + "".join(_run_row(folder, r) for r in runs) + "</tbody></table>")  # fmt: skip
+             + "".join(_run_row(folder, r) for r in shallow_first) + "</tbody></table>")  # fmt: skip
     parts = []
     for d, mds, pngs in _folder_parts(folder, runs):
         rel = d.relative_to(folder).as_posix() if d != folder else "."
@@ -297,7 +299,8 @@ def index_html(folder: Path, runs: list[Path]) -> str:
         body += "".join(markdown_html(m.read_text(encoding="utf-8")) for m in mds)
         body += "".join(_figure(p) for p in pngs)
         parts.append((f"{rel}/", body))
-    sections = [("Run folders", table), *parts]
+    own = [p for p in parts if p[0] == "./"]  # the folder's own Markdown (comparison.md, README.md) comes first
+    sections = [*(("This folder", b) for _, b in own), ("Run folders", table), *(p for p in parts if p[0] != "./")]
     title = html.escape(f"soabench report: {folder.name}")
     toc = " · ".join(f'<a href="#s{i}">{html.escape(n)}</a>' for i, (n, _) in enumerate(sections))
     body = "\n".join(f'<section id="s{i}"><h2>{html.escape(n)}</h2>\n{c}</section>' for i, (n, c) in
