@@ -53,20 +53,67 @@ def _add(ax: Any, path: str, **style: Any) -> list:
     return [] if patch is None else [ax.add_patch(patch)]
 
 
+def _legend(fig: Any, sources: list[dict[str, str]], ncol: int) -> None:
+    """The page's legend, in the strip under the panels."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    def mark(marker: str, **kw: Any) -> Line2D:
+        return Line2D([], [], ls="none", marker=marker, **kw)
+
+    items = [
+        (Patch(fc="#7fd37f", alpha=0.6), "visible sidewalk Ω_k"),
+        (Patch(fc=_HIDE + "2e", ec=_HIDE, hatch="////", lw=0), "occluded sidewalk in the FOV"),
+        *((mark("s" if i == 3 else "o", ms=6, mfc=c, mec="k"), f"pedestrian: {s}") for i, (c, s) in
+          enumerate(zip(_PED_FILL, ("visible", "occluded", "outside FOV", "in building"), strict=True))),
+        (mark("o", ms=9, mfc="none", mec=_AWAIT, mew=1.6), "detected, not yet initiated"),
+        (Line2D([], [], color=_AWAIT, ls="--"), "to its nearest birth term"),
+        (mark(".", color="#1f77b4", ms=7), "measurement (target)"),
+        (mark("x", color="#ff7f0e", ms=5), "measurement (clutter)"),
+        (mark("+", color=_EST, ms=8, mew=1.8), "estimate"),
+        *((mark("o", ms=8, mfc="none", mec=s["color"]), f"birth: {s['label']}") for s in sources),
+    ]  # fmt: skip
+    fig.legend(*zip(*items, strict=True), loc="lower center", ncol=ncol, fontsize=7, frameon=False,
+               handlelength=1.6, columnspacing=1.0, borderaxespad=0.2)  # fmt: skip
+
+
+def frame_size(n_models: int, n_legend: int, panel_px: int = 420) -> tuple[int, int, int, int]:
+    """(width, height, panel height, legend strip height) in pixels of a video frame: ``n_models`` panels of
+    ``panel_px`` x 3/4 ``panel_px`` over a legend of ``n_legend`` entries, under a title line; width and height
+    rounded up to multiples of 16 (what video codecs want)."""
+    panel_h = panel_px * 3 // 4
+    legend_h = 14 * -(-n_legend // _legend_columns(n_models)) + 8
+    up16 = lambda v: -(-v // 16) * 16  # noqa: E731
+    return up16(n_models * panel_px), up16(_TITLE_PX + panel_h + legend_h), panel_h, legend_h
+
+
+_TITLE_PX = 24
+_LEGEND_FIXED = 11  #: legend entries besides the birth origins
+
+
+def _legend_columns(n_models: int) -> int:
+    return max(2, 3 * n_models)
+
+
 def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndarray]:
     """One (H, W, 3) uint8 RGB image per scan of the replay ``data`` (:func:`soabench.replay.frames.replay_data`),
-    H and W multiples of 16 (what video codecs want)."""
+    sized by :func:`frame_size`: each panel follows the ego, the sensor's range and a margin around it (the page's
+    "the FOV" view)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.collections import EllipseCollection
     from matplotlib.figure import Figure
 
     S, models = data["scene"], data["models"]
-    x0, y0, w, h = S["viewBox"]
     dpi = 80
-    width, height = (-(-v // 16) * 16 for v in (panel_px * len(models), int(panel_px * h / w) + 48))
+    width, height, panel_h, legend_h = frame_size(len(models), _LEGEND_FIXED + len(data["sources"]), panel_px)
     fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
     canvas = FigureCanvasAgg(fig)
-    axes = fig.subplots(1, len(models), squeeze=False)[0]
+    axes = [
+        fig.add_axes(((i * panel_px + 3) / width, legend_h / height, (panel_px - 6) / width, panel_h / height))
+        for i in range(len(models))
+    ]
+    half_h = 1.1 * data["r_max"]
+    half_w = half_h * (panel_px - 6) / panel_h
     colours = [s["color"] for s in data["sources"]]
     for ax in axes:
         ax.set_facecolor("#dde3ea")
@@ -78,12 +125,9 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
             ("parked", {"fc": "black", "ec": "none"}),
         ):
             _add(ax, S[key], lw=0.5, **style)  # fmt: skip
-        ax.set_xlim(x0, x0 + w)
-        ax.set_ylim(y0 + h, y0)  # page coordinates: y grows downwards
-        ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.9, wspace=0.03)
+    _legend(fig, data["sources"], _legend_columns(len(models)))
     text = {"fontsize": 6.5, "clip_on": True}
     drawn: list = []
     for f in data["frames"]:
@@ -122,6 +166,9 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
                 drawn += ax.plot(x, y, "+", color=colour, ms=9, mew=1.8)
                 if lab >= 0:
                     drawn.append(ax.text(x + 1.5, y + 3.0, tracks[lab], color=colour, fontweight="bold", **text))
+            cx, cy = f["ego"][:2]
+            ax.set_xlim(cx - half_w, cx + half_w)
+            ax.set_ylim(cy + half_h, cy - half_h)  # page coordinates: y grows downwards
             ax.set_title(f"{models[i]['label']}  k = {f['k']}, t = {f['t']:.1f} s", fontsize=10)  # replaced each time
         canvas.draw()
         yield np.asarray(canvas.buffer_rgba())[:height, :width, :3].copy()
