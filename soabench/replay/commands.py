@@ -12,7 +12,7 @@ from soabench.errors import require
 
 def add_replay_parser(sub: argparse._SubParsersAction, csv_list) -> None:
     """Register ``replay`` (``csv_list``: the CLI's comma-list parser factory)."""
-    p = sub.add_parser("replay", help="re-simulate one trial of a finished run as an interactive HTML page")
+    p = sub.add_parser("replay", help="re-simulate one trial of a finished run as an interactive HTML page or a video")
     p.add_argument("run", metavar="RUN", help="a finished (or resumable) run folder (holds run.json)")
     p.add_argument("--trial", type=int, required=True, help="trial index of the run")
     p.add_argument(
