@@ -203,7 +203,7 @@ def run_study(
                 md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
             from soabench.replay.report import write_index
 
-            index = write_index(root, reports=False)[0]  # each finished run wrote its report.html
+            index = write_index(root)[0]  # and each run's report.html (a run kept from before may have none)
             md += f"\nEvery part on one page: {index}\n"
         except KeyboardInterrupt:
             raise Interrupted(
