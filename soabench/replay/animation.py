@@ -49,14 +49,20 @@ def _patch(path: str, **style: Any):
 
 
 def _add(ax: Any, path: str, **style: Any) -> list:
+    """Draw an SVG path of ours on ``ax`` (as an artist: the panels' limits are set, not fitted to what is drawn)."""
     patch = _patch(path, **style)
-    return [] if patch is None else [ax.add_patch(patch)]
+    return [] if patch is None else [ax.add_artist(patch)]
 
 
-def _legend(fig: Any, sources: list[dict[str, str]], ncol: int) -> None:
-    """The page's legend, in the strip under the panels."""
+def _legend(sources: list[dict[str, str]], ncol: int, width: int, height: int, dpi: int) -> np.ndarray:
+    """The page's legend, drawn once as the (height, width, 3) strip under the panels of every frame."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
+
+    fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
+    canvas = FigureCanvasAgg(fig)
 
     def mark(marker: str, **kw: Any) -> Line2D:
         return Line2D([], [], ls="none", marker=marker, **kw)
@@ -73,8 +79,10 @@ def _legend(fig: Any, sources: list[dict[str, str]], ncol: int) -> None:
         (mark("+", color=_EST, ms=8, mew=1.8), "estimate"),
         *((mark("o", ms=8, mfc="none", mec=s["color"]), f"birth: {s['label']}") for s in sources),
     ]  # fmt: skip
-    fig.legend(*zip(*items, strict=True), loc="lower center", ncol=ncol, fontsize=7, frameon=False,
+    fig.legend(*zip(*items, strict=True), loc="center", ncol=ncol, fontsize=7, frameon=False,
                handlelength=1.6, columnspacing=1.0, borderaxespad=0.2)  # fmt: skip
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[:height, :width, :3].copy()
 
 
 def frame_size(n_models: int, n_legend: int, panel_px: int = 420) -> tuple[int, int, int, int]:
@@ -127,7 +135,7 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
             _add(ax, S[key], lw=0.5, **style)  # fmt: skip
         ax.set_xticks([])
         ax.set_yticks([])
-    _legend(fig, data["sources"], _legend_columns(len(models)))
+    legend = _legend(data["sources"], _legend_columns(len(models)), width, legend_h, dpi)
     text = {"fontsize": 6.5, "clip_on": True}
     drawn: list = []
     for f in data["frames"]:
@@ -171,7 +179,9 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
             ax.set_ylim(cy + half_h, cy - half_h)  # page coordinates: y grows downwards
             ax.set_title(f"{models[i]['label']}  k = {f['k']}, t = {f['t']:.1f} s", fontsize=10)  # replaced each time
         canvas.draw()
-        yield np.asarray(canvas.buffer_rgba())[:height, :width, :3].copy()
+        rgb = np.asarray(canvas.buffer_rgba())[:height, :width, :3].copy()
+        rgb[height - legend_h :] = legend
+        yield rgb
 
 
 def _part(out: Path) -> Path:
