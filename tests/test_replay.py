@@ -221,6 +221,30 @@ def test_track_labels_keep_one_colour_per_label(labelled_page) -> None:
     assert shown == given and sum(map(len, given)) >= 3  # every estimate keeps its own label, index = colour
 
 
+def test_a_whole_tracker_is_replayed_with_its_track_labels(tmp_path: Path) -> None:
+    """A run's tracker (not a birth model) gets its panel, without birth terms; the labels of its Estimates (set
+    whether or not Estimates declares the field) are shown, one colour per label."""
+    run = tmp_path / "run"
+    argv = ["run", "--trials", "1", "--duration", "30", "--models", "soa", "--trackers",
+            "plugin_fixtures:LabelledEchoTracker", "--probabilities", "static", "--workers", "1", "--no-progress",
+            "--out", str(run)]  # fmt: skip
+    assert main(argv) == 0
+    page = tmp_path / "t0.html"
+    assert main(["replay", str(run), "--trial", "0", "--models", "soa,plugin_fixtures:LabelledEchoTracker",
+                 "--out", str(page)]) == 0  # fmt: skip
+    data = page_data(page)
+    assert data["reproduced"] is True, data["notes"]
+    soa, echo = data["models"]
+    assert soa["tracks"] == [] and echo["tracks"]
+    for f in data["frames"]:
+        assert f["models"][1]["births"] == [] and f["models"][1]["sum_w"] is None  # a tracker: no births, no mass
+        for x, y, i in f["models"][1]["est"]:
+            assert echo["tracks"][i] == f"c{int(x // 10)}:{int(-y // 10)}"  # the page's y is the world's -y
+    k = max(range(len(data["frames"])), key=lambda i: len(data["frames"][i]["models"][1]["est"]))
+    attrs = body_attrs(browse(page, f"#frame={k}", tmp_path))
+    assert attrs["status"] == "ok" and attrs["tracks"] == str(len(data["frames"][k]["models"][1]["est"])), attrs
+
+
 def test_labels_drawn_in_the_browser_and_the_video(labelled_page, tmp_path: Path) -> None:
     from soabench.replay.animation import TRACK_COLORS, render_frames
 

@@ -18,7 +18,8 @@ def add_replay_parser(sub: argparse._SubParsersAction, csv_list) -> None:
     p.add_argument(
         "--models",
         type=csv_list("model"),
-        help="birth models to show side by side (default: the run's; a run's module:Class plugin only when typed here)",
+        help="birth models and trackers to show side by side (default: the run's; a run's module:Class plugin only "
+        "when typed here)",
     )
     p.add_argument("--mode", help="probability mode (default: the run's first)")
     p.add_argument("--clutter", type=float, help="clutter rate lambda (default: the run's first)")

@@ -105,7 +105,9 @@ def init_states(metrics: Any, K: int, P: int) -> np.ndarray:
 
 def _birth_arrays(births: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The scan's birth terms (those of measurement newborns included): means (n, 4), covariances (n, 4, 4) and
-    origins (n,)."""
+    origins (n,); none for a whole tracker (``births`` None)."""
+    if births is None:
+        return np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, dtype=int)
     m = [np.asarray(births.m, dtype=float).reshape(-1, 4)]
     P = [np.asarray(births.P, dtype=float).reshape(-1, 4, 4)]
     src = [np.asarray(births.source, dtype=int).reshape(-1)]
@@ -208,7 +210,7 @@ def frame_data(
         waiting = np.flatnonzero((inits[i][k] == 1) & np.asarray(scans.present[k], dtype=bool))
         why = [[str(scans.ped_ids[j]), *near] for j in waiting if (near := nearest_birth(arrays, scans.truth_xy[k, j]))]
         models.append({"births": _births_of(arrays), "est": est, "why": why,
-                       "n_comp": int(res.n_reduced), "sum_w": round(float(res.sum_w), 2)})  # fmt: skip
+                       "n_comp": int(res.n_reduced), "sum_w": _num(res.sum_w, 2)})  # fmt: skip
     return {
         "k": k,
         "t": round(float(scan.t), 3),
@@ -271,7 +273,7 @@ def replay_data(rep: Any) -> dict[str, Any]:
     }
 
 
-def _num(v: Any) -> float | None:
+def _num(v: Any, digits: int = 4) -> float | None:
     """A JSON number (None for NaN)."""
     f = float(v)
-    return None if f != f else round(f, 4)
+    return None if f != f else round(f, digits)

@@ -121,7 +121,7 @@ function draw(k){
     layers[i].innerHTML=s;nDrawn+=layers[i].childElementCount;nTracks+=layers[i].querySelectorAll("text.track").length;
     const parts=Object.keys(counts).map(c=>counts[c]+" "+D.sources[c].label);
     stats[i].textContent="births: "+(parts.length?parts.join(", "):"none")+" | estimates "+mf.est.length+
-      " | components "+mf.n_comp+" (mass "+mf.sum_w+")"+(waiting.length?" | awaiting initiation: "+waiting.map(function(id){const w=why[id];
+      " | components "+mf.n_comp+(mf.sum_w===null?"":" (mass "+mf.sum_w+")")+(waiting.length?" | awaiting initiation: "+waiting.map(function(id){const w=why[id];
         return w?id+" (nearest birth "+w[1].toFixed(1)+"\u03c3 away: "+D.sources[w[3]].label+", "+w[2].toFixed(1)+" m)":id;}).join(", "):"");
   });
   slider.value=k;
