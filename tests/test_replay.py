@@ -261,7 +261,10 @@ def test_labels_drawn_in_the_browser_and_the_video(labelled_page, tmp_path: Path
 def test_replay_bad_input(run_dir: Path, tmp_path: Path, capsys) -> None:
     cases = [
         (["replay", str(run_dir), "--trial", "7"], "--trial 7 is not a trial of this run; choose 0 to 1"),
-        (["replay", str(run_dir), "--trial", "0", "--models", "gmbm"], "'gmbm' is not a birth model of this run"),
+        (
+            ["replay", str(run_dir), "--trial", "0", "--models", "gmbm"],
+            "'gmbm' is not a birth model or tracker of this run; choose from soa, ubm",
+        ),
         (["replay", str(run_dir), "--trial", "0", "--mode", "dynamic"], "--mode 'dynamic' is not in this run"),
         (["replay", str(tmp_path), "--trial", "0"], "is not a run folder"),
         (["report", str(tmp_path)], "is not a run folder"),
