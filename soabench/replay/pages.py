@@ -1,4 +1,4 @@
-"""The pages ``soabench replay`` and ``soabench report`` write: one trial's replay (and GIF), a run's report with
+"""The pages ``soabench replay`` and ``soabench report`` write: one trial's replay (page or video), a run's report with
 the replays of its best and worst trials, or an index over a folder of runs (docs/user-guide/replay.md)."""
 
 from __future__ import annotations
@@ -11,19 +11,33 @@ from soabench import plugins
 from soabench.errors import require
 from soabench.experiment.runs.ownership import check_out_file
 from soabench.experiment.runs.store import RUN_FILE
+from soabench.replay.animation import VIDEO_SUFFIXES, require_mp4, write_video
 from soabench.replay.frames import replay_data
-from soabench.replay.gif import write_gif
 from soabench.replay.page import write_replay
 from soabench.replay.report import REPLAYS_DIR, extreme_trials, replay_file, write_index, write_report
 from soabench.replay.simulate import read_run, replay_trial
 
+PAGE_SUFFIXES = (".html", ".htm")
 
-def _replay_out(run_dir: Path, trial: int, out: str | None) -> Path:
-    if out is not None:
-        return check_out_file(out)
-    folder = run_dir / REPLAYS_DIR
-    folder.mkdir(exist_ok=True)
-    return check_out_file(str(folder / replay_file(trial)))
+
+def _replay_outs(run_dir: Path, trial: int, outs: list[str] | None) -> list[Path]:
+    """The files to write, each ending in a format we write (checked before any simulation)."""
+    if not outs:
+        folder = run_dir / REPLAYS_DIR
+        folder.mkdir(exist_ok=True)
+        return [check_out_file(str(folder / replay_file(trial)))]
+    paths = []
+    allowed = (*PAGE_SUFFIXES, *VIDEO_SUFFIXES)
+    for out in outs:
+        path = check_out_file(out)
+        suffix = path.suffix.lower()
+        require(
+            suffix in allowed, f"--out {out!r} must end in one of {', '.join(allowed)}: the format it is written in"
+        )
+        if suffix == ".mp4":
+            require_mp4()
+        paths.append(path)
+    return paths
 
 
 def write_trial_replay(
@@ -32,28 +46,24 @@ def write_trial_replay(
     models=None,
     mode=None,
     clutter=None,
-    out: str | None = None,
-    gif: str | None = None,
-    log: Callable[[str], None] = print,
+    outs: list[str] | None = None,
 ):
-    """Re-simulate and write one replay page (and a GIF if ``gif``); returns (path, size in bytes, the replay,
-    seconds simulating, seconds rendering the page). A run's ``module:Class`` plugin is imported only when named in
-    ``models`` (as with ``run --resume``: run.json is data)."""
+    """Re-simulate a trial and write each of ``outs`` (default: its page under ``RUN/replays/``); returns (the
+    paths and sizes in bytes written, the replay, seconds simulating, seconds writing). A run's ``module:Class``
+    plugin is imported only when named in ``models`` (as with ``run --resume``: run.json is data)."""
     require(trial >= 0, f"--trial {trial} must be >= 0")
     plugins.allow_import_paths(models or ())
     run_dir, _, _ = read_run(run)
-    gif_out = None if gif is None else check_out_file(gif)
-    require(gif_out is None or gif_out.suffix.lower() == ".gif", f"--gif {gif!r} must name a .gif file")
-    target = _replay_out(run_dir, trial, out)
+    targets = _replay_outs(run_dir, trial, outs)
     t0 = time.perf_counter()
     rep = replay_trial(run_dir, trial, models, mode, clutter)
     t1 = time.perf_counter()
     data = replay_data(rep)
-    size = write_replay(data, target)
-    t2 = time.perf_counter()
-    if gif_out is not None:
-        log(f"wrote {gif_out} ({write_gif(data, gif_out) / 1e6:.2f} MB)")
-    return target, size, rep, t1 - t0, t2 - t1
+    written = []
+    for target in targets:
+        write = write_replay if target.suffix.lower() in PAGE_SUFFIXES else write_video
+        written.append((target, write(data, target)))
+    return written, rep, t1 - t0, time.perf_counter() - t1
 
 
 def write_pages(run: str | Path, out: str | None = None, replays: bool = False, log: Callable[[str], None] = print):
@@ -69,7 +79,7 @@ def write_pages(run: str | Path, out: str | None = None, replays: bool = False, 
     if replays:
         trials = sorted({r[w][1] for r in extreme_trials(run_dir) for w in ("best", "worst")})
         for trial in trials:
-            target, size, rep, _, _ = write_trial_replay(run_dir, trial, log=log)
+            ((target, size),), rep, _, _ = write_trial_replay(run_dir, trial)
             log(f"wrote {target} ({size / 1e6:.2f} MB; {rep.notes[-1]})")
     target, size = write_report(run_dir, out)
     log(f"wrote {target} ({size / 1e6:.2f} MB)")

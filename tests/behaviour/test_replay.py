@@ -60,6 +60,14 @@ def scene_sensor_scans(monkeypatch, tmp_path: Path, time: float):
     return seen["scans"], seen["k"]
 
 
+def test_a_run_writes_its_report(run_dir: Path) -> None:
+    """A plain `soabench run` leaves report.html in its folder: the page to open."""
+    from soabench.replay.report import REPORT_FILE
+
+    text = (run_dir / REPORT_FILE).read_text(encoding="utf-8")
+    assert '<meta name="generator" content="soabench report">' in text and "Best and worst trials" in text
+
+
 def test_replay_reproduces_the_run(replay_page: Path, capsys) -> None:
     data = page_data(replay_page)
     assert data["reproduced"] is True, data["notes"]
@@ -71,6 +79,15 @@ def test_replay_reproduces_the_run(replay_page: Path, capsys) -> None:
     soa_src = {b[5] for f in data["frames"] for b in f["models"][0]["births"]}
     ubm_src = {b[5] for f in data["frames"] for b in f["models"][1]["births"]}
     assert soa_src <= {0, 1, 2} and 0 in soa_src and ubm_src == {3}
+    # each pedestrian awaiting initiation names the model's nearest birth term of the scan
+    why = [(f, i, w) for f in data["frames"] for i, m in enumerate(f["models"]) for w in m["why"]]
+    assert why
+    for f, i, (pid, sigmas, metres, source, _, _) in why:
+        assert next(p for p in f["peds"] if p[0] == pid)[5][i] == 1 and sigmas >= 0 and metres >= 0
+        assert source in {b[5] for b in f["models"][i]["births"]}
+    # a GM-PHD's estimates carry no track labels: no track list, label index -1
+    assert all(m["tracks"] == [] for m in data["models"])
+    assert {e[2] for f in data["frames"] for m in f["models"] for e in m["est"]} == {-1}
 
 
 def _truth_rows(scans, k: int) -> dict[str, tuple[float, float]]:
@@ -110,6 +127,17 @@ def test_frame_shows_what_scene_sensor_shows(replay_page: Path, monkeypatch, tmp
         assert sorted(z[2] for z in frame["z"]) == sorted(z[2] for z in want_z)
 
 
+def test_nearest_birth_known_answer() -> None:
+    from soabench.replay.frames import nearest_birth
+
+    m = np.array([[0.0, 0.0, 0, 0], [10.0, 0.0, 0, 0]])
+    P = np.array([np.diag([4.0, 1.0, 1, 1]), np.diag([100.0, 100.0, 1, 1])])
+    # (3, 0): 1.5 sigma from the first term (sd 2 m along x), 0.7 from the wide second one 7 m away
+    assert nearest_birth((m, P, np.array([1, 0])), np.array([3.0, 0.0])) == [0.7, 7.0, 0, 10.0, -0.0]
+    assert nearest_birth((m[:1], P[:1], np.array([1])), np.array([0.0, 2.0])) == [2.0, 2.0, 1, 0.0, -0.0]
+    assert nearest_birth((m[:0], P[:0], np.array([], dtype=int)), np.array([0.0, 0.0])) is None
+
+
 def test_replay_scans_equal_scene_sensor_arrays(run_dir: Path, monkeypatch, tmp_path: Path) -> None:
     """The replay's own arrays (not only the rounded page data) equal `scene --sensor`'s on the last scan."""
     from soabench.replay import replay_trial
@@ -124,22 +152,121 @@ def test_replay_scans_equal_scene_sensor_arrays(run_dir: Path, monkeypatch, tmp_
         np.testing.assert_array_equal(getattr(rep.scans, flag)[k], getattr(scans, flag)[k])
 
 
-def test_replay_gif(run_dir: Path, tmp_path: Path) -> None:
+def test_replay_videos(run_dir: Path, tmp_path: Path) -> None:
+    """--out picks the format by its ending: an MP4 (read back with ffmpeg) and a GIF of one frame per scan."""
+    import imageio_ffmpeg
     from PIL import Image
 
-    out, gif = tmp_path / "t0.html", tmp_path / "t0.gif"
-    assert main(["replay", str(run_dir), "--trial", "0", "--models", "soa", "--out", str(out), "--gif", str(gif)]) == 0
+    mp4, gif = tmp_path / "t0.mp4", tmp_path / "t0.gif"
+    argv = ["replay", str(run_dir), "--trial", "0", "--models", "soa,ubm", "--out", str(mp4), "--out", str(gif)]
+    assert main(argv) == 0
+    reader = imageio_ffmpeg.read_frames(str(mp4))
+    meta = reader.__next__()
+    frames = [np.frombuffer(f, dtype=np.uint8) for f in reader]
+    w, h = meta["size"]
+    assert len(frames) == DURATION and meta["fps"] == 5.0  # 1 s scans at 5x real time
+    # two 420 x 315 px panels side by side, a title line above and the legend below, to multiples of 16 px
+    assert w == 848 and h % 16 == 0 and 315 + 24 + 3 * 14 <= h < 315 + 24 + 3 * 14 + 40, (w, h)
+    assert all(f.size == w * h * 3 for f in frames)
+    last = frames[-1].reshape(h, w, 3)
+    assert len(np.unique(last.reshape(-1, 3) // 16, axis=0)) > 10  # a drawn frame, not a blank one
     with Image.open(gif) as img:
-        assert img.n_frames == DURATION and img.info["duration"] == 200  # 1 s scans at 5x
-        img.seek(DURATION - 1)
-        assert len(img.convert("RGB").getcolors(maxcolors=1 << 16) or ()) > 10
-    assert main(["replay", str(run_dir), "--trial", "0", "--gif", str(tmp_path / "t0.png")]) == 2
+        assert img.n_frames == DURATION and img.info["duration"] == 200 and img.size == (w, h)
+    assert not list(tmp_path.glob(".*part*"))  # no temporary file left
+    assert main(["replay", str(run_dir), "--trial", "0", "--out", str(tmp_path / "t0.png")]) == 2
+
+
+def test_mp4_without_its_extra_says_how_to_install(run_dir: Path, tmp_path: Path, monkeypatch, capsys) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if not installed: the import fails
+    assert main(["replay", str(run_dir), "--trial", "0", "--out", str(tmp_path / "t.mp4")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pip install 'soabench[video]'" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+class _Labelled:
+    """A scan result with track labels beside its estimates (a tracker that keeps identities)."""
+
+    def __init__(self, result, labels) -> None:
+        self.result, self.labels = result, labels
+
+    def __getattr__(self, name: str):
+        return getattr(self.result, name)
+
+
+@pytest.fixture(scope="module")
+def labelled_page(run_dir: Path) -> tuple[Path, dict, list[list[str]]]:
+    """Trial 1's replay with each estimate labelled by its nearest truth pedestrian (a stand-in tracker's ids)."""
+    from soabench.replay import replay_data, replay_trial, write_replay
+
+    rep = replay_trial(run_dir, 1, ("soa",))
+    scans, model, given = rep.scans, rep.models[0], []
+    for k, res in enumerate(model.results):
+        X = np.asarray(res.X)[:, :2]
+        truth = np.where(scans.present[k][:, None], scans.truth_xy[k], np.inf)
+        near = [int(np.argmin(np.linalg.norm(truth - x, axis=1))) for x in X]
+        given.append([f"trk-{scans.ped_ids[j]}" for j in near])
+        model.results[k] = _Labelled(res, np.array(given[-1], dtype=object))
+    page = run_dir.parent / "labelled.html"
+    data = replay_data(rep)
+    write_replay(data, page)
+    return page, data, given
+
+
+def test_track_labels_keep_one_colour_per_label(labelled_page) -> None:
+    _, data, given = labelled_page
+    tracks = data["models"][0]["tracks"]
+    assert tracks and len(tracks) == len(set(tracks))
+    shown = [[tracks[e[2]] for e in f["models"][0]["est"]] for f in data["frames"]]
+    assert shown == given and sum(map(len, given)) >= 3  # every estimate keeps its own label, index = colour
+
+
+def test_a_whole_tracker_is_replayed_with_its_track_labels(tmp_path: Path) -> None:
+    """A run's tracker (not a birth model) gets its panel, without birth terms; the labels of its Estimates (set
+    whether or not Estimates declares the field) are shown, one colour per label."""
+    run = tmp_path / "run"
+    argv = ["run", "--trials", "1", "--duration", "30", "--models", "soa", "--trackers",
+            "plugin_fixtures:LabelledEchoTracker", "--probabilities", "static", "--workers", "1", "--no-progress",
+            "--out", str(run)]  # fmt: skip
+    assert main(argv) == 0
+    page = tmp_path / "t0.html"
+    assert main(["replay", str(run), "--trial", "0", "--models", "soa,plugin_fixtures:LabelledEchoTracker",
+                 "--out", str(page)]) == 0  # fmt: skip
+    data = page_data(page)
+    assert data["reproduced"] is True, data["notes"]
+    soa, echo = data["models"]
+    assert soa["tracks"] == [] and echo["tracks"]
+    for f in data["frames"]:
+        assert f["models"][1]["births"] == [] and f["models"][1]["sum_w"] is None  # a tracker: no births, no mass
+        for x, y, i in f["models"][1]["est"]:
+            assert echo["tracks"][i] == f"c{int(x // 10)}:{int(-y // 10)}"  # the page's y is the world's -y
+    k = max(range(len(data["frames"])), key=lambda i: len(data["frames"][i]["models"][1]["est"]))
+    attrs = body_attrs(browse(page, f"#frame={k}", tmp_path))
+    assert attrs["status"] == "ok" and attrs["tracks"] == str(len(data["frames"][k]["models"][1]["est"])), attrs
+
+
+def test_labels_drawn_in_the_browser_and_the_video(labelled_page, tmp_path: Path) -> None:
+    from soabench.replay.animation import TRACK_COLORS, render_frames
+
+    page, data, given = labelled_page
+    k = max(range(len(given)), key=lambda i: len(given[i]))
+    attrs = body_attrs(browse(page, f"#frame={k}", tmp_path))
+    assert attrs["status"] == "ok" and attrs["tracks"] == str(len(given[k])), attrs
+    frame = next(render_frames({**data, "frames": [data["frames"][k]]}))
+    colour = TRACK_COLORS[data["frames"][k]["models"][0]["est"][0][2] % len(TRACK_COLORS)]
+    rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
+    assert (np.abs(frame.reshape(-1, 3).astype(int) - rgb).sum(axis=1) < 30).sum() > 20  # the label's colour drawn
 
 
 def test_replay_bad_input(run_dir: Path, tmp_path: Path, capsys) -> None:
     cases = [
         (["replay", str(run_dir), "--trial", "7"], "--trial 7 is not a trial of this run; choose 0 to 1"),
-        (["replay", str(run_dir), "--trial", "0", "--models", "gmbm"], "'gmbm' is not a birth model of this run"),
+        (
+            ["replay", str(run_dir), "--trial", "0", "--models", "gmbm"],
+            "'gmbm' is not a birth model or tracker of this run; choose from soa, ubm",
+        ),
         (["replay", str(run_dir), "--trial", "0", "--mode", "dynamic"], "--mode 'dynamic' is not in this run"),
         (["replay", str(tmp_path), "--trial", "0"], "is not a run folder"),
         (["report", str(tmp_path)], "is not a run folder"),

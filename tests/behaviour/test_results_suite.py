@@ -104,6 +104,22 @@ def test_one_command_writes_every_part(suite):
     assert read_json(out / "kitti/intersection/export/export.json")["trials"] == 2
 
 
+def test_index_pages_link_every_part(suite):
+    """Every run folder has its report.html, each study and results/ an index.html linking the parts."""
+    from soabench.replay.report import find_runs
+
+    runs = find_runs(suite.out)
+    every = {p.parent for p in suite.out.rglob("run.json")}
+    assert set(runs) == {r for r in every if "kitti" not in r.parts} and len(runs) > 2 * 4
+    assert all((r / "report.html").is_file() for r in runs)
+    root = (suite.out / "index.html").read_text(encoding="utf-8")
+    for scene in ("intersection", "tjunction"):
+        assert f'href="{scene}/index.html"' in root and f'href="{scene}/main/report.html"' in root
+        study = (suite.out / scene / "index.html").read_text(encoding="utf-8")
+        assert 'href="main/report.html"' in study and 'href="births/points/ntot_001/report.html"' in study
+    assert "kitti/intersection/run/" in root  # the KITTI protocol's report.md, shown as a part
+
+
 def test_rerun_on_a_complete_folder_keeps_every_part(suite):
     """Nothing is simulated or run again and no file of a part changes; only the summary is redrawn (same bytes)."""
     assert suite.second == 0

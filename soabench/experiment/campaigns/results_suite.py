@@ -312,6 +312,19 @@ def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None],
     return ("done" if o.complete else "incomplete"), o.n_missing
 
 
+def _index_pages(root: Path, scenes: Sequence[str], log: Callable[[str], None]) -> tuple[str, int]:
+    """Every run folder's ``report.html``, each study's ``index.html`` and ``index.html`` linking every part
+    (docs/user-guide/replay.md); a kept part gets its pages here too, an unchanged page is not rewritten."""
+    from soabench.replay.report import write_index
+
+    for scene in scenes:
+        if (root / scene).is_dir():
+            write_index(root / scene)
+    index = write_index(root, reports=False)[0]
+    log(f"wrote {index}")
+    return "done", 0
+
+
 # ------------------------------------------------------------------------------------------------ the command
 def run_results(
     out: Path,
@@ -334,7 +347,7 @@ def run_results(
     scenes = list(s.scenes or shipped)
     log = log or (lambda msg: print(f"soabench results: {msg}", file=sys.stderr, flush=True))
     root = resolve(out)
-    own = (*shipped, "scenes", "kitti", "README.md")  # README.md: results/'s own description, never written here
+    own = (*shipped, "scenes", "kitti", "README.md", "index.html")  # README.md: results/'s own description
     check_own_folder(root, "results folder", own)
     root.mkdir(parents=True, exist_ok=True)
     hint = f"finish with: soabench results --out {root} (and the same options)"
@@ -396,6 +409,7 @@ def run_results(
                     f"{scene} KITTI export and protocol",
                     lambda scene=scene: _kitti_part(root / "kitti" / scene, scene, s, log, progress),
                 )
+            step("index pages", lambda: _index_pages(root, scenes, log), banner=False)
         except KeyboardInterrupt:
             raise Interrupted(
                 f"interrupted during the {part}: finished parts and trials are on disk in {root}; {hint}"

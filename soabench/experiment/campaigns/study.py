@@ -49,7 +49,7 @@ from soabench.experiment.runs.store import RunStore
 from soabench.figures.drawing import parallel
 
 #: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
-STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png")
+STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png", "index.html")
 
 
 @dataclass
@@ -229,6 +229,10 @@ def run_study(
                 sens.write_sensitivity(sens_dir, main_dir, variants)
                 where = sens_dir / "sensitivity.md"
                 md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
+            from soabench.replay.report import write_index
+
+            index = write_index(root)[0]  # and each run's report.html (a run kept from before may have none)
+            md += f"\nEvery part on one page: {index}\n"
         except KeyboardInterrupt:
             raise Interrupted(
                 f"interrupted: the study in {root} is incomplete (finished trials are on disk); {hint}"

@@ -55,6 +55,7 @@ from soabench.experiment.trial import registry
 from soabench.experiment.trial.guard import failure_message
 from soabench.figures.drawing import report_pool
 from soabench.kernel_warmup import ensure_compiled
+from soabench.replay.report import refresh_report
 from soabench.scenario.derive import said_by_the_driver
 from soabench.seeding import trial_seeds
 
@@ -473,6 +474,7 @@ def _run_locked(
         local = not (options.scheduler or options.dask_local)
         with report_pool(options.workers if local else None, executor):  # figures on local processes
             outcome.summary_markdown = report.write_report(store.run_dir, figures=figures, store=store)
+        refresh_report(store.run_dir)  # report.html: the one page to open in a run folder
         outcome.model_failures = store.model_failures()
     except KeyboardInterrupt:
         raise Interrupted(
