@@ -11,6 +11,7 @@ what the run measured.
 
 from __future__ import annotations
 
+import copy
 import csv
 import dataclasses
 import math
@@ -24,12 +25,13 @@ from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.ownership import check_existing_folder, resolve
 from soabench.experiment.runs.runmeta import validate_run_meta
-from soabench.experiment.trial import registry
+from soabench.experiment.trial import guard, registry
 from soabench.experiment.trial.registry import load_scene_cached
+from soabench.protocols import TrackerSetup
 from soabench.scenario import simulate
 from soabench.seeding import trial_seeds
 from soabench.sensor import observe
-from soabench.trackers import GMPHDTracker, run_tracker
+from soabench.trackers import GMPHDTracker, ScanFailure, run_tracker
 
 #: per-trial metric columns compared with ``trials.csv`` (the rest are derived from these or are wall times)
 CHECKED_COLUMNS = ("delay_mean", "n_episodes", "n_censored", "card_err", "ospa", "gospa", "tp", "fp", "fn")
@@ -150,13 +152,6 @@ def replay_trial(
 def _tracker_run(name: str, cfg: Config, sensor_cfg: Any, scene: Any, scans: Any, seeds: Any, mode: str) -> Any:
     """A whole tracker's run over the scans, built as the trial builds it (its own copy of the configuration, the
     trial's placement generator); each step's track labels, where its Estimates carry them, stay on the result."""
-    import copy
-
-    from soabench import plugins
-    from soabench.experiment import guard
-    from soabench.protocols import TrackerSetup
-    from soabench.trackers import ScanFailure, run_tracker
-
     def check(out: Any, scan: Any, t_step: float) -> Any:
         result = guard.check_estimates(out, scan, t_step)
         labels = getattr(out, "labels", None)
