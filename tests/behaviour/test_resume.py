@@ -56,14 +56,6 @@ def wait_for_trials(out: Path, n: int, proc: subprocess.Popen, timeout: float = 
 
 def assert_same_as_uninterrupted(out: Path, cfg: Config, ref_dir: Path) -> None:
     """An uninterrupted serial run of ``cfg`` writes the same CSV files, byte for byte, as the run in ``out``."""
-    ref = run_experiment(
-        cfg,
-        "intersection",
-        out=ref_dir,
-        options=RunOptions(workers=1, progress=False, figures=False),
-        trial_fn=ft.fake_trial,
-        load_fn=ft.fake_load,
-    )
     ref = ft.run_fake(cfg, ref_dir)
     assert ref.complete
     for name in CSV_FILES:
