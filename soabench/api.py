@@ -166,7 +166,7 @@ def simulate_trial(
         clutter rate uses.
     """
     from soabench.experiment.execution.runner import check_against_scenario
-    from soabench.experiment.trial.trial.registry import load_scene_cached
+    from soabench.experiment.trial.registry import load_scene_cached
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
     from soabench.sensor import observe
