@@ -128,71 +128,95 @@ def _enumerate(logc, options, n_opt):
 
 
 @njit(cache=True)
-def _draw(logc, i, theta, taken, n_cols, state):
-    """theta_i from its conditional: prop. to exp(logc[i, c]) over the options not taken by another track."""
-    mx = -np.inf
-    for c in range(n_cols):
-        if c >= 2 and taken[c - 2] >= 0 and taken[c - 2] != i:
-            continue
-        if logc[i, c] > mx:
-            mx = logc[i, c]
-    if not mx > -np.inf:
-        return theta[i]
+def _draw(i, options, n_opt, weight, taken, state):
+    """theta_i from its conditional: prop. to ``weight[i, o]`` (exp of the log cost, shifted by the row's maximum)
+    over the options o of track i whose measurement is not taken by another track."""
     tot = 0.0
-    for c in range(n_cols):
-        if c >= 2 and taken[c - 2] >= 0 and taken[c - 2] != i:
-            continue
-        tot += math.exp(logc[i, c] - mx)
+    for o in range(n_opt[i]):
+        c = options[i, o]
+        if c < 2 or taken[c - 2] < 0 or taken[c - 2] == i:
+            tot += weight[i, o]
     u = _uniform(state) * tot
     acc = 0.0
     last = -1
-    for c in range(n_cols):
-        if c >= 2 and taken[c - 2] >= 0 and taken[c - 2] != i:
-            continue
-        p = math.exp(logc[i, c] - mx)
-        if p > 0.0:
-            last = c
-            acc += p
-            if u < acc:
-                return c
+    for o in range(n_opt[i]):
+        c = options[i, o]
+        if c < 2 or taken[c - 2] < 0 or taken[c - 2] == i:
+            if weight[i, o] > 0.0:
+                last = c
+                acc += weight[i, o]
+                if u < acc:
+                    return c
     return last
 
 
 @njit(cache=True)
-def _gibbs(logc, n_sweeps, state):
-    """Distinct hypotheses visited by ``n_sweeps`` Gibbs sweeps (the start included), sorted lexicographically."""
+def _gibbs(logc, options, n_opt, n_sweeps, state):
+    """Distinct hypotheses visited by ``n_sweeps`` Gibbs sweeps (the start included), in the order of their hashes.
+    ``options[i, :n_opt[i]]``: the columns of track i with a finite log cost."""
     n, n_cols = logc.shape
     M = n_cols - 2
+    weight = np.zeros(options.shape)
+    for i in range(n):  # exp of each row once, shifted by its maximum (the conditionals are ratios within a row)
+        mx = -np.inf
+        for o in range(n_opt[i]):
+            mx = max(mx, logc[i, options[i, o]])
+        for o in range(n_opt[i]):
+            weight[i, o] = math.exp(logc[i, options[i, o]] - mx)
     theta = np.empty(n, dtype=np.int64)
     taken = np.full(M, -1, dtype=np.int64)
     for i in range(n):
         theta[i] = MISSED if logc[i, MISSED] > -np.inf else ABSENT
+    # Zobrist hash of each sample (a sum of one random 64-bit key per (track, option)), kept up to date as theta
+    # changes: distinct hypotheses are found by sorting the hashes and comparing rows of equal hash exactly
+    zkey = np.empty((n, n_cols), dtype=np.uint64)
+    zstate = np.full(1, np.uint64(n * n_cols), dtype=np.uint64)
+    for i in range(n):
+        for c in range(n_cols):
+            _uniform(zstate)
+            zkey[i, c] = zstate[0] * _MIX1
+    h = np.uint64(0)
+    for i in range(n):
+        h += zkey[i, theta[i]]
     samples = np.empty((n_sweeps, n), dtype=np.int64)
+    hashes = np.empty(n_sweeps, dtype=np.uint64)
     samples[0] = theta
+    hashes[0] = h
     for s in range(1, n_sweeps):
         for i in range(n):
-            c = _draw(logc, i, theta, taken, n_cols, state)
+            c = _draw(i, options, n_opt, weight, taken, state)
+            if c < 0:  # no option of positive weight (cannot happen: absent or missed is always open)
+                c = theta[i]
+            if c == theta[i]:
+                continue
             if theta[i] >= 2:
                 taken[theta[i] - 2] = -1
+            h += zkey[i, c] - zkey[i, theta[i]]
             theta[i] = c
             if c >= 2:
                 taken[c - 2] = i
         samples[s] = theta
-    perm = np.arange(n_sweeps)
-    for col in range(n - 1, -1, -1):  # lexicographic order: stable sorts from the last column to the first
-        perm = perm[np.argsort(samples[perm, col], kind="mergesort")]
+        hashes[s] = h
+    perm = np.argsort(hashes, kind="mergesort")
     out = np.empty((n_sweeps, n), dtype=np.int64)
     n_hyp = 0
-    for s in range(n_sweeps):
-        row = samples[perm[s]]
-        same = n_hyp > 0
-        if same:
+    run = 0  # first output row of the current run of equal hashes
+    for k in range(n_sweeps):
+        s = perm[k]
+        if k == 0 or hashes[s] != hashes[perm[k - 1]]:
+            run = n_hyp
+        new = True
+        for u in range(run, n_hyp):  # rows of equal hash: compared exactly
+            same = True
             for i in range(n):
-                if out[n_hyp - 1, i] != row[i]:
+                if out[u, i] != samples[s, i]:
                     same = False
                     break
-        if not same:
-            out[n_hyp] = row
+            if same:
+                new = False
+                break
+        if new:
+            out[n_hyp] = samples[s]
             n_hyp += 1
     return out, n_hyp
 
@@ -260,7 +284,7 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False):
         if bound <= max_hyp and not force_gibbs:
             hyps, n_hyp = _enumerate(sub, options, n_opt)
         else:
-            hyps, n_hyp = _gibbs(sub, max_hyp, state)
+            hyps, n_hyp = _gibbs(sub, options, n_opt, max_hyp, state)
             n_gibbs += 1
         local = np.zeros((n, 2 + mc))
         _accumulate(sub, hyps, n_hyp, local, np.arange(n))
