@@ -612,7 +612,7 @@ class Estimates:
             harness reports the number of estimates.
         cardinality: optional expected number of targets (a PHD's sum of weights); without it NaN.
         labels: optional (n,) int64 track labels, one per estimate: equal labels across scans are the same track
-            (docs/method.md §9.1); None for a tracker that gives no identities.
+            (the LMB filter gives them, docs/method.md "LMB filter"); None for a tracker that gives no identities.
     """
 
     X: np.ndarray
