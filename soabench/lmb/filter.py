@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from soabench import notice
 from soabench.config import FilterConfig, SensorConfig, _in_range, _int_range, _non_negative
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
@@ -124,7 +125,14 @@ class LMBFilter:
 
     def step(self, scan: Scan, births: Births) -> StepResult:
         """One cycle (module docstring) with the births of ``scan``; returns the labelled estimates
-        (``StepResult.labels``) and the cost figures (tracks as components)."""
+        (``StepResult.labels``) and the cost figures (tracks as components). The first step in a process may
+        compile the kernels: never a silent pause (:mod:`soabench.notice`)."""
+        if not notice.ready("lmb.step"):
+            with notice.first_use_notice("lmb.step"):
+                return self._step(scan, births)
+        return self._step(scan, births)
+
+    def _step(self, scan: Scan, births: Births) -> StepResult:
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the GM-PHD runs of the scan
         Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
         checked: StepInputs = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
