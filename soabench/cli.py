@@ -134,6 +134,14 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         type=_csv_list("probability mode", PROBABILITY_MODES),
         help="static,dynamic (default) or dynamic+occ",
     )
+    from soabench.config import FILTER_FAMILIES
+
+    p.add_argument(
+        "--filters",
+        type=_csv_list("filter family", FILTER_FAMILIES),
+        help="filter families every birth model runs in: gmphd (default), lmb (labelled multi-Bernoulli: static "
+        "probabilities only), or both",
+    )
     p.add_argument("--seed", type=int, help="base seed (default 0)")
     p.add_argument("--workers", type=int, help="process workers (default: every core)")
     p.add_argument("--out", type=Path, help="run folder (default results/<scenario name>/<timestamp>/)")
@@ -361,6 +369,7 @@ def _config_from_args(args: argparse.Namespace) -> Config:
         "models": getattr(args, "models", None),
         "trackers": getattr(args, "trackers", None),
         "probabilities": getattr(args, "probabilities", None),
+        "filters": getattr(args, "filters", None),
         "clutter": getattr(args, "clutter", None),
         "seed": getattr(args, "seed", None),
     }

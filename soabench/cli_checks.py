@@ -132,6 +132,7 @@ FLAG_KEYS = {
     "models": "experiment.models",
     "trackers": "experiment.trackers",
     "probabilities": "experiment.probabilities",
+    "filters": "experiment.filters",
     "clutter": "experiment.clutter",
     "seed": "experiment.seed",
 }
