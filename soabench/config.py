@@ -357,6 +357,13 @@ class ExperimentConfig:
         for f in self.filters:
             _one_of("filter family", f, FILTER_FAMILIES)
         require_distinct("filters", self.filters)
+        for f in self.filters:
+            runs = [p for p in self.probabilities if p in FAMILY_MODES[f]]
+            require(
+                bool(runs),
+                f"filter family {f!r} runs the probability modes {', '.join(FAMILY_MODES[f])} only, and probabilities "
+                f"= {list(self.probabilities)!r} names none of them; add one (e.g. --probabilities static)",
+            )
         require(len(self.clutter) >= 1, "clutter must give at least one rate")
         for lam in self.clutter:
             _non_negative("clutter", lam, hi=1e4)
