@@ -387,3 +387,21 @@ def test_every_builtin_birth_model_runs_inside(name):
     assert all(r.n_reduced <= LMBConfig().max_tracks and len(r.labels) == len(r.X) for r in a)
     assert all(len(set(r.labels.tolist())) == len(r.labels) for r in a)  # labels are distinct within a scan
     assert sum(r.n_predicted for r in a) > 0  # births arrived
+
+
+def test_ukf_form_agrees_with_ekf():
+    """filter.form = "ukf" reaches the LMB's measurement model; on a well-localised track both forms agree closely."""
+    R = measurement_noise(1.0, math.radians(5.0))
+    t = Tracks.single(
+        [0.5], np.array([[12.0, 6.0, 0.5, 0.0]]), np.diag([0.5, 0.5, 1.0, 1.0])[None], make_labels(0, [0])
+    )
+    Z = np.array([[math.hypot(12.3, 6.1), math.atan2(6.1, 12.3)]])
+    ups = [
+        update(t, Z, np.zeros(3), np.full(1, 0.9), np.full(1, 0.01), RangeBearingEKF(R, 0.5, 13.8, f))
+        for f in ("ekf", "ukf")
+    ]
+    assert abs(ups[0].tracks.r[0] - ups[1].tracks.r[0]) < 1e-3
+    np.testing.assert_allclose(ups[0].tracks.m, ups[1].tracks.m, atol=0.05)
+    from soabench.gmphd.models import ukf_terms
+
+    assert LMBFilter(FilterConfig(form="ukf"), SensorConfig()).model._terms is ukf_terms

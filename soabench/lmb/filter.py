@@ -66,8 +66,8 @@ class LMBFilter:
     """The LMB filter of one run (module docstring).
 
     Args:
-        filter_cfg: the GM-PHD's filter settings it shares: sigma_a, p_S, p_D, gate, prune_T and merge_U (applied
-            to each track's components), occlusion_pd, nonfinite.
+        filter_cfg: the GM-PHD's filter settings it shares: form (EKF or UKF), sigma_a, p_S, p_D, gate, prune_T
+            and merge_U (applied to each track's components), occlusion_pd, nonfinite.
         sensor_cfg: the sensor model (dt, FOV, R, clutter) shared with the simulator (§2.3).
         mode: "static" (the only mode: the LMB has no Beta probabilities).
         lmb_cfg: :class:`LMBConfig` (defaults if None).
@@ -106,7 +106,7 @@ class LMBFilter:
         self.F, self.Q = cv_model(sensor_cfg.dt, filter_cfg.sigma_a)
         R = measurement_noise(sensor_cfg.sigma_r, sensor_cfg.sigma_b)
         gate = gate_threshold(filter_cfg.gate, filter_cfg.gate_prob)
-        self.model = model if model is not None else RangeBearingEKF(R, sensor_cfg.r_min, gate)
+        self.model = model if model is not None else RangeBearingEKF(R, sensor_cfg.r_min, gate, filter_cfg.form)
         self.tracks = Tracks.empty()
         #: newborn terms (m, P) of the previous scan's measurements and their r_U, for the adaptive birth
         self._newborn: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None

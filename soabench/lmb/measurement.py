@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 
 from soabench.gmphd import kernels
-from soabench.gmphd.models import MeasurementTerms, _inv2, ekf_terms, log_likelihood
+from soabench.gmphd.models import MeasurementTerms, _inv2, ekf_terms, log_likelihood, ukf_terms
 
 
 class MeasurementModel(Protocol):
@@ -28,16 +28,18 @@ class MeasurementModel(Protocol):
 
 
 class RangeBearingEKF:
-    """The GM-PHD's sensor: h(x) = (range, bearing) relative to the ego pose, EKF linearisation at each mean,
-    chi-square gate ``gate_thr`` on the squared Mahalanobis distance (§2.3, §2.6, §2.8)."""
+    """The GM-PHD's sensor: h(x) = (range, bearing) relative to the ego pose, EKF linearisation at each mean
+    (``form = "ekf"``, §2.6) or the equal-weight cubature transform (``"ukf"``, §2.7), chi-square gate ``gate_thr``
+    on the squared Mahalanobis distance (§2.3, §2.8)."""
 
-    def __init__(self, R: np.ndarray, r_min: float, gate_thr: float) -> None:
+    def __init__(self, R: np.ndarray, r_min: float, gate_thr: float, form: str = "ekf") -> None:
         self.R = np.asarray(R, dtype=float)
         self.r_min = float(r_min)
         self.gate_thr = float(gate_thr)
+        self._terms = ekf_terms if form == "ekf" else ukf_terms
 
     def terms(self, m: np.ndarray, P: np.ndarray, ego: np.ndarray) -> MeasurementTerms:
-        return ekf_terms(m, P, ego, self.R, self.r_min)
+        return self._terms(m, P, ego, self.R, self.r_min)
 
     def log_likelihood(self, terms: MeasurementTerms, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return log_likelihood(terms, Z, self.gate_thr)
