@@ -55,3 +55,39 @@ def test_lmb_only_and_bad_families():
         "gmphd",
         "lmb",
     ]
+
+
+def test_summary_is_per_family_with_paired_statistics_inside_each(tmp_path):
+    """A run folder written by hand: S-OA and PUBM in both families; in the GM-PHD S-OA is slower in every trial, in
+    the LMB faster in every trial: each family's win counts see only its own rows; the LMB's dynamic cells read "—"."""
+    import dataclasses
+
+    from soabench.experiment.files import write_csv
+    from soabench.experiment.report import load_tables, render_markdown, summarize
+    from soabench.experiment.store import RunStore
+
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(
+        cfg.experiment, trials=3, models=("soa", "pubm"), probabilities=("static", "dynamic"), filters=("gmphd", "lmb")
+    )
+    cfg.validate()
+    RunStore(tmp_path).create({"net": "hand", "trials": 3, "config": cfg.to_dict()})
+    rows = []
+    for t in range(3):
+        for model, mode, fam, delay in (
+            ("soa", "static", "gmphd", 3.0), ("soa", "static", "lmb", 1.0), ("soa", "dynamic", "gmphd", 3.0),
+            ("pubm", "static", "gmphd", 2.0), ("pubm", "static", "lmb", 2.0), ("pubm", "dynamic", "gmphd", 2.0),
+        ):  # fmt: skip
+            rows.append({"trial": t, "clutter": 3.0, "model": model, "mode": mode, "delay_mean": delay,
+                         "delay_std": 0.5, "card_err": 1.0, "ospa": 10.0, "precision": 1.0, "n_episodes": 4,
+                         "n_censored": 0, FILTER_COLUMN: fam})  # fmt: skip
+    write_csv(tmp_path / "trials.csv", rows, ("trial", "clutter", "model", "mode"))
+    summary = summarize(load_tables(tmp_path))
+    gm, lmb = summary["results"]
+    assert (gm["filter"], lmb["filter"]) == ("gmphd", "lmb")
+    assert [(c["mode"], c["wins"], c["losses"]) for c in gm["vs_soa"]] == [("static", 0, 3), ("dynamic", 0, 3)]
+    assert [(c["mode"], c["wins"], c["losses"]) for c in lmb["vs_soa"]] == [("static", 3, 0)]
+    assert [(m["model"], m["mode"]) for m in lmb["models"]] == [("soa", "static"), ("pubm", "static")]
+    md = render_markdown(summary)
+    assert "## λ = 3, GM-PHD" in md and "## λ = 3, LMB" in md
+    assert "| S-OA | dynamic |" + " — |" * 10 in md and "| PUBM | dynamic |" + " — |" * 10 in md
