@@ -19,7 +19,14 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from soabench import cli_checks
-from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config, filter_config_for_mode, load_config
+from soabench.config import (
+    BIRTH_MODEL_NAMES,
+    FILTER_FAMILIES,
+    PROBABILITY_MODES,
+    Config,
+    filter_config_for_mode,
+    load_config,
+)
 from soabench.errors import Interrupted, SoabenchError, require
 
 EXIT_USAGE = 2
@@ -134,14 +141,6 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         type=_csv_list("probability mode", PROBABILITY_MODES),
         help="static,dynamic (default) or dynamic+occ",
     )
-    from soabench.config import FILTER_FAMILIES
-
-    p.add_argument(
-        "--filters",
-        type=_csv_list("filter family", FILTER_FAMILIES),
-        help="filter families every birth model runs in: gmphd (default), lmb (labelled multi-Bernoulli: static "
-        "probabilities only), or both",
-    )
     p.add_argument("--seed", type=int, help="base seed (default 0)")
     p.add_argument("--workers", type=int, help="process workers (default: every core)")
     p.add_argument("--out", type=Path, help="run folder (default results/<scenario name>/<timestamp>/)")
@@ -217,6 +216,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
     _add_run_args(p)
+    p.add_argument(
+        "--filters",
+        type=_csv_list("filter family", FILTER_FAMILIES),
+        help="filter families every birth model runs in: gmphd (default), lmb (labelled multi-Bernoulli: static "
+        "probabilities only), or both",
+    )
     p.add_argument("--clutter", type=_float_list, help="clutter rate(s) lambda, e.g. 3 or 0.5,3,5 (default 3)")
     p.add_argument(
         "--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run (default: new run)"
