@@ -39,6 +39,7 @@ from soabench.errors import require
 from soabench.kitti.config import KittiConfig
 from soabench.kitti.formats import ReadError
 from soabench.kitti.reader import KittiSequence, sensor_for
+from soabench.kitti.velodyne import hole_free
 
 #: SemanticKITTI class ids (lower 16 bits of a .label value) by class name, as in the dataset's semantic-kitti.yaml
 SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
@@ -186,7 +187,6 @@ def frame_regions(
 ) -> list[tuple[str, np.ndarray]]:
     """``(class, (n, 2) vertices)`` hole-free polygons of one frame, per configured class, from the points within
     r_max and within ``FOV_MARGIN_DEG`` of the sensor's sector (Omega_k never reaches beyond it)."""
-    from soabench.kitti.export import _hole_free
 
     out = []
     xy = pts[:, :2].astype(float)
@@ -199,7 +199,7 @@ def frame_regions(
         is_cls = np.isin(lab, cid)
         extra = ray_fill(xy, is_cls, params, by_sector)
         geom = region_from_points(np.concatenate([xy[is_cls], extra]), params, r_max)
-        out.extend((name, np.asarray(p.exterior.coords)[:-1]) for p in _hole_free(geom))
+        out.extend((name, np.asarray(p.exterior.coords)[:-1]) for p in hole_free(geom))
     return out
 
 
@@ -275,7 +275,7 @@ def sequence_regions(
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# the protocol's hooks (``spec.lidar`` of :class:`~soabench.kitti.protocol.KittiSpec`)
+# the protocol's hooks (``spec.lidar`` of :class:`~soabench.kitti.config.KittiSpec`)
 
 
 def lidar_files(lidar: dict, seq: KittiSequence) -> None:
@@ -300,3 +300,33 @@ def lidar_semantics(
         f"sequence {seq.seq}: semantic regions from {seq.n_frames} LiDAR scans {how} ({time.perf_counter() - t0:.1f} s)"
     )
     return sem
+
+
+def lidar_options(
+    root: str,
+    point_labels: str | None,
+    velodyne: str | None = None,
+    semantics: str | None = None,
+    grid: float | None = None,
+    closing: float | None = None,
+    fill: float | None = None,
+    classes: tuple[str, ...] = (),
+) -> dict | None:
+    """A KITTI run's ``spec.lidar`` from ``--point-labels DIR [--velodyne DIR] [--lidar-grid M] [--lidar-closing M]
+    [--lidar-fill M]`` (None without ``point_labels``); one line naming the bad value otherwise. ``classes``: the
+    semantic and occluder classes whose SemanticKITTI ids the region is made of."""
+    given = {"grid": grid, "closing": closing, "fill": fill}
+    if point_labels is None:
+        flags = [
+            f for f, v in (("velodyne", velodyne), *((f"lidar-{k}", v) for k, v in given.items())) if v is not None
+        ]
+        require(not flags, f"--{flags[0] if flags else ''} needs --point-labels DIR")
+        return None
+    require(semantics is None, "give either --semantics DIR or --point-labels DIR (two sources of one region)")
+    velodyne_dir = Path(velodyne) if velodyne is not None else Path(root) / "velodyne"
+    require(velodyne_dir.is_dir(), f"--velodyne {str(velodyne_dir)!r} is not a folder (KITTI scans XXXX/NNNNNN.bin)")
+    labels = Path(point_labels)
+    require(labels.is_dir(), f"--point-labels {str(labels)!r} is not a folder (SemanticKITTI XXXX/NNNNNN.label)")
+    class_ids(classes)
+    params = LidarParams(**{k: float(v) for k, v in given.items() if v is not None}).validate()
+    return {"velodyne": str(velodyne_dir.resolve()), "point_labels": str(labels.resolve()), **asdict(params)}

@@ -12,8 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from soabench.birth.base import SOURCE_MEAS
-from soabench.birth.plots import SOURCE_COLORS, SOURCE_LABELS, ellipse_params
+from soabench.figures.births import SOURCE_COLORS, SOURCE_LABELS, ellipse_params
+from soabench.geometry import polar_to_world
+from soabench.sensor import fov_polygon, scan_steps
+from soabench.types import CLUTTER, SOURCE_MEAS
 
 #: pedestrian states of a scan: visible, occluded (in the FOV, line of sight blocked), outside the FOV, in a building
 PED_STATES = ("visible", "occluded", "outside FOV", "in building")
@@ -131,8 +133,6 @@ def _hidden(scene: Any, fov: Any, omega: Any) -> Any:
 def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndarray]) -> dict[str, Any]:
     """Scan ``k`` (recording step ``idx``) of a :class:`~soabench.replay.simulate.TrialReplay` as a JSON-able
     record; ``peds`` from :func:`ped_states`, ``inits`` one :func:`init_states` per model."""
-    from soabench.geometry import polar_to_world
-    from soabench.sensor import CLUTTER, fov_polygon
 
     scans, rec = rep.scans, rep.recording
     scan = scans.scans[k]
@@ -171,7 +171,6 @@ def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndar
 
 def replay_data(rep: Any) -> dict[str, Any]:
     """The whole replay: header, scene, legend tables, per-model episodes and every scan's record."""
-    from soabench.sensor import scan_steps
 
     scans = rep.scans
     K, P = np.shape(scans.present)

@@ -19,9 +19,12 @@ import shlex
 from pathlib import Path
 from typing import Any
 
+from soabench.birth import LABEL
 from soabench.errors import SoabenchError, require
-from soabench.experiment.files import write_text_atomic
+from soabench.experiment.runs.files import write_text_atomic
+from soabench.experiment.runs.ownership import resolve
 from soabench.replay.page import asset, fill
+from soabench.replay.simulate import read_run
 
 GENERATOR = "soabench report"
 REPORT_FILE = "report.html"
@@ -119,7 +122,6 @@ def _replay_cells(run_dir: Path, model: str, mode: str, clutter: float, trial: i
 def _extremes_html(run_dir: Path, rows: list[dict[str, Any]]) -> str:
     if not rows:
         return "<p>No trials.csv with a counted delay: no best or worst trial.</p>"
-    from soabench.birth import LABEL
 
     body = []
     for r in rows:
@@ -190,8 +192,6 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Pa
     """Write the report page of a run folder (default ``RUN/report.html``); returns its path and size in bytes.
 
     An existing file at the target that this command did not write is left alone (an error says so)."""
-    from soabench.replay.simulate import read_run
-
     path, _, raw = read_run(run_dir)
     target = path / REPORT_FILE if out is None else Path(out)
     _check_ours(target)
@@ -202,7 +202,8 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Pa
 
 def find_runs(folder: Path) -> list[Path]:
     """Every run folder (holding ``run.json``) under ``folder``, sorted by path."""
-    from soabench.experiment.store import RUN_FILE
+    # imported when called: scipy would slow every start-up
+    from soabench.experiment.runs.store import RUN_FILE
 
     return sorted(p.parent for p in folder.rglob(RUN_FILE))
 
@@ -221,8 +222,6 @@ def _folder_parts(folder: Path, runs: list[Path]) -> list[tuple[Path, list[Path]
 
 
 def _run_row(folder: Path, run: Path) -> str:
-    from soabench.replay.simulate import read_run
-
     rel = run.relative_to(folder).as_posix()
     try:
         _, meta, raw = read_run(run)
@@ -261,7 +260,6 @@ def index_html(folder: Path, runs: list[Path]) -> str:
 def write_index(folder: str | Path) -> tuple[Path, int, list[Path]]:
     """Write every run's report under ``folder`` and ``folder/index.html`` linking them; returns the index path, its
     size in bytes and the run folders."""
-    from soabench.experiment.ownership import resolve
 
     path = resolve(folder)
     require(path.is_dir(), f"{str(path)!r} is not a folder")

@@ -18,8 +18,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from soabench import plugins
+from soabench.birth import LABEL
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
+from soabench.experiment.runs.ownership import check_existing_folder, resolve
+from soabench.experiment.runs.runmeta import validate_run_meta
+from soabench.experiment.trial import registry
+from soabench.experiment.trial.registry import load_scene_cached
+from soabench.scenario import simulate
+from soabench.seeding import trial_seeds
+from soabench.sensor import observe
+from soabench.trackers import GMPHDTracker, run_tracker
 
 #: per-trial metric columns compared with ``trials.csv`` (the rest are derived from these or are wall times)
 CHECKED_COLUMNS = ("delay_mean", "n_episodes", "n_censored", "card_err", "ospa", "gospa", "tp", "fp", "fn")
@@ -58,11 +68,10 @@ class TrialReplay:
 
 
 def read_run(run_dir: str | Path):
-    """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runmeta.validate_run_meta`) and its
+    """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runs.runmeta.validate_run_meta`) and its
     raw dict."""
-    from soabench.experiment.ownership import check_existing_folder, resolve
-    from soabench.experiment.runmeta import validate_run_meta
-    from soabench.experiment.store import RUN_FILE, RunStore
+    # imported when called: scipy would slow every start-up
+    from soabench.experiment.runs.store import RUN_FILE, RunStore
 
     path = resolve(run_dir)
     check_existing_folder(path, RUN_FILE, "run")
@@ -88,17 +97,10 @@ def replay_trial(
 ) -> TrialReplay:
     """Re-simulate trial ``trial`` of the run in ``run_dir`` for ``models`` (default: the run's birth models) in
     probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
-    from soabench import plugins
-    from soabench.birth import LABEL
-    from soabench.experiment import registry
-    from soabench.experiment.runner import load_scene_cached
-    from soabench.experiment.trial import RunKey, make_row
+    # imported when called: numba, scipy would slow every start-up
+    from soabench.experiment.trial.trial import RunKey, make_row
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.metrics import evaluate
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
-    from soabench.trackers import GMPHDTracker, run_tracker
 
     path, meta, raw = read_run(run_dir)
     cfg = meta.config
@@ -158,7 +160,8 @@ class _Recorder:
 
 def _version_note(raw: dict) -> str:
     """One line: the package versions that differ between the run and this replay (or that they agree)."""
-    from soabench.experiment.runner import package_versions
+    # imported when called: scipy would slow every start-up
+    from soabench.experiment.execution.runner import package_versions
 
     stored = raw.get("versions") if isinstance(raw.get("versions"), dict) else {}
     now = package_versions()
