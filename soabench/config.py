@@ -28,6 +28,10 @@ from soabench.tomlfile import read_toml
 
 BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(plugins.BUILTIN_BIRTH_MODELS)  #: the built-in birth models
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
+#: the filter families a run can put every birth model in (docs/method.md "LMB filter"); the first is the default
+FILTER_FAMILIES = ("gmphd", "lmb")
+#: the probability modes each family runs; a family's other modes are skipped (their table cells read "—")
+FAMILY_MODES = {"gmphd": PROBABILITY_MODES, "lmb": ("static",)}
 
 
 #: fields that are not config keys: their value comes from the key named beside them (one home per parameter)
@@ -338,6 +342,7 @@ class ExperimentConfig:
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
+    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: "gmphd", "lmb"
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
     plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
 
@@ -358,6 +363,17 @@ class ExperimentConfig:
         for p in self.probabilities:
             _one_of("probability mode", p, PROBABILITY_MODES)
         require_distinct("probabilities", self.probabilities)
+        require(len(self.filters) >= 1, f"filters must name at least one of {', '.join(FILTER_FAMILIES)}")
+        for f in self.filters:
+            _one_of("filter family", f, FILTER_FAMILIES)
+        require_distinct("filters", self.filters)
+        for f in self.filters:
+            runs = [p for p in self.probabilities if p in FAMILY_MODES[f]]
+            require(
+                bool(runs),
+                f"filter family {f!r} runs the probability modes {', '.join(FAMILY_MODES[f])} only, and probabilities "
+                f"= {list(self.probabilities)!r} names none of them; add one (e.g. --probabilities static)",
+            )
         require(len(self.clutter) >= 1, "clutter must give at least one rate")
         for lam in self.clutter:
             _non_negative("clutter", lam, hi=1e4)
@@ -401,8 +417,11 @@ class Config:
         return self
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS`."""
+        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS` and
+        without ``experiment.filters`` when it is the default (so the identity of a default run is unchanged)."""
         out = dataclasses.asdict(self)
+        if tuple(out["experiment"]["filters"]) == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
+            del out["experiment"]["filters"]
         return {
             sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items() if f"{sec}.{k}" not in DERIVED_KEYS}
             for sec, d in out.items()

@@ -50,6 +50,8 @@ KERNEL_MODULES = (
     "soabench.gmphd.cycle",
     "soabench.metrics_kernels",
     "soabench.geometry_kernels",
+    "soabench.lmb.gibbs",
+    "soabench.lmb.tracks",
 )
 MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version) ..."
 
@@ -161,11 +163,31 @@ def _newborn_steps() -> None:
             f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
 
 
+def _lmb_steps() -> None:
+    """The LMB filter (docs/method.md "LMB filter"): steps with Gaussian births and with newborn terms (the adaptive
+    birth), and the association marginals on both of their paths (enumeration and Gibbs sampling)."""
+    import shapely
+
+    from soabench.config import Config
+    from soabench.lmb import LMBFilter
+    from soabench.lmb.gibbs import association_marginals
+    from soabench.types import NewbornTerms, Scan
+
+    cfg = Config()
+    Z, ego = _scan_arrays()
+    f = LMBFilter(cfg.filter, cfg.sensor)
+    for k in range(3):
+        b = _births()
+        b.newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0 * A)
+        f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
+    association_marginals(np.zeros((2, 4)), 10, np.uint32(0), True)
+
+
 #: rounds of groups: the groups of a round are independent (no kernel in two of them) and run in parallel; a later
 #: round links the earlier rounds' cached kernels
 ROUNDS: tuple[tuple[Callable[[], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_fused_steps, _newborn_steps),
+    (_fused_steps, _newborn_steps, _lmb_steps),
 )
 
 

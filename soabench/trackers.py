@@ -108,6 +108,7 @@ def step_result_from(est: Estimates, k: int, t_step: float) -> StepResult:
         mean_pD=math.nan,
         A=np.zeros(0),
         kappa=np.zeros(0),
+        labels=None if est.labels is None else np.asarray(est.labels, dtype=np.int64).reshape(-1),
     )
 
 

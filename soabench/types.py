@@ -611,12 +611,15 @@ class Estimates:
         n_components: optional cost figure: hypotheses, components or tracks kept after the step. Without it the
             harness reports the number of estimates.
         cardinality: optional expected number of targets (a PHD's sum of weights); without it NaN.
+        labels: optional (n,) int64 track labels, one per estimate: equal labels across scans are the same track
+            (the LMB filter gives them, docs/method.md "LMB filter"); None for a tracker that gives no identities.
     """
 
     X: np.ndarray
     w: np.ndarray | None = None
     n_components: int | None = None
     cardinality: float | None = None
+    labels: np.ndarray | None = None
 
     @classmethod
     def empty(cls) -> Estimates:
@@ -681,6 +684,8 @@ class StepResult:
     #: posterior components (after reduction) by birth origin and age, in the order of
     #: :data:`soabench.origins.ORIGIN_KEYS` (docs/method.md §5.7); None: origins unknown (a foreign tracker)
     origin_counts: np.ndarray | None = None
+    #: (n,) int64 track label of each estimate (a labelled filter: the LMB); None when the filter gives no labels
+    labels: np.ndarray | None = None
 
     def __repr__(self) -> str:
         return f"StepResult(k={self.k}, {len(self.X)} estimates, mass {self.sum_w:.3g}, {self.n_reduced} components)"

@@ -62,6 +62,7 @@ FLAG_KEYS = {
     "models": "experiment.models",
     "trackers": "experiment.trackers",
     "probabilities": "experiment.probabilities",
+    "filters": "experiment.filters",
     "clutter": "experiment.clutter",
     "seed": "experiment.seed",
 }

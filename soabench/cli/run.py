@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 
 from soabench.cli import common
-from soabench.cli.parsing import add_run_args, float_list
+from soabench.cli.parsing import add_run_args, csv_list, float_list
+from soabench.config import FILTER_FAMILIES
 from soabench.errors import require
 
 
@@ -14,6 +15,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
     add_run_args(p)
     p.add_argument("--clutter", type=float_list, help="clutter rate(s) lambda, e.g. 3 or 0.5,3,5 (default 3)")
+    p.add_argument(
+        "--filters",
+        type=csv_list("filter family", FILTER_FAMILIES),
+        help="filter families every birth model runs in: gmphd (default), lmb (labelled multi-Bernoulli: static "
+        "probabilities only), or both",
+    )
     p.add_argument(
         "--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run (default: new run)"
     )

@@ -16,6 +16,11 @@ Statistics (per clutter rate lambda, birth model and probability mode):
 * components: mean over trials of the per-trial mean posterior component count (§5.7, Fig. 7);
 * censored: censored episodes / all episodes with a detection (§5.4 item 5);
 * "episodes S-OA ≤ X": the KITTI-style pairwise fraction over episodes counted for both (§5.8).
+
+A run that names filter families (``experiment.filters``, a ``filter`` column in its tables) is summarised family
+by family: every statistic and every paired comparison above is computed inside one family (S-OA in the LMB against
+the baselines in the LMB), and a probability mode a family does not run reads "—". The figures and the comparison
+with the paper use the GM-PHD family.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from soabench.birth import BASELINES, LABEL
-from soabench.config import Config, MetricsConfig
+from soabench.config import FAMILY_MODES, FILTER_FAMILIES, Config, MetricsConfig
 from soabench.errors import SoabenchError
 from soabench.experiment.reports import paper
 from soabench.experiment.reports.paper import percent_reduction
@@ -40,6 +45,10 @@ from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE
 from soabench.experiment.runs.store import RunStore
 from soabench.experiment.trial.observable import duration_hint
+from soabench.experiment.trial.trial import FILTER_COLUMN
+
+#: how the summary names a filter family
+FAMILY_LABEL = {"gmphd": "GM-PHD", "lmb": "LMB"}
 
 
 def _nanmean(x: np.ndarray) -> float:
@@ -149,17 +158,42 @@ def timing_summary(tables: RunTables, sessions: list[dict]) -> dict:
         col = tm.get(f"t_{stage}")
         out[f"{stage}_s"] = float(np.nansum(col[idx])) if col is not None else math.nan
     filt = {}
-    for model in dict.fromkeys(tm["model"]):
-        for mode in dict.fromkeys(tm["mode"]):
-            m = select(tm, model=model, mode=mode)
-            if m.any():
-                filt[f"{model}/{mode}"] = {
-                    stage: float(np.nansum(tm[f"t_{stage}"][m]))
-                    for stage in ("birth", "predict", "update", "reduce", "metrics", "filter_total")
-                    if f"t_{stage}" in tm
-                }
+    fams = list(dict.fromkeys(tm[FILTER_COLUMN])) if FILTER_COLUMN in tm else [None]
+    runs = [(a, b, f) for a in dict.fromkeys(tm["model"]) for b in dict.fromkeys(tm["mode"]) for f in fams]
+    for model, mode, fam in runs:
+        m = select(tm, model=model, mode=mode) & (tm[FILTER_COLUMN] == fam if fam is not None else True)
+        if m.any():
+            filt[f"{model}/{mode}" + (f"/{fam}" if fam is not None else "")] = {
+                stage: float(np.nansum(tm[f"t_{stage}"][m]))
+                for stage in ("birth", "predict", "update", "reduce", "metrics", "filter_total")
+                if f"t_{stage}" in tm
+            }
     out["filter_s"] = filt
     return out
+
+
+def families(tables: RunTables) -> list[str | None]:
+    """The filter families of a run's tables in the config's order ([None]: a run without a ``filter`` column)."""
+    if FILTER_COLUMN not in tables.trials:
+        return [None]
+    present = set(tables.trials[FILTER_COLUMN])
+    named = tables.meta["config"]["experiment"].get("filters", FILTER_FAMILIES[:1])
+    return [f for f in named if f in present] + sorted(present - set(named))
+
+
+def family_tables(tables: RunTables, family: str | None) -> RunTables:
+    """The tables of one filter family (all of them for None): trials, episodes and timing rows of that family."""
+    if family is None:
+        return tables
+
+    def only(table: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        if FILTER_COLUMN not in table:
+            return table
+        keep = table[FILTER_COLUMN] == family
+        return {c: v[keep] for c, v in table.items()}
+
+    return dataclasses.replace(tables, trials=only(tables.trials), episodes=only(tables.episodes),
+                               timing=only(tables.timing))  # fmt: skip
 
 
 def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: list[dict] | None = None) -> dict:
@@ -169,20 +203,8 @@ def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: l
     n_trials = int(meta.get("trials", exp["trials"]))
     ok_trials = sorted({int(t) for t in tables.trials.get("trial", [])})
     results = []
-    for clutter in tables.clutters:
-        stats = {(mo, md): model_stats(tables, clutter, mo, md) for mo in tables.models for md in tables.modes}
-        comps = []
-        warning = unobserved_warning(tables, clutter)
-        if warning:  # when, on this scene, somebody does become observable
-            warning += duration_hint(meta)
-        if "soa" in tables.models and not warning:  # paired against S-OA: the baselines, then every plugin
-            others = [b for b in BASELINES if b in tables.models] + [
-                m for m in tables.models if m != "soa" and m not in BASELINES
-            ]
-            for md in tables.modes:
-                for b in others:
-                    comps.append(compare(tables, clutter, md, b, stats))
-        results.append({"clutter": clutter, "models": list(stats.values()), "vs_soa": comps, "warning": warning})
+    for clutter, family in [(c, f) for c in tables.clutters for f in families(tables)]:
+        results.append(_clutter_results(family_tables(tables, family), clutter, family))
     failures = failures or []
     return {
         "net": meta.get("net"),
@@ -202,6 +224,27 @@ def summarize(tables: RunTables, failures: list[dict] | None = None, sessions: l
         "results": results,
         "timing": timing_summary(tables, sessions or []),
     }
+
+
+def _clutter_results(tables: RunTables, clutter: float, family: str | None) -> dict:
+    """The statistics and paired comparisons of one clutter rate (of one filter family, when not None)."""
+    meta = tables.meta
+    stats = {(mo, md): model_stats(tables, clutter, mo, md) for mo in tables.models for md in tables.modes}
+    comps = []
+    warning = unobserved_warning(tables, clutter)
+    if warning:  # when, on this scene, somebody does become observable
+        warning += duration_hint(meta)
+    if "soa" in tables.models and not warning:  # paired against S-OA: the baselines, then every plugin
+        others = [b for b in BASELINES if b in tables.models] + [
+            m for m in tables.models if m != "soa" and m not in BASELINES
+        ]
+        for md in tables.modes:
+            for b in others:
+                comps.append(compare(tables, clutter, md, b, stats))
+    out = {"clutter": clutter, "models": list(stats.values()), "vs_soa": comps, "warning": warning}
+    if family is not None:
+        out["filter"] = family
+    return out
 
 
 # ------------------------------------------------------------------------------------------------ Markdown
@@ -226,7 +269,8 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
         + (f", {len(summary['failures'])} failed (listed below)." if summary["failures"] else ".")
     )
     for res in summary["results"]:
-        lines += ["", f"## λ = {res['clutter']:g}", ""]
+        family = res.get("filter")
+        lines += ["", f"## λ = {res['clutter']:g}" + (f", {FAMILY_LABEL.get(family, family)}" if family else ""), ""]
         if res.get("warning"):
             lines += [f"**Warning:** {res['warning']}", ""]
         lines.append(
@@ -242,6 +286,11 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
                 f"| {fmt(s['precision_mean'])} | {fmt(s['recall_mean'])} | {fmt(s['components_mean'], 1)} "
                 f"| {s['n_censored']} / {s['n_episodes']} |"
             )
+        if family in FAMILY_MODES:  # the modes this family does not run: one row of "—" per model
+            skipped = [md for md in exp["probabilities"] if md not in FAMILY_MODES[family]]
+            for model in dict.fromkeys(s["model"] for s in res["models"]):
+                for md in skipped:
+                    lines.append(f"| {LABEL.get(model, model)} | {md} |" + " — |" * 10)
         if res["vs_soa"]:
             lines += [
                 "",
@@ -371,7 +420,11 @@ def paper_section(run_dir: Path, tables: RunTables, clutter: float = 3.0) -> str
     if not set(tables.modes) & {"static", "dynamic"}:
         return ""
 
-    rows = [r for r in paper.read_rows(run_dir / "trials.csv") if r["mode"] in ("static", "dynamic")]
+    rows = [
+        r
+        for r in paper.read_rows(run_dir / "trials.csv")
+        if r["mode"] in ("static", "dynamic") and r.get(FILTER_COLUMN, FILTER_FAMILIES[0]) == FILTER_FAMILIES[0]
+    ]
     with np.errstate(invalid="ignore"):  # percentiles of all-NaN bootstrap samples (trials without episodes)
         body = paper.markdown(rows, clutter)
     return f"## Against the paper (docs/method.md §5.9), λ = {clutter:g}\n\n{body}\n"
@@ -386,6 +439,8 @@ def write_report(run_dir: Path, figures: bool = True, store: RunStore | None = N
     store = store if store is not None else RunStore(run_dir)
     tables = load_tables(run_dir, steps=store.step_columns())  # the columns its merge kept: no parse of steps.csv
     summary = summarize(tables, store.failures(), store.sessions())
+    if families(tables) != [None]:  # the figures and the paper's comparison: the GM-PHD family
+        tables = family_tables(tables, FILTER_FAMILIES[0])
     fig_paths: list[str] = []
     if figures:
         # imported when called: matplotlib would slow every start-up

@@ -57,7 +57,15 @@ from soabench.experiment.runs.files import (
     write_json_atomic,
     write_lines,
 )
-from soabench.experiment.trial.trial import EPISODE_KEYS, ROW_ID_KEYS, ROW_KEYS, ROW_TIME_KEYS, STEP_KEYS, TIMING_KEYS
+from soabench.experiment.trial.trial import (
+    EPISODE_KEYS,
+    FILTER_COLUMN,
+    ROW_ID_KEYS,
+    ROW_KEYS,
+    ROW_TIME_KEYS,
+    STEP_KEYS,
+    TIMING_KEYS,
+)
 
 RUN_FILE = "run.json"
 TRIALS_DIR = "trials"
@@ -394,6 +402,7 @@ def timing_rows(rows: Sequence[dict], trial_timing: dict) -> list[dict]:
             **{c: r.get(c) for c in ("trial", "clutter", "model", "mode")},
             **{c: r.get(c) for c in TIMING_COLUMNS},
             **{f"t_{k}": trial_timing.get(k) for k in TRIAL_TIMING_KEYS},
+            **({FILTER_COLUMN: r[FILTER_COLUMN]} if FILTER_COLUMN in r else {}),  # a run that names filter families
         }
         for r in rows
     ]
@@ -419,7 +428,8 @@ class TableOrder:
         )
 
     def row(self, r: dict) -> tuple:
-        """Sort key of a trials (or timing) row."""
+        """Sort key of a trials (or timing) row; rows that differ only in their filter family keep the trial's
+        order (the family is no key: a run without the ``filter`` column sorts exactly as before it existed)."""
         return self.key_of(r["trial"], r["clutter"], r["model"], r["mode"])
 
     def episode(self, r: dict) -> tuple:

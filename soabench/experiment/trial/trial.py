@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from soabench import plugins
-from soabench.config import filter_config_for_mode
+from soabench.config import FAMILY_MODES, FILTER_FAMILIES, filter_config_for_mode
 from soabench.errors import require
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.trial import guard, isolate
@@ -101,17 +101,27 @@ class TrialResult:
     failures: list[dict[str, Any]] = field(default_factory=list)
 
 
+#: the column naming a run's filter family (docs/method.md "LMB filter"); written only by runs whose
+#: ``experiment.filters`` is not the default ``("gmphd",)``, as the last column of every table
+FILTER_COLUMN = "filter"
+
+
 @dataclass(frozen=True)
 class RunKey:
-    """Identity of one filter run inside a trial."""
+    """Identity of one filter run inside a trial; ``family``: its filter family when the run names families
+    (``experiment.filters`` not the default), else None (no ``filter`` column)."""
 
     trial: int
     clutter: float
     model: str
     mode: str
+    family: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        return {"trial": self.trial, "clutter": self.clutter, "model": self.model, "mode": self.mode}
+        d = {"trial": self.trial, "clutter": self.clutter, "model": self.model, "mode": self.mode}
+        if self.family is not None:
+            d[FILTER_COLUMN] = self.family
+        return d
 
 
 @dataclass
@@ -245,7 +255,10 @@ def make_row(
     }
     row.update({k: _scalar(v) for k, v in metrics.summary.items()})
     row.update({"t_birth": run.t_birth, "t_metrics": t_metrics, "t_filter_total": run.t_total})
-    return {k: row[k] for k in ROW_KEYS}
+    out = {k: row[k] for k in ROW_KEYS}
+    if key.family is not None:
+        out[FILTER_COLUMN] = key.family
+    return out
 
 
 def episode_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
@@ -253,7 +266,8 @@ def episode_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
     base = key.as_dict()
     head = {k: _scalar(base[k]) for k in EPISODE_KEYS if k in base}
     own = [k for k in EPISODE_KEYS if k not in base]  # the Episode's fields: scalars, read as they are
-    return [{**head, **{k: _scalar(getattr(e, k)) for k in own}} for e in metrics.episodes]
+    tail = {FILTER_COLUMN: base[FILTER_COLUMN]} if FILTER_COLUMN in base else {}
+    return [{**head, **{k: _scalar(getattr(e, k)) for k in own}, **tail} for e in metrics.episodes]
 
 
 def step_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
@@ -261,13 +275,14 @@ def step_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
     base = key.as_dict()
     K = len(metrics.series["n_gt"]) if metrics.series else 0
     names = STEP_KEYS[5:]
+    tail = {FILTER_COLUMN: base.pop(FILTER_COLUMN)} if FILTER_COLUMN in base else {}
     # each series as a list of Python ints or floats (tolist() of a cast array: the values int() / float() give)
     cols = [
         [int(v) for v in metrics.series[c].tolist()] if c in _INT_STEP_KEYS else _float_list(metrics.series[c])
         for c in names
     ]
     keys = ("k", *names)
-    return [{**base, **dict(zip(keys, vals, strict=True))} for vals in zip(range(K), *cols, strict=False)]
+    return [{**base, **dict(zip(keys, vals, strict=True)), **tail} for vals in zip(range(K), *cols, strict=False)]
 
 
 def _float_list(series: Any) -> list[float]:
@@ -281,11 +296,12 @@ def _float_list(series: Any) -> list[float]:
 def estimate_rows(key: RunKey, results: Sequence[StepResult]) -> list[dict[str, Any]]:
     """One row of :data:`ESTIMATE_KEYS` per extracted estimate (unrestricted, with multiplicity)."""
     base = key.as_dict()
+    tail = {FILTER_COLUMN: base.pop(FILTER_COLUMN)} if FILTER_COLUMN in base else {}
     rows = []
     for k, res in enumerate(results):
         w = list(res.X_w) if len(res.X_w) == len(res.X) else [float("nan")] * len(res.X)
         for (x, y), wi in zip(res.X[:, :2].tolist(), w, strict=True):
-            rows.append({**base, "k": k, "x": x, "y": y, "w": float(wi)})
+            rows.append({**base, "k": k, "x": x, "y": y, "w": float(wi), **tail})
     return rows
 
 
@@ -391,16 +407,16 @@ def run_trial(
                 births_key = (candidates_key, birth_key, model, fn_key[3])
                 candidates = share.birth_candidates.setdefault(births_key, {})
                 births = _births_once(model, config, sensor_cfg, scene, seeds, birth_factory, candidates, share.count)
-            for mode in exp.probabilities:
-                key = RunKey(trial, float(lam), model, mode)
-                run_key = (scans_key, cfg_key, model, mode, save_estimates, *fn_key[2:])
+            for mode, family in _family_runs(exp.probabilities, exp.filters):
+                key = RunKey(trial, float(lam), model, mode, family)
+                run_key = (scans_key, cfg_key, model, mode, family, save_estimates, *fn_key[2:])
                 cached = share.runs.get(run_key)
                 if cached is not None:
                     _replay(cached, out)
                     share.count("runs_reused")
                     continue
                 n = (len(out.rows), len(out.episodes), len(out.steps), len(out.estimates or ()), len(out.failures))
-                filter_key = (scans_key, filter_cfg_key, model, mode, *fn_key[2:])
+                filter_key = (scans_key, filter_cfg_key, model, mode, family, *fn_key[2:])
                 kept = share.filter_runs.get(filter_key)
                 if kept is not None:  # the same filter run under another metrics config: score it only
                     _record(key, config, sensor_cfg, scans, seeds, kept, out)
@@ -422,6 +438,16 @@ def run_trial(
                 key = RunKey(trial, float(lam), tracker, mode)
                 _run_one_tracker(key, config, sensor_cfg, scene, scans, seeds, out)
     return out
+
+
+def _family_runs(modes: Sequence[str], families: Sequence[str]) -> list[tuple[str, str | None]]:
+    """The (probability mode, filter family) of each run of a birth model, mode by mode and family by family in the
+    config's orders; a family runs only the modes it supports (:data:`soabench.config.FAMILY_MODES`: the LMB runs
+    static probabilities only; its other cells read "—"). The family is None for the default families
+    (``("gmphd",)``): such a run writes no ``filter`` column."""
+    if tuple(families) == FILTER_FAMILIES[:1]:
+        return [(mode, None) for mode in modes]
+    return [(mode, fam) for mode in modes for fam in families if mode in FAMILY_MODES[fam]]
 
 
 def _births_once(
@@ -493,6 +519,10 @@ def _run_one(
     """
 
     filter_cfg, filter_mode, p_D_b = filter_config_for_mode(config.filter, key.mode)
+    if key.family == "lmb":  # the labelled multi-Bernoulli filter: its Gibbs seeds from the trial's own stream
+        from soabench.lmb import LMBFilter
+
+        filter_cls = functools.partial(LMBFilter, N_hat=config.birth.N_hat, rng=seeds.association_rng())
     if plugins.is_builtin_birth(key.model):
         birth_model = (
             births
