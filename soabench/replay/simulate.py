@@ -24,6 +24,7 @@ from soabench.birth import LABEL
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.ownership import check_existing_folder, resolve
+from soabench.experiment.runs.provenance import package_versions
 from soabench.experiment.runs.runmeta import validate_run_meta
 from soabench.experiment.trial import guard, registry
 from soabench.experiment.trial.registry import load_scene_cached
@@ -152,6 +153,7 @@ def replay_trial(
 def _tracker_run(name: str, cfg: Config, sensor_cfg: Any, scene: Any, scans: Any, seeds: Any, mode: str) -> Any:
     """A whole tracker's run over the scans, built as the trial builds it (its own copy of the configuration, the
     trial's placement generator); each step's track labels, where its Estimates carry them, stay on the result."""
+
     def check(out: Any, scan: Any, t_step: float) -> Any:
         result = guard.check_estimates(out, scan, t_step)
         labels = getattr(out, "labels", None)
@@ -185,7 +187,6 @@ class _Recorder:
 def _version_note(raw: dict) -> str:
     """One line: the package versions that differ between the run and this replay (or that they agree)."""
     # imported when called: scipy would slow every start-up
-    from soabench.experiment.execution.runner import package_versions
 
     stored = raw.get("versions") if isinstance(raw.get("versions"), dict) else {}
     now = package_versions()

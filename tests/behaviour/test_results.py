@@ -19,9 +19,14 @@ import pytest
 from repo_paths import ROOT
 
 from soabench.config import Config
-from soabench.experiment.execution.runner import package_versions
 from soabench.experiment.runs.files import format_value
-from soabench.experiment.runs.provenance import REGENERATE_COMMAND, REPRODUCTION_TOLERANCE, cpu_model, within_tolerance
+from soabench.experiment.runs.provenance import (
+    REGENERATE_COMMAND,
+    REPRODUCTION_TOLERANCE,
+    cpu_model,
+    package_versions,
+    within_tolerance,
+)
 from soabench.experiment.runs.store import TRIAL_COLUMNS
 from soabench.experiment.trial.trial import run_trial
 from soabench.scenario import load

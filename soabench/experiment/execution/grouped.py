@@ -29,11 +29,11 @@ from soabench.experiment.execution.runner import (
     _print_failure,
     _print_model_failures,
     _utc_stamp,
-    package_versions,
     run_trial_task,
     uses_kernels,
 )
 from soabench.experiment.runs.ownership import FolderLock
+from soabench.experiment.runs.provenance import package_versions
 from soabench.experiment.trial import registry
 from soabench.experiment.trial import trial as trial_module
 from soabench.experiment.trial.trial import TrialShare, _config_key

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import platform
 import socket
 import sys
 import threading
@@ -41,7 +40,7 @@ from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.reports import report
 from soabench.experiment.runs.files import pack_table, to_jsonable, write_json_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
-from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, platform_info
+from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, package_versions, platform_info
 from soabench.experiment.runs.runmeta import check_requested, validate_run_meta
 from soabench.experiment.runs.store import (
     EPISODE_COLUMNS,
@@ -161,29 +160,6 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     if spec.save_estimates and est is not None:
         record["estimates"] = to_jsonable(est)
     return record
-
-
-# ------------------------------------------------------------------------------------------------ metadata
-def package_versions() -> dict[str, str]:
-    """Versions of the packages that shape the results (summary.json)."""
-    from importlib import metadata
-
-    out = {"python": platform.python_version()}
-    for label, dist in (
-        ("numpy", "numpy"),
-        ("scipy", "scipy"),
-        ("shapely", "shapely"),
-        ("numba", "numba"),
-        ("llvmlite", "llvmlite"),
-        ("sumo", "eclipse-sumo"),
-        ("libsumo", "libsumo"),
-        ("soabench", "soabench"),
-    ):
-        try:
-            out[label] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            out[label] = "not installed"
-    return out
 
 
 class TodoTrials:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import os
 import platform
+from importlib import metadata
 from typing import Any
 
 #: How closely re-running a committed trial must reproduce each number of ``trials.csv``: ``|new - old| <=
@@ -68,3 +69,23 @@ def _number(v: Any) -> float | None:
         return float(str(v))
     except ValueError:
         return None
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of the packages that shape the results (summary.json)."""
+    out = {"python": platform.python_version()}
+    for label, dist in (
+        ("numpy", "numpy"),
+        ("scipy", "scipy"),
+        ("shapely", "shapely"),
+        ("numba", "numba"),
+        ("llvmlite", "llvmlite"),
+        ("sumo", "eclipse-sumo"),
+        ("libsumo", "libsumo"),
+        ("soabench", "soabench"),
+    ):
+        try:
+            out[label] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[label] = "not installed"
+    return out
