@@ -3,7 +3,7 @@
 A plugin's output is checked at every scan before anything uses it: :func:`check_births` (shapes, numeric dtypes,
 finite values, non-negative weights, symmetric covariances; newborn terms: one per measurement and a ``beta`` that
 returns (M,) finite non-negative values) and :func:`check_estimates` (an :class:`~soabench.types.Estimates`, not
-None, (n, 2) or (n, 4) finite states, optional track labels: (n,) integers). A failed check or an exception
+None, (n, 2) or (n, 4) finite states, optional track labels: (n,) distinct integers). A failed check or an exception
 raises, :func:`soabench.trackers.run_tracker` names the scan, and the trial keeps every other run and records
 this one in :func:`failure_row` form: no row of metrics is written for a run that failed, so no zero or NaN can
 pass for a result.
@@ -44,7 +44,8 @@ def _array(value: Any, what: str, shape: tuple[int | None, ...]) -> np.ndarray:
 
 
 def _labels(value: Any, what: str, n: int) -> np.ndarray | None:
-    """Optional track labels: None, or (n,) integers (one per estimate) as int64; PluginOutputError otherwise."""
+    """Optional track labels: None, or (n,) distinct integers (one per estimate) as int64; PluginOutputError
+    otherwise."""
     if value is None:
         return None
     a = np.asarray(value)
@@ -55,7 +56,16 @@ def _labels(value: Any, what: str, n: int) -> np.ndarray | None:
         )
     if a.dtype == np.uint64 and a.size and int(a.max()) > np.iinfo(np.int64).max:
         raise PluginOutputError(f"{what} holds a label above {np.iinfo(np.int64).max}; labels must fit in int64")
-    return a.astype(np.int64)
+    a = a.astype(np.int64)
+    if n > 1:
+        s = np.sort(a)
+        dup = s[1:][s[1:] == s[:-1]]
+        if len(dup):
+            raise PluginOutputError(
+                f"{what} gives label {int(dup[0])} to more than one estimate of the scan; a label names one track, "
+                "so the labels of one scan must differ"
+            )
+    return a
 
 
 def check_births(births: Any, scan: Scan) -> Births:
