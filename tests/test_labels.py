@@ -253,3 +253,19 @@ def test_scans_carry_the_pedestrians_ids_as_ints(recorded):
     labels = scans.ped_labels
     assert labels.dtype == np.int64 and len(labels) == scans.truth_xy.shape[1] == len(scans.ped_ids)
     assert [f"ped{i}" for i in labels] == [str(p) for p in scans.ped_ids]
+
+
+@pytest.mark.parametrize("name", ["stonesoup-gnn", "stonesoup-gmphd"])
+def test_stonesoup_trackers_keep_one_label_on_one_target(name):
+    """The bridge numbers Stone Soup's track ids (GNN) and component tags (GM-PHD) per run: the T31 walk is one
+    track under one label from the scan it is first reported on."""
+    from soabench.api import make_tracker
+
+    scans, _, _ = _walk_scans()
+    tracker = make_tracker(name, "intersection", {"experiment": {"clutter": [0.0]}})
+    labels = []
+    for scan in scans:
+        est = check_estimates(tracker.step(scan), scan, 0.0)
+        assert est.labels is not None and len(est.labels) == len(est.X) <= 1
+        labels += est.labels.tolist()
+    assert len(labels) >= len(scans) - 2 and set(labels) == {1}
