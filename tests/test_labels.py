@@ -269,3 +269,16 @@ def test_stonesoup_trackers_keep_one_label_on_one_target(name):
         assert est.labels is not None and len(est.labels) == len(est.X) <= 1
         labels += est.labels.tolist()
     assert len(labels) >= len(scans) - 2 and set(labels) == {1}
+
+
+def test_kitti_truth_labels_are_the_track_ids_of_label_02(tmp_path):
+    from kitti_files import write_sequence
+
+    from soabench.kitti.config import KittiConfig
+    from soabench.kitti.reader import open_dataset, read_sequence, to_scans
+
+    write_sequence(tmp_path, "0000")
+    labels = tmp_path / "label_02" / "0000.txt"
+    labels.write_text(labels.read_text().replace(" 0 Pedestrian ", " 17 Pedestrian "))  # track id 0 -> 17
+    ss = to_scans(read_sequence(open_dataset(tmp_path), "0000"), KittiConfig(), SensorConfig(dt=0.1, r_max=50.0))
+    assert list(ss.scans.ped_ids) == ["17"] and ss.scans.ped_labels.tolist() == [17]
