@@ -22,7 +22,7 @@ from shapely.geometry import Polygon
 
 from soabench.birth import REGISTRY, get_birth_model
 from soabench.birth.base import BirthContext, Births, NewbornTerms
-from soabench.config import PROBABILITY_MODES, Config, filter_config_for_mode
+from soabench.config import PROBABILITY_MODES, filter_config_for_mode
 from soabench.gmphd import GMPHDFilter, Mixture
 from soabench.gmphd.models import h
 from soabench.sensor import Scan
@@ -32,21 +32,9 @@ LOOSE = dict(rtol=1e-9, atol=1e-9)
 
 
 @pytest.fixture(scope="module")
-def recorded():
-    """(config, scene, scans at lambda = 3 and lambda = 10) of a 30 s trial of the shipped intersection."""
-    from soabench.scenario import load, simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
-
-    scene, scenario = load("intersection")
-    cfg = Config()
-    seeds = trial_seeds(4, 1)
-    rec = simulate(scene, scenario, seeds, duration=30.0)
-    scans = {}
-    for lam in (3.0, 10.0):
-        sensor = dataclasses.replace(cfg.sensor, lambda_c=lam)
-        scans[lam] = (sensor, observe(rec, scene, sensor, seeds.sensor_rngs()))
-    return cfg, scene, scans, seeds
+def recorded(recorded_intersection):
+    """(config, scene, scans at lambda = 3 and lambda = 10, seeds) of a 30 s trial of the shipped intersection."""
+    return recorded_intersection
 
 
 def assert_same_mixture(a: Mixture, b: Mixture, tol: dict = TOL) -> None:

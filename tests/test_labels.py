@@ -20,7 +20,7 @@ from shapely.geometry import Polygon
 
 from soabench.birth import REGISTRY, get_birth_model
 from soabench.birth.base import BirthContext, Births, NewbornTerms
-from soabench.config import PROBABILITY_MODES, Config, FilterConfig, SensorConfig, filter_config_for_mode
+from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig, filter_config_for_mode
 from soabench.experiment.guard import PluginOutputError, check_estimates
 from soabench.gmphd import GMPHDFilter, Mixture, cycle, reduction
 from soabench.gmphd.filter import _mixture_arrays
@@ -29,18 +29,10 @@ from soabench.types import Estimates, Obstacles, Scan, truth_labels
 
 
 @pytest.fixture(scope="module")
-def recorded():
-    """(config, scene, sensor, scans, seeds) of a 30 s trial of the shipped intersection with clutter."""
-    from soabench.scenario import load, simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
-
-    scene, scenario = load("intersection")
-    cfg = Config()
-    seeds = trial_seeds(4, 1)
-    rec = simulate(scene, scenario, seeds, duration=30.0)
-    sensor = dataclasses.replace(cfg.sensor, lambda_c=3.0)
-    return cfg, scene, sensor, observe(rec, scene, sensor, seeds.sensor_rngs()), seeds
+def recorded(recorded_intersection):
+    """(config, scene, sensor, scans, seeds) of a 30 s trial of the shipped intersection with lambda = 3."""
+    cfg, scene, scans, seeds = recorded_intersection
+    return cfg, scene, *scans[3.0], seeds
 
 
 def _bits(a: np.ndarray) -> bytes:
