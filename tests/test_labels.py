@@ -274,3 +274,39 @@ def test_kitti_truth_labels_are_the_track_ids_of_label_02(tmp_path):
     labels.write_text(labels.read_text().replace(" 0 Pedestrian ", " 17 Pedestrian "))  # track id 0 -> 17
     ss = to_scans(read_sequence(open_dataset(tmp_path), "0000"), KittiConfig(), SensorConfig(dt=0.1, r_max=50.0))
     assert list(ss.scans.ped_ids) == ["17"] and ss.scans.ped_labels.tolist() == [17]
+
+
+def _extract_labels_reference(w, label, idx, reps, nxt):
+    """The rule of §2.13 item 4 written plainly: heaviest (then lowest index) keeps a shared label, the others get
+    fresh labels heaviest first; extra copies get fresh labels after those, in the order of X."""
+    label = label.copy()
+    owner = {}
+    for j in sorted(idx.tolist(), key=lambda j: (-w[j], j)):
+        owner.setdefault(int(label[j]), j)
+    for j in sorted(idx.tolist(), key=lambda j: (-w[j], j)):
+        if owner[int(label[j])] != j:
+            label[j], nxt = nxt, nxt + 1
+    out = []
+    for j, r in zip(idx.tolist(), reps.tolist(), strict=True):
+        out.append(int(label[j]))
+        for _ in range(r - 1):
+            out.append(nxt)
+            nxt += 1
+    return out, label, nxt
+
+
+@pytest.mark.parametrize("n", [2, 7, 24, 25, 120])
+def test_extract_labels_equals_the_plain_rule(n):
+    """Small scans take a pairwise conflict test, large ones a sort: both give the plain rule's labels."""
+    from soabench.gmphd.kernels import extract_labels
+
+    rng = np.random.default_rng(n)
+    for _ in range(20):
+        J = n + 5
+        w = rng.choice([0.6, 0.8, 1.2, 2.6], J)  # ties on purpose
+        label = rng.integers(1, max(2, n // 2), J).astype(np.int64)
+        idx = np.sort(rng.choice(J, n, replace=False))
+        reps = np.floor(w[idx] + 0.5).astype(np.int64)
+        want = _extract_labels_reference(w, label, idx, reps, 1000)
+        out, new_label, nxt = extract_labels(w, label.copy(), idx, reps, 1000)
+        assert out.tolist() == want[0] and new_label.tolist() == want[1].tolist() and nxt == want[2]

@@ -746,6 +746,9 @@ def merge_moments(label, centres, w, m, P, n_det, age):
     return W, mt, Pt, nd, ag, count
 
 
+_FEW_ESTIMATES = 24  #: up to this many extracted components, label conflicts are found by a pairwise test
+
+
 @njit(cache=True)
 def extract_labels(w, label, idx, reps, next_label):
     """The labels of the estimates extracted from components ``idx`` (``reps[k]`` copies of component idx[k], in
@@ -758,15 +761,26 @@ def extract_labels(w, label, idx, reps, next_label):
     place), the next unused label).
     """
     n = idx.shape[0]
-    keys = np.empty(n, dtype=np.int64)
-    for k in range(n):
-        keys[k] = label[idx[k]]
-    by_key = np.argsort(keys, kind="mergesort")
-    n_dup = 0
-    for k in range(1, n):
-        if keys[by_key[k]] == keys[by_key[k - 1]]:
-            n_dup += 1
+    n_dup = 0  # estimates whose label an earlier one has: the losers of the conflicts
+    if n <= _FEW_ESTIMATES:  # the usual scan: a pairwise test allocates nothing
+        for a in range(1, n):
+            for c in range(a):
+                if label[idx[c]] == label[idx[a]]:
+                    n_dup += 1
+                    break
+    else:
+        keys = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            keys[k] = label[idx[k]]
+        by_key = np.argsort(keys, kind="mergesort")
+        for k in range(1, n):
+            if keys[by_key[k]] == keys[by_key[k - 1]]:
+                n_dup += 1
     if n_dup > 0:  # every member of a run of equal labels but its heaviest is a loser
+        keys = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            keys[k] = label[idx[k]]
+        by_key = np.argsort(keys, kind="mergesort")
         loser = np.zeros(n, dtype=np.bool_)
         a = 0
         while a < n:
