@@ -310,3 +310,19 @@ def test_extract_labels_equals_the_plain_rule(n):
         want = _extract_labels_reference(w, label, idx, reps, 1000)
         out, new_label, nxt = extract_labels(w, label.copy(), idx, reps, 1000)
         assert out.tolist() == want[0] and new_label.tolist() == want[1].tolist() and nxt == want[2]
+
+
+def test_labelled_estimates_reach_the_step_results_the_metrics_read(recorded):
+    """Estimates built from the truth, labelled with the truth's labels, pass through the checks of
+    ``soabench.api.evaluate`` (:func:`soabench.boundary.step_results`) with their labels row for row."""
+    from soabench.boundary import step_results
+
+    scans = recorded[3]
+    estimates = []
+    for k in range(len(scans)):
+        cols = np.flatnonzero(scans.present[k])
+        estimates.append(Estimates(scans.truth_xy[k, cols], labels=scans.ped_labels[cols]))
+    results = step_results(scans, estimates)
+    assert sum(len(r.labels) for r in results) == int(scans.present.sum()) > 0
+    for k, r in enumerate(results):
+        assert r.labels.tolist() == scans.ped_labels[scans.present[k]].tolist()
