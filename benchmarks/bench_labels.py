@@ -40,8 +40,12 @@ import numpy as np
 _STEP_CHILD = r"""
 import json, sys, time
 import numpy as np
-from soabench.birth import REGISTRY, get_birth_model
-from soabench.birth.base import BirthContext
+from soabench.birth import get_birth_model
+try:
+    from soabench.plugins import BUILTIN_BIRTH_MODELS as MODELS
+except ImportError:  # a baseline checkout from before the built-in birth models moved to soabench.plugins
+    from soabench.birth import REGISTRY as MODELS
+from soabench.types import BirthContext
 from soabench.config import Config, filter_config_for_mode
 from soabench.gmphd import GMPHDFilter
 from soabench.scenario import load
@@ -54,7 +58,7 @@ cfg = Config()
 scene, _ = load("intersection")
 seeds = trial_seeds(0, 1)
 out = {}
-for model in REGISTRY:
+for model in MODELS:
     for mode in ("static", "dynamic"):
         fcfg, fmode, p_D_b = filter_config_for_mode(cfg.filter, mode)
         birth = get_birth_model(model)(cfg.birth, scans.sensor, scene, seeds.placement_rng())

@@ -22,10 +22,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from soabench.birth import REGISTRY as _BIRTH_REGISTRY
+from soabench import plugins
 from soabench.errors import SoabenchError, require
+from soabench.tomlfile import read_toml
 
-BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(_BIRTH_REGISTRY)  #: the built-in birth models (soabench.birth.REGISTRY)
+BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(plugins.BUILTIN_BIRTH_MODELS)  #: the built-in birth models
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
 
 
@@ -34,6 +35,7 @@ DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
+MAX_DURATION = 86400.0  #: longest simulated time (s): experiment.duration and a snapshot's --time / --duration
 
 
 def _one_of(name: str, value: Any, allowed: tuple) -> None:
@@ -70,6 +72,16 @@ def _positive(name: str, value: float, hi: float = 1e6) -> None:
 
 def _non_negative(name: str, value: float, hi: float = 1e6) -> None:
     _in_range(name, value, 0.0, hi)
+
+
+def check_time(flag: str, value: float | None) -> None:
+    """A finite, positive time of at most :data:`MAX_DURATION` seconds (None: not given)."""
+    if value is None:
+        return
+    require(
+        math.isfinite(value) and 0 < value <= MAX_DURATION,
+        f"{flag} {value!r} is out of range; allowed: (0, {MAX_DURATION:g}] seconds",
+    )
 
 
 def require_distinct(name: str, values: tuple) -> None:
@@ -331,10 +343,8 @@ class ExperimentConfig:
 
     def validate(self) -> None:
         _int_range("trials", self.trials, 1, MAX_TRIALS)
-        _positive("duration", self.duration, hi=86400.0)
+        _positive("duration", self.duration, hi=MAX_DURATION)
         require(len(self.models) + len(self.trackers) >= 1, "models must name at least one birth model or tracker")
-        from soabench import plugins  # the closed list of names: built-ins, entry points, typed import paths
-
         for m in self.models:
             plugins.check_name(plugins.BIRTH, m)
         for t in self.trackers:
@@ -496,7 +506,6 @@ def load_config(path: str | Path | None, base: Config | None = None) -> Config:
     """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
     if path is None:
         return (base or Config()).validate()
-    from soabench.tomlfile import read_toml
 
     p = Path(path)
     require(p.is_file(), f"config file {str(p)!r} does not exist")

@@ -34,7 +34,14 @@ from typing import TextIO
 
 import numpy as np
 
-from soabench.experiment.progress import LINE_INTERVAL_S, is_terminal
+from soabench import notice
+from soabench.birth import sampling
+from soabench.birth.soa import dedup, ego_inside
+from soabench.cache import configure_numba_cache
+from soabench.config import Config, MetricsConfig
+from soabench.experiment.execution.progress import LINE_INTERVAL_S, is_terminal
+from soabench.sensor import segment_meets_convex
+from soabench.types import Births, NewbornTerms, Obstacles, Scan
 
 #: the modules whose kernels are compiled here (their source files key the stamp, as they key numba's cache)
 KERNEL_MODULES = (
@@ -48,7 +55,7 @@ MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (onc
 
 
 def _filter(mode: str):
-    from soabench.config import Config
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import GMPHDFilter
 
     cfg = Config()
@@ -61,7 +68,6 @@ def _scan_arrays() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _births(n: int = 2):
-    from soabench.types import Births
 
     m = np.zeros((n, 4))
     m[:, 0] = np.linspace(5.0, 15.0, n)
@@ -70,6 +76,7 @@ def _births(n: int = 2):
 
 def _predict_update() -> None:
     """The prediction and the update (EKF and UKF terms, posterior) of both probability modes' argument types."""
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import cycle
     from soabench.gmphd.filter import _birth_arrays, _mixture_arrays
 
@@ -84,6 +91,7 @@ def _predict_update() -> None:
 
 def _reduction() -> None:
     """Pruning, merging (window and grid), capping and extraction."""
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import cycle
     from soabench.gmphd.filter import _mixture_arrays
     from soabench.gmphd.mixture import Mixture
@@ -100,13 +108,10 @@ def _reduction() -> None:
 
 def _metrics_geometry() -> None:
     """The per-run matchings (§5.2-5.6) and the scan-geometry kernels of the birth models and the sensor."""
-    from soabench.birth import sampling
-    from soabench.birth.soa import dedup, ego_inside
-    from soabench.config import MetricsConfig
+    # imported when called: numba, scipy would slow every start-up
     from soabench.geometry_kernels import occlusion_layer_arrays, poisson_accept, poisson_first_free
     from soabench.metrics import GATE_COST
     from soabench.metrics_kernels import run_matchings
-    from soabench.sensor import segment_meets_convex
 
     c = MetricsConfig()
     E = np.array([[0.0, 0.0], [5.0, 5.0]])
@@ -123,7 +128,6 @@ def _metrics_geometry() -> None:
 
 
 def _no_obstacles():
-    from soabench.types import Obstacles
 
     return Obstacles([], *(np.zeros(0) for _ in range(7)))
 
@@ -132,8 +136,6 @@ def _fused_steps() -> None:
     """The fused cycle's entry points as the filter calls them: one call per scan (both probability modes), and the
     split step of the line-of-sight gate (§2.11, §4.4)."""
     import shapely
-
-    from soabench.types import Scan
 
     Z, ego = _scan_arrays()
     far = [shapely.box(1000.0, 1000.0, 1001.0, 1001.0)]
@@ -147,8 +149,6 @@ def _fused_steps() -> None:
 def _newborn_steps() -> None:
     """The split step of measurement-driven newborn terms (§3.4) in both probability modes."""
     import shapely
-
-    from soabench.types import NewbornTerms, Scan
 
     Z, ego = _scan_arrays()
     for mode in ("static", "dynamic"):
@@ -170,7 +170,6 @@ ROUNDS: tuple[tuple[Callable[[], None], ...], ...] = (
 
 
 def _run_group(fn: Callable[[], None]) -> None:
-    from soabench import notice
 
     notice.silence()  # the driver announces compilation once; a group process never does
     fn()
@@ -180,8 +179,6 @@ def stamp_path() -> Path:
     """The file that marks this soabench's kernels compiled for this numba and Python in the cache folder."""
     import importlib.metadata
     import importlib.util
-
-    from soabench.cache import configure_numba_cache
 
     parts = [sys.version, importlib.metadata.version("numba"), importlib.metadata.version("soabench")]
     for name in KERNEL_MODULES:
@@ -209,7 +206,6 @@ def ensure_compiled(stream: TextIO | None = None, workers: int | None = None) ->
     terminal, and the time taken at the end."""
     if compiled():
         return 0.0
-    from soabench import notice
 
     stream = stream if stream is not None else sys.stderr
     t0 = time.monotonic()

@@ -3,7 +3,7 @@
 :class:`GMPHDTracker` wraps the cycle of docs/method.md §2.11 (birth from the context at k, then ``filter.step``)
 behind the :class:`~soabench.protocols.Tracker` shape. :func:`run_tracker` runs any tracker over the scans of a run
 and returns one :class:`~soabench.types.StepResult` per scan, the form the metrics read: a foreign tracker's
-:class:`~soabench.types.Estimates` are checked (:mod:`soabench.experiment.guard`) and converted by
+:class:`~soabench.types.Estimates` are checked (:mod:`soabench.experiment.trial.guard`) and converted by
 :func:`step_result_from`.
 """
 
@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from soabench.errors import require_type
-from soabench.protocols import Tracker, TrackerSetup
+from soabench.protocols import Tracker
 from soabench.types import BirthContext, Births, Estimates, Scan, Scans, StepResult
 
-__all__ = ["GMPHDTracker", "Tracker", "TrackerRun", "TrackerSetup", "run_tracker", "step_result_from"]
+__all__ = ["GMPHDTracker", "TrackerRun", "run_tracker", "step_result_from"]
 
 
 class GMPHDTracker:

@@ -35,7 +35,7 @@ SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (docs/use
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Truth: one scenario run (moved from soabench.scenario.recording, which re-exports it)
+# Truth: one scenario run
 
 
 @dataclass
@@ -154,7 +154,7 @@ _RECORDING_KEYS = (
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Scans: what a tracker receives, plus the per-scan truth the metrics need (moved from soabench.sensor)
+# Scans: what a tracker receives, plus the per-scan truth the metrics need
 
 
 @dataclass
@@ -552,7 +552,7 @@ def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
 
 
 def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
-    from soabench.config import SensorConfig
+    from soabench.config import SensorConfig  # run time only: soabench.config sits above this bottom module
 
     if "sensor_json" not in a:
         return None
@@ -563,7 +563,7 @@ def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | 
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Births: what a birth model hands the GM-PHD filter (moved from soabench.birth.base; docs/method.md §2.11, §3.0)
+# Births: what a birth model hands the GM-PHD filter (docs/method.md §2.11, §3.0)
 
 # source codes of birth components (Births.source), for figures and diagnostics
 SOURCE_OCCL, SOURCE_SEM, SOURCE_FOV, SOURCE_GRID, SOURCE_GM, SOURCE_MEAS = range(6)

@@ -31,7 +31,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from soabench.errors import SoabenchError
+from soabench.errors import SoabenchError, require, require_type
+from soabench.geometry import fov_mask
 from soabench.protocols import TrackerSetup
 from soabench.trackers import check_scan
 from soabench.types import CLUTTER, Estimates, Scan, Scans
@@ -147,7 +148,7 @@ def to_stonesoup(
         for time, detections in feed:
             ...
     """
-    from soabench.errors import require, require_type
+    # imported when called: scipy would slow every start-up
     from soabench.metrics import gt_mask
 
     require_type(scans, Scans, "to_stonesoup's scans", "simulate them with soabench.api.simulate_trial")
@@ -201,7 +202,6 @@ def from_stonesoup(tracks: Iterable[Any], scans: Scans) -> StoneSoupEstimates:
         Each estimate is labelled (``Estimates.labels``, docs/method.md §2.13): the track ids numbered 1, 2, ... by
         the first scan they appear in (within a scan, by state).
     """
-    from soabench.errors import require, require_type
 
     require_type(scans, Scans, "from_stonesoup's scans", "give the Scans the tracks were made from")
     times = {scan_time(scan): k for k, scan in enumerate(scans.scans)}
@@ -236,7 +236,6 @@ def estimate_set(tracks: Iterable[Any], scans: Scans, gt_set: str = "fov") -> li
     scan's sensor pose unless ``gt_set`` is ``"scene"``. With :func:`to_stonesoup`'s truths (same ``gt_set``) and
     ``Euclidean(mapping=(0, 2))`` (positions only; Stone Soup's default measure also reads the velocities), Stone
     Soup's ``OSPAMetric`` gives our per-scan OSPA."""
-    from soabench.geometry import fov_mask
 
     by_time = {scan_time(scan): scan for scan in scans.scans}
     out = []

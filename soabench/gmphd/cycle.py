@@ -9,7 +9,7 @@ costing microseconds of fixed overhead. Here the stages are compiled functions (
 clock of ``time.perf_counter`` (:mod:`soabench.gmphd.clock`) so that ``StepResult`` still reports the three stage
 times. Only what needs Python splits a step: the line-of-sight gate (shapely) of the occlusion-aware mode, between
 the prediction and :func:`update_reduce`, and the newborn terms' ``beta(A, kappa)``, between :func:`support` and
-:func:`posterior_reduce`. What used to be fixed Python cost around the stages is done inside: the birth
+:func:`posterior_reduce`. Work that would be fixed Python cost around the stages is done inside: the birth
 components' input check (:func:`births_ok`, §2.12) and the posterior's origin counts (:func:`origin_counts`, §5.7);
 the settings of a call travel as one float array (``PRED_*``, ``RED_*`` name its entries) that the filter packs
 once instead of converting them on every step.
@@ -17,7 +17,7 @@ once instead of converting them on every step.
 Each formula is the one of the array path, evaluated in the same order where that order is ours (elementwise Beta
 algebra, log-sum-exp, the Kalman kernels of :mod:`soabench.gmphd.kernels`, which both paths share); matrix products
 and sums that numpy hands to BLAS or pairwise summation can differ in the last bits, so the two paths agree to
-1e-12 (``tests/test_fused_cycle.py`` runs both on recorded scans), not bit for bit. Arithmetic is IEEE (no
+1e-12 (``tests/equivalence/test_fused_cycle.py`` runs both on recorded scans), not bit for bit. Arithmetic is IEEE (no
 ``fastmath``), so the fused path itself is bit-reproducible. The array path stays callable as the reference:
 ``GMPHDFilter(..., fused=False)``. The UKF form takes it for a step in which a covariance is not positive
 definite (its jitter retry perturbs every component of the batch, a rule kept in one place).
@@ -35,6 +35,7 @@ from soabench.gmphd.kernels import (
     _cholesky4,
     ekf_terms,
     extract_labels,
+    inv2_sym,
     merge_groups,
     merge_moments,
     posterior_pairs,
@@ -135,17 +136,18 @@ PRED_P_S, PRED_BETA_FACTOR, PRED_THETA_MIN, PRED_P_S_MAX, PRED_R_MIN, PRED_R_MAX
 
 
 @njit(cache=True)
-def _empty_mixture(dyn):
-    """(w, m, P, origin, n_det, age, beta, label) of no component, as the compiled calls pass a mixture."""
+def _new_mixture(n, dyn):
+    """(w, m, P, origin, n_det, age, beta, label) of n components, uninitialised, as the compiled calls pass a
+    mixture (beta is (n, 4) for dynamic p_D, else (0, 0); label int64, §2.13)."""
     return (
-        np.empty(0),
-        np.empty((0, 4)),
-        np.empty((0, 4, 4)),
-        np.empty(0, dtype=np.int8),
-        np.empty(0, dtype=np.int32),
-        np.empty(0, dtype=np.int32),
-        np.empty((0, 4) if dyn else (0, 0)),
-        np.empty(0, dtype=np.int64),
+        np.empty(n),
+        np.empty((n, 4)),
+        np.empty((n, 4, 4)),
+        np.empty(n, dtype=np.int8),
+        np.empty(n, dtype=np.int32),
+        np.empty(n, dtype=np.int32),
+        np.empty((n, 4) if dyn else (0, 0)),
+        np.empty(n, dtype=np.int64),
     )
 
 
@@ -180,7 +182,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pars, bw, bm,
     """
     dyn = beta.shape[1] == 4
     if not births_ok(bw, bm, bP):
-        return (*_empty_mixture(dyn), np.empty(0), False)
+        return (*_new_mixture(0, dyn), np.empty(0), False)
     p_S = pars[PRED_P_S]
     f_beta, theta_min, p_S_max = pars[PRED_BETA_FACTOR], pars[PRED_THETA_MIN], pars[PRED_P_S_MAX]
     r_min, r_max, half_fov = pars[PRED_R_MIN], pars[PRED_R_MAX], pars[PRED_HALF_FOV]
@@ -188,14 +190,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pars, bw, bm,
     J0 = w.shape[0]
     Jb = bw.shape[0]
     J = J0 + Jb
-    w2 = np.empty(J)
-    m2 = np.empty((J, 4))
-    P2 = np.empty((J, 4, 4))
-    origin2 = np.empty(J, dtype=np.int8)
-    n_det2 = np.empty(J, dtype=np.int32)
-    age2 = np.empty(J, dtype=np.int32)
-    beta2 = np.empty((J, 4) if dyn else (0, 0))
-    label2 = np.empty(J, dtype=np.int64)
+    w2, m2, P2, origin2, n_det2, age2, beta2, label2 = _new_mixture(J, dyn)
     T = np.empty((4, 4))
     for j in range(J0):
         factor = p_S
@@ -329,14 +324,7 @@ def ukf_terms(m, P, ego, R, r_min):
                 for i in range(8):
                     acc += (w0 * X[i, a]) * D[i, b]
                 C[j, a, b] = acc
-        sa, sb, sd = S[j, 0, 0], 0.5 * (S[j, 0, 1] + S[j, 1, 0]), S[j, 1, 1]
-        det = sa * sd - sb * sb
-        good = det > 0.0 and math.isfinite(det)
-        if not good:
-            det = 1.0
-        Sinv[j, 0, 0], Sinv[j, 1, 1] = sd / det, sa / det
-        Sinv[j, 0, 1] = Sinv[j, 1, 0] = -sb / det
-        logdet[j] = np.log(det)
+        good = inv2_sym(S[j, 0, 0], 0.5 * (S[j, 0, 1] + S[j, 1, 0]), S[j, 1, 1], Sinv[j], logdet, j)
         eta[j, 0], eta[j, 1] = zr, wrap(zb)
         valid[j] = rmin >= r_lo and good
     return eta, S, Sinv, logdet, C, H, valid, True
@@ -485,14 +473,7 @@ def posterior(w, m, P, origin, n_det, age, beta, label, sup, R, beta_nb, nb_m, n
         if w_nb[ll] > 0.0:
             n_nb += 1
     n = J + n_pairs + n_nb
-    wo = np.empty(n)
-    mo = np.empty((n, 4))
-    Po = np.empty((n, 4, 4))
-    oo = np.empty(n, dtype=np.int8)
-    no = np.empty(n, dtype=np.int32)
-    ao = np.empty(n, dtype=np.int32)
-    bo = np.empty((n, 4) if dyn else (0, 0))
-    lo = np.empty(n, dtype=np.int64)
+    wo, mo, Po, oo, no, ao, bo, lo = _new_mixture(n, dyn)
     for j in range(J):
         wo[j] = w[j] * (1.0 - p_D[j])
         _copy_state(mo, Po, j, m, P, j)
@@ -564,10 +545,7 @@ def _take(w, m, P, origin, n_det, age, beta, label, keep):
 def _select(w, m, P, origin, n_det, age, beta, label, idx):
     n = idx.shape[0]
     dyn = beta.shape[1] == 4
-    bo = np.empty((n, 4) if dyn else (0, 0))
-    wo, mo, Po = np.empty(n), np.empty((n, 4)), np.empty((n, 4, 4))
-    oo, no, ao = np.empty(n, dtype=np.int8), np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
-    lo = np.empty(n, dtype=np.int64)
+    wo, mo, Po, oo, no, ao, bo, lo = _new_mixture(n, dyn)
     for k in range(n):
         i = idx[k]
         wo[k], oo[k], no[k], ao[k], lo[k] = w[i], origin[i], n_det[i], age[i], label[i]
@@ -717,7 +695,7 @@ STEP_OK, STEP_BAD_BIRTHS, STEP_NOT_PD = 0, 1, 2
 def _no_reduction(dyn):
     """What :func:`reduce` returns for an empty posterior (the value :func:`step` returns when it stops early)."""
     empty_label = np.zeros(0, dtype=np.int64)
-    return _empty_mixture(dyn), np.empty((0, 4)), np.empty(0), empty_label, empty_label, (0.0, 0, 0, False, 0)
+    return _new_mixture(0, dyn), np.empty((0, 4)), np.empty(0), empty_label, empty_label, (0.0, 0, 0, False, 0)
 
 
 @njit(cache=True)

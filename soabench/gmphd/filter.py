@@ -36,7 +36,8 @@ from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, p
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
 from soabench.gmphd.reduction import extract_labelled, prune_merge_cap
 from soabench.origins import origin_counts
-from soabench.types import (  # StepResult re-exported: old import path
+from soabench.sensor import line_of_sight_past, sight_blockers
+from soabench.types import (
     SOURCE_MEAS,
     SOURCE_NAMES,
     Births,
@@ -315,8 +316,6 @@ class GMPHDFilter:
         newborn = births.newborn
         n_predicted = len(g) + (len(Z) if newborn is not None else 0)
         if self.occlusion and scan.occluders and g.any():  # line-of-sight gate (§4.4), as detection_gate
-            from soabench.sensor import line_of_sight_past, sight_blockers
-
             idx = np.flatnonzero(g)
             make = lambda: (sight_blockers(ego[:2], scan.occluders), scan.occluders)  # noqa: E731
             key = ("filter.sight_blockers", id(scan.occluders), len(scan.occluders), ego[0], ego[1])

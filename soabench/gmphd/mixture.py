@@ -2,7 +2,7 @@
 
 A mixture of J components is ``w (J,)``, ``m (J, 4)``, ``P (J, 4, 4)`` plus
 
-* ``origin (J,) int8``: the birth source code of the component (``soabench.birth.base.SOURCE_*``) kept for its
+* ``origin (J,) int8``: the birth source code of the component (``soabench.types.SOURCE_*``) kept for its
   whole life (after merging: that of the heaviest member j*); ``ORIGIN_PERSISTENT = -1`` marks components given
   without a source (e.g. a prior built by hand). A component is persistent once ``age > 0``.
 * ``n_det (J,) int32``: number of detection updates so far.
