@@ -78,7 +78,7 @@ for model in MODELS:
         out[f"{model}/{mode}"] = float(np.sum(best))
 print(json.dumps(out))
 """
-_CLI = "import sys; from soabench.cli import main; sys.exit(main())"
+_CLI = "import runpy; runpy.run_module('soabench', run_name='__main__')"  #: ``python -m soabench`` of either tree
 
 
 def parse_args(argv=None) -> argparse.Namespace:
