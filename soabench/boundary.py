@@ -189,5 +189,5 @@ def _swapped(e: Any) -> Any:
         return e
     X = np.asarray(e.X, dtype=float)
     if X.ndim == 2 and X.shape[1] == 4:
-        return Estimates(X[:, SWAP_ORDER], e.w, e.n_components, e.cardinality)
+        return Estimates(X[:, SWAP_ORDER], e.w, e.n_components, e.cardinality, e.labels)
     return e

@@ -86,9 +86,9 @@ def _predict_update() -> None:
     for mode in ("static", "dynamic"):
         f = _filter(mode)
         pred = cycle.predict_append(
-            *_mixture_arrays(f.mixture), f.F, f.Q, f._pred_pars, *_birth_arrays(_births()), f._beta0, ego
+            *_mixture_arrays(f.mixture), f.F, f.Q, f._pred_pars, *_birth_arrays(_births()), f._beta0, ego, f.next_label
         )
-        cycle.update(*pred[:8], f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
+        cycle.update(*pred[:9], f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
 
 
 def _reduction() -> None:
@@ -105,7 +105,7 @@ def _reduction() -> None:
         m[:, :2] = rng.uniform(0.0, 50.0, (J, 2))
         mix = Mixture.from_arrays(np.full(J, 0.5), m, np.repeat(np.eye(4)[None], J, axis=0), origin=0, n_det=0,
                                   age=0, beta=f.beta0)  # fmt: skip
-        cycle.reduce(*_mixture_arrays(mix), f._red_pars)
+        cycle.reduce(*_mixture_arrays(mix), f._red_pars, f.next_label)
 
 
 def _metrics_geometry() -> None:

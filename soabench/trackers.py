@@ -84,7 +84,8 @@ def step_result_from(est: Estimates, k: int, t_step: float) -> StepResult:
 
     Positions pad to (n, 4) with zero velocity when only (n, 2) were given; the step time goes to ``t_update``;
     the component count is ``est.n_components`` (else the number of estimates); the cardinality is
-    ``est.cardinality`` (else NaN); GM-PHD-only diagnostics (p_D, A, kappa) are NaN or empty.
+    ``est.cardinality`` (else NaN); GM-PHD-only diagnostics (p_D, A, kappa) are NaN or empty; the track labels
+    are ``est.labels`` (None: unlabelled).
     """
     X = np.asarray(est.X, dtype=float)
     if X.shape[1] == 2:

@@ -53,3 +53,25 @@ def no_work(monkeypatch):
     monkeypatch.setattr(bad_inputs, "STARTED", [])
     with bad_inputs.work_stubbed(monkeypatch.setattr):
         yield bad_inputs.STARTED
+
+
+@pytest.fixture(scope="session")
+def recorded_intersection():
+    """(config, scene, {lambda: (sensor, scans)} at lambda = 3 and 10, seeds) of a 30 s trial of the shipped
+    intersection (SUMO), shared by the filter tests that run on recorded scans."""
+    import dataclasses
+
+    from soabench.config import Config
+    from soabench.scenario import load, simulate
+    from soabench.seeding import trial_seeds
+    from soabench.sensor import observe
+
+    scene, scenario = load("intersection")
+    cfg = Config()
+    seeds = trial_seeds(4, 1)
+    rec = simulate(scene, scenario, seeds, duration=30.0)
+    scans = {}
+    for lam in (3.0, 10.0):
+        sensor = dataclasses.replace(cfg.sensor, lambda_c=lam)
+        scans[lam] = (sensor, observe(rec, scene, sensor, seeds.sensor_rngs()))
+    return cfg, scene, scans, seeds

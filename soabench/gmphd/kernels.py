@@ -753,3 +753,82 @@ def merge_moments(label, centres, w, m, P, n_det, age):
                     Pt[g, a, b] = s
                     Pt[g, b, a] = s
     return W, mt, Pt, nd, ag, count
+
+
+_FEW_ESTIMATES = 24  #: up to this many extracted components, label conflicts are found by a pairwise test
+
+
+@njit(cache=True)
+def extract_labels(w, label, idx, reps, next_label):
+    """The labels of the estimates extracted from components ``idx`` (``reps[k]`` copies of component idx[k], in
+    the order of X), by the rule of §2.13: each estimate takes its component's label; when extracted components
+    share a label, the heaviest keeps it (equal weights: the lower index) and each other one gets a fresh label,
+    written back, heaviest first; the second and later copies of one component get fresh labels that are not
+    written back. Fresh labels are next_label, next_label + 1, ...
+
+    Returns (labels of the estimates, the components' labels after the write-back (``label`` itself, changed in
+    place), the next unused label).
+    """
+    n = idx.shape[0]
+    n_dup = 0  # estimates whose label an earlier one has: the losers of the conflicts
+    if n <= _FEW_ESTIMATES:  # the usual scan: a pairwise test allocates nothing
+        for a in range(1, n):
+            for c in range(a):
+                if label[idx[c]] == label[idx[a]]:
+                    n_dup += 1
+                    break
+    else:
+        keys = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            keys[k] = label[idx[k]]
+        by_key = np.argsort(keys, kind="mergesort")
+        for k in range(1, n):
+            if keys[by_key[k]] == keys[by_key[k - 1]]:
+                n_dup += 1
+    if n_dup > 0:  # every member of a run of equal labels but its heaviest is a loser
+        keys = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            keys[k] = label[idx[k]]
+        by_key = np.argsort(keys, kind="mergesort")
+        loser = np.zeros(n, dtype=np.bool_)
+        a = 0
+        while a < n:
+            b = a + 1
+            while b < n and keys[by_key[b]] == keys[by_key[a]]:
+                b += 1
+            best = by_key[a]
+            for k in range(a + 1, b):
+                c = by_key[k]
+                if w[idx[c]] > w[idx[best]] or (w[idx[c]] == w[idx[best]] and idx[c] < idx[best]):
+                    best = c
+            for k in range(a, b):
+                loser[by_key[k]] = by_key[k] != best
+            a = b
+        pos = np.empty(n_dup, dtype=np.int64)
+        q = 0
+        for k in range(n):
+            if loser[k]:
+                pos[q] = k
+                q += 1
+        pos = pos[np.argsort(idx[pos], kind="mergesort")]  # component order, then heaviest first (stable)
+        ww = np.empty(n_dup)
+        for q in range(n_dup):
+            ww[q] = -w[idx[pos[q]]]
+        pos = pos[np.argsort(ww, kind="mergesort")]
+        for q in range(n_dup):
+            label[idx[pos[q]]] = next_label
+            next_label += 1
+    n_x = 0
+    for k in range(n):
+        n_x += reps[k]
+    out = np.empty(n_x, dtype=np.int64)
+    q = 0
+    for k in range(n):
+        for r in range(reps[k]):
+            if r == 0:
+                out[q] = label[idx[k]]
+            else:
+                out[q] = next_label
+                next_label += 1
+            q += 1
+    return out, label, next_label

@@ -21,7 +21,7 @@ import pytest
 from shapely.geometry import Polygon
 
 from soabench.birth import get_birth_model
-from soabench.config import PROBABILITY_MODES, Config, filter_config_for_mode
+from soabench.config import PROBABILITY_MODES, filter_config_for_mode
 from soabench.gmphd import GMPHDFilter, Mixture
 from soabench.gmphd.models import h
 from soabench.plugins import BUILTIN_BIRTH_MODELS
@@ -32,21 +32,9 @@ LOOSE = dict(rtol=1e-9, atol=1e-9)
 
 
 @pytest.fixture(scope="module")
-def recorded():
-    """(config, scene, scans at lambda = 3 and lambda = 10) of a 30 s trial of the shipped intersection."""
-    from soabench.scenario import load, simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
-
-    scene, scenario = load("intersection")
-    cfg = Config()
-    seeds = trial_seeds(4, 1)
-    rec = simulate(scene, scenario, seeds, duration=30.0)
-    scans = {}
-    for lam in (3.0, 10.0):
-        sensor = dataclasses.replace(cfg.sensor, lambda_c=lam)
-        scans[lam] = (sensor, observe(rec, scene, sensor, seeds.sensor_rngs()))
-    return cfg, scene, scans, seeds
+def recorded(recorded_intersection):
+    """(config, scene, scans at lambda = 3 and lambda = 10, seeds) of a 30 s trial of the shipped intersection."""
+    return recorded_intersection
 
 
 def assert_same_mixture(a: Mixture, b: Mixture, tol: dict = TOL) -> None:
@@ -57,6 +45,7 @@ def assert_same_mixture(a: Mixture, b: Mixture, tol: dict = TOL) -> None:
     np.testing.assert_array_equal(a.origin, b.origin)
     np.testing.assert_array_equal(a.n_det, b.n_det)
     np.testing.assert_array_equal(a.age, b.age)
+    np.testing.assert_array_equal(a.label, b.label)  # §2.13: both paths label alike
     assert (a.beta is None) == (b.beta is None)
     if a.beta is not None:
         np.testing.assert_allclose(a.beta, b.beta, **LOOSE)
@@ -71,6 +60,8 @@ def assert_same_step(a, b, tol: dict = TOL) -> None:
         assert getattr(a, f) == pytest.approx(getattr(b, f), rel=tol["rtol"], abs=tol["atol"]), f
     assert a.mean_pD == pytest.approx(b.mean_pD, rel=1e-9), "mean_pD"  # reads the merged Beta parameters
     np.testing.assert_array_equal(a.origin_counts, b.origin_counts, err_msg="origin_counts")  # §5.7 by origin
+    np.testing.assert_array_equal(a.labels, b.labels, err_msg="labels")  # §2.13
+    assert a.labels.dtype == np.int64 and len(a.labels) == len(a.X)
     assert a.origin_counts.sum() == a.n_reduced
 
 
@@ -90,7 +81,7 @@ def test_fused_equals_array_path_on_recorded_scans(recorded, model, lam):
         prev = None
         for scan in scans.scans:
             births = birth(BirthContext(scan, prev, p_D_b))
-            synced.mixture = ref.mixture.copy()
+            synced.mixture, synced.next_label = ref.mixture.copy(), ref.next_label
             prev = ref.step(scan, births)
             assert_same_step(synced.step(scan, births), prev)
             assert_same_mixture(synced.mixture, ref.mixture)
@@ -138,6 +129,8 @@ def test_fused_equals_array_path_random(dynamic, newborn):
             prior.m[0, :2] = [0.1, 0.1]  # r < r_min
             prior.P[1] *= 50.0  # wide
             if k == 0:
+                # shared labels, so that extraction meets label conflicts (§2.13)
+                prior.label[:] = np.random.default_rng(k).integers(1, 8, len(prior))
                 fused.mixture, ref.mixture = prior, prior.copy()
             nb = None
             if newborn:
@@ -174,7 +167,7 @@ def test_fused_ukf_equals_array_path(recorded, mode):
     prev = None
     for scan in scans.scans:
         births = birth(BirthContext(scan, prev, 0.98))
-        synced.mixture = ref.mixture.copy()
+        synced.mixture, synced.next_label = ref.mixture.copy(), ref.next_label
         prev = ref.step(scan, births)
         assert_same_step(synced.step(scan, births), prev)
         assert_same_mixture(synced.mixture, ref.mixture)

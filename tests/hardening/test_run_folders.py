@@ -36,15 +36,6 @@ def small_config(trials: int = 3, **exp) -> Config:
 
 
 def make_run(out: Path, trials: int = 3, **kw) -> Path:
-    run_experiment(
-        small_config(trials),
-        "intersection",
-        out=out,
-        options=RunOptions(workers=1, progress=False, figures=False),
-        trial_fn=ft.fake_trial,
-        load_fn=ft.fake_load,
-        **kw,
-    )
     ft.run_fake(small_config(trials), out, **kw)
     return out
 

@@ -54,9 +54,9 @@ def test_the_compiled_cycle_reduces_with_the_same_tie_rule():
     for d2 in (4.0, 4.0 * (1.0 + 1e-12), 4.0 * (1.0 - 1e-12)):
         for _ in range(20):
             mix = _pair(d2, rng.uniform(-EPS, EPS, (2, 4)))
-            out = cycle.reduce(*_mixture_arrays(mix), red)
-            assert out[4][2] == 1 and len(out[0][0]) == len(merge(mix, 4.0)) == 1  # n_merged
-    assert len(cycle.reduce(*_mixture_arrays(_pair(4.0001)), red)[0][0]) == 2
+            out = cycle.reduce(*_mixture_arrays(mix), red, 1)
+            assert out[5][2] == 1 and len(out[0][0]) == len(merge(mix, 4.0)) == 1  # n_merged
+    assert len(cycle.reduce(*_mixture_arrays(_pair(4.0001)), red, 1)[0][0]) == 2
 
 
 def ubm_grid(x0: float, y0: float, n: int, d_u: float = 5.0, sigma_u: float = 2.5) -> tuple[np.ndarray, ...]:

@@ -70,20 +70,23 @@ def test_one_call_equals_the_stage_calls(recorded, mode, form):
         mix = _mixture_arrays(filt.mixture)
         b = _birth_arrays(births) if len(births) else filt._no_births
         common = (filt._p_D, Z, filt.R, filt._r_min, filt._gate, kappa, filt._ukf)
-        pred = cycle.predict_append(*mix, filt.F, filt.Q, filt._pred_pars, *b, filt._beta0, ego)
-        post, A, ok = cycle.update(*pred[:8], *common[:2], ego, *common[2:])
-        red = cycle.reduce(*post[:7], filt._red_pars)
+        label0 = filt.next_label
+        pred = cycle.predict_append(*mix, filt.F, filt.Q, filt._pred_pars, *b, filt._beta0, ego, label0)
+        post, A, ok = cycle.update(*pred[:9], *common[:2], ego, *common[2:])
+        red = cycle.reduce(*post[:8], filt._red_pars, label0 + len(b[0]))
         status, n_pred, n_up, n_pairs, A1, red1, times = cycle.step(
-            *mix, filt.F, filt.Q, filt._pred_pars, *b, filt._beta0, ego, *common, filt._red_pars
+            *mix, filt.F, filt.Q, filt._pred_pars, *b, filt._beta0, ego, *common, filt._red_pars, label0
         )
         assert ok and status == cycle.STEP_OK
-        assert (n_pred, n_up, n_pairs) == (len(pred[0]), len(post[0]), post[7])
+        assert (n_pred, n_up, n_pairs) == (len(pred[0]), len(post[0]), post[8])
         _same(A1, A)
         _same(red1, red)
         assert times.shape == (3,) and (times >= 0.0).all()
         res = filt.step(scan, births)  # the filter's own step takes the one call and keeps its reduced posterior
         _same(res.X, red[1])
         _same(filt.mixture.w, red[0][0])
+        _same(filt.mixture.label, red[0][7])
+        _same(res.labels, red[3])
         assert min(res.t_predict, res.t_update, res.t_reduce) >= 0.0
         prev, checked = res, checked + 1
     assert checked == len(scans.scans) > 10
@@ -102,6 +105,6 @@ def test_bad_births_change_nothing(recorded):
     ego = np.ascontiguousarray(scan.ego, dtype=float)
     out = cycle.step(
         *_mixture_arrays(filt.mixture), filt.F, filt.Q, filt._pred_pars, *b, filt._beta0, ego, filt._p_D, Z,
-        filt.R, filt._r_min, filt._gate, filt._kappa(Z), filt._ukf, filt._red_pars,
+        filt.R, filt._r_min, filt._gate, filt._kappa(Z), filt._ukf, filt._red_pars, filt.next_label,
     )  # fmt: skip
     assert out[0] == cycle.STEP_BAD_BIRTHS and len(out[5][0][0]) == 0

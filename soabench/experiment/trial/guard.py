@@ -3,9 +3,10 @@
 A plugin's output is checked at every scan before anything uses it: :func:`check_births` (shapes, numeric dtypes,
 finite values, non-negative weights, symmetric covariances; newborn terms: one per measurement and a ``beta`` that
 returns (M,) finite non-negative values) and :func:`check_estimates` (an :class:`~soabench.types.Estimates`, not
-None, (n, 2) or (n, 4) finite states). A failed check or an exception raises, :func:`soabench.trackers.run_tracker`
-names the scan, and the trial keeps every other run and records this one in :func:`failure_row` form: no row of
-metrics is written for a run that failed, so no zero or NaN can pass for a result.
+None, (n, 2) or (n, 4) finite states, optional track labels: (n,) distinct integers). A failed check or an exception
+raises, :func:`soabench.trackers.run_tracker` names the scan, and the trial keeps every other run and records
+this one in :func:`failure_row` form: no row of metrics is written for a run that failed, so no zero or NaN can
+pass for a result.
 """
 
 from __future__ import annotations
@@ -39,6 +40,31 @@ def _array(value: Any, what: str, shape: tuple[int | None, ...]) -> np.ndarray:
     a = a.astype(float)
     if not np.all(np.isfinite(a)):
         raise PluginOutputError(f"{what} holds NaN or infinite values")
+    return a
+
+
+def _labels(value: Any, what: str, n: int) -> np.ndarray | None:
+    """Optional track labels: None, or (n,) distinct integers (one per estimate) as int64; PluginOutputError
+    otherwise."""
+    if value is None:
+        return None
+    a = np.asarray(value)
+    if a.shape != (n,) or not (np.issubdtype(a.dtype, np.integer) and not np.issubdtype(a.dtype, np.bool_)):
+        raise PluginOutputError(
+            f"{what} has shape {a.shape} and dtype {a.dtype}; ({n},) integers are required (one track label per "
+            "estimate), or None for no labels"
+        )
+    if a.dtype == np.uint64 and a.size and int(a.max()) > np.iinfo(np.int64).max:
+        raise PluginOutputError(f"{what} holds a label above {np.iinfo(np.int64).max}; labels must fit in int64")
+    a = a.astype(np.int64)
+    if n > 1:
+        s = np.sort(a)
+        dup = s[1:][s[1:] == s[:-1]]
+        if len(dup):
+            raise PluginOutputError(
+                f"{what} gives label {int(dup[0])} to more than one estimate of the scan; a label names one track, "
+                "so the labels of one scan must differ"
+            )
     return a
 
 
@@ -86,7 +112,8 @@ def _check_newborn(nb: Any, M: int) -> NewbornTerms:
 def check_estimates(out: Any, scan: Scan, t_step: float) -> StepResult:
     """A tracker's output at scan k as the :class:`StepResult` the metrics read; PluginOutputError if unusable."""
     if isinstance(out, StepResult):
-        _array(out.X, "StepResult.X", (None, 4))
+        X = _array(out.X, "StepResult.X", (None, 4))
+        _labels(out.labels, "StepResult.labels", len(X))
         return out
     if out is None:
         raise PluginOutputError("the tracker returned None; return Estimates (Estimates.empty() for no target)")
@@ -105,7 +132,8 @@ def check_estimates(out: Any, scan: Scan, t_step: float) -> StepResult:
     card = out.cardinality
     if card is not None and not (np.isfinite(card) and card >= 0):
         raise PluginOutputError(f"Estimates.cardinality = {card!r} must be a finite number >= 0 or None")
-    return step_result_from(Estimates(X, w, n_comp, card), scan.k, t_step)
+    labels = _labels(out.labels, "Estimates.labels", len(X))
+    return step_result_from(Estimates(X, w, n_comp, card, labels), scan.k, t_step)
 
 
 def failure_row(
