@@ -1,1 +1,1 @@
-"""Baseline birth models (docs/method.md §3.2-3.5), each implementing soabench.birth.base.BirthModel."""
+"""Baseline birth models (docs/method.md §3.2-3.5), each implementing soabench.protocols.BirthModel."""

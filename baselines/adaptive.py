@@ -18,11 +18,11 @@ import math
 import numpy as np
 
 from soabench.baselines.partially_uniform import inverse_measurement_terms, scan_inverse_terms
-from soabench.birth.base import SOURCE_MEAS, BirthContext, Births, FOVRule, NewbornTerms
+from soabench.birth.base import FOVRule
 from soabench.config import BirthConfig, SensorConfig
 from soabench.errors import require
 from soabench.scenario.scene import SceneMap
-from soabench.sensor import Scan
+from soabench.types import SOURCE_MEAS, BirthContext, Births, NewbornTerms, Scan
 
 
 def newborn_likelihood(sensor: SensorConfig) -> float:

@@ -2,7 +2,7 @@
 
 The birth intensity is uniform over the measurement-space FOV V_z and Gaussian in velocity; with a position-observing
 sensor its update is measurement-driven. Each scan hands the filter one newborn term per measurement
-(:class:`~soabench.birth.base.NewbornTerms`):
+(:class:`~soabench.types.NewbornTerms`):
 
 * beta_l = p_D,b w_PU / |V_z| (``pubm_space = meas``) or p_D,b w_PU r_l / A with A = Theta (r_max^2 - r_min^2) / 2
   (``cart``), w_PU = (1 - eta) N_hat;
@@ -18,11 +18,11 @@ from __future__ import annotations
 import numpy as np
 
 from soabench.baselines.standard_gm import StandardGMBirth
-from soabench.birth.base import BirthContext, Births, NewbornTerms, build_components
+from soabench.birth.base import build_components
 from soabench.config import BirthConfig, SensorConfig
 from soabench.geometry import fov_area, inverse_measurement_cov, measurement_volume, polar_to_world
 from soabench.scenario.scene import SceneMap
-from soabench.types import Scan, scan_once
+from soabench.types import BirthContext, Births, NewbornTerms, Scan, scan_once
 
 
 def inverse_measurement_terms(

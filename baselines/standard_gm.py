@@ -18,9 +18,10 @@ from typing import NamedTuple
 import numpy as np
 import shapely
 
-from soabench.birth.base import SOURCE_GM, BirthContext, Births, FOVRule, build_components
+from soabench.birth.base import FOVRule, build_components
 from soabench.config import BirthConfig, SensorConfig
 from soabench.scenario.scene import SceneMap
+from soabench.types import SOURCE_GM, BirthContext, Births
 
 #: exits closer than this (m) are one exit (e.g. two touching lane segments crossing the boundary at one point)
 MERGE_DIST = 1.0

@@ -14,9 +14,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from soabench.birth.base import SOURCE_GRID, BirthContext, Births, FOVRule, build_components
+from soabench.birth.base import FOVRule, build_components
 from soabench.config import BirthConfig, SensorConfig
 from soabench.scenario.scene import SceneMap
+from soabench.types import SOURCE_GRID, BirthContext, Births
 
 
 def grid_nodes(bounds: tuple[float, float, float, float], d_u: float) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""What guarding plugins costs (soabench/experiment/isolate.py): the built-ins' trial time, and the per-scan cost a
+"""What guarding plugins costs (soabench/experiment/trial/isolate.py): the built-ins' trial time, and the per-scan cost
+a
 plugin pays for its own thread and its private copy of the scan.
 
     python benchmarks/bench_plugin_isolation.py [--baseline DIR] [--repeats 5] [--duration 30]
@@ -7,8 +8,10 @@ plugin pays for its own thread and its private copy of the scan.
    runs, each in a fresh process after one warm-up trial. With ``--baseline DIR`` the same trial runs with the
    soabench of another checkout (``PYTHONPATH=DIR``), alternating with this one, and the ratio is printed: the
    built-ins run unguarded, so it should be 1 within the noise.
-2. **A plugin's overhead per scan**, on the scans of that trial: :func:`~soabench.experiment.isolate.private_scan`,
-   and a call through :class:`~soabench.experiment.isolate.PluginCalls` against a direct call, next to the time one
+2. **A plugin's overhead per scan**, on the scans of that trial:
+:func:`~soabench.experiment.trial.isolate.private_scan`,
+   and a call through :class:`~soabench.experiment.trial.isolate.PluginCalls` against a direct call, next to the time
+   one
    GM-PHD filter spends per scan.
 """
 
@@ -25,7 +28,7 @@ import time
 TRIAL = """
 import json, sys, time
 from soabench.config import Config, ExperimentConfig
-from soabench.experiment.trial import run_trial
+from soabench.experiment.trial.trial import run_trial
 from soabench.scenario import load
 scene, scenario = load("intersection")
 exp = ExperimentConfig(trials=1, duration={duration}, models=("soa", "ubm"), probabilities=("static", "dynamic"))
@@ -50,7 +53,7 @@ def trial_time(pythonpath: str | None, duration: float) -> dict:
 
 def per_scan_costs(duration: float, calls: int = 2000) -> dict:
     from soabench.config import SensorConfig
-    from soabench.experiment.isolate import PluginCalls, private_scan
+    from soabench.experiment.trial.isolate import PluginCalls, private_scan
     from soabench.scenario import load, simulate
     from soabench.seeding import trial_seeds
     from soabench.sensor import observe

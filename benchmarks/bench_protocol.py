@@ -41,11 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
-_CLI = "import sys; from soabench.cli import main; sys.exit(main())"
+_CLI = "import sys; from soabench.cli.main import main; sys.exit(main())"
 #: the command run in a child that reports its own and its (waited) workers' ru_maxrss to the file in argv[1]
 _CLI_RUSAGE = (
     "import json, resource, sys\n"
-    "from soabench.cli import main\n"
+    "from soabench.cli.main import main\n"
     "path = sys.argv.pop(1)\n"
     "try:\n"
     "    rc = main()\n"
@@ -147,7 +147,7 @@ def summarise(
 ) -> dict:
     """The numbers of one finished run folder (timing.csv, the session record) and the measured wall and memory."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from soabench.experiment.files import read_csv
+    from soabench.experiment.runs.files import read_csv
 
     tm = read_csv(run_dir / "timing.csv")
     first = np.unique(tm["trial"], return_index=True)[1]

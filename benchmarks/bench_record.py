@@ -1,4 +1,4 @@
-"""Time recording one 100 s scenario of the shipped intersection with libsumo (issue 2).
+"""Time recording one 100 s scenario of the shipped intersection with libsumo.
 
 Usage: python benchmarks/bench_record.py [--net intersection] [--repeat 5] [--model jupedsim]
 Prints the scene-load time and the median / min wall time of ``simulate`` over ``--repeat`` seeds.

@@ -5,7 +5,7 @@
    and a memory bound, and is counted per command as clean (exit 2, one line ``soabench: error: ...`` naming the
    value), traceback, silent (another exit status, real work started, or a write into a foreign folder), hang
    (killed at the time bound) or unclear (exit 2 without one line naming the value); every case that is not clean
-   is listed. The poisoned and invalid ``run.json`` files of ``tests/test_hardening_runs.py`` are counted too.
+   is listed. The poisoned and invalid ``run.json`` files of ``tests/hardening/test_run_folders.py`` are counted too.
 2. Kill/resume cycles: a 16-trial process-pool run (the tests' slow fake trial) is SIGKILLed after some trials,
    resumed, killed again, ... until it completes; after each kill no pool worker may survive; the result must equal
    an uninterrupted serial run byte for byte.
@@ -37,11 +37,13 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import bad_inputs  # noqa: E402
 import fake_trial as ft  # noqa: E402
+from processes import alive, children  # noqa: E402
 
-import soabench.experiment.report as report  # noqa: E402
-from soabench.cli import main  # noqa: E402
+import soabench.experiment.reports.report as report  # noqa: E402
+from soabench.cli.main import main  # noqa: E402
 from soabench.config import Config  # noqa: E402
-from soabench.experiment.runner import run_experiment  # noqa: E402
+from soabench.experiment.execution.options import RunOptions  # noqa: E402
+from soabench.experiment.execution.runner import run_experiment  # noqa: E402
 
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
@@ -53,12 +55,11 @@ def _case_in_child(make, needle: str, case_dir: Path, limit_bytes: int, say_comm
     """Run one catalogue case in this (forked) process; return its verdict and first lines."""
     import contextlib
     import io
-    import operator
     import resource
     import traceback
 
     resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
-    bad_inputs.stub_work(setattr, operator.setitem)
+    bad_inputs.work_stubbed(setattr).__enter__()  # for the rest of this forked process
     os.chdir(case_dir)
     out, err = io.StringIO(), io.StringIO()
     started = False
@@ -132,17 +133,24 @@ def catalogue_counts(tmp: Path, timeout_s: float = 30.0, limit_gb: float = 3.0) 
 
 
 def run_meta_cases(tmp: Path) -> tuple[int, int]:
-    """(tried, refused) over the poisoned and invalid run.json files of tests/test_hardening_runs.py."""
+    """(tried, refused) over the poisoned and invalid run.json files of tests/hardening/test_run_folders.py."""
     import contextlib
     import io
 
-    from test_hardening_runs import BAD_META, POISONS
+    sys.path.insert(0, str(ROOT / "tests" / "hardening"))
+    from test_run_folders import BAD_META, POISONS
 
     tried = refused = 0
     for i, changes in enumerate([*POISONS, *(c for c, _ in BAD_META)]):
         run = tmp / f"meta{i}"
-        run_experiment(_cfg(3), "x", out=run, workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load,
-                       progress=False, figures=False)  # fmt: skip
+        run_experiment(
+            _cfg(3),
+            "x",
+            out=run,
+            options=RunOptions(workers=1, progress=False, figures=False),
+            trial_fn=ft.fake_trial,
+            load_fn=ft.fake_load,
+        )
         meta = json.loads((run / "run.json").read_text())
         for k, v in changes.items():
             meta.pop(k, None) if v is ... else meta.__setitem__(k, v)
@@ -167,31 +175,15 @@ sys.path.insert(0, {tests!r})
 import fake_trial as ft
 from pathlib import Path
 from soabench.config import Config
-from soabench.experiment.runner import run_experiment
+from soabench.experiment.execution.options import RunOptions
+from soabench.experiment.execution.runner import run_experiment
 cfg = Config.from_dict({cfg!r}).validate()
-kw = dict(workers=2, trial_fn=ft.slow_trial, load_fn=ft.fake_load, progress=False, figures=False)
+kw = dict(options=RunOptions(workers=2, progress=False, figures=False), trial_fn=ft.slow_trial, load_fn=ft.fake_load)
 if {resume!r}:
     run_experiment(None, "x", resume=Path({out!r}), **kw)
 else:
     run_experiment(cfg, "intersection", out=Path({out!r}), **kw)
 """
-
-
-def _children(pid: int) -> list[int]:
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            out += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 def kill_resume_cycles(tmp: Path, n_trials: int = 16) -> dict:
@@ -211,21 +203,27 @@ def kill_resume_cycles(tmp: Path, n_trials: int = 16) -> dict:
             proc.communicate()
             assert proc.returncode == 0
             break
-        workers = _children(proc.pid)
+        workers = children(proc.pid)
         proc.send_signal(signal.SIGKILL)
         proc.communicate()
         cycles += 1
         t0 = time.monotonic()
-        while any(_alive(p) for p in workers) and time.monotonic() - t0 < 10:
+        while any(alive(p) for p in workers) and time.monotonic() - t0 < 10:
             time.sleep(0.1)
-        orphans += sum(_alive(p) for p in workers)
+        orphans += sum(alive(p) for p in workers)
         for p in workers:
-            if _alive(p):
+            if alive(p):
                 os.kill(p, signal.SIGKILL)
         resume = True
     ref = tmp / "ref"
-    run_experiment(cfg, "intersection", out=ref, workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load,
-                   progress=False, figures=False)  # fmt: skip
+    run_experiment(
+        cfg,
+        "intersection",
+        out=ref,
+        options=RunOptions(workers=1, progress=False, figures=False),
+        trial_fn=ft.fake_trial,
+        load_fn=ft.fake_load,
+    )
     same = all((out / f).read_bytes() == (ref / f).read_bytes() for f in CSV_FILES)
     return {"cycles": cycles, "orphans": orphans, "identical": same}
 
@@ -234,18 +232,25 @@ def executors(tmp: Path) -> dict:
     from distributed import LocalCluster
 
     cfg = _cfg(6)
-    kw = dict(trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, figures=False)
+    kw = dict(trial_fn=ft.fake_trial, load_fn=ft.fake_load)
+    quiet = dict(progress=False, figures=False)
     runs = {
-        "serial": dict(workers=1),
-        "process pool (2)": dict(workers=2),
-        "Dask LocalCluster (2)": dict(dask_local=True, workers=2),
+        "serial": RunOptions(workers=1, **quiet),
+        "process pool (2)": RunOptions(workers=2, **quiet),
+        "Dask LocalCluster (2)": RunOptions(dask_local=True, workers=2, **quiet),
     }
     out = {}
     for name, ex in runs.items():
-        run_experiment(cfg, "intersection", out=tmp / name.split()[0], **ex, **kw)
+        run_experiment(cfg, "intersection", out=tmp / name.split()[0], options=ex, **kw)
         out[name] = tmp / name.split()[0]
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        run_experiment(cfg, "intersection", out=tmp / "external", scheduler=cluster.scheduler_address, **kw)
+        run_experiment(
+            cfg,
+            "intersection",
+            out=tmp / "external",
+            options=RunOptions(scheduler=cluster.scheduler_address, **quiet),
+            **kw,
+        )
         out["external Dask scheduler"] = tmp / "external"
     ref = out["serial"]
     return {name: all((d / f).read_bytes() == (ref / f).read_bytes() for f in CSV_FILES) for name, d in out.items()}
@@ -254,10 +259,9 @@ def executors(tmp: Path) -> dict:
 def filter_steps(n: int = 2000) -> dict:
     from shapely.geometry import Polygon
 
-    from soabench.birth.base import SOURCE_GRID, Births
     from soabench.config import FilterConfig, SensorConfig
     from soabench.gmphd import GMPHDFilter
-    from soabench.sensor import Scan
+    from soabench.types import SOURCE_GRID, Births, Scan
 
     rng = np.random.default_rng(0)
     filt = GMPHDFilter(FilterConfig(nonfinite="drop", J_max=100), SensorConfig(), "dynamic")

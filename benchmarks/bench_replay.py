@@ -1,13 +1,14 @@
 """Replay pages: the time to draw a trial's page against the time to re-simulate the trial, and the pages' sizes.
 
-Usage: python benchmarks/bench_replay.py [--run results/intersection/main] [--trials 3] [--browser] [--gif]
+Usage: python benchmarks/bench_replay.py [--run results/intersection/main] [--trials 3] [--browser] [--gif] [--mp4]
 
 For each of ``--trials`` trials of the run folder (default: the committed 100-trial x 100 s main run with six birth
 models): the re-simulation (:func:`soabench.replay.replay_trial`: SUMO, the sensor, every model's filter run and
 its metrics) and the page (:func:`soabench.replay.replay_data` and writing the HTML) are timed in the same process,
 and their ratio printed; the report page of the run folder is written to a temporary file (the run folder is not
 touched) and its size printed. ``--browser`` also times headless Chromium opening the page (``--dump-dom``, the
-browser's start included) and checks that the page's script ran; ``--gif`` times writing the animated GIF.
+browser's start included) and checks that the page's script ran; ``--gif`` and ``--mp4`` time writing the animated
+GIF and the MP4 (the ``video`` extra).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import time
 from pathlib import Path
 
 from soabench.replay import replay_data, replay_trial, write_replay, write_report
-from soabench.replay.gif import write_gif
+from soabench.replay.animation import write_gif, write_mp4
 
 
 def _browser_seconds(page: Path) -> float:
@@ -47,6 +48,7 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=3, help="trials 0..N-1 to replay")
     ap.add_argument("--browser", action="store_true", help="also time headless Chromium opening each page")
     ap.add_argument("--gif", action="store_true", help="also time writing each replay's animated GIF")
+    ap.add_argument("--mp4", action="store_true", help="also time writing each replay's MP4")
     args = ap.parse_args()
 
     sims, draws, sizes, opens = [], [], [], []
@@ -69,6 +71,10 @@ def main() -> None:
                 t3 = time.perf_counter()
                 gif_size = write_gif(replay_data(rep), Path(tmp) / f"trial_{trial}.gif")
                 extra += f", GIF {time.perf_counter() - t3:.1f} s ({gif_size / 1e6:.2f} MB)"
+            if args.mp4:
+                t3 = time.perf_counter()
+                mp4_size = write_mp4(replay_data(rep), Path(tmp) / f"trial_{trial}.mp4")
+                extra += f", MP4 {time.perf_counter() - t3:.1f} s ({mp4_size / 1e6:.2f} MB)"
             print(f"trial {trial}: {len(rep.scans)} scans x {len(rep.models)} models; re-simulate {t1 - t0:.2f} s, "
                   f"page {t2 - t1:.2f} s (ratio {(t2 - t1) / (t1 - t0):.2f}), {size / 1e6:.2f} MB{extra}; "
                   f"{rep.notes[-1]}")  # fmt: skip

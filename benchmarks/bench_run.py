@@ -1,6 +1,7 @@
 """Wall time of a Monte Carlo run, broken down by stage (SUMO, sensor, each filter model x mode, metrics).
 
-Runs :func:`soabench.experiment.runner.run_experiment` (default: the paper's full protocol, 100 trials x 100 s,
+Runs :func:`soabench.experiment.execution.runner.run_experiment` (default: the paper's full protocol, 100 trials x 100
+s,
 five birth models x {static, dynamic}, lambda = 3, every core) and prints, from the run's ``timing.csv`` and
 session records: the wall time, the CPU seconds summed over trials per stage and their share, and the per-trial
 mean. Example (a small real run, then the fake trial function of the tests)::
@@ -21,9 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config
-from soabench.experiment.files import read_csv
-from soabench.experiment.runner import run_experiment
-from soabench.experiment.store import RunStore
+from soabench.experiment.execution.options import RunOptions
+from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.runs.files import read_csv
+from soabench.experiment.runs.store import RunStore
 
 STAGES = ("birth", "predict", "update", "reduce", "metrics")
 #: the stages timed inside the filter loop, whose wall time is ``t_filter_total`` (metrics are timed after it)
@@ -100,7 +102,7 @@ def main(argv=None) -> int:
         kwargs = {"trial_fn": fake_trial.fake_trial, "load_fn": fake_trial.fake_load}
     t0 = time.perf_counter()
     outcome = run_experiment(
-        cfg, args.net, out=out, workers=args.workers, dask_local=args.dask, figures=False, **kwargs
+        cfg, args.net, out=out, options=RunOptions(workers=args.workers, dask_local=args.dask, figures=False), **kwargs
     )
     t_run = time.perf_counter() - t0
     if not outcome.complete:

@@ -1,4 +1,4 @@
-"""Wall time of ``soabench study`` relative to its main run, with and without the work done once (issue 19).
+"""Wall time of ``soabench study`` relative to its main run, with and without the work done once.
 
 In one process, on the same short protocol, one after another:
 
@@ -14,7 +14,7 @@ In one process, on the same short protocol, one after another:
    their own, and every folder's figures drawn one per task on the study's ``--workers`` processes.
 
 The "before" side is what can still be switched off in today's code, not main @ e59db79 as a whole: its parts
-one after another also draw their figures on ``--workers`` processes (``soabench run`` does since issue 19), so
+one after another also draw their figures on ``--workers`` processes (as ``soabench run`` does), so
 compare only the ratios printed by one invocation.
 
 It prints each wall time split into trials (the sessions' wall time) and reports (summaries and figures of every
@@ -38,10 +38,11 @@ import time
 from pathlib import Path
 
 from soabench.config import Config
-from soabench.experiment import report as report_module
-from soabench.experiment import trial as trial_module
-from soabench.experiment.runner import run_experiment
-from soabench.experiment.study import run_study
+from soabench.experiment.campaigns.study import run_study
+from soabench.experiment.execution.options import RunOptions
+from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports import report as report_module
+from soabench.experiment.trial import trial as trial_module
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -121,12 +122,14 @@ def main(argv=None) -> int:
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=a.trials, duration=a.duration, seed=a.seed)
     cfg.validate()
     root = Path(a.out) if a.out else Path(tempfile.mkdtemp(prefix="bench_study_"))
-    kw = dict(workers=a.workers, progress=False)
+    kw = dict(options=RunOptions(workers=a.workers, progress=False))
     study_kw = dict(births_trials=a.births_trials, **kw)
 
     warm = Config.from_dict(cfg.to_dict())  # imports, scene, compiled kernels: paid here, by no measured run
     warm.experiment = dataclasses.replace(warm.experiment, trials=1)
-    run_experiment(warm, a.net, out=root / "warm_up", figures=False, **kw)
+    run_experiment(
+        warm, a.net, out=root / "warm_up", options=RunOptions(workers=a.workers, progress=False, figures=False)
+    )
     with ReportClock() as r_main:
         t_main = timed(run_experiment, cfg, a.net, out=root / "main_alone", cpu_key="main_alone", **kw)
     defaults = trial_module.run_trial.__kwdefaults__

@@ -40,7 +40,7 @@ def child(peds: int, lam: float, duration: float, seed: int) -> dict:
 
     import soabench.sensor
     from soabench.config import Config
-    from soabench.experiment.trial import run_trial
+    from soabench.experiment.trial.trial import run_trial
     from soabench.scenario import load, simulate
 
     cfg = Config()

@@ -14,10 +14,10 @@ with KIND one of
 * ``scenario-keys``: the table of every scenario TOML key, read from
   :class:`soabench.scenario.config.ScenarioConfig` (defaults, and the ``Attributes:`` section of its docstring);
 * ``kitti-keys``: the table of the ``[kitti]`` section's keys (:class:`soabench.kitti.config.KittiConfig`);
-* ``commands``: a section per command of :func:`soabench.cli.build_parser` with its ``--help`` text.
+* ``commands``: a section per command of :func:`soabench.cli.main.build_parser` with its ``--help`` text.
 
 ``python docs/hooks.py`` rewrites the blocks of every page from the installed code; ``python docs/hooks.py --check``
-lists the pages whose blocks are stale (``tests/test_docs.py`` runs the check).
+lists the pages whose blocks are stale (``tests/repository/test_docs.py`` runs the check).
 
 Three things only the built site can show are filled in at build time and stay a sentence in the page file:
 
@@ -191,7 +191,7 @@ def scenario_table() -> str:
 
 def cli_help(command: str) -> str:
     """``soabench COMMAND --help`` (``soabench --help`` for an empty command) as a fenced block, 100 columns wide."""
-    from soabench.cli import build_parser
+    from soabench.cli.main import build_parser
 
     parser = build_parser()
     if command:
@@ -217,7 +217,7 @@ def commands_section() -> str:
     """Markdown: ``soabench --help``, then a section per command with its one-line summary and ``--help`` text."""
     import argparse
 
-    from soabench.cli import build_parser
+    from soabench.cli.main import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))

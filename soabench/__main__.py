@@ -2,7 +2,7 @@
 
 import sys
 
-from soabench.cli import main
+from soabench.cli.main import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -62,7 +62,7 @@ from soabench.types import (
 )
 
 if _TYPE_CHECKING:  # at run time imported on first use (module __getattr__)
-    from soabench.experiment.memory import RunResult
+    from soabench.experiment.execution.memory import RunResult
     from soabench.metrics import TrialMetrics
 
 BIRTH_MODEL = _plugins.BIRTH  #: plugin kind of a birth model (:func:`resolve`): ``"birth model"``
@@ -116,7 +116,7 @@ __all__ = [
 
 #: public classes imported on first use (their modules load the metrics and the harness, seconds of imports that a
 #: plugin importing this module does not need)
-_LAZY = {"RunResult": "soabench.experiment.memory", "TrialMetrics": "soabench.metrics"}
+_LAZY = {"RunResult": "soabench.experiment.execution.memory", "TrialMetrics": "soabench.metrics"}
 
 
 def __getattr__(name: str) -> _Any:
@@ -165,7 +165,8 @@ def simulate_trial(
         ``(recording, scans)``: the same values trial ``trial`` of a run with this configuration and its first
         clutter rate uses.
     """
-    from soabench.experiment.runner import check_against_scenario, load_scene_cached
+    from soabench.experiment.execution.runner import check_against_scenario
+    from soabench.experiment.trial.registry import load_scene_cached
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
     from soabench.sensor import observe
@@ -214,7 +215,7 @@ def make_tracker(
         results of that run of ``soabench run``.
     """
     from soabench.config import filter_config_for_mode
-    from soabench.experiment import guard
+    from soabench.experiment.trial.trial import guard
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.seeding import trial_seeds
 
@@ -292,7 +293,7 @@ def run(
         models: birth models (names or classes; a comma-separated string is split); trackers: whole trackers.
         trials, duration, seed, probabilities, clutter: the protocol's size, seconds per trial, base seed,
             probability modes and clutter rates.
-        workers: processes (1: this process); executor: an executor of :mod:`soabench.experiment.executors` to
+        workers: processes (1: this process); executor: an executor of :mod:`soabench.experiment.execution.executors` to
             reuse (e.g. a Dask one).
         out: also write the run folder ``soabench run --out`` writes (run.json, trial records, the CSV files and
             the report); None (default): nothing is written.
@@ -303,7 +304,7 @@ def run(
         the values of the CSV files ``soabench run`` writes for the same configuration, ``.to_pandas(name)`` with
         pandas, ``.write_csv(folder)`` for the files themselves (the same bytes).
     """
-    from soabench.experiment.memory import run_in_memory, with_experiment
+    from soabench.experiment.execution.memory import run_in_memory, with_experiment
 
     cfg = with_experiment(
         _boundary.as_config(config),
@@ -317,12 +318,12 @@ def run(
     )
     if out is None:
         return run_in_memory(cfg, str(net), workers=workers, executor=executor, progress=progress)
-    from soabench.experiment.memory import from_run_folder
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.memory import from_run_folder
+    from soabench.experiment.execution.options import RunOptions
+    from soabench.experiment.execution.runner import run_experiment
 
-    outcome = run_experiment(
-        cfg, str(net), out=_Path(out), workers=workers, executor=executor, progress=progress, figures=False
-    )
+    options = RunOptions(workers=workers, progress=progress, figures=False)
+    outcome = run_experiment(cfg, str(net), out=_Path(out), options=options, executor=executor)
     return from_run_folder(outcome.run_dir, cfg, str(net))
 
 

@@ -20,6 +20,9 @@ import numpy as np
 from soabench import plugins
 from soabench.config import Config, MetricsConfig, load_config
 from soabench.errors import SoabenchError, require, require_type
+from soabench.experiment.trial.guard import PluginOutputError, check_estimates
+from soabench.experiment.trial.registry import load_scene_cached
+from soabench.scenario.scene import SceneMap
 from soabench.types import Estimates, Scans, StepResult
 
 ORDER_SOABENCH = "x,y,vx,vy"  #: our state order (positions first)
@@ -53,11 +56,8 @@ def metrics_config(config: Config | MetricsConfig | dict | str | Path | None) ->
 def as_scene(scene_or_net: Any) -> Any:
     """A :class:`~soabench.scenario.scene.SceneMap`, or the one of a network name or path (loaded once per
     process)."""
-    from soabench.scenario.scene import SceneMap
 
     if isinstance(scene_or_net, (str, Path)):
-        from soabench.experiment.runner import load_scene_cached
-
         return load_scene_cached(str(scene_or_net), (), None)[0]
     require_type(scene_or_net, SceneMap, "scene_or_net", "give a network name such as 'intersection' or a SceneMap")
     return scene_or_net
@@ -158,7 +158,6 @@ def step_results(scans: Scans, estimates: Sequence[Any], order: str | None = Non
     ``order``: the column order of four-column states (:data:`ORDERS`); None: ours, after
     :func:`check_state_order` found no sign of Stone Soup's.
     """
-    from soabench.experiment.guard import PluginOutputError, check_estimates
 
     require_type(scans, Scans, "scans", "simulate them with soabench.api.simulate_trial")
     require(order is None or order in ORDERS, f"order = {order!r}; choose one of {', '.join(map(repr, ORDERS))}")
@@ -190,5 +189,5 @@ def _swapped(e: Any) -> Any:
         return e
     X = np.asarray(e.X, dtype=float)
     if X.ndim == 2 and X.shape[1] == 4:
-        return Estimates(X[:, SWAP_ORDER], e.w, e.n_components, e.cardinality)
+        return Estimates(X[:, SWAP_ORDER], e.w, e.n_components, e.cardinality, e.labels)
     return e

@@ -22,11 +22,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from soabench.birth import REGISTRY as _BIRTH_REGISTRY
+from soabench import plugins
 from soabench.errors import SoabenchError, require
+from soabench.tomlfile import read_toml
 
-BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(_BIRTH_REGISTRY)  #: the built-in birth models (soabench.birth.REGISTRY)
+BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(plugins.BUILTIN_BIRTH_MODELS)  #: the built-in birth models
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
+#: the filter families a run can put every birth model in (docs/method.md "LMB filter"); the first is the default
+FILTER_FAMILIES = ("gmphd", "lmb")
+#: the probability modes each family runs; a family's other modes are skipped (their table cells read "—")
+FAMILY_MODES = {"gmphd": PROBABILITY_MODES, "lmb": ("static",)}
 
 
 #: fields that are not config keys: their value comes from the key named beside them (one home per parameter)
@@ -34,6 +39,7 @@ DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
+MAX_DURATION = 86400.0  #: longest simulated time (s): experiment.duration and a snapshot's --time / --duration
 
 
 def _one_of(name: str, value: Any, allowed: tuple) -> None:
@@ -70,6 +76,16 @@ def _positive(name: str, value: float, hi: float = 1e6) -> None:
 
 def _non_negative(name: str, value: float, hi: float = 1e6) -> None:
     _in_range(name, value, 0.0, hi)
+
+
+def check_time(flag: str, value: float | None) -> None:
+    """A finite, positive time of at most :data:`MAX_DURATION` seconds (None: not given)."""
+    if value is None:
+        return
+    require(
+        math.isfinite(value) and 0 < value <= MAX_DURATION,
+        f"{flag} {value!r} is out of range; allowed: (0, {MAX_DURATION:g}] seconds",
+    )
 
 
 def require_distinct(name: str, values: tuple) -> None:
@@ -326,15 +342,14 @@ class ExperimentConfig:
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
+    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: "gmphd", "lmb"
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
     plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
 
     def validate(self) -> None:
         _int_range("trials", self.trials, 1, MAX_TRIALS)
-        _positive("duration", self.duration, hi=86400.0)
+        _positive("duration", self.duration, hi=MAX_DURATION)
         require(len(self.models) + len(self.trackers) >= 1, "models must name at least one birth model or tracker")
-        from soabench import plugins  # the closed list of names: built-ins, entry points, typed import paths
-
         for m in self.models:
             plugins.check_name(plugins.BIRTH, m)
         for t in self.trackers:
@@ -348,6 +363,17 @@ class ExperimentConfig:
         for p in self.probabilities:
             _one_of("probability mode", p, PROBABILITY_MODES)
         require_distinct("probabilities", self.probabilities)
+        require(len(self.filters) >= 1, f"filters must name at least one of {', '.join(FILTER_FAMILIES)}")
+        for f in self.filters:
+            _one_of("filter family", f, FILTER_FAMILIES)
+        require_distinct("filters", self.filters)
+        for f in self.filters:
+            runs = [p for p in self.probabilities if p in FAMILY_MODES[f]]
+            require(
+                bool(runs),
+                f"filter family {f!r} runs the probability modes {', '.join(FAMILY_MODES[f])} only, and probabilities "
+                f"= {list(self.probabilities)!r} names none of them; add one (e.g. --probabilities static)",
+            )
         require(len(self.clutter) >= 1, "clutter must give at least one rate")
         for lam in self.clutter:
             _non_negative("clutter", lam, hi=1e4)
@@ -391,8 +417,11 @@ class Config:
         return self
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS`."""
+        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS` and
+        without ``experiment.filters`` when it is the default (so the identity of a default run is unchanged)."""
         out = dataclasses.asdict(self)
+        if tuple(out["experiment"]["filters"]) == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
+            del out["experiment"]["filters"]
         return {
             sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items() if f"{sec}.{k}" not in DERIVED_KEYS}
             for sec, d in out.items()
@@ -496,7 +525,6 @@ def load_config(path: str | Path | None, base: Config | None = None) -> Config:
     """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
     if path is None:
         return (base or Config()).validate()
-    from soabench.tomlfile import read_toml
 
     p = Path(path)
     require(p.is_file(), f"config file {str(p)!r} does not exist")

@@ -2,7 +2,7 @@
 
 A scan's birth geometry asks small questions of a few dozen points (is a point behind an obstacle, is a candidate
 too close to one kept before), once per scan. Written with numpy they are a dozen array calls each, and at these
-sizes numpy's fixed cost per call, not arithmetic, sets the time (about 0.1 ms per question and scan). The loops
+sizes numpy's fixed cost per call, not arithmetic, sets the time (measured in ``benchmarks/README.md``). The loops
 here do the same arithmetic once per (point, edge) or per pair: only additions, subtractions, multiplications,
 divisions and comparisons, in IEEE double precision without ``fastmath``, so a result is the same bit for bit as
 the numpy form of the same formula and does not depend on the CPU. Compiled code is cached like the filter

@@ -35,7 +35,14 @@ from typing import TextIO
 
 import numpy as np
 
-from soabench.experiment.progress import LINE_INTERVAL_S, is_terminal
+from soabench import notice
+from soabench.birth import sampling
+from soabench.birth.soa import dedup, ego_inside
+from soabench.cache import configure_numba_cache
+from soabench.config import Config, MetricsConfig
+from soabench.experiment.execution.progress import LINE_INTERVAL_S, is_terminal
+from soabench.sensor import segment_meets_convex
+from soabench.types import Births, NewbornTerms, Obstacles, Scan
 
 #: the modules whose kernels are compiled here (their source files key the stamp, as they key numba's cache)
 KERNEL_MODULES = (
@@ -45,12 +52,14 @@ KERNEL_MODULES = (
     "soabench.metrics_kernels",
     "soabench.geometry_kernels",
     "soabench.tracks.kernels",
+    "soabench.lmb.gibbs",
+    "soabench.lmb.tracks",
 )
 MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version) ..."
 
 
 def _filter(mode: str):
-    from soabench.config import Config
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import GMPHDFilter
 
     cfg = Config()
@@ -63,7 +72,6 @@ def _scan_arrays() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _births(n: int = 2):
-    from soabench.types import Births
 
     m = np.zeros((n, 4))
     m[:, 0] = np.linspace(5.0, 15.0, n)
@@ -72,6 +80,7 @@ def _births(n: int = 2):
 
 def _predict_update() -> None:
     """The prediction and the update (EKF and UKF terms, posterior) of both probability modes' argument types."""
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import cycle
     from soabench.gmphd.filter import _birth_arrays, _mixture_arrays
 
@@ -79,13 +88,14 @@ def _predict_update() -> None:
     for mode in ("static", "dynamic"):
         f = _filter(mode)
         pred = cycle.predict_append(
-            *_mixture_arrays(f.mixture), f.F, f.Q, f._pred_pars, *_birth_arrays(_births()), f._beta0, ego
+            *_mixture_arrays(f.mixture), f.F, f.Q, f._pred_pars, *_birth_arrays(_births()), f._beta0, ego, f.next_label
         )
-        cycle.update(*pred[:8], f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
+        cycle.update(*pred[:9], f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
 
 
 def _reduction() -> None:
     """Pruning, merging (window and grid), capping and extraction."""
+    # imported when called: numba would slow every start-up
     from soabench.gmphd import cycle
     from soabench.gmphd.filter import _mixture_arrays
     from soabench.gmphd.mixture import Mixture
@@ -97,18 +107,15 @@ def _reduction() -> None:
         m[:, :2] = rng.uniform(0.0, 50.0, (J, 2))
         mix = Mixture.from_arrays(np.full(J, 0.5), m, np.repeat(np.eye(4)[None], J, axis=0), origin=0, n_det=0,
                                   age=0, beta=f.beta0)  # fmt: skip
-        cycle.reduce(*_mixture_arrays(mix), f._red_pars)
+        cycle.reduce(*_mixture_arrays(mix), f._red_pars, f.next_label)
 
 
 def _metrics_geometry() -> None:
     """The per-run matchings (§5.2-5.6) and the scan-geometry kernels of the birth models and the sensor."""
-    from soabench.birth import sampling
-    from soabench.birth.soa import dedup, ego_inside
-    from soabench.config import MetricsConfig
+    # imported when called: numba, scipy would slow every start-up
     from soabench.geometry_kernels import occlusion_layer_arrays, poisson_accept, poisson_first_free
     from soabench.metrics import GATE_COST
     from soabench.metrics_kernels import run_matchings
-    from soabench.sensor import segment_meets_convex
 
     c = MetricsConfig()
     E = np.array([[0.0, 0.0], [5.0, 5.0]])
@@ -125,7 +132,6 @@ def _metrics_geometry() -> None:
 
 
 def _no_obstacles():
-    from soabench.types import Obstacles
 
     return Obstacles([], *(np.zeros(0) for _ in range(7)))
 
@@ -134,8 +140,6 @@ def _fused_steps() -> None:
     """The fused cycle's entry points as the filter calls them: one call per scan (both probability modes), and the
     split step of the line-of-sight gate (§2.11, §4.4)."""
     import shapely
-
-    from soabench.types import Scan
 
     Z, ego = _scan_arrays()
     far = [shapely.box(1000.0, 1000.0, 1001.0, 1001.0)]
@@ -149,8 +153,6 @@ def _fused_steps() -> None:
 def _newborn_steps() -> None:
     """The split step of measurement-driven newborn terms (§3.4) in both probability modes."""
     import shapely
-
-    from soabench.types import NewbornTerms, Scan
 
     Z, ego = _scan_arrays()
     for mode in ("static", "dynamic"):
@@ -173,16 +175,35 @@ def _track_metrics() -> None:
     ospa2(ids, xy, ids, xy)
 
 
+def _lmb_steps() -> None:
+    """The LMB filter (docs/method.md "LMB filter"): steps with Gaussian births and with newborn terms (the adaptive
+    birth), and the association marginals on both of their paths (enumeration and Gibbs sampling)."""
+    import shapely
+
+    from soabench.config import Config
+    from soabench.lmb import LMBFilter
+    from soabench.lmb.gibbs import association_marginals
+    from soabench.types import NewbornTerms, Scan
+
+    cfg = Config()
+    Z, ego = _scan_arrays()
+    f = LMBFilter(cfg.filter, cfg.sensor)
+    for k in range(3):
+        b = _births()
+        b.newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0 * A)
+        f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
+    association_marginals(np.zeros((2, 4)), 10, np.uint32(0), True)
+
+
 #: rounds of groups: the groups of a round are independent (no kernel in two of them) and run in parallel; a later
 #: round links the earlier rounds' cached kernels
 ROUNDS: tuple[tuple[Callable[[], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_fused_steps, _newborn_steps, _track_metrics),
+    (_fused_steps, _newborn_steps, _lmb_steps, _track_metrics),
 )
 
 
 def _run_group(fn: Callable[[], None]) -> None:
-    from soabench import notice
 
     notice.silence()  # the driver announces compilation once; a group process never does
     fn()
@@ -192,8 +213,6 @@ def stamp_path() -> Path:
     """The file that marks this soabench's kernels compiled for this numba and Python in the cache folder."""
     import importlib.metadata
     import importlib.util
-
-    from soabench.cache import configure_numba_cache
 
     parts = [sys.version, importlib.metadata.version("numba"), importlib.metadata.version("soabench")]
     for name in KERNEL_MODULES:
@@ -221,7 +240,6 @@ def ensure_compiled(stream: TextIO | None = None, workers: int | None = None) ->
     terminal, and the time taken at the end."""
     if compiled():
         return 0.0
-    from soabench import notice
 
     stream = stream if stream is not None else sys.stderr
     t0 = time.monotonic()

@@ -8,8 +8,8 @@ Building blocks (pure functions of point sets, all distances 2-D Euclidean in me
   association k_t, censoring, the lower-bound variant;
 * :func:`evaluate`: every metric of one filter run (one birth model x probability mode x clutter rate of a trial).
 
-Metrics never touch SUMO or the filter: they read :class:`~soabench.sensor.Scans` (truth flags) and the filter's
-:class:`~soabench.gmphd.filter.StepResult` list.
+Metrics never touch SUMO or the filter: they read :class:`~soabench.types.Scans` (truth flags) and the filter's
+:class:`~soabench.types.StepResult` list.
 """
 
 from __future__ import annotations
@@ -24,12 +24,12 @@ from scipy.optimize import linear_sum_assignment
 
 from soabench.errors import SoabenchError, require
 from soabench.geometry import fov_mask
+from soabench.notice import announced
 from soabench.origins import ORIGIN_KEYS, origin_counts_of
 
 if TYPE_CHECKING:
     from soabench.config import MetricsConfig, SensorConfig
-    from soabench.gmphd.filter import StepResult
-    from soabench.sensor import Scans
+    from soabench.types import Scans, StepResult
 
 #: cost of a pair beyond the gate in the gated Hungarian assignment (§5.4 step 1)
 GATE_COST = 1e6
@@ -521,8 +521,8 @@ def _matchings_compiled(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_matchings` for p = 1 as one compiled call: Est_k of every scan stacked (the FOV test of
     :func:`estimate_positions` over all of them at once, each with its scan's pose)."""
+    # imported when called: numba would slow every start-up
     from soabench.metrics_kernels import run_matchings
-    from soabench.notice import announced
 
     X = [_points(res.X) for res in results]
     counts = np.fromiter((len(x) for x in X), dtype=np.int64, count=len(X))

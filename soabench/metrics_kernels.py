@@ -16,8 +16,8 @@ Only additions, subtractions, multiplications, divisions, square roots and compa
 without ``fastmath``, the same on every CPU. This path serves the order p = 1 of both metrics (the defaults); other
 orders use the numpy functions of :mod:`soabench.metrics`. An optimal assignment is unique unless two assignments
 have exactly the same cost; the results can differ from scipy's choice only then, and only where such a tie
-between different sets of kept pairs changes a sum or a count (``tests/test_metrics_kernels.py`` compares every
-output with the numpy path).
+between different sets of kept pairs changes a sum or a count (``tests/equivalence/test_metrics_kernels.py``
+compares every output with the numpy path).
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ MESSAGE = (
     "soabench: compiling the GM-PHD filter, metric and scan-geometry kernels with numba (once after installation, "
     "one to two minutes; cached afterwards) ..."
 )
-DELAY = 3.0  #: seconds of silence before the notice (loading cached kernels takes about 1.5 s)
+DELAY = 3.0  #: seconds of silence before the notice (longer than loading cached kernels takes)
 _done: set[Hashable] = set()
 _printed = threading.Event()  #: the notice is printed at most once per process
 

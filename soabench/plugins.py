@@ -2,7 +2,7 @@
 
 The registry is a closed list, rebuilt in every process from three sources:
 
-1. the built-ins: the six birth models (:data:`soabench.birth.REGISTRY`) and the Stone Soup bridges
+1. the built-ins: the six birth models (:data:`BUILTIN_BIRTH_MODELS`) and the Stone Soup bridges
    (:data:`BUILTIN_TRACKERS`, usable when Stone Soup is installed);
 2. the installed entry points of the groups ``soabench.birth_models`` and ``soabench.trackers`` (a package's
    ``pyproject.toml`` declares them; the entry point's name is the model's name in every table);
@@ -33,6 +33,16 @@ BIRTH, TRACKER = "birth model", "tracker"  #: the plugin kinds (``soabench.api.B
 KINDS = (BIRTH, TRACKER)
 
 #: trackers that ship with soabench (bridges to other frameworks; each needs its optional extra)
+#: the built-in birth models: name -> "module:Class" (imported when first used: baselines import soabench.birth.base)
+BUILTIN_BIRTH_MODELS: dict[str, str] = {
+    "soa": "soabench.birth.soa:SOABirth",
+    "pubm": "soabench.baselines.partially_uniform:PartiallyUniformBirth",
+    "ubm": "soabench.baselines.uniform:UniformBirth",
+    "ubm-ws": "soabench.baselines.uniform:WorkspaceUniformBirth",
+    "atbm": "soabench.baselines.adaptive:AdaptiveBirth",
+    "gmbm": "soabench.baselines.standard_gm:StandardGMBirth",
+}
+
 BUILTIN_TRACKERS: dict[str, str] = {
     "stonesoup-gmphd": "soabench.bridges.stonesoup:StoneSoupGMPHD",
     "stonesoup-gnn": "soabench.bridges.stonesoup:StoneSoupGNN",
@@ -68,12 +78,6 @@ def session_import_paths() -> tuple[str, ...]:
     return tuple(sorted(_TYPED))
 
 
-def _builtin_birth() -> dict[str, str]:
-    from soabench.birth import REGISTRY
-
-    return REGISTRY
-
-
 def _entry_points(group: str) -> dict[str, metadata.EntryPoint]:
     return {ep.name: ep for ep in metadata.entry_points(group=group)}
 
@@ -90,14 +94,14 @@ def check_kind(kind: str) -> None:
 def names(kind: str) -> list[str]:
     """Every registered name of ``kind`` (built-ins first, then installed entry points, then typed paths)."""
     check_kind(kind)
-    builtin = _builtin_birth() if kind == BIRTH else BUILTIN_TRACKERS
+    builtin = BUILTIN_BIRTH_MODELS if kind == BIRTH else BUILTIN_TRACKERS
     eps = [n for n in _entry_points(BIRTH_GROUP if kind == BIRTH else TRACKER_GROUP) if n not in builtin]
     return [*builtin, *sorted(eps)]
 
 
 def is_builtin_birth(name: str) -> bool:
     """One of the six built-in birth models (run unguarded: an error there is a bug of soabench)."""
-    return name in _builtin_birth()
+    return name in BUILTIN_BIRTH_MODELS
 
 
 def check_name(kind: str, name: str) -> None:
@@ -112,7 +116,7 @@ def check_name(kind: str, name: str) -> None:
             f"(to resume such a run, type it again: --resume DIR --{'models' if kind == BIRTH else 'trackers'} {name})",
         )
         return
-    if name in (_builtin_birth() if kind == BIRTH else BUILTIN_TRACKERS):
+    if name in (BUILTIN_BIRTH_MODELS if kind == BIRTH else BUILTIN_TRACKERS):
         return  # no entry-point scan for a built-in
     known = names(kind)
     require(
@@ -125,7 +129,7 @@ def check_name(kind: str, name: str) -> None:
 def resolve(kind: str, name: str) -> type:
     """The class registered under ``name`` (imported now); PluginError naming the plugin if that fails."""
     check_name(kind, name)
-    builtin = _builtin_birth() if kind == BIRTH else BUILTIN_TRACKERS
+    builtin = BUILTIN_BIRTH_MODELS if kind == BIRTH else BUILTIN_TRACKERS
     try:
         if name in builtin or is_import_path(name):
             target = builtin.get(name, name)
@@ -205,7 +209,7 @@ def preflight(config: Any) -> None:
 
     An import error or an unknown option is a user error (one line, exit 2) caught here, in the driver, so no
     trial runs with a plugin that cannot even be built; errors while a plugin runs are recorded per run instead
-    (:mod:`soabench.experiment.guard`).
+    (:mod:`soabench.experiment.trial.guard`).
     """
     exp = config.experiment
     for kind, names_ in ((BIRTH, exp.models), (TRACKER, exp.trackers)):

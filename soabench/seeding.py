@@ -38,6 +38,11 @@ class TrialSeeds:
         """Stochastic birth placement (Poisson-disk, uniform semantic sampling)."""
         return np.random.default_rng(self.placement)
 
+    def association_rng(self) -> np.random.Generator:
+        """Seeds of the LMB filter's Gibbs sampler (docs/method.md "LMB filter"): a fifth child of the trial's
+        root sequence, so the four streams above are unchanged and every LMB run of trial n draws the same seeds."""
+        return np.random.default_rng(_child(np.random.SeedSequence([self.base_seed, self.trial]), 4))
+
 
 def trial_seeds(base_seed: int, trial: int) -> TrialSeeds:
     """The seeds of trial ``trial`` of a run started with ``base_seed`` (independent of worker and order)."""

@@ -30,22 +30,18 @@ from shapely.geometry.base import BaseGeometry
 from soabench.config import SensorConfig
 from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import fov_mask, range_bearing, wrap
-
-# the stage contract lives in the bottom layer; re-exported here so old import paths keep working
-from soabench.types import (  # noqa: F401
+from soabench.notice import announced
+from soabench.scenario.scene import SceneMap
+from soabench.types import (
     CLUTTER,
-    OCCLUDER_KINDS,
-    SCANS_FORMAT_VERSION,
-    SENSOR_UNITS,
     DeferredRegion,
     Obstacles,
+    Recording,
     Scan,
     Scans,
-    sensor_arrays,
 )
 
 if TYPE_CHECKING:
-    from soabench.scenario.recording import Recording
     from soabench.scenario.scene import SceneMap
 
 _FOV_ARC_STEP = np.radians(1.0)  #: vertex spacing of the FOV polygon arcs (chord error 2 mm at 50 m)
@@ -352,7 +348,7 @@ class VisibleRegion(DeferredRegion):
     :meth:`build` is :func:`visible_region` (the same polygon overlay, bit for bit). :meth:`contains_xy` answers
     which points lie in its interior from the overlay's inputs, without the overlay. A trial's birth models ask the
     second question of a few dozen points per scan; the overlay (a union of the shadow polygons and a set
-    difference, about 2 ms per scan) is then computed only for a scan whose geometry is read (a figure, an
+    difference, the costly part) is then computed only for a scan whose geometry is read (a figure, an
     exported scans file, a birth model that samples in Omega_k itself).
     """
 
@@ -429,8 +425,8 @@ def segment_meets_convex(ego_xy: np.ndarray, points: np.ndarray, polygons: Seque
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if len(points) == 0 or len(polygons) == 0:
         return np.zeros(len(points), dtype=bool)
+    # imported when called: numba would slow every start-up
     from soabench.geometry_kernels import flat_polygons, segments_meet_convex
-    from soabench.notice import announced
 
     e = np.asarray(ego_xy, dtype=float)
     vx, vy, starts, counts = flat_polygons(polygons)
@@ -554,8 +550,6 @@ def observe(
     and settings other than ``lambda_c`` reuses it (another recording, scene or setting starts it afresh). The scans
     are the same as without it (docs/method.md §5.8: the detection and clutter streams are drawn as before).
     """
-    from soabench.scenario.recording import Recording
-    from soabench.scenario.scene import SceneMap
 
     require_type(recording, Recording, "observe's recording", "simulate one with soabench.scenario.simulate")
     require_type(scene, SceneMap, "observe's scene", "load it with soabench.scenario.load(net)")

@@ -3,7 +3,7 @@
 :class:`GMPHDTracker` wraps the cycle of docs/method.md §2.11 (birth from the context at k, then ``filter.step``)
 behind the :class:`~soabench.protocols.Tracker` shape. :func:`run_tracker` runs any tracker over the scans of a run
 and returns one :class:`~soabench.types.StepResult` per scan, the form the metrics read: a foreign tracker's
-:class:`~soabench.types.Estimates` are checked (:mod:`soabench.experiment.guard`) and converted by
+:class:`~soabench.types.Estimates` are checked (:mod:`soabench.experiment.trial.guard`) and converted by
 :func:`step_result_from`.
 """
 
@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from soabench.errors import require_type
-from soabench.protocols import Tracker, TrackerSetup
+from soabench.protocols import Tracker
 from soabench.types import BirthContext, Births, Estimates, Scan, Scans, StepResult
 
-__all__ = ["GMPHDTracker", "Tracker", "TrackerRun", "TrackerSetup", "run_tracker", "step_result_from"]
+__all__ = ["GMPHDTracker", "TrackerRun", "run_tracker", "step_result_from"]
 
 
 class GMPHDTracker:
@@ -84,7 +84,8 @@ def step_result_from(est: Estimates, k: int, t_step: float) -> StepResult:
 
     Positions pad to (n, 4) with zero velocity when only (n, 2) were given; the step time goes to ``t_update``;
     the component count is ``est.n_components`` (else the number of estimates); the cardinality is
-    ``est.cardinality`` (else NaN); GM-PHD-only diagnostics (p_D, A, kappa) are NaN or empty.
+    ``est.cardinality`` (else NaN); GM-PHD-only diagnostics (p_D, A, kappa) are NaN or empty; the track labels
+    are ``est.labels`` (None: unlabelled).
     """
     X = np.asarray(est.X, dtype=float)
     if X.shape[1] == 2:
@@ -108,6 +109,7 @@ def step_result_from(est: Estimates, k: int, t_step: float) -> StepResult:
         mean_pD=math.nan,
         A=np.zeros(0),
         kappa=np.zeros(0),
+        labels=None if est.labels is None else np.asarray(est.labels, dtype=np.int64).reshape(-1),
     )
 
 

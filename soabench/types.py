@@ -35,7 +35,7 @@ SCANS_FORMAT_VERSION = 1  #: version written by :meth:`Scans.save_npz` (docs/use
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Truth: one scenario run (moved from soabench.scenario.recording, which re-exports it)
+# Truth: one scenario run
 
 
 @dataclass
@@ -154,7 +154,7 @@ _RECORDING_KEYS = (
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Scans: what a tracker receives, plus the per-scan truth the metrics need (moved from soabench.sensor)
+# Scans: what a tracker receives, plus the per-scan truth the metrics need
 
 
 @dataclass
@@ -325,6 +325,8 @@ class Scans:
         truth_xy: (K, P, 2) true positions (NaN while absent).
         present, in_fov, visible, detected: (K, P) bool flags (§5.1, §5.4).
         ped_ids: (P,) pedestrian ids.
+        ped_labels: (P,) int64 truth track label of each pedestrian (read-only property, derived from ``ped_ids``
+            by :func:`truth_labels`).
         sensor: the :class:`~soabench.config.SensorConfig` that produced the scans (written into every exported
             file).
     """
@@ -342,6 +344,11 @@ class Scans:
 
     def __len__(self) -> int:
         return len(self.scans)
+
+    @property
+    def ped_labels(self) -> np.ndarray:
+        """(P,) int64 truth track label of each pedestrian column (docs/method.md §2.13): :func:`truth_labels`."""
+        return truth_labels(self.ped_ids)
 
     def __iter__(self) -> Iterator[Scan]:
         """The scans in order (``for scan in scans: tracker.step(scan)``)."""
@@ -379,6 +386,23 @@ class Scans:
         with np.load(p, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
         return _scans_from_arrays(arrays, str(p))
+
+
+def truth_labels(ped_ids: Sequence[str] | np.ndarray) -> np.ndarray:
+    """(P,) int64 truth track labels from pedestrian ids, deterministically (docs/method.md §2.13).
+
+    Ids that are all integers (KITTI's track ids) are those integers; ids that are one common prefix followed by
+    distinct integers (SUMO's ``ped0``, ``ped1``, ...) are the integers; any other set of ids is numbered by column,
+    0, 1, ... (the columns are in the recording's stable order).
+    """
+    ids = [str(i) for i in np.asarray(ped_ids).reshape(-1)]
+    stems = [i.rstrip("0123456789") for i in ids]
+    digits = [i[len(t) :] for i, t in zip(ids, stems, strict=True)]
+    if ids and all(digits) and len(set(stems)) == 1:
+        nums = [int(d) for d in digits]
+        if len(set(nums)) == len(nums) and max(nums) < 2**62:
+            return np.array(nums, dtype=np.int64)
+    return np.arange(len(ids), dtype=np.int64)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -528,7 +552,7 @@ def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
 
 
 def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
-    from soabench.config import SensorConfig
+    from soabench.config import SensorConfig  # run time only: soabench.config sits above this bottom module
 
     if "sensor_json" not in a:
         return None
@@ -539,7 +563,7 @@ def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | 
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Births: what a birth model hands the GM-PHD filter (moved from soabench.birth.base; docs/method.md §2.11, §3.0)
+# Births: what a birth model hands the GM-PHD filter (docs/method.md §2.11, §3.0)
 
 # source codes of birth components (Births.source), for figures and diagnostics
 SOURCE_OCCL, SOURCE_SEM, SOURCE_FOV, SOURCE_GRID, SOURCE_GM, SOURCE_MEAS = range(6)
@@ -611,12 +635,16 @@ class Estimates:
         n_components: optional cost figure: hypotheses, components or tracks kept after the step. Without it the
             harness reports the number of estimates.
         cardinality: optional expected number of targets (a PHD's sum of weights); without it NaN.
+        labels: optional (n,) int64 track label of each estimate (docs/method.md §2.13; the LMB filter labels its
+            estimates too): equal labels across scans mean the same track. None: the tracker does not label its
+            estimates (scored by position only).
     """
 
     X: np.ndarray
     w: np.ndarray | None = None
     n_components: int | None = None
     cardinality: float | None = None
+    labels: np.ndarray | None = None
 
     @classmethod
     def empty(cls) -> Estimates:
@@ -631,7 +659,8 @@ class Estimates:
             if value is not None
         )
         w = "" if self.w is None else ", with weights"
-        return f"Estimates({len(X)} targets, X of shape {X.shape}{w}{extra})"
+        lab = "" if self.labels is None else ", labelled"
+        return f"Estimates({len(X)} targets, X of shape {X.shape}{w}{lab}{extra})"
 
     def __len__(self) -> int:
         return len(self.X)
@@ -681,6 +710,8 @@ class StepResult:
     #: posterior components (after reduction) by birth origin and age, in the order of
     #: :data:`soabench.origins.ORIGIN_KEYS` (docs/method.md §5.7); None: origins unknown (a foreign tracker)
     origin_counts: np.ndarray | None = None
+    #: (n,) int64 track label of each row of X (docs/method.md §2.13, and the LMB filter); None: an unlabelled tracker
+    labels: np.ndarray | None = None
 
     def __repr__(self) -> str:
         return f"StepResult(k={self.k}, {len(self.X)} estimates, mass {self.sum_w:.3g}, {self.n_reduced} components)"

@@ -1,6 +1,7 @@
 """The catalogue of bad inputs: every case must give ONE line on stderr and exit status 2, without a traceback,
 without running a trial or a simulation, and without writing into a folder that is not the command's own. Used by
-tests/test_hardening_cli.py (in-process, through :func:`soabench.cli.main`) and benchmarks/bench_reliability.py
+tests/test_hardening_cli.py (in-process, through :func:`soabench.cli.main.main`) and benchmarks/bench_reliability.py
+tests/hardening/test_command_line.py (in-process, through :func:`soabench.cli.main`) and benchmarks/bench_reliability.py
 (each case in a forked process with a time bound, counted as clean / traceback / silent / hang / unclear).
 
 Each case is ``(name, make_argv(tmp) -> argv, needle)``: ``make_argv`` may write files under ``tmp`` (a fresh
@@ -11,9 +12,13 @@ exists (its ``CASES`` list has the same format).
 
 from __future__ import annotations
 
+import dataclasses
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+
+from soabench.experiment.execution.options import RunOptions
 
 Case = tuple[str, Callable[[Path], list[str]], str]
 
@@ -363,16 +368,17 @@ def _usage_cases() -> list[Case]:
 # ------------------------------------------------------------------------------------------------ output paths
 def _sensitivity(tmp: Path, out: str, finished: bool = True) -> list[str]:
     """``sensitivity --main`` a (fake) run of 2 trials, finished or with one trial missing."""
-    import dataclasses
 
     import fake_trial as ft
 
     from soabench.config import Config
-    from soabench.experiment.runner import run_experiment
+    from soabench.experiment.execution.runner import run_experiment
 
     cfg = Config()
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=2, duration=10.0, models=("soa",))
-    kw = dict(workers=1, trial_fn=ft.fake_trial, load_fn=ft.fake_load, progress=False, figures=False)
+    kw = dict(
+        options=RunOptions(workers=1, progress=False, figures=False), trial_fn=ft.fake_trial, load_fn=ft.fake_load
+    )
     run_experiment(cfg.validate(), "intersection", out=tmp / "main", **kw)
     if not finished:
         (tmp / "main" / "trials" / "trial_00001.json").unlink()
@@ -644,7 +650,7 @@ def catalogue() -> list[Case]:
 
 # ------------------------------------------------------------------------------------------------ running a case
 class WorkStarted(BaseException):
-    """Raised by the stubs of :func:`stub_work`: the input was accepted and real work (a trial, a SUMO simulation,
+    """Raised by the stubs of :func:`work_stubbed`: the input was accepted and real work (a trial, a SUMO simulation,
     a KITTI sequence, netconvert) would have started. A BaseException, so that no error handler records it as a
     failed trial; :data:`STARTED` counts the calls in case one does."""
 
@@ -657,18 +663,21 @@ def _started(*args, **kwargs):
     raise WorkStarted
 
 
-def stub_work(setattr_: Callable, setitem: Callable) -> None:
-    """Replace every entry point of real work by :func:`_started` (``setattr_``/``setitem``: pytest's monkeypatch
-    methods, or plain ``setattr`` and ``operator.setitem`` in a forked process)."""
+@contextmanager
+def work_stubbed(setattr_: Callable) -> Iterator[None]:
+    """A block in which every entry point of real work is :func:`_started`: the built-in trial kind (through the
+    registry's public hook) and, with ``setattr_`` (pytest's ``monkeypatch.setattr``), the SUMO simulation, the KITTI
+    sequence and netconvert."""
     import soabench.kitti.protocol
     import soabench.scenario
     import soabench.scenario.osm
-    from soabench.experiment import registry
+    from soabench.experiment.trial import registry
 
-    setitem(registry._TRIAL_KINDS, registry.DEFAULT_TRIAL_KIND, _started)
     setattr_(soabench.scenario, "simulate", _started)
     setattr_(soabench.kitti.protocol, "run_sequence", _started)
     setattr_(soabench.scenario.osm, "_tool", _started)
+    with registry.registered({registry.DEFAULT_TRIAL_KIND: _started}):
+        yield
 
 
 def messages(err: str) -> list[str]:

@@ -2,7 +2,7 @@
 twice), files nested too deeply or not UTF-8, scenario values of the wrong type or place, polygon files that are
 not polygons, out-of-range snapshot indices, ``--resume --save-estimates`` on a run without estimates, and KITTI
 files and options that were accepted but read wrong. Every one must give ONE line on stderr and exit status 2,
-without a traceback and without running a trial. Used by tests/test_hardening_values.py.
+without a traceback and without running a trial. Used by tests/hardening/test_accepted_values.py.
 
 Each case is ``(name, make_argv(tmp) -> argv, needle)``; ``make_argv`` may write files under ``tmp``.
 """

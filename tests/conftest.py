@@ -25,6 +25,58 @@ def typed_plugins_cleared():
     plugins._TYPED.update(saved)
 
 
+# ------------------------------------------------------------------------------------ stand-ins for real work
+@pytest.fixture
+def fake_builtins():
+    """For the test, the built-in trial kind and scene loader are tests/fake_trial.py's fast, deterministic
+    stand-ins (through the registry's public hook), so ``soabench run`` and the campaigns run fake trials."""
+    import fake_trial as ft
+
+    with ft.as_builtins():
+        yield
+
+
+@pytest.fixture
+def fake_cli_runs(monkeypatch, fake_builtins):
+    """:func:`fake_builtins`, and a run's report is the string "summary" (no statistics, no figures)."""
+    import soabench.experiment.reports.report as report
+
+    monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Any trial, simulation, KITTI sequence or netconvert started by a case fails the test (bad inputs must be
+    refused before): the stubs of bad_inputs.work_stubbed raise WorkStarted and note the call in the list returned."""
+    import bad_inputs
+
+    monkeypatch.setattr(bad_inputs, "STARTED", [])
+    with bad_inputs.work_stubbed(monkeypatch.setattr):
+        yield bad_inputs.STARTED
+
+
+@pytest.fixture(scope="session")
+def recorded_intersection():
+    """(config, scene, {lambda: (sensor, scans)} at lambda = 3 and 10, seeds) of a 30 s trial of the shipped
+    intersection (SUMO), shared by the filter tests that run on recorded scans."""
+    import dataclasses
+
+    from soabench.config import Config
+    from soabench.scenario import load, simulate
+    from soabench.seeding import trial_seeds
+    from soabench.sensor import observe
+
+    scene, scenario = load("intersection")
+    cfg = Config()
+    seeds = trial_seeds(4, 1)
+    rec = simulate(scene, scenario, seeds, duration=30.0)
+    scans = {}
+    for lam in (3.0, 10.0):
+        sensor = dataclasses.replace(cfg.sensor, lambda_c=lam)
+        scans[lam] = (sensor, observe(rec, scene, sensor, seeds.sensor_rngs()))
+    return cfg, scene, scans, seeds
+
+
 @pytest.fixture
 def trackeval_kitti():
     """TrackEval's KITTI 2-D box evaluation, printing nothing: ``evaluate(gt, trackers, names, classes)`` scores

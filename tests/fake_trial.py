@@ -1,4 +1,4 @@
-"""A fast, deterministic stand-in for ``soabench.experiment.trial.run_trial`` (same TrialResult schema).
+"""A fast, deterministic stand-in for ``soabench.experiment.trial.trial.run_trial`` (same TrialResult schema).
 
 Module-level functions so worker processes (process pool, Dask) can import them. Numbers depend only on
 ``(config.experiment.seed, trial)`` and the (clutter, model, mode) indices; the ``t_*`` timing columns are real
@@ -196,7 +196,42 @@ def crashing_trial(trial, config, scene, scenario, *, save_estimates=False):
 
 # the fakes are registered trial kinds / scene loaders, so a run made with them can be resumed by name (a run
 # folder names what it needs; it never spells out an import path)
-from soabench.experiment.registry import register_scene_loader, register_trial_kind  # noqa: E402
+from soabench.experiment.trial import registry  # noqa: E402
+from soabench.experiment.trial.registry import register_scene_loader, register_trial_kind  # noqa: E402
+
+
+def small_config(**experiment):
+    """The default configuration with ``experiment``'s keys replaced in its ``[experiment]`` table, validated."""
+    import dataclasses
+
+    from soabench.config import Config
+
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(cfg.experiment, **experiment)
+    return cfg.validate()
+
+
+def run_fake(config, out, net="intersection", **kw):
+    """:func:`soabench.experiment.execution.runner.run_experiment` of ``config`` on ``net`` with :func:`fake_trial` and
+    :func:`fake_load`, serial, without progress or figures (``kw`` overrides any of these): the fake run the tests
+    share. Returns the run's outcome."""
+    from soabench.experiment.execution.options import RunOptions
+    from soabench.experiment.execution.runner import run_experiment
+
+    fields = {"workers", "scheduler", "dask_local", "fail_fast", "save_estimates", "progress", "figures"}
+    options = dict(workers=1, progress=False, figures=False) | {k: v for k, v in kw.items() if k in fields}
+    rest = dict(trial_fn=fake_trial, load_fn=fake_load) | {k: v for k, v in kw.items() if k not in fields}
+    return run_experiment(config, net, out=out, options=RunOptions(**options), **rest)
+
+
+def as_builtins(trial=fake_trial, loader=fake_load):
+    """A block in which the built-in trial kind and scene loader (the names ``soabench run`` uses) are ``trial`` and
+    ``loader`` (None: that one stays the real one), through the public hook :func:`registry.registered`."""
+    return registry.registered(
+        {registry.DEFAULT_TRIAL_KIND: trial} if trial is not None else None,
+        {registry.DEFAULT_SCENE_LOADER: loader} if loader is not None else None,
+    )
+
 
 register_scene_loader("fake-load", fake_load)
 for _name, _fn in (

@@ -89,6 +89,15 @@ class EchoTracker:
         return Estimates(p * self.scale if self.scale != 1.0 else p, w=np.ones(len(p)), n_components=len(p))
 
 
+class LabelledEchoTracker(EchoTracker):
+    """EchoTracker whose estimates carry track labels: the 10 m grid cell of each (stable while a target lingers)."""
+
+    def step(self, scan) -> Estimates:
+        est = super().step(scan)
+        est.labels = np.array([f"c{int(x // 10)}:{int(y // 10)}" for x, y in np.asarray(est.X)], dtype=object)
+        return est
+
+
 class SilentTracker(EchoTracker):
     def step(self, scan):
         return None

@@ -1,7 +1,8 @@
-"""The shared birth builder and FOV rule (docs/method.md §3.0); the birth contract is re-exported from the bottom layer.
+"""The shared birth builder and FOV rule (docs/method.md §3.0).
 
-The data classes (:class:`Births`, :class:`NewbornTerms`, :class:`BirthContext`) live in :mod:`soabench.types` and
-the :class:`BirthModel` protocol in :mod:`soabench.protocols` (both public through :mod:`soabench.api`).
+The data classes (:class:`~soabench.types.Births`, :class:`~soabench.types.NewbornTerms`,
+:class:`~soabench.types.BirthContext`) live in :mod:`soabench.types` and the :class:`~soabench.protocols.BirthModel`
+protocol in :mod:`soabench.protocols` (both public through :mod:`soabench.api`).
 
 A birth model is built once per trial, ``Model(cfg, sensor, scene, rng)``, and called once per scan with a
 :class:`BirthContext`. It returns :class:`Births`: Gaussian components appended to the predicted intensity before
@@ -22,20 +23,8 @@ from shapely import STRtree
 from shapely.geometry.base import BaseGeometry
 
 from soabench.geometry import fov_mask
-
-# the data classes and the protocol live in the bottom layer; re-exported here so old import paths keep working
-from soabench.protocols import BirthModel  # noqa: F401
-from soabench.types import (  # noqa: F401
-    SOURCE_FOV,
-    SOURCE_GM,
-    SOURCE_GRID,
-    SOURCE_MEAS,
-    SOURCE_NAMES,
-    SOURCE_OCCL,
-    SOURCE_SEM,
-    BirthContext,
+from soabench.types import (
     Births,
-    NewbornTerms,
 )
 
 if TYPE_CHECKING:

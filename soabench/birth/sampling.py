@@ -21,6 +21,7 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 from soabench.errors import require
+from soabench.notice import announced, ready
 
 
 def uniform_points(region: BaseGeometry, n: int, rng: np.random.Generator, batch: int | None = None) -> np.ndarray:
@@ -62,8 +63,8 @@ def poisson_disk(region: BaseGeometry, d_min: float, rng: np.random.Generator, k
     require(d_min > 0, f"d_min = {d_min!r} must be > 0")
     if region.is_empty or region.area <= 0.0:
         return np.zeros((0, 2))
+    # imported when called: numba would slow every start-up
     from soabench.geometry_kernels import poisson_accept, poisson_first_free
-    from soabench.notice import announced, ready
 
     if not ready("geometry.poisson"):  # the kernels' first call in a process may compile them
         announced("geometry.poisson", _warm_poisson, poisson_accept, poisson_first_free)

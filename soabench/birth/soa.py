@@ -27,20 +27,13 @@ from shapely import STRtree
 from shapely.geometry import LineString, Point
 from shapely.geometry.base import BaseGeometry
 
-from soabench.birth.base import (
-    SOURCE_FOV,
-    SOURCE_OCCL,
-    SOURCE_SEM,
-    BirthContext,
-    Births,
-    FOVRule,
-    births_from,
-    isotropic,
-)
+from soabench.birth.base import FOVRule, births_from, isotropic
 from soabench.birth.sampling import dbscan_clusters, grid_points, hex_lattice, poisson_disk, uniform_points
 from soabench.config import BirthConfig, SensorConfig
+from soabench.notice import announced
 from soabench.scenario.scene import SceneMap
-from soabench.sensor import Obstacles, Scan, fov_polygon, shadow_polygons
+from soabench.sensor import fov_polygon, shadow_polygons
+from soabench.types import SOURCE_FOV, SOURCE_OCCL, SOURCE_SEM, BirthContext, Births, Obstacles, Scan
 
 #: speed of the optional occlusion velocity prior (m/s), §3.1.3 ``occl_velocity_prior``
 OCCL_SPEED = 0.8
@@ -63,8 +56,8 @@ def ego_inside(polygons: list[np.ndarray], e: np.ndarray) -> np.ndarray:
     N = len(polygons)
     if N == 0:
         return np.zeros(0, dtype=bool)
+    # imported when called: numba would slow every start-up
     from soabench.geometry_kernels import convex_contains, flat_polygons
-    from soabench.notice import announced
 
     x, y, starts, counts = flat_polygons(polygons)
     tol = 1e-12 * max(1.0, float(np.abs(x).max()), float(np.abs(y).max()))
@@ -102,7 +95,6 @@ def occlusion_layers(
     # u_perp u_perp^T with u_perp = (-sin, cos), and the velocity prior (out of the cone: clockwise of theta_min,
     # counter-clockwise of theta_max) in one compiled pass (soabench.geometry_kernels.occlusion_layer_arrays)
     from soabench.geometry_kernels import occlusion_layer_arrays
-    from soabench.notice import announced
 
     return announced(
         "geometry.layers",
@@ -125,8 +117,8 @@ def dedup(xy: np.ndarray, d_dup: float) -> np.ndarray:
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     if len(xy) < 2:
         return np.ones(len(xy), dtype=bool)
+    # imported when called: numba would slow every start-up
     from soabench.geometry_kernels import greedy_dedup  # compiled: one pass over the pairs
-    from soabench.notice import announced
 
     return announced("geometry.dedup", greedy_dedup, xy[:, 0].copy(), xy[:, 1].copy(), float(d_dup))
 

@@ -10,7 +10,8 @@ diag(sigma_b^2, sigma_r^2)); scan k happens at ``EPOCH + t_k`` seconds.
   ``PointProcessMultiTargetTracker``: GM-PHD with an EKF, one wide birth component on the sensor) and
   :class:`StoneSoupGNN` (``MultiTargetTracker`` with global-nearest-neighbour assignment, a
   ``MultiMeasurementInitiator`` and an ``UpdateTimeStepsDeleter``); their estimates go through the same metrics
-  as ours.
+  as ours, labelled (docs/method.md §2.13): Stone Soup's track ids (GNN) and component tags (GM-PHD) are uuid
+  strings, numbered 1, 2, ... per run in order of first appearance (:class:`TrackLabels`).
 * Out of the harness: :func:`to_stonesoup` gives a run's scans and truth (by default the truth set of our tables,
   docs/method.md §5.1) as Stone Soup detections (``TrueDetection`` linked to the walker's ``GroundTruthPath``, or
   ``Clutter``) and ground-truth paths, for Stone Soup's trackers and metric managers; :func:`from_stonesoup` turns
@@ -30,7 +31,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from soabench.errors import SoabenchError
+from soabench.errors import SoabenchError, require, require_type
+from soabench.geometry import fov_mask
 from soabench.protocols import TrackerSetup
 from soabench.trackers import check_scan
 from soabench.types import CLUTTER, Estimates, Scan, Scans
@@ -146,7 +148,7 @@ def to_stonesoup(
         for time, detections in feed:
             ...
     """
-    from soabench.errors import require, require_type
+    # imported when called: scipy would slow every start-up
     from soabench.metrics import gt_mask
 
     require_type(scans, Scans, "to_stonesoup's scans", "simulate them with soabench.api.simulate_trial")
@@ -197,8 +199,9 @@ def from_stonesoup(tracks: Iterable[Any], scans: Scans) -> StoneSoupEstimates:
     Returns:
         ``(estimates, labels)``: per scan, the states the tracks hold at its time in our order [x, y, v_x, v_y]
         (a track's whole history counts, the states before its confirmation too) and the track id of each row.
+        Each estimate is labelled (``Estimates.labels``, docs/method.md §2.13): the track ids numbered 1, 2, ... by
+        the first scan they appear in (within a scan, by state).
     """
-    from soabench.errors import require, require_type
 
     require_type(scans, Scans, "from_stonesoup's scans", "give the Scans the tracks were made from")
     times = {scan_time(scan): k for k, scan in enumerate(scans.scans)}
@@ -217,7 +220,14 @@ def from_stonesoup(tracks: Iterable[Any], scans: Scans) -> StoneSoupEstimates:
             require(len(x) == 4, f"track {label!r} holds a {len(x)}-dimensional state; [x, vx, y, vy] is required")
             rows[k].append(x[SS_ORDER])
             ids[k].append(label)
-    estimates = [Estimates(np.array(r).reshape(-1, 4)) for r in rows]
+    number: dict[str, int] = {}
+    for r, i in zip(rows, ids, strict=True):
+        for n in sorted(range(len(r)), key=lambda n: tuple(r[n])):
+            number.setdefault(i[n], len(number) + 1)
+    estimates = [
+        Estimates(np.array(r).reshape(-1, 4), labels=np.array([number[x] for x in i], dtype=np.int64))
+        for r, i in zip(rows, ids, strict=True)
+    ]
     return StoneSoupEstimates(estimates, [np.array(i, dtype=str) for i in ids])
 
 
@@ -226,7 +236,6 @@ def estimate_set(tracks: Iterable[Any], scans: Scans, gt_set: str = "fov") -> li
     scan's sensor pose unless ``gt_set`` is ``"scene"``. With :func:`to_stonesoup`'s truths (same ``gt_set``) and
     ``Euclidean(mapping=(0, 2))`` (positions only; Stone Soup's default measure also reads the velocities), Stone
     Soup's ``OSPAMetric`` gives our per-scan OSPA."""
-    from soabench.geometry import fov_mask
 
     by_time = {scan_time(scan): scan for scan in scans.scans}
     out = []
@@ -239,6 +248,51 @@ def estimate_set(tracks: Iterable[Any], scans: Scans, gt_set: str = "fov") -> li
             if gt_set == "scene" or fov_mask(xy, np.asarray(scan.ego, dtype=float), scans.sensor)[0]:
                 out.append(state)
     return out
+
+
+class TrackLabels:
+    """Stone Soup's track ids or component tags (uuid strings) as int64 labels 1, 2, ... in order of first
+    appearance, for one run (docs/method.md §2.13)."""
+
+    def __init__(self) -> None:
+        self.ids: dict[str, int] = {}
+        self.next = 1
+
+    def fresh(self) -> int:
+        """A label no id has had."""
+        self.next += 1
+        return self.next - 1
+
+    def of(self, key: str) -> int:
+        """The label of ``key`` (a fresh one the first time)."""
+        if key not in self.ids:
+            self.ids[key] = self.fresh()
+        return self.ids[key]
+
+    def unique(self, keys: list[str], w: np.ndarray) -> np.ndarray:
+        """The labels of one scan's estimates with ids ``keys``: where several share an id (a GM-PHD's updated and
+        missed-detection copies of one tagged component), the heaviest (``w``; ties: the first) keeps its label and
+        each other one gets a fresh label for this scan."""
+        out = np.empty(len(keys), dtype=np.int64)
+        seen: set[int] = set()
+        for i in np.argsort(-np.asarray(w, dtype=float), kind="stable"):
+            label = self.of(keys[i])
+            if label in seen:
+                label = self.fresh()
+            seen.add(label)
+            out[i] = label
+        return out
+
+
+def _first_seen(tracks: Iterable[Any], labels: TrackLabels) -> list[Any]:
+    """``tracks`` (a set: no fixed order) in a fixed order: known tracks by label, then new ones by their current
+    state vector, so that labels are numbered the same way in every run."""
+    known = sorted((t for t in tracks if str(t.id) in labels.ids), key=lambda t: labels.ids[str(t.id)])
+    new = sorted(
+        (t for t in tracks if str(t.id) not in labels.ids),
+        key=lambda t: tuple(np.asarray(t.state.state_vector, dtype=float).ravel()),
+    )
+    return known + new
 
 
 def _state_array(states: list[Any]) -> np.ndarray:
@@ -312,6 +366,7 @@ class StoneSoupGMPHD(_Base):
             extraction_threshold=float(f.extract_thr),
             birth_component=self.birth,
         )
+        self.labels = TrackLabels()
 
     def step(self, scan: Scan) -> Estimates:
         check_scan(scan)
@@ -328,6 +383,7 @@ class StoneSoupGMPHD(_Base):
             w=w,
             n_components=len(mix),
             cardinality=float(sum(float(c.weight) for c in mix)),
+            labels=self.labels.unique([str(c.tag) for c in states], w),
         )
 
 
@@ -364,11 +420,13 @@ class StoneSoupGNN(_Base):
             data_associator=associator,
             updater=self.updater,
         )
+        self.labels = TrackLabels()
 
     def step(self, scan: Scan) -> Estimates:
         check_scan(scan)
         time, dets = self._detections(scan)
         _, tracks = self.tracker.update_tracker(time, dets)
-        states = [t.state for t in tracks]
+        ordered = _first_seen(tracks, self.labels)
+        labels = np.array([self.labels.of(str(t.id)) for t in ordered], dtype=np.int64)
         n_holding = len(getattr(self.tracker.initiator, "holding_tracks", ()))
-        return Estimates(_state_array(states), n_components=len(tracks) + n_holding)
+        return Estimates(_state_array([t.state for t in ordered]), n_components=len(tracks) + n_holding, labels=labels)

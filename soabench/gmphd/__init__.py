@@ -7,7 +7,7 @@ Modules: :mod:`.mixture` (the arrays), :mod:`.models` (predict, update), :mod:`.
 :mod:`.cycle` (the compiled loops and the fused cycle).
 """
 
-from soabench.gmphd.filter import GMPHDFilter, StepResult
+from soabench.gmphd.filter import GMPHDFilter
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, ekf_terms, measurement_noise, predict, ukf_terms, update
 from soabench.gmphd.reduction import cap, extract, merge, prune, prune_merge_cap
@@ -15,7 +15,6 @@ from soabench.gmphd.reduction import cap, extract, merge, prune, prune_merge_cap
 __all__ = [
     "GMPHDFilter",
     "Mixture",
-    "StepResult",
     "cap",
     "cv_model",
     "ekf_terms",

@@ -9,7 +9,7 @@ costing microseconds of fixed overhead. Here the stages are compiled functions (
 clock of ``time.perf_counter`` (:mod:`soabench.gmphd.clock`) so that ``StepResult`` still reports the three stage
 times. Only what needs Python splits a step: the line-of-sight gate (shapely) of the occlusion-aware mode, between
 the prediction and :func:`update_reduce`, and the newborn terms' ``beta(A, kappa)``, between :func:`support` and
-:func:`posterior_reduce`. What used to be fixed Python cost around the stages is done inside: the birth
+:func:`posterior_reduce`. Work that would be fixed Python cost around the stages is done inside: the birth
 components' input check (:func:`births_ok`, §2.12) and the posterior's origin counts (:func:`origin_counts`, §5.7);
 the settings of a call travel as one float array (``PRED_*``, ``RED_*`` name its entries) that the filter packs
 once instead of converting them on every step.
@@ -17,7 +17,7 @@ once instead of converting them on every step.
 Each formula is the one of the array path, evaluated in the same order where that order is ours (elementwise Beta
 algebra, log-sum-exp, the Kalman kernels of :mod:`soabench.gmphd.kernels`, which both paths share); matrix products
 and sums that numpy hands to BLAS or pairwise summation can differ in the last bits, so the two paths agree to
-1e-12 (``tests/test_fused_cycle.py`` runs both on recorded scans), not bit for bit. Arithmetic is IEEE (no
+1e-12 (``tests/equivalence/test_fused_cycle.py`` runs both on recorded scans), not bit for bit. Arithmetic is IEEE (no
 ``fastmath``), so the fused path itself is bit-reproducible. The array path stays callable as the reference:
 ``GMPHDFilter(..., fused=False)``. The UKF form takes it for a step in which a covariance is not positive
 definite (its jitter retry perturbs every component of the batch, a rule kept in one place).
@@ -31,7 +31,16 @@ import numpy as np
 from numba import njit
 
 from soabench.gmphd.clock import monotonic
-from soabench.gmphd.kernels import _cholesky4, ekf_terms, merge_groups, merge_moments, posterior_pairs, wrap
+from soabench.gmphd.kernels import (
+    _cholesky4,
+    ekf_terms,
+    extract_labels,
+    inv2_sym,
+    merge_groups,
+    merge_moments,
+    posterior_pairs,
+    wrap,
+)
 
 _TINY = 1e-300  #: as :data:`soabench.gmphd.probabilities._TINY`
 _LOG2 = math.log(2.0)
@@ -127,16 +136,18 @@ PRED_P_S, PRED_BETA_FACTOR, PRED_THETA_MIN, PRED_P_S_MAX, PRED_R_MIN, PRED_R_MAX
 
 
 @njit(cache=True)
-def _empty_mixture(dyn):
-    """(w, m, P, origin, n_det, age, beta) of no component, as the compiled calls pass a mixture."""
+def _new_mixture(n, dyn):
+    """(w, m, P, origin, n_det, age, beta, label) of n components, uninitialised, as the compiled calls pass a
+    mixture (beta is (n, 4) for dynamic p_D, else (0, 0); label int64, §2.13)."""
     return (
-        np.empty(0),
-        np.empty((0, 4)),
-        np.empty((0, 4, 4)),
-        np.empty(0, dtype=np.int8),
-        np.empty(0, dtype=np.int32),
-        np.empty(0, dtype=np.int32),
-        np.empty((0, 4) if dyn else (0, 0)),
+        np.empty(n),
+        np.empty((n, 4)),
+        np.empty((n, 4, 4)),
+        np.empty(n, dtype=np.int8),
+        np.empty(n, dtype=np.int32),
+        np.empty(n, dtype=np.int32),
+        np.empty((n, 4) if dyn else (0, 0)),
+        np.empty(n, dtype=np.int64),
     )
 
 
@@ -157,12 +168,13 @@ def births_ok(bw, bm, bP):
 
 
 @njit(cache=True)
-def predict_append(w, m, P, origin, n_det, age, beta, F, Q, pars, bw, bm, bP, bsrc, beta0, ego):
+def predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pars, bw, bm, bP, bsrc, beta0, ego, label0):
     """Steps 1-2 of §2.11 and the FOV gate: predict (§2.5; Beta prediction §4.2, §4.3 when ``beta`` has rows),
-    append the birth components (n_det = age = 0, Beta prior ``beta0``), and g_j = 1[m_j in FOV_k] (§4.1).
+    append the birth components (n_det = age = 0, Beta prior ``beta0``, fresh labels label0, label0 + 1, ... in
+    their order, §2.13), and g_j = 1[m_j in FOV_k] (§4.1).
 
     ``pars``: the scalars named by the ``PRED_*`` indices (p_S, Beta parameters, FOV), one array so that a call
-    unboxes one argument for them. Returns (w, m, P, origin, n_det, age, beta, g) of the J + J_b predicted
+    unboxes one argument for them. Returns (w, m, P, origin, n_det, age, beta, label, g) of the J + J_b predicted
     components and :func:`births_ok` of the birth components; when that is False (a non-finite or negative birth
     input, which the caller must raise on or drop, docs/method.md §2.12) nothing else is computed and the arrays
     are empty. Throughout this module a static-mode mixture carries a (0, 0) ``beta`` and a dynamic one a (J, 4)
@@ -170,7 +182,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, pars, bw, bm, bP, bs
     """
     dyn = beta.shape[1] == 4
     if not births_ok(bw, bm, bP):
-        return (*_empty_mixture(dyn), np.empty(0), False)
+        return (*_new_mixture(0, dyn), np.empty(0), False)
     p_S = pars[PRED_P_S]
     f_beta, theta_min, p_S_max = pars[PRED_BETA_FACTOR], pars[PRED_THETA_MIN], pars[PRED_P_S_MAX]
     r_min, r_max, half_fov = pars[PRED_R_MIN], pars[PRED_R_MAX], pars[PRED_HALF_FOV]
@@ -178,13 +190,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, pars, bw, bm, bP, bs
     J0 = w.shape[0]
     Jb = bw.shape[0]
     J = J0 + Jb
-    w2 = np.empty(J)
-    m2 = np.empty((J, 4))
-    P2 = np.empty((J, 4, 4))
-    origin2 = np.empty(J, dtype=np.int8)
-    n_det2 = np.empty(J, dtype=np.int32)
-    age2 = np.empty(J, dtype=np.int32)
-    beta2 = np.empty((J, 4) if dyn else (0, 0))
+    w2, m2, P2, origin2, n_det2, age2, beta2, label2 = _new_mixture(J, dyn)
     T = np.empty((4, 4))
     for j in range(J0):
         factor = p_S
@@ -223,6 +229,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, pars, bw, bm, bP, bs
         origin2[j] = origin[j]
         n_det2[j] = n_det[j]
         age2[j] = age[j] + 1
+        label2[j] = label[j]
     for k in range(Jb):
         j = J0 + k
         w2[j] = bw[k]
@@ -231,6 +238,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, pars, bw, bm, bP, bs
         origin2[j] = bsrc[k]
         n_det2[j] = 0
         age2[j] = 0
+        label2[j] = label0 + k
         if dyn:
             beta2[j] = beta0
     g = np.empty(J)
@@ -242,7 +250,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, F, Q, pars, bw, bm, bP, bs
         if ok and limited:
             ok = abs(wrap(math.atan2(dy, dx) - ego[2])) <= half_fov
         g[j] = 1.0 if ok else 0.0
-    return w2, m2, P2, origin2, n_det2, age2, beta2, g, True
+    return w2, m2, P2, origin2, n_det2, age2, beta2, label2, g, True
 
 
 @njit(cache=True)
@@ -316,14 +324,7 @@ def ukf_terms(m, P, ego, R, r_min):
                 for i in range(8):
                     acc += (w0 * X[i, a]) * D[i, b]
                 C[j, a, b] = acc
-        sa, sb, sd = S[j, 0, 0], 0.5 * (S[j, 0, 1] + S[j, 1, 0]), S[j, 1, 1]
-        det = sa * sd - sb * sb
-        good = det > 0.0 and math.isfinite(det)
-        if not good:
-            det = 1.0
-        Sinv[j, 0, 0], Sinv[j, 1, 1] = sd / det, sa / det
-        Sinv[j, 0, 1] = Sinv[j, 1, 0] = -sb / det
-        logdet[j] = np.log(det)
+        good = inv2_sym(S[j, 0, 0], 0.5 * (S[j, 0, 1] + S[j, 1, 0]), S[j, 1, 1], Sinv[j], logdet, j)
         eta[j, 0], eta[j, 1] = zr, wrap(zb)
         valid[j] = rmin >= r_lo and good
     return eta, S, Sinv, logdet, C, H, valid, True
@@ -416,11 +417,13 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False
 
 
 @njit(cache=True)
-def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin):
+def posterior(w, m, P, origin, n_det, age, beta, label, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin, nb_label0):
     """Second half of the update (§2.6, §3.4, §4.2): missed-detection terms (all J), detection pairs (j, l) with
     w p_D q / L > 0 in (j, l) order, newborn terms with beta_l / L_l > 0 (``beta_nb`` has M rows, else none).
+    Labels (§2.13): a missed-detection term and every detection pair keep the label of their prior component; the
+    newborn term of measurement l gets the fresh label nb_label0 + l.
 
-    Returns (w, m, P, origin, n_det, age, beta) of the posterior and (n_pairs, n_newborn).
+    Returns (w, m, P, origin, n_det, age, beta, label) of the posterior and (n_pairs, n_newborn).
     """
     p_D, g, det_idx, C, Sinv, S, H, nu_r, nu_b, log_t, log_L, A, _ = sup
     J = w.shape[0]
@@ -470,17 +473,12 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
         if w_nb[ll] > 0.0:
             n_nb += 1
     n = J + n_pairs + n_nb
-    wo = np.empty(n)
-    mo = np.empty((n, 4))
-    Po = np.empty((n, 4, 4))
-    oo = np.empty(n, dtype=np.int8)
-    no = np.empty(n, dtype=np.int32)
-    ao = np.empty(n, dtype=np.int32)
-    bo = np.empty((n, 4) if dyn else (0, 0))
+    wo, mo, Po, oo, no, ao, bo, lo = _new_mixture(n, dyn)
     for j in range(J):
         wo[j] = w[j] * (1.0 - p_D[j])
         _copy_state(mo, Po, j, m, P, j)
         oo[j] = origin[j]
+        lo[j] = label[j]
         no[j] = n_det[j]
         ao[j] = age[j]
         if dyn:
@@ -492,6 +490,7 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
         wo[q] = w_det[jj[p], lj[p]]
         _copy_state(mo, Po, q, m_new, P_new, p)
         oo[q] = origin[src]
+        lo[q] = label[src]
         no[q] = n_det[src] + 1
         ao[q] = age[src]
         if dyn:
@@ -504,29 +503,30 @@ def posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb
             mo[q] = nb_m[ll]
             Po[q] = nb_P[ll]
             oo[q] = nb_origin
+            lo[q] = nb_label0 + ll
             no[q] = 1
             ao[q] = 0
             if dyn:
                 bo[q] = nb_beta
             q += 1
-    return wo, mo, Po, oo, no, ao, bo, n_pairs, n_nb
+    return wo, mo, Po, oo, no, ao, bo, lo, n_pairs, n_nb
 
 
 @njit(cache=True)
-def update(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False):
+def update(w, m, P, origin, n_det, age, beta, label, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False):
     """:func:`support` then :func:`posterior` without newborn terms, in one call; returns (posterior, A, ok)."""
     sup = support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
     no_nb = np.empty(0)
     # nb_origin as an int64 variable, not the literal 0: then this is the specialisation posterior_reduce compiles
     # too (a literal argument would make numba compile posterior a second time)
     nb_origin = np.int64(0)
-    out = posterior(w, m, P, origin, n_det, age, beta, sup, R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)), no_nb,
-                    nb_origin)  # fmt: skip
+    out = posterior(w, m, P, origin, n_det, age, beta, label, sup, R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)),
+                    no_nb, nb_origin, nb_origin)  # fmt: skip
     return out, sup[11], sup[12]
 
 
 @njit(cache=True)
-def _take(w, m, P, origin, n_det, age, beta, keep):
+def _take(w, m, P, origin, n_det, age, beta, label, keep):
     """The components where ``keep`` (bool, J) is True, in order."""
     n = 0
     for j in range(keep.shape[0]):
@@ -538,23 +538,21 @@ def _take(w, m, P, origin, n_det, age, beta, keep):
         if keep[j]:
             idx[k] = j
             k += 1
-    return _select(w, m, P, origin, n_det, age, beta, idx)
+    return _select(w, m, P, origin, n_det, age, beta, label, idx)
 
 
 @njit(cache=True)
-def _select(w, m, P, origin, n_det, age, beta, idx):
+def _select(w, m, P, origin, n_det, age, beta, label, idx):
     n = idx.shape[0]
     dyn = beta.shape[1] == 4
-    bo = np.empty((n, 4) if dyn else (0, 0))
-    wo, mo, Po = np.empty(n), np.empty((n, 4)), np.empty((n, 4, 4))
-    oo, no, ao = np.empty(n, dtype=np.int8), np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
+    wo, mo, Po, oo, no, ao, bo, lo = _new_mixture(n, dyn)
     for k in range(n):
         i = idx[k]
-        wo[k], oo[k], no[k], ao[k] = w[i], origin[i], n_det[i], age[i]
+        wo[k], oo[k], no[k], ao[k], lo[k] = w[i], origin[i], n_det[i], age[i], label[i]
         _copy_state(mo, Po, k, m, P, i)
         if dyn:
             bo[k] = beta[i]
-    return wo, mo, Po, oo, no, ao, bo
+    return wo, mo, Po, oo, no, ao, bo, lo
 
 
 #: indices of :func:`reduce`'s ``pars``: max_age (< 0: off), T, U, J_max, theta_min, the extraction threshold,
@@ -578,13 +576,16 @@ def origin_counts(origin, age, n_sources):
 
 
 @njit(cache=True)
-def reduce(w, m, P, origin, n_det, age, beta, pars):
+def reduce(w, m, P, origin, n_det, age, beta, label, pars, next_label):
     """§2.9-2.10 and §4.5: drop undetected births older than max_age (< 0: off), prune w > T, Vo-Ma merge
     (Table II, moment matching, Beta moment matching of multi-member groups), keep the J_max heaviest, extract
     (Vo-Ma: w > thr, floor(w + 0.5) copies; otherwise no extraction here), count the posterior by origin (§5.7).
+    Labels (§2.13): a merged component takes the label of its group's j*; the estimates are labelled by
+    :func:`extract_labels` with fresh labels from ``next_label`` on.
 
     ``pars``: the scalars named by the ``RED_*`` indices, one array so that a call unboxes one argument for them.
-    Returns ((w, m, P, origin, n_det, age, beta), X, X_w, origin counts, (sum_w, n_pruned, n_merged, cap_hit)).
+    Returns ((w, m, P, origin, n_det, age, beta, label), X, X_w, X_label, origin counts, (sum_w, n_pruned, n_merged,
+    cap_hit, next unused label)).
     """
     max_age, T, U = int(pars[RED_MAX_AGE]), pars[RED_T], pars[RED_U]
     J_max, theta_min, extract_thr = int(pars[RED_J_MAX]), pars[RED_THETA_MIN], pars[RED_EXTRACT_THR]
@@ -596,17 +597,17 @@ def reduce(w, m, P, origin, n_det, age, beta, pars):
     keep = np.empty(J, dtype=np.bool_)
     for j in range(J):
         keep[j] = w[j] > T and not (max_age >= 0 and n_det[j] == 0 and age[j] > max_age)
-    w, m, P, origin, n_det, age, beta = _take(w, m, P, origin, n_det, age, beta, keep)
+    w, m, P, origin, n_det, age, beta, label = _take(w, m, P, origin, n_det, age, beta, label, keep)
     n_pruned = w.shape[0]
     dyn = beta.shape[1] == 4
     if n_pruned > 0:
         order = _order_heaviest_first(w)
-        label, centres = merge_groups(m, P, order, U)  # q <= U (1 + 1e-9): a pair at exactly U merges (§2.9)
+        group, centres = merge_groups(m, P, order, U)  # q <= U (1 + 1e-9): a pair at exactly U merges (§2.9)
         G = centres.shape[0]
         if G == n_pruned:
-            w, m, P, origin, n_det, age, beta = _select(w, m, P, origin, n_det, age, beta, centres)
+            w, m, P, origin, n_det, age, beta, label = _select(w, m, P, origin, n_det, age, beta, label, centres)
         else:
-            W, mt, Pt, nd, ag, counts = merge_moments(label, centres, w, m, P, n_det, age)
+            W, mt, Pt, nd, ag, counts = merge_moments(group, centres, w, m, P, n_det, age)
             bo = np.empty((G, 4) if dyn else (0, 0))
             if dyn:
                 for g in range(G):
@@ -614,7 +615,7 @@ def reduce(w, m, P, origin, n_det, age, beta, pars):
                 wmu = np.zeros((G, 2))
                 wsec = np.zeros((G, 2))
                 for i in range(n_pruned):
-                    g = label[i]
+                    g = group[i]
                     if counts[g] > 1:
                         for h in range(2):
                             s, t = beta[i, 2 * h], beta[i, 2 * h + 1]
@@ -631,33 +632,52 @@ def reduce(w, m, P, origin, n_det, age, beta, pars):
                             theta = max(mu * (1.0 - mu) / v - 1.0, theta_min)
                             bo[g, 2 * h], bo[g, 2 * h + 1] = theta * mu, theta * (1.0 - mu)
             oo = np.empty(G, dtype=np.int8)
+            lo = np.empty(G, dtype=np.int64)
             for g in range(G):
                 oo[g] = origin[centres[g]]
-            w, m, P, origin, n_det, age, beta = W, mt, Pt, oo, nd, ag, bo
+                lo[g] = label[centres[g]]
+            w, m, P, origin, n_det, age, beta, label = W, mt, Pt, oo, nd, ag, bo, lo
     n_merged = w.shape[0]
     cap_hit = n_merged > J_max
     if cap_hit:
         top = _order_heaviest_first(w)[:J_max]
         keep = np.zeros(n_merged, dtype=np.bool_)
         keep[top] = True
-        w, m, P, origin, n_det, age, beta = _take(w, m, P, origin, n_det, age, beta, keep)
-    n_x = 0
+        w, m, P, origin, n_det, age, beta, label = _take(w, m, P, origin, n_det, age, beta, label, keep)
+    n_e = 0
     if vo_ma:
         for j in range(w.shape[0]):
             if w[j] > extract_thr:
-                n_x += int(math.floor(w[j] + 0.5))
-    X = np.empty((n_x, 4))
-    X_w = np.empty(n_x)
+                n_e += 1
+    idx = np.empty(n_e, dtype=np.int64)
+    reps = np.empty(n_e, dtype=np.int64)
+    n_x = 0
     k = 0
     if vo_ma:
         for j in range(w.shape[0]):
             if w[j] > extract_thr:
-                for _ in range(int(math.floor(w[j] + 0.5))):
-                    X[k] = m[j]
-                    X_w[k] = w[j]
-                    k += 1
+                idx[k] = j
+                reps[k] = int(math.floor(w[j] + 0.5))
+                n_x += reps[k]
+                k += 1
+    X = np.empty((n_x, 4))
+    X_w = np.empty(n_x)
+    k = 0
+    for e in range(n_e):
+        for _ in range(reps[e]):
+            X[k] = m[idx[e]]
+            X_w[k] = w[idx[e]]
+            k += 1
+    X_label, label, next_label = extract_labels(w, label, idx, reps, next_label)
     counts = origin_counts(origin, age, n_sources)
-    return (w, m, P, origin, n_det, age, beta), X, X_w, counts, (sum_w, n_pruned, n_merged, cap_hit)
+    return (
+        (w, m, P, origin, n_det, age, beta, label),
+        X,
+        X_w,
+        X_label,
+        counts,
+        (sum_w, n_pruned, n_merged, cap_hit, next_label),
+    )
 
 
 # -- one call per scan -----------------------------------------------------------------------------------------------
@@ -674,14 +694,16 @@ STEP_OK, STEP_BAD_BIRTHS, STEP_NOT_PD = 0, 1, 2
 @njit(cache=True)
 def _no_reduction(dyn):
     """What :func:`reduce` returns for an empty posterior (the value :func:`step` returns when it stops early)."""
-    return _empty_mixture(dyn), np.empty((0, 4)), np.empty(0), np.zeros(0, dtype=np.int64), (0.0, 0, 0, False)
+    empty_label = np.zeros(0, dtype=np.int64)
+    return _new_mixture(0, dyn), np.empty((0, 4)), np.empty(0), empty_label, empty_label, (0.0, 0, 0, False, 0)
 
 
 @njit(cache=True)
-def step(w, m, P, origin, n_det, age, beta, F, Q, pred_pars, bw, bm, bP, bsrc, beta0, ego, p_D0, Z, R, r_min,
-         gate_thr, kappa, ukf, red_pars):  # fmt: skip
+def step(w, m, P, origin, n_det, age, beta, label, F, Q, pred_pars, bw, bm, bP, bsrc, beta0, ego, p_D0, Z, R, r_min,
+         gate_thr, kappa, ukf, red_pars, next_label):  # fmt: skip
     """One filter cycle without newborn terms and without the line-of-sight gate: :func:`predict_append`, then
-    :func:`update_reduce` (:func:`update`, :func:`reduce`), in one call.
+    :func:`update_reduce` (:func:`update`, :func:`reduce`), in one call. The birth components take the labels
+    next_label, next_label + 1, ... (§2.13); the reduction's fresh labels follow them.
 
     Returns (status, n_predicted, n_updated, n_pairs, A, reduction, times): ``status`` one of ``STEP_*``;
     ``reduction`` is :func:`reduce`'s value (empty unless ``status`` is ``STEP_OK``); ``times`` the seconds of
@@ -689,43 +711,48 @@ def step(w, m, P, origin, n_det, age, beta, F, Q, pred_pars, bw, bm, bP, bsrc, b
     """
     times = np.zeros(3)
     t0 = monotonic()
-    pred = predict_append(w, m, P, origin, n_det, age, beta, F, Q, pred_pars, bw, bm, bP, bsrc, beta0, ego)
+    pred = predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pred_pars, bw, bm, bP, bsrc, beta0, ego,
+                          next_label)  # fmt: skip
     times[0] = monotonic() - t0
-    if not pred[8]:
+    if not pred[9]:
         return STEP_BAD_BIRTHS, 0, 0, 0, np.empty(0), _no_reduction(beta.shape[1] == 4), times
     status, n_updated, n_pairs, A, red, ur = update_reduce(
-        *pred[:8], p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars
+        *pred[:9], p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars, next_label + bw.shape[0]
     )
     times[1], times[2] = ur[0], ur[1]
     return status, pred[0].shape[0] if status == STEP_OK else 0, n_updated, n_pairs, A, red, times
 
 
 @njit(cache=True)
-def update_reduce(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars):
+def update_reduce(w, m, P, origin, n_det, age, beta, label, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars,
+                  next_label):  # fmt: skip
     """:func:`update` and :func:`reduce` in one call, for a predicted mixture whose gate ``g`` the caller has
     refined (the line-of-sight gate, §4.4). Returns (status, n_updated, n_pairs, A, reduction, times) as
     :func:`step` (``times``: update, reduce)."""
     times = np.zeros(2)
     t1 = monotonic()
-    post, A, ok = update(w, m, P, origin, n_det, age, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
+    post, A, ok = update(w, m, P, origin, n_det, age, beta, label, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
     t2 = monotonic()
     times[0] = t2 - t1
     if not ok:
         return STEP_NOT_PD, 0, 0, A, _no_reduction(beta.shape[1] == 4), times
-    red = reduce(*post[:7], red_pars)
+    red = reduce(*post[:8], red_pars, next_label)
     times[1] = monotonic() - t2
-    return STEP_OK, post[0].shape[0], post[7], A, red, times
+    return STEP_OK, post[0].shape[0], post[8], A, red, times
 
 
 @njit(cache=True)
-def posterior_reduce(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin, red_pars):
-    """:func:`posterior` (with the newborn terms' ``beta_nb``) and :func:`reduce` in one call. Returns (n_updated,
-    n_pairs, n_newborn, reduction, times) with ``times`` the seconds of posterior and reduce."""
+def posterior_reduce(w, m, P, origin, n_det, age, beta, label, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin,
+                     red_pars, nb_label0):  # fmt: skip
+    """:func:`posterior` (with the newborn terms' ``beta_nb``, labelled nb_label0 + l) and :func:`reduce` (fresh
+    labels after the M newborn labels) in one call. Returns (n_updated, n_pairs, n_newborn, reduction, times) with
+    ``times`` the seconds of posterior and reduce."""
     times = np.zeros(2)
     t1 = monotonic()
-    post = posterior(w, m, P, origin, n_det, age, beta, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin)
+    post = posterior(w, m, P, origin, n_det, age, beta, label, sup, R, beta_nb, nb_m, nb_P, nb_beta, nb_origin,
+                     nb_label0)  # fmt: skip
     t2 = monotonic()
     times[0] = t2 - t1
-    red = reduce(*post[:7], red_pars)
+    red = reduce(*post[:8], red_pars, nb_label0 + beta_nb.shape[0])
     times[1] = monotonic() - t2
-    return post[0].shape[0], post[7], post[8], red, times
+    return post[0].shape[0], post[8], post[9], red, times

@@ -34,9 +34,10 @@ from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite,
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
-from soabench.gmphd.reduction import extract, prune_merge_cap
+from soabench.gmphd.reduction import extract_labelled, prune_merge_cap
 from soabench.origins import origin_counts
-from soabench.types import (  # StepResult re-exported: old import path
+from soabench.sensor import line_of_sight_past, sight_blockers
+from soabench.types import (
     SOURCE_MEAS,
     SOURCE_NAMES,
     Births,
@@ -61,6 +62,8 @@ class GMPHDFilter:
 
     Attributes:
         mixture: the current posterior (after reduction); empty at k = 0.
+        next_label: the next fresh track label of this run (§2.13): 1 at k = 0, advanced by every birth component,
+            every newborn term and every fresh label of an extraction.
     """
 
     def __init__(
@@ -86,6 +89,7 @@ class GMPHDFilter:
             self.beta_newborn = self.beta0.copy()
             self.beta_newborn[0] += 1.0
         self.mixture = Mixture.empty(self.dynamic)
+        self.next_label = 1
         self.fused = bool(fused)
         self._ukf = filter_cfg.form == "ukf"
         self._init_fused()
@@ -122,11 +126,13 @@ class GMPHDFilter:
         self._kappa_key = ("filter.kappa", s.clutter_space, s.lambda_c, s.r_min, s.r_max, s.fov_deg)
 
     def reset(self) -> None:
-        """Forget the posterior (next step is k = 0 again)."""
+        """Forget the posterior and restart the label counter (next step is k = 0 again)."""
         self.mixture = Mixture.empty(self.dynamic)
+        self.next_label = 1
 
     def _predict(self, births: Births) -> Mixture:
-        """Step 1-2 of §2.11: predict the persistent mixture (§2.5, §4.3) and append the birth components."""
+        """Step 1-2 of §2.11: predict the persistent mixture (§2.5, §4.3) and append the birth components, labelled
+        ``next_label``, ``next_label + 1``, ... (§2.13)."""
         mix = self.mixture
         if self.dynamic and len(mix):
             p_S, beta = beta_predict(mix.beta, self.cfg)
@@ -135,8 +141,9 @@ class GMPHDFilter:
         else:
             mix = predict(mix, self.F, self.Q, self.cfg.p_S)
         if len(births):
+            fresh = np.arange(self.next_label, self.next_label + len(births), dtype=np.int64)
             born = Mixture.from_arrays(
-                births.w, births.m, births.P, origin=births.source, n_det=0, age=0, beta=self.beta0
+                births.w, births.m, births.P, origin=births.source, n_det=0, age=0, beta=self.beta0, label=fresh
             )
             mix = Mixture.concatenate([mix, born]) if len(mix) else born
         return mix
@@ -213,6 +220,7 @@ class GMPHDFilter:
             r_min=self.sensor.r_min,
             newborn=births.newborn,
             newborn_beta=self.beta_newborn,
+            newborn_label0=self.next_label + len(births),
         )
         post = up.mix
         t2 = time.perf_counter()
@@ -223,7 +231,8 @@ class GMPHDFilter:
                 post = post.select(keep)
         red = prune_merge_cap(post, cfg.prune_T, cfg.merge_U, cfg.J_max, cfg.theta_min)
         self.mixture = red.mix
-        X, X_w = extract(red.mix, cfg.extract_thr, cfg.extraction)
+        next_label = self.next_label + len(births) + (len(Z) if births.newborn is not None else 0)
+        X, X_w, X_label, self.next_label = extract_labelled(red.mix, cfg.extract_thr, cfg.extraction, next_label)
         t3 = time.perf_counter()
 
         w = red.mix.w
@@ -252,6 +261,7 @@ class GMPHDFilter:
             n_dropped=checked.n_dropped,
             n_dropped_births=checked.n_dropped_births,
             origin_counts=origin_counts(red.mix.origin, red.mix.age),
+            labels=X_label,
         )
 
     def _step_fused(
@@ -278,7 +288,7 @@ class GMPHDFilter:
         status, n_predicted, n_updated, n_pairs, A, reduced, times = cycle.step(
             *_mixture_arrays(mix), self.F, self.Q,
             self._pred_pars, *(_birth_arrays(births) if len(births) else self._no_births), self._beta0, ego,
-            self._p_D, Z, self.R, self._r_min, self._gate, kappa, self._ukf, self._red_pars,
+            self._p_D, Z, self.R, self._r_min, self._gate, kappa, self._ukf, self._red_pars, self.next_label,
         )  # fmt: skip
         if status == cycle.STEP_BAD_BIRTHS:
             return None
@@ -297,15 +307,15 @@ class GMPHDFilter:
         pred = cycle.predict_append(
             *_mixture_arrays(mix), self.F, self.Q,
             self._pred_pars, *(_birth_arrays(births) if len(births) else self._no_births), self._beta0, ego,
+            self.next_label,
         )  # fmt: skip
-        if not pred[8]:
+        if not pred[9]:
             return None
-        g = pred[7]
+        g = pred[8]
+        label0 = self.next_label + len(births)  # the first label after the birth components' (§2.13)
         newborn = births.newborn
         n_predicted = len(g) + (len(Z) if newborn is not None else 0)
         if self.occlusion and scan.occluders and g.any():  # line-of-sight gate (§4.4), as detection_gate
-            from soabench.sensor import line_of_sight_past, sight_blockers
-
             idx = np.flatnonzero(g)
             make = lambda: (sight_blockers(ego[:2], scan.occluders), scan.occluders)  # noqa: E731
             key = ("filter.sight_blockers", id(scan.occluders), len(scan.occluders), ego[0], ego[1])
@@ -316,7 +326,7 @@ class GMPHDFilter:
 
         if newborn is None:
             status, n_updated, n_pairs, A, reduced, times = cycle.update_reduce(
-                *pred[:8], self._p_D, Z, ego, self.R, self._r_min, self._gate, kappa, self._ukf, self._red_pars
+                *pred[:9], self._p_D, Z, ego, self.R, self._r_min, self._gate, kappa, self._ukf, self._red_pars, label0
             )
             if status == cycle.STEP_NOT_PD:
                 return self._step_array(scan, StepInputs(Z, ego, births, 0, 0))
@@ -336,7 +346,7 @@ class GMPHDFilter:
                 beta_nb = np.where(beta_nb > 0.0, beta_nb, 0.0)  # a newborn term is a non-negative intensity
             t2 = time.perf_counter()
             n_updated, n_pairs, n_newborn, reduced, times = cycle.posterior_reduce(
-                *pred[:7],
+                *pred[:8],
                 sup,
                 self.R,
                 beta_nb,
@@ -345,6 +355,7 @@ class GMPHDFilter:
                 self._nb_beta,
                 SOURCE_MEAS,
                 self._red_pars,
+                label0,
             )
             t_update, t_reduce = t2 - t1 + times[0], times[1]
         return self._fused_result(scan, reduced, t1 - t0, t_update, t_reduce, n_predicted, n_updated, n_pairs,
@@ -365,14 +376,17 @@ class GMPHDFilter:
         kappa: np.ndarray,
     ) -> StepResult:
         """Keep the reduced posterior of a fused step, extract (unless Vo-Ma extraction ran compiled), and report."""
-        red, X, X_w, counts, (sum_w, n_pruned, n_merged, cap_hit) = reduced
+        red, X, X_w, X_label, counts, (sum_w, n_pruned, n_merged, cap_hit, next_label) = reduced
         if cap_hit:
             cfg = self.cfg
             reduction.log.info("J_max = %d hit: %d components reduced to %d", cfg.J_max, n_merged, cfg.J_max)
-        self.mixture = Mixture(*red[:6], red[6] if self.dynamic else None)
+        self.mixture = Mixture(*red[:6], red[6] if self.dynamic else None, red[7])
+        self.next_label = next_label
         if not self._vo_ma:
             t = time.perf_counter()
-            X, X_w = extract(self.mixture, self.cfg.extract_thr, self.cfg.extraction)
+            X, X_w, X_label, self.next_label = extract_labelled(
+                self.mixture, self.cfg.extract_thr, self.cfg.extraction, next_label
+            )
             t_reduce += time.perf_counter() - t
         w = red[0]
         return StepResult(
@@ -396,6 +410,7 @@ class GMPHDFilter:
             n_pairs=n_pairs,
             n_newborn=n_newborn,
             origin_counts=counts,
+            labels=X_label,
         )
 
     def _kappa(self, Z: np.ndarray) -> np.ndarray:
@@ -432,7 +447,7 @@ def _read_only(a: np.ndarray) -> np.ndarray:
 
 def _mixture_arrays(mix: Mixture) -> tuple[np.ndarray, ...]:
     """A mixture's arrays as :mod:`soabench.gmphd.cycle` takes them (contiguous, float / int8 / int32; Beta (J, 4)
-    or (0, 0)): no copy for the mixtures the cycle itself produced."""
+    or (0, 0); labels int64): no copy for the mixtures the cycle itself produced."""
     return (
         np.ascontiguousarray(mix.w, dtype=float),
         np.ascontiguousarray(mix.m, dtype=float),
@@ -441,6 +456,7 @@ def _mixture_arrays(mix: Mixture) -> tuple[np.ndarray, ...]:
         np.ascontiguousarray(mix.n_det, dtype=np.int32),
         np.ascontiguousarray(mix.age, dtype=np.int32),
         _beta_array(mix.beta),
+        np.ascontiguousarray(mix.label, dtype=np.int64),
     )
 
 

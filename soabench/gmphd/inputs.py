@@ -1,4 +1,4 @@
-"""The filter's API boundary: measurements, ego pose and birth components checked before a cycle (issue 14).
+"""The filter's API boundary: measurements, ego pose and birth components checked before a cycle.
 
 A NaN or inf in Z_k, in the ego pose or in a birth component would otherwise flow into the means, the weights and
 the extracted states (a NaN measurement with PUBM or ATBM builds a NaN newborn). ``filter.nonfinite`` chooses:
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from soabench.birth.base import Births, NewbornTerms
 from soabench.errors import SoabenchError
+from soabench.types import Births, NewbornTerms
 
 NONFINITE_POLICIES = ("raise", "drop")
 

@@ -2,8 +2,8 @@
 
 Each kernel is the formula written once per component or per (j, l) pair, compiled by numba. Why compiled: a
 filter step is a few hundred small array operations, and at the mixture sizes of a trial (tens of components) numpy's
-fixed cost per call, not arithmetic, set the step time (about 0.6 ms at J = 50). The kernels take that to tens of
-microseconds; ``benchmarks/bench_filter_vs_stonesoup.py`` measures it against Stone Soup.
+fixed cost per call, not arithmetic, sets the step time. Compiled, the step costs a small fraction of that
+(``benchmarks/README.md`` has both; ``benchmarks/bench_filter_vs_stonesoup.py`` measures it against Stone Soup).
 
 Arithmetic is IEEE (no ``fastmath``: no reassociation, no fused multiply-add contraction), so a result does not
 depend on the vector width of the CPU, and the same seed gives bit-identical results serial or parallel.
@@ -32,6 +32,21 @@ def wrap(a: float) -> float:
     """Map an angle to (-pi, pi] (§2.1), as :func:`soabench.geometry.wrap`."""
     out = (a + math.pi) % _TWO_PI - math.pi
     return math.pi if out == -math.pi else out
+
+
+@njit(cache=True, inline="always")
+def inv2_sym(a, b, d, Sinv, logdet, j):
+    """Closed-form inverse of the symmetric 2x2 block [[a, b], [b, d]] into Sinv (2, 2) and log det into logdet[j]
+    (§2.12 item 5). A block whose determinant is not positive and finite gets det = 1 (its row is marked invalid by
+    the caller). Returns whether the determinant was positive and finite."""
+    det = a * d - b * b
+    good = det > 0.0 and math.isfinite(det)
+    if not good:
+        det = 1.0
+    Sinv[0, 0], Sinv[1, 1] = d / det, a / det
+    Sinv[0, 1] = Sinv[1, 0] = -b / det
+    logdet[j] = math.log(det)
+    return good
 
 
 @njit(cache=True)
@@ -70,13 +85,7 @@ def ekf_terms(m, P, ego, R, r_min):
         s11 = h10 * C[j, 0, 1] + h11 * C[j, 1, 1] + R[1, 1]
         s01 = 0.5 * ((h00 * C[j, 0, 1] + h01 * C[j, 1, 1] + R[0, 1]) + (h10 * C[j, 0, 0] + h11 * C[j, 1, 0] + R[1, 0]))
         S[j, 0, 0], S[j, 0, 1], S[j, 1, 0], S[j, 1, 1] = s00, s01, s01, s11
-        det = s00 * s11 - s01 * s01
-        good = det > 0.0 and math.isfinite(det)
-        if not good:
-            det = 1.0
-        Sinv[j, 0, 0], Sinv[j, 1, 1] = s11 / det, s00 / det
-        Sinv[j, 0, 1] = Sinv[j, 1, 0] = -s01 / det
-        logdet[j] = math.log(det)
+        good = inv2_sym(s00, s01, s11, Sinv[j], logdet, j)
         valid[j] = ok and good
     return eta, S, Sinv, logdet, C, H, valid
 
@@ -184,6 +193,41 @@ _SLACK = 1.0 + 1e-8  #: relative slack of the reach radius (rounding of Cholesky
 
 
 @njit(cache=True)
+def _merge_reaches(m, P, U):
+    """Cholesky factors and squared reaches of the components for the indexed merges (§2.9): rho_i^2 =
+    U lambda_max(P_i,xy) with slack, or -1 for a component outside the index (its covariance is not positive
+    definite or its position is not finite). Returns (L (J, 4, 4), reach2 (J,), how many are indexed)."""
+    J = m.shape[0]
+    L = np.zeros((J, 4, 4))
+    reach2 = np.empty(J)
+    n_idx = 0
+    for i in range(J):
+        ok = _cholesky4(P[i], L[i]) and math.isfinite(m[i, 0]) and math.isfinite(m[i, 1])
+        if ok:
+            a, b, d = P[i, 0, 0], P[i, 1, 0], P[i, 1, 1]
+            lam = 0.5 * (a + d) + math.sqrt(0.25 * (a - d) * (a - d) + b * b)
+            reach2[i] = U * lam * _SLACK
+            n_idx += 1
+        else:
+            reach2[i] = -1.0
+    return L, reach2, n_idx
+
+
+@njit(cache=True, inline="always")
+def _merge_q(x, c, L, y):
+    """q = (x - c)^T P^-1 (x - c) = |y|^2 with y = L^-1 (x - c) by forward substitution (L the Cholesky factor of
+    P, y a scratch vector of 4), summed in row order: the one evaluation every merge kernel shares (§2.9)."""
+    q = 0.0
+    for a in range(4):
+        s = x[a] - c[a]
+        for b in range(a):
+            s -= L[a, b] * y[b]
+        y[a] = s / L[a, a]
+        q += y[a] * y[a]
+    return q
+
+
+@njit(cache=True)
 def _select(perm, key, a, b, k):
     """Reorder perm[a:b] so that key[perm[k]] is the (k - a)-th smallest, smaller-or-equal keys before it and
     larger-or-equal after it (Hoare's quickselect with the median of three as pivot; O(b - a) on average)."""
@@ -275,10 +319,9 @@ def merge_groups(m, P, order, U):
 
     Every search structure gives exactly the same groups (the same quadratic form, evaluated the same way, on a
     superset of the candidates that can merge): :func:`merge_groups_window` for small mixtures, where its O(J x
-    groups) is a few microseconds, :func:`merge_groups_grid` (about O(J) plus each pass's 3 x 3 cells) above
+    groups) costs least, :func:`merge_groups_grid` (about O(J) plus each pass's 3 x 3 cells) above
     ``_SMALL_MERGE`` components. :func:`merge_groups_tree` (a 2-d tree, about O(J log J)) gives the same groups
-    and is kept as the reference of ``benchmarks/bench_merge_scaling.py``; the grid is about 1.8x faster on the
-    mixtures of a 200-pedestrian trial.
+    and is kept as the reference of ``benchmarks/bench_merge_scaling.py``, which times all three.
     Returns (label (J,), centres (G,)): the group of each component and the j* of each group, in creation order.
     """
     if m.shape[0] <= _SMALL_MERGE:
@@ -304,18 +347,7 @@ def merge_groups_tree(m, P, order, U):
     """
     U = merge_threshold(U)  # the tie rule of §2.9; every bound below is derived from this U
     J = m.shape[0]
-    L = np.zeros((J, 4, 4))
-    reach2 = np.empty(J)  # rho_i^2 with slack; -1 for components outside the index
-    n_idx = 0
-    for i in range(J):
-        ok = _cholesky4(P[i], L[i]) and math.isfinite(m[i, 0]) and math.isfinite(m[i, 1])
-        if ok:
-            a, b, d = P[i, 0, 0], P[i, 1, 0], P[i, 1, 1]
-            lam = 0.5 * (a + d) + math.sqrt(0.25 * (a - d) * (a - d) + b * b)
-            reach2[i] = U * lam * _SLACK
-            n_idx += 1
-        else:
-            reach2[i] = -1.0
+    L, reach2, n_idx = _merge_reaches(m, P, U)
     perm = np.empty(n_idx, dtype=np.int64)
     k = 0
     for i in range(J):
@@ -394,13 +426,7 @@ def merge_groups_tree(m, P, order, U):
                 ey = sm[k, 1] - py
                 if ex * ex + ey * ey > sreach2[k]:  # beyond its own reach: q > U (the node test, per member)
                     continue
-                q = 0.0
-                for a in range(4):  # y = L_i^-1 d by forward substitution
-                    s = sm[k, a] - mc[a]
-                    for b in range(a):
-                        s -= sL[k, a, b] * y[b]
-                    y[a] = s / sL[k, a, a]
-                    q += y[a] * y[a]
+                q = _merge_q(sm[k], mc, sL[k], y)
                 if q <= U:
                     i = perm[k]
                     alive[i] = False
@@ -463,18 +489,7 @@ def merge_groups_grid(m, P, order, U):
     """
     U = merge_threshold(U)  # the tie rule of §2.9; every bound below is derived from this U
     J = m.shape[0]
-    L = np.zeros((J, 4, 4))
-    reach2 = np.empty(J)
-    n_idx = 0
-    for i in range(J):
-        ok = _cholesky4(P[i], L[i]) and math.isfinite(m[i, 0]) and math.isfinite(m[i, 1])
-        if ok:
-            a, b, d = P[i, 0, 0], P[i, 1, 0], P[i, 1, 1]
-            lam = 0.5 * (a + d) + math.sqrt(0.25 * (a - d) * (a - d) + b * b)
-            reach2[i] = U * lam * _SLACK
-            n_idx += 1
-        else:
-            reach2[i] = -1.0
+    L, reach2, n_idx = _merge_reaches(m, P, U)
     # reach classes
     level = np.full(J, -1, dtype=np.int64)
     n_lev = 0
@@ -639,9 +654,9 @@ def _grid_remove(k, cell, cstart, ccount, sidx, sm, sL, sreach2, slot_of):
 
 @njit(cache=True)
 def merge_groups_window(m, P, order, U):
-    """:func:`merge_groups` with an x-sorted window (the only search structure before the tree; it is also the
-    baseline of ``benchmarks/bench_merge_scaling.py``). Each pass scans every component in the window, merged or
-    not: O(J x groups) once the widest covariance makes the window wide.
+    """:func:`merge_groups` with an x-sorted window (also the baseline of ``benchmarks/bench_merge_scaling.py``).
+    Each pass scans every component in the window, merged or not: O(J x groups) once the widest covariance makes
+    the window wide.
 
     The quadratic form is |L_i^-1 d|^2 with L_i the Cholesky factor of P_i. Candidates are looked up in a window
     of the x-sorted means: d^T P_i^-1 d >= dx^2 / P_i,xx, so only |dx| <= sqrt(U max_i P_i,xx) can merge. A
@@ -680,13 +695,7 @@ def merge_groups_window(m, P, order, U):
             d0 = m[i, 0] - m[c, 0]
             if d0 * d0 > U * P[i, 0, 0] * (1.0 + 1e-9):  # the x marginal alone already exceeds U
                 continue
-            q = 0.0
-            for a in range(4):  # y = L_i^-1 d by forward substitution
-                s = m[i, a] - m[c, a]
-                for b in range(a):
-                    s -= L[i, a, b] * y[b]
-                y[a] = s / L[i, a, a]
-                q += y[a] * y[a]
+            q = _merge_q(m[i], m[c], L[i], y)
             if q <= U:
                 alive[i] = False
                 label[i] = G
@@ -744,3 +753,82 @@ def merge_moments(label, centres, w, m, P, n_det, age):
                     Pt[g, a, b] = s
                     Pt[g, b, a] = s
     return W, mt, Pt, nd, ag, count
+
+
+_FEW_ESTIMATES = 24  #: up to this many extracted components, label conflicts are found by a pairwise test
+
+
+@njit(cache=True)
+def extract_labels(w, label, idx, reps, next_label):
+    """The labels of the estimates extracted from components ``idx`` (``reps[k]`` copies of component idx[k], in
+    the order of X), by the rule of §2.13: each estimate takes its component's label; when extracted components
+    share a label, the heaviest keeps it (equal weights: the lower index) and each other one gets a fresh label,
+    written back, heaviest first; the second and later copies of one component get fresh labels that are not
+    written back. Fresh labels are next_label, next_label + 1, ...
+
+    Returns (labels of the estimates, the components' labels after the write-back (``label`` itself, changed in
+    place), the next unused label).
+    """
+    n = idx.shape[0]
+    n_dup = 0  # estimates whose label an earlier one has: the losers of the conflicts
+    if n <= _FEW_ESTIMATES:  # the usual scan: a pairwise test allocates nothing
+        for a in range(1, n):
+            for c in range(a):
+                if label[idx[c]] == label[idx[a]]:
+                    n_dup += 1
+                    break
+    else:
+        keys = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            keys[k] = label[idx[k]]
+        by_key = np.argsort(keys, kind="mergesort")
+        for k in range(1, n):
+            if keys[by_key[k]] == keys[by_key[k - 1]]:
+                n_dup += 1
+    if n_dup > 0:  # every member of a run of equal labels but its heaviest is a loser
+        keys = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            keys[k] = label[idx[k]]
+        by_key = np.argsort(keys, kind="mergesort")
+        loser = np.zeros(n, dtype=np.bool_)
+        a = 0
+        while a < n:
+            b = a + 1
+            while b < n and keys[by_key[b]] == keys[by_key[a]]:
+                b += 1
+            best = by_key[a]
+            for k in range(a + 1, b):
+                c = by_key[k]
+                if w[idx[c]] > w[idx[best]] or (w[idx[c]] == w[idx[best]] and idx[c] < idx[best]):
+                    best = c
+            for k in range(a, b):
+                loser[by_key[k]] = by_key[k] != best
+            a = b
+        pos = np.empty(n_dup, dtype=np.int64)
+        q = 0
+        for k in range(n):
+            if loser[k]:
+                pos[q] = k
+                q += 1
+        pos = pos[np.argsort(idx[pos], kind="mergesort")]  # component order, then heaviest first (stable)
+        ww = np.empty(n_dup)
+        for q in range(n_dup):
+            ww[q] = -w[idx[pos[q]]]
+        pos = pos[np.argsort(ww, kind="mergesort")]
+        for q in range(n_dup):
+            label[idx[pos[q]]] = next_label
+            next_label += 1
+    n_x = 0
+    for k in range(n):
+        n_x += reps[k]
+    out = np.empty(n_x, dtype=np.int64)
+    q = 0
+    for k in range(n):
+        for r in range(reps[k]):
+            if r == 0:
+                out[q] = label[idx[k]]
+            else:
+                out[q] = next_label
+                next_label += 1
+            q += 1
+    return out, label, next_label

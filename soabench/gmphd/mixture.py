@@ -2,13 +2,16 @@
 
 A mixture of J components is ``w (J,)``, ``m (J, 4)``, ``P (J, 4, 4)`` plus
 
-* ``origin (J,) int8``: the birth source code of the component (``soabench.birth.base.SOURCE_*``) kept for its
+* ``origin (J,) int8``: the birth source code of the component (``soabench.types.SOURCE_*``) kept for its
   whole life (after merging: that of the heaviest member j*); ``ORIGIN_PERSISTENT = -1`` marks components given
   without a source (e.g. a prior built by hand). A component is persistent once ``age > 0``.
 * ``n_det (J,) int32``: number of detection updates so far.
 * ``age (J,) int32``: predictions survived since birth (0 for births of this scan).
 * ``beta (J, 4) float`` in dynamic mode only: the Beta parameters ``sD, tD, sS, tS`` (§4.2, §4.3); ``None`` in
   static mode.
+* ``label (J,) int64``: the track label of the component (docs/method.md §2.13): fresh at birth, kept through
+  prediction and update, that of the heaviest member j* after merging; ``UNLABELLED = 0`` marks components given
+  without one. Labels never enter the arithmetic.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 ORIGIN_PERSISTENT = -1  #: origin code of a component given without a birth source
+UNLABELLED = 0  #: label of a component given without one (a filter run numbers its labels from 1)
 
 
 @dataclass
@@ -31,6 +35,11 @@ class Mixture:
     n_det: np.ndarray
     age: np.ndarray
     beta: np.ndarray | None = None
+    label: np.ndarray | None = None  #: (J,) int64; None when built: every component UNLABELLED
+
+    def __post_init__(self) -> None:
+        if self.label is None:
+            self.label = np.full(len(self.w), UNLABELLED, dtype=np.int64)
 
     @classmethod
     def empty(cls, dynamic: bool = False) -> Mixture:
@@ -55,6 +64,7 @@ class Mixture:
         n_det: np.ndarray | int = 0,
         age: np.ndarray | int = 0,
         beta: np.ndarray | None = None,
+        label: np.ndarray | int = UNLABELLED,
     ) -> Mixture:
         """Build a mixture from weights, means and covariances; scalar metadata is broadcast to all components."""
         w = np.asarray(w, dtype=float).reshape(-1)
@@ -65,7 +75,8 @@ class Mixture:
         n_det_a = np.broadcast_to(np.asarray(n_det, dtype=np.int32), (J,)).copy()
         age_a = np.broadcast_to(np.asarray(age, dtype=np.int32), (J,)).copy()
         beta_a = None if beta is None else np.broadcast_to(np.asarray(beta, dtype=float), (J, 4)).copy()
-        return cls(w, m, P, origin_a, n_det_a, age_a, beta_a)
+        label_a = np.broadcast_to(np.asarray(label, dtype=np.int64), (J,)).copy()
+        return cls(w, m, P, origin_a, n_det_a, age_a, beta_a, label_a)
 
     def __len__(self) -> int:
         return len(self.w)
@@ -111,6 +122,7 @@ class Mixture:
             self.n_det[idx],
             self.age[idx],
             None if self.beta is None else self.beta[idx],
+            self.label[idx],
         )
 
     def copy(self) -> Mixture:
@@ -130,4 +142,5 @@ class Mixture:
             np.concatenate([p.n_det for p in parts]),
             np.concatenate([p.age for p in parts]),
             np.concatenate([p.beta for p in parts]) if dyn else None,
+            np.concatenate([p.label for p in parts]),
         )

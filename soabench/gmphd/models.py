@@ -52,7 +52,9 @@ def predict(mix: Mixture, F: np.ndarray, Q: np.ndarray, p_S: float | np.ndarray)
     if len(mix) == 0:
         return mix.copy()
     P = symmetrise(F @ mix.P @ F.T + Q)
-    return Mixture(mix.w * p_S, mix.m @ F.T, P, mix.origin.copy(), mix.n_det.copy(), mix.age + 1, mix.beta)
+    return Mixture(
+        mix.w * p_S, mix.m @ F.T, P, mix.origin.copy(), mix.n_det.copy(), mix.age + 1, mix.beta, mix.label.copy()
+    )
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -227,6 +229,7 @@ def update(
     r_min: float = 0.5,
     newborn: NewbornTerms | None = None,
     newborn_beta: np.ndarray | None = None,
+    newborn_label0: int = 0,
 ) -> UpdateResult:
     """GM-PHD measurement update with range-bearing measurements relative to ``ego`` (§2.6-2.8, §3.2, §3.4).
 
@@ -243,6 +246,8 @@ def update(
         newborn: measurement-driven newborn terms: beta_l = newborn.beta(A, kappa) enters L_l; newborn l gets
             weight beta_l / L_l, the given mean/cov, no Kalman correction and no missed-detection term.
         newborn_beta: (4,) Beta parameters of newborns in dynamic mode.
+        newborn_label0: the newborn term of measurement l is labelled newborn_label0 + l (§2.13); missed-detection
+            and detection terms keep their component's label.
 
     Log domain: log L_l = logsumexp(log kappa_l, log p_D,j w_j q_jl over j, log beta_l); a measurement with
     L_l = 0 is skipped. Dynamic mode: missed w (1 - p_D) with t_D += g; detected w p_D q/L with s_D += 1.
@@ -271,7 +276,7 @@ def update(
             terms = None
 
     # missed-detection terms (all J)
-    miss = Mixture(mix.w * (1.0 - p_D), mix.m, mix.P, mix.origin, mix.n_det, mix.age, None)
+    miss = Mixture(mix.w * (1.0 - p_D), mix.m, mix.P, mix.origin, mix.n_det, mix.age, None, mix.label)
     if mix.beta is not None:
         miss.beta = mix.beta.copy()
         miss.beta[:, 1] += g
@@ -306,9 +311,8 @@ def update(
                 if mix.beta is not None:
                     beta_new = mix.beta[src].copy()
                     beta_new[:, 0] += 1.0
-                parts.append(
-                    Mixture(w_det[jj, ll], m_new, P_new, mix.origin[src], mix.n_det[src] + 1, mix.age[src], beta_new)
-                )
+                origin, n_det, age, label = mix.origin[src], mix.n_det[src] + 1, mix.age[src], mix.label[src]
+                parts.append(Mixture(w_det[jj, ll], m_new, P_new, origin, n_det, age, beta_new, label))
         w_nb = np.exp(np.log(beta_nb) - log_L_safe) if newborn is not None and M else None
 
     n_newborn = 0
@@ -330,6 +334,7 @@ def update(
                     n_det=1,
                     age=0,
                     beta=nb_beta,
+                    label=newborn_label0 + keep,
                 )
             )
     post = Mixture.concatenate(parts) if len(parts) > 1 else parts[0]

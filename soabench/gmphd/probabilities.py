@@ -15,6 +15,7 @@ import numpy as np
 
 from soabench.config import FilterConfig, SensorConfig
 from soabench.geometry import fov_mask
+from soabench.sensor import line_of_sight
 
 _TINY = 1e-300
 
@@ -31,8 +32,6 @@ def detection_gate(
     m = np.asarray(m, dtype=float).reshape(-1, 4)
     g = fov_mask(m[:, :2], ego, sensor_cfg)
     if occluders and g.any():
-        from soabench.sensor import line_of_sight  # the sensor owner's implementation
-
         idx = np.flatnonzero(g)
         vis = np.asarray(line_of_sight(np.asarray(ego[:2], dtype=float), m[idx, :2], occluders), dtype=bool)
         g[idx] = vis.reshape(-1)

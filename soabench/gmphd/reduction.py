@@ -49,7 +49,7 @@ def merge(mix: Mixture, U: float, theta_min: float = 2.0) -> Mixture:
     """Vo-Ma merging (§2.9) with moment-matched Gaussians, Beta moment matching (§4.5) and metadata rules.
 
     w~ = sum w_i; m~ = sum w_i m_i / w~; P~ = sum w_i [P_i + (m~ - m_i)(m~ - m_i)^T] / w~;
-    n_det = max, age = max, origin = that of j*. Singleton groups are passed through unchanged.
+    n_det = max, age = max, origin and label = those of j* (§2.13). Singleton groups are passed through unchanged.
     """
     J = len(mix)
     if J == 0:
@@ -74,7 +74,7 @@ def merge(mix: Mixture, U: float, theta_min: float = 2.0) -> Mixture:
                 np.bincount(lab, weights=w * sec, minlength=G)[gs],
                 theta_min,
             )
-    return Mixture(W, mt, Pt, mix.origin[centres], n_det, age, beta)
+    return Mixture(W, mt, Pt, mix.origin[centres], n_det, age, beta, mix.label[centres])
 
 
 def cap(mix: Mixture, J_max: int) -> tuple[Mixture, bool]:
@@ -104,16 +104,36 @@ def prune_merge_cap(mix: Mixture, T: float, U: float, J_max: int, theta_min: flo
     return ReductionResult(capped, len(pruned), len(merged), hit)
 
 
+def _extraction(mix: Mixture, thr: float, rule: str) -> tuple[np.ndarray, np.ndarray]:
+    """The extracted components (in the order of X) and the copies of each, by ``rule`` (:func:`extract`)."""
+    if rule == "top_n":
+        n = int(np.floor(mix.w.sum() + 0.5)) if len(mix) else 0
+        idx = np.argsort(-mix.w, kind="stable")[:n]
+        return idx, np.ones(len(idx), dtype=np.int64)
+    idx = np.flatnonzero(mix.w > thr)
+    return idx, np.floor(mix.w[idx] + 0.5).astype(np.int64)
+
+
 def extract(mix: Mixture, thr: float = 0.5, rule: str = "vo_ma") -> tuple[np.ndarray, np.ndarray]:
     """State extraction (§2.10): returns (X (n, 4), X_w (n,)).
 
     ``vo_ma``: every component with w > thr, repeated floor(w + 0.5) times (not Python's half-to-even ``round``).
     ``top_n`` (ablation): the floor(sum w + 0.5) heaviest components, once each.
     """
-    if rule == "top_n":
-        n = int(np.floor(mix.w.sum() + 0.5)) if len(mix) else 0
-        idx = np.argsort(-mix.w, kind="stable")[:n]
-        return mix.m[idx].copy(), mix.w[idx].copy()
-    idx = np.flatnonzero(mix.w > thr)
-    reps = np.floor(mix.w[idx] + 0.5).astype(np.int64)
+    idx, reps = _extraction(mix, thr, rule)
     return np.repeat(mix.m[idx], reps, axis=0), np.repeat(mix.w[idx], reps)
+
+
+def extract_labelled(
+    mix: Mixture, thr: float, rule: str, next_label: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """:func:`extract` with the label of each estimate (§2.13, :func:`soabench.gmphd.kernels.extract_labels`):
+    returns (X, X_w, labels (n,) int64, the next unused label). A component that lost a label conflict gets its fresh
+    label written into ``mix.label``, so that its track continues under it."""
+    idx, reps = _extraction(mix, thr, rule)
+    X, X_w = np.repeat(mix.m[idx], reps, axis=0), np.repeat(mix.w[idx], reps)
+    labels, mix.label, nxt = kernels.extract_labels(
+        np.ascontiguousarray(mix.w, dtype=float), np.ascontiguousarray(mix.label, dtype=np.int64), idx, reps,
+        int(next_label),
+    )  # fmt: skip
+    return X, X_w, labels, int(nxt)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -121,3 +121,75 @@ def kitti_from_dict(values: Any) -> KittiConfig:
 def kitti_to_dict(cfg: KittiConfig) -> dict[str, Any]:
     out = dataclasses.asdict(cfg)
     return {k: list(v) if isinstance(v, tuple) else (None if v == -math.inf else v) for k, v in out.items()}
+
+
+FORMAT = "soabench-kitti-1"  #: the ``format`` of a KITTI run folder's ``run.json``
+
+
+@dataclass
+class KittiSpec:
+    """Everything a KITTI run needs (stored in ``run.json``)."""
+
+    root: str
+    detections: str | None
+    semantics: str | None
+    sequences: list[int] | None
+    folds: int
+    nhat_sweep: list[int] | None
+    skip_bad: bool
+    config: Config
+    kitti: KittiConfig = field(default_factory=KittiConfig)
+    lidar: dict | None = None  #: with segmented scans: velodyne, point_labels and the LidarParams fields (lidar.py)
+
+    def to_meta(self) -> dict:
+        return {
+            "format": FORMAT,
+            "root": self.root,
+            "detections": self.detections,
+            "semantics": self.semantics,
+            "sequences": self.sequences,
+            "folds": self.folds,
+            "nhat_sweep": self.nhat_sweep,
+            "skip_bad": self.skip_bad,
+            "config": self.config.to_dict(),
+            "kitti": kitti_to_dict(self.kitti),
+        } | ({"lidar": self.lidar} if self.lidar else {})
+
+    @classmethod
+    def from_meta(cls, meta: dict) -> KittiSpec:
+        require(isinstance(meta, dict) and meta.get("format") == FORMAT, "not a `soabench kitti` run folder")
+        return cls(
+            root=meta["root"],
+            detections=meta["detections"],
+            semantics=meta["semantics"],
+            sequences=meta["sequences"],
+            folds=int(meta["folds"]),
+            nhat_sweep=meta["nhat_sweep"],
+            skip_bad=bool(meta["skip_bad"]),
+            config=Config.from_record(meta["config"]).validate(),
+            kitti=kitti_from_dict(meta["kitti"]),
+            lidar=meta.get("lidar"),
+        )
+
+
+def kitti_run_config(
+    path: str | Path | None,
+    models: tuple[str, ...] | None = None,
+    seed: int | None = None,
+    probability: str | None = None,
+    classes: tuple[str, ...] | None = None,
+    score_min: float | None = None,
+) -> tuple[Config, KittiConfig]:
+    """The configuration of a new KITTI run: the file ``path`` (:func:`load_kitti_config`) overlaid by the given
+    values (None: the file's), validated."""
+    cfg, kcfg = load_kitti_config(path)
+    overrides: dict[str, Any] = {"models": models, "seed": seed}
+    if probability is not None:
+        overrides["probabilities"] = (probability,)
+    cfg.experiment = dataclasses.replace(cfg.experiment, **{k: v for k, v in overrides.items() if v is not None})
+    cfg.validate()
+    if classes is not None:
+        kcfg = dataclasses.replace(kcfg, classes=tuple(classes)).validate()
+    if score_min is not None:
+        kcfg = dataclasses.replace(kcfg, score_min=float(score_min)).validate()
+    return cfg, kcfg

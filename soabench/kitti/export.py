@@ -33,13 +33,13 @@ from pathlib import Path
 
 import numpy as np
 import shapely
-from shapely.geometry import LineString, Point, Polygon
-from shapely.ops import split
+from shapely.geometry import Point, Polygon
 
-from soabench.config import Config, SensorConfig
+from soabench import scenario as sumo_scenario
+from soabench.config import Config, SensorConfig, check_time
 from soabench.errors import require
-from soabench.experiment.files import write_json_atomic, write_text_atomic
-from soabench.experiment.ownership import FolderLock, check_new_folder, resolve
+from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
+from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
 from soabench.geometry import wrap
 from soabench.kitti.camera import image_box
 from soabench.kitti.formats import (
@@ -50,12 +50,14 @@ from soabench.kitti.formats import (
     latlon_to_mercator,
     mercator_to_latlon,
 )
+from soabench.kitti.raycast import export_lidar
 from soabench.kitti.reader import CALIB_DIR, DETECTION_DIR, LABEL_DIR, OXTS_DIR, SEMANTICS_DIR
+from soabench.kitti.velodyne import CAR_H, GROUND_Z, PED_HWL, ego_frame, hole_free
+from soabench.scenario import load
+from soabench.seeding import trial_seeds
+from soabench.sensor import _static_occluder_arrays, observe, scan_steps
 
 ORIGIN_LAT, ORIGIN_LON = 49.0, 8.43  #: geodetic position of the first IMU packet (Karlsruhe)
-GROUND_Z = -1.73  #: ground height in the Velodyne frame (m; KITTI sensor setup)
-PED_HWL = (1.75, 0.6, 0.8)  #: pedestrian box (m)
-CAR_H = 1.5  #: vehicle box height (m)
 SCORE_STREAM = 0x4B495454  #: "KITT": spawn key of the score stream
 GRAVITY = 9.80665  #: specific force (m/s^2) an accelerometer at rest reports upward: the OXTS az and au of a level ego
 MAX_EXPORT_TRIALS = 10_000  #: trials of one export: KITTI sequence ids have four digits
@@ -140,12 +142,6 @@ def oxts_text(egos: np.ndarray, calib, dt: float) -> str:
     return "\n".join(rows) + "\n"
 
 
-def _ego_frame(xy: np.ndarray, ego: np.ndarray) -> np.ndarray:
-    d = np.asarray(xy, dtype=float).reshape(-1, 2) - ego[:2]
-    c, s = math.cos(ego[2]), math.sin(ego[2])
-    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
-
-
 def _object_row(frame, tid, typ, truncated, occluded, bbox, hwl, xyz, ry, score=None) -> str:
     """One row in the devkit's field order: frame, track id, type, truncated, occluded, alpha, 2-D box (left, top,
     right, bottom; px), h w l (m), x y z (bottom centre, camera frame, m), rotation_y (rad)[, score]."""
@@ -172,7 +168,7 @@ def pedestrian_row(
 ) -> str | None:
     """The row of a pedestrian box at world position ``xy`` walking along world ``heading`` (rad; NaN: unknown,
     written as rotation_y 0), if it is within ``r_max`` of the ego and the camera sees it; else None."""
-    p = _ego_frame(xy, ego)[0]
+    p = ego_frame(xy, ego)[0]
     if math.hypot(p[0], p[1]) > r_max:
         return None
     xyz = calib.velo_to_rect_pts([p[0], p[1], GROUND_Z])[0]
@@ -199,24 +195,8 @@ def _box(corners: np.ndarray) -> tuple[np.ndarray, float, float, float]:
     return rect.mean(axis=0), float(np.hypot(*e1)), float(np.hypot(*e2)), float(math.atan2(e1[1], e1[0]))
 
 
-def _hole_free(geom) -> list[Polygon]:
-    """Polygons without holes covering ``geom``: each hole is cut by a vertical line through its interior."""
-    todo = [p for p in shapely.get_parts(geom) if isinstance(p, Polygon) and not p.is_empty]
-    out: list[Polygon] = []
-    while todo:
-        p = todo.pop()
-        if not p.interiors:
-            out.append(p)
-            continue
-        x = Polygon(p.interiors[0]).representative_point().x
-        y0, y1 = p.bounds[1] - 1.0, p.bounds[3] + 1.0
-        todo.extend(q for q in split(p, LineString([(x, y0), (x, y1)])).geoms if isinstance(q, Polygon))
-    return out
-
-
 def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, calib, out: Path, seed: int) -> dict:
     """Write sequence ``trial`` (all five files); returns counts."""
-    from soabench.sensor import _static_occluder_arrays, scan_steps
 
     seq = f"{trial:04d}"
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(trial)], spawn_key=(SCORE_STREAM,)))
@@ -252,7 +232,7 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
             if g.distance(ego_pt) <= sensor.r_max:
                 boxes.append((P + V + j, parked[j]))
         for tid, corners in boxes:
-            centre, length, width, heading = _box(_ego_frame(corners, ego))
+            centre, length, width, heading = _box(ego_frame(corners, ego))
             xyz = calib.velo_to_rect_pts([centre[0], centre[1], GROUND_Z])[0]
             ry = _ry(calib, heading)
             seen = _seen(calib, (CAR_H, width, length), xyz, ry)
@@ -271,12 +251,12 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
                 n_meas += 1
         # semantics: sidewalk within r_max (+1 m), buildings within r_max
         disk = ego_pt.buffer(sensor.r_max + 1.0, 64)
-        for piece in _hole_free(shapely.intersection(sidewalk, disk)):
-            xy = _ego_frame(np.asarray(piece.exterior.coords)[:-1], ego)
+        for piece in hole_free(shapely.intersection(sidewalk, disk)):
+            xy = ego_frame(np.asarray(piece.exterior.coords)[:-1], ego)
             sem.append(f"{k} sidewalk {_fmt(xy)}")
         for g, ring in zip(building_geoms, buildings, strict=True):
             if g.distance(ego_pt) <= sensor.r_max:
-                sem.append(f"{k} building {_fmt(_ego_frame(ring, ego))}")
+                sem.append(f"{k} building {_fmt(ego_frame(ring, ego))}")
     egos = np.array([s.ego for s in scans.scans])
     for folder, text in (
         (LABEL_DIR, "\n".join(labels)), (DETECTION_DIR, "\n".join(dets)), (SEMANTICS_DIR, "\n".join(sem)),
@@ -284,6 +264,15 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
     ):  # fmt: skip
         write_text_atomic(out / folder / f"{seq}.txt", text + "\n" if text else "")
     return {"sequence": seq, "frames": len(scans), "pedestrians": P, "measurements": n_meas}
+
+
+def check_export_size(trials: int, duration: float | None) -> None:
+    """``trials`` sequences (ids 0000-9999) of ``duration`` seconds each (None: the scenario's)."""
+    require(
+        isinstance(trials, int) and 1 <= trials <= MAX_EXPORT_TRIALS,
+        f"--trials {trials!r} is out of range; allowed: integers in [1, {MAX_EXPORT_TRIALS}] (sequence ids 0000-9999)",
+    )
+    check_time("--duration", duration)
 
 
 def export_kitti(
@@ -300,12 +289,8 @@ def export_kitti(
 ) -> list[dict]:
     """Simulate, observe and write ``trials`` SUMO trials as KITTI sequences 0000, 0001, ... under ``out`` (with
     ``lidar``, also their synthetic segmented scans: :mod:`soabench.kitti.raycast`)."""
-    from soabench.scenario import load
 
-    require(
-        isinstance(trials, int) and 1 <= trials <= MAX_EXPORT_TRIALS,
-        f"--trials {trials!r} is out of range; allowed: integers in [1, {MAX_EXPORT_TRIALS}] (sequence ids 0000-9999)",
-    )
+    check_export_size(trials, duration)
     out = resolve(out)
     check_new_folder(out, EXPORT_FILE, "KITTI export", "remove it to export again")
     fov = float(fov_deg) if fov_deg is not None else export_default_fov(cfg.sensor)
@@ -334,20 +319,15 @@ def _export_trials(
     lidar: bool,
 ) -> list[dict]:
     """The trials of :func:`export_kitti` written into the checked and locked folder ``out``; ``export.json`` last."""
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
 
     (net, polys, scenario), (scene, scen) = source, loaded
     rows = []
     for n in range(trials):
         seeds = trial_seeds(cfg.experiment.seed, n)
-        recording = simulate(scene, scen, seeds, duration=dur)
+        recording = sumo_scenario.simulate(scene, scen, seeds, duration=dur)
         scans = observe(recording, scene, sensor, seeds.sensor_rngs())
         rows.append(export_trial(n, recording, scans, scene, sensor, calib, out, cfg.experiment.seed))
         if lidar:
-            from soabench.kitti.raycast import export_lidar
-
             rows[-1]["lidar_points"] = export_lidar(n, recording, scans, scene, sensor, out)
         log(f"sequence {n:04d}: {rows[-1]['frames']} frames, {rows[-1]['measurements']} measurements")
     write_json_atomic(

@@ -11,9 +11,10 @@ Per frame and configured class (``kitti.semantic_classes``: birth region, ``kitt
 bird's-eye points of that class within r_max and near the sensor's sector, with the ground between consecutive
 returns of the class along a scan sector (gap fill, ``fill`` m at most), are rasterised on a grid of ``grid`` m
 cells aligned with the ego frame; the occupancy is closed morphologically with a disc of radius ``closing`` m (it
-fills the gaps between beams and azimuths), and the occupied cells are merged into polygons (coverage union,
-simplified within half a cell), cut into hole-free pieces: the same ``(class, vertices)`` rows a ``--semantics``
-file gives.
+fills the gaps between beams and azimuths), and the outline of the occupied cells is traced along the cell edges
+(the union of the cells exactly), simplified within half a cell and cut into hole-free pieces: the same
+``(class, vertices)`` rows a ``--semantics`` file gives. The loops over points and cells are compiled
+(:mod:`soabench.kitti.lidar_raster`).
 
 The regions of a sequence are cached in ``RUN/lidar/XXXX.npz`` with a key made of the input files' names, sizes and
 modification times and the parameters, so a resumed or repeated run reads them back instead of rebuilding them.
@@ -27,18 +28,22 @@ import os
 import time
 import zipfile
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
 import shapely
-from scipy import ndimage
+from shapely.geometry import Polygon
 
 from soabench.config import SensorConfig
 from soabench.errors import require
 from soabench.kitti.config import KittiConfig
 from soabench.kitti.formats import ReadError
+from soabench.kitti.lidar_raster import closed_raster, frame_cells, ring_polygons
 from soabench.kitti.reader import KittiSequence, sensor_for
+from soabench.kitti.velodyne import hole_free
+from soabench.notice import first_use_notice
 
 #: SemanticKITTI class ids (lower 16 bits of a .label value) by class name, as in the dataset's semantic-kitti.yaml
 SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
@@ -51,7 +56,7 @@ SEMANTIC_KITTI_IDS: dict[str, tuple[int, ...]] = {
 }  # fmt: skip
 POINT_BYTES = 16  #: float32 x, y, z, intensity
 CACHE_DIR = "lidar"
-CACHE_FORMAT = "soabench-lidar-regions-1"
+CACHE_FORMAT = "soabench-lidar-regions-2"
 FOV_MARGIN_DEG = 5.0  #: points this far outside the sensor's sector still shape the region at its edges
 
 
@@ -121,59 +126,55 @@ def read_frame(scan: Path, labels: Path) -> tuple[np.ndarray, np.ndarray]:
 # points -> polygons
 
 
-def _disc(radius_cells: int) -> np.ndarray:
-    r = np.arange(-radius_cells, radius_cells + 1)
-    return (r[:, None] ** 2 + r[None, :] ** 2) <= radius_cells**2
+def _label_lut(ids: dict[str, np.ndarray]) -> np.ndarray:
+    """Configured class index (0, 1, ... in the order of ``ids``; -1: none) of every 16-bit SemanticKITTI id."""
+    lut = np.full(1 << 16, -1, dtype=np.int64)
+    for c, cid in enumerate(ids.values()):
+        lut[cid] = c
+    return lut
+
+
+def _polygons(occ: np.ndarray, i0: int, j0: int, grid: float) -> list[np.ndarray]:
+    """The occupied cells of a raster whose cell (0, 0) is the ego frame's cell (i0, j0), as the (n, 2) vertices of
+    hole-free polygons: each 4-connected set of cells is bounded by its traced outline (staircase corners only) and
+    its holes, every ring simplified within half a cell (Douglas-Peucker from the ring's lowest vertex, as
+    ``shapely.simplify`` does the outline of the union of the cells; :func:`.lidar_raster.ring_polygons`); a set
+    with holes is cut into hole-free pieces, and the rare polygon the simplification leaves invalid (rings
+    touching where cells meet at a corner) is made valid first."""
+    xy, off, xy_h, off_h, comp_h, shell_h = ring_polygons(occ, i0, j0, grid, 0.5 * grid)
+    plain = shapely.from_ragged_array(shapely.GeometryType.POLYGON, xy, (off, np.arange(len(off))))
+    valid = shapely.is_valid(plain)
+    out = [xy[a : b - 1] for a, b, ok in zip(off[:-1], off[1:], valid, strict=True) if ok]
+    rest = list(shapely.make_valid(plain[~valid])) if not valid.all() else []
+    rings = [xy_h[a:b] for a, b in zip(off_h[:-1], off_h[1:], strict=True)]
+    for c in np.unique(comp_h):
+        mine = np.flatnonzero(comp_h == c)
+        if not shell_h[mine].any():  # its outline collapsed: no area
+            continue
+        g = Polygon(rings[mine[shell_h[mine]][0]], [rings[r] for r in mine[~shell_h[mine]]])
+        rest.append(g if g.is_valid else shapely.make_valid(g))
+    for g in rest:
+        out.extend(np.asarray(p.exterior.coords)[:-1] for p in hole_free(g))
+    return out
+
+
+def _cells_region(ci: np.ndarray, cj: np.ndarray, params: LidarParams) -> list[np.ndarray]:
+    """Hole-free polygons (vertex arrays) of the marked cells ``(ci, cj)`` after the closing (docs/method.md §3.1.4,
+    steps 2 and 3)."""
+    if len(ci) == 0:
+        return []
+    rad = int(np.ceil(params.closing / params.grid)) if params.closing > 0 else 0
+    occ, i0, j0 = closed_raster(ci, cj, rad)
+    return _polygons(occ, int(i0), int(j0), params.grid)
 
 
 def region_from_points(xy: np.ndarray, params: LidarParams, r_max: float):
     """The bird's-eye region of the points ``xy`` (N, 2): grid occupancy within r_max, closed with a disc of radius
-    ``params.closing``, as the union of the occupied cells (a shapely geometry, empty without points)."""
+    ``params.closing``, as polygons of the occupied cells (a shapely geometry, empty without points)."""
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     xy = xy[(np.abs(xy) <= r_max).all(axis=1)]
-    if len(xy) == 0:
-        return shapely.Polygon()
-    g = params.grid
-    rad = int(np.ceil(params.closing / g)) if params.closing > 0 else 0
-    ij = np.floor(xy / g).astype(np.int64)
-    lo = ij.min(axis=0) - rad - 1
-    ij -= lo
-    occ = np.zeros(tuple(ij.max(axis=0) + rad + 2), dtype=bool)
-    occ[ij[:, 0], ij[:, 1]] = True
-    if rad:
-        occ = ndimage.binary_closing(occ, structure=_disc(rad))
-    # the occupied cells share exact edge coordinates, so their union is a coverage union (linear time); the
-    # staircase outline is then simplified within half a cell
-    xs, ys = ((np.arange(n + 1) + o) * g for n, o in zip(occ.shape, lo, strict=True))
-    ci, cj = np.nonzero(occ)
-    union = shapely.coverage_union_all(shapely.box(xs[ci], ys[cj], xs[ci + 1], ys[cj + 1]))
-    return shapely.simplify(union, 0.5 * g)
-
-
-def sector_order(xy: np.ndarray, params: LidarParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The points' order by (azimuth sector, range), with their sectors and ranges in that order."""
-    r = np.hypot(xy[:, 0], xy[:, 1])
-    sector = np.floor((np.arctan2(xy[:, 1], xy[:, 0]) + np.pi) / np.radians(params.sector_deg)).astype(np.int64)
-    order = np.argsort(sector * (4.0 * np.max(r, initial=0.0) + 1.0) + r, kind="stable")  # by sector, then range
-    return order, sector[order], r[order]
-
-
-def ray_fill(xy: np.ndarray, is_cls: np.ndarray, params: LidarParams, by_sector=None) -> np.ndarray:
-    """Extra (M, 2) points on the ground between consecutive returns (by range) of one azimuth sector that are both
-    of the class and at most ``params.fill`` apart: the ground a scan ring skips between two returns of the class,
-    with no return of another class between them, is taken to be of that class."""
-    if params.fill <= 0 or is_cls.sum() < 2:
-        return np.zeros((0, 2))
-    order, s, rr = sector_order(xy, params) if by_sector is None else by_sector
-    c = is_cls[order]
-    pair = (s[1:] == s[:-1]) & c[1:] & c[:-1] & (rr[1:] - rr[:-1] <= params.fill) & (rr[1:] - rr[:-1] > params.grid)
-    a, b = xy[order][:-1][pair], xy[order][1:][pair]
-    n = np.ceil(np.hypot(*(b - a).T) / (0.5 * params.grid)).astype(np.int64)
-    if n.sum() == 0:
-        return np.zeros((0, 2))
-    seg = np.repeat(np.arange(len(n)), n)
-    t = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n, n)
-    return a[seg] + t[:, None] * (b[seg] - a[seg])
+    ij = np.floor(xy / params.grid).astype(np.int64)
+    return shapely.union_all([Polygon(r) for r in _cells_region(ij[:, 0].copy(), ij[:, 1].copy(), params)])
 
 
 def frame_regions(
@@ -183,23 +184,20 @@ def frame_regions(
     params: LidarParams,
     r_max: float,
     fov_deg: float = 360.0,
+    lut: np.ndarray | None = None,
 ) -> list[tuple[str, np.ndarray]]:
     """``(class, (n, 2) vertices)`` hole-free polygons of one frame, per configured class, from the points within
-    r_max and within ``FOV_MARGIN_DEG`` of the sensor's sector (Omega_k never reaches beyond it)."""
-    from soabench.kitti.export import _hole_free
-
+    r_max and within ``FOV_MARGIN_DEG`` of the sensor's sector (Omega_k never reaches beyond it); ``lut`` is
+    :func:`_label_lut` of ``ids`` (made when not given)."""
+    lut = _label_lut(ids) if lut is None else lut
+    half = 0.5 * fov_deg + FOV_MARGIN_DEG if fov_deg + 2.0 * FOV_MARGIN_DEG < 360.0 else -1.0
+    ci, cj, cc = frame_cells(
+        pts, lab, lut, len(ids), float(r_max), half, params.grid, float(np.radians(params.sector_deg)), params.fill
+    )
     out = []
-    xy = pts[:, :2].astype(float)
-    near = (np.abs(xy) <= r_max).all(axis=1)
-    if fov_deg + 2.0 * FOV_MARGIN_DEG < 360.0:
-        near &= np.abs(np.degrees(np.arctan2(xy[:, 1], xy[:, 0]))) <= 0.5 * fov_deg + FOV_MARGIN_DEG
-    xy, lab = xy[near], lab[near]
-    by_sector = sector_order(xy, params) if params.fill > 0 else None
-    for name, cid in ids.items():
-        is_cls = np.isin(lab, cid)
-        extra = ray_fill(xy, is_cls, params, by_sector)
-        geom = region_from_points(np.concatenate([xy[is_cls], extra]), params, r_max)
-        out.extend((name, np.asarray(p.exterior.coords)[:-1]) for p in _hole_free(geom))
+    for c, name in enumerate(ids):
+        mine = cc == c
+        out.extend((name, xy) for xy in _cells_region(ci[mine], cj[mine], params))
     return out
 
 
@@ -265,9 +263,13 @@ def sequence_regions(
     if path is not None and path.is_file() and (hit := _load(path, key)) is not None:
         return hit, True
     sem = {}
+    lut = _label_lut(ids)
     for k, (scan, lab, _) in enumerate(files):
         pts, cl = read_frame(scan, lab)
-        if polys := frame_regions(pts, cl, ids, params, r_max, fov_deg):
+        # the first frame compiles the loops of lidar_raster after installation: one line if that takes a while
+        with first_use_notice("lidar_raster") if k == 0 else nullcontext():
+            polys = frame_regions(pts, cl, ids, params, r_max, fov_deg, lut)
+        if polys:
             sem[k] = polys
     if path is not None:
         _save(path, key, names, sem)
@@ -275,7 +277,7 @@ def sequence_regions(
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# the protocol's hooks (``spec.lidar`` of :class:`~soabench.kitti.protocol.KittiSpec`)
+# the protocol's hooks (``spec.lidar`` of :class:`~soabench.kitti.config.KittiSpec`)
 
 
 def lidar_files(lidar: dict, seq: KittiSequence) -> None:
@@ -300,3 +302,33 @@ def lidar_semantics(
         f"sequence {seq.seq}: semantic regions from {seq.n_frames} LiDAR scans {how} ({time.perf_counter() - t0:.1f} s)"
     )
     return sem
+
+
+def lidar_options(
+    root: str,
+    point_labels: str | None,
+    velodyne: str | None = None,
+    semantics: str | None = None,
+    grid: float | None = None,
+    closing: float | None = None,
+    fill: float | None = None,
+    classes: tuple[str, ...] = (),
+) -> dict | None:
+    """A KITTI run's ``spec.lidar`` from ``--point-labels DIR [--velodyne DIR] [--lidar-grid M] [--lidar-closing M]
+    [--lidar-fill M]`` (None without ``point_labels``); one line naming the bad value otherwise. ``classes``: the
+    semantic and occluder classes whose SemanticKITTI ids the region is made of."""
+    given = {"grid": grid, "closing": closing, "fill": fill}
+    if point_labels is None:
+        flags = [
+            f for f, v in (("velodyne", velodyne), *((f"lidar-{k}", v) for k, v in given.items())) if v is not None
+        ]
+        require(not flags, f"--{flags[0] if flags else ''} needs --point-labels DIR")
+        return None
+    require(semantics is None, "give either --semantics DIR or --point-labels DIR (two sources of one region)")
+    velodyne_dir = Path(velodyne) if velodyne is not None else Path(root) / "velodyne"
+    require(velodyne_dir.is_dir(), f"--velodyne {str(velodyne_dir)!r} is not a folder (KITTI scans XXXX/NNNNNN.bin)")
+    labels = Path(point_labels)
+    require(labels.is_dir(), f"--point-labels {str(labels)!r} is not a folder (SemanticKITTI XXXX/NNNNNN.label)")
+    class_ids(classes)
+    params = LidarParams(**{k: float(v) for k, v in given.items() if v is not None}).validate()
+    return {"velodyne": str(velodyne_dir.resolve()), "point_labels": str(labels.resolve()), **asdict(params)}

@@ -18,71 +18,29 @@ import dataclasses
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from soabench.birth import get_birth_model
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
-from soabench.experiment.files import read_json, write_json_atomic
-from soabench.kitti.config import KittiConfig, kitti_from_dict, kitti_to_dict
+from soabench.experiment.runs.files import read_json, write_json_atomic
+from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
+from soabench.experiment.trial.trial import run_filter
+from soabench.kitti.config import KittiConfig, KittiSpec
 from soabench.kitti.formats import ReadError, UnreadableError
 from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
+from soabench.kitti.report import write_outputs
+from soabench.metrics import evaluate
 
 RUN_FILE = "run.json"
 RECORDS = "records"
-FORMAT = "soabench-kitti-1"
 CV = "cv"
 #: per-step series kept in a record (Table I uses card_err and ospa over all time steps)
 SERIES = ("n_gt", "n_est", "card_err", "ospa", "n_components")
-
-
-@dataclass
-class KittiSpec:
-    """Everything a KITTI run needs (stored in ``run.json``)."""
-
-    root: str
-    detections: str | None
-    semantics: str | None
-    sequences: list[int] | None
-    folds: int
-    nhat_sweep: list[int] | None
-    skip_bad: bool
-    config: Config
-    kitti: KittiConfig = field(default_factory=KittiConfig)
-    lidar: dict | None = None  #: with segmented scans: velodyne, point_labels and the LidarParams fields (lidar.py)
-
-    def to_meta(self) -> dict:
-        return {
-            "format": FORMAT,
-            "root": self.root,
-            "detections": self.detections,
-            "semantics": self.semantics,
-            "sequences": self.sequences,
-            "folds": self.folds,
-            "nhat_sweep": self.nhat_sweep,
-            "skip_bad": self.skip_bad,
-            "config": self.config.to_dict(),
-            "kitti": kitti_to_dict(self.kitti),
-        } | ({"lidar": self.lidar} if self.lidar else {})
-
-    @classmethod
-    def from_meta(cls, meta: dict) -> KittiSpec:
-        require(isinstance(meta, dict) and meta.get("format") == FORMAT, "not a `soabench kitti` run folder")
-        return cls(
-            root=meta["root"],
-            detections=meta["detections"],
-            semantics=meta["semantics"],
-            sequences=meta["sequences"],
-            folds=int(meta["folds"]),
-            nhat_sweep=meta["nhat_sweep"],
-            skip_bad=bool(meta["skip_bad"]),
-            config=Config.from_record(meta["config"]).validate(),
-            kitti=kitti_from_dict(meta["kitti"]),
-            lidar=meta.get("lidar"),
-        )
 
 
 @dataclass
@@ -134,10 +92,8 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
     Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])``. Wall-clock
     times go to ``record["timing"]``, so everything else is bit-identical for the same inputs and seed.
     """
-    from soabench.birth import get_birth_model
-    from soabench.experiment.trial import run_filter
+    # imported when called: numba would slow every start-up
     from soabench.gmphd.filter import GMPHDFilter
-    from soabench.metrics import evaluate
 
     mode = cfg.experiment.probabilities[0]
     filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
@@ -188,8 +144,8 @@ def run_kitti(
     log: Callable[[str], None] | None = None,
 ) -> KittiOutcome:
     """Run (or finish, ``resume=True``) the protocol into the run folder ``out``: resolved, new or empty for a new
-    run (holding this run's ``run.json`` on resume), locked while it works (:mod:`soabench.experiment.ownership`)."""
-    from soabench.experiment.ownership import FolderLock, check_new_folder, resolve
+    run (holding this run's ``run.json`` on resume), locked while it works
+    (:mod:`soabench.experiment.runs.ownership`)."""
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = resolve(out)
@@ -215,7 +171,6 @@ def run_kitti(
 
 def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], None]) -> KittiOutcome:
     """The body of :func:`run_kitti` once the folder is checked and locked."""
-    from soabench.kitti.report import write_outputs
 
     run_file = out / RUN_FILE
     assert spec is not None

@@ -27,8 +27,9 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from soabench.config import SensorConfig
-from soabench.kitti.export import CAR_H, GROUND_Z, PED_HWL, _ego_frame
 from soabench.kitti.lidar import SEMANTIC_KITTI_IDS
+from soabench.kitti.velodyne import CAR_H, GROUND_Z, PED_HWL, ego_frame
+from soabench.sensor import _static_occluder_arrays, scan_steps
 
 VELODYNE_DIR, POINT_LABEL_DIR = "velodyne", "point_labels"
 BEAMS = 64
@@ -105,7 +106,6 @@ def cast(
 
 def export_lidar(trial: int, recording, scans, scene, sensor: SensorConfig, out: Path) -> int:
     """Write the scans and labels of sequence ``trial``; returns the number of points written."""
-    from soabench.sensor import _static_occluder_arrays, scan_steps
 
     seq = f"{trial:04d}"
     steps = scan_steps(recording.t, recording.step_length, sensor.dt)
@@ -126,19 +126,19 @@ def export_lidar(trial: int, recording, scans, scene, sensor: SensorConfig, out:
         rings, tops, labels = [], [], []
         for g, ring, top, lab in zip(static_geoms, statics, static_tops, static_labels, strict=True):
             if g.distance(ego_pt) <= reach:
-                rings.append(_ego_frame(ring, ego))
+                rings.append(ego_frame(ring, ego))
                 tops.append(top)
                 labels.append(lab)
         foot = np.asarray(recording.veh_footprint[idx], dtype=float).reshape(-1, 4, 2)
         pres = np.asarray(recording.veh_present[idx], dtype=bool).reshape(-1)
         for v in np.flatnonzero(pres & np.isfinite(foot).all(axis=(1, 2))):
-            ring = _ego_frame(foot[v], ego)
+            ring = ego_frame(foot[v], ego)
             if np.hypot(ring[:, 0], ring[:, 1]).min() <= reach:
                 rings.append(ring)
                 tops.append(CAR_H)
                 labels.append(CAR)
         present = np.flatnonzero(scans.present[k])
-        peds = _ego_frame(scans.truth_xy[k, present], ego) if len(present) else np.zeros((0, 2))
+        peds = ego_frame(scans.truth_xy[k, present], ego) if len(present) else np.zeros((0, 2))
         peds = peds[np.hypot(peds[:, 0], peds[:, 1]) <= reach]
         pts, lab = cast(rings, np.asarray(tops, dtype=float), np.asarray(labels, dtype=np.uint32), peds, sensor.r_max)
         ground = lab == ROAD

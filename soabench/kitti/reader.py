@@ -1,4 +1,4 @@
-"""KITTI tracking sequences -> the same :class:`~soabench.sensor.Scans` the SUMO path makes (docs/method.md §2.3,
+"""KITTI tracking sequences -> the same :class:`~soabench.types.Scans` the SUMO path makes (docs/method.md §2.3,
 §3.1.1, §5.1, §5.4, §5.9).
 
 Frames: the sensor (ego) frame is the Velodyne frame (x forward, y left); its pose comes from the oxts packets (devkit
@@ -47,7 +47,8 @@ from soabench.kitti.formats import (
 )
 from soabench.metrics import gated_assignment
 from soabench.scenario.scene import SceneMap
-from soabench.sensor import CLUTTER, Scan, Scans, obstacles_from_geoms, visible_region
+from soabench.sensor import obstacles_from_geoms, visible_region
+from soabench.types import CLUTTER, Scan, Scans
 
 LABEL_DIR, CALIB_DIR, OXTS_DIR = "label_02", "calib", "oxts"
 DETECTION_DIR, SEMANTICS_DIR = "detections", "semantics"  #: folder names written by ``soabench export kitti``

@@ -12,20 +12,16 @@
 
 from __future__ import annotations
 
-import io
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from soabench.birth import LABEL
-from soabench.experiment.files import write_bytes_atomic, write_csv, write_json_atomic, write_text_atomic
-from soabench.plotstyle import model_style
-
-if TYPE_CHECKING:
-    from soabench.kitti.protocol import KittiSpec
+from soabench.experiment.runs.files import write_csv, write_json_atomic, write_text_atomic
+from soabench.figures import kitti as kitti_figures
+from soabench.kitti.config import KittiSpec
 
 #: the paper's KITTI numbers (Table I, §V-A pairwise shares, §V-B std of the sweep means); its UBM spreads the grid
 #: across the workspace, so its numbers stand beside ``ubm-ws`` (``ubm``, clipped to the FOV, has none)
@@ -39,10 +35,6 @@ PAPER = {
 
 def _label(m: str) -> str:
     return LABEL.get(m, m)
-
-
-def _color(m: str) -> str | None:
-    return model_style(m).color
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -118,88 +110,6 @@ def sweep_table(records: dict, models: list[str], offsets: list[int]) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-# figures
-
-
-def _figure(w: float, h: float):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(w, h))
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _save(fig, path: Path) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=150, bbox_inches="tight")
-    write_bytes_atomic(path, buf.getvalue())
-    return path.name
-
-
-def fig6(records: dict, models: list[str], dt: float, path: Path) -> str:
-    """Histogram of the per-target delays (s), grouped bars per model."""
-    fig = _figure(6.0, 3.6)
-    ax = fig.add_subplot()
-    data = [delays(records, "cv", m) for m in models]
-    censored = [sum(math.isinf(v) for v in _episodes(records, "cv", m).values()) for m in models]
-    top = max([float(d.max()) for d in data if len(d)] + [dt])
-    step = dt * max(1, math.ceil(top / dt / 15))  # at most ~16 bins, each a whole number of frames
-    bins = (np.arange(int(round(top / step)) + 2) - 0.5) * step  # centred on 0, step, 2 step, ...
-    width = step / (len(models) + 1)
-    for i, (m, d) in enumerate(zip(models, data, strict=True)):
-        counts, _ = np.histogram(d, bins)
-        label = f"{_label(m)} (n = {len(d)}, {censored[i]} never initiated)"
-        ax.bar(bins[:-1] + (i + 1) * width, counts, width, label=label, color=_color(m))
-    ax.yaxis.get_major_locator().set_params(integer=True)
-    ax.set_xlabel("tracking delay $k_{delay}$ (s)")
-    ax.set_ylabel("number of targets")
-    ax.set_title("tracking delays of all target episodes (paper Fig. 6)")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False)  # below: never over a bar
-    ax.grid(axis="y", alpha=0.3)
-    return _save(fig, path)
-
-
-def fig7(records: dict, models: list[str], path: Path) -> str:
-    """Mean posterior components per sequence, grouped bars per model."""
-    seqs = sorted(s for (st, s) in records if st == "cv")
-    fig = _figure(max(6.0, 0.45 * len(seqs) + 2.5), 3.6)
-    ax = fig.add_subplot()
-    width = 0.8 / len(models)
-    x = np.arange(len(seqs))
-    for i, m in enumerate(models):
-        vals = [records[("cv", s)]["models"][m]["summary"]["mean_components"] for s in seqs]
-        ax.bar(x + (i - (len(models) - 1) / 2) * width, vals, width, label=_label(m), color=_color(m))
-    ax.set_xticks(x, seqs, rotation=90 if len(seqs) > 8 else 0)
-    ax.set_xlabel("sequence")
-    ax.set_ylabel("mean posterior components")
-    ax.set_title("components of the posterior intensity (paper Fig. 7)")
-    ax.set_ylim(0, 1.25 * ax.get_ylim()[1])
-    ax.legend(ncols=len(models), loc="upper center")
-    ax.grid(axis="y", alpha=0.3)
-    return _save(fig, path)
-
-
-def fig8(sweep: dict, models: list[str], path: Path) -> str:
-    """Mean delay vs N-hat offset per model, the std of the means in the legend."""
-    fig = _figure(6.0, 3.6)
-    ax = fig.add_subplot()
-    for m in models:
-        s = sweep[m]
-        ax.plot(
-            s["offsets"], s["mean_delay"], "o-", ms=3, color=_color(m),
-            label=f"{_label(m)} (std of means {s['std_of_means']:.3f} s)",
-        )  # fmt: skip
-    ax.xaxis.get_major_locator().set_params(integer=True)
-    ax.set_xlabel(r"$N_{tot} - N_{true}$ (expected births per sequence)")
-    ax.set_ylabel(r"mean delay $\bar{k}_{delay}$ (s)")
-    ax.set_title(r"sensitivity to $\hat{N}_k$ (paper Fig. 8)")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    return _save(fig, path)
-
-
-# ---------------------------------------------------------------------------------------------------------------------
 # files
 
 
@@ -217,10 +127,14 @@ def write_outputs(
     offsets = list(spec.nhat_sweep or [])
     sw = sweep_table(records, models, offsets) if offsets else {}
     fig_dir = out / "figures"
-    figs = [fig6(records, models, spec.config.sensor.dt, fig_dir / "fig6_delay_hist.png")]
-    figs.append(fig7(records, models, fig_dir / "fig7_components.png"))
+    censored = {m: sum(math.isinf(v) for v in _episodes(records, "cv", m).values()) for m in models}
+    cv_delays = {m: delays(records, "cv", m) for m in models}
+    figs = [kitti_figures.delay_histogram(cv_delays, censored, spec.config.sensor.dt, fig_dir / "fig6_delay_hist.png")]
+    seqs = sorted(s for (st, s) in records if st == "cv")
+    components = {m: [records[("cv", s)]["models"][m]["summary"]["mean_components"] for s in seqs] for m in models}
+    figs.append(kitti_figures.components_per_sequence(seqs, components, fig_dir / "fig7_components.png"))
     if sw:
-        figs.append(fig8(sw, models, fig_dir / "fig8_nhat_sweep.png"))
+        figs.append(kitti_figures.nhat_sweep({m: sw[m] for m in models}, fig_dir / "fig8_nhat_sweep.png"))
 
     per_seq, ep_rows = [], []
     for (setting, s), r in sorted(records.items()):

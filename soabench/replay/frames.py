@@ -12,8 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from soabench.birth.base import SOURCE_MEAS
-from soabench.birth.plots import SOURCE_COLORS, SOURCE_LABELS, ellipse_params
+from soabench.figures.births import SOURCE_COLORS, SOURCE_LABELS, ellipse_params
+from soabench.geometry import polar_to_world
+from soabench.sensor import fov_polygon, scan_steps
+from soabench.types import CLUTTER, SOURCE_MEAS
 
 #: pedestrian states of a scan: visible, occluded (in the FOV, line of sight blocked), outside the FOV, in a building
 PED_STATES = ("visible", "occluded", "outside FOV", "in building")
@@ -103,8 +105,11 @@ def init_states(metrics: Any, K: int, P: int) -> np.ndarray:
     return out
 
 
-def _births_of(births: Any) -> list:
-    """[[x, -y, width, height, angle_deg, source], ...]: the 2-sigma ellipses of the position blocks."""
+def _birth_arrays(births: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The scan's birth terms (those of measurement newborns included): means (n, 4), covariances (n, 4, 4) and
+    origins (n,); none for a whole tracker (``births`` None)."""
+    if births is None:
+        return np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, dtype=int)
     m = [np.asarray(births.m, dtype=float).reshape(-1, 4)]
     P = [np.asarray(births.P, dtype=float).reshape(-1, 4, 4)]
     src = [np.asarray(births.source, dtype=int).reshape(-1)]
@@ -112,12 +117,31 @@ def _births_of(births: Any) -> list:
         m.append(np.asarray(births.newborn.m, dtype=float).reshape(-1, 4))
         P.append(np.asarray(births.newborn.P, dtype=float).reshape(-1, 4, 4))
         src.append(np.full(len(m[-1]), SOURCE_MEAS))
-    mm, PP, ss = np.concatenate(m), np.concatenate(P), np.concatenate(src)
+    return np.concatenate(m), np.concatenate(P), np.concatenate(src)
+
+
+def _births_of(arrays: tuple[np.ndarray, np.ndarray, np.ndarray]) -> list:
+    """[[x, -y, width, height, angle_deg, source], ...]: the 2-sigma ellipses of the position blocks."""
+    mm, PP, ss = arrays
     if not len(mm):
         return []
     w, h, a = ellipse_params(PP[:, :2, :2])
     rows = np.column_stack([mm[:, 0], -mm[:, 1], w, h, -a])  # the page's y is negated: angles turn the other way
     return [[*r, int(s)] for r, s in zip(np.round(rows, 2).tolist(), ss.tolist(), strict=True)]
+
+
+def nearest_birth(arrays: tuple[np.ndarray, np.ndarray, np.ndarray], xy: np.ndarray) -> list | None:
+    """The birth term of the scan nearest to the world point ``xy`` in its own position covariance:
+    ``[sigmas, metres, source, x, -y]`` (Mahalanobis distance, Euclidean distance, origin, its mean in page
+    coordinates), None without births. Its drawn ellipse is 2 sigma: a pedestrian outside every ellipse has no
+    birth term there, which is why a model's delay runs (docs/method.md §3.6, §5.4)."""
+    mm, PP, ss = arrays
+    if not len(mm):
+        return None
+    d = np.asarray(xy, dtype=float)[None, :] - mm[:, :2]
+    sig = np.sqrt(np.einsum("ni,ni->n", d, np.linalg.solve(PP[:, :2, :2], d[:, :, None])[:, :, 0]))
+    i = int(np.argmin(sig))
+    return [round(float(sig[i]), 2), round(float(np.hypot(*d[i])), 2), int(ss[i]), *_xy(mm[i, :2])[0]]
 
 
 def _hidden(scene: Any, fov: Any, omega: Any) -> Any:
@@ -128,11 +152,41 @@ def _hidden(scene: Any, fov: Any, omega: Any) -> Any:
     return base.difference(omega) if not base.is_empty else base
 
 
-def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndarray]) -> dict[str, Any]:
+def estimate_labels(result: Any) -> list[str] | None:
+    """The track label of each estimate of a scan's result, as text, when the tracker gives them (an optional
+    ``labels`` sequence beside ``X``, one per row); None otherwise (a GM-PHD's estimates carry no identity)."""
+    labels = getattr(result, "labels", None)
+    if labels is None:
+        return None
+    labels = [str(v) for v in np.asarray(labels, dtype=object).reshape(-1).tolist()]
+    return labels if len(labels) == len(np.asarray(result.X)) else None
+
+
+def track_labels(results: list[Any]) -> list[str]:
+    """Every track label of a model's run in order of first appearance: label i is drawn in colour i of the page's
+    palette in every frame, so a track keeps its colour (and a label switch shows as a colour change)."""
+    seen: dict[str, None] = {}
+    for res in results:
+        for lab in estimate_labels(res) or ():
+            seen.setdefault(lab, None)
+    return list(seen)
+
+
+def _label_index(result: Any, tracks: list[str]) -> list[int]:
+    """Per estimate: the index of its label in ``tracks`` (-1: no label)."""
+    labels = estimate_labels(result)
+    if labels is None:
+        return [-1] * len(np.asarray(result.X))
+    where = {lab: i for i, lab in enumerate(tracks)}
+    return [where[lab] for lab in labels]
+
+
+def frame_data(
+    rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndarray], tracks: list[list[str]]
+) -> dict[str, Any]:
     """Scan ``k`` (recording step ``idx``) of a :class:`~soabench.replay.simulate.TrialReplay` as a JSON-able
-    record; ``peds`` from :func:`ped_states`, ``inits`` one :func:`init_states` per model."""
-    from soabench.geometry import polar_to_world
-    from soabench.sensor import CLUTTER, fov_polygon
+    record; ``peds`` from :func:`ped_states`, ``inits`` one :func:`init_states` per model, ``tracks`` one
+    :func:`track_labels` per model. An estimate is ``[x, y, i]``: its label is ``tracks[model][i]`` (i = -1: none)."""
 
     scans, rec = rep.scans, rep.recording
     scan = scans.scans[k]
@@ -150,10 +204,13 @@ def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndar
                          [int(s[k, j]) for s in inits]])  # fmt: skip
     fov, omega = fov_polygon(ego, rep.scans.sensor), scan.visible_region
     models = []
-    for m in rep.models:
-        res = m.results[k]
-        models.append({"births": _births_of(m.births[k]), "est": _xy(np.asarray(res.X)[:, :2]),
-                       "n_comp": int(res.n_reduced), "sum_w": round(float(res.sum_w), 2)})  # fmt: skip
+    for i, (m, labels) in enumerate(zip(rep.models, tracks, strict=True)):
+        res, arrays = m.results[k], _birth_arrays(m.births[k])
+        est = [[*xy, n] for xy, n in zip(_xy(np.asarray(res.X)[:, :2]), _label_index(res, labels), strict=True)]
+        waiting = np.flatnonzero((inits[i][k] == 1) & np.asarray(scans.present[k], dtype=bool))
+        why = [[str(scans.ped_ids[j]), *near] for j in waiting if (near := nearest_birth(arrays, scans.truth_xy[k, j]))]
+        models.append({"births": _births_of(arrays), "est": est, "why": why,
+                       "n_comp": int(res.n_reduced), "sum_w": _num(res.sum_w, 2)})  # fmt: skip
     return {
         "k": k,
         "t": round(float(scan.t), 3),
@@ -171,12 +228,12 @@ def frame_data(rep: Any, k: int, idx: int, peds: np.ndarray, inits: list[np.ndar
 
 def replay_data(rep: Any) -> dict[str, Any]:
     """The whole replay: header, scene, legend tables, per-model episodes and every scan's record."""
-    from soabench.sensor import scan_steps
 
     scans = rep.scans
     K, P = np.shape(scans.present)
     peds = ped_states(scans)
     inits = [init_states(m.metrics, K, P) for m in rep.models]
+    tracks = [track_labels(m.results) for m in rep.models]
     steps = scan_steps(rep.recording.t, rep.recording.step_length, scans.dt)
     exp = rep.config.experiment
     return {
@@ -203,18 +260,19 @@ def replay_data(rep: Any) -> dict[str, Any]:
                 "label": m.label,
                 "delay_mean": _num(m.row.get("delay_mean")),
                 "ospa": _num(m.row.get("ospa")),
+                "tracks": labels,
                 "episodes": [
                     [str(scans.ped_ids[e.target]), e.k0, e.k_end, e.k_d, e.k_t, _num(e.delay), bool(e.censored)]
                     for e in m.metrics.episodes
                 ],
             }
-            for m in rep.models
+            for m, labels in zip(rep.models, tracks, strict=True)
         ],
-        "frames": [frame_data(rep, k, int(idx), peds, inits) for k, idx in enumerate(steps)],
+        "frames": [frame_data(rep, k, int(idx), peds, inits, tracks) for k, idx in enumerate(steps)],
     }
 
 
-def _num(v: Any) -> float | None:
+def _num(v: Any, digits: int = 4) -> float | None:
     """A JSON number (None for NaN)."""
     f = float(v)
-    return None if f != f else round(f, 4)
+    return None if f != f else round(f, digits)

@@ -7,7 +7,10 @@ const D=JSON.parse(document.getElementById("replay-data").textContent);
 const NS="http://www.w3.org/2000/svg";
 const K=D.frames.length;
 const PED_FILL=["#111","#999","#fff","#8b4513"];
-const AWAIT="#e6007e", EST="#5b2a86";
+const AWAIT="#e6007e", EST="#5b2a86", HIDE="#4b2e83";
+// one colour per track label (soabench/replay/animation.py's TRACK_COLORS): label i of a model in colour i
+const TRACK=["#e6194b","#3cb44b","#4363d8","#f58231","#911eb4","#42d4f4","#f032e6","#9a6324","#469990","#800000",
+  "#808000","#000075"];
 function esc(s){return String(s).replace(/[&<>"']/g,c=>"&#"+c.charCodeAt(0)+";");}
 function pts(a){return a.map(p=>p[0]+","+p[1]).join(" ");}
 function el(tag,attrs){const e=document.createElementNS(NS,tag);for(const k in attrs)e.setAttribute(k,attrs[k]);return e;}
@@ -21,7 +24,10 @@ const legend=document.getElementById("legend");
 function swatch(svg,label){const s=document.createElement("span");
   s.innerHTML='<svg width="18" height="14" viewBox="0 0 18 14">'+svg+"</svg> "+esc(label);legend.appendChild(s);}
 swatch('<rect x="1" y="2" width="16" height="10" fill="#7fd37f" fill-opacity="0.45"/>',"visible sidewalk \u03a9_k");
-swatch('<rect x="1" y="2" width="16" height="10" fill="#6d6d6d" fill-opacity="0.35"/>',"occluded sidewalk (in the FOV)");
+swatch('<defs><pattern id="hatch-legend" patternUnits="userSpaceOnUse" width="4" height="4" patternTransform="rotate(45)">'+
+  '<line x1="0" y1="0" x2="0" y2="4" stroke="'+HIDE+'" stroke-width="1.3"/></pattern></defs>'+
+  '<rect x="1" y="2" width="16" height="10" fill="'+HIDE+'" fill-opacity="0.18"/><rect x="1" y="2" width="16" height="10" fill="url(#hatch-legend)"/>',
+  "occluded sidewalk in the FOV (\u03a9_k's complement: the sensor cannot see it)");
 swatch('<rect x="1" y="2" width="16" height="10" fill="none" stroke="#000" stroke-dasharray="3 2"/>',"field of view");
 swatch('<rect x="1" y="3" width="16" height="8" fill="#e41a1c" stroke="#000"/>',"ego (sensor)");
 swatch('<rect x="1" y="3" width="16" height="8" fill="#377eb8" stroke="#000"/>',"moving vehicle");
@@ -30,9 +36,14 @@ swatch('<rect x="1" y="1" width="16" height="12" fill="#f5c518" stroke="#b8860b"
 D.ped_states.forEach(function(s,i){swatch('<circle cx="9" cy="7" r="5" fill="'+PED_FILL[i]+'" stroke="#000"'+
   (i==1?' stroke-dasharray="2 1"':'')+'/>',"pedestrian: "+s);});
 swatch('<circle cx="9" cy="7" r="5" fill="none" stroke="'+AWAIT+'" stroke-width="2.5"/>',"detected, not yet initiated (delay runs)");
+swatch('<path d="M1 7H17" stroke="'+AWAIT+'" stroke-width="1.5" stroke-dasharray="3 2"/>',
+  "to the nearest birth term (its distance in \u03c3 in the panel's line: beyond 2\u03c3, outside every ellipse)");
 swatch('<circle cx="9" cy="7" r="3" fill="#1f77b4"/>',"measurement (target)");
 swatch('<path d="M5 3L13 11M13 3L5 11" stroke="#ff7f0e" stroke-width="2"/>',"measurement (clutter)");
 swatch('<path d="M9 1V13M3 7H15" stroke="'+EST+'" stroke-width="2.5"/>',"estimate");
+if(D.models.some(m=>m.tracks&&m.tracks.length))swatch('<path d="M9 1V13M3 7H15" stroke="'+TRACK[0]+'" stroke-width="2.5"/>'+
+  '<path d="M9 1V13M3 7H15" stroke="'+TRACK[1]+'" stroke-width="2.5" transform="translate(6 0)"/>',
+  "estimate with its track label (one colour per track)");
 D.sources.forEach(function(s){swatch('<ellipse cx="9" cy="7" rx="7" ry="4" fill="none" stroke="'+s.color+'" stroke-width="1.5"/>',
   "birth: "+s.label);});
 // panels: the static scene once per panel, a dynamic layer redrawn per frame
@@ -52,6 +63,9 @@ D.models.forEach(function(m,i){
   svg.appendChild(el("path",{d:S.buildings,fill:"#f5c518",stroke:"#b8860b","stroke-width":0.3,"fill-rule":"evenodd"}));
   svg.appendChild(el("path",{d:S.parked,fill:"#000"}));
   S.doors.forEach(function(p){svg.appendChild(el("rect",{x:p[0]-0.7,y:p[1]-0.7,width:1.4,height:1.4,fill:"#8b4513"}));});
+  const defs=el("defs",{}), pat=el("pattern",{id:"hatch"+i,patternUnits:"userSpaceOnUse",width:1.4,height:1.4,
+    patternTransform:"rotate(45)"});
+  pat.appendChild(el("line",{x1:0,y1:0,x2:0,y2:1.4,stroke:HIDE,"stroke-width":0.35}));defs.appendChild(pat);svg.appendChild(defs);
   const g=el("g",{"class":"dyn"});svg.appendChild(g);layers.push(g);
   div.appendChild(svg);panels.appendChild(div);
 });
@@ -65,7 +79,8 @@ function view(f){
 function draw(k){
   const f=D.frames[k];view(f);const R=fs*0.45;
   let common='<path d="'+f.omega+'" fill="#7fd37f" fill-opacity="0.45" fill-rule="evenodd"/>'+
-    '<path d="'+f.hidden+'" fill="#6d6d6d" fill-opacity="0.35" fill-rule="evenodd"/>'+
+    '<path d="'+f.hidden+'" fill="'+HIDE+'" fill-opacity="0.18" fill-rule="evenodd"/>'+
+    '<path d="'+f.hidden+'" fill="url(#hatch%I%)" fill-rule="evenodd"/>'+
     '<path d="'+f.fov+'" fill="none" stroke="#000" stroke-width="0.25" stroke-dasharray="1.5 1" fill-rule="evenodd"/>';
   f.vehicles.forEach(function(v){common+='<polygon points="'+pts(v)+'" fill="#377eb8" stroke="#000" stroke-width="0.15"/>';});
   if(f.ego_box.length)common+='<polygon points="'+pts(f.ego_box)+'" fill="#e41a1c" stroke="#000" stroke-width="0.15"/>';
@@ -74,11 +89,11 @@ function draw(k){
   let zs="";
   const c=(0.7*R).toFixed(2), c2=(1.4*R).toFixed(2);
   f.z.forEach(function(z){zs+=z[2]?'<path d="M'+(z[0]-c)+" "+(z[1]-c)+"l"+c2+" "+c2+"m0 -"+c2+"l-"+c2+" "+c2+
-    '" stroke="#ff7f0e" stroke-width="'+(0.3*R)+'"/>':'<circle cx="'+z[0]+'" cy="'+z[1]+'" r="'+(0.55*R)+'" fill="#1f77b4"/>';});
-  let nDrawn=0;
+    '" stroke="#ff7f0e" stroke-width="'+(0.45*R)+'"/>':'<circle cx="'+z[0]+'" cy="'+z[1]+'" r="'+(0.55*R)+'" fill="#1f77b4"/>';});
+  let nDrawn=0,nTracks=0;
   D.models.forEach(function(m,i){
     const mf=f.models[i];
-    let s=common, counts={};
+    let s=common.replace("%I%",i), counts={};
     mf.births.forEach(function(b){
       counts[b[5]]=(counts[b[5]]||0)+1;
       s+='<ellipse cx="'+b[0]+'" cy="'+b[1]+'" rx="'+(b[2]/2)+'" ry="'+(b[3]/2)+'" transform="rotate('+b[4]+" "+b[0]+" "+b[1]+
@@ -93,18 +108,27 @@ function draw(k){
       s+='<text x="'+(p[1]+1.3*R)+'" y="'+(p[2]-1.3*R)+'" font-size="'+fs+'" fill="#000" stroke="#fff" stroke-width="'+(fs/6)+
         '" paint-order="stroke">'+esc(p[0])+'</text>';});
     s+=zs;
+    const why={};
+    mf.why.forEach(function(w){why[w[0]]=w;const p=f.peds.find(q=>q[0]==w[0]);if(!p)return;
+      s+='<line x1="'+p[1]+'" y1="'+p[2]+'" x2="'+w[4]+'" y2="'+w[5]+'" stroke="'+AWAIT+'" stroke-width="'+(0.45*R)+
+        '" stroke-dasharray="'+R+" "+(0.6*R)+'"/>';});
     const e1=1.5*R, e2=3*R;
-    mf.est.forEach(function(x){s+='<path d="M'+x[0]+" "+(x[1]-e1)+"v"+e2+"M"+(x[0]-e1)+" "+x[1]+"h"+e2+'" stroke="'+EST+
-      '" stroke-width="'+(0.45*R)+'"/>';});
-    layers[i].innerHTML=s;nDrawn+=layers[i].childElementCount;
+    mf.est.forEach(function(x){const lab=x[2]>=0?m.tracks[x[2]]:null, col=lab===null?EST:TRACK[x[2]%TRACK.length];
+      s+='<path d="M'+x[0]+" "+(x[1]-e1)+"v"+e2+"M"+(x[0]-e1)+" "+x[1]+"h"+e2+'" stroke="'+col+
+      '" stroke-width="'+(0.45*R)+'"/>';
+      if(lab!==null)s+='<text class="track" x="'+(x[0]+1.3*R)+'" y="'+(x[1]+2.2*R)+'" font-size="'+fs+'" font-weight="bold" fill="'+
+        col+'" stroke="#fff" stroke-width="'+(fs/6)+'" paint-order="stroke">'+esc(lab)+'</text>';});
+    layers[i].innerHTML=s;nDrawn+=layers[i].childElementCount;nTracks+=layers[i].querySelectorAll("text.track").length;
     const parts=Object.keys(counts).map(c=>counts[c]+" "+D.sources[c].label);
     stats[i].textContent="births: "+(parts.length?parts.join(", "):"none")+" | estimates "+mf.est.length+
-      " | components "+mf.n_comp+" (mass "+mf.sum_w+")"+(waiting.length?" | awaiting initiation: "+waiting.join(", "):"");
+      " | components "+mf.n_comp+(mf.sum_w===null?"":" (mass "+mf.sum_w+")")+(waiting.length?" | awaiting initiation: "+waiting.map(function(id){const w=why[id];
+        return w?id+" (nearest birth "+w[1].toFixed(1)+"\u03c3 away: "+D.sources[w[3]].label+", "+w[2].toFixed(1)+" m)":id;}).join(", "):"");
   });
   slider.value=k;
   document.getElementById("clock").textContent="scan k = "+k+" / "+(K-1)+", t = "+f.t.toFixed(1)+" s";
   body.dataset.frame=String(k);body.dataset.t=String(f.t);body.dataset.measurements=String(f.z.length);
   body.dataset.pedestrians=String(f.peds.length);body.dataset.drawn=String(nDrawn);
+  body.dataset.tracks=String(nTracks);
 }
 const slider=document.getElementById("slider");slider.max=String(K-1);
 let cur=0,timer=null,focus=null;  // focus: the pedestrian the zoomed views centre on (else the ego)

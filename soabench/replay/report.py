@@ -16,18 +16,44 @@ import json
 import math
 import re
 import shlex
+import sys
 from pathlib import Path
 from typing import Any
 
+from soabench.birth import LABEL
 from soabench.errors import SoabenchError, require
-from soabench.experiment.files import write_text_atomic
+from soabench.experiment.runs.files import write_text_atomic
+from soabench.experiment.runs.ownership import resolve
 from soabench.replay.page import asset, fill
+from soabench.replay.simulate import read_run
 
 GENERATOR = "soabench report"
 REPORT_FILE = "report.html"
 INDEX_FILE = "index.html"
 REPLAYS_DIR = "replays"
 _MARKER = f'<meta name="generator" content="{GENERATOR}">'
+
+
+def shown_path(path: Path) -> str:
+    """``path`` relative to the working folder when it lies below it (a page written from a repository's root names
+    ``results/...``, not the machine's absolute path), else absolute."""
+    try:
+        return path.relative_to(Path.cwd().resolve()).as_posix() or "."
+    except ValueError:
+        return str(path)
+
+
+def write_page(target: Path, text: str) -> int:
+    """Write ``text`` to ``target`` (atomically) unless the file holds exactly that already, so writing the pages
+    of a finished folder again leaves them untouched; returns the size in bytes."""
+    data = text.encode("utf-8")
+    try:
+        if target.is_file() and target.stat().st_size == len(data) and target.read_bytes() == data:
+            return len(data)
+    except OSError:
+        pass
+    write_text_atomic(target, text)
+    return len(data)
 
 
 def replay_file(trial: int) -> str:
@@ -110,7 +136,7 @@ def _figures(run_dir: Path) -> str:
 
 
 def _replay_cells(run_dir: Path, model: str, mode: str, clutter: float, trial: int) -> str:
-    cmd = f"soabench replay {shlex.quote(str(run_dir))} --trial {trial} --mode {mode} --clutter {clutter:g}"
+    cmd = f"soabench replay {shlex.quote(shown_path(run_dir))} --trial {trial} --mode {mode} --clutter {clutter:g}"
     page = run_dir / REPLAYS_DIR / replay_file(trial)
     link = f' <a href="{REPLAYS_DIR}/{replay_file(trial)}">open replay</a>' if page.is_file() else ""
     return f"<code>{html.escape(cmd)}</code>{link}"
@@ -119,7 +145,6 @@ def _replay_cells(run_dir: Path, model: str, mode: str, clutter: float, trial: i
 def _extremes_html(run_dir: Path, rows: list[dict[str, Any]]) -> str:
     if not rows:
         return "<p>No trials.csv with a counted delay: no best or worst trial.</p>"
-    from soabench.birth import LABEL
 
     body = []
     for r in rows:
@@ -171,58 +196,77 @@ def report_html(run_dir: Path, raw: dict) -> str:
     toc = " · ".join(f'<a href="#s{i}">{html.escape(n)}</a>' for i, (n, _) in enumerate(sections))
     body = "\n".join(f'<section id="s{i}"><h2>{html.escape(n)}</h2>\n{c}</section>' for i, (n, c) in
                      enumerate(sections))  # fmt: skip
-    content = f"<h1>{title}</h1><p>{html.escape(str(run_dir))}</p><nav>{toc}</nav>\n{body}\n"
+    content = f"<h1>{title}</h1><p>{html.escape(shown_path(run_dir))}</p><nav>{toc}</nav>\n{body}\n"
     return fill(_PAGE, MARKER=_MARKER, TITLE=title, CSS=asset("report.css"), BODY=content, JS=asset("report.js"))
+
+
+def _ours(target: Path) -> bool:
+    """``target`` is a page this command wrote."""
+    try:
+        return _MARKER in target.read_text(encoding="utf-8", errors="replace")[:2000]
+    except OSError:
+        return False
 
 
 def _check_ours(target: Path) -> None:
     """An existing file at ``target`` must be a page this command wrote (else it is left alone, with an error)."""
     if not target.exists():
         return
-    try:
-        ours = _MARKER in target.read_text(encoding="utf-8", errors="replace")[:2000]
-    except OSError as exc:
-        raise SoabenchError(f"cannot read {str(target)!r}: {exc}") from None
-    require(ours, f"{str(target)!r} exists and was not written by soabench report; move it or give --out")
+    require(_ours(target), f"{str(target)!r} exists and was not written by soabench report; move it or give --out")
 
 
 def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, int]:
     """Write the report page of a run folder (default ``RUN/report.html``); returns its path and size in bytes.
 
     An existing file at the target that this command did not write is left alone (an error says so)."""
-    from soabench.replay.simulate import read_run
-
     path, _, raw = read_run(run_dir)
     target = path / REPORT_FILE if out is None else Path(out)
     _check_ours(target)
-    text = report_html(path, raw)
-    write_text_atomic(target, text)
-    return target, len(text.encode("utf-8"))
+    return target, write_page(target, report_html(path, raw))
+
+
+def refresh_report(run_dir: Path) -> Path | None:
+    """The run's ``report.html`` after its summary was written (every finished run, sweep point and study part gets
+    one: the page to open in a run folder); a foreign file there is left alone with a warning, the run stands."""
+    try:
+        return write_report(run_dir)[0]
+    except SoabenchError as exc:
+        print(f"soabench: warning: no report.html: {exc}", file=sys.stderr)
+        return None
 
 
 def find_runs(folder: Path) -> list[Path]:
-    """Every run folder (holding ``run.json``) under ``folder``, sorted by path."""
-    from soabench.experiment.store import RUN_FILE
+    """Every protocol run folder under ``folder`` (its ``run.json`` of the run format), sorted by path; other
+    folders with a ``run.json`` (a KITTI protocol run) are shown by their Markdown and figures."""
+    # imported when called: scipy would slow every start-up
+    from soabench.experiment.runs.store import FORMAT_VERSION, RUN_FILE
 
-    return sorted(p.parent for p in folder.rglob(RUN_FILE))
+    runs = []
+    for p in sorted(folder.rglob(RUN_FILE)):
+        try:
+            meta = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError):
+            meta = None
+        if isinstance(meta, dict) and meta.get("format") == FORMAT_VERSION:
+            runs.append(p.parent)
+    return runs
 
 
 def _folder_parts(folder: Path, runs: list[Path]) -> list[tuple[Path, list[Path], list[Path]]]:
-    """(subfolder, its Markdown files, its PNG files) for every folder under ``folder`` outside the run folders."""
+    """(subfolder, its Markdown files, its PNG files) for every folder under ``folder`` outside the run folders that
+    holds some or an index page of ours."""
     inside = set(runs)
     out = []
     for d in sorted([folder, *(p for p in folder.rglob("*") if p.is_dir())]):
         if any(d == r or r in d.parents for r in inside):
             continue
         md, png = sorted(d.glob("*.md")), sorted(d.glob("*.png"))
-        if md or png:
+        if md or png or (d != folder and _ours(d / INDEX_FILE)):
             out.append((d, md, png))
     return out
 
 
 def _run_row(folder: Path, run: Path) -> str:
-    from soabench.replay.simulate import read_run
-
     rel = run.relative_to(folder).as_posix()
     try:
         _, meta, raw = read_run(run)
@@ -238,30 +282,35 @@ def _run_row(folder: Path, run: Path) -> str:
 
 
 def index_html(folder: Path, runs: list[Path]) -> str:
-    """The index page of a folder of run folders (a study, ``results/``): its own Markdown and figures, and a table
-    linking every run's report page."""
+    """The index page of a folder of run folders (a study, ``results/``): its own Markdown and figures, a table
+    linking every run's report page (shallow folders first: a study's main run before its sweep points), then the
+    folders below with their index pages, Markdown and figures."""
     head = "".join(f"<th>{h}</th>" for h in ("run folder", "scene", "trials", "duration", "models", "λ", "seed"))
+    shallow_first = sorted(runs, key=lambda r: (len(r.relative_to(folder).parts), r))  # main/ before sweep points
     table = (f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>'
-             + "".join(_run_row(folder, r) for r in runs) + "</tbody></table>")  # fmt: skip
+             + "".join(_run_row(folder, r) for r in shallow_first) + "</tbody></table>")  # fmt: skip
     parts = []
     for d, mds, pngs in _folder_parts(folder, runs):
         rel = d.relative_to(folder).as_posix() if d != folder else "."
-        body = "".join(markdown_html(m.read_text(encoding="utf-8")) for m in mds)
+        body = ""
+        if d != folder and _ours(d / INDEX_FILE):
+            body += f'<p><a href="{html.escape(rel)}/{INDEX_FILE}">{html.escape(rel)}/{INDEX_FILE}</a></p>'
+        body += "".join(markdown_html(m.read_text(encoding="utf-8")) for m in mds)
         body += "".join(_figure(p) for p in pngs)
         parts.append((f"{rel}/", body))
-    sections = [("Run folders", table), *parts]
+    own = [p for p in parts if p[0] == "./"]  # the folder's own Markdown (comparison.md, README.md) comes first
+    sections = [*(("This folder", b) for _, b in own), ("Run folders", table), *(p for p in parts if p[0] != "./")]
     title = html.escape(f"soabench report: {folder.name}")
     toc = " · ".join(f'<a href="#s{i}">{html.escape(n)}</a>' for i, (n, _) in enumerate(sections))
     body = "\n".join(f'<section id="s{i}"><h2>{html.escape(n)}</h2>\n{c}</section>' for i, (n, c) in
                      enumerate(sections))  # fmt: skip
-    content = f"<h1>{title}</h1><p>{html.escape(str(folder))}</p><nav>{toc}</nav>\n{body}\n"
+    content = f"<h1>{title}</h1><p>{html.escape(shown_path(folder))}</p><nav>{toc}</nav>\n{body}\n"
     return fill(_PAGE, MARKER=_MARKER, TITLE=title, CSS=asset("report.css"), BODY=content, JS=asset("report.js"))
 
 
-def write_index(folder: str | Path) -> tuple[Path, int, list[Path]]:
-    """Write every run's report under ``folder`` and ``folder/index.html`` linking them; returns the index path, its
-    size in bytes and the run folders."""
-    from soabench.experiment.ownership import resolve
+def write_index(folder: str | Path, reports: bool = True) -> tuple[Path, int, list[Path]]:
+    """Write every run's report under ``folder`` (``reports``) and ``folder/index.html`` linking them; returns the
+    index path, its size in bytes and the run folders. Unchanged pages are not rewritten."""
 
     path = resolve(folder)
     require(path.is_dir(), f"{str(path)!r} is not a folder")
@@ -269,11 +318,9 @@ def write_index(folder: str | Path) -> tuple[Path, int, list[Path]]:
     require(bool(runs), f"{str(path)!r} is not a run folder and holds none (no run.json in it or below)")
     target = path / INDEX_FILE
     _check_ours(target)
-    for run in runs:
+    for run in runs if reports else ():
         write_report(run)
-    text = index_html(path, runs)
-    write_text_atomic(target, text)
-    return target, len(text.encode("utf-8")), runs
+    return target, write_page(target, index_html(path, runs)), runs
 
 
 _PAGE = """<!DOCTYPE html>

@@ -11,6 +11,7 @@ what the run measured.
 
 from __future__ import annotations
 
+import copy
 import csv
 import dataclasses
 import math
@@ -18,8 +19,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from soabench import plugins
+from soabench.birth import LABEL
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
+from soabench.experiment.runs.ownership import check_existing_folder, resolve
+from soabench.experiment.runs.provenance import package_versions
+from soabench.experiment.runs.runmeta import validate_run_meta
+from soabench.experiment.trial import guard, registry
+from soabench.experiment.trial.registry import load_scene_cached
+from soabench.protocols import TrackerSetup
+from soabench.scenario import simulate
+from soabench.seeding import trial_seeds
+from soabench.sensor import observe
+from soabench.trackers import GMPHDTracker, ScanFailure, run_tracker
 
 #: per-trial metric columns compared with ``trials.csv`` (the rest are derived from these or are wall times)
 CHECKED_COLUMNS = ("delay_mean", "n_episodes", "n_censored", "card_err", "ospa", "gospa", "tp", "fp", "fn")
@@ -58,11 +71,10 @@ class TrialReplay:
 
 
 def read_run(run_dir: str | Path):
-    """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runmeta.validate_run_meta`) and its
+    """The validated ``run.json`` of a run folder (:func:`soabench.experiment.runs.runmeta.validate_run_meta`) and its
     raw dict."""
-    from soabench.experiment.ownership import check_existing_folder, resolve
-    from soabench.experiment.runmeta import validate_run_meta
-    from soabench.experiment.store import RUN_FILE, RunStore
+    # imported when called: scipy would slow every start-up
+    from soabench.experiment.runs.store import RUN_FILE, RunStore
 
     path = resolve(run_dir)
     check_existing_folder(path, RUN_FILE, "run")
@@ -88,17 +100,10 @@ def replay_trial(
 ) -> TrialReplay:
     """Re-simulate trial ``trial`` of the run in ``run_dir`` for ``models`` (default: the run's birth models) in
     probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
-    from soabench import plugins
-    from soabench.birth import LABEL
-    from soabench.experiment import registry
-    from soabench.experiment.runner import load_scene_cached
-    from soabench.experiment.trial import RunKey, make_row
+    # imported when called: numba, scipy would slow every start-up
+    from soabench.experiment.trial.trial import RunKey, make_row
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.metrics import evaluate
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
-    from soabench.trackers import GMPHDTracker, run_tracker
 
     path, meta, raw = read_run(run_dir)
     cfg = meta.config
@@ -112,10 +117,10 @@ def replay_trial(
         f"run folder {str(path)!r} was made by trial kind {meta.trial_kind!r} / scene loader {meta.scene_loader!r}; "
         "a replay re-simulates the built-in pipeline only",
     )
-    names = tuple(exp.models) if models is None else tuple(models)
+    names = (*exp.models, *exp.trackers) if models is None else tuple(models)
     for name in names:
-        require(name in exp.models, f"--models {name!r} is not a birth model of this run; choose from "
-                f"{', '.join(exp.models)}")  # fmt: skip
+        require(name in (*exp.models, *exp.trackers), f"--models {name!r} is not a birth model or tracker of this "
+                f"run; choose from {', '.join((*exp.models, *exp.trackers))}")  # fmt: skip
     mode = _choose(mode, list(exp.probabilities), "--mode")
     lam = float(_choose(None if clutter is None else float(clutter), [float(c) for c in exp.clutter], "--clutter"))
     scene, scenario = load_scene_cached(meta.net, meta.polys, meta.scenario)
@@ -126,20 +131,43 @@ def replay_trial(
     filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
     runs: list[ModelReplay] = []
     for name in names:
-        cls = plugins.resolve(plugins.BIRTH, name)
-        options = {} if plugins.is_builtin_birth(name) else cfg.plugins.get(name, {})
-        model = _Recorder(cls(cfg.birth, sensor_cfg, scene, seeds.placement_rng(), **options))
-        run = run_tracker(scans, GMPHDTracker(model, GMPHDFilter(filter_cfg, sensor_cfg, filter_mode), p_D_b))
+        if name not in exp.models:  # a whole tracker: no birth terms of ours to show
+            run = _tracker_run(name, cfg, sensor_cfg, scene, scans, seeds, mode)
+            births: list[Any] = [None] * len(run.results)
+        else:
+            cls = plugins.resolve(plugins.BIRTH, name)
+            options = {} if plugins.is_builtin_birth(name) else cfg.plugins.get(name, {})
+            model = _Recorder(cls(cfg.birth, sensor_cfg, scene, seeds.placement_rng(), **options))
+            run = run_tracker(scans, GMPHDTracker(model, GMPHDFilter(filter_cfg, sensor_cfg, filter_mode), p_D_b))
+            births = model.births
         metrics = evaluate(scans, run.results, cfg.metrics, sensor_cfg)
         row = make_row(RunKey(trial, lam, name, mode), seeds, cfg.birth.N_hat, metrics, run, 0.0)
-        runs.append(ModelReplay(name, LABEL.get(name, name), model.births, run.results, metrics, row))
+        runs.append(ModelReplay(name, LABEL.get(name, name), births, run.results, metrics, row))
     out = TrialReplay(path, trial, lam, mode, cfg, scene, recording, scans, seeds, runs)
     out.notes.append(_version_note(raw))
-    if exp.trackers:
-        out.notes.append(f"not replayed: the run's whole trackers ({', '.join(exp.trackers)}); birth models only")
     out.reproduced, note = _check_rows(path, out)
     out.notes.append(note)
     return out
+
+
+def _tracker_run(name: str, cfg: Config, sensor_cfg: Any, scene: Any, scans: Any, seeds: Any, mode: str) -> Any:
+    """A whole tracker's run over the scans, built as the trial builds it (its own copy of the configuration, the
+    trial's placement generator); each step's track labels, where its Estimates carry them, stay on the result."""
+
+    def check(out: Any, scan: Any, t_step: float) -> Any:
+        result = guard.check_estimates(out, scan, t_step)
+        labels = getattr(out, "labels", None)
+        if labels is not None and getattr(result, "labels", None) is None:
+            result.labels = labels  # shown by the replay (soabench.replay.frames.estimate_labels)
+        return result
+
+    cls = plugins.resolve(plugins.TRACKER, name)
+    own = copy.deepcopy(cfg)
+    setup = TrackerSetup(dataclasses.replace(sensor_cfg), scene, seeds.placement_rng(), mode, own)
+    try:
+        return run_tracker(scans, cls(setup, **own.plugins.get(name, {})), check)
+    except ScanFailure as exc:
+        raise SoabenchError(f"tracker {name!r} failed at scan {exc.k} of the replay: {exc.message}") from None
 
 
 class _Recorder:
@@ -158,7 +186,7 @@ class _Recorder:
 
 def _version_note(raw: dict) -> str:
     """One line: the package versions that differ between the run and this replay (or that they agree)."""
-    from soabench.experiment.runner import package_versions
+    # imported when called: scipy would slow every start-up
 
     stored = raw.get("versions") if isinstance(raw.get("versions"), dict) else {}
     now = package_versions()

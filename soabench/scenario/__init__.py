@@ -1,5 +1,5 @@
-"""SUMO scenarios: networks -> :class:`SceneMap`, libsumo runs -> :class:`Recording` (docs/development.md pipeline,
-stage 1).
+"""SUMO scenarios: networks -> :class:`SceneMap`, libsumo runs -> :class:`~soabench.types.Recording`
+(docs/development.md pipeline, stage 1).
 
 Public API: :func:`load` (network + polygons + scenario TOML) and :func:`simulate` (one run with libsumo).
 """
@@ -13,13 +13,13 @@ from pathlib import Path
 
 from soabench.errors import require
 from soabench.scenario.config import ScenarioConfig, load_scenario, scenario_from_dict
-from soabench.scenario.recording import Recording
+from soabench.scenario.derive import derive_defaults
+from soabench.scenario.network import read_net
 from soabench.scenario.scene import SceneMap
 from soabench.scenario.simulation import simulate
 
 __all__ = [
     "USER_NET_DEFAULTS",
-    "Recording",
     "ScenarioConfig",
     "SceneMap",
     "load",
@@ -95,9 +95,6 @@ def load(
     Whatever the scenario leaves open is derived from the network (docs/user-guide/scenes.md; module
     :mod:`soabench.scenario.derive`): ego route, world box, vehicle sources / sinks and doors.
     """
-    from soabench.scenario.derive import derive_defaults
-    from soabench.scenario.network import read_net
-
     folder = scene_folder(net)
     if folder is not None:
         own = folder / "scenario.toml"

@@ -23,7 +23,18 @@ from shapely.geometry import LineString, box
 
 from soabench.errors import SoabenchError, require
 from soabench.scenario.config import ScenarioConfig
+from soabench.scenario.network import (
+    MAX_DOOR_DISTANCE,
+    default_doors,
+    default_ego_route,
+    fringe_edges,
+    load_scene,
+    net_regions,
+    read_polygons,
+)
+from soabench.scenario.parking import kerbside_parking
 from soabench.scenario.scene import SceneMap
+from soabench.scenario.simulation import ego_depart_pos
 
 #: metres added around the ego's stretch for the derived world box (the default sensor range is 50 m).
 BOX_MARGIN = 40.0
@@ -123,7 +134,6 @@ def check_vehicles_and_ego(net, cfg: ScenarioConfig) -> None:
             require(e in edges, f"{key} edge {e!r} is not in network {cfg.net_file!r}")
             if cfg.n_vehicles:
                 _drive_lane(net, e)
-    from soabench.scenario.simulation import ego_depart_pos
 
     lane = _drive_lane(net, cfg.ego_route[0])
     ego_depart_pos(lane.getShape(), lane.getLength(), cfg)
@@ -131,8 +141,6 @@ def check_vehicles_and_ego(net, cfg: ScenarioConfig) -> None:
 
 def derive_defaults(cfg: ScenarioConfig, net, quiet: bool = False) -> SceneMap:
     """Fill ``cfg``'s open fields from ``net`` (module docstring) and return the scene map; log what was derived."""
-    from soabench.scenario.network import MAX_DOOR_DISTANCE, default_doors, fringe_edges, load_scene, read_polygons
-    from soabench.scenario.parking import kerbside_parking
 
     require(
         _has_pedestrian_lane(net),
@@ -140,8 +148,6 @@ def derive_defaults(cfg: ScenarioConfig, net, quiet: bool = False) -> SceneMap:
     )
     said: list[str] = []
     if not cfg.ego_route:
-        from soabench.scenario.network import default_ego_route
-
         cfg.ego_route = default_ego_route(net)
         length = sum(net.getEdge(e).getLength() for e in cfg.ego_route)
         said.append(f"ego route {cfg.ego_route[0]} -> {cfg.ego_route[-1]} ({len(cfg.ego_route)} edges, {length:.0f} m)")
@@ -155,7 +161,6 @@ def derive_defaults(cfg: ScenarioConfig, net, quiet: bool = False) -> SceneMap:
     if doors is None:
         buildings, _ = read_polygons(cfg.poly_files)
         near = [b for b in buildings if b.intersects(world)]
-        from soabench.scenario.network import net_regions
 
         doors = default_doors(near, net_regions(net)["sidewalk"].intersection(world)) if near else np.zeros((0, 2))
         if not cfg.poly_files:

@@ -27,6 +27,7 @@ from shapely.geometry import LineString, MultiLineString, Point, Polygon, box
 from shapely.geometry.base import BaseGeometry
 
 from soabench.errors import SoabenchError, require
+from soabench.scenario.config import MAX_COORDINATE
 from soabench.scenario.scene import SceneMap
 
 #: farthest a scenario's door may lie from a sidewalk centre line (m); as far as a derived door may lie from a
@@ -91,7 +92,6 @@ def _require_not_a_network(p: Path) -> None:
 def _require_outline(p: Path, poly) -> None:
     """A building's or occluder's outline: at least 3 points, finite coordinates within
     :data:`~soabench.scenario.config.MAX_COORDINATE` (a scene spans at most 10 000 km)."""
-    from soabench.scenario.config import MAX_COORDINATE
 
     where = f"polygon {poly.id!r} ({poly.type}) of {str(p)!r}"
     require(len(poly.shape) >= 3, f"{where} has {len(poly.shape)} point(s); an outline needs at least 3")

@@ -20,6 +20,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from soabench.errors import SoabenchError, require
+from soabench.experiment.runs.ownership import check_new_folder, resolve
+from soabench.scenario import ScenarioConfig
+from soabench.scenario.derive import derive_defaults
+from soabench.scenario.network import read_net
 
 #: netconvert options of an import (pedestrian infrastructure guessed, geometry cleaned).
 NETCONVERT_OPTIONS = (
@@ -141,7 +145,6 @@ def import_osm(osm_file: str | os.PathLike, out: str | os.PathLike, force: bool 
     ``out`` must not exist or be empty; the scene is built in a temporary folder beside it and moved there when
     complete, so an import that fails leaves nothing. Files above :data:`MAX_OSM_MB` are refused unless ``force``.
     """
-    from soabench.experiment.ownership import check_new_folder, resolve
 
     osm = Path(osm_file)
     counts = check_osm(osm)
@@ -182,9 +185,6 @@ def _build(osm: Path, folder: Path, stem: str) -> Path:
         str(osm),
     )  # fmt: skip
     _say(f"polyconvert wrote {polys.name} ({time.monotonic() - t0:.0f} s)")
-    from soabench.scenario import ScenarioConfig
-    from soabench.scenario.derive import derive_defaults
-    from soabench.scenario.network import read_net
 
     net_map = read_net(net)
     cfg = ScenarioConfig(net_file=str(net), poly_files=[str(polys)], name=stem, pedestrian_model="striping")

@@ -29,10 +29,10 @@ from shapely.geometry import LineString, Point, box
 from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import wrap
 from soabench.scenario.config import ScenarioConfig
-from soabench.scenario.recording import Recording
 from soabench.scenario.scene import SceneMap
 from soabench.scenario.watchdog import INSERTING, STARTING, STEPPING, Progress, run_watched
 from soabench.seeding import TrialSeeds
+from soabench.types import Recording
 
 #: steps run before the first recorded sample (insertion; the first sample of a new person is dropped anyway).
 WARMUP_STEPS = 3
@@ -165,7 +165,7 @@ def simulate(scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, durat
         seeds: trial seeds; SUMO gets ``seeds.sumo_seed``, every scenario choice uses ``seeds.scenario_rng()``.
         duration: recorded time (s), overriding ``scenario.duration``.
     """
-    import libsumo  # noqa: F401  (imported once here, about 1 s; every forked SUMO run inherits it)
+    import libsumo  # noqa: F401  (imported once here: every forked SUMO run inherits it)
 
     hint = "load both with soabench.scenario.load(net), or call soabench.api.simulate_trial(net, seed, trial)"
     require_type(scene, SceneMap, "simulate's scene", hint)

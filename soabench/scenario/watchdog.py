@@ -28,6 +28,7 @@ from collections.abc import Callable
 from typing import Any
 
 from soabench.errors import SoabenchError
+from soabench.experiment.execution.workers import _set_pdeathsig
 
 #: environment variable holding the stall limit in seconds (``inf`` waits for ever).
 STALL_ENV = "SOABENCH_SUMO_TIMEOUT"
@@ -89,7 +90,6 @@ def run_watched(fn: Callable[..., Any], args: tuple, describe: str, hint: str = 
     limit = stall_timeout()
     if not hasattr(os, "fork"):  # pragma: no cover - Windows
         return fn(*args, progress=Progress())
-    from soabench.experiment.workers import _set_pdeathsig  # imported here: the child starts at once
 
     page = mmap.mmap(-1, _STATE.size)  # anonymous and shared: the child's writes are seen here
     read_fd, write_fd = os.pipe()

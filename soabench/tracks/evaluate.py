@@ -2,7 +2,7 @@
 
 :func:`evaluate_tracks` reads the truth of :class:`~soabench.sensor.Scans` (positions, presence, FOV, line of sight),
 the tracker's extracted positions and, if it labels them, their labels, and the §5.4 delay episodes that
-:func:`soabench.metrics.evaluate` already built. Truth ids are the pedestrian columns of the scans; truth and
+:func:`soabench.metrics.evaluate` already built. Truth ids are the pedestrians' track labels (``Scans.ped_labels``); truth and
 estimates are the sets of docs/method.md §5.1. The position-only measures (entry and re-emergence delay, coasted)
 are computed for every tracker; the label measures (HOTA ... OSPA(2), HOTA per alpha, identity kept) are None for an
 unlabelled one.
@@ -24,7 +24,7 @@ from soabench.tracks.sequence import ScanRows, TrackSequence, checked
 
 if TYPE_CHECKING:
     from soabench.config import MetricsConfig, SensorConfig
-    from soabench.sensor import Scans
+    from soabench.types import Scans
 
 #: per-run columns that need labels (None for an unlabelled tracker), in table order
 LABEL_KEYS = (
@@ -102,7 +102,8 @@ def evaluate_tracks(
     out: dict[str, float | int | None] = dict.fromkeys(LABEL_KEYS + ALPHA_KEYS)
     if est_labels is not None:
         k, p = np.nonzero(gt)  # GT_k of every scan stacked, in column order (finite positions: gt_mask)
-        seq = TrackSequence.of_rows(ScanRows(p.astype(np.int64), scans.truth_xy[k, p], _offsets(gt.sum(axis=1))), est)
+        truth = ScanRows(scans.ped_labels[p], scans.truth_xy[k, p], _offsets(gt.sum(axis=1)))  # truth track ids
+        seq = TrackSequence.of_rows(truth, est)
         scores = scores_of(seq, cfg.d_gate)
         s, o = scores.scalars(), ospa2_of(seq)
         out.update({key: s[key] for key in LABEL_KEYS if key in s})

@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from matplotlib.figure import Figure
 
-from soabench import plotstyle as ps
+from soabench.figures import style as ps
 from soabench.tracks.evaluate import ALPHA_KEYS
 from soabench.tracks.scores import ALPHAS
 

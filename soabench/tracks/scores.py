@@ -8,7 +8,7 @@
 
 Each follows the arithmetic of TrackEval's ``HOTA``, ``CLEAR`` and ``Identity`` metric classes step for step (the
 same Hungarian problems, the same threshold tests with their machine-epsilon margins, the same results on empty
-sequences), so the values equal TrackEval's to rounding; tests/test_track_metrics.py holds them to 1e-12 against
+sequences), so the values equal TrackEval's to rounding; tests/unit/test_track_metrics.py holds them to 1e-12 against
 TrackEval itself. The scan-by-scan matching is one compiled loop (:mod:`soabench.tracks.kernels`), done once for
 all 19 alphas, which are then applied to the stacked matches; benchmarks/bench_track_metrics.py times it against
 TrackEval's three ``eval_sequence`` calls.

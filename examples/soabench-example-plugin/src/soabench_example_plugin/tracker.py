@@ -6,7 +6,8 @@ linearised covariance J R J^T, so the update is linear. Per scan: predict every 
 Mahalanobis distance (chi-square, 2 degrees of freedom), assign greedily by increasing distance (global nearest
 neighbour, greedy), update the assigned tracks, start a tentative track on every unassigned measurement. A track
 is confirmed once it was updated in ``m`` of its last ``n`` scans and deleted after ``max_misses`` scans in a row
-without a measurement. The estimates are the confirmed tracks.
+without a measurement. The estimates are the confirmed tracks, each labelled with its track number (1, 2, ... in
+the order the tracks were started), so the harness can score identities too.
 """
 
 from __future__ import annotations
@@ -51,6 +52,8 @@ class NearestNeighbourKF:
         self.hits = np.zeros((0, n), dtype=bool)  # hit history, newest last
         self.misses = np.zeros(0, dtype=int)
         self.confirmed = np.zeros(0, dtype=bool)
+        self.ids = np.zeros(0, dtype=np.int64)  # track number of each track: its label
+        self.next_id = 1
 
     def _measurements(self, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
         """World positions (M, 2) and covariances (M, 2, 2) of the scan's measurements."""
@@ -94,7 +97,7 @@ class NearestNeighbourKF:
         # delete, then start tentative tracks on the unassigned measurements
         keep = self.misses <= self.max_misses
         self.x, self.P, self.hits = self.x[keep], self.P[keep], self.hits[keep]
-        self.misses, self.confirmed = self.misses[keep], self.confirmed[keep]
+        self.misses, self.confirmed, self.ids = self.misses[keep], self.confirmed[keep], self.ids[keep]
         new = np.setdiff1d(np.arange(M), assigned[assigned >= 0])
         if len(new):
             x0 = np.zeros((len(new), 4))
@@ -108,5 +111,7 @@ class NearestNeighbourKF:
             self.hits = np.concatenate([self.hits, h0])
             self.misses = np.concatenate([self.misses, np.zeros(len(new), dtype=int)])
             self.confirmed = np.concatenate([self.confirmed, np.full(len(new), self.m <= 1)])
+            self.ids = np.concatenate([self.ids, np.arange(self.next_id, self.next_id + len(new), dtype=np.int64)])
+            self.next_id += len(new)
         X = self.x[self.confirmed]
-        return Estimates(X.copy(), n_components=len(self.x))
+        return Estimates(X.copy(), n_components=len(self.x), labels=self.ids[self.confirmed].copy())

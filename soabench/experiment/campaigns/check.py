@@ -1,0 +1,513 @@
+"""``soabench check --suite FILE.toml``: short scenarios with per-metric thresholds, the CI mode for tracker developers.
+
+A suite file (TOML, read as data only) holds:
+
+* ``[suite]``: ``name``, optional ``baseline`` (JSON path, relative to the suite file) and ``config`` (a soabench
+  configuration TOML, relative to the suite file, e.g. for ``[plugins.<name>]`` options);
+* one ``[[scenario]]`` table per short scenario: ``name``, ``net`` (a shipped network or a path relative to the
+  suite file), optional ``polys`` (polygon files) and ``scenario`` (scenario TOML), ``seeds`` (base seeds),
+  ``trials`` per seed, ``duration`` (s), ``models``, ``trackers``, ``probabilities``, ``clutter``;
+* one ``[[threshold]]`` table per check: ``metric`` (a metric or ``t_*`` timing column of trials.csv, e.g.
+  ``ospa``, ``card_err``, ``precision``; any other name is a bad suite), ``model`` (a name or ``"*"``), optional
+  ``mode``/``scenario`` filters, and any of ``max``, ``min`` (absolute), ``max_increase``, ``max_decrease``
+  (relative to the baseline value: fail when the value exceeds ``baseline * (1 + max_increase)`` or falls below
+  ``baseline * (1 - max_decrease)``) and ``abs_tol`` (slack added to the relative bounds, default 1e-9).
+
+A value is the mean of the metric over every trial and seed of one (scenario, model, mode, clutter). A value that is
+NaN (no trial produced it) fails every threshold on it, and a plugin run that failed (soabench.experiment.trial.guard)
+fails the suite. Results: a table on stdout, ``check.json`` and ``junit.xml`` in ``--out``; exit status 0 when every
+check passes, 1 on a regression. ``--update-baseline`` writes every measured value to the baseline file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import math
+import re
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import escape, quoteattr
+
+import numpy as np
+
+from soabench import plugins
+from soabench.config import Config, load_config
+from soabench.errors import SoabenchError, require
+from soabench.experiment.runs.files import read_csv, write_json_atomic, write_text_atomic
+from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
+from soabench.experiment.trial.guard import failure_message
+from soabench.tomlfile import read_toml
+
+SUITE_KEYS = {"name", "baseline", "config"}
+SCENARIO_KEYS = {
+    "name",
+    "net",
+    "polys",
+    "scenario",
+    "seeds",
+    "trials",
+    "duration",
+    "models",
+    "trackers",
+    "probabilities",
+    "clutter",
+}
+THRESHOLD_KEYS = {"metric", "model", "mode", "scenario", "max", "min", "max_increase", "max_decrease", "abs_tol"}
+BASELINE_FORMAT = 1
+#: a scenario's name names its folder ``--out/runs/NAME/``: a plain name, never a path
+SCENARIO_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
+#: every entry of a check folder (a folder holding anything else is not a check's and is refused)
+CHECK_ENTRIES = ("check.json", "junit.xml", "runs")
+
+
+@dataclass
+class Scenario:
+    name: str
+    net: str
+    polys: tuple[str, ...] = ()
+    scenario: str | None = None
+    seeds: tuple[int, ...] = (0,)
+    trials: int = 1
+    duration: float = 20.0
+    models: tuple[str, ...] = ("soa",)
+    trackers: tuple[str, ...] = ()
+    probabilities: tuple[str, ...] = ("static",)
+    clutter: tuple[float, ...] = (3.0,)
+
+
+@dataclass
+class Threshold:
+    metric: str
+    model: str = "*"
+    mode: str | None = None
+    scenario: str | None = None
+    max: float | None = None
+    min: float | None = None
+    max_increase: float | None = None
+    max_decrease: float | None = None
+    abs_tol: float = 1e-9
+
+    @property
+    def relative(self) -> bool:
+        return self.max_increase is not None or self.max_decrease is not None
+
+
+@dataclass
+class Suite:
+    name: str
+    path: Path
+    scenarios: list[Scenario]
+    thresholds: list[Threshold]
+    baseline: Path | None = None
+    config: Path | None = None
+
+
+@dataclass
+class CheckResult:
+    """One check: a threshold applied to one value (or a failed plugin run)."""
+
+    name: str
+    passed: bool
+    message: str
+    value: float = math.nan
+    bound: str = ""
+
+
+@dataclass
+class CheckOutcome:
+    suite: str
+    values: dict[str, float]
+    results: list[CheckResult] = field(default_factory=list)
+    wall_s: float = 0.0
+
+    @property
+    def passed(self) -> bool:
+        return all(r.passed for r in self.results)
+
+
+# ------------------------------------------------------------------------------------------------ the suite file
+def _table(data: Any, where: str, allowed: set[str]) -> dict:
+    require(isinstance(data, dict), f"{where} must be a table of key = value")
+    unknown = sorted(set(data) - allowed)
+    if unknown:
+        raise SoabenchError(f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}")
+    return data
+
+
+def _strs(v: Any, where: str) -> tuple[str, ...]:
+    require(isinstance(v, list) and all(isinstance(s, str) for s in v), f"{where} = {v!r} must be a list of names")
+    return tuple(v)
+
+
+def _number(v: Any, where: str, lo: float = -math.inf) -> float:
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= lo
+    require(ok, f"{where} = {v!r} must be a finite number >= {lo:g}")
+    return float(v)
+
+
+def _inside(folder: Path, name: Any, where: str) -> Path:
+    """``folder / name`` for a relative path that stays inside ``folder`` (``--update-baseline`` writes it: a suite
+    file never names a place outside its own folder)."""
+    require(isinstance(name, str) and name != "", f"{where} = {name!r} must be a file name relative to the suite")
+    path = (folder / name).resolve()
+    require(
+        not Path(name).is_absolute() and path.is_relative_to(folder),
+        f"{where} = {name!r} lies outside the suite file's folder {str(folder)!r}; give a path inside it",
+    )
+    return path
+
+
+def load_suite(path: str | Path) -> Suite:
+    """Read and validate a suite file (SoabenchError naming the value and what is allowed)."""
+    p = Path(path)
+    require(p.is_file(), f"suite file {str(p)!r} does not exist")
+    data = read_toml(p, "suite file")
+    _table(data, str(p), {"suite", "scenario", "threshold"})
+    head = _table(data.get("suite", {}), "[suite]", SUITE_KEYS)
+    here = p.resolve().parent
+    suite = Suite(
+        name=str(head.get("name", p.stem)),
+        path=p,
+        scenarios=[],
+        thresholds=[],
+        baseline=_inside(here, head["baseline"], "[suite] baseline") if "baseline" in head else None,
+        config=here / head["config"] if "config" in head else None,
+    )
+    scen = data.get("scenario", [])
+    require(isinstance(scen, list) and len(scen) >= 1, f"{p}: give at least one [[scenario]] table")
+    for i, raw in enumerate(scen):
+        t = _table(raw, f"[[scenario]] #{i + 1}", SCENARIO_KEYS)
+        require("name" in t and "net" in t, f"[[scenario]] #{i + 1} needs a name and a net")
+        require(
+            isinstance(t["name"], str) and SCENARIO_NAME.fullmatch(t["name"]) is not None,
+            f"[[scenario]] #{i + 1}: name = {t['name']!r} is not a plain name (letters, digits, '.', '_', '-', at most "
+            "100, starting with a letter or digit): it names the folder --out/runs/NAME",
+        )
+        net = str(t["net"])
+        if "/" in net or net.endswith(".xml"):
+            net = str(here / net)
+        s = Scenario(name=str(t["name"]), net=net)
+        w = f"scenario {s.name!r}"
+        if "polys" in t:
+            s.polys = tuple(str(here / f) for f in _strs(t["polys"], f"{w}: polys"))
+        if "scenario" in t:
+            require(isinstance(t["scenario"], str), f"{w}: scenario must be a path to a scenario TOML")
+            s.scenario = str(here / t["scenario"])
+        if "seeds" in t:
+            require(
+                isinstance(t["seeds"], list)
+                and len(t["seeds"]) >= 1
+                and all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in t["seeds"]),
+                f"{w}: seeds = {t['seeds']!r} must be a non-empty list of integers >= 0",
+            )
+            s.seeds = tuple(t["seeds"])
+        if "trials" in t:
+            require(isinstance(t["trials"], int) and t["trials"] >= 1, f"{w}: trials must be an integer >= 1")
+            s.trials = int(t["trials"])
+        if "duration" in t:
+            s.duration = _number(t["duration"], f"{w}: duration", 1e-9)
+        for key in ("models", "trackers", "probabilities"):
+            if key in t:
+                setattr(s, key, _strs(t[key], f"{w}: {key}"))
+        if "clutter" in t:
+            require(isinstance(t["clutter"], list) and t["clutter"], f"{w}: clutter must be a list of rates")
+            s.clutter = tuple(_number(c, f"{w}: clutter", 0.0) for c in t["clutter"])
+        suite.scenarios.append(s)
+    names = [s.name for s in suite.scenarios]
+    require(len(set(names)) == len(names), f"{p}: scenario names {names} repeat")
+    for i, raw in enumerate(data.get("threshold", [])):
+        t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
+        require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
+        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}")
+        th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
+        th.mode, th.scenario = t.get("mode"), t.get("scenario")
+        for key in ("max", "min"):
+            if key in t:
+                setattr(th, key, _number(t[key], f"threshold {th.metric}: {key}"))
+        for key in ("max_increase", "max_decrease", "abs_tol"):
+            if key in t:
+                setattr(th, key, _number(t[key], f"threshold {th.metric}: {key}", 0.0))
+        require(
+            any(v is not None for v in (th.max, th.min, th.max_increase, th.max_decrease)),
+            f"threshold on {th.metric!r} sets none of max, min, max_increase, max_decrease",
+        )
+        require(th.scenario is None or th.scenario in names, f"threshold scenario {th.scenario!r} is not in {names}")
+        suite.thresholds.append(th)
+    if any(th.relative for th in suite.thresholds):
+        require(suite.baseline is not None, f'{p}: relative thresholds need [suite] baseline = "FILE.json"')
+    return suite
+
+
+def _check_metric(metric: Any, where: str) -> None:
+    """A threshold's metric must be a metric or timing column of trials.csv (a typo is a bad suite, not a failed
+    check)."""
+    # imported when called: scipy would slow every start-up
+    from soabench.experiment.runs.store import METRIC_COLUMNS, TIMING_COLUMNS
+
+    allowed = METRIC_COLUMNS + TIMING_COLUMNS
+    if metric in allowed:
+        return
+    close = difflib.get_close_matches(str(metric), allowed, n=1)
+    guess = f" (did you mean {close[0]!r}?)" if close else ""
+    raise SoabenchError(f"{where}: metric {metric!r} is not a trials.csv metric{guess}; allowed: {', '.join(allowed)}")
+
+
+def check_import_paths(suite: Suite) -> None:
+    """Every import-path plugin a suite names must be allowed with ``--plugin`` (soabench.plugins: the closed list);
+    said before anything runs, with the check command's advice."""
+
+    typed = set(plugins.session_import_paths())
+    for s in suite.scenarios:
+        for name in (*s.models, *s.trackers):
+            require(
+                not plugins.is_import_path(name) or name in typed,
+                f"{suite.path}: scenario {s.name!r} names the import-path plugin {name!r}; soabench imports only "
+                f"built-ins, installed entry points and import paths allowed on the command line: add --plugin {name}",
+            )
+
+
+# ------------------------------------------------------------------------------------------------ running
+def value_key(scenario: str, model: str, mode: str, clutter: float, metric: str) -> str:
+    return f"{scenario}/{model}/{mode}/lambda={clutter:g}/{metric}"
+
+
+def _refuse_protocol_keys(config: Path | None) -> None:
+    """In a suite the ``[[scenario]]`` tables own the protocol (each experiment key has that one home): a
+    ``[suite] config`` file that sets an ``[experiment]`` key is refused with one line naming both keys."""
+    if config is None:
+        return
+    section = read_toml(config, "config file").get("experiment", {})  # load_config read it
+    if section:
+        key = sorted(section)[0]
+        raise SoabenchError(
+            f"{config}: [experiment] {key} is set per scenario in a check suite ([[scenario]] "
+            f"{'seeds' if key == 'seed' else key}); remove it from the config file"
+        )
+
+
+def _config_for(base: Config, s: Scenario, seed: int) -> Config:
+    cfg = Config.from_dict(base.to_dict())
+    cfg.experiment = dataclasses.replace(
+        cfg.experiment,
+        trials=s.trials,
+        duration=s.duration,
+        models=s.models,
+        trackers=s.trackers,
+        probabilities=s.probabilities,
+        clutter=s.clutter,
+        seed=seed,
+    )
+    return cfg.validate()
+
+
+def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict[str, float], list[dict]]:
+    """Run every scenario and seed; return the mean of every trials.csv metric per key, and the plugin failures."""
+    # imported when called: scipy would slow every start-up
+    from soabench.experiment.execution.options import RunOptions
+    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.runs.store import RunStore
+
+    check_import_paths(suite)
+    base = load_config(suite.config)
+    _refuse_protocol_keys(suite.config)
+    for s in suite.scenarios:  # validate every scenario before running any
+        _config_for(base, s, s.seeds[0])
+    rows: dict[tuple, list[dict]] = {}
+    failures: list[dict] = []
+    for s in suite.scenarios:
+        for seed in s.seeds:
+            run_dir = out / "runs" / s.name / f"seed_{seed}"
+            if run_dir.exists():
+                import shutil
+
+                shutil.rmtree(run_dir)
+            cfg = _config_for(base, s, seed)
+            options = RunOptions(workers=workers, progress=False, figures=False)
+            o = run_experiment(cfg, s.net, s.polys, s.scenario, out=run_dir, options=options)
+            require(o.complete, f"scenario {s.name!r} seed {seed}: {o.n_missing} trial(s) failed; see {run_dir}")
+            failures += [{**f, "scenario": s.name, "seed": seed} for f in RunStore(run_dir).model_failures()]
+            table = read_csv(run_dir / "trials.csv")
+            n = len(table["model"])
+            for i in range(n):
+                key = (s.name, str(table["model"][i]), str(table["mode"][i]), float(table["clutter"][i]))
+                rows.setdefault(key, []).append({c: table[c][i] for c in table})
+    values: dict[str, float] = {}
+    for (scen, model, mode, lam), rs in sorted(rows.items()):
+        for col, v in rs[0].items():
+            if col in ("trial", "seed", "sumo_seed", "clutter", "model", "mode") or not isinstance(
+                v, (float, int, np.floating, np.integer)
+            ):
+                continue
+            vals = np.array([float(r[col]) for r in rs])
+            values[value_key(scen, model, mode, lam, col)] = float(np.mean(vals)) if len(vals) else math.nan
+    return values, failures
+
+
+def _matches(th: Threshold, key: str) -> bool:
+    scen, model, mode, _lam, metric = key.split("/")
+    return (
+        metric == th.metric
+        and (th.model == "*" or th.model == model)
+        and (th.mode is None or th.mode == mode)
+        and (th.scenario is None or th.scenario == scen)
+    )
+
+
+def evaluate(suite: Suite, values: dict[str, float], baseline: dict[str, float] | None) -> list[CheckResult]:
+    """Apply every threshold to every value it matches (a threshold that matches nothing is a failed check)."""
+    results = []
+    for th in suite.thresholds:
+        keys = [k for k in values if _matches(th, k)]
+        if not keys:
+            results.append(
+                CheckResult(f"{th.scenario or '*'}/{th.model}/{th.mode or '*'}/{th.metric}", False, "no value matches")
+            )
+            continue
+        for key in keys:
+            v = values[key]
+            bounds, bad = [], []
+            if th.max is not None:
+                bounds.append(f"<= {th.max:g}")
+                bad += [] if v <= th.max else [f"{v:.6g} > max {th.max:g}"]
+            if th.min is not None:
+                bounds.append(f">= {th.min:g}")
+                bad += [] if v >= th.min else [f"{v:.6g} < min {th.min:g}"]
+            if th.relative:
+                b = (baseline or {}).get(key)
+                if b is None or not math.isfinite(b):
+                    bad.append("no baseline value (run with --update-baseline)")
+                else:
+                    if th.max_increase is not None:
+                        hi = b + abs(b) * th.max_increase + th.abs_tol
+                        bounds.append(f"<= {hi:.6g} (baseline {b:.6g} +{100 * th.max_increase:g}%)")
+                        bad += [] if v <= hi else [f"{v:.6g} > {hi:.6g} (baseline {b:.6g} +{100 * th.max_increase:g}%)"]
+                    if th.max_decrease is not None:
+                        lo = b - abs(b) * th.max_decrease - th.abs_tol
+                        bounds.append(f">= {lo:.6g} (baseline {b:.6g} -{100 * th.max_decrease:g}%)")
+                        bad += [] if v >= lo else [f"{v:.6g} < {lo:.6g} (baseline {b:.6g} -{100 * th.max_decrease:g}%)"]
+            if not math.isfinite(v):
+                bad = ["no result (NaN): no trial produced this value"]
+            results.append(CheckResult(key, not bad, "; ".join(bad) or "ok", v, ", ".join(bounds)))
+    return results
+
+
+def read_baseline(path: Path) -> dict[str, float]:
+    require(path.is_file(), f"baseline {str(path)!r} does not exist; create it with soabench check --update-baseline")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, RecursionError) as exc:  # not JSON, not UTF-8, or nested too deeply to read
+        raise SoabenchError(f"baseline {str(path)!r} is not valid JSON: {type(exc).__name__}: {exc}") from None
+    require(
+        isinstance(data, dict) and data.get("format") == BASELINE_FORMAT and isinstance(data.get("values"), dict),
+        f"baseline {str(path)!r} is not a soabench check baseline (format {BASELINE_FORMAT})",
+    )
+    return {str(k): float(v) if v is not None else math.nan for k, v in data["values"].items()}
+
+
+def write_baseline(path: Path, suite: Suite, values: dict[str, float]) -> None:
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    clean = {k: (v if math.isfinite(v) else None) for k, v in values.items() if not _is_time(k)}
+    write_json_atomic(path, {"format": BASELINE_FORMAT, "suite": suite.name, "values": clean})
+
+
+def _is_time(key: str) -> bool:
+    """Wall-clock columns differ between runs; they are never baselined."""
+    return key.rsplit("/", 1)[-1].startswith("t_")
+
+
+# ------------------------------------------------------------------------------------------------ reports
+def junit_xml(outcome: CheckOutcome) -> str:
+    failures = sum(not r.passed for r in outcome.results)
+    lines = [
+        '<?xml version="1.0" encoding="UTF-8"?>',
+        f"<testsuites><testsuite name={quoteattr('soabench check: ' + outcome.suite)} "
+        f'tests="{len(outcome.results)}" failures="{failures}" errors="0" time="{outcome.wall_s:.3f}">',
+    ]
+    for r in outcome.results:
+        lines.append(f"  <testcase classname={quoteattr(outcome.suite)} name={quoteattr(r.name)}>")
+        if not r.passed:
+            lines.append(f"    <failure message={quoteattr(r.message)}>{escape(r.message)}</failure>")
+        lines.append("  </testcase>")
+    lines.append("</testsuite></testsuites>")
+    return "\n".join(lines) + "\n"
+
+
+def table(outcome: CheckOutcome) -> str:
+    rows = [("check", "value", "bound", "result")]
+    for r in outcome.results:
+        rows.append((r.name, f"{r.value:.6g}", r.bound, "ok" if r.passed else f"FAIL: {r.message}"))
+    widths = [max(len(row[i]) for row in rows) for i in range(3)]
+    out = [" | ".join(c.ljust(w) for c, w in zip(row[:3], widths, strict=True)) + " | " + row[3] for row in rows]
+    out.insert(1, "-" * len(out[0]))
+    n_fail = sum(not r.passed for r in outcome.results)
+    verdict = "PASS" if not n_fail else f"FAIL ({n_fail} of {len(outcome.results)} checks)"
+    return "\n".join(out) + f"\n\nsoabench check {outcome.suite}: {verdict}\n"
+
+
+def run_check(
+    suite_path: str | Path,
+    out: Path,
+    update_baseline: bool = False,
+    workers: int | None = 1,
+    plugin_paths: Sequence[str] = (),
+) -> int:
+    """The ``check`` command: exit status 0 (every check passed) or 1 (a regression). ``plugin_paths``: the
+    ``module:Class`` plugins the suite may name (entry-point plugins need none)."""
+    from soabench import plugins
+
+    require(workers is None or workers >= 1, f"--workers {workers} must be >= 1")
+    for name in plugin_paths:
+        require(":" in name, f"--plugin {name!r} must be MODULE:CLASS (installed entry-point plugins need no --plugin)")
+    plugins.allow_import_paths(plugin_paths)
+    t0 = time.perf_counter()
+    suite = load_suite(suite_path)
+    baseline = None
+    if any(th.relative for th in suite.thresholds) and not update_baseline:
+        baseline = read_baseline(suite.baseline)  # a missing baseline is a user error, before any run
+
+    out = resolve(out)
+    check_own_folder(out, "check folder", CHECK_ENTRIES)
+    with FolderLock(out, "check folder"):
+        check_own_folder(out, "check folder", CHECK_ENTRIES)  # again, under the lock
+        return _check_locked(suite, out, baseline, update_baseline, workers, t0)
+
+
+def _check_locked(
+    suite: Suite, out: Path, baseline: dict[str, float] | None, update_baseline: bool, workers: int | None, t0: float
+) -> int:
+    """The body of :func:`run_check` once ``out`` is checked and locked."""
+    values, failures = run_suite(suite, out, workers)
+    if update_baseline:
+        require(suite.baseline is not None, f'{suite.path}: --update-baseline needs [suite] baseline = "FILE.json"')
+        write_baseline(suite.baseline, suite, values)
+        print(f"wrote baseline {suite.baseline} ({sum(not _is_time(k) for k in values)} values)")
+        baseline = read_baseline(suite.baseline)
+    outcome = CheckOutcome(suite.name, values, evaluate(suite, values, baseline))
+
+    for f in failures:
+        outcome.results.append(CheckResult(f"{f['scenario']}/{f['model']}/plugin", False, failure_message(f)))
+    outcome.wall_s = time.perf_counter() - t0
+
+    write_json_atomic(
+        out / "check.json",
+        {
+            "suite": suite.name,
+            "passed": outcome.passed,
+            "wall_s": outcome.wall_s,
+            "values": {k: (v if math.isfinite(v) else None) for k, v in values.items()},
+            "checks": [
+                {**dataclasses.asdict(r), "value": r.value if math.isfinite(r.value) else None} for r in outcome.results
+            ],
+        },
+    )
+    write_text_atomic(out / "junit.xml", junit_xml(outcome))
+    sys.stdout.write(table(outcome))
+    print(f"wrote {out / 'check.json'} and {out / 'junit.xml'}")
+    return 0 if outcome.passed else 1

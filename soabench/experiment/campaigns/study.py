@@ -1,0 +1,309 @@
+"""The paper's simulation study as one command: ``soabench study``.
+
+Four parts, each an ordinary (resumable) run or sweep folder under ``OUT`` (default ``results/<net>/``):
+
+* ``main/``: the main protocol (docs/method.md §5.8): six birth models x {static, dynamic}, lambda = 3;
+* ``clutter/``: the clutter sweep lambda in {0.5, 3, 5} with precision curves (paper Fig. 5h);
+* ``births/``: the N_hat sensitivity sweep N_tot = N_true + {-10..10} (clipped at 1) for S-OA, PUBM and both UBMs;
+* ``sensitivity/``: the main protocol again (same trials, duration, seed, models, modes and clutter, read from
+  ``main/run.json``) once with the χ² gate off (``gate_off/``) and once scored against visible pedestrians
+  (``visible/``), then ``sensitivity.md`` / ``sensitivity.csv``: every headline number under each setting
+  (:mod:`soabench.experiment.campaigns.sensitivity`).
+
+``comparison.md`` then puts every headline number of the paper (§5.9) beside ours with paired Wilcoxon tests and
+bootstrap intervals (:mod:`soabench.experiment.reports.paper`). Re-running the command on a finished folder re-reports
+it;
+on an interrupted one it finishes the missing trials.
+
+The four parts run together (:mod:`soabench.experiment.execution.grouped`): trial n runs SUMO once, the sensor once per
+clutter rate and every filter run once for all parts (the clutter sweep's λ = 3 runs are the main run's; the
+sensitivity runs share the recording and the scans), then writes each part's record into its own folder, so every
+folder is what running the parts one after another gives. The reports of all folders are then drawn on the same
+worker processes, one figure per task (:mod:`soabench.figures.drawing`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+from soabench import plugins
+from soabench.birth import CORE_MODELS
+from soabench.config import Config
+from soabench.errors import Interrupted, require
+from soabench.experiment.campaigns import sensitivity as sens
+from soabench.experiment.campaigns.sensitivity_runs import VARIANTS, run_variants
+from soabench.experiment.campaigns.sweep import DEFAULT_VALUES, SweepOutcome, run_sweep
+from soabench.experiment.execution.executors import open_executor
+from soabench.experiment.execution.grouped import run_group
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
+from soabench.experiment.execution.premerge import merged_on
+from soabench.experiment.execution.runner import RunOutcome, net_name, run_experiment
+from soabench.experiment.reports import paper
+from soabench.experiment.reports.report import paper_protocol_mismatch
+from soabench.experiment.runs.files import write_text_atomic
+from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
+from soabench.experiment.runs.runmeta import flatten_config
+from soabench.experiment.runs.store import RunStore
+from soabench.figures.drawing import parallel
+
+#: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
+STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png", "index.html")
+
+
+@dataclass
+class StudyOutcome:
+    """The three parts of a study and where its comparison was written."""
+
+    run_dir: Path
+    main: RunOutcome
+    clutter: SweepOutcome
+    births: SweepOutcome
+    summary_markdown: str
+    sensitivity: tuple[RunOutcome, ...] = ()
+
+    @property
+    def complete(self) -> bool:
+        parts = (self.main, self.clutter, self.births, *self.sensitivity)
+        return all(p.complete for p in parts)
+
+    @property
+    def n_missing(self) -> int:
+        return sum(p.n_missing for p in (self.main, self.clutter, self.births, *self.sensitivity))
+
+
+def with_plugin_models(config: Config, extra: tuple[str, ...]) -> Config:
+    """The study's configuration with plugin birth models ``extra`` beside the six built-in ones (a built-in name
+    is refused: the study runs those already)."""
+    bad = [m for m in extra if plugins.is_builtin_birth(m)]
+    require(not bad, f"`study` runs the six built-in models; --models {','.join(bad)} adds plugins only")
+    if not extra:
+        return config
+    plugins.allow_import_paths(extra)
+    config.experiment = dataclasses.replace(config.experiment, models=(*config.experiment.models, *extra))
+    return config.validate()
+
+
+def check_part_trials(sweep_trials: int | None, births_trials: int | None, sensitivity_trials: int | None) -> None:
+    """Each part's number of trials, when given, is at least 1."""
+    for flag, value in (
+        ("sweep_trials", sweep_trials), ("births_trials", births_trials), ("sensitivity_trials", sensitivity_trials)
+    ):  # fmt: skip
+        require(value is None or value >= 1, f"--{flag.replace('_', '-')} {value} must be >= 1")
+
+
+def _with_experiment(cfg: Config, **changes) -> Config:
+    out = Config.from_dict(cfg.to_dict())
+    out.experiment = dataclasses.replace(out.experiment, **changes)
+    return out.validate()
+
+
+def run_study(
+    config: Config,
+    net: str = "intersection",
+    *,
+    out: Path | None = None,
+    sweep_trials: int | None = None,
+    births_trials: int = 30,
+    sensitivity_trials: int | None = None,
+    options: RunOptions = RUN_DEFAULTS,
+    explicit: set[str] | None = None,
+    grouped: bool = True,
+) -> StudyOutcome:
+    """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
+
+    ``sweep_trials``: trials of the clutter sweep (default: as many as the main protocol). ``births_trials``: trials
+    per N_tot point of the N_hat sweep, static probabilities only (21 offsets make it the costliest part).
+    ``sensitivity_trials``: trials of each sensitivity run (default: as many as the main run has).
+    ``explicit``: the dotted config keys the user asked for (command-line flags, config file keys; ``trials`` of
+    a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
+    refuses differences, except more trials (see :mod:`~soabench.experiment.runs.runmeta`); None compares nothing.
+    ``grouped``: False runs the parts one after another (the same results, slower; for benchmarks).
+    ``options``: how every part runs (:class:`~soabench.experiment.execution.options.RunOptions`; fail_fast and
+    save_estimates are not the study's: refused); ``options.figures`` True also draws the figures of every N̂ point
+    and of both sensitivity runs (by default ``births/sweep_births.png`` and ``sensitivity/sensitivity.md``
+    summarise those folders, which get tables and summaries only).
+    """
+    require(not options.save_estimates, "--save-estimates is not offered by `study`; use `run`")
+    require(not options.fail_fast, "--fail-fast is not offered by `study`; use `run`")
+    root = resolve(out if out is not None else Path("results") / net_name(net))
+    check_own_folder(root, "study folder", STUDY_ENTRIES)
+    hint = f"finish with: soabench study --out {root}"
+    explicit = set(explicit or ())
+    main_cfg = config
+    n_sweep = sweep_trials or config.experiment.trials
+    clutter_cfg = _with_experiment(config, trials=n_sweep)
+    births_cfg = _with_experiment(config, trials=births_trials, models=CORE_MODELS, probabilities=("static",))
+
+    def requested(cfg: Config, trials_key: str | None, skip: tuple[str, ...] = ()) -> dict:
+        keys = {k for k in explicit if k != "experiment.trials" and k not in skip}
+        if trials_key in explicit:
+            keys.add("experiment.trials")
+        flat = flatten_config(cfg.to_dict())
+        return {k: flat[k] for k in keys if k in flat}
+
+    all_figures = options.figures is True
+    exe = dict(options=dataclasses.replace(options, figures=None))  # main run, clutter sweep: their own defaults
+    births_exe = dict(options=dataclasses.replace(options, figures=True if all_figures else None))
+    sens_options = dataclasses.replace(options, figures=all_figures)
+    main_dir, clutter_dir, births_dir = root / "main", root / "clutter", root / "births"
+
+    def parts(**kw) -> tuple[RunOutcome, SweepOutcome, SweepOutcome]:
+        """The three parts (each created, checked and resumed as usual; ``kw``: defer or run_trials)."""
+        if (main_dir / "run.json").is_file():
+            req = requested(main_cfg, "experiment.trials")
+            main = run_experiment(None, net, resume=main_dir, requested=req, **exe, **kw)
+        else:
+            main = run_experiment(main_cfg, net, out=main_dir, **exe, **kw)
+        if (clutter_dir / "sweep.json").is_file():
+            trials_key = "experiment.trials" if "sweep_trials" in explicit else None
+            if sweep_trials is None and "experiment.trials" in explicit:
+                trials_key = "experiment.trials"  # the clutter sweep follows --trials by default
+            req = requested(clutter_cfg, trials_key, skip=("experiment.clutter",))
+            clutter = run_sweep("clutter", (), None, net, resume=clutter_dir, requested=req, **exe, **kw)
+        else:
+            clutter = run_sweep("clutter", DEFAULT_VALUES["clutter"], clutter_cfg, net, out=clutter_dir, **exe, **kw)
+        if (births_dir / "sweep.json").is_file():
+            trials_key = "experiment.trials" if "births_trials" in explicit else None
+            req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
+            births = run_sweep(
+                "births", (), None, net, resume=births_dir, requested=req, grouped=grouped, **births_exe, **kw,
+            )  # fmt: skip
+        else:
+            births = run_sweep(
+                "births", DEFAULT_VALUES["births"], births_cfg, net, out=births_dir, grouped=grouped,
+                **births_exe, **kw,
+            )  # fmt: skip
+        return main, clutter, births
+
+    with FolderLock(root, "study folder"):
+        check_own_folder(root, "study folder", STUDY_ENTRIES)  # again, under the lock
+        try:
+            follow = sensitivity_trials is None and "experiment.trials" in explicit  # like the clutter sweep
+            sens_dir = root / "sensitivity"
+            if grouped:
+                deferred: list = []
+                parts(defer=deferred)
+                run_variants(
+                    sens_dir,
+                    main_dir,
+                    trials=sensitivity_trials,
+                    follow_main=follow,
+                    defer=deferred,
+                    options=sens_options,
+                )
+
+                # the trials', then the figures' workers
+                pool = open_executor(options.workers, options.scheduler, options.dask_local)
+                aborted = True
+                try:
+                    if deferred:
+                        run_group(deferred, pool, progress=options.progress, label=root.name)
+                    # the reports of the parts that attempted every trial, each merged by a worker first
+                    with parallel(pool), merged_on(pool, deferred):
+                        main, clutter, births = parts(run_trials=False)
+                        sensitivity = run_variants(
+                            sens_dir,
+                            main_dir,
+                            trials=sensitivity_trials,
+                            follow_main=follow,
+                            run_trials=False,
+                            options=sens_options,
+                        )
+                    aborted = False
+                finally:
+                    pool.close(abort=aborted)
+            else:
+                main, clutter, births = parts()
+                sensitivity = run_variants(
+                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, options=sens_options
+                )
+
+            md = ""
+            if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
+                mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
+                md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
+            if main.complete and all(o.complete for o in sensitivity):
+                variants = {k: sens_dir / k for k in VARIANTS}
+                sens.write_sensitivity(sens_dir, main_dir, variants)
+                where = sens_dir / "sensitivity.md"
+                md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
+            from soabench.replay.report import write_index
+
+            index = write_index(root)[0]  # and each run's report.html (a run kept from before may have none)
+            md += f"\nEvery part on one page: {index}\n"
+        except KeyboardInterrupt:
+            raise Interrupted(
+                f"interrupted: the study in {root} is incomplete (finished trials are on disk); {hint}"
+            ) from None
+    return StudyOutcome(root, main, clutter, births, md, tuple(sensitivity))
+
+
+def _precision_table(rows: list[dict]) -> str:
+    prec = paper.precision_by_clutter(rows)
+    lams = sorted({k[2] for k in prec})
+    models = [m for m in ("soa", *paper.BASELINES) if any(k[1] == m for k in prec)]
+    lines = ["| mode | model | " + " | ".join(f"λ = {lam:g}" for lam in lams) + " |", "|---|---|" + "---:|" * len(lams)]
+    for mode in [m for m in ("static", "dynamic") if any(k[0] == m for k in prec)]:
+        for m in models:
+            cells = [f"{prec[(mode, m, lam)]:.3f}" if (mode, m, lam) in prec else "n/a" for lam in lams]
+            lines.append(f"| {mode} | {paper.LABEL[m]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _ratio_table(rows: list[dict]) -> str:
+    ratios = paper.component_ratios(rows)
+    models = ["soa", *paper.BASELINES]
+    lines = ["| mode | " + " | ".join(paper.LABEL[m] for m in models) + " |", "|---|" + "---:|" * len(models)]
+    for mode in ("static", "dynamic"):
+        if any(k[0] == mode for k in ratios):
+            lines.append(
+                f"| {mode} | " + " | ".join(f"{ratios.get((mode, m), float('nan')):.2f}" for m in models) + " |"
+            )
+    return "\n".join(lines)
+
+
+def key_figure(main_rows: list[dict], clutter_rows: list[dict], path: Path) -> Path:
+    """The README's key figure (:func:`soabench.figures.sweeps.key_figure`), written to ``path``."""
+    # imported when called: matplotlib would slow every start-up
+    from soabench.figures.style import save_png
+    from soabench.figures.sweeps import key_figure as draw
+
+    return save_png(draw(main_rows, clutter_rows), path)
+
+
+def write_comparison(root: Path) -> str:
+    """``comparison.md``: the paper's headline numbers beside ours, from the committed CSV files alone."""
+    root = Path(root)
+    main_rows = paper.read_rows(root / "main" / "trials.csv")
+    parts = [
+        "# The paper's simulation study on the shipped intersection: paper vs soabench",
+        "",
+        "Generated by `soabench study` from `main/trials.csv`, `clutter/points/*/trials.csv` and `births/`.",
+        "",
+        "## Main protocol (λ = 3)",
+        "",
+        paper.markdown(main_rows),
+        "",
+        "### Mean posterior components relative to S-OA (paper: UBM ≈ 5-6 × S-OA on KITTI; S-OA lowest)",
+        "",
+        _ratio_table(main_rows),
+    ]
+    clutter_rows = [r for f in sorted((root / "clutter" / "points").glob("*/trials.csv")) for r in paper.read_rows(f)]
+    if clutter_rows:
+        parts += [
+            "",
+            "## Precision under clutter (paper Fig. 5h: ATBM falls sharply from λ = 0.5 to 5, S-OA stays high)",
+            "",
+            "Mean per-trial precision of the extracted estimates (gated Hungarian matching, 5 m).",
+            "",
+            _precision_table(clutter_rows),
+        ]
+    key_figure(main_rows, clutter_rows, root / "key_figure.png")
+    births_md = root / "births" / "sweep.md"
+    if births_md.is_file():
+        parts += ["", "## Sensitivity to N_hat (paper §V.C)", "", births_md.read_text(encoding="utf-8").strip()]
+    md = "\n".join(parts) + "\n"
+    write_text_atomic(root / "comparison.md", md)
+    return md

@@ -1,0 +1,211 @@
+"""The LMB filter cycle (docs/method.md "LMB filter"): ``LMBFilter.step(scan, births)`` once per scan, the same
+call as :class:`soabench.gmphd.filter.GMPHDFilter`, so every birth model (built-in or plugin) runs inside it.
+
+One cycle at scan k:
+
+1. predict the tracks (r <- p_S r, CV motion) and add the birth tracks: the birth model's Gaussian components
+   (r = min(w, r_B,max), label (k, j)) and the adaptive birth from the previous scan's measurements when the model
+   gives newborn terms (:mod:`soabench.lmb.birth`);
+2. joint update with Z_k (:mod:`soabench.lmb.update`): association costs, marginals by enumeration or Gibbs
+   sampling (:mod:`soabench.lmb.gibbs`), the LMB approximation of the GLMB posterior;
+3. per track: prune, merge and cap its Gaussian components (the GM-PHD's Vo-Ma kernels); drop tracks with
+   r < ``prune_r``, keep the ``max_tracks`` most probable;
+4. estimates: the tracks with r > ``extract_r``, labelled.
+
+Static probabilities only (§4.1): p_S, and p_D g(x) at each component mean with the FOV gate (times line of sight
+with ``filter.occlusion_pd``); the dynamic (Beta) modes are refused.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from soabench import notice
+from soabench.config import FilterConfig, SensorConfig, _in_range, _int_range, _non_negative
+from soabench.errors import SoabenchError, require
+from soabench.geometry import clutter_intensity
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
+from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
+from soabench.gmphd.probabilities import detection_gate
+from soabench.lmb.birth import adaptive_birth, gm_birth
+from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
+from soabench.lmb.tracks import Tracks, reduce_components
+from soabench.lmb.update import predict, update
+from soabench.origins import origin_counts
+from soabench.types import Births, Scan, StepResult, scan_once
+
+#: the probability modes the LMB filter runs (docs/method.md §4.6): static only
+LMB_MODES = ("static",)
+
+
+@dataclass
+class LMBConfig:
+    """Settings of the LMB filter (defaults: Vo's toolbox; register row 33 for r_B,max)."""
+
+    r_B_max: float = 0.5  #: largest existence probability of a birth track
+    prune_r: float = 1e-3  #: tracks with r below this are dropped
+    max_tracks: int = 100  #: most probable tracks kept
+    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many hypotheses, else this many Gibbs sweeps
+    max_components: int = 10  #: Gaussian components kept per track
+    extract_r: float = 0.5  #: estimates: tracks with r > this
+
+    def validate(self) -> LMBConfig:
+        _in_range("lmb.r_B_max", self.r_B_max, 0.0, 1.0, lo_open=True, hi_open=True)
+        _in_range("lmb.prune_r", self.prune_r, 0.0, 1.0, hi_open=True)
+        _int_range("lmb.max_tracks", self.max_tracks, 1, 1_000_000)
+        _int_range("lmb.max_hypotheses", self.max_hypotheses, 1, 10_000_000)
+        _int_range("lmb.max_components", self.max_components, 1, 10_000)
+        _non_negative("lmb.extract_r", self.extract_r, hi=1.0)
+        return self
+
+
+class LMBFilter:
+    """The LMB filter of one run (module docstring).
+
+    Args:
+        filter_cfg: the GM-PHD's filter settings it shares: form (EKF or UKF), sigma_a, p_S, p_D, gate, prune_T
+            and merge_U (applied to each track's components), occlusion_pd, nonfinite.
+        sensor_cfg: the sensor model (dt, FOV, R, clutter) shared with the simulator (§2.3).
+        mode: "static" (the only mode: the LMB has no Beta probabilities).
+        lmb_cfg: :class:`LMBConfig` (defaults if None).
+        N_hat: lambda_B of the adaptive birth (expected births per scan, ``birth.N_hat``).
+        rng: the generator of the Gibbs sampler's seeds (one draw per scan); the trial's association stream
+            (:meth:`soabench.seeding.TrialSeeds.association_rng`) in the harness, a fixed seed if None.
+        model: the measurement model; the GM-PHD's range-bearing EKF with its gate if None.
+
+    Attributes:
+        tracks: the posterior tracks after the last step.
+    """
+
+    name = "lmb"
+
+    def __init__(
+        self,
+        filter_cfg: FilterConfig,
+        sensor_cfg: SensorConfig,
+        mode: str = "static",
+        *,
+        lmb_cfg: LMBConfig | None = None,
+        N_hat: float = 0.06,
+        rng: np.random.Generator | None = None,
+        model: MeasurementModel | None = None,
+    ) -> None:
+        require(
+            mode in LMB_MODES,
+            f"probability mode {mode!r} is not supported by the LMB filter; it runs static probabilities only",
+        )
+        filter_cfg.validate()
+        sensor_cfg.validate()
+        self.cfg, self.sensor, self.mode = filter_cfg, sensor_cfg, mode
+        self.lmb = (lmb_cfg or LMBConfig()).validate()
+        self.N_hat = float(N_hat)
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.F, self.Q = cv_model(sensor_cfg.dt, filter_cfg.sigma_a)
+        R = measurement_noise(sensor_cfg.sigma_r, sensor_cfg.sigma_b)
+        gate = gate_threshold(filter_cfg.gate, filter_cfg.gate_prob)
+        self.model = model if model is not None else RangeBearingEKF(R, sensor_cfg.r_min, gate, filter_cfg.form)
+        self.tracks = Tracks.empty()
+        #: newborn terms (m, P) of the previous scan's measurements and their r_U, for the adaptive birth
+        self._newborn: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def reset(self) -> None:
+        """Forget the posterior (next step is k = 0 again)."""
+        self.tracks = Tracks.empty()
+        self._newborn = None
+
+    def _p_D(self, m: np.ndarray, ego: np.ndarray | None, scan: Scan) -> np.ndarray:
+        """p_D g(m_c) at each component mean (§4.1, §4.4 with ``occlusion_pd``); 0 for a dropped scan."""
+        if ego is None:
+            return np.zeros(len(m))
+        occ = scan.occluders if self.cfg.occlusion_pd else None
+        return self.cfg.p_D * detection_gate(m, ego, self.sensor, occ)
+
+    def step(self, scan: Scan, births: Births) -> StepResult:
+        """One cycle (module docstring) with the births of ``scan``; returns the labelled estimates
+        (``StepResult.labels``) and the cost figures (tracks as components). The first step in a process may
+        compile the kernels: never a silent pause (:mod:`soabench.notice`)."""
+        if not notice.ready("lmb.step"):
+            with notice.first_use_notice("lmb.step"):
+                return self._step(scan, births)
+        return self._step(scan, births)
+
+    def _step(self, scan: Scan, births: Births) -> StepResult:
+        key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the GM-PHD runs of the scan
+        Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
+        checked: StepInputs = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
+        Z, births = checked.Z, checked.births
+        lmb, k = self.lmb, int(scan.k)
+        seed = int(self.rng.integers(2**32))  # one draw per scan, used or not: the stream never depends on the data
+        t0 = time.perf_counter()
+
+        born = gm_birth(births, k, lmb.r_B_max)
+        parts = [predict(self.tracks, self.F, self.Q, self.cfg.p_S), born]
+        if self._newborn is not None:
+            m_nb, P_nb, r_U = self._newborn
+            parts.append(adaptive_birth(m_nb, P_nb, r_U, self.N_hat, lmb.r_B_max, self.F, self.Q, k, len(births)))
+        pred = Tracks.concatenate(parts)
+        t1 = time.perf_counter()
+
+        ego_ok = checked.ego
+        p_D = self._p_D(pred.m, ego_ok, scan)
+        kappa = clutter_intensity(Z, self.sensor)
+        up = update(
+            pred, Z, ego_ok if ego_ok is not None else np.zeros(3), p_D, kappa, self.model,
+            max_hyp=lmb.max_hypotheses, seed=seed,
+        )  # fmt: skip
+        nb = births.newborn
+        self._newborn = None
+        if nb is not None and len(Z):
+            m_nb, P_nb = np.asarray(nb.m, dtype=float).reshape(-1, 4), np.asarray(nb.P, dtype=float).reshape(-1, 4, 4)
+            self._newborn = (m_nb, P_nb, up.r_U)
+        t2 = time.perf_counter()
+
+        post = up.tracks
+        n_updated = len(post.w)
+        sum_r = float(post.r.sum())
+        keep = np.flatnonzero(post.r >= lmb.prune_r)
+        cap_hit = len(keep) > lmb.max_tracks
+        if cap_hit:
+            keep = np.sort(keep[np.argsort(-post.r[keep], kind="stable")[: lmb.max_tracks]])
+        post = post.select(keep)
+        start, w, m, P = reduce_components(
+            post.start, post.w, post.m, post.P, float(self.cfg.prune_T), float(self.cfg.merge_U),
+            int(lmb.max_components),
+        )  # fmt: skip
+        self.tracks = Tracks(post.r, post.label, post.origin, post.age, start, w, m, P)
+        X, X_r, labels = self.tracks.estimates(lmb.extract_r)
+        t3 = time.perf_counter()
+        if not (np.isfinite(self.tracks.r).all() and np.isfinite(X).all()):
+            raise SoabenchError(f"scan {scan.k}: the LMB filter produced a non-finite posterior from finite inputs")
+
+        # A such that rho = A / (kappa + A) = r_U: what a model reading the previous step (ATBM prev_scan) needs
+        with np.errstate(divide="ignore", invalid="ignore"):
+            A = np.where(up.r_U < 1.0, kappa * up.r_U / np.maximum(1.0 - up.r_U, 1e-300), np.inf)
+        return StepResult(
+            k=scan.k,
+            X=X,
+            X_w=X_r,
+            sum_w=sum_r,
+            sum_w_reduced=float(self.tracks.r.sum()),
+            n_predicted=len(pred),
+            n_updated=n_updated,
+            n_reduced=len(self.tracks),
+            cap_hit=bool(cap_hit),
+            t_predict=t1 - t0,
+            t_update=t2 - t1,
+            t_reduce=t3 - t2,
+            mean_pD=float(self.cfg.p_D),
+            A=np.where(np.isfinite(A), A, np.finfo(float).max),
+            kappa=np.asarray(kappa, dtype=float),
+            n_pruned=len(keep),
+            n_merged=len(self.tracks.w),
+            n_pairs=up.n_pairs,
+            n_newborn=0 if self._newborn is None else len(Z),
+            n_dropped=checked.n_dropped,
+            n_dropped_births=checked.n_dropped_births,
+            origin_counts=origin_counts(self.tracks.origin, self.tracks.age),
+            labels=labels,
+        )

@@ -1,0 +1,295 @@
+"""Association of tracks and measurements: exhaustive enumeration or Gibbs sampling of Vo, Vo & Hoang (2017)
+(docs/method.md "LMB filter").
+
+Track i has one association variable theta_i in {absent, missed, measurement j}. Its log cost row is
+``logc[i] = [log eta_i(absent), log eta_i(missed), log eta_i(z_1) ... log eta_i(z_M)]`` (-inf where the option is
+impossible, e.g. a measurement outside the gate), and a joint association theta (distinct measurements) has weight
+prod_i eta_i(theta_i). The kernels return the marginal association probabilities
+``marg[i, c] = sum_theta w(theta) 1[theta_i = c]`` over the hypotheses they visit, each hypothesis weighted exactly
+(not by how often it was sampled).
+
+* Tracks that share no measurement are independent (the weight factorises), so the tracks are split into clusters
+  (connected by a measurement both may take) and each cluster is solved alone: a track with no measurement in its
+  gate has the closed form marg = (eta_absent, eta_missed) / sum.
+* A cluster whose hypothesis count is at most ``max_hyp`` (bound: the product of its tracks' option counts) is
+  enumerated exhaustively (exact).
+* A larger cluster runs the Gibbs sampler of Vo, Vo & Hoang (2017, Algorithm 1 with the all-missed start of Vo's
+  toolbox; a track whose missed option is impossible starts absent): ``max_hyp`` sweeps, each redrawing every
+  theta_i from its conditional given the others (measurements held by the others locked out); the distinct
+  hypotheses visited are weighted exactly.
+
+Randomness: a SplitMix64 stream (Steele, Lea & Flood 2014) private to each call, started from ``seed`` (drawn by
+the filter from the trial's association stream, :mod:`soabench.seeding`): no global generator state, so a run is
+bit-identical whatever ran before it, in any process or thread.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from soabench.cache import configure_numba_cache
+
+configure_numba_cache()
+
+from numba import njit  # noqa: E402
+
+ABSENT, MISSED = 0, 1  #: the first two columns of a cost row; measurement j is column 2 + j
+
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+
+
+@njit(cache=True)
+def _uniform(state):
+    """The next uniform in [0, 1) of the SplitMix64 stream ``state`` (a (1,) uint64 array, advanced in place)."""
+    state[0] += _GOLDEN
+    z = state[0]
+    z = (z ^ (z >> np.uint64(30))) * _MIX1
+    z = (z ^ (z >> np.uint64(27))) * _MIX2
+    z = z ^ (z >> np.uint64(31))
+    return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True)
+def _find(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True)
+def _log_weight(logc, theta):
+    s = 0.0
+    for i in range(theta.shape[0]):
+        s += logc[i, theta[i]]
+    return s
+
+
+@njit(cache=True)
+def _accumulate(logc, hyps, n_hyp, marg_out, rows):
+    """Add the normalised weights of hypotheses ``hyps[:n_hyp]`` to the marginals of ``rows``."""
+    n = logc.shape[0]
+    lw = np.empty(n_hyp)
+    mx = -np.inf
+    for h in range(n_hyp):
+        lw[h] = _log_weight(logc, hyps[h])
+        if lw[h] > mx:
+            mx = lw[h]
+    if not mx > -np.inf:  # no hypothesis of positive weight (cannot happen: all-absent has weight prod (1 - r))
+        return
+    tot = 0.0
+    for h in range(n_hyp):
+        lw[h] = math.exp(lw[h] - mx)
+        tot += lw[h]
+    for h in range(n_hyp):
+        p = lw[h] / tot
+        for i in range(n):
+            marg_out[rows[i], hyps[h, i]] += p
+
+
+@njit(cache=True)
+def _enumerate(logc, options, n_opt):
+    """Every joint association with distinct measurements (mixed-radix counter over each track's options)."""
+    n = logc.shape[0]
+    bound = 1
+    for i in range(n):
+        bound *= n_opt[i]
+    hyps = np.empty((bound, n), dtype=np.int64)
+    digit = np.zeros(n, dtype=np.int64)
+    theta = np.empty(n, dtype=np.int64)
+    n_hyp = 0
+    M = logc.shape[1] - 2
+    used = np.zeros(M, dtype=np.int64)
+    for _ in range(bound):
+        ok = True
+        for i in range(n):
+            theta[i] = options[i, digit[i]]
+            if theta[i] >= 2:
+                if used[theta[i] - 2] == 1:
+                    ok = False
+                used[theta[i] - 2] = 1
+        for i in range(n):
+            if theta[i] >= 2:
+                used[theta[i] - 2] = 0
+        if ok:
+            hyps[n_hyp] = theta
+            n_hyp += 1
+        for i in range(n):  # next digit string
+            digit[i] += 1
+            if digit[i] < n_opt[i]:
+                break
+            digit[i] = 0
+    return hyps, n_hyp
+
+
+@njit(cache=True)
+def _draw(i, options, n_opt, weight, taken, state):
+    """theta_i from its conditional: prop. to ``weight[i, o]`` (exp of the log cost, shifted by the row's maximum)
+    over the options o of track i whose measurement is not taken by another track."""
+    tot = 0.0
+    for o in range(n_opt[i]):
+        c = options[i, o]
+        if c < 2 or taken[c - 2] < 0 or taken[c - 2] == i:
+            tot += weight[i, o]
+    u = _uniform(state) * tot
+    acc = 0.0
+    last = -1
+    for o in range(n_opt[i]):
+        c = options[i, o]
+        if c < 2 or taken[c - 2] < 0 or taken[c - 2] == i:
+            if weight[i, o] > 0.0:
+                last = c
+                acc += weight[i, o]
+                if u < acc:
+                    return c
+    return last
+
+
+@njit(cache=True)
+def _gibbs(logc, options, n_opt, n_sweeps, state):
+    """Distinct hypotheses visited by ``n_sweeps`` Gibbs sweeps (the start included), in the order of their hashes.
+    ``options[i, :n_opt[i]]``: the columns of track i with a finite log cost."""
+    n, n_cols = logc.shape
+    M = n_cols - 2
+    weight = np.zeros(options.shape)
+    for i in range(n):  # exp of each row once, shifted by its maximum (the conditionals are ratios within a row)
+        mx = -np.inf
+        for o in range(n_opt[i]):
+            mx = max(mx, logc[i, options[i, o]])
+        for o in range(n_opt[i]):
+            weight[i, o] = math.exp(logc[i, options[i, o]] - mx)
+    theta = np.empty(n, dtype=np.int64)
+    taken = np.full(M, -1, dtype=np.int64)
+    for i in range(n):
+        theta[i] = MISSED if logc[i, MISSED] > -np.inf else ABSENT
+    # Zobrist hash of each sample (a sum of one random 64-bit key per (track, option)), kept up to date as theta
+    # changes: distinct hypotheses are found by sorting the hashes and comparing rows of equal hash exactly
+    zkey = np.empty((n, n_cols), dtype=np.uint64)
+    zstate = np.full(1, np.uint64(n * n_cols), dtype=np.uint64)
+    for i in range(n):
+        for c in range(n_cols):
+            _uniform(zstate)
+            zkey[i, c] = zstate[0] * _MIX1
+    h = np.uint64(0)
+    for i in range(n):
+        h += zkey[i, theta[i]]
+    samples = np.empty((n_sweeps, n), dtype=np.int64)
+    hashes = np.empty(n_sweeps, dtype=np.uint64)
+    samples[0] = theta
+    hashes[0] = h
+    for s in range(1, n_sweeps):
+        for i in range(n):
+            c = _draw(i, options, n_opt, weight, taken, state)
+            if c < 0:  # no option of positive weight (cannot happen: absent or missed is always open)
+                c = theta[i]
+            if c == theta[i]:
+                continue
+            if theta[i] >= 2:
+                taken[theta[i] - 2] = -1
+            h += zkey[i, c] - zkey[i, theta[i]]
+            theta[i] = c
+            if c >= 2:
+                taken[c - 2] = i
+        samples[s] = theta
+        hashes[s] = h
+    perm = np.argsort(hashes, kind="mergesort")
+    out = np.empty((n_sweeps, n), dtype=np.int64)
+    n_hyp = 0
+    run = 0  # first output row of the current run of equal hashes
+    for k in range(n_sweeps):
+        s = perm[k]
+        if k == 0 or hashes[s] != hashes[perm[k - 1]]:
+            run = n_hyp
+        new = True
+        for u in range(run, n_hyp):  # rows of equal hash: compared exactly
+            same = True
+            for i in range(n):
+                if out[u, i] != samples[s, i]:
+                    same = False
+                    break
+            if same:
+                new = False
+                break
+        if new:
+            out[n_hyp] = samples[s]
+            n_hyp += 1
+    return out, n_hyp
+
+
+@njit(cache=True)
+def association_marginals(logc, max_hyp, seed, force_gibbs=False):
+    """Marginal association probabilities ``marg`` (N, 2 + M) of the cost rows ``logc`` (module docstring), and
+    the number of hypotheses weighted and of clusters solved by Gibbs sampling.
+
+    ``force_gibbs``: sample every cluster with measurements, even one small enough to enumerate (tests).
+    """
+    state = np.full(1, seed, dtype=np.uint64)
+    N, n_cols = logc.shape
+    M = n_cols - 2
+    marg = np.zeros((N, n_cols))
+    parent = np.arange(N)
+    first = np.full(M, -1, dtype=np.int64)
+    n_meas = np.zeros(N, dtype=np.int64)
+    for i in range(N):
+        for j in range(M):
+            if logc[i, 2 + j] > -np.inf:
+                n_meas[i] += 1
+                if first[j] < 0:
+                    first[j] = i
+                else:
+                    a, b = _find(parent, i), _find(parent, first[j])
+                    if a != b:
+                        parent[max(a, b)] = min(a, b)
+    root = np.empty(N, dtype=np.int64)
+    for i in range(N):
+        root[i] = _find(parent, i)
+    total_hyp = 0
+    n_gibbs = 0
+    for i in range(N):
+        if n_meas[i] == 0:  # absent or missed: closed form
+            a, b = logc[i, ABSENT], logc[i, MISSED]
+            mx = max(a, b)
+            if not mx > -np.inf:  # r = 1 and p_D = 1 but no measurement: keep the track (weight 0 otherwise)
+                marg[i, MISSED] = 1.0
+                total_hyp += 1
+                continue
+            ea, eb = math.exp(a - mx), math.exp(b - mx)
+            marg[i, ABSENT] = ea / (ea + eb)
+            marg[i, MISSED] = eb / (ea + eb)
+            total_hyp += 1
+            continue
+        if root[i] != i:
+            continue
+        rows_l = [r for r in range(N) if root[r] == i]
+        rows = np.array(rows_l, dtype=np.int64)
+        cols_l = [j for j in range(M) if first[j] >= 0 and root[first[j]] == i]
+        cols = np.array(cols_l, dtype=np.int64)
+        n, mc = rows.shape[0], cols.shape[0]
+        sub = np.empty((n, 2 + mc))
+        options = np.empty((n, 2 + mc), dtype=np.int64)
+        n_opt = np.zeros(n, dtype=np.int64)
+        bound = 1.0
+        for a in range(n):
+            for c in range(2 + mc):
+                sub[a, c] = logc[rows[a], c if c < 2 else 2 + cols[c - 2]]
+                if sub[a, c] > -np.inf:
+                    options[a, n_opt[a]] = c
+                    n_opt[a] += 1
+            bound *= n_opt[a]
+        if bound <= max_hyp and not force_gibbs:
+            hyps, n_hyp = _enumerate(sub, options, n_opt)
+        else:
+            hyps, n_hyp = _gibbs(sub, options, n_opt, max_hyp, state)
+            n_gibbs += 1
+        local = np.zeros((n, 2 + mc))
+        _accumulate(sub, hyps, n_hyp, local, np.arange(n))
+        for a in range(n):
+            for c in range(2 + mc):
+                marg[rows[a], c if c < 2 else 2 + cols[c - 2]] += local[a, c]
+        total_hyp += n_hyp
+    return marg, total_hyp, n_gibbs

@@ -1,0 +1,93 @@
+"""The filter family as an axis of a trial (docs/method.md "LMB filter"): ``experiment.filters = ("gmphd", "lmb")``
+runs every birth model in both families, the LMB in static mode only, with a final ``filter`` column; the GM-PHD
+rows equal those of a default run; a default run writes no ``filter`` column; the LMB runs are reproducible."""
+
+from __future__ import annotations
+
+import pytest
+from test_trial import FakeBirth, fake_config, fake_observe, fake_simulate, without_timing
+
+from soabench.config import Config, ExperimentConfig
+from soabench.errors import SoabenchError
+from soabench.experiment.trial.trial import FILTER_COLUMN, ROW_KEYS, run_trial
+
+
+def _trial(**experiment):
+    return run_trial(
+        2, fake_config(**experiment), scene=None, scenario=None, simulate_fn=fake_simulate,
+        observe_fn=fake_observe, birth_factory=lambda name: FakeBirth,
+    )  # fmt: skip
+
+
+def test_both_families_with_the_lmb_in_static_mode_only():
+    res = _trial(filters=("gmphd", "lmb"), clutter=(3.0,))
+    runs = [(r["model"], r["mode"], r[FILTER_COLUMN]) for r in res.rows]
+    assert runs == [
+        ("soa", "static", "gmphd"), ("soa", "static", "lmb"), ("soa", "dynamic", "gmphd"),
+        ("ubm", "static", "gmphd"), ("ubm", "static", "lmb"), ("ubm", "dynamic", "gmphd"),
+    ]  # fmt: skip
+    assert all(list(r) == [*ROW_KEYS, FILTER_COLUMN] for r in res.rows)  # the column comes last
+    assert {e[FILTER_COLUMN] for e in res.episodes} <= {"gmphd", "lmb"} and res.episodes
+    assert all(list(s)[-1] == FILTER_COLUMN for s in res.steps)
+    assert sum(s["n_est"] for s in res.steps if s[FILTER_COLUMN] == "lmb") > 0  # the LMB's estimates were scored
+
+    default = _trial(clutter=(3.0,))
+    assert all(FILTER_COLUMN not in r for r in default.rows + default.episodes + default.steps)
+    gm = [{k: v for k, v in r.items() if k != FILTER_COLUMN} for r in res.rows if r[FILTER_COLUMN] == "gmphd"]
+    assert without_timing(gm) == without_timing(default.rows)  # the LMB runs change no GM-PHD number
+
+    again = _trial(filters=("gmphd", "lmb"), clutter=(3.0,))
+    assert without_timing(again.rows) == without_timing(res.rows)
+    assert again.steps == res.steps
+
+
+def test_lmb_only_and_bad_families():
+    res = _trial(filters=("lmb",), probabilities=("static",), clutter=(3.0,))
+    assert [(r["model"], r[FILTER_COLUMN]) for r in res.rows] == [("soa", "lmb"), ("ubm", "lmb")]
+    with pytest.raises(SoabenchError, match="filter family = 'kf' is not allowed"):
+        Config(experiment=ExperimentConfig(filters=("kf",))).validate()
+    with pytest.raises(SoabenchError, match="names 'lmb' twice"):
+        Config(experiment=ExperimentConfig(filters=("lmb", "lmb"))).validate()
+    with pytest.raises(SoabenchError, match="'lmb' runs the probability modes static only"):
+        Config(experiment=ExperimentConfig(filters=("gmphd", "lmb"), probabilities=("dynamic",))).validate()
+    assert "filters" not in Config().to_dict()["experiment"]  # a default run's run.json is as before
+    assert Config(experiment=ExperimentConfig(filters=("gmphd", "lmb"))).to_dict()["experiment"]["filters"] == [
+        "gmphd",
+        "lmb",
+    ]
+
+
+def test_summary_is_per_family_with_paired_statistics_inside_each(tmp_path):
+    """A run folder written by hand: S-OA and PUBM in both families; in the GM-PHD S-OA is slower in every trial, in
+    the LMB faster in every trial: each family's win counts see only its own rows; the LMB's dynamic cells read "—"."""
+    import dataclasses
+
+    from soabench.experiment.reports.report import load_tables, render_markdown, summarize
+    from soabench.experiment.runs.files import write_csv
+    from soabench.experiment.runs.store import RunStore
+
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(
+        cfg.experiment, trials=3, models=("soa", "pubm"), probabilities=("static", "dynamic"), filters=("gmphd", "lmb")
+    )
+    cfg.validate()
+    RunStore(tmp_path).create({"net": "hand", "trials": 3, "config": cfg.to_dict()})
+    rows = []
+    for t in range(3):
+        for model, mode, fam, delay in (
+            ("soa", "static", "gmphd", 3.0), ("soa", "static", "lmb", 1.0), ("soa", "dynamic", "gmphd", 3.0),
+            ("pubm", "static", "gmphd", 2.0), ("pubm", "static", "lmb", 2.0), ("pubm", "dynamic", "gmphd", 2.0),
+        ):  # fmt: skip
+            rows.append({"trial": t, "clutter": 3.0, "model": model, "mode": mode, "delay_mean": delay,
+                         "delay_std": 0.5, "card_err": 1.0, "ospa": 10.0, "precision": 1.0, "n_episodes": 4,
+                         "n_censored": 0, FILTER_COLUMN: fam})  # fmt: skip
+    write_csv(tmp_path / "trials.csv", rows, ("trial", "clutter", "model", "mode"))
+    summary = summarize(load_tables(tmp_path))
+    gm, lmb = summary["results"]
+    assert (gm["filter"], lmb["filter"]) == ("gmphd", "lmb")
+    assert [(c["mode"], c["wins"], c["losses"]) for c in gm["vs_soa"]] == [("static", 0, 3), ("dynamic", 0, 3)]
+    assert [(c["mode"], c["wins"], c["losses"]) for c in lmb["vs_soa"]] == [("static", 3, 0)]
+    assert [(m["model"], m["mode"]) for m in lmb["models"]] == [("soa", "static"), ("pubm", "static")]
+    md = render_markdown(summary)
+    assert "## λ = 3, GM-PHD" in md and "## λ = 3, LMB" in md
+    assert "| S-OA | dynamic |" + " — |" * 10 in md and "| PUBM | dynamic |" + " — |" * 10 in md
