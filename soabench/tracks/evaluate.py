@@ -1,11 +1,11 @@
 """Every track measure of one filter run (docs/method.md §9.3, §9.4): the columns a trial adds beside §5's.
 
-:func:`evaluate_tracks` reads the truth of :class:`~soabench.sensor.Scans` (positions, presence, FOV, line of sight),
+:func:`evaluate_tracks` reads the truth of :class:`~soabench.types.Scans` (positions, presence, FOV, line of sight),
 the tracker's extracted positions and, if it labels them, their labels, and the §5.4 delay episodes that
-:func:`soabench.metrics.evaluate` already built. Truth ids are the pedestrians' track labels (``Scans.ped_labels``); truth and
-estimates are the sets of docs/method.md §5.1. The position-only measures (entry and re-emergence delay, coasted)
-are computed for every tracker; the label measures (HOTA ... OSPA(2), HOTA per alpha, identity kept) are None for an
-unlabelled one.
+:func:`soabench.metrics.evaluate` already built. Truth ids are the pedestrians' track labels (``Scans.ped_labels``);
+truth and estimates are the sets of docs/method.md §5.1. The position-only measures (entry and re-emergence delay,
+coasted) are computed for every tracker; the label measures (HOTA ... OSPA(2), HOTA per alpha, identity kept) are
+None for an unlabelled one.
 """
 
 from __future__ import annotations
