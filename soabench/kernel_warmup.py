@@ -1,10 +1,11 @@
 """Compile the numba kernels once per machine, before the first trial, on every core (docs/user-guide/ci-cache.md).
 
 The filter, metric and scan-geometry kernels (:mod:`soabench.gmphd.cycle`, :mod:`soabench.gmphd.kernels`,
-:mod:`soabench.metrics_kernels`, :mod:`soabench.geometry_kernels`) are compiled by numba on first use and cached in
-the per-user folder of :mod:`soabench.cache`. Left to the trials, every worker process compiles the same kernels
-at the same time, one after another inside each process, while the progress line extrapolates an ETA from trials
-that were mostly compiling. Instead, the driver of a run calls :func:`ensure_compiled` before its trials start:
+:mod:`soabench.metrics_kernels`, :mod:`soabench.geometry_kernels`, :mod:`soabench.tracks.kernels`) are compiled by
+numba on first use and cached in the per-user folder of :mod:`soabench.cache`. Left to the trials, every worker
+process compiles the same kernels at the same time, one after another inside each process, while the progress line
+extrapolates an ETA from trials that were mostly compiling. Instead, the driver of a run calls
+:func:`ensure_compiled` before its trials start:
 
 * the kernels are compiled in independent groups (the update, the reduction, the metric and geometry kernels), one
   process per group on up to ``os.cpu_count()`` cores, then the fused cycle's entry points (which link the groups'
@@ -50,6 +51,7 @@ KERNEL_MODULES = (
     "soabench.gmphd.cycle",
     "soabench.metrics_kernels",
     "soabench.geometry_kernels",
+    "soabench.tracks.kernels",
     "soabench.lmb.gibbs",
     "soabench.lmb.tracks",
 )
@@ -163,6 +165,16 @@ def _newborn_steps() -> None:
             f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
 
 
+def _track_metrics() -> None:
+    """The track metrics' scan loops (§9.3): HOTA's and CLEAR's matchings and OSPA(2)'s windows."""
+    from soabench.tracks.ospa2 import ospa2
+    from soabench.tracks.scores import track_scores
+
+    ids, xy = [np.array([1, 2])] * 2, [np.array([[0.0, 0.0], [9.0, 9.0]])] * 2
+    track_scores(ids, xy, ids, xy, 5.0)
+    ospa2(ids, xy, ids, xy)
+
+
 def _lmb_steps() -> None:
     """The LMB filter (docs/method.md "LMB filter"): steps with Gaussian births and with newborn terms (the adaptive
     birth), and the association marginals on both of their paths (enumeration and Gibbs sampling)."""
@@ -187,7 +199,7 @@ def _lmb_steps() -> None:
 #: round links the earlier rounds' cached kernels
 ROUNDS: tuple[tuple[Callable[[], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_fused_steps, _newborn_steps, _lmb_steps),
+    (_fused_steps, _newborn_steps, _lmb_steps, _track_metrics),
 )
 
 

@@ -341,9 +341,16 @@ def gt_mask(scans: Scans, gt_set: str = "fov") -> np.ndarray:
 def estimate_positions(X: np.ndarray, ego: np.ndarray, sensor_cfg: SensorConfig, gt_set: str = "fov") -> np.ndarray:
     """Est_k (§5.1): extracted positions (with multiplicity), restricted to FOV_k unless ``gt_set`` is "scene"."""
     E = _points(X)
+    return E[estimate_mask(E, ego, sensor_cfg, gt_set)]
+
+
+def estimate_mask(X: np.ndarray, ego: np.ndarray, sensor_cfg: SensorConfig, gt_set: str = "fov") -> np.ndarray:
+    """(n,) which rows of ``X`` are in Est_k (§5.1): ``X[estimate_mask(...)]`` has the rows of
+    :func:`estimate_positions`, so that per-estimate data (labels) can be restricted the same way."""
+    E = _points(X)
     if gt_set == "scene" or len(E) == 0:
-        return E
-    return E[fov_mask(E, ego, sensor_cfg)]
+        return np.ones(len(E), dtype=bool)
+    return fov_mask(E, ego, sensor_cfg)
 
 
 # ---------------------------------------------------------------------------------------------------------------------

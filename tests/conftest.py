@@ -75,3 +75,30 @@ def recorded_intersection():
         sensor = dataclasses.replace(cfg.sensor, lambda_c=lam)
         scans[lam] = (sensor, observe(rec, scene, sensor, seeds.sensor_rngs()))
     return cfg, scene, scans, seeds
+
+
+@pytest.fixture
+def trackeval_kitti():
+    """TrackEval's KITTI 2-D box evaluation, printing nothing: ``evaluate(gt, trackers, names, classes)`` scores
+    ``trackers/<name>/data/XXXX.txt`` against ``gt/label_02`` (with ``gt/evaluate_tracking.seqmap.training``) and
+    returns ``{name: {class: {"HOTA": ..., "CLEAR": ..., "Identity": ...}}}`` of the combined sequences."""
+    import trackeval  # the test extra installs it
+
+    def evaluate(gt, trackers, names: list[str], classes: list[str]) -> dict:
+        config = trackeval.Evaluator.get_default_eval_config()
+        config.update(
+            USE_PARALLEL=False, PRINT_RESULTS=False, PRINT_CONFIG=False, TIME_PROGRESS=False, OUTPUT_SUMMARY=False,
+            OUTPUT_DETAILED=False, PLOT_CURVES=False, DISPLAY_LESS_PROGRESS=True,
+        )  # fmt: skip
+        dataset = trackeval.datasets.Kitti2DBox(
+            {
+                "GT_FOLDER": str(gt), "TRACKERS_FOLDER": str(trackers), "OUTPUT_FOLDER": str(trackers.parent / "o"),
+                "TRACKERS_TO_EVAL": names, "CLASSES_TO_EVAL": classes, "PRINT_CONFIG": False,
+            }
+        )  # fmt: skip
+        metrics = [trackeval.metrics.HOTA(), trackeval.metrics.CLEAR(), trackeval.metrics.Identity()]
+        res, msg = trackeval.Evaluator(config).evaluate([dataset], metrics)
+        assert msg["Kitti2DBox"] == dict.fromkeys(names, "Success")
+        return {name: res["Kitti2DBox"][name]["COMBINED_SEQ"] for name in names}
+
+    return evaluate

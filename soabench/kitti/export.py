@@ -155,6 +155,31 @@ def _seen(calib, hwl, xyz, ry) -> tuple[np.ndarray, int] | None:
     return image_box(calib.P2, hwl, xyz, ry) if xyz[2] > 0.0 else None
 
 
+def pedestrian_row(
+    frame: int,
+    tid: int,
+    xy: np.ndarray,
+    heading: float,
+    ego: np.ndarray,
+    calib,
+    r_max: float,
+    occluded: int,
+    score: float | None = None,
+) -> str | None:
+    """The row of a pedestrian box at world position ``xy`` walking along world ``heading`` (rad; NaN: unknown,
+    written as rotation_y 0), if it is within ``r_max`` of the ego and the camera sees it; else None."""
+    p = ego_frame(xy, ego)[0]
+    if math.hypot(p[0], p[1]) > r_max:
+        return None
+    xyz = calib.velo_to_rect_pts([p[0], p[1], GROUND_Z])[0]
+    heading_ego = float(heading) - float(ego[2])
+    ry = _ry(calib, heading_ego) if math.isfinite(heading_ego) else 0.0
+    seen = _seen(calib, PED_HWL, xyz, ry)
+    if seen is None:
+        return None
+    return _object_row(frame, tid, "Pedestrian", seen[1], occluded, seen[0], PED_HWL, xyz, ry, score)
+
+
 def _ry(calib, heading_ego: float) -> float:
     """rotation_y of a box whose length axis points along ``heading_ego`` in the Velodyne frame."""
     d = calib.velo_to_rect[:3, :3] @ np.array([math.cos(heading_ego), math.sin(heading_ego), 0.0])
@@ -191,16 +216,11 @@ def export_trial(trial: int, recording, scans, scene, sensor: SensorConfig, cali
         ego_pt = Point(ego[:2])
         # pedestrians
         for i in np.flatnonzero(scans.present[k]):
-            p = ego_frame(scans.truth_xy[k, i], ego)[0]
-            if math.hypot(p[0], p[1]) > sensor.r_max:
-                continue
-            xyz = calib.velo_to_rect_pts([p[0], p[1], GROUND_Z])[0]
-            heading = float(recording.ped_heading[idx, i]) - float(ego[2])
-            ry = _ry(calib, heading) if math.isfinite(heading) else 0.0
-            seen = _seen(calib, PED_HWL, xyz, ry)
-            if seen is not None:
-                occ = 0 if scans.visible[k, i] else (2 if scans.in_fov[k, i] else 3)
-                labels.append(_object_row(k, int(i), "Pedestrian", seen[1], occ, seen[0], PED_HWL, xyz, ry))
+            occ = 0 if scans.visible[k, i] else (2 if scans.in_fov[k, i] else 3)
+            heading = float(recording.ped_heading[idx, i])
+            row = pedestrian_row(k, int(i), scans.truth_xy[k, i], heading, ego, calib, sensor.r_max, occ)
+            if row is not None:
+                labels.append(row)
         # vehicles and parked cars within r_max
         boxes = []
         foot = np.asarray(recording.veh_footprint[idx], dtype=float).reshape(-1, 4, 2)

@@ -163,12 +163,10 @@ def test_oxts_of_a_turning_accelerating_path_integrate_back():
 # TrackEval's KITTI 2-D box reader
 
 
-def test_trackeval_reads_the_export(exported, tmp_path):
+def test_trackeval_reads_the_export(exported, tmp_path, trackeval_kitti):
     """TrackEval's KITTI 2-D box dataset reads label_02 as ground truth and a tracker file in the same format:
     the labels themselves score HOTA = MOTA = IDF1 = 1 for both classes; swapping two cars' ids halfway through the
     frames they share costs identity switches."""
-    import trackeval  # the test extra installs it
-
     rows = _rows(exported / "label_02" / "0000.txt")
     n_frames = len(_rows(exported / "oxts" / "0000.txt"))
     gt = tmp_path / "gt"
@@ -192,23 +190,10 @@ def test_trackeval_reads_the_export(exported, tmp_path):
             tid = ids.get(int(r[1]), int(r[1])) if int(r[0]) >= at else int(r[1])
             out.append(" ".join([r[0], str(tid), *r[2:], "1.0"]))
         (folder / "0000.txt").write_text("\n".join(out) + "\n")
-    config = trackeval.Evaluator.get_default_eval_config()
-    config.update(
-        USE_PARALLEL=False, PRINT_RESULTS=False, PRINT_CONFIG=False, TIME_PROGRESS=False, OUTPUT_SUMMARY=False,
-        OUTPUT_DETAILED=False, PLOT_CURVES=False, DISPLAY_LESS_PROGRESS=True,
-    )  # fmt: skip
-    dataset = trackeval.datasets.Kitti2DBox(
-        {
-            "GT_FOLDER": str(gt), "TRACKERS_FOLDER": str(tmp_path / "trackers"), "OUTPUT_FOLDER": str(tmp_path / "o"),
-            "TRACKERS_TO_EVAL": ["perfect", "swapped"], "CLASSES_TO_EVAL": ["car", "pedestrian"], "PRINT_CONFIG": False,
-        }
-    )  # fmt: skip
-    metrics = [trackeval.metrics.HOTA(), trackeval.metrics.CLEAR(), trackeval.metrics.Identity()]
-    res, msg = trackeval.Evaluator(config).evaluate([dataset], metrics)
-    assert msg["Kitti2DBox"] == {"perfect": "Success", "swapped": "Success"}
+    res = trackeval_kitti(gt, tmp_path / "trackers", ["perfect", "swapped"], ["car", "pedestrian"])
     for cls in ("car", "pedestrian"):
-        r = res["Kitti2DBox"]["perfect"]["COMBINED_SEQ"][cls]
+        r = res["perfect"][cls]
         assert r["CLEAR"]["CLR_TP"] > 0
         assert np.allclose(r["HOTA"]["HOTA"], 1.0) and r["CLEAR"]["MOTA"] == 1.0 and r["Identity"]["IDF1"] == 1.0
-    s = res["Kitti2DBox"]["swapped"]["COMBINED_SEQ"]["car"]
+    s = res["swapped"]["car"]
     assert s["CLEAR"]["IDSW"] > 0 and s["HOTA"]["HOTA"].mean() < 1.0

@@ -46,6 +46,8 @@ from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE
 from soabench.experiment.runs.store import RunStore
 from soabench.experiment.trial.observable import duration_hint
 from soabench.experiment.trial.trial import FILTER_COLUMN
+from soabench.tracks.evaluate import TRACK_KEYS
+from soabench.tracks.report import TRACKS_LEGEND, render_tracks, track_stats, tracks_vs_soa
 
 #: how the summary names a filter family
 FAMILY_LABEL = {"gmphd": "GM-PHD", "lmb": "LMB"}
@@ -242,9 +244,41 @@ def _clutter_results(tables: RunTables, clutter: float, family: str | None) -> d
             for b in others:
                 comps.append(compare(tables, clutter, md, b, stats))
     out = {"clutter": clutter, "models": list(stats.values()), "vs_soa": comps, "warning": warning}
+    out["tracks"] = _tracks(tables, clutter, [c["baseline"] for c in comps if c["mode"] == tables.modes[0]])
     if family is not None:
         out["filter"] = family
     return out
+
+
+def _floats(values: Any) -> np.ndarray:
+    """A trials.csv column as floats: an empty cell (a track column of an unlabelled tracker) is NaN."""
+    return np.array([math.nan if v is None or v == "" else float(v) for v in np.asarray(values).tolist()], dtype=float)
+
+
+def _tracks(tables: RunTables, clutter: float, baselines: list[str]) -> dict:
+    """The Tracks table of one clutter rate (docs/method.md §9.3, §9.4): per model and mode
+    :func:`soabench.tracks.report.track_stats`, and S-OA's paired HOTA comparison against ``baselines``."""
+    t = tables.trials
+    if "hota" not in t:
+        return {}
+    rows, versus = [], []
+    by_trial: dict[tuple[str, str], dict[int, dict[str, float]]] = {}
+    for mo in tables.models:
+        for md in tables.modes:
+            m = select(t, clutter=clutter, model=mo, mode=md)
+            if not m.any():
+                continue
+            cols = {c: _floats(t[c][m]) if c in t else np.full(int(m.sum()), math.nan) for c in TRACK_KEYS}
+            rows.append((mo, md, track_stats(cols.__getitem__)))
+            trials = [int(v) for v in t["trial"][m]]
+            by_trial[(mo, md)] = {
+                n: {"hota": h, "idf1": f} for n, h, f in zip(trials, cols["hota"], cols["idf1"], strict=True)
+            }
+    for md in tables.modes:
+        for b in baselines:
+            if ("soa", md) in by_trial and (b, md) in by_trial:
+                versus.append((md, b, tracks_vs_soa(by_trial[("soa", md)], by_trial[(b, md)])))
+    return {"rows": rows, "versus": versus}
 
 
 # ------------------------------------------------------------------------------------------------ Markdown
@@ -310,6 +344,11 @@ def render_markdown(summary: dict, figures: Sequence[str] = ()) -> str:
                     f"| {c['ties']} | {c['losses']} | {c['na']} | {pct} "
                     f"| {fmt_pct(c['card_reduction'])} | {fmt_pct(c['ospa_reduction'])} |"
                 )
+        if res.get("tracks"):
+            tr = res["tracks"]
+            rows = [(LABEL.get(mo, mo), md, st) for mo, md, st in tr["rows"]]
+            versus = [(md, LABEL.get(b, b), c) for md, b, c in tr["versus"]]
+            lines += ["", f"### Tracks, λ = {res['clutter']:g}", "", *render_tracks(rows, versus), "", TRACKS_LEGEND]
     if summary["results"]:
         lines += ["", table_legend(summary["config"].get("metrics", {}))]
     if summary["failures"]:

@@ -47,6 +47,7 @@ from soabench.seeding import TrialSeeds, trial_seeds
 from soabench.sensor import observe
 from soabench.trackers import GMPHDTracker, ScanFailure, run_tracker
 from soabench.trackers import TrackerRun as FilterRun  # the step results and times of one run
+from soabench.tracks.evaluate import TRACK_KEYS, evaluate_tracks
 
 if TYPE_CHECKING:
     from soabench.config import Config, SensorConfig
@@ -59,7 +60,7 @@ ROW_ID_KEYS = ("trial", "seed", "sumo_seed", "clutter", "N_hat", "model", "mode"
 #: wall-clock columns of a row (seconds per filter run; the filter stages are sums over the K steps)
 ROW_TIME_KEYS = ("t_birth", "t_predict", "t_update", "t_reduce", "t_metrics", "t_filter_total")
 #: every column of a row, in order: ids, the metrics of :data:`soabench.metrics.SUMMARY_KEYS`, wall-clock times
-ROW_KEYS = ROW_ID_KEYS + tuple(k for k in SUMMARY_KEYS if k not in ROW_TIME_KEYS) + ROW_TIME_KEYS
+ROW_KEYS = ROW_ID_KEYS + tuple(k for k in SUMMARY_KEYS if k not in ROW_TIME_KEYS) + ROW_TIME_KEYS + TRACK_KEYS
 #: columns of an episode row (§5.4); k_t = -1 and delay = NaN when censored
 EPISODE_KEYS = (
     "trial",
@@ -241,9 +242,16 @@ def _scalar(v: Any) -> Any:
 
 
 def make_row(
-    key: RunKey, seeds: TrialSeeds, N_hat: float, metrics: TrialMetrics, run: FilterRun, t_metrics: float
+    key: RunKey,
+    seeds: TrialSeeds,
+    N_hat: float,
+    metrics: TrialMetrics,
+    run: FilterRun,
+    t_metrics: float,
+    tracks: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """One row of :data:`ROW_KEYS` for a filter run."""
+    """One row of :data:`ROW_KEYS` for a filter run; ``tracks``: its track columns (:func:`evaluate_tracks`; None:
+    every track column empty)."""
     row: dict[str, Any] = {
         "trial": key.trial,
         "seed": seeds.base_seed,
@@ -255,6 +263,7 @@ def make_row(
     }
     row.update({k: _scalar(v) for k, v in metrics.summary.items()})
     row.update({"t_birth": run.t_birth, "t_metrics": t_metrics, "t_filter_total": run.t_total})
+    row.update(tracks or dict.fromkeys(TRACK_KEYS))
     out = {k: row[k] for k in ROW_KEYS}
     if key.family is not None:
         out[FILTER_COLUMN] = key.family
@@ -646,7 +655,14 @@ def _record(
     t0 = time.perf_counter()
     metrics = evaluate(scans, run.results, config.metrics, sensor_cfg)
     t_metrics = time.perf_counter() - t0
-    out.rows.append(make_row(key, seeds, config.birth.N_hat, metrics, run, t_metrics))
+    X = [r.X for r in run.results]
+    # a labelled run: labels on every scan with estimates (a scan without estimates may carry none)
+    labelled = any(r.labels is not None for r in run.results) and all(
+        r.labels is not None or len(x) == 0 for r, x in zip(run.results, X, strict=True)
+    )
+    labels = [np.zeros(0, np.int64) if r.labels is None else r.labels for r in run.results] if labelled else None
+    tracks = evaluate_tracks(scans, X, labels, metrics.episodes, config.metrics, sensor_cfg)
+    out.rows.append(make_row(key, seeds, config.birth.N_hat, metrics, run, t_metrics, tracks))
     out.episodes.extend(episode_rows(key, metrics))
     out.steps.extend(step_rows(key, metrics))
     if out.estimates is not None:
