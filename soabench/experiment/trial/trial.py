@@ -522,7 +522,9 @@ def _run_one(
     if key.family == "lmb":  # the labelled multi-Bernoulli filter: its Gibbs seeds from the trial's own stream
         from soabench.lmb import LMBFilter
 
-        filter_cls = functools.partial(LMBFilter, N_hat=config.birth.N_hat, rng=seeds.association_rng())
+        filter_cls = functools.partial(
+            LMBFilter, lmb_cfg=config.lmb, N_hat=config.birth.N_hat, rng=seeds.association_rng()
+        )
     if plugins.is_builtin_birth(key.model):
         birth_model = (
             births
