@@ -485,6 +485,17 @@ class Config:
             self.sensor.lambda_c = self._lambda_c = float(self.experiment.clutter[0])
         return self
 
+    def gmphd_only(self, command: str) -> Config:
+        """This configuration, for a command that runs the GM-PHD family only (docs/user-guide/outputs.md "Filter
+        families"): ``experiment.filters`` naming another family is refused with one line, never ignored."""
+        families = self.experiment.filters
+        require(
+            tuple(families) == FILTER_FAMILIES[:1],
+            f"experiment.filters = {list(families)!r}: {command} runs the GM-PHD family only; run the families side "
+            "by side with `soabench run --filters gmphd,lmb`",
+        )
+        return self
+
     def single_clutter_rate(self, command: str) -> float:
         """The one clutter rate of a command that observes one scene; a list of several is refused with one line."""
         rates = self.experiment.clutter

@@ -152,6 +152,7 @@ def replay_trial(
 def _tracker_run(name: str, cfg: Config, sensor_cfg: Any, scene: Any, scans: Any, seeds: Any, mode: str) -> Any:
     """A whole tracker's run over the scans, built as the trial builds it (its own copy of the configuration, the
     trial's placement generator); each step's track labels, where its Estimates carry them, stay on the result."""
+
     def check(out: Any, scan: Any, t_step: float) -> Any:
         result = guard.check_estimates(out, scan, t_step)
         labels = getattr(out, "labels", None)
