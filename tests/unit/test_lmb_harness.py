@@ -124,3 +124,13 @@ def test_figures_of_a_families_run(tmp_path):
     assert heights == [3.0, 2.0, 1.0, 2.0]  # S-OA, PUBM in the GM-PHD, then in the LMB (static mode)
     assert [round(p.get_height(), 9) for p in ospa_ax.patches if p.get_width() > 0] == [23.0, 22.0, 21.0, 22.0]
     assert [t.get_text() for t in fig.legends[0].get_texts()] == ["GM-PHD", "LMB"]
+
+
+def test_sensitivity_of_a_families_run_is_refused(tmp_path):
+    """`soabench sensitivity --main` of a run naming filter families: one line, before any folder is made."""
+    from soabench.experiment.campaigns.sensitivity_runs import run_sensitivity
+
+    _hand_run(tmp_path / "main")
+    with pytest.raises(SoabenchError, match=r"`soabench sensitivity` \(--main .*main\) runs the GM-PHD family only"):
+        run_sensitivity(tmp_path / "main", tmp_path / "sens")
+    assert not (tmp_path / "sens").exists()
