@@ -159,11 +159,7 @@ PROPERTY_KEYS = {"sigma_b": "sigma_b_deg", "fov": "fov_deg"}
 def config_keys() -> set[str]:
     """The keys of :class:`Config` (without the derived fields, which are not keys)."""
     cfg = Config()
-    return {
-        f"{sec}.{f.name}"
-        for sec in SPIED
-        for f in dataclasses.fields(getattr(cfg, sec))
-    } - set(DERIVED_KEYS)
+    return {f"{sec}.{f.name}" for sec in SPIED for f in dataclasses.fields(getattr(cfg, sec))} - set(DERIVED_KEYS)
 
 
 def page_keys() -> set[str]:
