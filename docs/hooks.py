@@ -60,6 +60,7 @@ _SECTION_REFS = {
     "birth": "[§3](../method.md#s3), register rows [9-19, 24, 26-28](../method.md#s7)",
     "metrics": "[§5](../method.md#s5), register rows [5, 6, 22, 23](../method.md#s7)",
     "experiment": "[§5.8](../method.md#s5.8)",
+    "lmb": "[LMB filter](../method.md#lmb), register row [33](../method.md#r33)",
 }
 
 

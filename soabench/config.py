@@ -383,6 +383,30 @@ class ExperimentConfig:
 
 
 @dataclass
+class LMBConfig:
+    """The LMB filter, read by runs whose experiment.filters names lmb (docs/method.md "LMB filter").
+
+    Defaults: Vo's toolbox; register row 33 for r_B,max. A key set here while no run reads it is refused.
+    """
+
+    r_B_max: float = 0.5  #: largest existence probability r_B,max of a birth track
+    prune_r: float = 1e-3  #: tracks with existence probability r below this are dropped
+    max_tracks: int = 100  #: most probable tracks kept after each scan
+    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many hypotheses, else this many Gibbs sweeps
+    max_components: int = 10  #: Gaussian components kept per track
+    extract_r: float = 0.5  #: estimates: the tracks with r above this, labelled
+
+    def validate(self) -> LMBConfig:
+        _in_range("lmb.r_B_max", self.r_B_max, 0.0, 1.0, lo_open=True, hi_open=True)
+        _in_range("lmb.prune_r", self.prune_r, 0.0, 1.0, hi_open=True)
+        _int_range("lmb.max_tracks", self.max_tracks, 1, 1_000_000)
+        _int_range("lmb.max_hypotheses", self.max_hypotheses, 1, 10_000_000)
+        _int_range("lmb.max_components", self.max_components, 1, 10_000)
+        _in_range("lmb.extract_r", self.extract_r, 0.0, 1.0, hi_open=True)
+        return self
+
+
+@dataclass
 class Config:
     """The full resolved configuration of a run."""
 
@@ -391,6 +415,7 @@ class Config:
     birth: BirthConfig = field(default_factory=BirthConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
+    lmb: LMBConfig = field(default_factory=LMBConfig)
     #: ``[plugins.<name>]`` tables: a plugin's own options, passed to its constructor as keyword arguments
     plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
 
@@ -408,6 +433,16 @@ class Config:
         self.filter.validate()
         self.birth.validate()
         self.metrics.validate()
+        self.lmb.validate()
+        default_lmb = LMBConfig()
+        changed = [
+            f.name for f in dataclasses.fields(LMBConfig) if getattr(self.lmb, f.name) != getattr(default_lmb, f.name)
+        ]
+        if changed and "lmb" not in self.experiment.filters:  # an [lmb] key no run reads: refused, not ignored
+            raise SoabenchError(
+                f"lmb.{changed[0]} = {getattr(self.lmb, changed[0])!r} is set but experiment.filters = "
+                f"{list(self.experiment.filters)!r} runs no LMB filter; add lmb (--filters gmphd,lmb) or remove the key"
+            )
         require(
             self.experiment.duration >= self.sensor.dt,
             f"duration = {self.experiment.duration!r} is shorter than one sensor period sensor.dt = {self.sensor.dt!r}",
@@ -417,11 +452,13 @@ class Config:
         return self
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS` and
-        without ``experiment.filters`` when it is the default (so the identity of a default run is unchanged)."""
+        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS`
+        and, when the run names no LMB family, without ``experiment.filters`` and ``[lmb]`` (then at their defaults:
+        the identity of a default run is unchanged)."""
         out = dataclasses.asdict(self)
         if tuple(out["experiment"]["filters"]) == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
             del out["experiment"]["filters"]
+            del out["lmb"]
         return {
             sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items() if f"{sec}.{k}" not in DERIVED_KEYS}
             for sec, d in out.items()
@@ -446,6 +483,17 @@ class Config:
         )
         if self.experiment.clutter:
             self.sensor.lambda_c = self._lambda_c = float(self.experiment.clutter[0])
+        return self
+
+    def gmphd_only(self, command: str) -> Config:
+        """This configuration, for a command that runs the GM-PHD family only (docs/user-guide/outputs.md "Filter
+        families"): ``experiment.filters`` naming another family is refused with one line, never ignored."""
+        families = self.experiment.filters
+        require(
+            tuple(families) == FILTER_FAMILIES[:1],
+            f"experiment.filters = {list(families)!r}: {command} runs the GM-PHD family only; run the families side "
+            "by side with `soabench run --filters gmphd,lmb`",
+        )
         return self
 
     def single_clutter_rate(self, command: str) -> float:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import kitti_files
@@ -191,3 +192,50 @@ CASES: list[Case] = [
     ("kitti --classes pedestrian", _kitti(None, "--classes", "pedestrian"), "'pedestrian' is not a KITTI"),
     ("kitti --nhat-sweep 0,0", _kitti(None, "--nhat-sweep", "0,0"), "names 0 twice"),
 ]
+
+
+# ------------------------------------------------------------------------------------------------ filter families
+FAMILIES = '[experiment]\nfilters = ["gmphd", "lmb"]\n'
+
+
+def _suite_with_config(text: str, threshold: str = "") -> Callable[[Path], list[str]]:
+    """A one-scenario check suite whose ``[suite] config`` file holds ``text`` (and ``threshold`` lines added to its
+    threshold row)."""
+
+    def make(tmp: Path) -> list[str]:
+        (tmp / "c.toml").write_text(text)
+        suite = tmp / "suite.toml"
+        suite.write_text(
+            '[suite]\nname = "t"\nconfig = "c.toml"\n[[scenario]]\nname = "a"\nnet = "intersection"\nduration = 5\n'
+            f'[[threshold]]\nmetric = "ospa"\nmax = 100.0\n{threshold}'
+        )
+        return ["check", "--suite", str(suite), "--out", str(tmp / "chk")]
+
+    return make
+
+
+def _with_config(*argv: str) -> Callable[[Path], list[str]]:
+    return lambda t: [*argv, "--config", _toml(t, FAMILIES)]
+
+
+FAMILY_CASES: list[Case] = [
+    ("run --filters kalman", lambda t: _run(t, "--filters", "kalman"), "'kalman'"),
+    ("run --filters lmb,lmb", lambda t: _run(t, "--filters", "lmb,lmb"), "names 'lmb' twice"),
+    ("run --filters lmb dynamic only", lambda t: _run(t, "--filters", "lmb", "--probabilities", "dynamic"), "static"),
+    _cfg("[experiment]\nfilters = []\n", "filters must name at least one"),
+    _cfg('[experiment]\nfilters = "lmb"\n', "must be a list"),
+    _cfg("[lmb]\nr_B_max = 0.3\n", "runs no LMB filter"),
+    _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nr_B_max = 1.0\n', "lmb.r_B_max = 1.0 is out of range"),
+    _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nmax_tracks = 0\n', "lmb.max_tracks = 0 is out of range"),
+    _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nmax_hypotheses = 2.5\n', "must be an integer"),
+    _cfg("[lmb]\nr_B = 0.3\n", "unknown config key lmb.r_B"),
+    ("sweep clutter config filters", _with_config("sweep", "clutter", "--trials", "1", "--out", "sw"), "GM-PHD"),
+    ("sweep births config filters", _with_config("sweep", "births", "--trials", "1", "--out", "sw"), "GM-PHD"),
+    ("study config filters", _with_config("study", "--trials", "1", "--out", "st"), "`soabench study` runs the GM"),
+    ("scene config filters", _with_config("scene", "--out", "s.png"), "`soabench scene` runs the GM-PHD"),
+    ("kitti config filters", lambda t: [*_kitti()(t), "--config", _toml(t, FAMILIES)], "a KITTI run runs the GM-PHD"),
+    ("kitti --filters", _kitti(None, "--filters", "gmphd,lmb"), "unrecognized arguments: --filters"),
+    ("check suite config filters", _suite_with_config(FAMILIES), "a check suite runs the GM-PHD family only"),
+    ("check threshold filter", _suite_with_config("", 'filter = "lmb"\n'), "unknown key 'filter'"),
+]
+CASES += FAMILY_CASES

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from soabench.errors import SoabenchError
+from soabench.experiment.trial.trial import FILTER_COLUMN, family_runs
 from soabench.seeding import trial_seeds
 
 FAIL_TRIALS = frozenset({2})
@@ -62,7 +63,8 @@ def fake_trial(trial, config, scene, scenario, *, save_estimates=False):
     rows, episodes, steps, estimates = [], [], [], []
     for ci, lam in enumerate(exp.clutter):
         for mi, model in enumerate(exp.models):
-            for pi, mode in enumerate(exp.probabilities):
+            for pi, (mode, fam) in enumerate(family_runs(exp.probabilities, exp.filters)):
+                n0 = (len(rows), len(episodes), len(steps))
                 t1 = time.perf_counter()
                 rng = np.random.default_rng([exp.seed, trial, ci, mi, pi, 7])
                 scale = DELAY_SCALE[model] * (0.9 if mode == "dynamic" else 1.0)
@@ -166,6 +168,9 @@ def fake_trial(trial, config, scene, scenario, *, save_estimates=False):
                         "t_filter_total": t_filter,
                     }
                 )
+                if fam is not None:  # a run naming filter families: the family as every table's last column
+                    for d in (*rows[n0[0] :], *episodes[n0[1] :], *steps[n0[2] :]):
+                        d[FILTER_COLUMN] = fam
     timing = {"sumo": t_sumo, "sensor": 0.5 * t_sumo}
     return FakeTrialResult(rows, episodes, steps, timing, estimates if save_estimates else None)
 

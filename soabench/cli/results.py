@@ -12,11 +12,15 @@ from soabench.experiment.execution.options import RunOptions
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("results", help="regenerate all of results/: study, every scene, summary, KITTI")
+    p = sub.add_parser(
+        "results", help="regenerate all of results/: study, filter families, every scene, summary, KITTI"
+    )
     d = Settings()
     p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default results)")
     p.add_argument("--scenes", type=csv_list("scene"), help="shipped scenes of the summary (default: every one)")
-    p.add_argument("--trials", type=int, default=d.trials, help="trials of the intersection study's main protocol")
+    p.add_argument(
+        "--trials", type=int, default=d.trials, help="trials of the intersection study's main protocol and families run"
+    )
     p.add_argument("--duration", type=float, default=d.duration, help="seconds per SUMO trial")
     p.add_argument("--seed", type=int, default=d.seed, help="base seed of every part")
     p.add_argument("--births-trials", type=int, default=d.births_trials, help="trials per point of the N_hat sweep")

@@ -56,7 +56,8 @@ def handle(args: argparse.Namespace) -> int:
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the sweep in its folder")
         common.allow_typed_plugins(args)
-        requested = {"kind": args.kind, **common.requested(args, common.config_from_args(args))}
+        cfg = common.config_from_args(args).gmphd_only("`soabench sweep`")
+        requested = {"kind": args.kind, **common.requested(args, cfg)}
         if args.values is not None or args.offsets is not None:
             requested["values"] = list(args.values if args.values is not None else args.offsets)
         outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, requested=requested, options=options)

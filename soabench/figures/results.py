@@ -83,9 +83,13 @@ def _offsets(n: int, width: float = 0.8) -> np.ndarray:
     return (np.arange(n) - (n - 1) / 2) * (width / max(n, 1))
 
 
-def _bars(ax, slots: list[str], modes: list[str], values, models_for_color: list[str] | None = None) -> None:
+def _bars(
+    ax, slots: list[str], modes: list[str], values, models_for_color: list[str] | None = None, hatch=None
+) -> None:
     """Grouped bars: one slot per model, one hatched/plain bar per mode, mean ± σ (lower bar clipped at 0) and
-    every per-trial value as a small dot. ``values(slot, mode)`` gives the per-trial values."""
+    every per-trial value as a small dot. ``values(slot, mode)`` gives the per-trial values; ``hatch(mode)`` the
+    bar hatch of a group (default: the probability mode's)."""
+    hatch = hatch or (lambda mode: ps.mode_style(mode).hatch)
     rng = np.random.default_rng(0)  # jitter only; fixed so the figure is reproducible
     width = 0.8 / max(len(modes), 1)
     for j, mode in enumerate(modes):
@@ -102,7 +106,7 @@ def _bars(ax, slots: list[str], modes: list[str], values, models_for_color: list
                 yerr=[[min(sd, mu) if v.size else 0.0], [sd if v.size else 0.0]],
                 color=st.color,
                 alpha=0.55,
-                hatch=ps.mode_style(mode).hatch,
+                hatch=hatch(mode),
                 edgecolor="k",
                 linewidth=0.5,
                 error_kw={"elinewidth": 0.8, "capsize": 2},
@@ -479,9 +483,19 @@ def fig_components(tables: RunTables, clutter: float, path: Path) -> Path:
 
 
 # -------------------------------------------------------------------------------------------------- all
-def figure_jobs(tables: RunTables, out_dir: Path) -> list[FigureJob]:
-    """Every figure of the run (module docstring) as a :class:`~soabench.figures.drawing.FigureJob`, in order."""
+def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> list[FigureJob]:
+    """Every figure of the run (module docstring) as a :class:`~soabench.figures.drawing.FigureJob`, in order; for a
+    run that names filter families, those of its GM-PHD family, then the families side by side
+    (:mod:`soabench.figures.families`); ``by_family`` False: the paper's figures of all the rows given."""
+    from soabench.figures.families import family_jobs, family_only, in_family, run_families
 
+    if by_family and run_families(tables):
+        first = run_families(tables)[0]
+        jobs = [
+            FigureJob(j.path, in_family, (first, j.build, *j.args), j.weight)
+            for j in figure_jobs(family_only(tables, first), out_dir, by_family=False)
+        ]
+        return jobs + family_jobs(tables, out_dir)
     out_dir = Path(out_dir)
     jobs: list[FigureJob] = []
     clutters = tables.clutters

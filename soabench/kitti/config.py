@@ -87,7 +87,7 @@ def load_kitti_config(path: str | Path | None) -> tuple[Config, KittiConfig]:
     require(p.is_file(), f"config file {str(p)!r} does not exist")
     data = read_toml(p, "config file")
     kitti = kitti_from_dict(data.pop("kitti", {}))
-    cfg = Config.from_dict(data, base).validate()
+    cfg = Config.from_dict(data, base).validate().gmphd_only("a KITTI run")
     cfg.single_clutter_rate("a KITTI run")
     return cfg, kitti
 

@@ -19,12 +19,11 @@ with ``filter.occlusion_pd``); the dynamic (Beta) modes are refused.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from soabench import notice
-from soabench.config import FilterConfig, SensorConfig, _in_range, _int_range, _non_negative
+from soabench.config import FilterConfig, LMBConfig, SensorConfig
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
@@ -39,27 +38,6 @@ from soabench.types import Births, Scan, StepResult, scan_once
 
 #: the probability modes the LMB filter runs (docs/method.md §4.6): static only
 LMB_MODES = ("static",)
-
-
-@dataclass
-class LMBConfig:
-    """Settings of the LMB filter (defaults: Vo's toolbox; register row 33 for r_B,max)."""
-
-    r_B_max: float = 0.5  #: largest existence probability of a birth track
-    prune_r: float = 1e-3  #: tracks with r below this are dropped
-    max_tracks: int = 100  #: most probable tracks kept
-    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many hypotheses, else this many Gibbs sweeps
-    max_components: int = 10  #: Gaussian components kept per track
-    extract_r: float = 0.5  #: estimates: tracks with r > this
-
-    def validate(self) -> LMBConfig:
-        _in_range("lmb.r_B_max", self.r_B_max, 0.0, 1.0, lo_open=True, hi_open=True)
-        _in_range("lmb.prune_r", self.prune_r, 0.0, 1.0, hi_open=True)
-        _int_range("lmb.max_tracks", self.max_tracks, 1, 1_000_000)
-        _int_range("lmb.max_hypotheses", self.max_hypotheses, 1, 10_000_000)
-        _int_range("lmb.max_components", self.max_components, 1, 10_000)
-        _non_negative("lmb.extract_r", self.extract_r, hi=1.0)
-        return self
 
 
 class LMBFilter:

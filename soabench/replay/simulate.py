@@ -21,7 +21,7 @@ from typing import Any
 
 from soabench import plugins
 from soabench.birth import LABEL
-from soabench.config import Config, filter_config_for_mode
+from soabench.config import FILTER_FAMILIES, Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.ownership import check_existing_folder, resolve
 from soabench.experiment.runs.provenance import package_versions
@@ -199,7 +199,10 @@ def _version_note(raw: dict) -> str:
 
 
 def _check_rows(path: Path, rep: TrialReplay) -> tuple[bool | None, str]:
-    """Compare each replayed run's metrics with its row of the run's ``trials.csv``."""
+    """Compare each replayed run's metrics with its row of the run's ``trials.csv`` (of the GM-PHD family, the one a
+    replay runs, in a run that names filter families)."""
+    from soabench.experiment.trial.trial import FILTER_COLUMN
+
     table = path / "trials.csv"
     if not table.is_file():
         return None, "reproduction not checked: the run has no trials.csv (unfinished run)"
@@ -211,6 +214,8 @@ def _check_rows(path: Path, rep: TrialReplay) -> tuple[bool | None, str]:
                 try:
                     same = int(r["trial"]) == rep.trial and float(r["clutter"]) == rep.clutter
                 except (KeyError, ValueError):
+                    continue
+                if r.get(FILTER_COLUMN, "") not in ("", FILTER_FAMILIES[0]):  # the replay runs the GM-PHD family
                     continue
                 if same and r.get("mode") == rep.mode and r.get("model") in want:
                     stored[r["model"]] = r

@@ -292,3 +292,32 @@ def test_a_part_made_with_other_models_is_refused_with_the_way_out(suite, tmp_pa
     (run / "run.json").write_text(json.dumps(meta))
     with pytest.raises(SoabenchError, match=r"experiment.models: stored \['soa', 'pubm'\].*remove that folder"):
         same_settings(run, cfg)
+
+
+def test_the_filters_part_is_kept_extended_or_refused(suite, tmp_path):
+    """The families run: kept when complete with the settings, extended by more trials (its finished trials kept),
+    refused when made with other families."""
+    import json
+    import shutil
+
+    from soabench.errors import SoabenchError
+    from soabench.experiment.campaigns.results_suite import Settings, _filters_part
+    from soabench.experiment.execution.options import RunOptions
+    from soabench.experiment.runs.files import read_csv
+
+    part = tmp_path / "filters"
+    shutil.copytree(suite.out / "filters", part)
+    exe, log = RunOptions(workers=1, progress=False, figures=False), lambda msg: None
+    with ft.as_builtins():
+        assert _filters_part(part, Settings(trials=2, duration=10.0), exe, log) == ("kept", 0)
+        before = read_csv(part / "trials.csv")
+        assert _filters_part(part, Settings(trials=3, duration=10.0), exe, log) == ("done", 0)
+    after = read_csv(part / "trials.csv")
+    assert set(after["trial"]) == {0, 1, 2} and set(after["filter"]) == {"gmphd", "lmb"}
+    old = after["trial"] < 2
+    assert list(after["ospa"][old]) == list(before["ospa"])  # the finished trials are kept as they were
+    meta = json.loads((part / "run.json").read_text())
+    meta["config"]["experiment"]["filters"] = ["gmphd"]
+    (part / "run.json").write_text(json.dumps(meta))
+    with pytest.raises(SoabenchError, match=r"experiment.filters: stored \['gmphd'\], requested \['gmphd', 'lmb'\]"):
+        _filters_part(part, Settings(trials=3, duration=10.0), exe, log)

@@ -283,6 +283,11 @@ def _refuse_protocol_keys(config: Path | None) -> None:
     if config is None:
         return
     section = read_toml(config, "config file").get("experiment", {})  # load_config read it
+    if "filters" in section:  # a suite scores the GM-PHD family (docs/user-guide/outputs.md "Filter families")
+        raise SoabenchError(
+            f"{config}: [experiment] filters: a check suite runs the GM-PHD family only; compare the families with "
+            "`soabench run --filters gmphd,lmb`"
+        )
     if section:
         key = sorted(section)[0]
         raise SoabenchError(

@@ -4,6 +4,9 @@ Parts, in order, under ``OUT`` (default ``results/``):
 
 * ``intersection/``: the paper's study (:mod:`soabench.experiment.campaigns.study`: main protocol, clutter sweep, N_hat
   sweep, comparison with the paper) on the shipped intersection;
+* ``filters/``: the main protocol on the shipped intersection (its trials, duration and seed; static
+  probabilities, λ = 3) with every birth model in both filter families, the GM-PHD and the labelled multi-Bernoulli
+  filter (``--filters gmphd,lmb``; :func:`_filters_part`): does occlusion-aware birth help a labelled filter?
 * ``<scene>/``: the same study on every other shipped scene (``--scene-trials`` trials of its main protocol; no
   comparison with the paper, whose numbers belong to its own protocol on the intersection);
 * ``scenes/density/<scene>.json``: each scene's occlusion density (:mod:`.occlusion_density`);
@@ -325,6 +328,34 @@ def _index_pages(root: Path, scenes: Sequence[str], log: Callable[[str], None]) 
     return "done", 0
 
 
+#: the filter families of the ``filters/`` part, and the one mode every family runs (docs/method.md "LMB filter")
+FILTERS_PART = {"filters": ("gmphd", "lmb"), "probabilities": ("static",)}
+
+
+def filters_config(s: Settings) -> Config:
+    """The configuration of the ``filters/`` part: the main protocol's sizes with both families, static mode."""
+    return _base_config(s, s.trials, **FILTERS_PART)
+
+
+def _filters_part(folder: Path, s: Settings, exe: RunOptions, log: Callable[[str], None]) -> tuple[str, int]:
+    """The main protocol on the intersection with both filter families (module docstring) in ``folder``: kept when
+    complete with these settings, else resumed (more trials: extended) or started."""
+    # imported when called: scipy would slow every start-up
+    from soabench.experiment.execution.runner import run_experiment
+
+    cfg = filters_config(s)
+    keys = (*SIZE_KEYS, "experiment.filters")
+    if (folder / "run.json").is_file():
+        if same_settings(folder, cfg, keys) and run_complete(folder):
+            log(f"kept {folder} (the families run is complete)")
+            return "kept", 0
+        requested = {k: v for k, v in flatten_config(cfg.to_dict()).items() if k in keys}
+        o = run_experiment(None, "intersection", resume=folder, requested=requested, options=exe)
+    else:
+        o = run_experiment(cfg, "intersection", out=folder, options=exe)
+    return ("done" if o.complete else "incomplete"), o.n_missing
+
+
 # ------------------------------------------------------------------------------------------------ the command
 def run_results(
     out: Path,
@@ -347,7 +378,7 @@ def run_results(
     scenes = list(s.scenes or shipped)
     log = log or (lambda msg: print(f"soabench results: {msg}", file=sys.stderr, flush=True))
     root = resolve(out)
-    own = (*shipped, "scenes", "kitti", "README.md", "index.html")  # README.md: results/'s own description
+    own = (*shipped, "scenes", "filters", "kitti", "README.md", "index.html")  # README.md: results/'s own description
     check_own_folder(root, "results folder", own)
     root.mkdir(parents=True, exist_ok=True)
     hint = f"finish with: soabench results --out {root} (and the same options)"
@@ -373,6 +404,7 @@ def run_results(
             mains = {n: root / n / "main" for n in scenes}
             if "intersection" in scenes:
                 step("intersection study", lambda: _study_part(root / "intersection", s, exe, log))
+                step("intersection filter families", lambda: _filters_part(root / "filters", s, exe, log))
             for scene in (n for n in scenes if n != "intersection"):
                 step(
                     f"{scene} study",

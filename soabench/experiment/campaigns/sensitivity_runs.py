@@ -145,6 +145,7 @@ def run_sensitivity(
     main_dir = resolve(Path(main_dir))
     require((main_dir / "run.json").is_file(), f"--main {main_dir}: not a run folder (no run.json)")
     meta = validate_run_meta(RunStore(main_dir).meta(), str(main_dir / "run.json"))
+    meta.config.gmphd_only(f"`soabench sensitivity` (--main {main_dir})")
     done = len(RunStore(main_dir).done_trials())
     require(
         done >= meta.trials and (main_dir / "trials.csv").is_file(),

@@ -127,6 +127,7 @@ def run_study(
     """
     require(not options.save_estimates, "--save-estimates is not offered by `study`; use `run`")
     require(not options.fail_fast, "--fail-fast is not offered by `study`; use `run`")
+    config.gmphd_only("`soabench study`")
     root = resolve(out if out is not None else Path("results") / net_name(net))
     check_own_folder(root, "study folder", STUDY_ENTRIES)
     hint = f"finish with: soabench study --out {root}"

@@ -178,6 +178,8 @@ def run_sweep(
     ``figures/``); None draws them for the clutter and occlusion points and not for the N̂ sweep's, whose
     ``sweep_births.png`` summarises its points (their tables and summaries are written either way).
     """
+    if config is not None:
+        config.gmphd_only("`soabench sweep`")
     if options.figures is None:
         options = dataclasses.replace(options, figures=kind != "births")
     locks: list[FolderLock] = []

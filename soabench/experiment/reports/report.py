@@ -19,8 +19,9 @@ Statistics (per clutter rate lambda, birth model and probability mode):
 
 A run that names filter families (``experiment.filters``, a ``filter`` column in its tables) is summarised family
 by family: every statistic and every paired comparison above is computed inside one family (S-OA in the LMB against
-the baselines in the LMB), and a probability mode a family does not run reads "—". The figures and the comparison
-with the paper use the GM-PHD family.
+the baselines in the LMB), and a probability mode a family does not run reads "—".
+The paper's figures and the comparison with the paper use the GM-PHD family; ``figures/families.png`` sets the
+families side by side.
 """
 
 from __future__ import annotations
@@ -478,14 +479,14 @@ def write_report(run_dir: Path, figures: bool = True, store: RunStore | None = N
     store = store if store is not None else RunStore(run_dir)
     tables = load_tables(run_dir, steps=store.step_columns())  # the columns its merge kept: no parse of steps.csv
     summary = summarize(tables, store.failures(), store.sessions())
-    if families(tables) != [None]:  # the figures and the paper's comparison: the GM-PHD family
-        tables = family_tables(tables, FILTER_FAMILIES[0])
     fig_paths: list[str] = []
-    if figures:
+    if figures:  # a run of several families: the GM-PHD family's figures, then the families side by side
         # imported when called: matplotlib would slow every start-up
         from soabench.figures.results import make_figures
 
         fig_paths = [str(p.relative_to(run_dir)) for p in make_figures(tables, run_dir / "figures")]
+    if families(tables) != [None]:  # the paper's comparison: the GM-PHD family
+        tables = family_tables(tables, FILTER_FAMILIES[0])
     summary["figures"] = fig_paths
 
     md = render_markdown(summary, fig_paths) + write_model_failures(run_dir, store.model_failures(), summary)

@@ -61,7 +61,7 @@ def take_snapshot(
         else f"--trial {trial} is out of range; allowed: 0 to {MAX_TRIALS - 1} (a run's trial indices)",
     )
     check_time("--time/--duration", duration)
-    cfg = load_config(config)
+    cfg = load_config(config).gmphd_only(f"`soabench {command}`")
     cfg.single_clutter_rate(f"`soabench {command}`")
     scene, scenario_cfg = scenarios.load(net, polys, scenario)
     duration = float(scenario_cfg.duration) if duration is None else duration

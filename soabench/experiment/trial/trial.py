@@ -416,7 +416,7 @@ def run_trial(
                 births_key = (candidates_key, birth_key, model, fn_key[3])
                 candidates = share.birth_candidates.setdefault(births_key, {})
                 births = _births_once(model, config, sensor_cfg, scene, seeds, birth_factory, candidates, share.count)
-            for mode, family in _family_runs(exp.probabilities, exp.filters):
+            for mode, family in family_runs(exp.probabilities, exp.filters):
                 key = RunKey(trial, float(lam), model, mode, family)
                 run_key = (scans_key, cfg_key, model, mode, family, save_estimates, *fn_key[2:])
                 cached = share.runs.get(run_key)
@@ -449,7 +449,7 @@ def run_trial(
     return out
 
 
-def _family_runs(modes: Sequence[str], families: Sequence[str]) -> list[tuple[str, str | None]]:
+def family_runs(modes: Sequence[str], families: Sequence[str]) -> list[tuple[str, str | None]]:
     """The (probability mode, filter family) of each run of a birth model, mode by mode and family by family in the
     config's orders; a family runs only the modes it supports (:data:`soabench.config.FAMILY_MODES`: the LMB runs
     static probabilities only; its other cells read "—"). The family is None for the default families
@@ -531,7 +531,9 @@ def _run_one(
     if key.family == "lmb":  # the labelled multi-Bernoulli filter: its Gibbs seeds from the trial's own stream
         from soabench.lmb import LMBFilter
 
-        filter_cls = functools.partial(LMBFilter, N_hat=config.birth.N_hat, rng=seeds.association_rng())
+        filter_cls = functools.partial(
+            LMBFilter, lmb_cfg=config.lmb, N_hat=config.birth.N_hat, rng=seeds.association_rng()
+        )
     if plugins.is_builtin_birth(key.model):
         birth_model = (
             births
