@@ -90,11 +90,14 @@ class EchoTracker:
 
 
 class LabelledEchoTracker(EchoTracker):
-    """EchoTracker whose estimates carry track labels: the 10 m grid cell of each (stable while a target lingers)."""
+    """EchoTracker whose estimates carry track labels: the 10 m grid cell of each (stable while a target lingers),
+    made distinct within a scan by its rank among the scan's estimates in that cell."""
 
     def step(self, scan) -> Estimates:
         est = super().step(scan)
-        est.labels = np.array([f"c{int(x // 10)}:{int(y // 10)}" for x, y in np.asarray(est.X)], dtype=object)
+        cells = [(int(x // 10) + 1000) * 10_000 + int(y // 10) + 1000 for x, y in np.asarray(est.X)[:, :2]]
+        labels = [100 * c + cells[:i].count(c) for i, c in enumerate(cells)]
+        est.labels = np.array(labels, dtype=np.int64)
         return est
 
 

@@ -85,9 +85,10 @@ def test_replay_reproduces_the_run(replay_page: Path, capsys) -> None:
     for f, i, (pid, sigmas, metres, source, _, _) in why:
         assert next(p for p in f["peds"] if p[0] == pid)[5][i] == 1 and sigmas >= 0 and metres >= 0
         assert source in {b[5] for b in f["models"][i]["births"]}
-    # a GM-PHD's estimates carry no track labels: no track list, label index -1
-    assert all(m["tracks"] == [] for m in data["models"])
-    assert {e[2] for f in data["frames"] for m in f["models"] for e in m["est"]} == {-1}
+    # the labelled GM-PHD's estimates carry track labels: each estimate names one of its model's tracks
+    for i, m in enumerate(data["models"]):
+        indices = {e[2] for f in data["frames"] for e in f["models"][i]["est"]}
+        assert m["tracks"] and indices <= set(range(len(m["tracks"])))
 
 
 def _truth_rows(scans, k: int) -> dict[str, tuple[float, float]]:
@@ -237,14 +238,15 @@ def test_a_whole_tracker_is_replayed_with_its_track_labels(tmp_path: Path) -> No
     data = page_data(page)
     assert data["reproduced"] is True, data["notes"]
     soa, echo = data["models"]
-    assert soa["tracks"] == [] and echo["tracks"]
+    assert soa["tracks"] and echo["tracks"]  # the labelled GM-PHD and the plugin both label their estimates
     for f in data["frames"]:
         assert f["models"][1]["births"] == [] and f["models"][1]["sum_w"] is None  # a tracker: no births, no mass
-        for x, y, i in f["models"][1]["est"]:
-            assert echo["tracks"][i] == f"c{int(x // 10)}:{int(-y // 10)}"  # the page's y is the world's -y
+        for x, y, i in f["models"][1]["est"]:  # the plugin's label names its 10 m cell; the page's y is the world's -y
+            assert int(echo["tracks"][i]) // 100 == (int(x // 10) + 1000) * 10_000 + int(-y // 10) + 1000
     k = max(range(len(data["frames"])), key=lambda i: len(data["frames"][i]["models"][1]["est"]))
     attrs = body_attrs(browse(page, f"#frame={k}", tmp_path))
-    assert attrs["status"] == "ok" and attrs["tracks"] == str(len(data["frames"][k]["models"][1]["est"])), attrs
+    labelled = sum(len(m["est"]) for m in data["frames"][k]["models"])  # every estimate of both panels is labelled
+    assert attrs["status"] == "ok" and attrs["tracks"] == str(labelled), attrs
 
 
 def test_labels_drawn_in_the_browser_and_the_video(labelled_page, tmp_path: Path) -> None:
