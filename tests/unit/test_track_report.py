@@ -55,8 +55,8 @@ def test_paired_hota_against_soa():
 
 
 def test_tracks_figure_draws_labelled_curves_and_names_the_unlabelled():
+    from soabench.figures.tracks import tracks_figure
     from soabench.tracks.evaluate import ALPHA_KEYS
-    from soabench.tracks.figures import tracks_figure
 
     def col(key: str, model: str, mode: str) -> np.ndarray:
         if model == "nnkf" and key in ALPHA_KEYS:
