@@ -60,6 +60,7 @@ from soabench.experiment.runs.files import read_csv, read_json, write_json_atomi
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.runs.runmeta import check_requested, flatten_config, validate_sweep_meta
 from soabench.experiment.trial.registry import load_scene_cached
+from soabench.tracks.report import render_hota
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births", "occlusion")
@@ -453,6 +454,14 @@ def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
             f"| {r['clutter']:g} | {LABEL.get(r['model'], r['model'])} | {r['mode']} | {fmt(r['precision_mean'])} "
             f"| {fmt(r['recall_mean'])} | {fmt(r['card_err_mean'])} | {fmt(r['ospa_mean'])} | {fmt(r['delay_mean'])} |"
         )
+    tracks = [
+        (f"{res['clutter']:g}", LABEL.get(mo, mo), md, st)
+        for res in summary["results"]
+        for mo, md, st in res.get("tracks", {}).get("rows", [])
+    ]
+    hota = render_hota("λ", tracks)
+    if hota:
+        lines += ["", "Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels.", "", *hota]
     # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import clutter_figure
@@ -461,7 +470,7 @@ def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     trial_rows = read_rows(run_dir / "trials.csv")
     save_png(clutter_figure(trial_rows, exp["models"], exp["probabilities"]), sweep_dir / "sweep_clutter.png")
     lines += ["", f"Figures: `sweep_clutter.png`, `points/{meta['points'][0]['name']}/figures/fig5h_precision.png`"]
-    return {"kind": "clutter", "table": rows}, "\n".join(lines) + "\n"
+    return {"kind": "clutter", "table": rows, "tracks": [list(t) for t in tracks]}, "\n".join(lines) + "\n"
 
 
 def write_sweep_report(sweep_dir: Path) -> str:
