@@ -423,13 +423,24 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     for r in table:
         lines.append(f"| {r['N_tot']} | {r['N_hat']:.4g} | " + " | ".join(fmt(r["delay"][c]) for c in cols) + " |")
     lines.append("| std over N_tot | | " + " | ".join(fmt(std[c]) for c in cols) + " |")
+    tracks = [
+        (str(p["value"]), LABEL.get(mo, mo), md, st)
+        for p in points
+        if (sweep_dir / "points" / p["name"] / "summary.json").is_file()
+        for res in read_json(sweep_dir / "points" / p["name"] / "summary.json")["results"][:1]
+        for mo, md, st in res.get("tracks", {}).get("rows", [])
+    ]
+    hota = render_hota("N_tot", tracks)
+    if hota:
+        lines += ["", "Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels.", "", *hota]
     # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import births_figure
 
     save_png(births_figure(table, models, modes, meta["n_true"], half), sweep_dir / "sweep_births.png")
     lines += ["", "Figure: `sweep_births.png`"]
-    return {"kind": "births", "table": table, "std_over_N_tot": std}, "\n".join(lines) + "\n"
+    summary = {"kind": "births", "table": table, "std_over_N_tot": std, "tracks": [list(t) for t in tracks]}
+    return summary, "\n".join(lines) + "\n"
 
 
 def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
