@@ -257,15 +257,24 @@ def evaluate(
 
     Returns:
         A :class:`TrialMetrics`: ``summary`` (``m["ospa"]``, the columns of a ``trials.csv`` row), the delay
-        ``episodes`` and the per-scan ``series`` (the columns of ``steps.csv``).
+        ``episodes`` and the per-scan ``series`` (the columns of ``steps.csv``). When the estimates carry labels
+        (``Estimates.labels`` on every scan with estimates), ``summary`` also holds the track columns of
+        docs/method.md §9.3-9.4 (``m["hota"]``, ``m["idf1"]``, ``m["idsw"]``, ... as in ``trials.csv``).
     """
     from soabench.metrics import evaluate as _evaluate
+    from soabench.tracks.evaluate import evaluate_tracks, run_labels
 
     results = _boundary.step_results(scans, estimates, order)
     _require(
         scans.sensor is not None, "these Scans carry no SensorConfig (Scans.sensor); set it to the sensor's settings"
     )
-    return _evaluate(scans, results, _boundary.metrics_config(config), scans.sensor)
+    cfg = _boundary.metrics_config(config)
+    metrics = _evaluate(scans, results, cfg, scans.sensor)
+    X = [r.X for r in results]
+    labels = run_labels(results, X)
+    if labels is not None:
+        metrics.summary.update(evaluate_tracks(scans, X, labels, metrics.episodes, cfg, scans.sensor))
+    return metrics
 
 
 def run(

@@ -16,9 +16,11 @@ model, static solid / dynamic dashed or hatched, panels titled "(a) ...") and sa
   one panel per mode;
 * ``fig7b_components_origin.png``: the same counts by origin (born this scan per birth source, or surviving),
   stacked, mean over trials, one panel per model and mode (:mod:`soabench.figures.origins`; not drawn for
-  a run written before ``steps.csv`` had the origin columns).
+  a run written before ``steps.csv`` had the origin columns);
+* ``tracks.png``: HOTA against its threshold α and the entry vs re-emergence delay per model and mode
+  (:mod:`soabench.figures.tracks`; drawn when some model or tracker labels its estimates).
 
-With several clutter rates, figures 5a–g, 6, 7 and 7b are drawn per rate with a ``_lam<λ>`` suffix.
+With several clutter rates, figures 5a–g, 6, 7, 7b and tracks are drawn per rate with a ``_lam<λ>`` suffix.
 
 Each ``*_figure`` function returns the :class:`~matplotlib.figure.Figure`; each ``fig_*`` function writes it.
 """
@@ -488,6 +490,7 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
     run that names filter families, those of its GM-PHD family, then the families side by side
     (:mod:`soabench.figures.families`); ``by_family`` False: the paper's figures of all the rows given."""
     from soabench.figures.families import family_jobs, family_only, in_family, run_families
+    from soabench.figures.tracks import has_labels, run_tracks_figure
 
     if by_family and run_families(tables):
         first = run_families(tables)[0]
@@ -501,7 +504,7 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
     clutters = tables.clutters
     if not clutters:
         return jobs
-    origins = has_origins(tables)
+    origins, labelled = has_origins(tables), has_labels(tables)
     for lam in clutters:
         sfx = f"_lam{lam:g}" if len(clutters) > 1 else ""
         limits = delay_limits(tables, lam)
@@ -518,6 +521,8 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
             panels = len(tables.models) * len(tables.modes)  # its drawing time grows with the panels
             name = f"fig7b_components_origin{sfx}.png"
             jobs.append(FigureJob(out_dir / name, components_origin_figure, (lam,), weight=0.4 * panels))
+        if labelled:
+            jobs.append(FigureJob(out_dir / f"tracks{sfx}.png", run_tracks_figure, (lam,), weight=2.0))
     jobs.append(FigureJob(out_dir / "fig5h_precision.png", precision_figure, (), weight=1.5))
     jobs.append(FigureJob(out_dir / "fig5h_precision_trials.png", precision_trials_figure, ()))
     return jobs

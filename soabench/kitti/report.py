@@ -33,6 +33,11 @@ PAPER = {
 }
 
 
+#: track measures kept per model and sequence (docs/method.md §9.3; truth ids are label_02's track ids, gate
+#: d_gate; None for an unlabelled model), in sequences.csv after the §5 columns
+TRACK_COLUMNS = ("hota", "deta", "assa", "idf1", "idsw", "mota")
+
+
 def _label(m: str) -> str:
     return LABEL.get(m, m)
 
@@ -53,6 +58,28 @@ def table1(records: dict, models: list[str]) -> dict:
             "ospa_mean": float(osp.mean()),
             "ospa_std": float(osp.std()),
             "steps": int(len(card)),
+        }
+    return out
+
+
+def tracks_table(records: dict, models: list[str]) -> dict:
+    """Per model, over the CV sequences (docs/method.md §9.3): mean and sigma (ddof 0) over sequences of HOTA and
+    IDF1, IDSW summed, and the number of sequences with labels; empty when no model labels its estimates (or the
+    records predate the track measures)."""
+    out = {}
+    for m in models:
+        rows = [r["models"][m].get("tracks", {}) for (st, _), r in sorted(records.items()) if st == "cv"]
+        rows = [t for t in rows if t.get("hota") is not None]
+        if not rows:
+            continue
+        hota, idf1 = np.array([t["hota"] for t in rows]), np.array([t["idf1"] for t in rows])
+        out[m] = {
+            "hota_mean": float(hota.mean()),
+            "hota_std": float(hota.std()),
+            "idf1_mean": float(idf1.mean()),
+            "idf1_std": float(idf1.std()),
+            "idsw": int(sum(t["idsw"] for t in rows)),
+            "sequences": len(rows),
         }
     return out
 
@@ -123,6 +150,7 @@ def write_outputs(
     """Write summary.json, report.md, sequences.csv, episodes.csv and the figures; returns the Markdown report."""
     models = list(spec.config.experiment.models)
     t1 = table1(records, models)
+    tt = tracks_table(records, models)
     pw = pairwise(records, models)
     offsets = list(spec.nhat_sweep or [])
     sw = sweep_table(records, models, offsets) if offsets else {}
@@ -162,6 +190,7 @@ def write_outputs(
                             "recall",
                         )
                     },
+                    **{k: r["models"][m].get("tracks", {}).get(k) for k in TRACK_COLUMNS},
                 }  # fmt: skip
             )
             for e in r["models"][m]["episodes"]:
@@ -178,6 +207,7 @@ def write_outputs(
         "models": models,
         "probability": spec.config.experiment.probabilities[0],
         "table1": t1,
+        "tracks": tt,
         "pairwise": pw,
         "sweep": sw,
         "sequences": per_seq,
@@ -189,7 +219,7 @@ def write_outputs(
         "figures": figs,
     }
     write_json_atomic(out / "summary.json", summary)
-    md = _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, stationary, infos, out)
+    md = _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, stationary, infos, out)
     write_text_atomic(out / "report.md", md)
     return md
 
@@ -215,7 +245,23 @@ def _lidar_source(spec, out: Path) -> str:
     )
 
 
-def _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, stationary, infos, out) -> str:
+def _tracks_md(tt: dict, models: list[str]) -> list[str]:
+    """The Tracks table of the report (nothing when no model labels its estimates)."""
+    if not tt:
+        return []
+    L = ["## Tracks: HOTA and IDF1 over the CV sequences (mean ± σ over sequences; IDSW summed)", ""]
+    L += ["| | HOTA | IDF1 | IDSW | sequences |", "|---|---|---|---|---|"]
+    for x in models:
+        t = tt.get(x)
+        if t is None:
+            L.append(f"| {_label(x)} | — | — | — | 0 |")
+            continue
+        hota, idf1 = f"{t['hota_mean']:.3f} ± {t['hota_std']:.3f}", f"{t['idf1_mean']:.3f} ± {t['idf1_std']:.3f}"
+        L.append(f"| {_label(x)} | {hota} | {idf1} | {t['idsw']} | {t['sequences']} |")
+    return [*L, ""]
+
+
+def _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, stationary, infos, out) -> str:
     m = spec.config.metrics
     det = _shown(spec.detections, out) if spec.detections else "(root)/detections"
     L = [
@@ -260,7 +306,7 @@ def _markdown(spec, folds, t1, pw, sw, records, models, skipped, no_sem, station
         for x in models:
             paper = f"{PAPER['sweep_std'][x]:.2f}" if x in PAPER["sweep_std"] else "—"
             L.append(f"| {_label(x)} | {sw[x]['std_of_means']:.3f} | {paper} |")
-    L += ["", "## Notes", ""]
+    L += ["", *_tracks_md(tt, models), "## Notes", ""]
     if no_sem:
         L.append(
             f"- No semantics for {len(no_sem)} sequence(s) ({', '.join(no_sem)}): S-OA used its occlusion and FOV "

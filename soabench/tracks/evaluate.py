@@ -79,6 +79,16 @@ def _estimate_rows(
     return rows if labels is None else checked(rows.ids, rows.xy, rows.off, "estimates")
 
 
+def run_labels(results: Sequence, X: Sequence[np.ndarray]) -> list[np.ndarray] | None:
+    """The per-scan labels of a filter run's results (``results[k].labels``, ``X[k]`` its estimates), or None for
+    an unlabelled run: a run is labelled when some scan carries labels and every scan with estimates does (a scan
+    without estimates may carry none)."""
+    labelled = any(r.labels is not None for r in results) and all(
+        r.labels is not None or len(x) == 0 for r, x in zip(results, X, strict=True)
+    )
+    return [np.zeros(0, np.int64) if r.labels is None else r.labels for r in results] if labelled else None
+
+
 def evaluate_tracks(
     scans: Scans,
     X: Sequence[np.ndarray],

@@ -132,6 +132,19 @@ def render_tracks(rows: list[tuple[str, str, dict]], versus: list[tuple[str, str
     return lines
 
 
+def render_hota(head: str, rows: list[tuple[str, str, str, Mapping]]) -> list[str]:
+    """Markdown lines of the short track table of a sweep or a study: per row (``head`` column value, model label,
+    mode, :func:`track_stats`) HOTA and IDF1 (mean ± σ over trials) and ID switches per trial; nothing when no row
+    is labelled."""
+    if not any(st["labelled"] for *_, st in rows):
+        return []
+    lines = [f"| {head} | model | mode | HOTA | IDF1 | IDSW / trial |", "|---|---|---|---|---|---|"]
+    for key, model, mode, st in rows:
+        idsw = _label(st, _num(st["idsw_mean"], 2))
+        lines.append(f"| {key} | {model} | {mode} | {_pm(st, 'hota')} | {_pm(st, 'idf1')} | {idsw} |")
+    return lines
+
+
 TRACKS_LEGEND = (
     "Legend (docs/method.md §9.3, §9.4): HOTA, AssA (association accuracy) and IDF1 are fractions (1 = perfect), "
     "mean ± σ over trials; IDSW counts identity switches; OSPA(2) is the OSPA distance between truth and estimated "

@@ -168,6 +168,18 @@ def test_kitti_protocol_end_to_end_and_resume(exported, tmp_path, capsys):
     assert f"Data: `{rel}`" in report and str(exported) not in report
     for name in ("fig6_delay_hist.png", "fig7_components.png", "fig8_nhat_sweep.png"):
         assert (run / "figures" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # track measures (truth ids from label_02): per sequence in sequences.csv, their mean over CV in the Tracks table
+    tracks = summary["tracks"]
+    assert set(tracks) == {"soa", "pubm", "ubm", "ubm-ws"}
+    cv = [r for r in _rows(run / "sequences.csv") if r["setting"] == "cv"]
+    for m, t in tracks.items():
+        hota = [float(r["hota"]) for r in cv if r["model"] == m]
+        assert t["sequences"] == len(hota) == 2 and 0 < t["hota_mean"] <= 1
+        assert t["hota_mean"] == pytest.approx(sum(hota) / 2) and t["idsw"] == sum(
+            int(r["idsw"]) for r in cv if r["model"] == m
+        )
+    t = tracks["soa"]
+    assert f"| S-OA | {t['hota_mean']:.3f} ± {t['hota_std']:.3f} |" in report
 
     # resume: a lost record is recomputed bit for bit, nothing else is rerun
     record = run / "records" / "cv" / "0001.json"

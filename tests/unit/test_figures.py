@@ -389,3 +389,23 @@ def test_fig7b_draws_a_run_whose_posteriors_stay_empty(tables, tmp_path):
     assert ps.save_png(fig, tmp_path / "fig7b_empty.png").stat().st_size > 5_000
     assert not any(ax.collections for ax in fig.axes)
     assert "mean J = 0.0, born this scan 0.0" in [t.get_text() for t in fig.axes[0].texts]
+
+
+def test_tracks_figure_is_drawn_per_clutter_rate_only_when_some_model_labels(tables, tmp_path):
+    from soabench.figures.tracks import run_tracks_figure
+    from soabench.tracks.evaluate import TRACK_KEYS
+
+    assert not any(j.path.name.startswith("tracks") for j in plots.figure_jobs(tables, tmp_path))
+    n = len(tables.trials["model"])
+    labelled = tables.trials["model"] == "soa"  # S-OA labels its estimates; the others leave the cells empty
+    cols = {k: np.where(labelled, 0.5 + 0.1 * np.arange(n) / n, np.nan) for k in TRACK_KEYS}
+    cols |= {k: np.full(n, 1.0) for k in ("delay_entry_mean", "delay_reemergence_mean")}
+    cols |= {k: np.full(n, 0.2) for k in ("delay_entry_std", "delay_reemergence_std")}
+    with_tracks = dataclasses.replace(tables, trials={**tables.trials, **cols})
+    names = [j.path.name for j in plots.figure_jobs(with_tracks, tmp_path)]
+    assert [x for x in names if x.startswith("tracks")] == [f"tracks_lam{lam:g}.png" for lam in CLUTTERS]
+    fig = run_tracks_figure(with_tracks, CLUTTERS[0])
+    curves = fig.axes[0]
+    assert len(curves.get_lines()) == len(MODES)  # S-OA's curve per mode, no curve for the unlabelled models
+    assert "no labels: ATBM, myplugin" in curves.get_title(loc="left")
+    _rendered(fig, tmp_path, "tracks")

@@ -55,8 +55,8 @@ def test_paired_hota_against_soa():
 
 
 def test_tracks_figure_draws_labelled_curves_and_names_the_unlabelled():
+    from soabench.figures.tracks import tracks_figure
     from soabench.tracks.evaluate import ALPHA_KEYS
-    from soabench.tracks.figures import tracks_figure
 
     def col(key: str, model: str, mode: str) -> np.ndarray:
         if model == "nnkf" and key in ALPHA_KEYS:
@@ -67,3 +67,21 @@ def test_tracks_figure_draws_labelled_curves_and_names_the_unlabelled():
     curves, bars = fig.axes[:2]
     assert len(curves.get_lines()) == 2 and "no labels: nnkf" in curves.get_title(loc="left")
     assert len(bars.patches) == 2 * 2 * 2  # two models x two modes x (entry, re-emergence)
+
+
+def test_sweep_and_study_track_tables():
+    from soabench.experiment.campaigns.study import _tracks_table
+    from soabench.tracks.report import render_hota
+
+    s = track_stats(columns([dict(hota=0.5, idf1=0.6, idsw=1.0), dict(hota=0.7, idf1=0.8, idsw=2.0)]).__getitem__)
+    plain = track_stats(columns([{}, {}]).__getitem__)
+    assert render_hota("λ", [("3", "nnkf", "—", plain)]) == []  # nothing labelled: no table
+    lines = render_hota("λ", [("3", "S-OA", "static", s), ("3", "nnkf", "—", plain)])
+    assert lines[0] == "| λ | model | mode | HOTA | IDF1 | IDSW / trial |"
+    assert lines[2] == "| 3 | S-OA | static | 0.600 ± 0.100 | 0.700 ± 0.100 | 1.50 |"
+    assert lines[3] == f"| 3 | nnkf | — | {ABSENT} | {ABSENT} | {ABSENT} |"
+    # the study's table from trials.csv rows: per clutter rate, model and mode; none for a run without labels
+    rows = [dict(clutter=3.0, model="soa", mode="static", hota=h, idf1=f, idsw=i)
+            for h, f, i in ((0.5, 0.6, 1.0), (0.7, 0.8, 2.0))]  # fmt: skip
+    assert _tracks_table(rows)[2] == "| 3 | S-OA | static | 0.600 ± 0.100 | 0.700 ± 0.100 | 1.50 |"
+    assert _tracks_table([{k: v for k, v in r.items() if k not in ("hota", "idf1", "idsw")} for r in rows]) == []

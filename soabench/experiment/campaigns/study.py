@@ -25,8 +25,11 @@ worker processes, one figure per task (:mod:`soabench.figures.drawing`).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from soabench import plugins
 from soabench.birth import CORE_MODELS
@@ -47,6 +50,7 @@ from soabench.experiment.runs.ownership import FolderLock, check_own_folder, res
 from soabench.experiment.runs.runmeta import flatten_config
 from soabench.experiment.runs.store import RunStore
 from soabench.figures.drawing import parallel
+from soabench.tracks.report import render_hota, track_stats
 
 #: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
 STUDY_ENTRIES = ("main", "clutter", "births", "sensitivity", "comparison.md", "key_figure.png", "index.html")
@@ -265,6 +269,16 @@ def _ratio_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _tracks_table(rows: list[dict]) -> list[str]:
+    """HOTA, IDF1 and ID switches per clutter rate, model and mode of the main protocol (nothing without labels)."""
+    out = []
+    for key in dict.fromkeys((r["clutter"], r["model"], r["mode"]) for r in rows):
+        sel = [r for r in rows if (r["clutter"], r["model"], r["mode"]) == key]
+        st = track_stats(lambda name, sel=sel: np.array([r.get(name, math.nan) for r in sel], dtype=float))
+        out.append((f"{key[0]:g}", paper.LABEL.get(key[1], key[1]), key[2], st))
+    return render_hota("λ", out)
+
+
 def key_figure(main_rows: list[dict], clutter_rows: list[dict], path: Path) -> Path:
     """The README's key figure (:func:`soabench.figures.sweeps.key_figure`), written to ``path``."""
     # imported when called: matplotlib would slow every start-up
@@ -291,6 +305,10 @@ def write_comparison(root: Path) -> str:
         "",
         _ratio_table(main_rows),
     ]
+    hota = _tracks_table(main_rows)
+    if hota:
+        parts += ["", "### Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels", ""]
+        parts += hota
     clutter_rows = [r for f in sorted((root / "clutter" / "points").glob("*/trials.csv")) for r in paper.read_rows(f)]
     if clutter_rows:
         parts += [

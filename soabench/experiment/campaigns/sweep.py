@@ -60,6 +60,7 @@ from soabench.experiment.runs.files import read_csv, read_json, write_json_atomi
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.runs.runmeta import check_requested, flatten_config, validate_sweep_meta
 from soabench.experiment.trial.registry import load_scene_cached
+from soabench.tracks.report import render_hota
 
 SWEEP_FILE = "sweep.json"
 KINDS = ("clutter", "births", "occlusion")
@@ -422,13 +423,24 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     for r in table:
         lines.append(f"| {r['N_tot']} | {r['N_hat']:.4g} | " + " | ".join(fmt(r["delay"][c]) for c in cols) + " |")
     lines.append("| std over N_tot | | " + " | ".join(fmt(std[c]) for c in cols) + " |")
+    tracks = [
+        (str(p["value"]), LABEL.get(mo, mo), md, st)
+        for p in points
+        if (sweep_dir / "points" / p["name"] / "summary.json").is_file()
+        for res in read_json(sweep_dir / "points" / p["name"] / "summary.json")["results"][:1]
+        for mo, md, st in res.get("tracks", {}).get("rows", [])
+    ]
+    hota = render_hota("N_tot", tracks)
+    if hota:
+        lines += ["", "Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels.", "", *hota]
     # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import births_figure
 
     save_png(births_figure(table, models, modes, meta["n_true"], half), sweep_dir / "sweep_births.png")
     lines += ["", "Figure: `sweep_births.png`"]
-    return {"kind": "births", "table": table, "std_over_N_tot": std}, "\n".join(lines) + "\n"
+    summary = {"kind": "births", "table": table, "std_over_N_tot": std, "tracks": [list(t) for t in tracks]}
+    return summary, "\n".join(lines) + "\n"
 
 
 def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
@@ -453,6 +465,14 @@ def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
             f"| {r['clutter']:g} | {LABEL.get(r['model'], r['model'])} | {r['mode']} | {fmt(r['precision_mean'])} "
             f"| {fmt(r['recall_mean'])} | {fmt(r['card_err_mean'])} | {fmt(r['ospa_mean'])} | {fmt(r['delay_mean'])} |"
         )
+    tracks = [
+        (f"{res['clutter']:g}", LABEL.get(mo, mo), md, st)
+        for res in summary["results"]
+        for mo, md, st in res.get("tracks", {}).get("rows", [])
+    ]
+    hota = render_hota("λ", tracks)
+    if hota:
+        lines += ["", "Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels.", "", *hota]
     # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import clutter_figure
@@ -461,7 +481,7 @@ def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
     trial_rows = read_rows(run_dir / "trials.csv")
     save_png(clutter_figure(trial_rows, exp["models"], exp["probabilities"]), sweep_dir / "sweep_clutter.png")
     lines += ["", f"Figures: `sweep_clutter.png`, `points/{meta['points'][0]['name']}/figures/fig5h_precision.png`"]
-    return {"kind": "clutter", "table": rows}, "\n".join(lines) + "\n"
+    return {"kind": "clutter", "table": rows, "tracks": [list(t) for t in tracks]}, "\n".join(lines) + "\n"
 
 
 def write_sweep_report(sweep_dir: Path) -> str:

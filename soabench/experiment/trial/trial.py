@@ -47,7 +47,7 @@ from soabench.seeding import TrialSeeds, trial_seeds
 from soabench.sensor import observe
 from soabench.trackers import GMPHDTracker, ScanFailure, run_tracker
 from soabench.trackers import TrackerRun as FilterRun  # the step results and times of one run
-from soabench.tracks.evaluate import TRACK_KEYS, evaluate_tracks
+from soabench.tracks.evaluate import TRACK_KEYS, evaluate_tracks, run_labels
 
 if TYPE_CHECKING:
     from soabench.config import Config, SensorConfig
@@ -658,12 +658,7 @@ def _record(
     metrics = evaluate(scans, run.results, config.metrics, sensor_cfg)
     t_metrics = time.perf_counter() - t0
     X = [r.X for r in run.results]
-    # a labelled run: labels on every scan with estimates (a scan without estimates may carry none)
-    labelled = any(r.labels is not None for r in run.results) and all(
-        r.labels is not None or len(x) == 0 for r, x in zip(run.results, X, strict=True)
-    )
-    labels = [np.zeros(0, np.int64) if r.labels is None else r.labels for r in run.results] if labelled else None
-    tracks = evaluate_tracks(scans, X, labels, metrics.episodes, config.metrics, sensor_cfg)
+    tracks = evaluate_tracks(scans, X, run_labels(run.results, X), metrics.episodes, config.metrics, sensor_cfg)
     out.rows.append(make_row(key, seeds, config.birth.N_hat, metrics, run, t_metrics, tracks))
     out.episodes.extend(episode_rows(key, metrics))
     out.steps.extend(step_rows(key, metrics))

@@ -6,17 +6,21 @@ a model whose curve falls early localises poorly, a model low everywhere associa
 model and mode, the mean over trials of the per-trial mean delay of entry episodes (plain bar) beside that of
 re-emergence episodes (dark bar), with σ̄ / 2 whiskers as the paper's Fig. 5 and every trial as a dot: what
 occlusion-aware birth is for is the right-hand bar. Trackers without labels have no curve in (a) and say so.
+
+A run's report draws it per clutter rate as ``tracks.png`` (``tracks_lam<λ>.png`` with several rates) when some
+model or tracker of the run labels its estimates (:func:`has_labels`).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from soabench.experiment.reports.tables import RunTables, select
 from soabench.figures import style as ps
+from soabench.figures.results import mean_ci
 from soabench.tracks.evaluate import ALPHA_KEYS
 from soabench.tracks.scores import ALPHAS
 
@@ -24,15 +28,32 @@ from soabench.tracks.scores import ALPHAS
 KINDS = (("entry", 0.35), ("reemergence", 0.9))
 
 
-def _mean_ci(v: np.ndarray) -> tuple[float, float]:
-    """Mean of the finite values and the half-width of its 95 % Student-t interval (NaN below two values)."""
-    from scipy.stats import t as student_t
+def _floats(values: np.ndarray) -> np.ndarray:
+    """A trials.csv column as floats: an empty cell (a label column of an unlabelled tracker) is NaN."""
+    return np.array([np.nan if v is None or v == "" else float(v) for v in np.asarray(values).tolist()], dtype=float)
 
-    v = np.asarray(v, dtype=float)
-    v = v[np.isfinite(v)]
-    if v.size < 2:
-        return (float(v.mean()) if v.size else math.nan), math.nan
-    return float(v.mean()), float(student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+
+def has_labels(tables: RunTables) -> bool:
+    """Whether some trial of the run has a HOTA: some model or tracker labelled its estimates."""
+    t = tables.trials
+    return "hota" in t and bool(np.isfinite(_floats(t["hota"])).any())
+
+
+def run_tracks_figure(tables: RunTables, clutter: float) -> Figure:
+    """:func:`tracks_figure` of a run's trials at one clutter rate: every model and tracker with trials there, in
+    the run's order."""
+    t = tables.trials
+    present = [
+        (mo, md) for mo in tables.models for md in tables.modes if select(t, clutter=clutter, model=mo, mode=md).any()
+    ]
+    models = [mo for mo in tables.models if any(p[0] == mo for p in present)]
+    modes = [md for md in tables.modes if any(p[1] == md for p in present)]
+
+    def col(key: str, model: str, mode: str) -> np.ndarray:
+        m = select(t, clutter=clutter, model=model, mode=mode)
+        return _floats(t[key][m]) if key in t else np.full(int(m.sum()), np.nan)
+
+    return tracks_figure(col, models, modes, clutter)
 
 
 def tracks_figure(
@@ -43,22 +64,26 @@ def tracks_figure(
     with ps.style():
         fig = ps.figure("double", 2.9)
         ax, bars = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.25]})
-        unlabelled = []
+        unlabelled, top = [], 0.0
         for model in models:
             st = ps.model_style(model)
             for mode in modes:
                 H = np.column_stack([col(key, model, mode) for key in ALPHA_KEYS])
+                if not len(H):  # no trial of this model in this mode
+                    continue
                 if not np.isfinite(H).any():
                     unlabelled.append(ps.model_label(model))
                     continue
-                mean_ci = [_mean_ci(H[:, a]) for a in range(len(ALPHAS))]
-                mu, half = np.array([m for m, _ in mean_ci]), np.nan_to_num(np.array([h for _, h in mean_ci]))
+                mean_ci_a = [mean_ci(H[:, a]) for a in range(len(ALPHAS))]
+                mu, half = np.array([m for m, _ in mean_ci_a]), np.nan_to_num(np.array([h for _, h in mean_ci_a]))
                 ax.plot(ALPHAS, mu, color=st.color, ls=ps.mode_style(mode).linestyle, marker=st.marker, ms=2.5)
-                ax.fill_between(ALPHAS, mu - half, mu + half, color=st.color, alpha=0.15, lw=0)
+                # light bands: with many models and modes they overlap, the curves must stay readable
+                ax.fill_between(ALPHAS, mu - half, mu + half, color=st.color, alpha=0.07, lw=0)
+                top = max(top, float(np.nanmax(mu + half)))
         ax.set_xlim(0, 1)
-        ax.set_ylim(0, 1)
+        ax.set_ylim(0, min(1.0, 1.1 * top) if top > 0 else 1.0)
         ax.set_xlabel("localisation threshold α (match when S ≥ α)")
-        ax.set_ylabel("HOTA_α, mean over trials ± 95% CI")
+        ax.set_ylabel("HOTA_α (mean over trials; band: 95% CI)")
         note = f"; no labels: {', '.join(sorted(set(unlabelled)))}" if unlabelled else ""
         ps.panel_title(ax, "a", f"HOTA against α, λ = {clutter:g}{note}")
         _delay_bars(bars, col, models, modes)
@@ -81,6 +106,8 @@ def _delay_bars(ax, col: Callable[[str, str, str], np.ndarray], models: Sequence
                 x = i + (2 * j + k - (n_bars - 1) / 2) * width
                 mu = np.asarray(col(f"delay_{kind}_mean", model, mode), dtype=float)
                 sd = np.asarray(col(f"delay_{kind}_std", model, mode), dtype=float)
+                if not mu.size:  # no trial of this model in this mode
+                    continue
                 mu = mu[np.isfinite(mu)]
                 if not mu.size:
                     ax.text(x, 0.02, "none", rotation=90, ha="center", va="bottom", fontsize=5,
@@ -93,7 +120,10 @@ def _delay_bars(ax, col: Callable[[str, str, str], np.ndarray], models: Sequence
                        error_kw={"elinewidth": 0.7, "capsize": 1.5}, zorder=2)  # fmt: skip
                 jitter = rng.uniform(-0.3, 0.3, mu.size) * width
                 ax.plot(x + jitter, mu, ".", color=st.color, mec="k", mew=0.2, ms=2.2, alpha=0.8, zorder=3)
-    ax.set_xticks(np.arange(len(models)), [ps.tick_label(m) for m in models])
+    if len(models) > 5:  # many names: one line each, slanted, so neighbours never run into each other
+        ax.set_xticks(np.arange(len(models)), [ps.model_label(m) for m in models], rotation=25, ha="right")
+    else:
+        ax.set_xticks(np.arange(len(models)), [ps.tick_label(m) for m in models])
     ax.set_xlim(-0.5, len(models) - 0.5)
     ax.set_ylabel("mean tracking delay (s)")
     ax.set_ylim(0, 1.25 * ax.get_ylim()[1])  # headroom for the legend above the tallest whisker
