@@ -7,6 +7,7 @@ wall-clock measurements, so they differ between runs (as the real ones do).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -223,7 +224,7 @@ def run_fake(config, out, net="intersection", **kw):
     from soabench.experiment.execution.options import RunOptions
     from soabench.experiment.execution.runner import run_experiment
 
-    fields = {"workers", "scheduler", "dask_local", "fail_fast", "save_estimates", "progress", "figures"}
+    fields = {f.name for f in dataclasses.fields(RunOptions)}
     options = dict(workers=1, progress=False, figures=False) | {k: v for k, v in kw.items() if k in fields}
     rest = dict(trial_fn=fake_trial, load_fn=fake_load) | {k: v for k, v in kw.items() if k not in fields}
     return run_experiment(config, net, out=out, options=RunOptions(**options), **rest)

@@ -89,13 +89,19 @@ class EchoTracker:
         return Estimates(p * self.scale if self.scale != 1.0 else p, w=np.ones(len(p)), n_components=len(p))
 
 
+def cell_code(x: float, y: float) -> int:
+    """The 10 m grid cell of (x, y) as one integer (the track label of :class:`LabelledEchoTracker` is 100 times it
+    plus the estimate's rank in that cell at the scan)."""
+    return (int(x // 10) + 1000) * 10_000 + int(y // 10) + 1000
+
+
 class LabelledEchoTracker(EchoTracker):
     """EchoTracker whose estimates carry track labels: the 10 m grid cell of each (stable while a target lingers),
     made distinct within a scan by its rank among the scan's estimates in that cell."""
 
     def step(self, scan) -> Estimates:
         est = super().step(scan)
-        cells = [(int(x // 10) + 1000) * 10_000 + int(y // 10) + 1000 for x, y in np.asarray(est.X)[:, :2]]
+        cells = [cell_code(x, y) for x, y in np.asarray(est.X)[:, :2]]
         labels = [100 * c + cells[:i].count(c) for i, c in enumerate(cells)]
         est.labels = np.array(labels, dtype=np.int64)
         return est

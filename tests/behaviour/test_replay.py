@@ -10,6 +10,7 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import plugin_fixtures
 import pytest
 
 from soabench.cli.main import main
@@ -242,7 +243,7 @@ def test_a_whole_tracker_is_replayed_with_its_track_labels(tmp_path: Path) -> No
     for f in data["frames"]:
         assert f["models"][1]["births"] == [] and f["models"][1]["sum_w"] is None  # a tracker: no births, no mass
         for x, y, i in f["models"][1]["est"]:  # the plugin's label names its 10 m cell; the page's y is the world's -y
-            assert int(echo["tracks"][i]) // 100 == (int(x // 10) + 1000) * 10_000 + int(-y // 10) + 1000
+            assert int(echo["tracks"][i]) // 100 == plugin_fixtures.cell_code(x, -y)
     k = max(range(len(data["frames"])), key=lambda i: len(data["frames"][i]["models"][1]["est"]))
     attrs = body_attrs(browse(page, f"#frame={k}", tmp_path))
     labelled = sum(len(m["est"]) for m in data["frames"][k]["models"])  # every estimate of both panels is labelled
