@@ -209,18 +209,24 @@ def make_tracker(
         seed, trial: the run's placement generator is trial ``trial``'s of base seed ``seed``.
         options: a plugin's own options (default: the configuration's ``[plugins.<name>]`` table).
 
+    The configuration's ``[sensor]``, ``[birth]``, ``[filter]`` and ``[plugins.<name>]`` sections shape the tracker;
+    ``experiment.filters`` (and with it ``[lmb]``) naming a family other than GM-PHD is refused with one line for a
+    birth model, never ignored. The rest of ``[experiment]`` and ``[metrics]`` describe a run and its scoring
+    (:func:`run`, :func:`evaluate`), not one tracker.
+
     Returns:
         A :class:`GMPHDTracker` for a birth model (``step`` returns :class:`StepResult`), else the tracker
         (``step`` returns :class:`Estimates`). Stepping it through :func:`simulate_trial`'s scans gives the step
         results of that run of ``soabench run``.
     """
     from soabench.config import filter_config_for_mode
-    from soabench.experiment.trial.trial import guard
     from soabench.gmphd.filter import GMPHDFilter
     from soabench.seeding import trial_seeds
 
     cfg = _boundary.as_config(config)
     kind, name, cls = _boundary.plugin(name_or_class)
+    if kind == BIRTH_MODEL:
+        cfg.gmphd_only("make_tracker (a birth model in our GM-PHD filter)")
     scene = _boundary.as_scene(scene_or_net)
     filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
     rng = trial_seeds(seed, trial).placement_rng()
@@ -234,7 +240,14 @@ def make_tracker(
         return cls(TrackerSetup(cfg.sensor, scene, rng, mode, cfg), **options)
     birth_model = cls(cfg.birth, cfg.sensor, scene, rng, **options)
     filt = GMPHDFilter(filter_cfg, cfg.sensor, filter_mode)
-    return GMPHDTracker(birth_model, filt, p_D_b, check_births=None if builtin else guard.check_births)
+    return GMPHDTracker(birth_model, filt, p_D_b, check_births=None if builtin else _named_check(name))
+
+
+def _named_check(plugin: str) -> _Any:
+    """The births check of a plugin birth model, its errors naming ``plugin``."""
+    from soabench.experiment.trial.guard import check_births
+
+    return lambda births, scan: check_births(births, scan, plugin)
 
 
 def evaluate(

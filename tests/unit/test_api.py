@@ -194,6 +194,13 @@ def test_wrong_objects_fail_at_the_boundary_in_one_line(trial1) -> None:
     assert "config must be a Config or dict or str or Path" in _one_line(exc)
 
 
+def test_make_tracker_refuses_a_filter_family_it_would_not_build() -> None:
+    with pytest.raises(ValueError) as exc:
+        sb.make_tracker("soa", NET, mode="dynamic", config={"experiment": {"filters": ["lmb"]}})
+    assert "experiment.filters = ['lmb']: make_tracker" in _one_line(exc)
+    assert isinstance(sb.make_tracker("soa", NET, config={"experiment": {"filters": ["gmphd"]}}), sb.GMPHDTracker)
+
+
 def test_nan_truth_rows_are_refused_by_the_metric_helpers(trial1) -> None:
     from soabench.metrics import gated_assignment, gospa, gt_mask, ospa
 

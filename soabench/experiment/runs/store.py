@@ -187,10 +187,10 @@ class RunStore:
             return "it was made by another run (other settings: its run_id differs from run.json's)"
         return None
 
-    def reject_foreign_records(self) -> list[str]:
+    def reject_foreign_records(self, n_trials: int | None = None) -> list[str]:
         """Move every file of trials/ and failed/ that is not the record its name says aside into rejected/
         (:meth:`record_problem`; also names :func:`trial_name` never writes); returns one line per file moved.
-        A moved trial counts as missing, so a resume runs it again."""
+        A moved trial counts as missing, so a resume runs it again when it is one of the run's ``n_trials``."""
         lines = []
         for folder in (TRIALS_DIR, FAILED_DIR):
             d = self.run_dir / folder
@@ -215,7 +215,12 @@ class RunStore:
                 while dest.exists():
                     dest, n = dest.with_name(f"{p.name}.{n}"), n + 1
                 os.replace(p, dest)
-                again = "" if trial is None else f"; trial {trial} runs again"
+                if trial is None:
+                    again = ""
+                elif n_trials is not None and trial >= n_trials:
+                    again = f"; the run has trials 0-{n_trials - 1}, so no trial {trial} runs"
+                else:
+                    again = f"; trial {trial} runs again"
                 lines.append(f"{folder}/{p.name}: {problem}; moved to {dest.relative_to(self.run_dir)}{again}")
         self._merged_failures = None
         return lines
