@@ -79,9 +79,8 @@ def _case_in_child(make, needle: str, case_dir: Path, limit_bytes: int, say_comm
             traceback.print_exc()
     started = started or bool(bad_inputs.STARTED)
     verdict = "silent" if started else bad_inputs.verdict(code, out.getvalue(), err.getvalue(), needle)
-    theirs = case_dir / "theirs"
-    if theirs.is_dir() and sorted(p.name for p in theirs.iterdir()) != ["README.md", "notes.txt"]:
-        verdict = "silent"  # wrote into a folder that is not the command's
+    if not bad_inputs.foreign_untouched(case_dir):
+        verdict = "silent"  # wrote (or probed) into a folder that is not the command's
     return {"verdict": verdict, "code": code, "started": started, "err": err.getvalue()[-2000:]}
 
 

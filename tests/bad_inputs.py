@@ -193,13 +193,29 @@ def _suite(tmp: Path, scenarios: str, extra: str = "") -> str:
 GOOD_SCENARIO = '[[scenario]]\nname = "a"\nnet = "intersection"\nduration = 5\n'
 
 
+#: modification time (ns) of each foreign folder made by :func:`_foreign`, by path
+_FOREIGN_MTIME: dict[str, int] = {}
+
+
 def _foreign(tmp: Path, name: str = "theirs") -> Path:
-    """A folder holding someone else's files (never to be written into)."""
+    """A folder holding someone else's files (never to be written into, nor probed: its modification time must not
+    change)."""
     d = tmp / name
     d.mkdir()
     (d / "README.md").write_text("mine\n")
     (d / "notes.txt").write_text("mine\n")
+    _FOREIGN_MTIME[str(d)] = d.stat().st_mtime_ns
     return d
+
+
+def foreign_untouched(tmp: Path) -> bool:
+    """The foreign folder ``tmp/theirs`` (if a case made one) holds its two files and was not modified (no file
+    created in it, even for a moment)."""
+    theirs = tmp / "theirs"
+    if not theirs.is_dir():
+        return True
+    same = _FOREIGN_MTIME.get(str(theirs), theirs.stat().st_mtime_ns) == theirs.stat().st_mtime_ns
+    return same and sorted(p.name for p in theirs.iterdir()) == ["README.md", "notes.txt"]
 
 
 #: the commands with a valid argument list each (a bad value or flag is put into them)

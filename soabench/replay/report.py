@@ -23,7 +23,7 @@ from typing import Any
 from soabench.birth import LABEL
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.files import write_text_atomic
-from soabench.experiment.runs.ownership import resolve
+from soabench.experiment.runs.ownership import check_out_file, resolve
 from soabench.replay.page import asset, fill
 from soabench.replay.simulate import read_run
 
@@ -236,9 +236,10 @@ def _check_ours(target: Path) -> None:
 def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, int]:
     """Write the report page of a run folder (default ``RUN/report.html``); returns its path and size in bytes.
 
-    An existing file at the target that this command did not write is left alone (an error says so)."""
+    An existing file at the target that this command did not write is left alone (an error says so); ``out`` must
+    end in .html and lie in an existing folder, as every command's output file does."""
     path, _, raw = read_run(run_dir)
-    target = path / REPORT_FILE if out is None else Path(out)
+    target = path / REPORT_FILE if out is None else check_out_file(str(out), ".html")
     _check_ours(target)
     return target, write_page(target, report_html(path, raw))
 

@@ -194,6 +194,14 @@ def test_wrong_objects_fail_at_the_boundary_in_one_line(trial1) -> None:
     assert "config must be a Config or dict or str or Path" in _one_line(exc)
 
 
+def test_make_tracker_names_the_plugin_whose_births_are_unusable(trial1) -> None:
+    _, scans = trial1
+    tracker = sb.make_tracker("plugin_fixtures:HugeWeights", NET)
+    with pytest.raises(ValueError) as exc:
+        tracker.step(scans[0])
+    assert "birth model 'plugin_fixtures:HugeWeights' at scan 0: Births.w[0] = 1e+300" in _one_line(exc)
+
+
 def test_make_tracker_refuses_a_filter_family_it_would_not_build() -> None:
     with pytest.raises(ValueError) as exc:
         sb.make_tracker("soa", NET, mode="dynamic", config={"experiment": {"filters": ["lmb"]}})
