@@ -13,9 +13,15 @@
    CSV files must be byte-identical.
 4. Filter steps: random mixtures and scans with NaN/inf injected, ``filter.nonfinite = "drop"``: no NaN anywhere.
 
+5. Fuzzing (``--fuzz MINUTES``, on its own): the targets of ``tests/fuzz_targets.py`` (config and scenario TOML,
+   run.json, trial records, run CSVs, KITTI text files and .bin/.label scans, plugin births, estimates and labels)
+   take turns on random Hypothesis inputs for MINUTES; prints the inputs tried, refused and accepted per target and
+   every distinct failure (a traceback, an error of several lines, a wrong result, a file outside the folder) with
+   an input that shows it.
+
 Uses the fake trial of the tests (no SUMO), so it takes a few minutes (``--catalogue``: part 1 only)::
 
-    python benchmarks/bench_reliability.py [--catalogue]
+    python benchmarks/bench_reliability.py [--catalogue | --fuzz MINUTES]
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -282,7 +289,60 @@ def filter_steps(n: int = 2000) -> dict:
     return {"steps": n, "measurements dropped": dropped, "non-finite results": nan_results}
 
 
+def fuzz(minutes: float, batch: int = 50) -> dict:
+    """Every fuzz target in turn, ``batch`` random inputs at a time, until ``minutes`` have passed; failures are
+    recorded (not raised, so the search goes on) and counted once per distinct first line."""
+    from fuzz_targets import TARGETS, FuzzFailure, short_id
+    from hypothesis import HealthCheck, Phase, given, settings
+
+    stop = time.monotonic() + 60.0 * minutes
+    seen = {name: {"ok": 0, "refused": 0, "failed": 0} for name in TARGETS}
+    failures: dict[tuple[str, str], dict] = {}
+    quick = settings(
+        max_examples=batch, derandomize=False, database=None, deadline=None, phases=[Phase.generate],
+        suppress_health_check=list(HealthCheck),
+    )  # fmt: skip
+
+    def runner(name: str, target) -> Callable[[object], None]:
+        def run(value: object) -> None:
+            if time.monotonic() >= stop:
+                return
+            try:
+                seen[name][target(value)] += 1
+            except FuzzFailure as exc:
+                seen[name]["failed"] += 1
+                key = (name, short_id(exc))
+                if key not in failures:
+                    failures[key] = {"count": 0, "detail": str(exc)[-3000:], "input": repr(value)[:600]}
+                failures[key]["count"] += 1
+
+        return run
+
+    while time.monotonic() < stop:
+        for name, (strategy, target) in TARGETS.items():
+            if time.monotonic() < stop:
+                quick(given(strategy())(runner(name, target)))()
+    return {"seen": seen, "failures": failures}
+
+
+def main_fuzz(minutes: float) -> None:
+    t0 = time.monotonic()
+    out = fuzz(minutes)
+    total = {k: sum(c[k] for c in out["seen"].values()) for k in ("ok", "refused", "failed")}
+    n = sum(total.values())
+    print(f"fuzzing: {n} inputs in {time.monotonic() - t0:.0f} s: {total['ok']} accepted, {total['refused']} refused "
+          f"with one line, {total['failed']} failed ({len(out['failures'])} distinct failures)")  # fmt: skip
+    for name, c in out["seen"].items():
+        print(f"  {name:28s} tried {sum(c.values()):7d}  accepted {c['ok']:7d}  refused {c['refused']:7d}  "
+              f"failed {c['failed']:5d}")  # fmt: skip
+    for (name, first), f in out["failures"].items():
+        print(f"\nFAILURE {name} ({f['count']}x): {first}\n  input: {f['input']}\n{f['detail']}")
+
+
 def main_() -> None:
+    if "--fuzz" in sys.argv[1:]:
+        main_fuzz(float(sys.argv[sys.argv.index("--fuzz") + 1]))
+        return
     report.write_report = lambda run_dir, figures=True, store=None: (
         "summary"
     )  # the figures are not what is measured here

@@ -185,6 +185,10 @@ class RunStore:
         rid = self.run_id()
         if rid and record.get("run_id") != rid:
             return "it was made by another run (other settings: its run_id differs from run.json's)"
+        for name, keys in _TABLE_KEYS.items():
+            problem = _table_problem(record.get(name), name, trial, keys) if ok else None
+            if problem is not None:
+                return problem
         return None
 
     def reject_foreign_records(self, n_trials: int | None = None) -> list[str]:
@@ -380,6 +384,43 @@ class RunStore:
 
 #: the files a merge writes, with run.json: a folder whose :func:`merged_stamp` is unchanged is as its merge left it
 MERGED_FILES = ("trials.csv", "episodes.csv", "steps.csv", "timing.csv", RUN_FILE)
+
+
+#: the packed tables of a trial record and the key columns each row must hold, by the types the merge sorts on
+_TABLE_KEYS = {
+    "rows": ("trial", "clutter", "model", "mode"),
+    "episodes": ("trial", "clutter", "model", "mode", "target", "k0"),
+    "steps": ("trial", "clutter", "model", "mode", "k"),
+}
+_KEY_TYPES: dict[str, tuple[type, ...]] = {
+    "trial": (int,), "clutter": (int, float), "model": (str,), "mode": (str,), "target": (str, int, float),
+    "k0": (int,), "k": (int,),
+}  # fmt: skip
+
+
+def _table_problem(table: Any, name: str, trial: int, keys: Sequence[str]) -> str | None:
+    """Why the packed table ``name`` of trial ``trial``'s record (:func:`pack_table`; absent: none) cannot be
+    merged, or None: columns named by strings, rows as long as the columns, key cells of the merge's types (the
+    trial cell that trial), every cell a JSON scalar."""
+    if table is None:
+        return None
+    cols = table.get("columns") if isinstance(table, dict) else None
+    rows = table.get("rows") if isinstance(table, dict) else None
+    if not (isinstance(cols, list) and isinstance(rows, list) and all(isinstance(c, str) for c in cols)):
+        return f"its {name} table is not {{columns: [names], rows: [[cells]]}}"
+    missing = [k for k in keys if k not in cols]
+    if missing or len(set(cols)) != len(cols):
+        return f"its {name} table lacks the column {missing[0]!r}" if missing else f"its {name} columns repeat"
+    at = [(cols.index(k), _KEY_TYPES[k]) for k in keys]
+    it = cols.index("trial")
+    for i, r in enumerate(rows):
+        if not (isinstance(r, list) and len(r) == len(cols)):
+            return f"row {i} of its {name} table is not a list of {len(cols)} cells"
+        if any(type(r[j]) not in types for j, types in at) or r[it] != trial:
+            return f"row {i} of its {name} table has a key cell of the wrong type or trial"
+        if any(isinstance(v, (list, dict)) for v in r):
+            return f"row {i} of its {name} table holds a list or a table in a cell"
+    return None
 
 
 def merged_stamp(run_dir: Path | str) -> tuple:
