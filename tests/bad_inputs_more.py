@@ -328,3 +328,18 @@ THIRD_PASS: list[Case] = [
      "kitti.semantic_classes = [] names no class of the birth region --semantics gives"),
 ]  # fmt: skip
 CASES += THIRD_PASS
+
+LMB = '[experiment]\nfilters = ["lmb"]\n'
+FAMILY_CASES_MORE: list[Case] = [
+    ("run --filters gmphd,LMB", lambda t: _run(t, "--filters", "gmphd,LMB"), "filter family 'LMB' is unknown"),
+    ("run --filters ''", lambda t: _run(t, "--filters="), "--filters"),
+    _cfg('[experiment]\nfilters = ["gmphd", "nope"]\n', "filter family = 'nope' is not allowed"),
+    _cfg(LMB + 'probabilities = ["dynamic+occ"]\n', "filter family 'lmb' runs the probability modes static"),
+    _cfg(LMB + "[lmb]\nprune_r = 1.0\n", "lmb.prune_r = 1.0 is out of range"),
+    _cfg(LMB + "[lmb]\nextract_r = nan\n", "lmb.extract_r = nan is out of range"),
+    _cfg(LMB + "[lmb]\nmax_components = 0\n", "lmb.max_components = 0 is out of range"),
+    _cfg(LMB + "[lmb]\nr_B_max = -0.1\n", "lmb.r_B_max = -0.1 is out of range"),
+    _cfg(LMB + "[lmb]\nmax_hypotheses = 100000000\n", "lmb.max_hypotheses = 100000000 is out of range"),
+    _cfg(LMB + '[lmb]\nr_B_max = "0.3"\n', "lmb.r_B_max"),
+]
+CASES += FAMILY_CASES_MORE

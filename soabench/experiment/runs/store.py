@@ -171,10 +171,11 @@ class RunStore:
     def _record_path(self, folder: str, trial: int) -> Path:
         return self.run_dir / folder / f"{trial_name(trial)}.json"
 
-    def record_problem(self, record: Any, trial: int, ok: bool = True) -> str | None:
+    def record_problem(self, record: Any, trial: int, ok: bool = True, tables: bool = False) -> str | None:
         """Why ``record`` (read from the file of ``trial``) is not trial ``trial`` of this run, or None if it is:
         a JSON object whose ``trial`` is that index, whose ``run_id`` is this run's (folders whose run.json has
-        none: not checked) and, for a finished trial (``ok``), whose status is "ok"."""
+        none: not checked) and, for a finished trial (``ok``), whose status is "ok"; with ``tables`` (a resume, before
+        it merges records it did not write) also whose packed tables the merge can sort (:func:`_table_problem`)."""
         if not isinstance(record, dict):
             return f"it holds a JSON {type(record).__name__}, not a trial record"
         held = record.get("trial")
@@ -185,8 +186,8 @@ class RunStore:
         rid = self.run_id()
         if rid and record.get("run_id") != rid:
             return "it was made by another run (other settings: its run_id differs from run.json's)"
-        for name, keys in _TABLE_KEYS.items():
-            problem = _table_problem(record.get(name), name, trial, keys) if ok else None
+        for name, keys in _TABLE_KEYS.items() if tables and ok else ():
+            problem = _table_problem(record.get(name), name, trial, keys)
             if problem is not None:
                 return problem
         return None
@@ -206,7 +207,7 @@ class RunStore:
                     problem = f"{p.name!r} is not a trial record name (trial_NNNNN.json)"
                 else:
                     try:
-                        problem = self.record_problem(read_json(p), trial, ok=folder == TRIALS_DIR)
+                        problem = self.record_problem(read_json(p), trial, ok=folder == TRIALS_DIR, tables=True)
                     except SoabenchError as exc:
                         problem = str(exc)
                     if problem is not None:
