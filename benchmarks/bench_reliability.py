@@ -21,7 +21,10 @@
 
 Uses the fake trial of the tests (no SUMO), so it takes a few minutes (``--catalogue``: part 1 only)::
 
-    python benchmarks/bench_reliability.py [--catalogue | --fuzz MINUTES]
+    python benchmarks/bench_reliability.py [--catalogue [--timeout S] | --fuzz MINUTES]
+
+``--timeout S`` is the time bound of a catalogue case (default 30 s; on a loaded shared machine a forked case can
+wait that long for a core before it starts).
 """
 
 from __future__ import annotations
@@ -349,7 +352,8 @@ def main_() -> None:
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.monotonic()
-        counts, bad = catalogue_counts(tmp / "bad")
+        bound = float(sys.argv[sys.argv.index("--timeout") + 1]) if "--timeout" in sys.argv else 30.0
+        counts, bad = catalogue_counts(tmp / "bad", timeout_s=bound)
         total = dict.fromkeys(VERDICTS, 0)
         for c in counts.values():
             for k, v in c.items():

@@ -11,6 +11,7 @@ import shutil
 import bad_inputs
 import bad_inputs_more
 import pytest
+from fake_trial import renumbered
 from test_command_line import test_bad_input_is_one_line_and_exit_2 as one_line_and_exit_2
 
 from soabench.cli.main import main
@@ -110,11 +111,22 @@ def test_a_stray_record_beyond_the_trial_count_is_not_said_to_run_again(tmp_path
     assert not (out / "trials" / "trial_00007.json").exists() and _rows(out) == before
 
 
+def test_a_record_whose_tables_hold_another_trial_is_moved_aside(tmp_path, fake_cli_runs, capsys):
+    out = _new_run(tmp_path)
+    before = _rows(out)
+    rec = json.loads((out / "trials" / "trial_00001.json").read_text())
+    (out / "trials" / "trial_00002.json").write_text(json.dumps({**rec, "trial": 2}))  # trial 1's rows, renamed
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "trial_00002.json: it is not trial 2 of this run: row 0 of its rows table has a key cell" in err
+    assert "trial 2 runs again" in err and _rows(out) == before
+
+
 def test_a_record_of_a_trial_beyond_the_trial_count_is_refused_in_one_line(tmp_path, fake_cli_runs, capsys):
     out = _new_run(tmp_path)
     before = _rows(out)
     rec = json.loads((out / "trials" / "trial_00001.json").read_text())
-    (out / "trials" / "trial_00007.json").write_text(json.dumps({**rec, "trial": 7}))
+    (out / "trials" / "trial_00007.json").write_text(json.dumps(renumbered(rec, 7)))
     capsys.readouterr()
     assert main(["run", "--resume", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
