@@ -39,6 +39,7 @@ DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
+MAX_GAP_BINS = 12  #: most occlusion-gap length bins (metrics.gap_bins)
 MAX_DURATION = 86400.0  #: longest simulated time (s): experiment.duration and a snapshot's --time / --duration
 
 
@@ -318,6 +319,7 @@ class MetricsConfig:
     confirm_n: int = 1  #: consecutive associated steps needed for initiation
     censored: str = "exclude"  #: "exclude" (count separately) or "lower_bound"
     ddof: int = 0  #: per-trial sigma convention
+    gap_bins: tuple[int, ...] = (1, 2, 4, 8)  #: first scan count of each occlusion-gap length bin (1, 2-3, 4-7, 8+)
 
     def validate(self) -> None:
         _positive("metrics.ospa_c", self.ospa_c)
@@ -330,6 +332,17 @@ class MetricsConfig:
         _int_range("metrics.confirm_n", self.confirm_n, 1, 1_000_000)
         _one_of("metrics.censored", self.censored, ("exclude", "lower_bound"))
         _one_of("metrics.ddof", self.ddof, (0, 1))
+        bins = self.gap_bins
+        require(
+            isinstance(bins, tuple) and 1 <= len(bins) <= MAX_GAP_BINS,
+            f"metrics.gap_bins = {list(bins)!r} must list 1 to {MAX_GAP_BINS} gap lengths",
+        )
+        for b in bins:
+            _int_range("metrics.gap_bins[]", b, 1, 1_000_000)
+        require(
+            bins[0] == 1 and all(a < b for a, b in zip(bins, bins[1:], strict=False)),
+            f"metrics.gap_bins = {list(bins)!r} must start at 1 and increase (each the first scan count of a bin)",
+        )
 
 
 @dataclass
