@@ -35,8 +35,9 @@ def tables() -> RunTables:
             for scans, kind, coasted, kept, delay in eps:
                 if model == "pubm" and scans == 9:
                     kept = int(n % 2 == 0)
-                rows.append({"trial": n, "model": model, "gap_scans": float(scans), "gap_occluder": kind,
-                             "gap_coasted": float(coasted), "gap_id_kept": float(kept), "delay": delay, "censored": 0})  # fmt: skip
+                gap = {"gap_scans": float(scans), "gap_occluder": kind, "gap_coasted": float(coasted),
+                       "gap_id_kept": float(kept)}  # fmt: skip
+                rows.append({"trial": n, "model": model, **gap, "delay": delay, "censored": 0})
     e = {k: np.array([r[k] for r in rows]) for k in rows[0]}
     e["gap_scans"] = np.array([math.nan if v == "" else float(v) for v in e["gap_scans"]])
     for k in ("gap_coasted", "gap_id_kept"):
