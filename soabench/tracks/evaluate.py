@@ -89,6 +89,15 @@ def _estimate_rows(
     return rows if labels is None else checked(rows.ids, rows.xy, rows.off, "estimates")
 
 
+def estimate_sets(
+    scans: Scans, X: Sequence[np.ndarray], labels: Sequence[np.ndarray] | None, gt_set: str, sensor_cfg: SensorConfig
+) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+    """Est_k of every scan (docs/method.md §5.1) as positions (K lists of (n_k, 2)) and, for a labelled tracker,
+    their labels (None for an unlabelled one): what the track measures match against the truth."""
+    est = _estimate_rows(scans, X, labels, gt_set, sensor_cfg)
+    return np.split(est.xy, est.off[1:-1]), None if labels is None else np.split(est.ids, est.off[1:-1])
+
+
 def run_labels(results: Sequence, X: Sequence[np.ndarray]) -> list[np.ndarray] | None:
     """The per-scan labels of a filter run's results (``results[k].labels``, ``X[k]`` its estimates), or None for
     an unlabelled run: a run is labelled when some scan carries labels and every scan with estimates does (a scan

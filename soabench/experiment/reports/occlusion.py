@@ -209,7 +209,7 @@ def _ci(row: dict, key: str, nd: int = 3) -> str:
 
 
 def _group_name(by: str, group: str) -> str:
-    return f"{group} scans" if by == "gap" else OCCLUDER_LABEL.get(group, group)
+    return (f"{group} scan" + ("" if group == "1" else "s")) if by == "gap" else OCCLUDER_LABEL.get(group, group)
 
 
 def render(occ: dict, labelled: dict[str, bool]) -> list[str]:
@@ -223,8 +223,9 @@ def render(occ: dict, labelled: dict[str, bool]) -> list[str]:
             f"| model | mode | {title} | identity kept | coasted | re-emergence delay (s) |",
             "|---|---|---|---|---|---|",
         ]
+        seen = {r["group"] for r in occ["rows"] if r["by"] == by and r["n_coasted"] > 0}
         for r in occ["rows"]:
-            if r["by"] != by:
+            if r["by"] != by or (by == "occluder" and r["group"] not in seen):  # a kind that hid nobody: no row
                 continue
             kept = _ci(r, "id_kept") if labelled.get(r["model"], False) else "—"
             lines.append(
@@ -246,7 +247,7 @@ def render(occ: dict, labelled: dict[str, bool]) -> list[str]:
                 for m, nd in (("id_kept", 3), ("coasted", 3), ("delay", 2))
             ]
             lines.append(
-                f"| {c['mode']} | {LABEL.get(c['baseline'], c['baseline'])} | {c['group']} scans | "
+                f"| {c['mode']} | {LABEL.get(c['baseline'], c['baseline'])} | {_group_name('gap', c['group'])} | "
                 + " | ".join(cells)
                 + " |"
             )
