@@ -10,6 +10,7 @@ None for an unlabelled one.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -49,11 +50,14 @@ TRACK_KEYS = LABEL_KEYS + REEMERGENCE_KEYS + ALPHA_KEYS
 #: per-episode columns of the gap before a re-emergence episode (§9.4, :mod:`soabench.tracks.gaps`): its length in
 #: scans and seconds, the occluder kind that hid the target longest, the target's displacement across the gap (m) and
 #: whether it exceeds d_gate, the ego's and whether it exceeds EGO_MOVED_M, whether the gap was coasted and whether
-#: the identity was kept (empty: unlabelled tracker or not counted); every cell empty for an entry episode
+#: the identity was kept (NaN: unlabelled tracker or not counted); NaN and no occluder for an entry episode
 GAP_KEYS = (
     "gap_scans", "gap_s", "gap_occluder", "gap_moved", "gap_displacement", "gap_ego_moved", "gap_ego_displacement",
     "gap_coasted", "gap_id_kept",
 )  # fmt: skip
+#: the gap cells of an entry episode (and of a re-emergence's identity kept where it is not counted): NaN numbers,
+#: an empty occluder; numbers are floats throughout (1.0 / 0.0 for the flags), so a column never mixes ints and NaN
+NO_GAP: dict[str, float | str | None] = {k: None if k == "gap_occluder" else math.nan for k in GAP_KEYS}
 
 
 def _offsets(counts: np.ndarray) -> np.ndarray:
@@ -162,7 +166,7 @@ def episode_gaps(
     labels: np.ndarray | None,
     d_gate: float,
 ) -> list[dict[str, float | int | str | None]]:
-    """The :data:`GAP_KEYS` cells of each episode (None throughout for an entry episode)."""
+    """The :data:`GAP_KEYS` cells of each episode (:data:`NO_GAP` for an entry episode)."""
     outcomes = gap_outcomes(episodes, gaps, assoc, labels)
     described = {
         o.gap: d
@@ -174,13 +178,13 @@ def episode_gaps(
     for e in episodes:
         o = outcomes.get((e.target, e.k0))
         if o is None:
-            rows.append(dict.fromkeys(GAP_KEYS))
+            rows.append(dict(NO_GAP))
             continue
         d = described[o.gap]
         rows.append({
-            "gap_scans": d.scans, "gap_s": d.seconds, "gap_occluder": d.occluder, "gap_moved": int(d.moved),
-            "gap_displacement": d.displacement, "gap_ego_moved": int(d.ego_moved),
-            "gap_ego_displacement": d.ego_displacement, "gap_coasted": int(o.coasted),
-            "gap_id_kept": None if o.id_kept is None else int(o.id_kept),
+            "gap_scans": float(d.scans), "gap_s": d.seconds, "gap_occluder": d.occluder, "gap_moved": float(d.moved),
+            "gap_displacement": d.displacement, "gap_ego_moved": float(d.ego_moved),
+            "gap_ego_displacement": d.ego_displacement, "gap_coasted": float(o.coasted),
+            "gap_id_kept": math.nan if o.id_kept is None else float(o.id_kept),
         })  # fmt: skip
     return rows

@@ -119,3 +119,32 @@ def test_track_intervals():
     assert c["hota_diff"] == pytest.approx(0.135) and c["hota_lo"] > 0.1 and c["hota_p"] < 0.01
     assert c["idf1_diff"] == 0.0 and math.isnan(c["idf1_p"])  # every difference 0: no test
     assert c["id_kept_n"] == 7 and c["id_kept_diff"] == 0.5
+
+
+def test_check_suites_threshold_each_gap_bin(tmp_path):
+    from soabench.experiment.campaigns.check import _gap_values, gap_metrics, load_suite
+    from soabench.experiment.runs.files import write_csv
+
+    names = gap_metrics((1, 2, 4, 8))
+    assert names["identity_kept_long"] == ("gap_id_kept", 3) and names["coasted_gap_2-3"] == ("gap_coasted", 1)
+    head = '[[scenario]]\nname = "a"\nnet = "intersection"\n[[threshold]]\nmetric = "{}"\nmin = 0.5\n'
+    (tmp_path / "ok.toml").write_text(head.format("identity_kept_long"))
+    assert load_suite(tmp_path / "ok.toml").thresholds[0].metric == "identity_kept_long"
+    (tmp_path / "bad.toml").write_text(head.format("identity_kept_gap_9-10"))
+    with pytest.raises(SoabenchError, match="identity_kept_gap_9-10"):
+        load_suite(tmp_path / "bad.toml")
+    # a suite whose configuration bins the gaps otherwise has those bins' names
+    (tmp_path / "bins.toml").write_text("[metrics]\ngap_bins = [1, 3]\n")
+    (tmp_path / "own.toml").write_text('[suite]\nconfig = "bins.toml"\n' + head.format("coasted_gap_1-2"))
+    assert load_suite(tmp_path / "own.toml").thresholds[0].metric == "coasted_gap_1-2"
+    # pooled over the episodes of a run folder: kept / counted per bin, entry episodes and uncounted ones left out
+    rows = [
+        {"model": "soa", "mode": "static", "clutter": 3.0, "gap_scans": n, "gap_id_kept": kept, "gap_coasted": 0}
+        for n, kept in ((1, 1), (1, 0), (9, 1), (12, None), (None, None))
+    ]
+    write_csv(tmp_path / "episodes.csv", rows, list(rows[0]))
+    sums: dict = {}
+    _gap_values(tmp_path, "a", (1, 2, 4, 8), sums)
+    assert sums[("a", "soa", "static", 3.0, "identity_kept_gap_1")] == [1.0, 2.0]
+    assert sums[("a", "soa", "static", 3.0, "identity_kept_long")] == [1.0, 1.0]
+    assert sums[("a", "soa", "static", 3.0, "coasted_long")] == [0.0, 2.0]

@@ -3,6 +3,8 @@ gap columns of a filter run, on hand-built scenes whose line of sight is the sen
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from shapely.geometry import Polygon
@@ -99,7 +101,8 @@ def test_a_runs_episode_rows_carry_the_gap_and_its_outcome():
     columns, gaps = track_evaluation(scans, X, labels, episodes, cfg, SensorConfig())
     assert len(gaps) == len(episodes) and all(list(g) == list(GAP_KEYS) for g in gaps)
     by_start = {(e.target, e.k0): g for e, g in zip(episodes, gaps, strict=True)}
-    assert all(v is None for v in by_start[(0, 0)].values()) and all(v is None for v in by_start[(1, 0)].values())
+    for entry in (by_start[(0, 0)], by_start[(1, 0)]):
+        assert entry["gap_occluder"] is None and all(math.isnan(v) for k, v in entry.items() if k != "gap_occluder")
     car, building = by_start[(0, 14)], by_start[(1, 16)]
     assert (car["gap_scans"], car["gap_occluder"], car["gap_moved"], car["gap_coasted"], car["gap_id_kept"]) == (
         3, "parked", 0, 1, 1)  # fmt: skip
@@ -110,5 +113,15 @@ def test_a_runs_episode_rows_carry_the_gap_and_its_outcome():
     assert (columns["n_gaps"], columns["coasted"], columns["n_id"], columns["id_kept"]) == (2, 0.5, 2, 0.5)
     # an unlabelled tracker: the same gaps, no identity
     _, plain = track_evaluation(scans, X, None, episodes, cfg, SensorConfig())
-    assert [g["gap_id_kept"] for g in plain] == [None] * len(plain)
-    assert [g["gap_coasted"] for g in plain] == [g["gap_coasted"] for g in gaps]
+    assert all(math.isnan(g["gap_id_kept"]) for g in plain)
+    assert str([g["gap_coasted"] for g in plain]) == str([g["gap_coasted"] for g in gaps])
+
+
+def test_the_api_describes_the_gaps_of_scans():
+    import soabench.api as sb
+
+    gaps = sb.occlusion_gaps(scene(), d_gate=5.0)
+    assert [(g["target"], g["k_a"], g["k_b"], g["scans"], g["occluder"], g["moved"]) for g in gaps] == [
+        (0, 11, 13, 3, "parked", False), (1, 7, 15, 9, "building", True)]  # fmt: skip
+    with pytest.raises(ValueError, match="Scans"):
+        sb.occlusion_gaps([1, 2])

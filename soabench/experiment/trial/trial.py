@@ -47,7 +47,7 @@ from soabench.seeding import TrialSeeds, trial_seeds
 from soabench.sensor import observe
 from soabench.trackers import GMPHDTracker, ScanFailure, run_tracker
 from soabench.trackers import TrackerRun as FilterRun  # the step results and times of one run
-from soabench.tracks.evaluate import GAP_KEYS, TRACK_KEYS, run_labels, track_evaluation
+from soabench.tracks.evaluate import GAP_KEYS, NO_GAP, TRACK_KEYS, run_labels, track_evaluation
 
 if TYPE_CHECKING:
     from soabench.config import Config, SensorConfig
@@ -276,12 +276,12 @@ def episode_rows(
     key: RunKey, metrics: TrialMetrics, gaps: Sequence[dict[str, Any]] | None = None
 ) -> list[dict[str, Any]]:
     """One row of :data:`EPISODE_KEYS` per delay episode; ``gaps``: each episode's :data:`GAP_KEYS` cells
-    (:func:`~soabench.tracks.evaluate.track_evaluation`; None: empty)."""
+    (:func:`~soabench.tracks.evaluate.track_evaluation`; None: :data:`~soabench.tracks.evaluate.NO_GAP`)."""
     base = key.as_dict()
     head = {k: _scalar(base[k]) for k in EPISODE_KEYS if k in base}
     own = [k for k in EPISODE_KEYS if k not in base and k not in GAP_KEYS]  # the Episode's fields, read as they are
     tail = {FILTER_COLUMN: base[FILTER_COLUMN]} if FILTER_COLUMN in base else {}
-    gaps = gaps if gaps is not None else [dict.fromkeys(GAP_KEYS)] * len(metrics.episodes)
+    gaps = gaps if gaps is not None else [NO_GAP] * len(metrics.episodes)
     return [
         {**head, **{k: _scalar(getattr(e, k)) for k in own}, **{k: _scalar(g[k]) for k in GAP_KEYS}, **tail}
         for e, g in zip(metrics.episodes, gaps, strict=True)
