@@ -145,10 +145,13 @@ def identity_curves(tables: RunTables, clutter: float, bins: Sequence[int]) -> d
 
 def breakdown(tables: RunTables, clutter: float, bins: Sequence[int], baselines: Sequence[str]) -> dict:
     """The breakdowns of one clutter rate (module docstring): ``rows`` (one per model, mode and group) and
-    ``vs_soa`` (one per mode, baseline and group); {} for a run without gap columns or without a gap."""
+    ``vs_soa`` (one per mode, baseline and group), both empty for a run without a gap; {} for tables without the
+    gap columns."""
     e, t = tables.episodes, tables.trials
-    if not _has_gaps(e):
+    if not e or "gap_scans" not in e:
         return {}
+    if not _has_gaps(e):
+        return {"bins": list(bins), "bin_labels": bin_labels(bins), "rows": [], "vs_soa": []}
     groups = _groups(e, bins)
     idx = paper.resample_indices  # the paired statistics' resampling: same seed, same resample count
     per: dict[tuple[str, str], tuple[np.ndarray, dict]] = {}

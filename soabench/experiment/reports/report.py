@@ -319,6 +319,7 @@ def render_occlusion(summary: dict) -> str:
     lines: list[str] = []
     for res in summary["results"]:
         iv, occ = res.get("track_intervals") or {}, res.get("occlusion") or {}
+        occ = occ if occ.get("rows") else {}  # bins without a gap: nothing to tabulate
         if not iv and not occ:
             continue
         family = res.get("filter")
