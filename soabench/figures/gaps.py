@@ -81,6 +81,12 @@ def identity_gaps_figure(tables: RunTables, clutter: float, families: Sequence[t
                 ax.set_xticks(x, [f"{b}\nn≤{n:.0f}" for b, n in zip(bin_labels(bins), counts, strict=True)])
                 if kind not in curves:
                     ax.text(0.5, 0.5, "no gap", ha="center", va="center", transform=ax.transAxes, color="0.4")
+        if not rows:  # no labelled re-emergence after a gap in this run
+            ax = axes[0, 0]
+            ax.text(0.5, 0.5, f"no re-emergence after an occlusion gap counted at λ = {clutter:g}", ha="center",
+                    va="center", transform=ax.transAxes)  # fmt: skip
+            ax.set_axis_off()
+            return fig
         ps.legend_below(fig, ps.model_handles(models), [ps.model_label(m) for m in models], ncol=len(models))
         fig.suptitle(
             f"Identity kept through an occlusion gap, λ = {clutter:g}: the share of re-emergences re-acquired under "
