@@ -15,6 +15,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
 from soabench.experiment.campaigns.atlas.stats import METRICS, NULL, Cell
@@ -82,9 +83,10 @@ def pair_heatmaps(
         panel_title(ax, letter, f"vs {label(b)}")
     axs[0].set_ylabel(names[y])
     cb = fig.colorbar(im, ax=list(axs), fraction=0.035 / max(1, ncol / 3), pad=0.02)
-    cb.set_label(METRICS[metric] + " (S-OA better: blue)", fontsize=6.5)
+    cb.set_label(METRICS[metric], fontsize=6.5)
     fig.suptitle(
-        f"S-OA's {METRICS[metric]}: framed = significant (BH-FDR q = 0.05), dashed = no advantage",
+        f"S-OA's {METRICS[metric]} over each baseline (blue: S-OA better)\n"
+        "framed: significant after BH-FDR (q = 0.05); dashed: no advantage",
         x=0.01, ha="left", fontsize=7.5,
     )  # fmt: skip
     return fig
@@ -122,12 +124,13 @@ def axis_curves(
             pos = np.array([vals.index(c.values[0]) for c in sel], float) + (bi - (nb - 1) / 2) * 0.06
             est = np.array([c.estimate for c in sel])
             err = np.array([[c.estimate - c.low, c.high - c.estimate] for c in sel]).T
-            line = ax.errorbar(pos, est, yerr=err, color=st.color, marker=None, lw=1.0, elinewidth=0.7)
+            ax.errorbar(pos, est, yerr=err, color=st.color, marker=None, lw=1.0, elinewidth=0.7)
             for p, e, c in zip(pos, est, sel, strict=True):
                 ax.plot(p, e, marker=st.marker, ms=4, color=st.color, mfc=st.color if c.significant else "white")
-            handles[b] = line
+            handles[b] = Line2D([], [], color=st.color, marker=st.marker, ms=4, lw=1.0)
         ax.axhline(null, color="black", lw=0.7, ls="--")
         ax.set_xticks(range(len(vals)), [_tick(v) for v in vals])
+        ax.set_xlim(-0.5, len(vals) - 0.5)
         ax.set_xlabel(names[a] if numeric else "")
         panel_title(ax, letter, names[a])
         if k % ncol == 0:

@@ -85,9 +85,8 @@ class Settings:
         count("seed", 0, MAX_SEED)
         for name in ("duration", "kitti_duration"):
             check_time(f"--{name.replace('_', '-')}", getattr(self, name))
-        for flag, names in (
-            ("--scenes", self.scenes or ()), ("--kitti-scenes", self.kitti_scenes), ("--atlas-scenes", self.atlas_scenes)
-        ):  # fmt: skip
+        lists = (("--scenes", self.scenes or ()), ("--kitti-scenes", self.kitti_scenes))
+        for flag, names in (*lists, ("--atlas-scenes", self.atlas_scenes)):
             bad = [n for n in names if n not in shipped]
             require(not bad, f"{flag} {','.join(bad)}: not a shipped scene; allowed: {', '.join(shipped)}")
         require(self.scenes is None or len(self.scenes) >= 1, "--scenes must name at least one shipped scene")
@@ -344,12 +343,25 @@ ATLAS_AXES: dict[str, tuple[float, ...]] = {
 }
 
 
+def atlas_axes(scene: str) -> dict[str, tuple[float, ...]]:
+    """:data:`ATLAS_AXES` on ``scene``; a scene without parking lanes (grid_block: its kerbs are sidewalks and shop
+    fronts) has no parked cars to vary, so it drops the parking axis (its occluders are its buildings)."""
+    from soabench.experiment.campaigns.occlusion import base_scenario
+    from soabench.scenario.network import read_net
+    from soabench.scenario.parking import parking_lanes
+
+    net_file = base_scenario(scene, None).get("files", {}).get("net")
+    if net_file and not parking_lanes(read_net(net_file)):
+        return {k: v for k, v in ATLAS_AXES.items() if k != "parking.density"}
+    return dict(ATLAS_AXES)
+
+
 def atlas_request(folder: Path, scene: str, s: Settings):
-    """The atlas of ``scene`` in ``folder`` (:data:`ATLAS_AXES`, ``s.atlas_trials`` trials per point)."""
+    """The atlas of ``scene`` in ``folder`` (:func:`atlas_axes`, ``s.atlas_trials`` trials per point)."""
     from soabench.experiment.campaigns.atlas.design import make_axis, make_design
     from soabench.experiment.campaigns.atlas.run import AtlasRequest
 
-    axes = [make_axis(k, list(v)) for k, v in ATLAS_AXES.items()]
+    axes = [make_axis(k, list(v)) for k, v in atlas_axes(scene).items()]
     cfg = _base_config(s, s.atlas_trials, probabilities=("static",))
     keys = {"experiment.trials", "experiment.duration", "experiment.seed", "experiment.models"}
     keys.add("experiment.probabilities")
@@ -425,7 +437,15 @@ def run_results(
     scenes = list(s.scenes or shipped)
     log = log or (lambda msg: print(f"soabench results: {msg}", file=sys.stderr, flush=True))
     root = resolve(out)
-    own = (*shipped, "scenes", "filters", "atlas", "kitti", "README.md", "index.html")  # README.md: results/'s own description
+    own = (
+        *shipped,
+        "scenes",
+        "filters",
+        "atlas",
+        "kitti",
+        "README.md",
+        "index.html",
+    )  # README.md: results/'s own description
     check_own_folder(root, "results folder", own)
     root.mkdir(parents=True, exist_ok=True)
     hint = f"finish with: soabench results --out {root} (and the same options)"

@@ -88,10 +88,12 @@ def run_chunk_task(task: int, spec: AtlasSpec) -> dict:
             load_fn = registry.scene_loader(spec.scene_loader)
             scene, scen = registry.load_scene_cached(net, (), scenario, load_fn)
             fn = registry.trial_kind(spec.trial_kind)
+            share = None
             if fn is registry.trial_kind(registry.DEFAULT_TRIAL_KIND):
                 from soabench.experiment.trial.trial import TrialShare, run_trial
 
-                fn = functools.partial(run_trial, share=TrialShare())
+                share = TrialShare()
+                fn = functools.partial(run_trial, share=share)
             rows, episodes, steps = [], [], []
             for point, scene_i, overrides, head in spec.points:
                 if scene_i != s:
@@ -116,6 +118,7 @@ def run_chunk_task(task: int, spec: AtlasSpec) -> dict:
         "episodes": store.columns_of(episodes, {}),
         "steps": store.columns_of(steps, {}) if spec.steps else None,
         "elapsed": time.perf_counter() - t0,
+        "shared": dict(share.counts) if share is not None else {},
     }
 
 
@@ -148,6 +151,9 @@ class AtlasOutcome:
     cost: Cost | None = None
     summary_markdown: str = ""
     failures: list[dict] = field(default_factory=list)
+    #: what the chunks computed and reused (recordings, scans, ...: TrialShare counts), summed over this session
+    shared: dict[str, int] = field(default_factory=dict)
+    elapsed: float = 0.0  #: summed task seconds of this session (core-seconds of the chunks run)
 
 
 def _utc() -> str:
@@ -335,6 +341,8 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
         spec = _spec(root, meta)
         todo_n = n_chunks - len({c for c in done if c[0] < n_trials})
         failures: list[dict] = []
+        shared: dict[str, int] = {}
+        elapsed = 0.0
         if todo_n:
             if spec.trial_kind == registry.DEFAULT_TRIAL_KIND:
                 from soabench.kernel_warmup import ensure_compiled
@@ -349,6 +357,9 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
                     for t, rec in gen:
                         n, s = spec.chunk_of(t)
                         if rec.get("status") == "ok":
+                            for key, v in (rec.get("shared") or {}).items():
+                                shared[key] = shared.get(key, 0) + int(v)
+                            elapsed += float(rec.get("elapsed", 0.0))
                             store.write_chunk(root, n, s, {k: rec.get(k) for k in ("trials", "episodes", "steps")})
                             bar.update(True)
                         else:
@@ -380,4 +391,4 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
             from soabench.experiment.campaigns.atlas.report import write_report
 
             md = write_report(root)
-    return AtlasOutcome(root, complete, n_done, cost.trials - n_done, cost, md, failures)
+    return AtlasOutcome(root, complete, n_done, cost.trials - n_done, cost, md, failures, shared, elapsed)

@@ -70,7 +70,7 @@ def write_chunk(root: Path, trial: int, scene: int, tables: dict[str, dict[str, 
     require(not (root / "trials" / name).exists(), f"chunk {name} of {root} is already complete")
     for table in ("episodes", "steps", "trials"):
         cols = tables.get(table)
-        if cols is None:
+        if not cols or not any(len(v) for v in cols.values()):  # no rows (a trial without episodes): no file
             continue
         write_bytes_atomic(root / table / name, parquet_bytes(cols))
     failed = root / "failures" / name.replace(".parquet", ".json")
