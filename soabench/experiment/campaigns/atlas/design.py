@@ -24,7 +24,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from soabench.config import FILTER_FAMILIES, Config
+from soabench.config import FAMILIES, Config
 from soabench.errors import SoabenchError, require
 
 #: scenario keys an axis may vary (section.key of the scenario file) and their value types
@@ -38,8 +38,8 @@ SCENE_KEYS: dict[str, type] = {
 }
 #: axes that are neither config nor scenario keys
 SPECIAL_KEYS = ("net", "filters", "birth.N_hat_offset")
-#: config sections whose scalar keys may be axes
-CONFIG_SECTIONS = ("sensor", "filter", "birth", "metrics", "lmb")
+#: config sections whose scalar keys may be axes (and each filter family's own section)
+CONFIG_SECTIONS = ("sensor", "filter", "birth", "metrics", *(f.section for f in FAMILIES.values() if f.section))
 #: ``experiment`` keys fixed for the whole atlas (trials, duration and seed: the protocol; models and modes run at
 #: every point)
 FIXED_EXPERIMENT = ("trials", "duration", "seed", "models", "trackers", "probabilities", "plugin_budget")
@@ -259,5 +259,5 @@ def design_from_dict(data: Any, source: str) -> tuple[list[Axis], dict[str, Any]
 
 
 def filter_families_allowed() -> tuple[str, ...]:
-    """The filter families a ``filters`` axis may name."""
-    return tuple(FILTER_FAMILIES)
+    """The filter families a ``filters`` axis may name: the family registry's (:data:`soabench.config.FAMILIES`)."""
+    return tuple(FAMILIES)
