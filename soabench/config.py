@@ -406,6 +406,30 @@ class LMBConfig:
         return self
 
 
+#: the ways the PMB variant computes its marginal association probabilities (docs/method.md §10.5)
+PMB_MARGINALS = ("murty",)
+
+
+@dataclass
+class PMBMConfig:
+    """The PMBM filter and its PMB variant, read by runs whose experiment.filters names pmbm or pmb (docs/method.md
+    §10, register rows 36-37). A key set here while no run reads it is refused."""
+
+    M_max: int = 100  #: global hypotheses kept; each prior global hypothesis a asks Murty for ceil(M_max w_a)
+    w_floor: float = 1e-4  #: global hypotheses of weight below this are dropped (then renormalised)
+    r_floor: float = 1e-5  #: a track whose every single-target hypothesis has r below this is dropped
+    J_h: int = 10  #: Gaussian components kept per single-target hypothesis
+    marginals: str = "murty"  #: the PMB's marginals: from the Murty hypotheses
+
+    def validate(self) -> PMBMConfig:
+        _int_range("pmbm.M_max", self.M_max, 1, 100_000)
+        _in_range("pmbm.w_floor", self.w_floor, 0.0, 1.0, hi_open=True)
+        _in_range("pmbm.r_floor", self.r_floor, 0.0, 1.0, hi_open=True)
+        _int_range("pmbm.J_h", self.J_h, 1, 10_000)
+        _one_of("pmbm.marginals", self.marginals, PMB_MARGINALS)
+        return self
+
+
 @dataclass
 class Config:
     """The full resolved configuration of a run."""
