@@ -11,15 +11,40 @@ them. Clusters are independent, so the best joint assignments are the best sums 
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
-from soabench.pmbm.murty import murty
+from soabench.cache import configure_numba_cache
+
+configure_numba_cache()
+
+from numba import njit  # noqa: E402
+
+from soabench.pmbm.murty import murty  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
+
+
+@njit(cache=True)
+def _components(track, hh, ll, n, M):
+    """Connected components of the graph of tracks 0..n-1 and measurements n..n+M-1 with the edges
+    (track[hh[e]], n + ll[e]) (union-find); returns each node's component as the smallest node in it."""
+    parent = np.arange(n + M)
+    for e in range(hh.shape[0]):
+        a, b = track[hh[e]], n + ll[e]
+        while parent[a] != a:
+            a = parent[a]
+        while parent[b] != b:
+            b = parent[b]
+        if a < b:
+            parent[b] = a
+        elif b < a:
+            parent[a] = b
+    for x in range(n + M):
+        r = x
+        while parent[r] != r:
+            r = parent[r]
+        parent[x] = r
+    return parent
 
 
 def clusters(track: np.ndarray, gated: np.ndarray, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -28,17 +53,18 @@ def clusters(track: np.ndarray, gated: np.ndarray, n: int) -> list[tuple[np.ndar
     Args:
         track: (H,) the track of each hypothesis; gated: (H, M) True where hypothesis h may have generated z_l.
     Returns:
-        (tracks, measurements) index arrays of every cluster with at least one track, then one cluster per
-        measurement that no track gates (no tracks), in increasing order of their smallest member.
+        (tracks, measurements) index arrays of every cluster, in increasing order of their smallest member
+        (tracks first: a cluster without tracks is one measurement that no track gates).
     """
     M = gated.shape[1]
     hh, ll = np.nonzero(gated)
-    ti = track[hh]
-    graph = coo_matrix((np.ones(len(ti)), (ti, n + ll)), shape=(n + M, n + M))
-    _, comp = connected_components(graph, directed=False)
+    comp = _components(np.ascontiguousarray(track, dtype=np.int64), hh.astype(np.int64), ll.astype(np.int64), n, M)
+    order = np.argsort(comp, kind="stable")
+    roots, first = np.unique(comp[order], return_index=True)
+    bounds = np.append(first, len(order))
     out = []
-    for c in np.unique(comp):  # in order of first appearance = order of the smallest member
-        members = np.flatnonzero(comp == c)
+    for g in range(len(roots)):
+        members = order[bounds[g] : bounds[g + 1]]
         out.append((members[members < n], members[members >= n] - n))
     return out
 
@@ -60,22 +86,23 @@ def cluster_costs(
 def best_sums(costs: list[np.ndarray], k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest sums of one entry of each sorted cost array: (sums (K,), index of each term (K, len))."""
     total = np.zeros(1)
-    idx = np.zeros((1, 0), dtype=np.int64)
-    for c in costs:
-        if len(c) == 1:
-            total = total + c[0]
-            idx = np.hstack([idx, np.zeros((len(idx), 1), dtype=np.int64)])
-            continue
+    idx = np.zeros((1, len(costs)), dtype=np.int64)
+    for j, c in enumerate(costs):
         s = (total[:, None] + c[None, :]).ravel()
         order = np.argsort(s, kind="stable")[:k]
         a, b = np.divmod(order, len(c))
         total = s[order]
-        idx = np.hstack([idx[a], b[:, None]])
+        idx = idx[a]
+        idx[:, j] = b
     return total, idx
 
 
 class ClusterSolver:
-    """Ranked solutions of each cluster for a given choice of its tracks' hypotheses, cached (module docstring)."""
+    """Ranked solutions of each cluster for a given choice of its tracks' hypotheses, cached (module docstring).
+
+    ``max_gap``: solutions costing more than this above the cluster's best are not searched for. A global
+    hypothesis built on such a solution weighs at most exp(-max_gap) times its parent's best child, so with
+    max_gap = -ln(w_floor) it could never reach the weight floor."""
 
     def __init__(
         self,
@@ -83,8 +110,10 @@ class ClusterSolver:
         log_l_miss: np.ndarray,
         log_l_det: np.ndarray,
         log_new: np.ndarray,
+        max_gap: float = np.inf,
     ) -> None:
         self.groups = groups
+        self.max_gap = max_gap
         self.log_l_miss, self.log_l_det, self.log_new = log_l_miss, log_l_det, log_new
         self._cache: dict[tuple, tuple[int, np.ndarray, np.ndarray]] = {}
         self.n_murty = 0  #: Murty runs so far
@@ -101,7 +130,7 @@ class ClusterSolver:
         if nL == 0:  # every track missed
             costs, choice = np.array([-float(self.log_l_miss[hs].sum())]), np.full((1, nT), MISS, dtype=np.int64)
         else:
-            sols = murty(cluster_costs(hs, L, self.log_l_miss, self.log_l_det, self.log_new), k)
+            sols = murty(cluster_costs(hs, L, self.log_l_miss, self.log_l_det, self.log_new), k, self.max_gap)
             self.n_murty += 1
             costs = np.array([s[0] for s in sols])
             choice = np.full((len(sols), nT), MISS, dtype=np.int64)
@@ -123,26 +152,54 @@ def new_global_hypotheses(
     """For each prior global hypothesis a, its ceil(M_max w_a) best assignments (at least one when it has any).
 
     Returns (parent (B,), choice (B, n): each track's measurement or :data:`MISS`, log weight (B,) unnormalised:
-    log w_a minus the assignment cost). Measurements no track takes go to their new tracks. Clusters without
-    tracks have one solution (every measurement to its new track) whose cost is added once.
+    log w_a minus the assignment cost). Measurements no track takes go to their new tracks. Each cluster is solved
+    once per distinct choice of its tracks' hypotheses among the prior global hypotheses (with the largest k that
+    any of them asks); a cluster with one solution for a global hypothesis adds its cost and choice to every one of
+    that hypothesis's assignments, and only the clusters with several solutions are combined by :func:`best_sums`.
     """
-    n = table.shape[1]
+    A, n = table.shape
     lone = [L for T, L in groups if len(T) == 0]
-    lone_cost = -float(solver.log_new[np.concatenate(lone)].sum()) if lone else 0.0
-    with_tracks = [c for c, (T, _) in enumerate(groups) if len(T)]
-    parents, choices, logs = [], [], []
-    for a in range(table.shape[0]):
-        k = max(1, min(M_max, math.ceil(M_max * math.exp(log_w[a]) - 1e-9)))
-        sols = [solver.solve(c, table[a, groups[c][0]], k) for c in with_tracks]
-        if any(len(s[0]) == 0 for s in sols):
+    base = np.full(A, -float(solver.log_new[np.concatenate(lone)].sum()) if lone else 0.0)
+    ks = np.maximum(1, np.minimum(M_max, np.ceil(M_max * np.exp(log_w) - 1e-9))).astype(np.int64)
+    fixed = np.full((A, n), MISS, dtype=np.int64)  # the choices of the single-solution clusters
+    feasible = np.ones(A, dtype=bool)
+    multi: list[list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = [[] for _ in range(A)]
+    for c, (T, _) in enumerate(groups):
+        if len(T) == 0:
             continue
-        sums, idx = best_sums([s[0] for s in sols], k)
-        ch = np.full((len(sums), n), MISS, dtype=np.int64)
-        for j, c in enumerate(with_tracks):
-            ch[:, groups[c][0]] = sols[j][1][idx[:, j]]
+        local = table[:, T]
+        if A == 1:
+            uniq, inv = local, np.zeros(1, dtype=np.int64)
+        else:
+            uniq, inv = np.unique(local, axis=0, return_inverse=True)
+            inv = inv.reshape(-1)
+        k_u = np.zeros(len(uniq), dtype=np.int64)
+        np.maximum.at(k_u, inv, ks)
+        sols = [solver.solve(c, uniq[u], int(k_u[u])) for u in range(len(uniq))]
+        n_sol = np.array([len(s[0]) for s in sols])
+        costs0 = np.array([s[0][0] if len(s[0]) else np.inf for s in sols])
+        feasible &= n_sol[inv] > 0
+        single = (n_sol[inv] == 1) | (ks == 1)
+        base[single] += costs0[inv[single]]
+        for a in np.flatnonzero(single & (n_sol[inv] > 0)):
+            fixed[a, T] = sols[inv[a]][1][0]
+        for a in np.flatnonzero(~single):
+            multi[a].append((T, *sols[inv[a]]))
+    parents, choices, logs = [], [], []
+    for a in np.flatnonzero(feasible):
+        if not multi[a]:
+            parents.append(np.array([a]))
+            choices.append(fixed[a][None, :])
+            logs.append(np.array([log_w[a] - base[a]]))
+            continue
+        k = int(ks[a])
+        sums, idx = best_sums([m[1][:k] for m in multi[a]], k)
+        ch = np.repeat(fixed[a][None, :], len(sums), axis=0)
+        for j, (T, _, choice) in enumerate(multi[a]):
+            ch[:, T] = choice[idx[:, j]]
         parents.append(np.full(len(sums), a, dtype=np.int64))
         choices.append(ch)
-        logs.append(log_w[a] - sums - lone_cost)
+        logs.append(log_w[a] - base[a] - sums)
     if not parents:
         return np.zeros(0, dtype=np.int64), np.zeros((0, n), dtype=np.int64), np.zeros(0)
     return np.concatenate(parents), np.concatenate(choices), np.concatenate(logs)

@@ -58,6 +58,10 @@ class PMBMDensity:
             np.add.at(p, self.table, w[:, None])
         return p
 
+    def phd_mass(self) -> float:
+        """The expected number of targets: the intensity's mass plus sum_a w_a sum_i r_i."""
+        return float(self.ppp.w.sum() + self.hypothesis_probabilities() @ self.hyps.r)
+
     def phd(self) -> Mixture:
         """The first moment: the intensity plus sum_a w_a sum_i r_i p_i (weights r_h P(h) omega_c per component)."""
         ph = self.hypothesis_probabilities() * self.hyps.r

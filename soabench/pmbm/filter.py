@@ -146,7 +146,7 @@ class PMBMFilter:
         post = up.density
         t2 = time.perf_counter()
 
-        sum_w = float(post.phd().mass)
+        sum_w = post.phd_mass()
         ppp = post.ppp
         if cfg.max_undetected_birth_age is not None and len(ppp):
             keep = ~((ppp.n_det == 0) & (ppp.age > cfg.max_undetected_birth_age))
@@ -179,7 +179,7 @@ class PMBMFilter:
             X=X,
             X_w=X_r,
             sum_w=sum_w,
-            sum_w_reduced=float(post.phd().mass),
+            sum_w_reduced=post.phd_mass(),
             n_predicted=len(pred.ppp) + len(pred.hyps.w),
             n_updated=len(up.density.ppp) + len(up.density.hyps.w),
             n_reduced=n_comp,

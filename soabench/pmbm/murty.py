@@ -28,9 +28,10 @@ def _solve(C: np.ndarray) -> tuple[float, np.ndarray] | None:
     return cost, cols
 
 
-def murty(C: np.ndarray, k: int) -> list[tuple[float, np.ndarray]]:
+def murty(C: np.ndarray, k: int, max_gap: float = np.inf) -> list[tuple[float, np.ndarray]]:
     """The (at most) ``k`` cheapest assignments of the square cost matrix ``C`` (+inf: forbidden), by increasing
-    cost: a list of (cost, cols) with ``cols[r]`` the column of row r."""
+    cost: a list of (cost, cols) with ``cols[r]`` the column of row r. Only assignments that cost at most
+    ``max_gap`` more than the cheapest are returned (their ranking is unchanged: the search stops there)."""
     C = np.asarray(C, dtype=float)
     n = C.shape[0]
     if C.shape != (n, n):
@@ -44,6 +45,7 @@ def murty(C: np.ndarray, k: int) -> list[tuple[float, np.ndarray]]:
     if first is None:
         return out
     seq = 0
+    limit = first[0] + max_gap
     # open subproblems: (cost, order found, cols, matrix, first free row)
     heap: list[tuple[float, int, np.ndarray, np.ndarray, int]] = [(first[0], seq, first[1], C, 0)]
     while heap and len(out) < k:
@@ -57,7 +59,7 @@ def murty(C: np.ndarray, k: int) -> list[tuple[float, np.ndarray]]:
             child = forced.copy()
             child[t, c] = np.inf
             sol = _solve(child)
-            if sol is not None:
+            if sol is not None and sol[0] <= limit:
                 seq += 1
                 heapq.heappush(heap, (sol[0], seq, sol[1], child, t))
             keep = forced[t, c]  # fix the pair (t, c) for the next subproblems

@@ -124,7 +124,8 @@ def update(
 
     # global hypotheses
     groups = clusters(pred.track, np.isfinite(log_l_det), n)
-    solver = ClusterSolver(groups, log_l_miss, log_l_det, log_new)
+    max_gap = -np.log(hyp.w_floor) if hyp.w_floor > 0.0 else np.inf
+    solver = ClusterSolver(groups, log_l_miss, log_l_det, log_new, max_gap)
     parent, choice, log_w = new_global_hypotheses(pred.table, pred.log_w, groups, solver, hyp.M_max)
     n_global = len(log_w)
     log_w = log_w - np.logaddexp.reduce(log_w)
