@@ -2,8 +2,12 @@
 and their combination into the best new global hypotheses of each prior global hypothesis.
 
 For a prior global hypothesis a (hypothesis a_i of each track i) and a cluster of tracks T and measurements L, the
-assignment problem has rows L then one "no measurement" row per track of T, and columns T then one new track per
-measurement of L; the costs are minus the log likelihood factors (:func:`cluster_costs`). A cluster's ranked
+assignment problem has one row per measurement of L and columns T then one new track per measurement of L; a
+track whose column no row takes is missed. Measurement l to track i costs -ln l_det(i, a_i, l) + ln l_miss(i, a_i),
+to its own new track -ln(kappa_l + e_l), to another new track +inf (forbidden); an assignment's cost plus
+-sum_i ln l_miss(i, a_i) is minus the log of its likelihood factors (:func:`cluster_costs`). Each association is one
+assignment: a square form with "no measurement" rows (whose cost-0 cells to the freed new-track columns can be
+permuted) would list every association with k detected tracks k! times. A cluster's ranked
 solutions are cached per choice of its tracks' hypotheses, so global hypotheses that differ only elsewhere share
 them. Clusters are independent, so the best joint assignments are the best sums of one solution per cluster
 (:func:`best_sums`).
@@ -72,14 +76,13 @@ def clusters(track: np.ndarray, gated: np.ndarray, n: int) -> list[tuple[np.ndar
 def cluster_costs(
     hs: np.ndarray, L: np.ndarray, log_l_miss: np.ndarray, log_l_det: np.ndarray, log_new: np.ndarray
 ) -> np.ndarray:
-    """The square cost matrix of one cluster (module docstring): ``hs`` the chosen hypothesis of each of its
-    tracks, ``L`` its measurements; +inf marks a forbidden cell."""
+    """The (|L|, |T| + |L|) cost matrix of one cluster (module docstring): ``hs`` the chosen hypothesis of each of
+    its tracks, ``L`` its measurements; +inf marks a forbidden cell. The missed factors (floored, never 0) make the
+    track costs finite wherever the detection factor is positive."""
     nT, nL = len(hs), len(L)
-    C = np.full((nL + nT, nT + nL), np.inf)
-    C[:nL, :nT] = -log_l_det[np.ix_(hs, L)].T
+    C = np.full((nL, nT + nL), np.inf)
+    C[:, :nT] = (log_l_miss[hs][:, None] - log_l_det[np.ix_(hs, L)]).T
     C[np.arange(nL), nT + np.arange(nL)] = -log_new[L]
-    C[nL + np.arange(nT), np.arange(nT)] = -log_l_miss[hs]
-    C[nL:, nT:] = 0.0
     return C
 
 
@@ -132,12 +135,11 @@ class ClusterSolver:
         else:
             sols = murty(cluster_costs(hs, L, self.log_l_miss, self.log_l_det, self.log_new), k, self.max_gap)
             self.n_murty += 1
-            costs = np.array([s[0] for s in sols])
+            costs = np.array([s[0] for s in sols]) - float(self.log_l_miss[hs].sum())
             choice = np.full((len(sols), nT), MISS, dtype=np.int64)
             for s, (_, cols) in enumerate(sols):
-                row_of = np.argsort(cols)[:nT]  # the row assigned to each track column
-                det = row_of < nL
-                choice[s, det] = L[row_of[det]]
+                det = cols < nT  # rows (measurements) assigned to a track column
+                choice[s, cols[det]] = L[det]
         self._cache[key] = (k, costs, choice)
         return costs, choice
 

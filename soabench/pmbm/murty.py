@@ -1,5 +1,6 @@
-"""Murty's ranked assignments (docs/method.md §10.3; Murty 1968): the k cheapest assignments of a square cost
-matrix, each solved with :func:`scipy.optimize.linear_sum_assignment`.
+"""Murty's ranked assignments (docs/method.md §10.3; Murty 1968): the k cheapest assignments of a cost matrix with
+no more rows than columns (every row gets a distinct column), each solved with
+:func:`scipy.optimize.linear_sum_assignment`.
 
 Forbidden cells are +inf. The best assignment is split into subproblems (Murty's partition): subproblem t keeps the
 first t pairs of the assignment, forbids its pair t, and leaves the rest free; the cheapest open subproblem gives the
@@ -29,13 +30,13 @@ def _solve(C: np.ndarray) -> tuple[float, np.ndarray] | None:
 
 
 def murty(C: np.ndarray, k: int, max_gap: float = np.inf) -> list[tuple[float, np.ndarray]]:
-    """The (at most) ``k`` cheapest assignments of the square cost matrix ``C`` (+inf: forbidden), by increasing
+    """The (at most) ``k`` cheapest assignments of the cost matrix ``C`` (rows <= columns; +inf: forbidden), by increasing
     cost: a list of (cost, cols) with ``cols[r]`` the column of row r. Only assignments that cost at most
     ``max_gap`` more than the cheapest are returned (their ranking is unchanged: the search stops there)."""
     C = np.asarray(C, dtype=float)
-    n = C.shape[0]
-    if C.shape != (n, n):
-        raise ValueError(f"Murty's algorithm needs a square cost matrix, got shape {C.shape}")
+    n, n_cols = C.shape
+    if n > n_cols:
+        raise ValueError(f"Murty's algorithm needs no more rows than columns, got shape {C.shape}")
     out: list[tuple[float, np.ndarray]] = []
     if k <= 0:
         return out
@@ -54,7 +55,7 @@ def murty(C: np.ndarray, k: int, max_gap: float = np.inf) -> list[tuple[float, n
         if len(out) == k:
             break
         forced = M.copy()
-        for t in range(t0, n - 1):  # with n - 1 rows fixed the last one has no alternative
+        for t in range(t0, n - 1 if n == n_cols else n):  # square: with n - 1 rows fixed the last has no choice
             c = cols[t]
             child = forced.copy()
             child[t, c] = np.inf

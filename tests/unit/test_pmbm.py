@@ -36,9 +36,9 @@ from soabench.types import BirthContext, Births, NewbornTerms
 
 
 def _all_assignments(C):
-    n = len(C)
+    n, n_cols = C.shape
     out = []
-    for perm in itertools.permutations(range(n)):
+    for perm in itertools.permutations(range(n_cols), n):
         cost = sum(C[r, perm[r]] for r in range(n))
         if np.isfinite(cost):
             out.append(cost)
@@ -48,9 +48,9 @@ def _all_assignments(C):
 @pytest.mark.parametrize("seed", range(12))
 def test_murty_ranks_like_enumeration(seed):
     rng = np.random.default_rng(seed)
-    n = int(rng.integers(1, 6))
-    C = rng.normal(0, 3, (n, n))
-    C[rng.random((n, n)) < 0.3] = np.inf
+    n = int(rng.integers(1, 5))
+    C = rng.normal(0, 3, (n, n + int(rng.integers(0, 3))))
+    C[rng.random(C.shape) < 0.3] = np.inf
     want = _all_assignments(C)
     got = murty(C, 10_000)
     assert len(got) == len(want)  # every feasible assignment, each once
@@ -60,6 +60,24 @@ def test_murty_ranks_like_enumeration(seed):
         assert cost == pytest.approx(C[np.arange(n), cols].sum(), abs=1e-12)
     k = max(1, len(want) // 2)
     assert [g[0] for g in murty(C, k)] == [g[0] for g in got[:k]]
+
+
+def test_each_association_is_listed_once():
+    """Two tracks gating two measurements: each measurement to track 0, track 1 or its new track, no track twice:
+    7 associations, each once, with the weights of their likelihood factors."""
+    from soabench.pmbm.association import ClusterSolver
+
+    lm, ld, ln = np.log([0.3, 0.4]), np.log([[0.5, 0.2], [0.3, 0.6]]), np.log([0.1, 0.2])
+    costs, choice = ClusterSolver([(np.arange(2), np.arange(2))], lm, ld, ln).solve(0, np.arange(2), 100)
+    assert len({tuple(c) for c in choice}) == len(choice) == 7
+    want = []
+    for c0, c1 in itertools.product((-1, 0, 1), repeat=2):  # the measurement each track takes (-1: missed)
+        if c0 == c1 != -1:
+            continue
+        f = [lm[0] if c0 < 0 else ld[0, c0], lm[1] if c1 < 0 else ld[1, c1]]
+        f += [ln[ll] for ll in (0, 1) if ll not in (c0, c1)]
+        want.append(-sum(f))
+    np.testing.assert_allclose(costs, sorted(want), rtol=0, atol=1e-12)
 
 
 def test_murty_infeasible_gives_nothing():
@@ -142,10 +160,10 @@ def _random_prior(rng):
         L = rng.normal(0, 0.3, (n, 4, 4))
         return m, L @ np.swapaxes(L, 1, 2) + np.diag([1.5, 1.5, 0.5, 0.5])
 
-    n = int(rng.integers(0, 3))
+    n = int(rng.choice([0, 1, 2, 2, 2]))
     rs, labels, starts, ws, ms, Ps, track = [], [], [0], [], [], [], []
     for i in range(n):
-        for _ in range(int(rng.integers(1, 3))):
+        for _ in range(int(rng.choice([1, 2, 2]))):
             c = int(rng.integers(1, 3))
             m, P = gauss(c)
             rs.append(rng.uniform(0.1, 1.0))
@@ -169,7 +187,7 @@ def _random_prior(rng):
     J = int(rng.integers(0, 4))
     m, P = gauss(J)
     ppp = Mixture.from_arrays(rng.uniform(0.05, 0.6, J), m, P)
-    M = int(rng.integers(0, 4))
+    M = int(rng.choice([0, 1, 2, 3, 3, 3]))
     Z = centre + rng.normal(0, 2.0, (M, 2))
     kappa = rng.uniform(0.002, 0.03, M)
     p_D_ppp = rng.uniform(0.3, 0.95, J)
