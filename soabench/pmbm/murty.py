@@ -30,8 +30,8 @@ def _solve(C: np.ndarray) -> tuple[float, np.ndarray] | None:
 
 
 def murty(C: np.ndarray, k: int, max_gap: float = np.inf) -> list[tuple[float, np.ndarray]]:
-    """The (at most) ``k`` cheapest assignments of the cost matrix ``C`` (rows <= columns; +inf: forbidden), by increasing
-    cost: a list of (cost, cols) with ``cols[r]`` the column of row r. Only assignments that cost at most
+    """The (at most) ``k`` cheapest assignments of the cost matrix ``C`` (rows <= columns; +inf: forbidden), by
+    increasing cost: a list of (cost, cols) with ``cols[r]`` the column of row r. Only assignments that cost at most
     ``max_gap`` more than the cheapest are returned (their ranking is unchanged: the search stops there)."""
     C = np.asarray(C, dtype=float)
     n, n_cols = C.shape
