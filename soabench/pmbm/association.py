@@ -121,6 +121,27 @@ class ClusterSolver:
         self._cache: dict[tuple, tuple[int, np.ndarray, np.ndarray]] = {}
         self.n_murty = 0  #: Murty runs so far
 
+    def _options(self, hs: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every association of a cluster with one track or one measurement (no measurement: every track missed),
+        unsorted: costs (K,) and choices (K, |T|)."""
+        lm, ld, ln = self.log_l_miss, self.log_l_det, self.log_new
+        nT = len(hs)
+        all_new, all_miss = -float(ln[L].sum()), -float(lm[hs].sum())
+        if nT == 1:  # missed, or detected by one of L (the others to their new tracks)
+            det = ld[hs[0], L]
+            ok = np.flatnonzero(np.isfinite(det))
+            costs = np.concatenate([[all_miss + all_new], all_new + ln[L[ok]] - det[ok]])
+            return costs, np.concatenate([[MISS], L[ok]])[:, None]
+        ell = L[0] if len(L) else -1  # one measurement: to its new track, or to one of the tracks
+        if ell < 0:
+            return np.array([all_miss]), np.full((1, nT), MISS, dtype=np.int64)
+        det = ld[hs, ell]
+        ok = np.flatnonzero(np.isfinite(det))
+        costs = np.concatenate([[all_miss + all_new], all_miss + lm[hs[ok]] - det[ok]])
+        choice = np.full((1 + len(ok), nT), MISS, dtype=np.int64)
+        choice[1 + np.arange(len(ok)), ok] = ell
+        return costs, choice
+
     def solve(self, c: int, hs: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """The (at most) ``k`` best solutions of cluster ``c`` with its tracks in hypotheses ``hs``: costs (K,)
         increasing, and the choice of each of its tracks (K, |T|): a measurement index or :data:`MISS`."""
@@ -130,12 +151,16 @@ class ClusterSolver:
         if hit is not None and (hit[0] >= k or len(hit[1]) < hit[0]):  # enough, or every solution already found
             return hit[1][:k], hit[2][:k]
         nT, nL = len(T), len(L)
-        if nL == 0:  # every track missed
-            costs, choice = np.array([-float(self.log_l_miss[hs].sum())]), np.full((1, nT), MISS, dtype=np.int64)
+        lm, ld, ln = self.log_l_miss, self.log_l_det, self.log_new
+        if nT == 1 or nL <= 1:  # one track or at most one measurement: the options are few, list them
+            costs, choice = self._options(hs, L)
+            order = np.argsort(costs, kind="stable")
+            order = order[costs[order] <= costs[order[0]] + self.max_gap][:k]
+            costs, choice = costs[order], choice[order]
         else:
-            sols = murty(cluster_costs(hs, L, self.log_l_miss, self.log_l_det, self.log_new), k, self.max_gap)
+            sols = murty(cluster_costs(hs, L, lm, ld, ln), k, self.max_gap)
             self.n_murty += 1
-            costs = np.array([s[0] for s in sols]) - float(self.log_l_miss[hs].sum())
+            costs = np.array([s[0] for s in sols]) - float(lm[hs].sum())
             choice = np.full((len(sols), nT), MISS, dtype=np.int64)
             for s, (_, cols) in enumerate(sols):
                 det = cols < nT  # rows (measurements) assigned to a track column
