@@ -60,6 +60,8 @@ FAMILIES: dict[str, FilterFamily] = {
     for f in (
         FilterFamily("gmphd", "GM-PHD", PROBABILITY_MODES, "soabench.gmphd.family:build"),
         FilterFamily("lmb", "LMB", ("static",), "soabench.lmb.family:build", section="lmb", hatch="////"),
+        FilterFamily("pmbm", "PMBM", ("static",), "soabench.pmbm.family:build", section="pmbm", hatch="xx"),
+        FilterFamily("pmb", "PMB", ("static",), "soabench.pmbm.family:build_pmb", section="pmbm", hatch=".."),
     )
 }
 #: the filter families' names (docs/method.md "LMB filter"); the first is the default
@@ -381,7 +383,7 @@ class ExperimentConfig:
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
-    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: "gmphd", "lmb"
+    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: gmphd, lmb, pmbm, pmb
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
     plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
 
@@ -479,6 +481,7 @@ class Config:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
     lmb: LMBConfig = field(default_factory=LMBConfig)
+    pmbm: PMBMConfig = field(default_factory=PMBMConfig)
     #: ``[plugins.<name>]`` tables: a plugin's own options, passed to its constructor as keyword arguments
     plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
 
@@ -496,9 +499,8 @@ class Config:
         self.filter.validate()
         self.birth.validate()
         self.metrics.validate()
-        for family in FAMILIES.values():
-            if family.section is not None:
-                self._check_family_section(family)
+        for section in dict.fromkeys(f.section for f in FAMILIES.values() if f.section is not None):
+            self._check_family_section(str(section))
         require(
             self.experiment.duration >= self.sensor.dt,
             f"duration = {self.experiment.duration!r} is shorter than one sensor period sensor.dt = {self.sensor.dt!r}",
@@ -507,18 +509,21 @@ class Config:
             require(isinstance(table, dict), f"[plugins.{name}] must be a table of option = value")
         return self
 
-    def _check_family_section(self, family: FilterFamily) -> None:
-        """Validate a family's own section; a key of it set while no run names the family is refused, not
+    def _check_family_section(self, name: str) -> None:
+        """Validate a filter family's own section (one section may serve several families, as ``[pmbm]`` serves
+        the PMBM and the PMB); a key of it set while no run names a family that reads it is refused, not
         ignored."""
-        section = getattr(self, str(family.section))
+        section = getattr(self, name)
         section.validate()
+        readers = [f for f in FAMILIES.values() if f.section == name]
         default = type(section)()
         changed = [f.name for f in dataclasses.fields(section) if getattr(section, f.name) != getattr(default, f.name)]
-        if changed and family.name not in self.experiment.filters:
+        if changed and not any(f.name in self.experiment.filters for f in readers):
+            none = " and no ".join(f"{f.label} filter" for f in readers)
             raise SoabenchError(
-                f"{family.section}.{changed[0]} = {getattr(section, changed[0])!r} is set but experiment.filters = "
-                f"{list(self.experiment.filters)!r} runs no {family.label} filter; add {family.name} "
-                f"(--filters gmphd,{family.name}) or remove the key"
+                f"{name}.{changed[0]} = {getattr(section, changed[0])!r} is set but experiment.filters = "
+                f"{list(self.experiment.filters)!r} runs no {none}; add "
+                f"{readers[0].name} (--filters gmphd,{readers[0].name}) or remove the key"
             )
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
@@ -528,9 +533,9 @@ class Config:
         unchanged)."""
         out = dataclasses.asdict(self)
         named = tuple(out["experiment"]["filters"])
-        for family in FAMILIES.values():
-            if family.section is not None and family.name not in named:
-                del out[family.section]
+        for section in dict.fromkeys(f.section for f in FAMILIES.values() if f.section is not None):
+            if not any(f.name in named for f in FAMILIES.values() if f.section == section):
+                del out[str(section)]
         if named == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
             del out["experiment"]["filters"]
         return {
