@@ -16,59 +16,12 @@ family's summed time to the GM-PHD's, measured in the same run.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import datetime
 import functools
 import sys
-import time
 
 import numpy as np
-
-MODELS = ("soa", "pubm", "ubm", "ubm-ws", "atbm", "gmbm")
-
-
-def scans_of(peds: int, duration: float, lam: float, seed: int):
-    from soabench.config import Config
-    from soabench.scenario import load, simulate
-    from soabench.seeding import trial_seeds
-    from soabench.sensor import observe
-
-    cfg = Config()
-    scene, scenario = load("intersection")
-    scenario = dataclasses.replace(scenario, n_pedestrians=peds)
-    seeds = trial_seeds(seed, 0)
-    rec = simulate(scene, scenario, seeds, duration=duration)
-    sensor = dataclasses.replace(cfg.sensor, lambda_c=float(lam))
-    return cfg, scene, sensor, seeds, observe(rec, scene, sensor, seeds.sensor_rngs())
-
-
-def births_of(name: str, cfg, scene, sensor, seeds, scans, make_filter) -> list:
-    """The births of every scan, with the previous step of ``make_filter()`` in the context."""
-    from soabench import plugins
-    from soabench.types import BirthContext
-
-    model = plugins.resolve(plugins.BIRTH, name)(cfg.birth, sensor, scene, seeds.placement_rng())
-    filt, prev, out = make_filter(), None, []
-    for scan in scans.scans:
-        out.append(model(BirthContext(scan, prev, cfg.filter.p_D)))
-        prev = filt.step(scan, out[-1])
-    return out
-
-
-def run(make_filter, scans, births, repeat: int) -> tuple[float, float]:
-    """(best total step time over ``repeat`` runs after one warm-up, mean components kept per scan)."""
-    best, kept = np.inf, 0.0
-    for r in range(repeat + 1):
-        filt = make_filter()
-        n = 0
-        t0 = time.perf_counter()
-        for scan, b in zip(scans.scans, births, strict=True):
-            n += filt.step(scan, b).n_reduced
-        dt = time.perf_counter() - t0
-        if r:
-            best = min(best, dt)
-        kept = n / len(births)
-    return best, kept
+from bench_lmb import MODELS, births_of, run, scans_of  # the same trial, births and timing loop as the LMB's bench
 
 
 def _maker(build_filter, cfg, sensor, seeds, family: str):

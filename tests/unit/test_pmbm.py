@@ -15,6 +15,7 @@ from plugin_fixtures import OneBirth
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import poisson
 from test_baselines import make_scan, make_scene
+from test_lmb import _walk_scans
 
 from soabench.birth import get_birth_model
 from soabench.config import BirthConfig, FilterConfig, PMBMConfig, SensorConfig
@@ -453,26 +454,9 @@ def test_two_pedestrians_crossing_keep_their_labels():
 # every birth model runs inside, unchanged; settings
 
 
-def _walk(K=10):
-    rng = np.random.default_rng(2)
-    scene = make_scene()
-    region = scene.sidewalk.intersection(shapely.Point(10, 0).buffer(50))
-    x = np.array([20.0, 7.5, -1.0, 0.0])
-    scans = []
-    for k in range(K):
-        x = x + np.r_[x[2:], 0, 0]
-        dx, dy = x[0] - 10.0, x[1]
-        Z = [[math.hypot(dx, dy) + rng.normal(), math.atan2(dy, dx) + rng.normal(0, 0.08)]]
-        Z += list(np.column_stack([rng.uniform(1, 50, 2), rng.uniform(-math.pi, math.pi, 2)]))
-        scan = make_scan(scene, Z=Z, k=k)
-        scan.visible_region = region
-        scans.append(scan)
-    return scene, scans
-
-
 @pytest.mark.parametrize("name", [*BUILTIN_BIRTH_MODELS, "atbm-prev", "plugin"])
 def test_every_birth_model_runs_inside(name):
-    scene, scans = _walk()
+    scene, scans = _walk_scans(10)
     for pmb in (False, True):
         runs = []
         for _ in range(2):
