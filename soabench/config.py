@@ -27,7 +27,9 @@ from soabench.errors import SoabenchError, require
 from soabench.tomlfile import read_toml
 
 BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(plugins.BUILTIN_BIRTH_MODELS)  #: the built-in birth models
-PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
+#: the probability modes (docs/method.md §4.6): static probabilities, the Beta-augmented dynamic ones, and each with
+#: the line-of-sight p_D of §4.4 (``+occ``)
+PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ", "static+occ")
 
 
 @dataclass(frozen=True)
@@ -59,9 +61,13 @@ FAMILIES: dict[str, FilterFamily] = {
     f.name: f
     for f in (
         FilterFamily("gmphd", "GM-PHD", PROBABILITY_MODES, "soabench.gmphd.family:build"),
-        FilterFamily("lmb", "LMB", ("static",), "soabench.lmb.family:build", section="lmb", hatch="////"),
-        FilterFamily("pmbm", "PMBM", ("static",), "soabench.pmbm.family:build", section="pmbm", hatch="xx"),
-        FilterFamily("pmb", "PMB", ("static",), "soabench.pmbm.family:build_pmb", section="pmbm", hatch=".."),
+        FilterFamily("lmb", "LMB", ("static", "static+occ"), "soabench.lmb.family:build", section="lmb", hatch="////"),
+        FilterFamily(
+            "pmbm", "PMBM", ("static", "static+occ"), "soabench.pmbm.family:build", section="pmbm", hatch="xx"
+        ),
+        FilterFamily(
+            "pmb", "PMB", ("static", "static+occ"), "soabench.pmbm.family:build_pmb", section="pmbm", hatch=".."
+        ),
     )
 }
 #: the filter families' names (docs/method.md "LMB filter"); the first is the default
@@ -226,7 +232,7 @@ class FilterConfig:
     gate_prob: float = 0.999  #: gate probability (chi2_2(0.999) = 13.8155)
     extract_thr: float = 0.5  #: extraction threshold
     extraction: str = "vo_ma"  #: "vo_ma" (w > 0.5, floor(w + 0.5) copies) or "top_n" (ablation)
-    occlusion_pd: bool = False  #: line-of-sight gate in p_D (§4.4); set by the "dynamic+occ" mode
+    occlusion_pd: bool = False  #: line-of-sight gate in p_D (§4.4); set by the "+occ" modes
     max_undetected_birth_age: int | None = None  #: prune n_det = 0 components older than this (§4.4)
     #: non-finite measurements, ego poses or birth components given to ``GMPHDFilter.step``: "raise" (default: they
     #: mean a broken input upstream) or "drop" (dropped and counted in ``StepResult.n_dropped``; for real sensor data)
@@ -509,21 +515,20 @@ class Config:
             require(isinstance(table, dict), f"[plugins.{name}] must be a table of option = value")
         return self
 
-    def _check_family_section(self, name: str) -> None:
-        """Validate a filter family's own section (one section may serve several families, as ``[pmbm]`` serves
-        the PMBM and the PMB); a key of it set while no run names a family that reads it is refused, not
-        ignored."""
-        section = getattr(self, name)
-        section.validate()
-        readers = [f for f in FAMILIES.values() if f.section == name]
-        default = type(section)()
-        changed = [f.name for f in dataclasses.fields(section) if getattr(section, f.name) != getattr(default, f.name)]
+    def _check_family_section(self, section: str) -> None:
+        """Validate a filter family's own section; a key of it set while the run names none of the families that
+        read it is refused, not ignored."""
+        values = getattr(self, section)
+        values.validate()
+        default = type(values)()
+        changed = [f.name for f in dataclasses.fields(values) if getattr(values, f.name) != getattr(default, f.name)]
+        readers = [f for f in FAMILIES.values() if f.section == section]
         if changed and not any(f.name in self.experiment.filters for f in readers):
-            none = " and no ".join(f"{f.label} filter" for f in readers)
+            names = " or ".join(f.name for f in readers)
             raise SoabenchError(
-                f"{name}.{changed[0]} = {getattr(section, changed[0])!r} is set but experiment.filters = "
-                f"{list(self.experiment.filters)!r} runs no {none}; add "
-                f"{readers[0].name} (--filters gmphd,{readers[0].name}) or remove the key"
+                f"{section}.{changed[0]} = {getattr(values, changed[0])!r} is set but experiment.filters = "
+                f"{list(self.experiment.filters)!r} runs no {' or '.join(f.label for f in readers)} filter; add "
+                f"{names} (--filters gmphd,{readers[0].name}) or remove the key"
             )
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
@@ -533,9 +538,9 @@ class Config:
         unchanged)."""
         out = dataclasses.asdict(self)
         named = tuple(out["experiment"]["filters"])
-        for section in dict.fromkeys(f.section for f in FAMILIES.values() if f.section is not None):
-            if not any(f.name in named for f in FAMILIES.values() if f.section == section):
-                del out[str(section)]
+        read = {f.section for f in FAMILIES.values() if f.name in named}
+        for section in {f.section for f in FAMILIES.values() if f.section is not None} - read:
+            del out[section]
         if named == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
             del out["experiment"]["filters"]
         return {
@@ -636,13 +641,15 @@ def _derived_message(key: str, value: Any) -> str:
 def filter_config_for_mode(cfg: FilterConfig, mode: str) -> tuple[FilterConfig, str, float]:
     """Filter settings of a probability mode (docs/method.md §4.6): ``(filter_cfg, filter_mode, p_D_b)``.
 
-    ``static`` and ``dynamic`` use ``cfg`` as given; ``dynamic+occ`` is ``dynamic`` with the line-of-sight gate
-    (``occlusion_pd``). ``p_D_b`` is the detection probability of a newborn term: p_D in static mode, the Beta prior
-    mean mu_D0 in the dynamic modes (§4.2).
+    ``static`` and ``dynamic`` use ``cfg`` as given; ``static+occ`` and ``dynamic+occ`` are ``static`` and ``dynamic``
+    with the line-of-sight gate of §4.4 (``occlusion_pd``). ``p_D_b`` is the detection probability of a newborn
+    term: p_D in the static modes, the Beta prior mean mu_D0 in the dynamic modes (§4.2).
     """
     _one_of("probability mode", mode, PROBABILITY_MODES)
     if mode == "static":
         return cfg, "static", cfg.p_D
+    if mode == "static+occ":
+        return dataclasses.replace(cfg, occlusion_pd=True), "static", cfg.p_D
     if mode == "dynamic+occ":
         return dataclasses.replace(cfg, occlusion_pd=True), "dynamic", cfg.mu_D0
     return cfg, "dynamic", cfg.mu_D0

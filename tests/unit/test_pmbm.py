@@ -18,7 +18,7 @@ from test_baselines import make_scan, make_scene
 from test_lmb import _walk_scans
 
 from soabench.birth import get_birth_model
-from soabench.config import BirthConfig, FilterConfig, PMBMConfig, SensorConfig
+from soabench.config import BirthConfig, Config, FilterConfig, PMBMConfig, SensorConfig
 from soabench.errors import SoabenchError
 from soabench.geometry import clutter_intensity, wrap
 from soabench.gmphd.mixture import Mixture
@@ -30,6 +30,7 @@ from soabench.plugins import BUILTIN_BIRTH_MODELS
 from soabench.pmbm import Hypotheses, PMBMDensity, PMBMFilter, murty
 from soabench.pmbm.pmb import collapse
 from soabench.pmbm.update import update
+from soabench.trackers import build_filter
 from soabench.types import BirthContext, Births, NewbornTerms
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -339,8 +340,12 @@ BEHIND = np.array([0.0, 30.0, 0.0, 0.0])  # behind the building box(-50, 10, 25,
 OPEN = np.array([35.0, 0.0, 0.0, 0.0])
 
 
-def _occlusion_filter(occlusion):
-    return PMBMFilter(FilterConfig(occlusion_pd=occlusion), SensorConfig())
+def _occlusion_filter(occlusion, family="pmbm"):
+    """The family's filter as a run builds it in the static+occ (line of sight) or the static mode."""
+    cfg = Config()
+    filt, _ = build_filter(family, cfg, cfg.sensor, "static+occ" if occlusion else "static")
+    assert filt.cfg.occlusion_pd == occlusion and filt.pmb == (family == "pmb")
+    return filt
 
 
 def test_T40_occluded_intensity_keeps_its_weight():
@@ -348,8 +353,8 @@ def test_T40_occluded_intensity_keeps_its_weight():
     scan = make_scan(scene, ego=(10.0, 0.0, 0.0))
     P = np.diag([1.0, 1.0, 0.5, 0.5])
     births = Births(np.array([0.2, 0.2]), np.array([BEHIND, OPEN]), np.array([P, P]), np.zeros(2, np.int8))
-    for occlusion, kept_behind in ((True, 1.0), (False, 0.02)):
-        filt = _occlusion_filter(occlusion)
+    for (occlusion, kept_behind), family in itertools.product(((True, 1.0), (False, 0.02)), ("pmbm", "pmb")):
+        filt = _occlusion_filter(occlusion, family)
         filt.step(scan, births)
         ppp = filt.density.ppp
         behind = np.flatnonzero(np.all(ppp.m == BEHIND, axis=1))

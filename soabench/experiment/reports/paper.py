@@ -19,7 +19,12 @@ from scipy import stats
 
 from soabench.birth import BASELINES, LABEL
 
-MODE_LABEL = {"static": "without dyn. p", "dynamic": "with dyn. p", "dynamic+occ": "dyn. p + occlusion"}
+MODE_LABEL = {
+    "static": "without dyn. p",
+    "dynamic": "with dyn. p",
+    "dynamic+occ": "dyn. p + occlusion",
+    "static+occ": "static p + occlusion",
+}
 
 #: The paper's numbers; its UBM spreads the grid "uniformly across the workspace", so they stand beside our
 #: ``ubm-ws``. Our ``ubm`` (the grid clipped to the field of view) has no paper counterpart: its paper cells are "-".
