@@ -62,6 +62,12 @@ def _segments(counts: np.ndarray) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
+def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The concatenated ranges starts[i] .. starts[i] + counts[i] - 1."""
+    ends = np.cumsum(counts)
+    return np.repeat(starts - (ends - counts), counts) + np.arange(ends[-1] if len(ends) else 0)
+
+
 def update(
     pred: PMBMDensity,
     Z: np.ndarray,
@@ -148,144 +154,97 @@ def update(
     old_inv = old_inv.reshape(B, n)
     h_par, h_choice = np.divmod(old_u, M + 1)
     h_choice = h_choice - 1
-    miss = h_choice == MISS
     # a track's kept children: the old codes are grouped by parent hypothesis, hence by track (pred.track sorted)
     child_track = pred.track[h_par]
 
-    # --- the children's densities
-    parts_r, parts_count, parts_w, parts_m, parts_P = [], [], [], [], []
-    pairs_c, pairs_l, pairs_slot = [], [], []  # Kalman pairs (component row in m_all, measurement, output slot)
-    n_out = 0
-    labels, origins, ages = [], [], []
-    for u in range(len(old_u)):
-        h = h_par[u]
-        a, b = hyps.start[h], hyps.start[h + 1]
-        labels.append(hyps.label[h])
-        origins.append(hyps.origin[h])
-        ages.append(hyps.age[h])
-        if miss[u]:
-            lr = log_r[h] + log_eta_miss[h] - log_l_miss_exact[h]
-            r_new = float(np.exp(lr)) if np.isfinite(lr) else 0.0
-            if np.isfinite(log_eta_miss[h]):
-                w = np.exp(log_miss[a:b] - log_eta_miss[h])
-                sel = np.flatnonzero(w > 0.0)
-                w = w[sel]
-            else:  # every component has p_D = 1: r' = 0, the prior density is kept
-                sel = np.arange(b - a)
-                w = hyps.w[a:b]
-            parts_r.append(r_new)
-            parts_count.append(len(sel))
-            parts_w.append(w)
-            parts_m.append(hyps.m[a + sel])
-            parts_P.append(hyps.P[a + sel])
-            n_out += len(sel)
-        else:
-            ell = h_choice[u]
-            w = np.exp(log_det[a:b, ell] - log_eta_det[h, ell])
-            sel = np.flatnonzero(w > 0.0)
-            parts_r.append(1.0)
-            parts_count.append(len(sel))
-            parts_w.append(w[sel])
-            parts_m.append(None)
-            parts_P.append(None)
-            pairs_c.append(J + a + sel)
-            pairs_l.append(np.full(len(sel), ell))
-            pairs_slot.append(n_out + np.arange(len(sel)))
-            n_out += len(sel)
-    # new tracks: "is its own" then "went to a track", per measurement with e_l > 0
+    # --- the children's densities, as component records (child, source row, measurement for a Kalman update or -1,
+    # weight); a child's records are its density's components in order
+    n_old_u = len(old_u)
+    start = hyps.start
+    cnt = start[h_par + 1] - start[h_par]
+    child = np.repeat(np.arange(n_old_u), cnt)
+    comp = _ranges(start[h_par], cnt)  # component index in hyps
+    ell = np.repeat(h_choice, cnt)
+    hp = np.repeat(h_par, cnt)
+    det = ell != MISS
+    w_rec = np.empty(len(comp))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.flatnonzero(det)
+        w_rec[d] = np.exp(log_det[comp[d], ell[d]] - log_eta_det[hp[d], ell[d]])
+        mi = np.flatnonzero(~det)
+        degenerate = ~np.isfinite(log_eta_miss[hp[mi]])  # every component has p_D = 1: the prior density is kept
+        w_rec[mi] = np.where(degenerate, hyps.w[comp[mi]], np.exp(log_miss[comp[mi]] - log_eta_miss[hp[mi]]))
+        lr = log_r[h_par] + log_eta_miss[h_par] - log_l_miss_exact[h_par]
+    r_old = np.where(h_choice == MISS, np.where(np.isfinite(lr), np.exp(lr), 0.0), 1.0)
+    keep_rec = w_rec > 0.0
+    rec_child, rec_row, rec_ell, rec_w = child[keep_rec], J + comp[keep_rec], ell[keep_rec], w_rec[keep_rec]
+    rec_nb = np.full(len(rec_child), -1, dtype=np.int64)  # newborn term of a record (-1: none)
+
+    # new tracks: "went to a track" (code 0, r = 0) then "is its own" (code 1), per measurement with e_l > 0
     n_new = len(new_l)
-    used_new = [np.unique(new_code[:, t]) for t in range(n_new)]
-    new_track_hyps = []
-    for t, ell in enumerate(new_l):
-        w_ppp = np.exp(log_t[:, ell] - log_e[ell])
-        sel = np.flatnonzero(w_ppp > 0.0)
-        w_nb = float(np.exp(log_beta[ell] - log_e[ell])) if beta[ell] > 0.0 else 0.0
-        r_is = float(np.exp(log_e[ell] - log_new[ell]))
-        heaviest_nb = w_nb > 0.0 and (len(sel) == 0 or w_nb >= w_ppp[sel].max())
-        origin = SOURCE_MEAS if heaviest_nb else int(ppp.origin[sel[np.argmax(w_ppp[sel])]])
-        comps_w = np.concatenate([w_ppp[sel], [w_nb] if w_nb > 0.0 else []])
-        hyps_here = []
-        for code in used_new[t]:
-            labels.append(label0 + ell)
-            origins.append(origin)
-            ages.append(0)
-            if code == 1:
-                parts_r.append(r_is)
-                k = len(comps_w)
-                parts_count.append(k)
-                parts_w.append(comps_w)
-                if w_nb > 0.0:
-                    nb_m = np.asarray(newborn.m, dtype=float).reshape(-1, 4)[ell : ell + 1]
-                    nb_P = np.asarray(newborn.P, dtype=float).reshape(-1, 4, 4)[ell : ell + 1]
-                    parts_m.append(np.concatenate([np.full((len(sel), 4), np.nan), nb_m]))
-                    parts_P.append(np.concatenate([np.full((len(sel), 4, 4), np.nan), nb_P]))
-                else:
-                    parts_m.append(None)
-                    parts_P.append(None)
-                pairs_c.append(sel)
-                pairs_l.append(np.full(len(sel), ell))
-                pairs_slot.append(n_out + np.arange(len(sel)))
-                n_out += k
-            else:  # r = 0: any density; one component, the heaviest PPP term's prediction
-                j = sel[np.argmax(w_ppp[sel])] if len(sel) else None
-                parts_r.append(0.0)
-                parts_count.append(1)
-                parts_w.append(np.ones(1))
-                if j is not None:
-                    parts_m.append(ppp.m[j : j + 1])
-                    parts_P.append(ppp.P[j : j + 1])
-                else:
-                    parts_m.append(np.asarray(newborn.m, dtype=float).reshape(-1, 4)[ell : ell + 1])
-                    parts_P.append(np.asarray(newborn.P, dtype=float).reshape(-1, 4, 4)[ell : ell + 1])
-                n_out += 1
-            hyps_here.append(code)
-        new_track_hyps.append(hyps_here)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        W = np.exp(log_t[:, new_l] - log_e[new_l])  # (J, n_new) the new tracks' intensity terms
+        w_nb = np.where(beta[new_l] > 0.0, np.exp(log_beta[new_l] - log_e[new_l]), 0.0)
+    used0 = (new_code == 0).any(axis=0)
+    used1 = (new_code == 1).any(axis=0)
+    n_hyp_new = used0.astype(np.int64) + used1
+    first = n_old_u + np.concatenate([[0], np.cumsum(n_hyp_new)[:-1]]).astype(np.int64)  # first child of each
+    is_child = first + used0  # the child index of "is its own" (when used1)
+    not_child = first
+    heaviest = np.argmax(np.where(W > 0.0, W, -1.0), axis=0) if J else np.zeros(n_new, dtype=np.int64)
+    any_ppp = (W > 0.0).any(axis=0) if J else np.zeros(n_new, dtype=bool)
+    nb_heavier = (w_nb > 0.0) & (~any_ppp | (w_nb >= (W[heaviest, np.arange(n_new)] if J else 0.0)))
+    new_origin = np.where(nb_heavier, SOURCE_MEAS, ppp.origin[heaviest] if J else SOURCE_MEAS)
+    # "is its own": the intensity's Kalman-updated terms, then the newborn component
+    tt, jj = np.nonzero((W > 0.0).T & used1[:, None])
+    nb_t = np.flatnonzero(used1 & (w_nb > 0.0))
+    # "went to a track": one component, the heaviest intensity term's prediction or the newborn component
+    n0 = np.flatnonzero(used0)
+    n0_ppp = n0[any_ppp[n0]]
+    n0_nb = n0[~any_ppp[n0]]
+    rec_child = np.concatenate([rec_child, is_child[tt], is_child[nb_t], not_child[n0_ppp], not_child[n0_nb]])
+    zeros = np.zeros(len(nb_t) + len(n0_nb), dtype=np.int64)
+    rec_row = np.concatenate([rec_row, jj, zeros[: len(nb_t)], heaviest[n0_ppp], zeros[len(nb_t) :]])
+    rec_ell = np.concatenate([rec_ell, new_l[tt], np.full(len(nb_t) + len(n0), MISS)])
+    rec_w = np.concatenate([rec_w, W[jj, tt], w_nb[nb_t], np.ones(len(n0))])
+    rec_nb = np.concatenate([rec_nb, np.full(len(tt), -1), new_l[nb_t], np.full(len(n0_ppp), -1), new_l[n0_nb]])
+    order = np.argsort(rec_child, kind="stable")  # records of a child contiguous, in the order listed
+    rec_child, rec_row, rec_ell, rec_w, rec_nb = (x[order] for x in (rec_child, rec_row, rec_ell, rec_w, rec_nb))
 
-    w_all = np.concatenate(parts_w) if parts_w else np.zeros(0)
-    m_out = np.full((n_out, 4), np.nan)
-    P_out = np.full((n_out, 4, 4), np.nan)
-    pos = 0
-    for cnt, mm, PP in zip(parts_count, parts_m, parts_P, strict=True):
-        if mm is not None:
-            ok = np.isfinite(mm[:, 0])
-            m_out[pos : pos + cnt][ok] = mm[ok]
-            P_out[pos : pos + cnt][ok] = PP[ok]
-        pos += cnt
-    n_pairs = 0
-    if pairs_c:
-        pc, pl, ps = np.concatenate(pairs_c), np.concatenate(pairs_l), np.concatenate(pairs_slot)
-        n_pairs = len(pc)
-        if n_pairs:
-            order_p = np.argsort(pc, kind="stable")
-            mk, Pk = kalman_pairs(m_all, P_all, terms, model.R, pc[order_p], pl[order_p], nu_r, nu_b)
-            m_out[ps[order_p]] = mk
-            P_out[ps[order_p]] = Pk
+    n_out = len(rec_w)
+    m_out = np.empty((n_out, 4))
+    P_out = np.empty((n_out, 4, 4))
+    plain = (rec_ell == MISS) & (rec_nb < 0)
+    m_out[plain], P_out[plain] = m_all[rec_row[plain]], P_all[rec_row[plain]]
+    nb = rec_nb >= 0
+    if nb.any():
+        m_out[nb] = np.asarray(newborn.m, dtype=float).reshape(-1, 4)[rec_nb[nb]]
+        P_out[nb] = np.asarray(newborn.P, dtype=float).reshape(-1, 4, 4)[rec_nb[nb]]
+    kal = np.flatnonzero(rec_ell != MISS)
+    n_pairs = len(kal)
+    if n_pairs:
+        order_p = kal[np.argsort(rec_row[kal], kind="stable")]
+        mk, Pk = kalman_pairs(m_all, P_all, terms, model.R, rec_row[order_p], rec_ell[order_p], nu_r, nu_b)
+        m_out[order_p], P_out[order_p] = mk, Pk
 
-    counts = np.asarray(parts_count, dtype=np.int64)
+    n_child = n_old_u + int(n_hyp_new.sum())
+    counts = np.bincount(rec_child, minlength=n_child)
+    new_t = np.repeat(np.arange(n_new), n_hyp_new)
+    is_code = np.concatenate([[c for c in (0, 1) if (used0[t] if c == 0 else used1[t])] for t in range(n_new)] or [[]])
+    r_new = np.where(is_code == 1, np.exp(log_e[new_l] - log_new[new_l])[new_t], 0.0)
     post_hyps = Tracks(
-        np.asarray(parts_r, dtype=float),
-        np.asarray(labels, dtype=np.int64),
-        np.asarray(origins, dtype=np.int8),
-        np.asarray(ages, dtype=np.int32),
+        np.concatenate([r_old, r_new]),
+        np.concatenate([hyps.label[h_par], label0 + new_l[new_t]]).astype(np.int64),
+        np.concatenate([hyps.origin[h_par], new_origin[new_t]]).astype(np.int8),
+        np.concatenate([hyps.age[h_par], np.zeros(len(new_t), np.int32)]).astype(np.int32),
         _segments(counts),
-        w_all,
+        rec_w,
         m_out,
         P_out,
     )
     # the new table: old tracks' columns index their children, new tracks' columns follow
-    n_old_h = len(old_u)
-    table_old = old_inv
-    new_cols = []
-    offset = n_old_h
-    for t in range(n_new):
-        codes = np.asarray(new_track_hyps[t])
-        new_cols.append(offset + np.searchsorted(codes, new_code[:, t]))
-        offset += len(codes)
-    table = np.hstack([table_old] + [c[:, None] for c in new_cols]) if n_new else table_old
-    track_of = np.concatenate(
-        [child_track] + [np.full(len(new_track_hyps[t]), n + t, dtype=np.int64) for t in range(n_new)]
-    ).astype(np.int64)
-
+    table = np.hstack([old_inv, first[None, :] + (new_code & used0[None, :])]) if n_new else old_inv
+    track_of = np.concatenate([child_track, n + new_t]).astype(np.int64)
     density = _prune_tracks(PMBMDensity(ppp_missed(ppp, p_D[:J]), post_hyps, track_of, table, log_w), hyp.r_floor)
     return UpdateResult(density, A, beta, n_pairs, n_new, solver.n_murty, n_global)
 
