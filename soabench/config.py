@@ -62,6 +62,12 @@ FAMILIES: dict[str, FilterFamily] = {
     for f in (
         FilterFamily("gmphd", "GM-PHD", PROBABILITY_MODES, "soabench.gmphd.family:build"),
         FilterFamily("lmb", "LMB", ("static", "static+occ"), "soabench.lmb.family:build", section="lmb", hatch="////"),
+        FilterFamily(
+            "pmbm", "PMBM", ("static", "static+occ"), "soabench.pmbm.family:build", section="pmbm", hatch="xx"
+        ),
+        FilterFamily(
+            "pmb", "PMB", ("static", "static+occ"), "soabench.pmbm.family:build_pmb", section="pmbm", hatch=".."
+        ),
     )
 }
 #: the filter families' names (docs/method.md "LMB filter"); the first is the default
@@ -396,7 +402,7 @@ class ExperimentConfig:
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
-    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: "gmphd", "lmb"
+    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: gmphd, lmb, pmbm, pmb
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
     plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
 
@@ -460,6 +466,30 @@ class LMBConfig:
         return self
 
 
+#: the ways the PMB variant computes its marginal association probabilities (docs/method.md §10.5)
+PMB_MARGINALS = ("murty",)
+
+
+@dataclass
+class PMBMConfig:
+    """The PMBM filter and its PMB variant, read by runs whose experiment.filters names pmbm or pmb (docs/method.md
+    §10, register rows 36-37). A key set here while no run reads it is refused."""
+
+    M_max: int = 100  #: global hypotheses kept; each prior global hypothesis a asks Murty for ceil(M_max w_a)
+    w_floor: float = 1e-4  #: global hypotheses of weight below this are dropped (then renormalised)
+    r_floor: float = 1e-5  #: a track whose every single-target hypothesis has r below this is dropped
+    J_h: int = 10  #: Gaussian components kept per single-target hypothesis
+    marginals: str = "murty"  #: the PMB's marginals: from the Murty hypotheses
+
+    def validate(self) -> PMBMConfig:
+        _int_range("pmbm.M_max", self.M_max, 1, 100_000)
+        _in_range("pmbm.w_floor", self.w_floor, 0.0, 1.0, hi_open=True)
+        _in_range("pmbm.r_floor", self.r_floor, 0.0, 1.0, hi_open=True)
+        _int_range("pmbm.J_h", self.J_h, 1, 10_000)
+        _one_of("pmbm.marginals", self.marginals, PMB_MARGINALS)
+        return self
+
+
 @dataclass
 class Config:
     """The full resolved configuration of a run."""
@@ -470,6 +500,7 @@ class Config:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
     lmb: LMBConfig = field(default_factory=LMBConfig)
+    pmbm: PMBMConfig = field(default_factory=PMBMConfig)
     #: ``[plugins.<name>]`` tables: a plugin's own options, passed to its constructor as keyword arguments
     plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
 
