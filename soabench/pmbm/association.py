@@ -208,8 +208,9 @@ def new_global_hypotheses(
         feasible &= n_sol[inv] > 0
         single = (n_sol[inv] == 1) | (ks == 1)
         base[single] += costs0[inv[single]]
-        for a in np.flatnonzero(single & (n_sol[inv] > 0)):
-            fixed[a, T] = sols[inv[a]][1][0]
+        first = np.stack([s[1][0] if len(s[0]) else np.full(len(T), MISS, dtype=np.int64) for s in sols])
+        rows = np.flatnonzero(single)
+        fixed[np.ix_(rows, T)] = first[inv[rows]]
         for a in np.flatnonzero(~single):
             multi[a].append((T, *sols[inv[a]]))
     parents, choices, logs = [], [], []
