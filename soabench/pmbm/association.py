@@ -81,8 +81,9 @@ def cluster_costs(
     track costs finite wherever the detection factor is positive."""
     nT, nL = len(hs), len(L)
     C = np.full((nL, nT + nL), np.inf)
-    C[:, :nT] = (log_l_miss[hs][:, None] - log_l_det[np.ix_(hs, L)]).T
-    C[np.arange(nL), nT + np.arange(nL)] = -log_new[L]
+    C[:, :nT] = (log_l_miss[hs][:, None] - log_l_det[hs][:, L]).T
+    idx = np.arange(nL)
+    C[idx, nT + idx] = -log_new[L]
     return C
 
 
