@@ -214,7 +214,10 @@ def stamp_path() -> Path:
     import importlib.metadata
     import importlib.util
 
-    parts = [sys.version, importlib.metadata.version("numba"), importlib.metadata.version("soabench")]
+    import soabench
+
+    # soabench's own version from the package, not from installed metadata: a checkout on PYTHONPATH has none
+    parts = [sys.version, importlib.metadata.version("numba"), soabench.__version__]
     for name in KERNEL_MODULES:
         spec = importlib.util.find_spec(name)
         origin = spec.origin if spec is not None and spec.origin else ""
