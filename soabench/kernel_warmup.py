@@ -13,8 +13,8 @@ extrapolates an ETA from trials that were mostly compiling. Instead, the driver 
 * the trials then load machine code from the cache (about a second per process) and the ETA counts trials only;
 * one line says so, once per run, on its own line; off a terminal (CI, ``2> log``) a line follows every
   :data:`LINE_INTERVAL_S` seconds while it lasts;
-* a stamp file in the cache folder records that the kernels of this soabench, numba and Python (and these kernel
-  sources: path and content, as numba's own cache key) were compiled, so a later run starts no process at all.
+* a stamp file in the kernels' cache folder (keyed by their sources, numba and Python: :mod:`soabench.cache`)
+  records that they were compiled, so a later run starts no process at all.
 
 Each group calls the kernels with small inputs of the types a trial passes (the filter's own argument packing),
 so the trials find exactly these specialisations in the cache. Compiling changes no number: the arithmetic is the
@@ -24,7 +24,6 @@ they need) and is never fatal.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import sys
 import time
@@ -38,23 +37,12 @@ import numpy as np
 from soabench import notice
 from soabench.birth import sampling
 from soabench.birth.soa import dedup, ego_inside
-from soabench.cache import configure_numba_cache
+from soabench.cache import kernel_folder
 from soabench.config import Config, MetricsConfig
 from soabench.experiment.execution.progress import LINE_INTERVAL_S, is_terminal
 from soabench.sensor import segment_meets_convex
 from soabench.types import Births, NewbornTerms, Obstacles, Scan
 
-#: the modules whose kernels are compiled here (their source files key the stamp, as they key numba's cache)
-KERNEL_MODULES = (
-    "soabench.gmphd.clock",
-    "soabench.gmphd.kernels",
-    "soabench.gmphd.cycle",
-    "soabench.metrics_kernels",
-    "soabench.geometry_kernels",
-    "soabench.tracks.kernels",
-    "soabench.lmb.gibbs",
-    "soabench.lmb.tracks",
-)
 MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version) ..."
 
 
@@ -210,21 +198,9 @@ def _run_group(fn: Callable[[], None]) -> None:
 
 
 def stamp_path() -> Path:
-    """The file that marks this soabench's kernels compiled for this numba and Python in the cache folder."""
-    import importlib.metadata
-    import importlib.util
-
-    import soabench
-
-    # soabench's own version from the package, not from installed metadata: a checkout on PYTHONPATH has none
-    parts = [sys.version, importlib.metadata.version("numba"), soabench.__version__]
-    for name in KERNEL_MODULES:
-        spec = importlib.util.find_spec(name)
-        origin = spec.origin if spec is not None and spec.origin else ""
-        digest = hashlib.sha256(Path(origin).read_bytes()).hexdigest()
-        parts += [origin, digest]  # numba keys its cache on the path and the content of the source file too
-    key = hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
-    return configure_numba_cache() / f"soabench-kernels-{key}.ready"
+    """The file that marks this soabench's kernels compiled, in their cache folder
+    (:func:`soabench.cache.kernel_folder`: keyed by the kernel sources, numba and Python)."""
+    return kernel_folder() / "compiled.ready"
 
 
 def compiled() -> bool:
@@ -269,6 +245,7 @@ def ensure_compiled(stream: TextIO | None = None, workers: int | None = None) ->
     took = time.monotonic() - t0
     if ok:
         try:
+            stamp_path().parent.mkdir(parents=True, exist_ok=True)
             stamp_path().write_text(f"compiled in {took:.1f} s\n")
         except OSError:
             pass
