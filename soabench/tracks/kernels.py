@@ -43,16 +43,34 @@ def scan_similarity(gx, g0, ng, ex, e0, ne, d_gate):  # pragma: no cover - compi
 
 @njit(cache=True)
 def _equal_rows(C):  # pragma: no cover - compiled
-    """True if two rows of ``C`` are equal and not all zero."""
+    """True if two rows of ``C`` are equal and not all zero. Two such rows have their first non-zero entry in the
+    same column, so only rows that share it are compared (from that column on)."""
     a, b = C.shape
+    first = np.full(a, b, dtype=np.int64)  # b: an all-zero row
     for i in range(a):
-        for j in range(i + 1, a):
-            same, nonzero = True, False
-            for c in range(b):
-                same = same and C[i, c] == C[j, c]
-                nonzero = nonzero or C[i, c] != 0.0
-            if same and nonzero:
-                return True
+        for c in range(b):
+            if C[i, c] != 0.0:
+                first[i] = c
+                break
+    order = np.argsort(first, kind="mergesort")
+    s = 0
+    while s < a:
+        e = s + 1
+        while e < a and first[order[e]] == first[order[s]]:
+            e += 1
+        f = first[order[s]]
+        if f < b:
+            for x in range(s, e):
+                for y in range(x + 1, e):
+                    i, j = order[x], order[y]
+                    same = True
+                    for c in range(f, b):
+                        if C[i, c] != C[j, c]:
+                            same = False
+                            break
+                    if same:
+                        return True
+        s = e
     return False
 
 
@@ -61,6 +79,67 @@ def _tied(C):  # pragma: no cover - compiled
     """True if two rows or two columns of ``C`` are equal and not all zero: then several assignments are optimal
     and which one is taken can change the matches (a zero row or column is never a kept match)."""
     return _equal_rows(C) or _equal_rows(np.ascontiguousarray(C.T))
+
+
+@njit(cache=True)
+def _root(parent, x):  # pragma: no cover - compiled
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@njit(cache=True)
+def sparse_assignment(C):  # pragma: no cover - compiled
+    """(rows, cols) of the pairs with a non-zero cost in a minimum-cost assignment of ``C`` (a, b) whose entries
+    are <= 0, sorted by row.
+
+    A pair of zero cost changes no total, so a minimum-cost assignment's non-zero pairs are a minimum-cost matching
+    of the graph of non-zero entries, which splits into that graph's connected components: each is assigned on its
+    own rows and columns (:func:`soabench.metrics_kernels.assignment`). Where the optimum is unique (:func:`_tied`
+    sends the ties equal rows or columns make to scipy) these are the non-zero pairs of the whole matrix's
+    assignment."""
+    a, b = C.shape
+    parent = np.arange(a + b)
+    for i in range(a):
+        for j in range(b):
+            if C[i, j] != 0.0:
+                ri, rj = _root(parent, i), _root(parent, a + j)
+                if ri != rj:
+                    parent[max(ri, rj)] = min(ri, rj)
+    comp = np.empty(a + b, dtype=np.int64)
+    for x in range(a + b):
+        comp[x] = _root(parent, x)
+    out_r = np.empty(min(a, b), dtype=np.int64)
+    out_c = np.empty(min(a, b), dtype=np.int64)
+    n = 0
+    rows = np.empty(a, dtype=np.int64)
+    cols = np.empty(b, dtype=np.int64)
+    for r0 in range(a):
+        if comp[r0] != r0:  # a component is handled at its root, its smallest row
+            continue
+        na = nb = 0
+        for i in range(a):
+            if comp[i] == r0:
+                rows[na] = i
+                na += 1
+        for j in range(b):
+            if comp[a + j] == r0:
+                cols[nb] = j
+                nb += 1
+        if nb == 0:
+            continue
+        sub = np.empty((na, nb))
+        for x in range(na):
+            for y in range(nb):
+                sub[x, y] = C[rows[x], cols[y]]
+        sr, sc = assignment(sub)
+        for t in range(len(sr)):
+            if sub[sr[t], sc[t]] != 0.0:
+                out_r[n], out_c[n] = rows[sr[t]], cols[sc[t]]
+                n += 1
+    order = np.argsort(out_r[:n], kind="mergesort")
+    return out_r[:n][order], out_c[:n][order]
 
 
 @njit(cache=True)
@@ -93,14 +172,14 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
                     Q[i, j] = 0.0 if S[i, j] < threshold - _EPS else -score
             if _tied(C) or _tied(Q):
                 return t
-            rows, cols = assignment(C)
+            rows, cols = sparse_assignment(C)  # the pairs of zero similarity are never a match
             n = counts[4]
             for r in range(len(rows)):
                 hg[n + r] = g_ids[g0 + rows[r]]
                 he[n + r] = e_ids[e0 + cols[r]]
                 hs[n + r] = S[rows[r], cols[r]]
             counts[4] = n + len(rows)
-            rows, cols = assignment(Q)
+            rows, cols = sparse_assignment(Q)  # the zero entries are never kept
             for i in range(ng):
                 gt_seen[g_ids[g0 + i]] += 1
             untracked = prev_scan < 0

@@ -108,3 +108,31 @@ def test_ospa2_far_pairs_apart_equals_every_pair(seed, window):
     seq = TrackSequence.of(*crowd_sequence(seed, K=90))
     got = ospa2(*crowd_sequence(seed, K=90), c=10.0, p=1.0, window=window).series[:, 0]
     np.testing.assert_array_equal(got, ospa2_every_pair(seq, 10.0, 1.0, window))
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_sparse_assignment_keeps_the_nonzero_pairs_of_the_whole_assignment(seed):
+    """Clusters of non-zero (negative, continuous: one optimum) costs among zeros, rows and columns without any:
+    the non-zero pairs of the whole matrix's minimum-cost assignment, in row order."""
+    from soabench.tracks.kernels import sparse_assignment
+
+    rng = np.random.default_rng(seed)
+    a, b = int(rng.integers(1, 30)), int(rng.integers(1, 30))
+    C = np.where(rng.random((a, b)) < rng.uniform(0.02, 0.3), -rng.random((a, b)), 0.0)
+    rows, cols = linear_sum_assignment(C)
+    keep = C[rows, cols] != 0
+    got = sparse_assignment(C)
+    np.testing.assert_array_equal(got[0], rows[keep])
+    np.testing.assert_array_equal(got[1], cols[keep])
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_equal_rows_as_compared_pair_by_pair(seed):
+    """Rows with few values (zeros, repeats, -0.0): the same answer as comparing every pair of rows."""
+    from soabench.tracks.kernels import _equal_rows
+
+    rng = np.random.default_rng(seed)
+    a, b = int(rng.integers(1, 12)), int(rng.integers(1, 6))
+    C = rng.choice([0.0, -0.0, -0.5, -1.0], size=(a, b), p=[0.6, 0.1, 0.15, 0.15])
+    expected = any((C[i] == C[j]).all() and (C[i] != 0).any() for i in range(a) for j in range(i + 1, a))
+    assert _equal_rows(C) == expected
