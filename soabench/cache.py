@@ -43,6 +43,7 @@ KERNEL_MODULES = (
     "lmb/gibbs.py",
     "lmb/tracks.py",
     "kitti/lidar_raster.py",
+    "pmbm/association.py",
 )
 
 PACKAGE_DIR = Path(__file__).resolve().parent

@@ -100,3 +100,17 @@ def test_the_cache_follows_the_kernel_sources_not_their_path(tmp_path):
     other.write_text(other.read_text() + "\n# a changed kernel source\n")
     assert _hits_misses(second, cache) == (0, 1)  # compiled again
     assert _hits_misses(first, cache) == (1, 0)  # the unchanged sources keep their own
+
+
+def test_every_module_with_kernels_keys_the_cache():
+    """A module that compiles with numba and is missing from KERNEL_MODULES would not renew the cache folder when it
+    changes (a kernel inlined from it elsewhere would stay stale)."""
+    from soabench.cache import KERNEL_MODULES
+
+    package = Path(soabench.__file__).parent
+    using = {
+        p.relative_to(package).as_posix()
+        for p in package.rglob("*.py")
+        if "from numba import" in p.read_text() or "@njit" in p.read_text()
+    }
+    assert using == set(KERNEL_MODULES)
