@@ -86,6 +86,7 @@ DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
+MAX_GAP_BINS = 12  #: most occlusion-gap length bins (metrics.gap_bins)
 MAX_DURATION = 86400.0  #: longest simulated time (s): experiment.duration and a snapshot's --time / --duration
 
 
@@ -365,6 +366,7 @@ class MetricsConfig:
     confirm_n: int = 1  #: consecutive associated steps needed for initiation
     censored: str = "exclude"  #: "exclude" (count separately) or "lower_bound"
     ddof: int = 0  #: per-trial sigma convention
+    gap_bins: tuple[int, ...] = (1, 2, 4, 8)  #: first scan count of each occlusion-gap length bin (1, 2-3, 4-7, 8+)
 
     def validate(self) -> None:
         _positive("metrics.ospa_c", self.ospa_c)
@@ -377,6 +379,17 @@ class MetricsConfig:
         _int_range("metrics.confirm_n", self.confirm_n, 1, 1_000_000)
         _one_of("metrics.censored", self.censored, ("exclude", "lower_bound"))
         _one_of("metrics.ddof", self.ddof, (0, 1))
+        bins = self.gap_bins
+        require(
+            isinstance(bins, tuple) and 1 <= len(bins) <= MAX_GAP_BINS,
+            f"metrics.gap_bins = {list(bins)!r} must list 1 to {MAX_GAP_BINS} gap lengths",
+        )
+        for b in bins:
+            _int_range("metrics.gap_bins[]", b, 1, 1_000_000)
+        require(
+            bins[0] == 1 and all(a < b for a, b in zip(bins, bins[1:], strict=False)),
+            f"metrics.gap_bins = {list(bins)!r} must start at 1 and increase (each the first scan count of a bin)",
+        )
 
 
 @dataclass
@@ -439,9 +452,12 @@ class LMBConfig:
     r_B_max: float = 0.5  #: largest existence probability r_B,max of a birth track
     prune_r: float = 1e-3  #: tracks with existence probability r below this are dropped
     max_tracks: int = 100  #: most probable tracks kept after each scan
-    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many hypotheses, else this many Gibbs sweeps
-    max_components: int = 10  #: Gaussian components kept per track
+    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many valid hypotheses, else this many Gibbs sweeps
+    max_components: int = 10  #: Gaussian components kept per track (J_h; also per birth group)
     extract_r: float = 0.5  #: estimates: the tracks with r above this, labelled
+    #: how birth components become Bernoullis: "groups" (one per merge group, r = min(sum w, r_B_max), §10.7) or
+    #: "components" (one per component, r = min(w, r_B_max), every newborn term as Reuter's adaptive birth)
+    birth_mapping: str = "groups"
 
     def validate(self) -> LMBConfig:
         _in_range("lmb.r_B_max", self.r_B_max, 0.0, 1.0, lo_open=True, hi_open=True)
@@ -450,6 +466,7 @@ class LMBConfig:
         _int_range("lmb.max_hypotheses", self.max_hypotheses, 1, 10_000_000)
         _int_range("lmb.max_components", self.max_components, 1, 10_000)
         _in_range("lmb.extract_r", self.extract_r, 0.0, 1.0, hi_open=True)
+        _one_of("lmb.birth_mapping", self.birth_mapping, ("groups", "components"))
         return self
 
 
