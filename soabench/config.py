@@ -452,9 +452,12 @@ class LMBConfig:
     r_B_max: float = 0.5  #: largest existence probability r_B,max of a birth track
     prune_r: float = 1e-3  #: tracks with existence probability r below this are dropped
     max_tracks: int = 100  #: most probable tracks kept after each scan
-    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many hypotheses, else this many Gibbs sweeps
-    max_components: int = 10  #: Gaussian components kept per track
+    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many valid hypotheses, else this many Gibbs sweeps
+    max_components: int = 10  #: Gaussian components kept per track (J_h; also per birth group)
     extract_r: float = 0.5  #: estimates: the tracks with r above this, labelled
+    #: how birth components become Bernoullis: "groups" (one per merge group, r = min(sum w, r_B_max), §10.7) or
+    #: "components" (one per component, r = min(w, r_B_max), every newborn term as Reuter's adaptive birth)
+    birth_mapping: str = "groups"
 
     def validate(self) -> LMBConfig:
         _in_range("lmb.r_B_max", self.r_B_max, 0.0, 1.0, lo_open=True, hi_open=True)
@@ -463,6 +466,7 @@ class LMBConfig:
         _int_range("lmb.max_hypotheses", self.max_hypotheses, 1, 10_000_000)
         _int_range("lmb.max_components", self.max_components, 1, 10_000)
         _in_range("lmb.extract_r", self.extract_r, 0.0, 1.0, hi_open=True)
+        _one_of("lmb.birth_mapping", self.birth_mapping, ("groups", "components"))
         return self
 
 

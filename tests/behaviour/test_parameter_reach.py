@@ -131,6 +131,7 @@ NON_DEFAULT: dict[str, object] = {
     "lmb.max_hypotheses": 500,
     "lmb.max_components": 8,
     "lmb.extract_r": 0.55,
+    "lmb.birth_mapping": "components",  # the old mapping: every other lmb key is still read
     "experiment.filters": ("lmb", "gmphd"),  # both families, the LMB first
     "experiment.plugin_budget": 30.0,  # its reach: tests/hardening/test_plugin_isolation.py (a plugin past its budget)
 }

@@ -358,12 +358,14 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
     from soabench.experiment.execution.options import RunOptions
     from soabench.experiment.execution.runner import run_experiment
     from soabench.experiment.runs.store import RunStore
+    from soabench.kernel_warmup import ensure_compiled
 
     check_import_paths(suite)
     base = load_config(suite.config)
     _refuse_protocol_keys(suite.config)
     for s in suite.scenarios:  # validate every scenario before running any
         _config_for(base, s, s.seeds[0])
+    ensure_compiled([_config_for(base, s, s.seeds[0]) for s in suite.scenarios])  # once, for every scenario
     rows: dict[tuple, list[dict]] = {}
     gap_sums: dict[tuple, list[float]] = {}
     bins = base.metrics.gap_bins
