@@ -348,3 +348,16 @@ FAMILY_CASES_MORE: list[Case] = [
     _cfg(LMB + '[lmb]\nr_B_max = "0.3"\n', "lmb.r_B_max"),
 ]
 CASES += FAMILY_CASES_MORE
+
+PMBM = '[experiment]\nfilters = ["pmbm"]\n'
+PMBM_CASES: list[Case] = [
+    _cfg("[pmbm]\nM_max = 50\n", "runs no PMBM or PMB filter"),
+    _cfg(PMBM + "[pmbm]\nM_max = 0\n", "pmbm.M_max = 0 is out of range"),
+    _cfg(PMBM + "[pmbm]\nw_floor = nan\n", "pmbm.w_floor = nan is out of range"),
+    _cfg(PMBM + '[pmbm]\nmarginals = "magic"\n', "pmbm.marginals = 'magic' is not allowed"),
+    _cfg('[experiment]\nfilters = ["pmb"]\n[pmbm]\nr_floor = 1.0\n', "pmbm.r_floor = 1.0 is out of range"),
+    _cfg(PMBM + "[pmbm]\nJ_h = 2.5\n", "pmbm.J_h = 2.5 must be an integer"),
+    _cfg(PMBM + "[pmbm]\nr_B_max = 0.3\n", "unknown config key pmbm.r_B_max"),
+    _cfg('[experiment]\nfilters = ["pmb"]\nprobabilities = ["dynamic"]\n', "filter family 'pmb' runs the probability"),
+]
+CASES += PMBM_CASES
