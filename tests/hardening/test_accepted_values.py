@@ -111,6 +111,23 @@ def test_a_stray_record_beyond_the_trial_count_is_not_said_to_run_again(tmp_path
     assert not (out / "trials" / "trial_00007.json").exists() and _rows(out) == before
 
 
+@pytest.mark.parametrize(
+    ("edit", "says"),
+    [
+        ({"timing": [1, 2]}, "its timing is not a table of stage times"),
+        ({"model_failures": [1]}, "its model_failures is not a list of failure records"),
+    ],
+)
+def test_a_record_the_merge_cannot_read_is_moved_aside(tmp_path, fake_cli_runs, capsys, edit, says):
+    out = _new_run(tmp_path)
+    before = _rows(out)
+    rec = json.loads((out / "trials" / "trial_00001.json").read_text())
+    (out / "trials" / "trial_00001.json").write_text(json.dumps({**rec, **edit}))
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"trial_00001.json: it is not trial 1 of this run: {says}" in err and _rows(out) == before
+
+
 def test_a_record_whose_tables_hold_another_trial_is_moved_aside(tmp_path, fake_cli_runs, capsys):
     out = _new_run(tmp_path)
     before = _rows(out)

@@ -186,10 +186,19 @@ class RunStore:
         rid = self.run_id()
         if rid and record.get("run_id") != rid:
             return "it was made by another run (other settings: its run_id differs from run.json's)"
-        for name, keys in _TABLE_KEYS.items() if tables and ok else ():
+        if not (tables and ok):
+            return None
+        for name, keys in _TABLE_KEYS.items():
             problem = _table_problem(record.get(name), name, trial, keys)
             if problem is not None:
                 return problem
+        timing, failures = record.get("timing"), record.get("model_failures")
+        if timing is not None and not (
+            isinstance(timing, dict) and not any(isinstance(v, (list, dict)) for v in timing.values())
+        ):
+            return "its timing is not a table of stage times"
+        if failures is not None and not (isinstance(failures, list) and all(isinstance(f, dict) for f in failures)):
+            return "its model_failures is not a list of failure records"
         return None
 
     def reject_foreign_records(self, n_trials: int | None = None) -> list[str]:
