@@ -299,7 +299,7 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     ev_j = np.empty(64, dtype=np.int64)
     ev_d = np.empty(64)
     ev_off = np.zeros(K + 1, dtype=np.int64)
-    n_ev = 0
+    n_ev = np.int64(0)  # not the literal 0: one specialisation of _near_events
     for k in range(K):
         lo = max(0, k - window + 1)
         if k >= window:  # scan k - window leaves the window
