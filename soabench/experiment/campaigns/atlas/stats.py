@@ -159,6 +159,8 @@ def cell_stats(con, cells_of: Sequence[tuple[str, ...]]) -> list[Cell]:
                 if len(x) == 0 or not math.isfinite(scale):
                     continue
                 m, lo, hi, p = _t_interval(x, NULL[metric] if metric == "delay_win" else 0.0)
+                if metric == "delay_win":  # a share: its interval inside [0, 1] (the p-value is the t-test's)
+                    lo, hi = max(lo, 0.0), min(hi, 1.0)
                 cells.append(
                     Cell(metric, b, mode, fam, tuple(combo), tuple(vals), len(x), m * scale, lo * scale, hi * scale, p)
                 )
