@@ -109,6 +109,7 @@ __all__ = [
     "from_stonesoup",
     "isotropic",
     "make_tracker",
+    "occlusion_gaps",
     "resolve",
     "run",
     "run_tracker",
@@ -218,12 +219,15 @@ def make_tracker(
             naming several is refused, as is one that names others than ``filter``.
         options: a plugin's own options (default: the configuration's ``[plugins.<name>]`` table).
 
+    The configuration's ``[sensor]``, ``[birth]``, ``[filter]``, ``[plugins.<name>]`` sections and the family's own
+    (``[lmb]``, ...) shape the tracker, ``experiment.filters`` picks its family (above); the rest of ``[experiment]``
+    and ``[metrics]`` describe a run and its scoring (:func:`run`, :func:`evaluate`), not one tracker.
+
     Returns:
         A :class:`FilterTracker` for a birth model (``step`` returns :class:`StepResult`, labelled), else the
         tracker (``step`` returns :class:`Estimates`). Stepping it through :func:`simulate_trial`'s scans gives the
         step results of that run of ``soabench run``.
     """
-    from soabench.experiment.trial.trial import guard
     from soabench.seeding import trial_seeds
     from soabench.trackers import build_filter
 
@@ -242,7 +246,14 @@ def make_tracker(
         return cls(TrackerSetup(cfg.sensor, scene, rng, mode, cfg), **options)
     filt, p_D_b = build_filter(family, cfg, cfg.sensor, mode, seeds.association_rng())
     birth_model = cls(cfg.birth, cfg.sensor, scene, rng, **options)
-    return FilterTracker(birth_model, filt, p_D_b, check_births=None if builtin else guard.check_births)
+    return FilterTracker(birth_model, filt, p_D_b, check_births=None if builtin else _named_check(name))
+
+
+def _named_check(plugin: str) -> _Any:
+    """The births check of a plugin birth model, its errors naming ``plugin``."""
+    from soabench.experiment.trial.guard import check_births
+
+    return lambda births, scan: check_births(births, scan, plugin)
 
 
 def evaluate(
@@ -283,6 +294,26 @@ def evaluate(
     if labels is not None:
         metrics.summary.update(evaluate_tracks(scans, X, labels, metrics.episodes, cfg, scans.sensor))
     return metrics
+
+
+def occlusion_gaps(scans: Scans, d_gate: float = 5.0) -> list[dict[str, _Any]]:
+    """The occlusion gaps of ``scans``, described (docs/method.md §9.4): per gap (a pedestrian present and in the
+    FOV but out of line of sight on scans ``k_a`` .. ``k_b``, seen before and after) its ``target`` column,
+    ``k_a``, ``k_b``, length in ``scans`` and ``seconds``, the ``occluder`` kind that hid it longest ("parked",
+    "vehicle", "building", "other"), its ``displacement`` across the gap (m) and whether that exceeds ``d_gate``
+    (``moved``), and the ego's (``ego_displacement``, ``ego_moved``). The ``gap_*`` columns of ``episodes.csv``
+    give the same for each re-emergence episode of a run, with its coasted and identity-kept outcome."""
+    import dataclasses as _dc
+
+    from soabench.tracks.gaps import describe_gaps
+    from soabench.tracks.reemergence import occlusion_gaps as _gaps
+
+    _require(isinstance(scans, Scans), f"scans must be a Scans, not {type(scans).__name__}")
+    gaps = _gaps(scans.present & scans.in_fov, scans.visible)
+    return [
+        {"target": g.target, "k_a": g.k_a, "k_b": g.k_b, **_dc.asdict(d)}
+        for g, d in zip(gaps, describe_gaps(scans, gaps, float(d_gate)), strict=True)
+    ]
 
 
 def run(

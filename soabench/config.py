@@ -62,6 +62,12 @@ FAMILIES: dict[str, FilterFamily] = {
     for f in (
         FilterFamily("gmphd", "GM-PHD", PROBABILITY_MODES, "soabench.gmphd.family:build"),
         FilterFamily("lmb", "LMB", ("static", "static+occ"), "soabench.lmb.family:build", section="lmb", hatch="////"),
+        FilterFamily(
+            "pmbm", "PMBM", ("static", "static+occ"), "soabench.pmbm.family:build", section="pmbm", hatch="xx"
+        ),
+        FilterFamily(
+            "pmb", "PMB", ("static", "static+occ"), "soabench.pmbm.family:build_pmb", section="pmbm", hatch="\\\\\\\\"
+        ),
     )
 }
 #: the filter families' names (docs/method.md "LMB filter"); the first is the default
@@ -80,6 +86,7 @@ DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
+MAX_GAP_BINS = 12  #: most occlusion-gap length bins (metrics.gap_bins)
 MAX_DURATION = 86400.0  #: longest simulated time (s): experiment.duration and a snapshot's --time / --duration
 
 
@@ -359,6 +366,7 @@ class MetricsConfig:
     confirm_n: int = 1  #: consecutive associated steps needed for initiation
     censored: str = "exclude"  #: "exclude" (count separately) or "lower_bound"
     ddof: int = 0  #: per-trial sigma convention
+    gap_bins: tuple[int, ...] = (1, 2, 4, 8)  #: first scan count of each occlusion-gap length bin (1, 2-3, 4-7, 8+)
 
     def validate(self) -> None:
         _positive("metrics.ospa_c", self.ospa_c)
@@ -371,6 +379,17 @@ class MetricsConfig:
         _int_range("metrics.confirm_n", self.confirm_n, 1, 1_000_000)
         _one_of("metrics.censored", self.censored, ("exclude", "lower_bound"))
         _one_of("metrics.ddof", self.ddof, (0, 1))
+        bins = self.gap_bins
+        require(
+            isinstance(bins, tuple) and 1 <= len(bins) <= MAX_GAP_BINS,
+            f"metrics.gap_bins = {list(bins)!r} must list 1 to {MAX_GAP_BINS} gap lengths",
+        )
+        for b in bins:
+            _int_range("metrics.gap_bins[]", b, 1, 1_000_000)
+        require(
+            bins[0] == 1 and all(a < b for a, b in zip(bins, bins[1:], strict=False)),
+            f"metrics.gap_bins = {list(bins)!r} must start at 1 and increase (each the first scan count of a bin)",
+        )
 
 
 @dataclass
@@ -383,7 +402,7 @@ class ExperimentConfig:
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
-    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: "gmphd", "lmb"
+    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: gmphd, lmb, pmbm, pmb
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
     plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
 
@@ -433,9 +452,12 @@ class LMBConfig:
     r_B_max: float = 0.5  #: largest existence probability r_B,max of a birth track
     prune_r: float = 1e-3  #: tracks with existence probability r below this are dropped
     max_tracks: int = 100  #: most probable tracks kept after each scan
-    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many hypotheses, else this many Gibbs sweeps
-    max_components: int = 10  #: Gaussian components kept per track
+    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many valid hypotheses, else this many Gibbs sweeps
+    max_components: int = 10  #: Gaussian components kept per track (J_h; also per birth group)
     extract_r: float = 0.5  #: estimates: the tracks with r above this, labelled
+    #: how birth components become Bernoullis: "groups" (one per merge group, r = min(sum w, r_B_max), §10.7) or
+    #: "components" (one per component, r = min(w, r_B_max), every newborn term as Reuter's adaptive birth)
+    birth_mapping: str = "groups"
 
     def validate(self) -> LMBConfig:
         _in_range("lmb.r_B_max", self.r_B_max, 0.0, 1.0, lo_open=True, hi_open=True)
@@ -444,6 +466,31 @@ class LMBConfig:
         _int_range("lmb.max_hypotheses", self.max_hypotheses, 1, 10_000_000)
         _int_range("lmb.max_components", self.max_components, 1, 10_000)
         _in_range("lmb.extract_r", self.extract_r, 0.0, 1.0, hi_open=True)
+        _one_of("lmb.birth_mapping", self.birth_mapping, ("groups", "components"))
+        return self
+
+
+#: the ways the PMB variant computes its marginal association probabilities (docs/method.md §10.5)
+PMB_MARGINALS = ("murty",)
+
+
+@dataclass
+class PMBMConfig:
+    """The PMBM filter and its PMB variant, read by runs whose experiment.filters names pmbm or pmb (docs/method.md
+    §10, register rows 36-37). A key set here while no run reads it is refused."""
+
+    M_max: int = 100  #: global hypotheses kept; each prior global hypothesis a asks Murty for ceil(M_max w_a)
+    w_floor: float = 1e-4  #: global hypotheses of weight below this are dropped (then renormalised)
+    r_floor: float = 1e-5  #: a track whose every single-target hypothesis has r below this is dropped
+    J_h: int = 10  #: Gaussian components kept per single-target hypothesis
+    marginals: str = "murty"  #: the PMB's marginals: from the Murty hypotheses
+
+    def validate(self) -> PMBMConfig:
+        _int_range("pmbm.M_max", self.M_max, 1, 100_000)
+        _in_range("pmbm.w_floor", self.w_floor, 0.0, 1.0, hi_open=True)
+        _in_range("pmbm.r_floor", self.r_floor, 0.0, 1.0, hi_open=True)
+        _int_range("pmbm.J_h", self.J_h, 1, 10_000)
+        _one_of("pmbm.marginals", self.marginals, PMB_MARGINALS)
         return self
 
 
@@ -457,6 +504,7 @@ class Config:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
     lmb: LMBConfig = field(default_factory=LMBConfig)
+    pmbm: PMBMConfig = field(default_factory=PMBMConfig)
     #: ``[plugins.<name>]`` tables: a plugin's own options, passed to its constructor as keyword arguments
     plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
 
