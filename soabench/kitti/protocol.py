@@ -34,6 +34,7 @@ from soabench.kitti.levels import level_split
 from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
 from soabench.kitti.report import TRACK_COLUMNS, write_outputs
+from soabench.kitti.trackeval_kitti import write_inputs
 from soabench.metrics import evaluate
 from soabench.trackers import FilterTracker, build_filter, run_tracker
 from soabench.tracks.evaluate import evaluate_tracks, run_labels
@@ -88,9 +89,13 @@ def count_targets(seq: KittiSequence, kcfg: KittiConfig) -> int:
 # one (setting, sequence) task
 
 
-def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: str) -> dict:
+def run_sequence(
+    ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: str, kitti_seq: KittiSequence | None = None
+) -> dict:
     """Every model of ``cfg.experiment`` (first probability mode) in every filter family of
-    ``cfg.experiment.filters`` on one sequence with N-hat; a JSON-ready record.
+    ``cfg.experiment.filters`` on one sequence with N-hat; a JSON-ready record. ``kitti_seq``: the parsed sequence,
+    to add under ``"kitti_results"`` each labelled model's estimates and labels per frame in the first family (for
+    :func:`soabench.kitti.trackeval_kitti.write_inputs`; not part of the written record).
 
     Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])`` (a family that
     draws, the LMB, its first child). The first family's runs are ``record["models"]``, every other family's
@@ -107,6 +112,9 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
         for model in cfg.experiment.models:
             t0 = time.perf_counter()
             runs[model] = _run_model(ss, run_cfg, family, mode, model, seed, seq)
+            X, labels = runs[model].pop("estimates")
+            if family == families[0] and kitti_seq is not None and labels is not None:
+                out.setdefault("kitti_results", {})[model] = (X, labels)
             key = model if family == families[0] else f"{model} ({family})"
             out["timing"][key] = {**runs[model].pop("timing"), "total": time.perf_counter() - t0}
     return out
@@ -132,6 +140,7 @@ def _run_model(ss: SequenceScans, cfg: Config, family: str, mode: str, model: st
         "tracks": {k: tracks[k] for k in TRACK_COLUMNS},
         "levels": level_split(ss, X, labels, cfg.metrics),
         "timing": timing,
+        "estimates": (X, labels),
     }
 
 
@@ -242,7 +251,11 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
             for note in cache[s].info["notes"]:
                 log(f"warning: {note}")
         t0 = time.perf_counter()
-        rec = run_sequence(cache[s], spec.config, nh, spec.config.experiment.seed, s)
+        rec = run_sequence(
+            cache[s], spec.config, nh, spec.config.experiment.seed, s, seqs[s] if setting == CV else None
+        )
+        if setting == CV:  # TrackEval's own KITTI evaluation reads these (soabench.kitti.trackeval_kitti)
+            write_inputs(out, seqs[s], cache[s], rec.pop("kitti_results", {}))
         rec.update({"setting": setting, "sequence": s, "N_hat": nh, "info": cache[s].info, "targets": targets[s]})
         write_json_atomic(path, rec)
         brief = ", ".join(
