@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.experiment.trial.trial import FILTER_COLUMN
 from soabench.figures import style as ps
+from soabench.figures.bars import grouped_bars
 from soabench.figures.drawing import FigureJob
 
 #: how a figure names a filter family
@@ -70,7 +71,6 @@ def in_family(tables: RunTables, family: str, build, *args) -> Figure:
 
 def families_figure(tables: RunTables, clutter: float) -> Figure:
     """Delay, cardinality error and OSPA per birth model and family, static mode (module docstring)."""
-    from soabench.figures.results import _bars
 
     t = tables.trials
     fams = run_families(tables)
@@ -84,7 +84,7 @@ def families_figure(tables: RunTables, clutter: float) -> Figure:
                 keep = select(t, clutter=clutter, model=model, mode=SHARED_MODE) & (t[FILTER_COLUMN] == fam)
                 return t[column][keep]
 
-            _bars(ax, models, fams, values, hatch=lambda fam: FAMILY_HATCH.get(fam, "xx"))
+            grouped_bars(ax, models, fams, values, hatch=lambda fam: FAMILY_HATCH.get(fam, "xx"))
             if column == "ospa":
                 c = float(tables.meta["config"].get("metrics", {}).get("ospa_c", math.nan))
                 if math.isfinite(c):

@@ -23,12 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic
 from soabench.birth import get_birth_model
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
-from soabench.experiment.runs.files import read_json, write_json_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
+from soabench.experiment.runs.files import read_json
 from soabench.experiment.trial.trial import run_filter
+from soabench.folders import FolderLock, check_new_folder, resolve
 from soabench.kitti.config import KittiConfig, KittiSpec
 from soabench.kitti.formats import ReadError, UnreadableError
 from soabench.kitti.lidar import lidar_files, lidar_semantics
@@ -149,7 +150,7 @@ def run_kitti(
 ) -> KittiOutcome:
     """Run (or finish, ``resume=True``) the protocol into the run folder ``out``: resolved, new or empty for a new
     run (holding this run's ``run.json`` on resume), locked while it works
-    (:mod:`soabench.experiment.runs.ownership`)."""
+    (:mod:`soabench.folders`)."""
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = resolve(out)
@@ -213,7 +214,7 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
                 "start a new run folder",
             )
     cache: dict[str, SequenceScans] = {}
-    sensor = spec.config.sensor
+    sensor = spec.config.sensor_at()
     for n, (setting, s, nh) in enumerate(tasks, start=1):
         path = out / RECORDS / setting / f"{s}.json"
         if path.is_file():

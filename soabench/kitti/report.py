@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.birth import LABEL
-from soabench.experiment.runs.files import write_csv, write_json_atomic, write_text_atomic
+from soabench.experiment.runs.files import write_csv
 from soabench.figures import kitti as kitti_figures
 from soabench.kitti.config import KittiSpec
 

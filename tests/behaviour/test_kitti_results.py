@@ -21,7 +21,7 @@ from soabench.sensor import observe
 def trial(tmp_path_factory):
     """Trial 0 of the intersection (30 s) observed as the export observes it, and its label_02 file."""
     cfg = kitti_base_config()
-    sensor = dataclasses.replace(cfg.sensor, fov_deg=export_default_fov(cfg.sensor))
+    sensor = dataclasses.replace(cfg.sensor_at(), fov_deg=export_default_fov(cfg.sensor))
     calib = export_calib(sensor)
     scene, scenario = load("intersection", (), None)
     seeds = trial_seeds(cfg.experiment.seed, 0)

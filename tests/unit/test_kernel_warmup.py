@@ -53,7 +53,26 @@ def test_a_failing_group_is_not_fatal_and_leaves_no_stamp(cache, monkeypatch):
     assert log.getvalue().count(kw.MESSAGE) == 1 and "compiling ahead failed" in log.getvalue().splitlines()[-1]
 
 
-def test_the_stamp_names_the_versions_and_kernel_sources(cache):
-    name = kw.stamp_path().name
-    assert name.startswith("soabench-kernels-") and name.endswith(".ready")
-    assert kw.stamp_path() == kw.stamp_path()  # the same sources give the same stamp
+def test_the_stamp_changes_with_the_versions_and_the_kernel_sources(cache, tmp_path, monkeypatch):
+    """A new numba, a new soabench or an edited kernel source needs another compilation: another stamp."""
+    import importlib.metadata
+
+    source = tmp_path / "src" / "house_kernel_source.py"
+    source.parent.mkdir()
+    source.write_text("X = 1\n")
+    monkeypatch.syspath_prepend(str(source.parent))
+    monkeypatch.setattr(kw, "KERNEL_MODULES", ("house_kernel_source",))
+    versions = {"numba": "0.60.0", "soabench": "0.1.0"}
+    monkeypatch.setattr(importlib.metadata, "version", lambda name: versions[name])
+    first = kw.stamp_path()
+    assert first.name.startswith("soabench-kernels-") and first.name.endswith(".ready") and first.parent == cache
+    source.write_text("X = 2\n")
+    edited = kw.stamp_path()
+    versions["numba"] = "0.61.0"
+    numba = kw.stamp_path()
+    versions["soabench"] = "0.2.0"
+    soabench = kw.stamp_path()
+    assert len({first, edited, numba, soabench}) == 4
+    source.write_text("X = 1\n")
+    versions.update(numba="0.60.0", soabench="0.1.0")
+    assert kw.stamp_path() == first  # the same sources and versions: the same stamp

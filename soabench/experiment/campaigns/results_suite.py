@@ -30,15 +30,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from soabench.atomic import write_json_atomic
 from soabench.birth import CORE_MODELS
 from soabench.config import MAX_SEED, MAX_TRIALS, Config, check_time
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns.occlusion_density import write_density
 from soabench.experiment.execution.executors import MAX_WORKERS
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
-from soabench.experiment.runs.files import read_json, write_json_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
+from soabench.experiment.runs.files import read_json
 from soabench.experiment.runs.runmeta import flatten_config
+from soabench.folders import FolderLock, check_own_folder, resolve
 from soabench.kitti.config import KittiSpec, load_kitti_config
 from soabench.scenario import shipped_nets
 
@@ -431,7 +432,7 @@ def run_results(
                 ready = [n for n in scenes if run_complete(mains[n])]
                 if ready:
                     triples = [(n, densities[n], mains[n] / "trials.csv") for n in ready]
-                    outcome.summary_markdown = write_summary(root / "scenes", triples, clutter=3.0)
+                    outcome.summary_markdown = write_summary(root / "scenes", triples)
                     log(f"wrote {root / 'scenes' / 'summary.md'} ({len(ready)} of {len(scenes)} scenes)")
                 return ("done" if len(ready) == len(scenes) else "incomplete"), 0
 

@@ -32,11 +32,11 @@ from soabench.experiment.execution.runner import (
     run_trial_task,
     uses_kernels,
 )
-from soabench.experiment.runs.ownership import FolderLock
 from soabench.experiment.runs.provenance import package_versions
 from soabench.experiment.trial import registry
 from soabench.experiment.trial import trial as trial_module
 from soabench.experiment.trial.trial import TrialShare, _config_key
+from soabench.folders import FolderLock
 from soabench.kernel_warmup import ensure_compiled
 
 

@@ -392,7 +392,7 @@ def run_trial(
     filter_cfg_key = _config_key(config, without=("metrics",))
     birth_key = _birth_key(config)
     for lam in exp.clutter:
-        sensor_cfg = dataclasses.replace(config.sensor, lambda_c=float(lam))
+        sensor_cfg = config.sensor_at(lam)
         scans_key = (rec_key, repr(sensor_cfg), fn_key[1])
         t0 = time.perf_counter()
         if scans_key in share.scans:
@@ -408,7 +408,7 @@ def run_trial(
             share.count("scans")
         out.timing["sensor"] += time.perf_counter() - t0
         # the sensor's geometry is the same for every lambda when the real sensor observed the scans
-        geometry_key = (rec_key, repr(dataclasses.replace(sensor_cfg, lambda_c=0.0)))
+        geometry_key = (rec_key, repr(sensor_cfg.settings))
         candidates_key = geometry_key if fn_key[1] == "default" else scans_key
         for model in exp.models:
             births = None
