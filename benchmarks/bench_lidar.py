@@ -12,7 +12,8 @@ then times, in this one run:
 * ``regions (cached)``: the same call reading back the run folder's ``.npz``;
 * ``to_scans``: the reader's Scans of the sequence with those regions (Omega_k per frame), and with the export's own
   sidewalk polygons (``--semantics``) for comparison;
-* ``filters``: :func:`soabench.kitti.protocol.run_sequence` with S-OA alone and with the protocol's four models.
+* ``filters``: :func:`soabench.experiment.campaigns.kitti.protocol.run_sequence` with S-OA alone and with the
+  protocol's four models.
 
 Regions and filters are each timed ``--repeat`` times and the shortest time of each counts (on a shared machine the
 longer ones measure the neighbours). It prints each time and the ratios regions / filters.
@@ -27,10 +28,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from soabench.experiment.campaigns.kitti.protocol import run_sequence
 from soabench.kitti.config import KittiConfig, kitti_base_config
 from soabench.kitti.export import export_kitti
 from soabench.kitti.lidar import LidarParams, class_ids, frame_files, frame_regions, read_frame, sequence_regions
-from soabench.kitti.protocol import run_sequence
 from soabench.kitti.reader import open_dataset, read_sequence, sensor_for, to_scans
 
 

@@ -21,7 +21,7 @@ import json
 import os
 import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +55,7 @@ class FigureBatch:
     jobs: tuple[FigureJob, ...]
     #: the tables as arrays (:func:`save_arrays`), or "": read them from ``run_dir``
     arrays: str = ""
-    config: dict = field(default_factory=dict)  # read by the executors for a failure record's seed
+    base_seed: int = 0  #: the seed of a failure record (a figure has no trial seed of its own)
 
     @property
     def task_fn(self) -> Callable[[int, FigureBatch], dict]:

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from soabench.errors import SoabenchError
+from soabench.experiment.campaigns.kitti.results import tracking_rows, write_tracking_results
 from soabench.kitti.config import kitti_base_config
 from soabench.kitti.export import export_calib, export_default_fov, export_trial
-from soabench.kitti.results import tracking_rows, write_tracking_results
 from soabench.scenario import load, simulate
 from soabench.seeding import trial_seeds
 from soabench.sensor import observe

@@ -9,6 +9,7 @@ import pytest
 from kitti_files import ab3dmot_rows, write_dataset, write_sequence
 
 from soabench.config import Sensor
+from soabench.experiment.campaigns.kitti.protocol import fold_partition, n_hat, sweep_n_hat
 from soabench.kitti.config import KittiConfig, kitti_from_dict
 from soabench.kitti.formats import (
     EARTH_RADIUS,
@@ -19,7 +20,6 @@ from soabench.kitti.formats import (
     parse_objects,
     poses_from_oxts,
 )
-from soabench.kitti.protocol import fold_partition, n_hat, sweep_n_hat
 from soabench.kitti.reader import footprints_ego, open_dataset, parse_sequences, read_sequence, to_scans
 
 SENSOR = Sensor(dt=0.1, r_max=50.0)

@@ -12,7 +12,7 @@ Parts, in order, under ``OUT`` (default ``results/``):
 * ``scenes/density/<scene>.json``: each scene's occlusion density (:mod:`.occlusion_density`);
 * ``scenes/``: the cross-scene summary (:mod:`.cross_scene`): S-OA's advantage against occlusion density;
 * ``kitti/<scene>/``: SUMO trials exported in the KITTI tracking layout (``export/``) and the KITTI protocol on them
-  (``run/``: k-fold N_hat, Table I; :mod:`soabench.kitti.protocol`).
+  (``run/``: k-fold N_hat, Table I; :mod:`soabench.experiment.campaigns.kitti.protocol`).
 
 An existing complete part with the same settings is kept as it is (nothing is re-run or rewritten); an unfinished
 one is resumed (its finished trials are kept); a part made with other settings is refused with one line naming the
@@ -271,8 +271,8 @@ def kitti_settings_check(base: Path, want: dict[str, Any]) -> dict | None:
 def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None], progress: bool) -> tuple[str, int]:
     """Export ``kitti_sequences`` SUMO trials of ``scene`` in the KITTI layout, then the KITTI protocol on them."""
     # imported when called: matplotlib, scipy would slow every start-up
+    from soabench.experiment.campaigns.kitti.protocol import run_kitti
     from soabench.kitti.export import export_kitti
-    from soabench.kitti.protocol import run_kitti
 
     export, run = base / "export", base / "run"
     cfg, kcfg = load_kitti_config(None)

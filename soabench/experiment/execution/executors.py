@@ -112,7 +112,7 @@ class PoolExecutor:
         return out
 
     def results(self, spec: Any, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
-        base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+        base_seed = int(spec.base_seed)
         queue = iter(trials)  # consumed lazily: a huge to-do list is never built in memory
         pending: dict = {}  # future -> (trial, pool generation)
         exhausted = False
@@ -218,7 +218,7 @@ class DaskExecutor:
         self.n_workers = max(1, len(self.client.scheduler_info().get("workers", {})))
 
     def results(self, spec: Any, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
-        base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+        base_seed = int(spec.base_seed)
         token = f"{os.getpid()}-{time.time_ns()}"
         futures = {}
         queue = iter(trials)  # submitted in a window of 4 per worker: a huge to-do list is never built in memory

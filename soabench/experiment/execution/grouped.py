@@ -48,9 +48,9 @@ class GroupSpec:
     todo: tuple[frozenset[int], ...]
 
     @property
-    def config(self) -> dict:
-        """The first folder's config (its seed names a trial lost with its worker)."""
-        return self.members[0].config
+    def base_seed(self) -> int:
+        """The first folder's base seed (it names a trial lost with its worker)."""
+        return self.members[0].base_seed
 
     @property
     def task_fn(self) -> Any:

@@ -99,6 +99,11 @@ class TaskSpec:
     load_fn: LoadFn | None = None
     #: import paths of plugins typed on the driver's command line (soabench.plugins: the closed list)
     plugin_paths: tuple[str, ...] = ()
+    #: ``experiment.seed`` of the config, read through :class:`~soabench.config.Config` once (a failure record's seed)
+    base_seed: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "base_seed", int(Config.from_dict(self.config).experiment.seed))
 
     @property
     def task_fn(self) -> Callable[[int, TaskSpec], dict]:
@@ -125,7 +130,7 @@ def _where() -> str:
 
 def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     """Run one trial in this process and return its record; an exception becomes a failure record."""
-    base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+    base_seed = spec.base_seed
     t0 = time.perf_counter()
     note_activity(trial, OWN_CODE)
     try:

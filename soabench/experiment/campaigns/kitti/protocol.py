@@ -9,7 +9,7 @@ registered birth model on every held-out sequence, the N-hat sweep.
 
 The run folder holds ``run.json`` (everything needed to resume), one record per (setting, sequence) under
 ``records/`` (written atomically; ``--resume`` runs the missing ones), then ``summary.json``, ``report.md``,
-``sequences.csv``, ``episodes.csv`` and ``figures/`` (:mod:`soabench.kitti.report`).
+``sequences.csv``, ``episodes.csv`` and ``figures/`` (:mod:`soabench.experiment.campaigns.kitti.report`).
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from soabench.atomic import write_json_atomic
 from soabench.birth import get_birth_model
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
+from soabench.experiment.campaigns.kitti.report import TRACK_COLUMNS, write_outputs
 from soabench.experiment.runs.files import read_json
 from soabench.experiment.trial.trial import run_filter
 from soabench.folders import FolderLock, check_new_folder, resolve
@@ -34,7 +35,6 @@ from soabench.kitti.config import KittiConfig, KittiSpec
 from soabench.kitti.formats import ReadError, UnreadableError
 from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
-from soabench.kitti.report import TRACK_COLUMNS, write_outputs
 from soabench.metrics import evaluate
 from soabench.tracks.evaluate import evaluate_tracks, run_labels
 
