@@ -13,6 +13,11 @@ A suite file (TOML, read as data only) holds:
   (relative to the baseline value: fail when the value exceeds ``baseline * (1 + max_increase)`` or falls below
   ``baseline * (1 - max_decrease)``) and ``abs_tol`` (slack added to the relative bounds, default 1e-9).
 
+Besides the trials.csv columns, the occlusion metrics of docs/method.md §9.4 read episodes.csv: per gap-length bin
+of ``metrics.gap_bins`` (default 1, 2-3, 4-7, 8+ scans) ``identity_kept_gap_<bin>`` and ``coasted_gap_<bin>`` (e.g.
+``identity_kept_gap_2-3``), and ``identity_kept_long`` / ``coasted_long`` for the longest bin; each is pooled over
+the re-emergences of every trial and seed (kept / counted), so each bin gets its own threshold.
+
 A value is the mean of the metric over every trial and seed of one (scenario, model, mode, clutter). A value that is
 NaN (no trial produced it) fails every threshold on it, and a plugin run that failed (soabench.experiment.trial.guard)
 fails the suite. Results: a table on stdout, ``check.json`` and ``junit.xml`` in ``--out``; exit status 0 when every
@@ -225,7 +230,7 @@ def load_suite(path: str | Path) -> Suite:
     for i, raw in enumerate(data.get("threshold", [])):
         t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
         require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
-        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}")
+        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", _suite_bins(suite.config))
         th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
         th.mode, th.scenario = t.get("mode"), t.get("scenario")
         for key in ("max", "min"):
@@ -245,18 +250,54 @@ def load_suite(path: str | Path) -> Suite:
     return suite
 
 
-def _check_metric(metric: Any, where: str) -> None:
-    """A threshold's metric must be a metric or timing column of trials.csv (a typo is a bad suite, not a failed
-    check)."""
+def gap_metrics(bins: Sequence[int]) -> dict[str, tuple[str, int]]:
+    """The occlusion metrics of a suite (module docstring): name -> (episodes.csv column, bin index)."""
+    from soabench.experiment.reports.occlusion import bin_labels
+
+    out = {}
+    for column, name in (("gap_id_kept", "identity_kept"), ("gap_coasted", "coasted")):
+        for i, label in enumerate(bin_labels(bins)):
+            out[f"{name}_gap_{label}"] = (column, i)
+        out[f"{name}_long"] = (column, len(bins) - 1)
+    return out
+
+
+def _check_metric(metric: Any, where: str, bins: Sequence[int] | None = None) -> None:
+    """A threshold's metric must be a metric or timing column of trials.csv or an occlusion metric of the suite's
+    gap bins (a typo is a bad suite, not a failed check)."""
     # imported when called: scipy would slow every start-up
+    from soabench.config import MetricsConfig
     from soabench.experiment.runs.store import METRIC_COLUMNS, TIMING_COLUMNS
 
-    allowed = METRIC_COLUMNS + TIMING_COLUMNS
+    allowed = METRIC_COLUMNS + TIMING_COLUMNS + tuple(gap_metrics(bins or MetricsConfig().gap_bins))
     if metric in allowed:
         return
     close = difflib.get_close_matches(str(metric), allowed, n=1)
     guess = f" (did you mean {close[0]!r}?)" if close else ""
     raise SoabenchError(f"{where}: metric {metric!r} is not a trials.csv metric{guess}; allowed: {', '.join(allowed)}")
+
+
+def _suite_bins(config: Path | None) -> tuple[int, ...]:
+    """The gap bins of a suite's configuration (the defaults without one)."""
+    return load_config(config).metrics.gap_bins
+
+
+def _gap_values(run_dir: Path, scenario: str, bins: Sequence[int], sums: dict[tuple, list[float]]) -> None:
+    """Add the kept / counted sums of every occlusion metric of one run folder's episodes.csv to ``sums`` (keyed by
+    the value key's parts)."""
+    e = read_csv(run_dir / "episodes.csv")
+    if "gap_scans" not in e or not len(e["gap_scans"]):
+        return
+    n = np.array([float(v) if v != "" else math.nan for v in np.asarray(e["gap_scans"]).tolist()])
+    which = np.searchsorted(np.asarray(bins), n, side="right") - 1
+    for name, (column, i) in gap_metrics(bins).items():
+        cells = np.array([float(v) if v != "" else math.nan for v in np.asarray(e[column]).tolist()])
+        ok = np.isfinite(n) & (which == i) & np.isfinite(cells)
+        for j in np.flatnonzero(ok):
+            key = (scenario, str(e["model"][j]), str(e["mode"][j]), float(e["clutter"][j]), name)
+            acc = sums.setdefault(key, [0.0, 0.0])
+            acc[0] += cells[j]
+            acc[1] += 1.0
 
 
 def check_import_paths(suite: Suite) -> None:
@@ -318,13 +359,17 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
     from soabench.experiment.execution.options import RunOptions
     from soabench.experiment.execution.runner import run_experiment
     from soabench.experiment.runs.store import RunStore
+    from soabench.kernel_warmup import ensure_compiled
 
     check_import_paths(suite)
     base = load_config(suite.config)
     _refuse_protocol_keys(suite.config)
     for s in suite.scenarios:  # validate every scenario before running any
         _config_for(base, s, s.seeds[0])
+    ensure_compiled([_config_for(base, s, s.seeds[0]) for s in suite.scenarios])  # once, for every scenario
     rows: dict[tuple, list[dict]] = {}
+    gap_sums: dict[tuple, list[float]] = {}
+    bins = base.metrics.gap_bins
     failures: list[dict] = []
     for s in suite.scenarios:
         for seed in s.seeds:
@@ -339,6 +384,7 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
             require(o.complete, f"scenario {s.name!r} seed {seed}: {o.n_missing} trial(s) failed; see {run_dir}")
             failures += [{**f, "scenario": s.name, "seed": seed} for f in RunStore(run_dir).model_failures()]
             table = read_csv(run_dir / "trials.csv")
+            _gap_values(run_dir, s.name, bins, gap_sums)
             n = len(table["model"])
             for i in range(n):
                 key = (s.name, str(table["model"][i]), str(table["mode"][i]), float(table["clutter"][i]))
@@ -352,6 +398,9 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
                 continue
             vals = np.array([float(r[col]) for r in rs])
             values[value_key(scen, model, mode, lam, col)] = float(np.mean(vals)) if len(vals) else math.nan
+        for name in gap_metrics(bins):  # a labelled run with no gap in a bin: NaN, which fails its threshold
+            kept, counted = gap_sums.get((scen, model, mode, lam, name), (0.0, 0.0))
+            values[value_key(scen, model, mode, lam, name)] = kept / counted if counted else math.nan
     return values, failures
 
 
