@@ -66,15 +66,23 @@ def test_the_stamp_lies_in_the_folder_keyed_by_the_kernel_sources(cache, tmp_pat
     monkeypatch.setattr(cache_module, "KERNEL_MODULES", ("kernels.py",))
     versions = {"numba": "0.60.0"}
     monkeypatch.setattr(importlib.metadata, "version", lambda name: versions[name])
-    first = kw.stamp_path()
-    (tmp_path / "kernels.py").write_text("X = 2\n")
-    edited = kw.stamp_path()
-    versions["numba"] = "0.61.0"
-    newer = kw.stamp_path()
-    assert len({first, edited, newer}) == 3 and first.parent.parent == cache
-    (tmp_path / "kernels.py").write_text("X = 1\n")
-    versions["numba"] = "0.60.0"
-    assert kw.stamp_path() == first
+
+    def stamp():  # the key is computed once per process: forget it, as a new process would
+        cache_module.kernel_key.cache_clear()
+        return kw.stamp_path()
+
+    try:
+        first = stamp()
+        (tmp_path / "kernels.py").write_text("X = 2\n")
+        edited = stamp()
+        versions["numba"] = "0.61.0"
+        newer = stamp()
+        assert len({first, edited, newer}) == 3 and first.parent.parent == cache
+        (tmp_path / "kernels.py").write_text("X = 1\n")
+        versions["numba"] = "0.60.0"
+        assert stamp() == first
+    finally:
+        cache_module.kernel_key.cache_clear()  # the real sources' key is computed again after the test
 
 
 def _config(**experiment):
