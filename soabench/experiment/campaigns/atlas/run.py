@@ -63,6 +63,12 @@ class AtlasSpec:
     trial_kind: str = registry.DEFAULT_TRIAL_KIND
     scene_loader: str = registry.DEFAULT_SCENE_LOADER
     plugin_paths: tuple[str, ...] = ()
+    #: ``experiment.seed`` of the base config, read through :class:`~soabench.config.Config` once (a failure
+    #: record's seed)
+    base_seed: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "base_seed", int(Config.from_dict(self.config).experiment.seed))
 
     @property
     def task_fn(self) -> Any:
