@@ -23,7 +23,7 @@ from typing import Any
 from soabench.atomic import write_text_atomic
 from soabench.birth import LABEL
 from soabench.errors import SoabenchError, require
-from soabench.folders import resolve
+from soabench.folders import check_out_file, resolve
 from soabench.replay.page import asset, fill
 from soabench.replay.simulate import read_run
 
@@ -63,7 +63,8 @@ def replay_file(trial: int) -> str:
 
 def extreme_trials(run_dir: Path) -> list[dict[str, Any]]:
     """Per (model, mode) of the first clutter rate: the trials of lowest and highest mean delay (NaN excluded; ties
-    go to the lower trial index), from ``trials.csv``."""
+    go to the lower trial index), from ``trials.csv``; one line naming the file and the row when it is damaged (a
+    row with too few or too many cells, a cell that is not a number, no newline at its end: a cut-off write)."""
     table = run_dir / "trials.csv"
     if not table.is_file():
         return []
@@ -71,15 +72,24 @@ def extreme_trials(run_dir: Path) -> list[dict[str, Any]]:
     first_clutter = None
     try:
         with table.open(newline="", encoding="utf-8") as fh:
-            for r in csv.DictReader(fh):
-                try:
-                    lam, trial, delay = float(r["clutter"]), int(r["trial"]), float(r["delay_mean"])
-                except (KeyError, TypeError, ValueError):
-                    continue
-                first_clutter = lam if first_clutter is None else first_clutter
-                if lam != first_clutter or math.isnan(delay):
-                    continue
-                by.setdefault((str(r.get("model")), str(r.get("mode"))), []).append((delay, trial))
+            text = fh.read()
+        reader = csv.DictReader(text.splitlines())
+        for line, r in enumerate(reader, start=2):
+            try:
+                if None in r or None in r.values():
+                    raise ValueError(f"{len(reader.fieldnames or ())} columns in the header, other count here")
+                lam, trial = float(r["clutter"]), int(r["trial"])
+                delay = math.nan if r["delay_mean"] == "" else float(r["delay_mean"])
+            except KeyError as exc:
+                raise SoabenchError(f"{str(table)!r} has no column {exc}: it is not a run's trials.csv") from None
+            except ValueError:
+                raise SoabenchError(_damaged(table, f"row {line} is not a whole trials.csv row")) from None
+            first_clutter = lam if first_clutter is None else first_clutter
+            if lam != first_clutter or math.isnan(delay):
+                continue
+            by.setdefault((str(r.get("model")), str(r.get("mode"))), []).append((delay, trial))
+        if text and not text.endswith("\n"):
+            raise SoabenchError(_damaged(table, "its last row has no newline"))
     except (OSError, csv.Error, UnicodeDecodeError) as exc:
         raise SoabenchError(f"cannot read {str(table)!r}: {exc}") from None
     out = []
@@ -87,6 +97,14 @@ def extreme_trials(run_dir: Path) -> list[dict[str, Any]]:
         best, worst = min(rows), max(rows, key=lambda r: (r[0], -r[1]))
         out.append({"model": model, "mode": mode, "clutter": first_clutter, "best": best, "worst": worst})
     return out
+
+
+def _damaged(table: Path, what: str) -> str:
+    run = shlex.quote(str(table.parent))
+    return (
+        f"{str(table)!r} is damaged ({what}: a cut-off or edited file); rebuild it from the trial records with "
+        f"soabench run --resume {run}"
+    )
 
 
 def _inline(text: str) -> str:
@@ -218,9 +236,10 @@ def _check_ours(target: Path) -> None:
 def write_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, int]:
     """Write the report page of a run folder (default ``RUN/report.html``); returns its path and size in bytes.
 
-    An existing file at the target that this command did not write is left alone (an error says so)."""
+    An existing file at the target that this command did not write is left alone (an error says so); ``out`` must
+    end in .html and lie in an existing folder, as every command's output file does."""
     path, _, raw = read_run(run_dir)
-    target = path / REPORT_FILE if out is None else Path(out)
+    target = path / REPORT_FILE if out is None else check_out_file(str(out), ".html")
     _check_ours(target)
     return target, write_page(target, report_html(path, raw))
 

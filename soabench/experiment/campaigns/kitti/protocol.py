@@ -28,6 +28,7 @@ from soabench.birth import get_birth_model
 from soabench.config import Config, filter_config_for_mode
 from soabench.errors import SoabenchError, require
 from soabench.experiment.campaigns.kitti.report import TRACK_COLUMNS, write_outputs
+from soabench.experiment.campaigns.kitti.trackeval_kitti import write_inputs
 from soabench.experiment.runs.files import read_json
 from soabench.experiment.trial.trial import run_filter
 from soabench.folders import FolderLock, check_new_folder, resolve
@@ -89,8 +90,12 @@ def count_targets(seq: KittiSequence, kcfg: KittiConfig) -> int:
 # one (setting, sequence) task
 
 
-def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: str) -> dict:
+def run_sequence(
+    ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: str, kitti_seq: KittiSequence | None = None
+) -> dict:
     """Every model of ``cfg.experiment`` (first probability mode) on one sequence with N-hat; a JSON-ready record.
+    ``kitti_seq``: the parsed sequence, to add under ``"kitti_results"`` each labelled model's estimates and labels
+    per frame (for :func:`.trackeval_kitti.write_inputs`; not part of the written record).
 
     Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])``. Wall-clock
     times go to ``record["timing"]``, so everything else is bit-identical for the same inputs and seed.
@@ -120,6 +125,8 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
             "tracks": {k: tracks[k] for k in TRACK_COLUMNS},
             "levels": level_split(ss, X, labels, cfg.metrics),
         }
+        if kitti_seq is not None and labels is not None:
+            out.setdefault("kitti_results", {})[model] = (X, labels)
         out["timing"][model] = {**timing, "total": time.perf_counter() - t0}
     return out
 
@@ -229,7 +236,13 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
             for note in cache[s].info["notes"]:
                 log(f"warning: {note}")
         t0 = time.perf_counter()
-        rec = run_sequence(cache[s], spec.config, nh, spec.config.experiment.seed, s)
+        rec = run_sequence(
+            cache[s], spec.config, nh, spec.config.experiment.seed, s, seqs[s] if setting == CV else None
+        )
+        if (
+            setting == CV
+        ):  # TrackEval's own KITTI evaluation reads these (soabench.experiment.campaigns.kitti.trackeval_kitti)
+            write_inputs(out, seqs[s], cache[s], rec.pop("kitti_results", {}))
         rec.update({"setting": setting, "sequence": s, "N_hat": nh, "info": cache[s].info, "targets": targets[s]})
         write_json_atomic(path, rec)
         brief = ", ".join(
