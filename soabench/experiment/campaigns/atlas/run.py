@@ -85,7 +85,7 @@ _LOCK = threading.Lock()  # libsumo is a process singleton: one chunk at a time 
 def run_chunk_task(task: int, spec: AtlasSpec) -> dict:
     """Run one chunk (module docstring) in this process; an exception becomes a failure record."""
     n, s = spec.chunk_of(task)
-    base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+    base_seed = spec.base_seed
     t0 = time.perf_counter()
     try:
         with _LOCK:
