@@ -8,7 +8,9 @@ Each assignment is the minimum-cost one of :func:`soabench.metrics_kernels.assig
 TrackEval and :func:`soabench.metrics.ospa` build, with the same floating-point operations (IEEE double, no
 ``fastmath``). An optimal assignment is unique unless two have the same cost; :func:`match_scans` stops at a scan
 whose cost matrix has two equal rows or columns (two equal positions that the labels do not tell apart) so that the
-caller matches it with scipy, as TrackEval does.
+caller matches it with scipy, as TrackEval does. :func:`match_scans` finds each scan's assignments per connected
+component of the non-zero costs (:func:`sparse_assignment`): a pair of zero similarity is never a match, so these
+are the matches of the whole matrix's assignment.
 """
 
 from __future__ import annotations
@@ -292,7 +294,7 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     ev_j = np.empty(64, dtype=np.int64)
     ev_d = np.empty(64)
     ev_off = np.zeros(K + 1, dtype=np.int64)
-    n_ev = 0
+    n_ev = np.int64(0)  # not the literal 0: one specialisation of _near_events
     for k in range(K):
         lo = max(0, k - window + 1)
         if k >= window:  # scan k - window leaves the window
