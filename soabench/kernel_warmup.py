@@ -55,7 +55,7 @@ KERNEL_MODULES = (
     "soabench.lmb.gibbs",
     "soabench.lmb.tracks",
 )
-MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version) ..."
+MESSAGE = notice.MESSAGE
 
 
 def _filter(mode: str):

@@ -18,10 +18,9 @@ from collections.abc import Callable, Hashable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-MESSAGE = (
-    "soabench: compiling the GM-PHD filter, metric and scan-geometry kernels with numba (once after installation, "
-    "one to two minutes; cached afterwards) ..."
-)
+#: the one wording of every compile notice (this first-use notice and the run's compile ahead,
+#: :mod:`soabench.kernel_warmup`)
+MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version) ..."
 DELAY = 3.0  #: seconds of silence before the notice (longer than loading cached kernels takes)
 _done: set[Hashable] = set()
 _printed = threading.Event()  #: the notice is printed at most once per process

@@ -490,6 +490,7 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
     run that names filter families, those of its GM-PHD family, then the families side by side
     (:mod:`soabench.figures.families`); ``by_family`` False: the paper's figures of all the rows given."""
     from soabench.figures.families import family_jobs, family_only, in_family, run_families
+    from soabench.figures.forest import paired_figure
     from soabench.figures.tracks import has_labels, run_tracks_figure
 
     if by_family and run_families(tables):
@@ -508,6 +509,8 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
     for lam in clutters:
         sfx = f"_lam{lam:g}" if len(clutters) > 1 else ""
         limits = delay_limits(tables, lam)
+        if "soa" in tables.models and len(tables.models) > 1:  # the headline's forest plot
+            jobs.append(FigureJob(out_dir / f"paired{sfx}.png", paired_figure, (lam,), weight=1.5))
         for model in sorted(tables.models, key=lambda m: LETTER.get(m, "z")):
             name = f"fig5{LETTER.get(model, 'x')}_delay_{model}{sfx}.png"
             jobs.append(FigureJob(out_dir / name, delay_figure, (model, lam, limits)))

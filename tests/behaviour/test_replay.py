@@ -63,7 +63,7 @@ def scene_sensor_scans(monkeypatch, tmp_path: Path, time: float):
 
 def test_a_run_writes_its_report(run_dir: Path) -> None:
     """A plain `soabench run` leaves report.html in its folder: the page to open."""
-    from soabench.replay.report import REPORT_FILE
+    from soabench.experiment.reports.html import REPORT_FILE
 
     text = (run_dir / REPORT_FILE).read_text(encoding="utf-8")
     assert '<meta name="generator" content="soabench report">' in text and "Best and worst trials" in text
@@ -281,7 +281,7 @@ def test_replay_bad_input(run_dir: Path, tmp_path: Path, capsys) -> None:
 
 
 def test_report_page(run_dir: Path, capsys) -> None:
-    from soabench.replay.report import REPLAYS_DIR, REPORT_FILE, extreme_trials
+    from soabench.experiment.reports.html import REPLAYS_DIR, REPORT_FILE, extreme_trials
 
     assert main(["report", str(run_dir), "--replays"]) == 0
     text = (run_dir / REPORT_FILE).read_text(encoding="utf-8")
@@ -308,7 +308,7 @@ def test_report_leaves_a_foreign_file(run_dir: Path, tmp_path: Path, capsys) -> 
 
 
 def test_report_escapes_what_it_reads(tmp_path: Path) -> None:
-    from soabench.replay.report import markdown_html
+    from soabench.experiment.reports.html import markdown_html
 
     out = markdown_html("# a <script>x</script>\n\n| a | b |\n|---|---|\n| <img src=x onerror=y> | `c` |\n")
     assert "<script>" not in out and "<img" not in out and "&lt;img" in out and "<code>c</code>" in out
@@ -362,24 +362,24 @@ def test_replay_page_in_browser(replay_page: Path, tmp_path: Path) -> None:
 
 
 def test_report_page_in_browser(run_dir: Path, tmp_path: Path) -> None:
-    from soabench.replay.report import REPORT_FILE
+    from soabench.experiment.reports.html import REPORT_FILE
 
     assert main(["report", str(run_dir)]) == 0
     page = run_dir / REPORT_FILE
     n_figures = len(list((run_dir / "figures").glob("*.png")))
-    dom = browse(page, "#sort=0:3", tmp_path)  # the summary table sorted by its 4th column (mean delay)
+    dom = browse(page, "#sort=0:3", tmp_path)  # the models table sorted by its 4th column (mean delay)
     attrs = body_attrs(dom)
     assert attrs["status"] == "ok", attrs
     assert attrs["images"] == f"{n_figures}/{n_figures}"
     table = re.search(r'<table class="sortable">(.*?)</table>', dom, re.S).group(1)
-    delays = [float(r[3]) for r in (re.findall(r"<td>(.*?)</td>", row) for row in re.findall(r"<tr>(.*?)</tr>", table))
-              if r]  # fmt: skip
+    cells = [re.findall(r'<span class="v">(.*?)</span>', row) for row in re.findall(r"<tr>(.*?)</tr>", table)]
+    delays = [float(c[1]) for c in cells if c]  # the cells with a value and its interval: trials, delay, ...
     assert len(delays) == 2 and delays == sorted(delays) and 'class="asc"' in table
 
 
 def test_index_of_a_folder_of_runs(run_dir: Path, tmp_path: Path) -> None:
     """A folder holding run folders (a study, results/) gets each run's report and an index page linking them."""
-    from soabench.replay.report import INDEX_FILE, REPORT_FILE
+    from soabench.experiment.reports.html import INDEX_FILE, REPORT_FILE
 
     folder = run_dir.parent
     (folder / "notes.md").write_text("# Study <b>notes</b>\n\n| a | b |\n|---|---|\n| 2 | 1 |\n", encoding="utf-8")

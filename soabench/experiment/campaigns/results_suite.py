@@ -36,6 +36,7 @@ from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns.occlusion_density import write_density
 from soabench.experiment.execution.executors import MAX_WORKERS
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
+from soabench.experiment.reports.html import write_index
 from soabench.experiment.runs.files import read_json, write_json_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runs.runmeta import flatten_config
@@ -318,8 +319,6 @@ def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None],
 def _index_pages(root: Path, scenes: Sequence[str], log: Callable[[str], None]) -> tuple[str, int]:
     """Every run folder's ``report.html``, each study's ``index.html`` and ``index.html`` linking every part
     (docs/user-guide/replay.md); a kept part gets its pages here too, an unchanged page is not rewritten."""
-    from soabench.replay.report import write_index
-
     for scene in scenes:
         if (root / scene).is_dir():
             write_index(root / scene)

@@ -38,6 +38,7 @@ from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.reports import report
+from soabench.experiment.reports.html import refresh_report
 from soabench.experiment.runs.files import pack_table, to_jsonable, write_json_atomic
 from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, package_versions, platform_info
@@ -54,7 +55,6 @@ from soabench.experiment.trial import registry
 from soabench.experiment.trial.guard import failure_message
 from soabench.figures.drawing import report_pool
 from soabench.kernel_warmup import ensure_compiled
-from soabench.replay.report import refresh_report
 from soabench.scenario.derive import said_by_the_driver
 from soabench.seeding import trial_seeds
 
