@@ -270,8 +270,8 @@ def test_pooled_mean_ci_is_the_trial_cluster_interval():
 def test_forest_plot_of_paired_differences_names_the_better_side(tables, tmp_path):
     """The key figure: one panel per metric, the models paired with S-OA as rows, x = S-OA − X with its unit and the
     side where S-OA is better; an interval far wider than the others is cut at the axis' edge, with its numbers."""
-    from soabench.experiment.reports.headline import headline
-    from soabench.figures.forest import KEY_METRICS, _limit, forest_figure
+    from soabench.experiment.reports.headline import KEY_METRICS, headline
+    from soabench.figures.forest import _limit, forest_figure
 
     fig = forest_figure(headline(tables, 3.0), KEY_METRICS)
     path = ps.save_png(fig, tmp_path / "key_figure.png")

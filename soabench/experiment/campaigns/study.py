@@ -44,7 +44,7 @@ from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.premerge import merged_on
 from soabench.experiment.execution.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.reports import paper
-from soabench.experiment.reports.headline import headline
+from soabench.experiment.reports.headline import KEY_METRICS, headline
 from soabench.experiment.reports.html import write_index
 from soabench.experiment.reports.report import families, family_tables, paper_protocol_mismatch
 from soabench.experiment.reports.tables import load_tables
@@ -285,7 +285,7 @@ def key_figure(root: Path) -> Path | None:
     on the main protocol at λ = 3 (delay, cardinality error, OSPA, precision; :mod:`soabench.figures.forest`), drawn
     from ``main/`` (its GM-PHD family). None when the folder holds no finished main run with S-OA at λ = 3."""
     # imported when called: matplotlib would slow every start-up
-    from soabench.figures.forest import KEY_METRICS, forest_figure
+    from soabench.figures.forest import forest_figure
     from soabench.figures.style import save_png
 
     main = Path(root) / "main"
