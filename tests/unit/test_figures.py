@@ -289,7 +289,6 @@ def test_forest_plot_of_paired_differences_names_the_better_side(tables, tmp_pat
     assert {"static", "dynamic"} <= set(_legend_labels(fig))
 
 
-
 # ---------------------------------------------------------------------------------------------------- maps
 def _ring_scene():
     """A looped block: a sidewalk ring (polygon with a hole), a road inside the hole, a building, a door."""
