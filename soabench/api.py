@@ -18,10 +18,11 @@ Four calls cover a study from a notebook:
 The data that flows (:mod:`soabench.types`): :class:`Recording`; :class:`Scans` / :class:`Scan`;
 :class:`Births` and :class:`NewbornTerms` from a :class:`BirthContext`; :class:`Estimates` (any tracker) and
 :class:`StepResult` (our GM-PHD). The two extension points (:mod:`soabench.protocols`): :class:`BirthModel` and
-:class:`Tracker` (built from a :class:`TrackerSetup`); :class:`GMPHDTracker` is our filter with a birth model as a
-tracker; :func:`build_components`, :func:`births_from`, :func:`isotropic` and :class:`FOVRule` help write birth
-models (§3.0). Plugins register by entry point (groups :data:`BIRTH_GROUP`, :data:`TRACKER_GROUP`) or are named as
-``module:Class``; :func:`resolve` turns a name of a kind (:data:`BIRTH_MODEL`, :data:`TRACKER`) into its class.
+:class:`Tracker` (built from a :class:`TrackerSetup`); :class:`FilterTracker` is one of our filter families
+(:data:`FAMILIES`: ``"gmphd"``, ``"lmb"``, ...) with a birth model as a tracker; :func:`build_components`,
+:func:`births_from`, :func:`isotropic` and :class:`FOVRule` help write birth models (§3.0). Plugins register by
+entry point (groups :data:`BIRTH_GROUP`, :data:`TRACKER_GROUP`) or are named as ``module:Class``;
+:func:`resolve` turns a name of a kind (:data:`BIRTH_MODEL`, :data:`TRACKER`) into its class.
 
 Wrong input fails at this boundary with one line (a ``ValueError``; a ``TypeError`` too for an object of the wrong
 kind), e.g. a :class:`Scans` passed to ``step``, NaN truth rows, or Stone Soup-ordered states ([x, vx, y, vy],
@@ -37,12 +38,12 @@ from soabench import boundary as _boundary
 from soabench import plugins as _plugins
 from soabench.birth.base import FOVRule, births_from, build_components, isotropic
 from soabench.boundary import ORDER_SOABENCH, ORDER_STONESOUP
-from soabench.config import Config
+from soabench.config import FAMILIES, Config
 from soabench.errors import require as _require
 from soabench.errors import require_type as _require_type
 from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP
 from soabench.protocols import BirthModel, Tracker, TrackerSetup
-from soabench.trackers import GMPHDTracker, run_tracker
+from soabench.trackers import FilterTracker, GMPHDTracker, run_tracker
 from soabench.types import (
     CLUTTER,
     SOURCE_FOV,
@@ -91,6 +92,8 @@ __all__ = [
     "Config",
     "Estimates",
     "FOVRule",
+    "FAMILIES",
+    "FilterTracker",
     "GMPHDTracker",
     "NewbornTerms",
     "Obstacles",
@@ -210,25 +213,31 @@ def make_tracker(
     mode: str = "static",
     seed: int = 0,
     trial: int = 0,
+    filter: str | None = None,
     **options: _Any,
 ) -> _Any:
     """A tracker with ``step(scan)``, built as the harness builds the run of ``name_or_class`` in trial ``trial``.
 
     Args:
         name_or_class: a birth model (``"soa"``, ``"pubm"``, ``"ubm"``, ``"ubm-ws"``, ``"atbm"``, ``"gmbm"``, an
-            installed entry point, ``"module:Class"`` or the class itself), which runs in our GM-PHD filter; or a
-            whole tracker (``"stonesoup-gmphd"``, ``"stonesoup-gnn"``, an entry point, ``"module:Class"`` or a class
-            with a ``step`` method).
+            installed entry point, ``"module:Class"`` or the class itself), which runs in one of our filter
+            families; or a whole tracker (``"stonesoup-gmphd"``, ``"stonesoup-gnn"``, an entry point,
+            ``"module:Class"`` or a class with a ``step`` method).
         scene_or_net: the scene the birth model reads (a SceneMap, or a network name or path).
         config: a :class:`Config`, a dict of sections, a TOML path or None (defaults).
-        mode: the probability mode (``"static"``, ``"dynamic"``, ``"dynamic+occ"``; docs/method.md §4.6).
-        seed, trial: the run's placement generator is trial ``trial``'s of base seed ``seed``.
+        mode: the probability mode (``"static"``, ``"static+occ"``, ``"dynamic"``, ``"dynamic+occ"``;
+            docs/method.md §4.6), one the family defines.
+        seed, trial: the run's placement generator (and a family's association stream) are trial ``trial``'s of
+            base seed ``seed``.
+        filter: the filter family the birth model runs in (:data:`FAMILIES`: ``"gmphd"``, ``"lmb"``, ...). None:
+            the one the configuration's ``experiment.filters`` names (the GM-PHD by default); a configuration
+            naming several is refused, as is one that names others than ``filter``.
         options: a plugin's own options (default: the configuration's ``[plugins.<name>]`` table).
 
     Returns:
-        A :class:`GMPHDTracker` for a birth model (``step`` returns :class:`StepResult`), else the tracker
-        (``step`` returns :class:`Estimates`). Stepping it through :func:`simulate_trial`'s scans gives the step
-        results of that run of ``soabench run``.
+        A :class:`FilterTracker` for a birth model (``step`` returns :class:`StepResult`, labelled), else the
+        tracker (``step`` returns :class:`Estimates`). Stepping it through :func:`simulate_trial`'s scans gives the
+        step results of that run of ``soabench run``.
 
     Example:
         >>> import soabench.api as sb
@@ -237,16 +246,15 @@ def make_tracker(
         >>> [type(tracker.step(scan)).__name__ for scan in scans][:2]
         ['StepResult', 'StepResult']
     """
-    from soabench.config import filter_config_for_mode
     from soabench.experiment.trial.trial import guard
-    from soabench.gmphd.filter import GMPHDFilter
     from soabench.seeding import trial_seeds
+    from soabench.trackers import build_filter
 
-    cfg = _boundary.as_config(config)
+    cfg, family = _boundary.family_config(config, filter)
     kind, name, cls = _boundary.plugin(name_or_class)
     scene = _boundary.as_scene(scene_or_net)
-    filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
-    rng = trial_seeds(seed, trial).placement_rng()
+    seeds = trial_seeds(seed, trial)
+    rng = seeds.placement_rng()
     builtin = kind == BIRTH_MODEL and isinstance(name_or_class, str) and _plugins.is_builtin_birth(name)
     _require(
         not (builtin and options), f"{name} is a built-in birth model: set its options in the config's [birth] section"
@@ -255,9 +263,9 @@ def make_tracker(
     _plugins.check_options(kind, name, cls, options)
     if kind == TRACKER:
         return cls(TrackerSetup(cfg.sensor, scene, rng, mode, cfg), **options)
+    filt, p_D_b = build_filter(family, cfg, cfg.sensor, mode, seeds.association_rng())
     birth_model = cls(cfg.birth, cfg.sensor, scene, rng, **options)
-    filt = GMPHDFilter(filter_cfg, cfg.sensor, filter_mode)
-    return GMPHDTracker(birth_model, filt, p_D_b, check_births=None if builtin else guard.check_births)
+    return FilterTracker(birth_model, filt, p_D_b, check_births=None if builtin else guard.check_births)
 
 
 def evaluate(

@@ -18,11 +18,12 @@ from typing import Any
 import numpy as np
 
 from soabench import plugins
-from soabench.config import Config, MetricsConfig, load_config
+from soabench.config import FAMILIES, Config, MetricsConfig, load_config
 from soabench.errors import SoabenchError, require, require_type
 from soabench.experiment.trial.guard import PluginOutputError, check_estimates
 from soabench.experiment.trial.registry import load_scene_cached
 from soabench.scenario.scene import SceneMap
+from soabench.tomlfile import read_toml
 from soabench.types import Estimates, Scans, StepResult
 
 ORDER_SOABENCH = "x,y,vx,vy"  #: our state order (positions first)
@@ -43,6 +44,42 @@ def as_config(config: Config | dict | str | Path | None) -> Config:
     if isinstance(config, dict):
         return Config.from_dict(config).validate()
     return load_config(config)
+
+
+def family_config(config: Config | dict | str | Path | None, family: str | None) -> tuple[Config, str]:
+    """A validated copy of ``config`` for a tracker of one filter family, and that family: ``family`` if given
+    (the configuration's ``experiment.filters`` set to it; one naming other families is refused), else the one
+    family ``experiment.filters`` names (a configuration naming several is refused)."""
+    if family is None:
+        cfg = as_config(config)
+        named = cfg.experiment.filters
+        require(
+            len(named) == 1,
+            f"experiment.filters = {list(named)!r} names {len(named)} filter families; a tracker runs one: pass "
+            f"filter= one of them",
+        )
+        return cfg, named[0]
+    require(
+        isinstance(family, str) and family in FAMILIES,
+        f"filter = {family!r} is not allowed; choose one of {', '.join(map(repr, FAMILIES))}",
+    )
+    if config is None or isinstance(config, Config):
+        data = (config or Config()).to_dict()
+    elif isinstance(config, dict):
+        data = dict(config)
+    else:
+        require_type(config, (Config, dict, str, Path), "config", "give a soabench.api.Config, a dict or a TOML path")
+        require(Path(config).is_file(), f"config file {str(config)!r} does not exist")
+        data = read_toml(Path(config), "config file")
+    exp = data.get("experiment", {})
+    require(isinstance(exp, dict), "config section [experiment] must be a table of key = value")
+    named = exp.get("filters")
+    require(
+        named is None or list(named) == [family] or (isinstance(named, (list, tuple)) and family in named),
+        f"filter = {family!r} is not among experiment.filters = {named!r} of the configuration; name it there or "
+        "drop the key",
+    )
+    return Config.from_dict({**data, "experiment": {**exp, "filters": [family]}}).validate(), family
 
 
 def metrics_config(config: Config | MetricsConfig | dict | str | Path | None) -> MetricsConfig:

@@ -28,10 +28,49 @@ from soabench.tomlfile import read_toml
 
 BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(plugins.BUILTIN_BIRTH_MODELS)  #: the built-in birth models
 PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
-#: the filter families a run can put every birth model in (docs/method.md "LMB filter"); the first is the default
-FILTER_FAMILIES = ("gmphd", "lmb")
+
+
+@dataclass(frozen=True)
+class FilterFamily:
+    """One filter family every birth model can run in (docs/development.md "Adding a filter family").
+
+    Attributes:
+        name: its name in ``--filters``, ``experiment.filters`` and the ``filter`` column of the tables.
+        label: how tables and figures name it.
+        modes: the probability modes it defines (docs/method.md §4.6); a run skips the others for it (their table
+            cells read "—"), and a run none of whose modes it defines is refused.
+        build: ``"module:function"`` of its builder, ``build(setup: FamilySetup) -> Filter``
+            (:mod:`soabench.protocols`); imported when a run builds its first filter, never at start-up.
+        section: its own config section (a dataclass field of :class:`Config`), or None when it reads ``[filter]``
+            only. A key of the section set while no run names the family is refused.
+        hatch: its bar hatch in ``families.png``.
+    """
+
+    name: str
+    label: str
+    modes: tuple[str, ...]
+    build: str
+    section: str | None = None
+    hatch: str = ""
+
+
+#: the filter families, in the order tables and figures list them; the first is the default of every run
+FAMILIES: dict[str, FilterFamily] = {
+    f.name: f
+    for f in (
+        FilterFamily("gmphd", "GM-PHD", PROBABILITY_MODES, "soabench.gmphd.family:build"),
+        FilterFamily("lmb", "LMB", ("static",), "soabench.lmb.family:build", section="lmb", hatch="////"),
+    )
+}
+#: the filter families' names (docs/method.md "LMB filter"); the first is the default
+FILTER_FAMILIES = tuple(FAMILIES)
 #: the probability modes each family runs; a family's other modes are skipped (their table cells read "—")
-FAMILY_MODES = {"gmphd": PROBABILITY_MODES, "lmb": ("static",)}
+FAMILY_MODES = {name: f.modes for name, f in FAMILIES.items()}
+
+
+def family_label(name: str) -> str:
+    """How tables and figures name filter family ``name`` (the name itself for one not registered)."""
+    return FAMILIES[name].label if name in FAMILIES else name
 
 
 #: fields that are not config keys: their value comes from the key named beside them (one home per parameter)
@@ -433,16 +472,9 @@ class Config:
         self.filter.validate()
         self.birth.validate()
         self.metrics.validate()
-        self.lmb.validate()
-        default_lmb = LMBConfig()
-        changed = [
-            f.name for f in dataclasses.fields(LMBConfig) if getattr(self.lmb, f.name) != getattr(default_lmb, f.name)
-        ]
-        if changed and "lmb" not in self.experiment.filters:  # an [lmb] key no run reads: refused, not ignored
-            raise SoabenchError(
-                f"lmb.{changed[0]} = {getattr(self.lmb, changed[0])!r} is set but experiment.filters = "
-                f"{list(self.experiment.filters)!r} runs no LMB filter; add lmb (--filters gmphd,lmb) or remove the key"
-            )
+        for family in FAMILIES.values():
+            if family.section is not None:
+                self._check_family_section(family)
         require(
             self.experiment.duration >= self.sensor.dt,
             f"duration = {self.experiment.duration!r} is shorter than one sensor period sensor.dt = {self.sensor.dt!r}",
@@ -451,14 +483,32 @@ class Config:
             require(isinstance(table, dict), f"[plugins.{name}] must be a table of option = value")
         return self
 
+    def _check_family_section(self, family: FilterFamily) -> None:
+        """Validate a family's own section; a key of it set while no run names the family is refused, not
+        ignored."""
+        section = getattr(self, str(family.section))
+        section.validate()
+        default = type(section)()
+        changed = [f.name for f in dataclasses.fields(section) if getattr(section, f.name) != getattr(default, f.name)]
+        if changed and family.name not in self.experiment.filters:
+            raise SoabenchError(
+                f"{family.section}.{changed[0]} = {getattr(section, changed[0])!r} is set but experiment.filters = "
+                f"{list(self.experiment.filters)!r} runs no {family.label} filter; add {family.name} "
+                f"(--filters gmphd,{family.name}) or remove the key"
+            )
+
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS`
-        and, when the run names no LMB family, without ``experiment.filters`` and ``[lmb]`` (then at their defaults:
-        the identity of a default run is unchanged)."""
+        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS`,
+        without the sections of the filter families the run does not name (then at their defaults) and, when the
+        run names the default family only, without ``experiment.filters`` (the identity of a default run is
+        unchanged)."""
         out = dataclasses.asdict(self)
-        if tuple(out["experiment"]["filters"]) == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
+        named = tuple(out["experiment"]["filters"])
+        for family in FAMILIES.values():
+            if family.section is not None and family.name not in named:
+                del out[family.section]
+        if named == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
             del out["experiment"]["filters"]
-            del out["lmb"]
         return {
             sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items() if f"{sec}.{k}" not in DERIVED_KEYS}
             for sec, d in out.items()

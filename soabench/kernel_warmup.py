@@ -214,7 +214,11 @@ def stamp_path() -> Path:
     import importlib.metadata
     import importlib.util
 
-    parts = [sys.version, importlib.metadata.version("numba"), importlib.metadata.version("soabench")]
+    try:
+        own = importlib.metadata.version("soabench")
+    except importlib.metadata.PackageNotFoundError:  # run from a checkout on PYTHONPATH: the digests below key it
+        own = "checkout"
+    parts = [sys.version, importlib.metadata.version("numba"), own]
     for name in KERNEL_MODULES:
         spec = importlib.util.find_spec(name)
         origin = spec.origin if spec is not None and spec.origin else ""

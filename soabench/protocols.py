@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 if TYPE_CHECKING:
     import numpy as np
 
-    from soabench.config import BirthConfig, Config, SensorConfig
+    from soabench.config import BirthConfig, Config, FilterConfig, SensorConfig
     from soabench.scenario.scene import SceneMap
     from soabench.types import BirthContext, Births, Estimates, Scan, StepResult
 
@@ -82,3 +82,44 @@ class Tracker(Protocol):
     def __init__(self, setup: TrackerSetup, **options: Any) -> None: ...
 
     def step(self, scan: Scan) -> Estimates | StepResult: ...
+
+
+@dataclass(frozen=True)
+class FamilySetup:
+    """What a filter family builds one run's filter from (one trial, one clutter rate, one probability mode;
+    docs/development.md "Adding a filter family").
+
+    Attributes:
+        config: the whole resolved configuration; the family reads ``[filter]`` and its own section.
+        sensor: the sensor model of this run (its clutter rate set).
+        mode: the run's probability mode label (``"static"``, ``"static+occ"``, ``"dynamic"``, ...), one of the
+            family's modes.
+        filter_cfg: ``[filter]`` for that mode (``occlusion_pd`` set by the ``+occ`` modes;
+            :func:`soabench.config.filter_config_for_mode`).
+        filter_mode: the probability model of that mode, ``"static"`` or ``"dynamic"``.
+        rng: the trial's association stream (:meth:`soabench.seeding.TrialSeeds.association_rng`), for a family
+            that draws (the LMB's Gibbs sampler); the same for every family and mode of a trial.
+    """
+
+    config: Config
+    sensor: SensorConfig
+    mode: str
+    filter_cfg: FilterConfig
+    filter_mode: str
+    rng: np.random.Generator
+
+
+@runtime_checkable
+class Filter(Protocol):
+    """One run's filter of a family: ``build(setup: FamilySetup) -> Filter`` once per run (the registry line's
+    builder, :data:`soabench.config.FAMILIES`), then ``filt.step(scan, births) -> StepResult`` once per scan.
+
+    ``births`` are the birth model's :class:`~soabench.types.Births` of the scan, exactly as every family gets them:
+    the family decides how they enter (the GM-PHD appends the components, the LMB groups them into Bernoullis).
+    ``step`` returns the scan's estimates with their track labels (``StepResult.labels``, one int64 per estimate)
+    and its cost figures (:func:`soabench.trackers.step_result_from` makes one from :class:`Estimates`).
+    """
+
+    name: str
+
+    def step(self, scan: Scan, births: Births) -> StepResult: ...

@@ -1,7 +1,9 @@
-"""Trackers: our GM-PHD filter with a birth model and a probability mode is one; plugins and bridges are others.
+"""Trackers: one of our filter families with a birth model and a probability mode is one; plugins and bridges are
+others.
 
-:class:`GMPHDTracker` wraps the cycle of docs/method.md §2.11 (birth from the context at k, then ``filter.step``)
-behind the :class:`~soabench.protocols.Tracker` shape. :func:`run_tracker` runs any tracker over the scans of a run
+:class:`FilterTracker` wraps the cycle of docs/method.md §2.11 (birth from the context at k, then ``filter.step``)
+around a filter of any family (:data:`soabench.config.FAMILIES`, built by :func:`build_filter`) behind the
+:class:`~soabench.protocols.Tracker` shape. :func:`run_tracker` runs any tracker over the scans of a run
 and returns one :class:`~soabench.types.StepResult` per scan, the form the metrics read: a foreign tracker's
 :class:`~soabench.types.Estimates` are checked (:mod:`soabench.experiment.trial.guard`) and converted by
 :func:`step_result_from`.
@@ -9,36 +11,74 @@ and returns one :class:`~soabench.types.StepResult` per scan, the form the metri
 
 from __future__ import annotations
 
+import importlib
 import math
 import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from soabench.errors import require_type
-from soabench.protocols import Tracker
+from soabench.config import FAMILIES, filter_config_for_mode
+from soabench.errors import require, require_type
+from soabench.protocols import FamilySetup, Filter, Tracker
 from soabench.types import BirthContext, Births, Estimates, Scan, Scans, StepResult
 
-__all__ = ["GMPHDTracker", "TrackerRun", "run_tracker", "step_result_from"]
+if TYPE_CHECKING:
+    from soabench.config import Config, SensorConfig
+
+__all__ = [
+    "FilterTracker",
+    "GMPHDTracker",
+    "TrackerRun",
+    "build_filter",
+    "family_builder",
+    "run_tracker",
+    "step_result_from",
+]
 
 
-class GMPHDTracker:
-    """Our GM-PHD filter + one birth model + one probability mode, as a tracker.
+def family_builder(family: str) -> Callable[[FamilySetup], Filter]:
+    """The builder of filter family ``family`` named by its registry line (:data:`soabench.config.FAMILIES`);
+    imported here, when a run builds its first filter (the families' compiled kernels would slow every start-up)."""
+    require(family in FAMILIES, f"filter family {family!r} is not allowed; choose one of {', '.join(FAMILIES)}")
+    module, _, attr = FAMILIES[family].build.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def build_filter(
+    family: str, config: Config, sensor: SensorConfig, mode: str, rng: np.random.Generator | None = None
+) -> tuple[Filter, float]:
+    """One run's filter of ``family`` in probability ``mode``, and the detection probability p_D_b its birth
+    models read (:func:`soabench.config.filter_config_for_mode`); ``rng``: the trial's association stream (a fixed
+    seed if None). A mode the family does not define is refused with one line."""
+    fam = FAMILIES.get(family)
+    require(fam is not None, f"filter family {family!r} is not allowed; choose one of {', '.join(FAMILIES)}")
+    require(
+        mode in fam.modes,
+        f"probability mode {mode!r} is not defined for the {fam.label} filter; it runs {', '.join(fam.modes)}",
+    )
+    filter_cfg, filter_mode, p_D_b = filter_config_for_mode(config.filter, mode)
+    rng = rng if rng is not None else np.random.default_rng(0)
+    setup = FamilySetup(config, sensor, mode, filter_cfg, filter_mode, rng)
+    return family_builder(family)(setup), p_D_b
+
+
+class FilterTracker:
+    """One of our filter families + one birth model + one probability mode, as a tracker.
 
     Args:
         birth_model: a built birth model (``model(ctx) -> Births``).
-        filt: a built :class:`~soabench.gmphd.filter.GMPHDFilter` (its mode fixed).
+        filt: a built filter of any family (:func:`build_filter`; a :class:`~soabench.gmphd.filter.GMPHDFilter`,
+            an :class:`~soabench.lmb.LMBFilter`, ...), its mode fixed.
         p_D_b: detection probability of a newborn (``soabench.config.filter_config_for_mode``).
         check_births: optional check of each scan's births (plugins are checked, built-ins are not).
 
     Attributes:
         t_birth: wall time spent in the birth model so far (s).
     """
-
-    name = "gmphd"
 
     def __init__(
         self,
@@ -54,10 +94,15 @@ class GMPHDTracker:
         self.prev: StepResult | None = None
         self.t_birth = 0.0
 
+    @property
+    def name(self) -> str:
+        """The filter family's name (``filt.name``)."""
+        return str(getattr(self.filt, "name", "gmphd"))
+
     def __repr__(self) -> str:
         model = getattr(self.birth_model, "name", None) or type(self.birth_model).__name__
         mode = getattr(self.filt, "mode", "?")
-        return f"GMPHDTracker(birth model {model!r}, mode {mode!r}, p_D_b={self.p_D_b:g})"
+        return f"FilterTracker(family {self.name!r}, birth model {model!r}, mode {mode!r}, p_D_b={self.p_D_b:g})"
 
     def step(self, scan: Scan) -> StepResult:
         """Birth from the context at k, then one filter cycle (predict, birth, update, reduce, extract)."""
@@ -69,6 +114,10 @@ class GMPHDTracker:
         self.t_birth += time.perf_counter() - tb
         self.prev = self.filt.step(scan, births)
         return self.prev
+
+
+#: the former name of :class:`FilterTracker` (our GM-PHD was its only family), kept for user code
+GMPHDTracker = FilterTracker
 
 
 def check_scan(scan: Any) -> None:
@@ -133,7 +182,7 @@ class ScanFailure(Exception):
 
 
 def run_tracker(
-    scans: Scans, tracker: Tracker | GMPHDTracker, check: Callable[[Any, Scan, float], StepResult] | None = None
+    scans: Scans, tracker: Tracker | FilterTracker, check: Callable[[Any, Scan, float], StepResult] | None = None
 ) -> TrackerRun:
     """Run ``tracker.step`` over every scan in order; one :class:`StepResult` per scan.
 

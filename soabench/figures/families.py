@@ -17,15 +17,16 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from soabench.config import FAMILIES
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.experiment.trial.trial import FILTER_COLUMN
 from soabench.figures import style as ps
 from soabench.figures.drawing import FigureJob
 
-#: how a figure names a filter family
-FAMILY_LABEL = {"gmphd": "GM-PHD", "lmb": "LMB"}
-#: the bar hatch of a family (the GM-PHD plain, the LMB hatched)
-FAMILY_HATCH = {"gmphd": "", "lmb": "////"}
+#: how a figure names a filter family (the registry's labels, :data:`soabench.config.FAMILIES`)
+FAMILY_LABEL = {name: f.label for name, f in FAMILIES.items()}
+#: the bar hatch of a family (the registry's: the GM-PHD plain, the others hatched)
+FAMILY_HATCH = {name: f.hatch for name, f in FAMILIES.items()}
 #: the mode every family runs (soabench.config.FAMILY_MODES)
 SHARED_MODE = "static"
 #: the panels: (trials.csv column, y label, title)

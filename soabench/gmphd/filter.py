@@ -66,6 +66,8 @@ class GMPHDFilter:
             every newborn term and every fresh label of an extraction.
     """
 
+    name = "gmphd"
+
     def __init__(
         self, filter_cfg: FilterConfig, sensor_cfg: SensorConfig, mode: str = "static", *, fused: bool = True
     ) -> None:

@@ -21,7 +21,7 @@ from typing import Any
 
 from soabench import plugins
 from soabench.birth import LABEL
-from soabench.config import FILTER_FAMILIES, Config, filter_config_for_mode
+from soabench.config import FILTER_FAMILIES, Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.ownership import check_existing_folder, resolve
 from soabench.experiment.runs.provenance import package_versions
@@ -32,7 +32,7 @@ from soabench.protocols import TrackerSetup
 from soabench.scenario import simulate
 from soabench.seeding import trial_seeds
 from soabench.sensor import observe
-from soabench.trackers import GMPHDTracker, ScanFailure, run_tracker
+from soabench.trackers import FilterTracker, ScanFailure, build_filter, run_tracker
 
 #: per-trial metric columns compared with ``trials.csv`` (the rest are derived from these or are wall times)
 CHECKED_COLUMNS = ("delay_mean", "n_episodes", "n_censored", "card_err", "ospa", "gospa", "tp", "fp", "fn")
@@ -102,7 +102,6 @@ def replay_trial(
     probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
     # imported when called: numba, scipy would slow every start-up
     from soabench.experiment.trial.trial import RunKey, make_row
-    from soabench.gmphd.filter import GMPHDFilter
     from soabench.metrics import evaluate
 
     path, meta, raw = read_run(run_dir)
@@ -128,7 +127,6 @@ def replay_trial(
     recording = simulate(scene, scenario, seeds, duration=exp.duration)
     sensor_cfg = dataclasses.replace(cfg.sensor, lambda_c=lam)
     scans = observe(recording, scene, sensor_cfg, seeds.sensor_rngs())
-    filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
     runs: list[ModelReplay] = []
     for name in names:
         if name not in exp.models:  # a whole tracker: no birth terms of ours to show
@@ -138,7 +136,8 @@ def replay_trial(
             cls = plugins.resolve(plugins.BIRTH, name)
             options = {} if plugins.is_builtin_birth(name) else cfg.plugins.get(name, {})
             model = _Recorder(cls(cfg.birth, sensor_cfg, scene, seeds.placement_rng(), **options))
-            run = run_tracker(scans, GMPHDTracker(model, GMPHDFilter(filter_cfg, sensor_cfg, filter_mode), p_D_b))
+            filt, p_D_b = build_filter(FILTER_FAMILIES[0], cfg, sensor_cfg, mode, seeds.association_rng())
+            run = run_tracker(scans, FilterTracker(model, filt, p_D_b))
             births = model.births
         metrics = evaluate(scans, run.results, cfg.metrics, sensor_cfg)
         row = make_row(RunKey(trial, lam, name, mode), seeds, cfg.birth.N_hat, metrics, run, 0.0)

@@ -144,7 +144,29 @@ def test_make_tracker_takes_names_classes_and_import_paths(trial1) -> None:
         sb.make_tracker("kalman", NET)
     with pytest.raises(ValueError, match="built-in birth model: set its options in the config's"):
         sb.make_tracker("soa", NET, N_hat=2.0)
-    assert "GMPHDTracker(birth model" in repr(sb.make_tracker("soa", NET))
+    assert "FilterTracker(family 'gmphd', birth model 'soa'" in repr(sb.make_tracker("soa", NET))
+
+
+def test_make_tracker_runs_any_family(trial1) -> None:
+    """``filter=`` (or the configuration's one family) picks the family; the LMB's step gives labelled estimates; a
+    configuration naming several families, another family, or a mode the family lacks is refused with one line."""
+    _, scans = trial1
+    lmb = sb.make_tracker("soa", NET, filter="lmb")
+    assert lmb.name == "lmb" and type(lmb.filt).__name__ == "LMBFilter"
+    out = [lmb.step(scan) for scan in scans[:5]]
+    assert all(r.labels is not None and len(r.labels) == len(r.X) for r in out)
+    by_config = sb.make_tracker("soa", NET, config={"experiment": {"filters": ["lmb"], "probabilities": ["static"]}})
+    assert by_config.name == "lmb"
+    tuned = sb.make_tracker("soa", NET, config={"lmb": {"max_tracks": 7}}, filter="lmb")
+    assert tuned.filt.lmb.max_tracks == 7  # an [lmb] key is honoured when the tracker runs the LMB
+    with pytest.raises(ValueError, match="names 2 filter families; a tracker runs one"):
+        sb.make_tracker("soa", NET, config={"experiment": {"filters": ["gmphd", "lmb"]}})
+    with pytest.raises(ValueError, match="filter = 'lmb' is not among experiment.filters"):
+        sb.make_tracker("soa", NET, config={"experiment": {"filters": ["gmphd"]}}, filter="lmb")
+    with pytest.raises(ValueError, match="filter = 'kf' is not allowed"):
+        sb.make_tracker("soa", NET, filter="kf")
+    with pytest.raises(ValueError, match="probability mode 'dynamic' is not defined for the LMB filter"):
+        sb.make_tracker("soa", NET, filter="lmb", mode="dynamic")
 
 
 def test_resolve_validates_the_kind() -> None:

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from soabench.birth import BASELINES, LABEL
-from soabench.config import FAMILY_MODES, FILTER_FAMILIES, Config, MetricsConfig
+from soabench.config import FAMILIES, FAMILY_MODES, FILTER_FAMILIES, Config, MetricsConfig
 from soabench.errors import SoabenchError
 from soabench.experiment.reports import paper
 from soabench.experiment.reports.paper import percent_reduction
@@ -51,7 +51,7 @@ from soabench.tracks.evaluate import TRACK_KEYS
 from soabench.tracks.report import TRACKS_LEGEND, render_tracks, track_stats, tracks_vs_soa
 
 #: how the summary names a filter family
-FAMILY_LABEL = {"gmphd": "GM-PHD", "lmb": "LMB"}
+FAMILY_LABEL = {name: f.label for name, f in FAMILIES.items()}
 
 
 def _nanmean(x: np.ndarray) -> float:

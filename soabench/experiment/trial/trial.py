@@ -45,7 +45,7 @@ from soabench.protocols import TrackerSetup
 from soabench.scenario import simulate
 from soabench.seeding import TrialSeeds, trial_seeds
 from soabench.sensor import observe
-from soabench.trackers import GMPHDTracker, ScanFailure, run_tracker
+from soabench.trackers import FilterTracker, ScanFailure, build_filter, run_tracker
 from soabench.trackers import TrackerRun as FilterRun  # the step results and times of one run
 from soabench.tracks.evaluate import TRACK_KEYS, evaluate_tracks, run_labels
 
@@ -229,7 +229,7 @@ def run_filter(
 ) -> FilterRun:
     """Run the filter cycle (§2.11) over every scan: birth from the context at k, then ``filt.step``."""
 
-    return run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
+    return run_tracker(scans, FilterTracker(birth_model, filt, p_D_b))
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -328,13 +328,6 @@ def _default_observe() -> Callable[..., Scans]:
     return observe
 
 
-def _default_filter_cls() -> type:
-    # imported when called: numba would slow every start-up
-    from soabench.gmphd.filter import GMPHDFilter
-
-    return GMPHDFilter
-
-
 def _default_birth_factory() -> Callable[[str], type]:
 
     return lambda name: plugins.resolve(plugins.BIRTH, name)
@@ -358,9 +351,10 @@ def run_trial(
 
     One SUMO run (``simulate_fn(scene, scenario, seeds, duration=...)``); per clutter rate one
     ``observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs())``; per (model, mode) a fresh birth model
-    ``birth_factory(model)(birth_cfg, sensor_cfg, scene, seeds.placement_rng())`` and a fresh
-    ``filter_cls(filter_cfg, sensor_cfg, mode)``, then :func:`soabench.metrics.evaluate`. The keyword-only
-    callables default to the real pipeline; tests inject fakes through them.
+    ``birth_factory(model)(birth_cfg, sensor_cfg, scene, seeds.placement_rng())`` and a fresh filter of each
+    family of ``experiment.filters`` (:func:`soabench.trackers.build_filter`), then
+    :func:`soabench.metrics.evaluate`. The keyword-only callables default to the real pipeline; tests inject fakes
+    through them (``filter_cls(filter_cfg, sensor_cfg, mode)`` replaces the default family's filter).
 
     ``births_once``: a mode-free birth model is called once per scan for every probability mode (module docstring);
     False builds one per (model, mode) as before (the results are the same; tests compare both). ``share``: a
@@ -371,7 +365,6 @@ def run_trial(
     fn_key = tuple("default" if f is None else f for f in (simulate_fn, observe_fn, filter_cls, birth_factory))
     simulate_fn = simulate_fn or _default_simulate()
     observe_fn = observe_fn or _default_observe()
-    filter_cls = filter_cls or _default_filter_cls()
     birth_factory = birth_factory or _default_birth_factory()
     exp = config.experiment
     seeds = trial_seeds(exp.seed, trial)
@@ -511,7 +504,7 @@ def _run_one(
     scene: SceneMap,
     scans: Scans,
     seeds: TrialSeeds,
-    filter_cls: type,
+    filter_cls: type | None,
     birth_factory: Callable[[str], type],
     out: TrialResult,
     births: _BirthsOnce | None = None,
@@ -527,36 +520,41 @@ def _run_one(
     trial goes on with the other runs.
     """
 
-    filter_cfg, filter_mode, p_D_b = filter_config_for_mode(config.filter, key.mode)
-    if key.family == "lmb":  # the labelled multi-Bernoulli filter: its Gibbs seeds from the trial's own stream
-        from soabench.lmb import LMBFilter
-
-        filter_cls = functools.partial(
-            LMBFilter, lmb_cfg=config.lmb, N_hat=config.birth.N_hat, rng=seeds.association_rng()
-        )
     if plugins.is_builtin_birth(key.model):
         birth_model = (
             births
             if births is not None
             else birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
         )
-        filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
-        run = run_tracker(scans, GMPHDTracker(birth_model, filt, p_D_b))
+        filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
+        run = run_tracker(scans, FilterTracker(birth_model, filt, p_D_b))
         _record(key, config, sensor_cfg, scans, seeds, run, out)
         return run
 
-    def build() -> GMPHDTracker:
+    def build() -> FilterTracker:
         cls = birth_factory(key.model)
         options = config.plugins.get(key.model, {})
         own_cfg, own_sensor = dataclasses.replace(config.birth), dataclasses.replace(sensor_cfg)
         birth_model = cls(own_cfg, own_sensor, scene, seeds.placement_rng(), **options)
-        filt = filter_cls(filter_cfg, sensor_cfg, filter_mode)
-        return GMPHDTracker(_PrivateScans(birth_model), filt, p_D_b, check_births=guard.check_births)
+        filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
+        return FilterTracker(_PrivateScans(birth_model), filt, p_D_b, check_births=guard.check_births)
 
     run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out, config.experiment.plugin_budget)
     if run is not None:
         _record(key, config, sensor_cfg, scans, seeds, run, out)
     return None
+
+
+def _filter(
+    key: RunKey, config: Config, sensor_cfg: SensorConfig, seeds: TrialSeeds, filter_cls: type | None
+) -> tuple[Any, float]:
+    """The run's filter of its family (the default family when the run names none) and p_D_b; an injected
+    ``filter_cls`` (tests) replaces the default family's filter."""
+    family = key.family or FILTER_FAMILIES[0]
+    if filter_cls is not None and family == FILTER_FAMILIES[0]:
+        filter_cfg, filter_mode, p_D_b = filter_config_for_mode(config.filter, key.mode)
+        return filter_cls(filter_cfg, sensor_cfg, filter_mode), p_D_b
+    return build_filter(family, config, sensor_cfg, key.mode, seeds.association_rng())
 
 
 class _PrivateScans:

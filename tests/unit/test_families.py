@@ -1,0 +1,83 @@
+"""The filter-family seam (docs/development.md "Adding a filter family"): every registry line resolves to a builder,
+names a Config section that exists and modes that exist; every family runs every built-in birth model through the
+neutral tracker and gives one label per estimate; the trial builds its filters from the registry."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import numpy as np
+import pytest
+
+import soabench.api as sb
+from soabench.config import FAMILIES, FILTER_FAMILIES, PROBABILITY_MODES, Config
+from soabench.errors import SoabenchError
+from soabench.plugins import BUILTIN_BIRTH_MODELS
+from soabench.protocols import Filter
+from soabench.trackers import FilterTracker, build_filter, family_builder
+
+NET = "intersection"
+
+
+def test_every_registry_line_is_complete() -> None:
+    assert FILTER_FAMILIES[0] == "gmphd"  # the default family of every run
+    sections = {f.name for f in dataclasses.fields(Config)}
+    for name, fam in FAMILIES.items():
+        assert fam.name == name and fam.label and fam.modes
+        assert set(fam.modes) <= set(PROBABILITY_MODES), name
+        assert callable(family_builder(name)), name
+        assert fam.section is None or fam.section in sections, name
+
+
+@pytest.fixture(scope="module")
+def scans():
+    return sb.simulate_trial(NET, seed=1, trial=0, duration=15)[1]
+
+
+@pytest.mark.parametrize("family", FILTER_FAMILIES)
+def test_every_family_runs_every_builtin_birth_model(scans, family) -> None:
+    cfg = Config.from_dict({"experiment": {"filters": [family], "probabilities": ["static"]}}).validate()
+    labelled = 0
+    for model in BUILTIN_BIRTH_MODELS:
+        tracker = sb.make_tracker(model, NET, config=cfg)
+        assert isinstance(tracker, FilterTracker) and tracker.name == family
+        assert isinstance(tracker.filt, Filter)
+        for scan in scans:
+            res = tracker.step(scan)
+            assert res.labels is not None and len(res.labels) == len(res.X), (family, model)
+            assert np.isfinite(res.X).all()
+            labelled += len(res.labels)
+    assert labelled > 0  # some estimate was made and labelled in the family
+
+
+def test_build_filter_refuses_what_the_registry_does_not_define() -> None:
+    cfg = Config().validate()
+    with pytest.raises(SoabenchError, match="filter family 'kf' is not allowed; choose one of gmphd, lmb"):
+        build_filter("kf", cfg, cfg.sensor, "static")
+    undefined = [(name, m) for name, f in FAMILIES.items() for m in PROBABILITY_MODES if m not in f.modes]
+    for name, mode in undefined:
+        with pytest.raises(SoabenchError, match=re.escape(f"probability mode '{mode}' is not defined for the")):
+            build_filter(name, cfg, cfg.sensor, mode)
+    filt, p_D_b = build_filter("gmphd", cfg, cfg.sensor, "dynamic")
+    assert filt.name == "gmphd" and filt.mode == "dynamic" and p_D_b == cfg.filter.mu_D0
+
+
+def test_a_family_section_is_refused_unless_the_family_runs() -> None:
+    for fam in FAMILIES.values():
+        if fam.section is None:
+            continue
+        section = getattr(Config(), fam.section)
+        key = dataclasses.fields(section)[0]
+        value = getattr(section, key.name)
+        changed = value / 2 if isinstance(value, float) else value + 1
+        with pytest.raises(SoabenchError, match=f"{fam.section}.{key.name} = .* runs no {fam.label} filter"):
+            Config.from_dict({fam.section: {key.name: changed}}).validate()
+        cfg = Config.from_dict(
+            {
+                fam.section: {key.name: changed},
+                "experiment": {"filters": ["gmphd", fam.name], "probabilities": ["static"]},
+            }
+        ).validate()
+        assert cfg.to_dict()[fam.section][key.name] == changed
+        assert fam.section not in Config().to_dict()  # a run without the family records no section
