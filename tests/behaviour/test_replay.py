@@ -390,3 +390,20 @@ def test_index_of_a_folder_of_runs(run_dir: Path, tmp_path: Path) -> None:
     assert "Study &lt;b&gt;notes&lt;/b&gt;" in text
     attrs = body_attrs(browse(index, "", tmp_path))
     assert attrs["status"] == "ok" and attrs["tables"] == "2"
+
+
+def test_a_run_ends_with_its_headline_and_the_page_to_open(run_dir: Path, capsys) -> None:
+    """``soabench run`` closes with a short table of S-OA's paired differences and names report.html; the full
+    Markdown stays in summary.md."""
+    from types import SimpleNamespace
+
+    from soabench.cli.common import report_outcome
+
+    outcome = SimpleNamespace(summary_markdown="# the summary", complete=True, run_dir=run_dir, n_missing=0)
+    assert report_outcome(outcome, short=True) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == f"open {run_dir / 'report.html'}" and out[-2] == f"every table: {run_dir / 'summary.md'}"
+    assert len(out) < 15 and not any(line.startswith("|") or "# the summary" in line for line in out)
+    (row,) = [line for line in out if line.strip().startswith("UBM (FOV)")]
+    assert "/2" in row  # S-OA − UBM with its interval and the trials S-OA wins, of the run's 2
+    assert out[0].startswith("λ = 3, static; best: ")
