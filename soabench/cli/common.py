@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 
 from soabench import plugins
@@ -53,9 +54,14 @@ def run_answer(run_dir) -> list[str]:
     from soabench.experiment.reports.html import REPORT_FILE, headlines
     from soabench.experiment.reports.tables import load_tables
 
+    summary = json.loads((run_dir / "summary.json").read_text(encoding="utf-8"))
+    warned = {(float(r["clutter"]), r.get("filter")) for r in summary.get("results", []) if r.get("warning")}
     lines = []
     for head in headlines(load_tables(run_dir)):
-        lines += render_text(head)
+        if (head.clutter, head.family) in warned:  # nothing was observed: the warning above says why
+            lines.append(f"λ = {head.clutter:g}: no comparison (no pedestrian was observed; see the warning)")
+        else:
+            lines += render_text(head)
     lines.append(f"every table: {run_dir / 'summary.md'}")
     if (run_dir / REPORT_FILE).is_file():
         lines.append(f"open {run_dir / REPORT_FILE}")

@@ -167,8 +167,8 @@ def test_replay_videos(run_dir: Path, tmp_path: Path) -> None:
     frames = [np.frombuffer(f, dtype=np.uint8) for f in reader]
     w, h = meta["size"]
     assert len(frames) == DURATION and meta["fps"] == 5.0  # 1 s scans at 5x real time
-    # two 420 x 315 px panels side by side, a title line above and the legend below, to multiples of 16 px
-    assert w == 848 and h % 16 == 0 and 315 + 24 + 3 * 14 <= h < 315 + 24 + 3 * 14 + 40, (w, h)
+    # two panels side by side filling 720p at least, a title line above and the legend below, to multiples of 16 px
+    assert w == 1280 and h % 16 == 0 and 720 <= h < 800, (w, h)
     assert all(f.size == w * h * 3 for f in frames)
     last = frames[-1].reshape(h, w, 3)
     assert len(np.unique(last.reshape(-1, 3) // 16, axis=0)) > 10  # a drawn frame, not a blank one
@@ -404,6 +404,6 @@ def test_a_run_ends_with_its_headline_and_the_page_to_open(run_dir: Path, capsys
     out = capsys.readouterr().out.splitlines()
     assert out[-1] == f"open {run_dir / 'report.html'}" and out[-2] == f"every table: {run_dir / 'summary.md'}"
     assert len(out) < 15 and not any(line.startswith("|") or "# the summary" in line for line in out)
-    (row,) = [line for line in out if line.strip().startswith("UBM (FOV)")]
+    (row,) = [line for line in out if line.startswith("  UBM (FOV)")]  # the table's row (a trade-off may name it)
     assert "/2" in row  # S-OA − UBM with its interval and the trials S-OA wins, of the run's 2
     assert out[0].startswith("λ = 3, static; best: ")
