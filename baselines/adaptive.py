@@ -107,7 +107,7 @@ class AdaptiveBirth:
             def beta(A: np.ndarray, kappa: np.ndarray) -> np.ndarray:
                 return scale * unexplained_mass(A, kappa, N_hat)
 
-        births.newborn = NewbornTerms(m, P, beta)
+        births.newborn = NewbornTerms(m, P, beta, adaptive=True)
         return births
 
     def _prev_scan(self, ctx: BirthContext) -> Births:

@@ -113,6 +113,7 @@ __all__ = [
     "isotropic",
     "load_scene",
     "make_tracker",
+    "occlusion_gaps",
     "resolve",
     "run",
     "run_tracker",
@@ -314,6 +315,26 @@ def evaluate(
     if labels is not None:
         metrics.summary.update(evaluate_tracks(scans, X, labels, metrics.episodes, cfg, scans.sensor))
     return metrics
+
+
+def occlusion_gaps(scans: Scans, d_gate: float = 5.0) -> list[dict[str, _Any]]:
+    """The occlusion gaps of ``scans``, described (docs/method.md §9.4): per gap (a pedestrian present and in the
+    FOV but out of line of sight on scans ``k_a`` .. ``k_b``, seen before and after) its ``target`` column,
+    ``k_a``, ``k_b``, length in ``scans`` and ``seconds``, the ``occluder`` kind that hid it longest ("parked",
+    "vehicle", "building", "other"), its ``displacement`` across the gap (m) and whether that exceeds ``d_gate``
+    (``moved``), and the ego's (``ego_displacement``, ``ego_moved``). The ``gap_*`` columns of ``episodes.csv``
+    give the same for each re-emergence episode of a run, with its coasted and identity-kept outcome."""
+    import dataclasses as _dc
+
+    from soabench.tracks.gaps import describe_gaps
+    from soabench.tracks.reemergence import occlusion_gaps as _gaps
+
+    _require(isinstance(scans, Scans), f"scans must be a Scans, not {type(scans).__name__}")
+    gaps = _gaps(scans.present & scans.in_fov, scans.visible)
+    return [
+        {"target": g.target, "k_a": g.k_a, "k_b": g.k_b, **_dc.asdict(d)}
+        for g, d in zip(gaps, describe_gaps(scans, gaps, float(d_gate)), strict=True)
+    ]
 
 
 def run(

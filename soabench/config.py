@@ -27,7 +27,9 @@ from soabench.errors import SoabenchError, require
 from soabench.tomlfile import read_toml
 
 BIRTH_MODEL_NAMES: tuple[str, ...] = tuple(plugins.BUILTIN_BIRTH_MODELS)  #: the built-in birth models
-PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ")
+#: the probability modes (docs/method.md §4.6): static probabilities, the Beta-augmented dynamic ones, and each with
+#: the line-of-sight p_D of §4.4 (``+occ``)
+PROBABILITY_MODES = ("static", "dynamic", "dynamic+occ", "static+occ")
 
 
 @dataclass(frozen=True)
@@ -59,7 +61,13 @@ FAMILIES: dict[str, FilterFamily] = {
     f.name: f
     for f in (
         FilterFamily("gmphd", "GM-PHD", PROBABILITY_MODES, "soabench.gmphd.family:build"),
-        FilterFamily("lmb", "LMB", ("static",), "soabench.lmb.family:build", section="lmb", hatch="////"),
+        FilterFamily("lmb", "LMB", ("static", "static+occ"), "soabench.lmb.family:build", section="lmb", hatch="////"),
+        FilterFamily(
+            "pmbm", "PMBM", ("static", "static+occ"), "soabench.pmbm.family:build", section="pmbm", hatch="xx"
+        ),
+        FilterFamily(
+            "pmb", "PMB", ("static", "static+occ"), "soabench.pmbm.family:build_pmb", section="pmbm", hatch=".."
+        ),
     )
 }
 #: the filter families' names (docs/method.md "LMB filter"); the first is the default
@@ -78,6 +86,7 @@ DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
+MAX_GAP_BINS = 12  #: most occlusion-gap length bins (metrics.gap_bins)
 MAX_DURATION = 86400.0  #: longest simulated time (s): experiment.duration and a snapshot's --time / --duration
 
 
@@ -224,7 +233,7 @@ class FilterConfig:
     gate_prob: float = 0.999  #: gate probability (chi2_2(0.999) = 13.8155)
     extract_thr: float = 0.5  #: extraction threshold
     extraction: str = "vo_ma"  #: "vo_ma" (w > 0.5, floor(w + 0.5) copies) or "top_n" (ablation)
-    occlusion_pd: bool = False  #: line-of-sight gate in p_D (§4.4); set by the "dynamic+occ" mode
+    occlusion_pd: bool = False  #: line-of-sight gate in p_D (§4.4); set by the "+occ" modes
     max_undetected_birth_age: int | None = None  #: prune n_det = 0 components older than this (§4.4)
     #: non-finite measurements, ego poses or birth components given to ``GMPHDFilter.step``: "raise" (default: they
     #: mean a broken input upstream) or "drop" (dropped and counted in ``StepResult.n_dropped``; for real sensor data)
@@ -357,6 +366,7 @@ class MetricsConfig:
     confirm_n: int = 1  #: consecutive associated steps needed for initiation
     censored: str = "exclude"  #: "exclude" (count separately) or "lower_bound"
     ddof: int = 0  #: per-trial sigma convention
+    gap_bins: tuple[int, ...] = (1, 2, 4, 8)  #: first scan count of each occlusion-gap length bin (1, 2-3, 4-7, 8+)
 
     def validate(self) -> None:
         _positive("metrics.ospa_c", self.ospa_c)
@@ -369,6 +379,17 @@ class MetricsConfig:
         _int_range("metrics.confirm_n", self.confirm_n, 1, 1_000_000)
         _one_of("metrics.censored", self.censored, ("exclude", "lower_bound"))
         _one_of("metrics.ddof", self.ddof, (0, 1))
+        bins = self.gap_bins
+        require(
+            isinstance(bins, tuple) and 1 <= len(bins) <= MAX_GAP_BINS,
+            f"metrics.gap_bins = {list(bins)!r} must list 1 to {MAX_GAP_BINS} gap lengths",
+        )
+        for b in bins:
+            _int_range("metrics.gap_bins[]", b, 1, 1_000_000)
+        require(
+            bins[0] == 1 and all(a < b for a, b in zip(bins, bins[1:], strict=False)),
+            f"metrics.gap_bins = {list(bins)!r} must start at 1 and increase (each the first scan count of a bin)",
+        )
 
 
 @dataclass
@@ -381,7 +402,7 @@ class ExperimentConfig:
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
     clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
-    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: "gmphd", "lmb"
+    filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: gmphd, lmb, pmbm, pmb
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
     plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
 
@@ -431,9 +452,12 @@ class LMBConfig:
     r_B_max: float = 0.5  #: largest existence probability r_B,max of a birth track
     prune_r: float = 1e-3  #: tracks with existence probability r below this are dropped
     max_tracks: int = 100  #: most probable tracks kept after each scan
-    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many hypotheses, else this many Gibbs sweeps
-    max_components: int = 10  #: Gaussian components kept per track
+    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many valid hypotheses, else this many Gibbs sweeps
+    max_components: int = 10  #: Gaussian components kept per track (J_h; also per birth group)
     extract_r: float = 0.5  #: estimates: the tracks with r above this, labelled
+    #: how birth components become Bernoullis: "groups" (one per merge group, r = min(sum w, r_B_max), §10.7) or
+    #: "components" (one per component, r = min(w, r_B_max), every newborn term as Reuter's adaptive birth)
+    birth_mapping: str = "groups"
 
     def validate(self) -> LMBConfig:
         _in_range("lmb.r_B_max", self.r_B_max, 0.0, 1.0, lo_open=True, hi_open=True)
@@ -442,6 +466,31 @@ class LMBConfig:
         _int_range("lmb.max_hypotheses", self.max_hypotheses, 1, 10_000_000)
         _int_range("lmb.max_components", self.max_components, 1, 10_000)
         _in_range("lmb.extract_r", self.extract_r, 0.0, 1.0, hi_open=True)
+        _one_of("lmb.birth_mapping", self.birth_mapping, ("groups", "components"))
+        return self
+
+
+#: the ways the PMB variant computes its marginal association probabilities (docs/method.md §10.5)
+PMB_MARGINALS = ("murty",)
+
+
+@dataclass
+class PMBMConfig:
+    """The PMBM filter and its PMB variant, read by runs whose experiment.filters names pmbm or pmb (docs/method.md
+    §10, register rows 36-37). A key set here while no run reads it is refused."""
+
+    M_max: int = 100  #: global hypotheses kept; each prior global hypothesis a asks Murty for ceil(M_max w_a)
+    w_floor: float = 1e-4  #: global hypotheses of weight below this are dropped (then renormalised)
+    r_floor: float = 1e-5  #: a track whose every single-target hypothesis has r below this is dropped
+    J_h: int = 10  #: Gaussian components kept per single-target hypothesis
+    marginals: str = "murty"  #: the PMB's marginals: from the Murty hypotheses
+
+    def validate(self) -> PMBMConfig:
+        _int_range("pmbm.M_max", self.M_max, 1, 100_000)
+        _in_range("pmbm.w_floor", self.w_floor, 0.0, 1.0, hi_open=True)
+        _in_range("pmbm.r_floor", self.r_floor, 0.0, 1.0, hi_open=True)
+        _int_range("pmbm.J_h", self.J_h, 1, 10_000)
+        _one_of("pmbm.marginals", self.marginals, PMB_MARGINALS)
         return self
 
 
@@ -455,6 +504,7 @@ class Config:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
     lmb: LMBConfig = field(default_factory=LMBConfig)
+    pmbm: PMBMConfig = field(default_factory=PMBMConfig)
     #: ``[plugins.<name>]`` tables: a plugin's own options, passed to its constructor as keyword arguments
     plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
 
@@ -472,9 +522,8 @@ class Config:
         self.filter.validate()
         self.birth.validate()
         self.metrics.validate()
-        for family in FAMILIES.values():
-            if family.section is not None:
-                self._check_family_section(family)
+        for section in dict.fromkeys(f.section for f in FAMILIES.values() if f.section is not None):
+            self._check_family_section(str(section))
         require(
             self.experiment.duration >= self.sensor.dt,
             f"duration = {self.experiment.duration!r} is shorter than one sensor period sensor.dt = {self.sensor.dt!r}",
@@ -483,18 +532,20 @@ class Config:
             require(isinstance(table, dict), f"[plugins.{name}] must be a table of option = value")
         return self
 
-    def _check_family_section(self, family: FilterFamily) -> None:
-        """Validate a family's own section; a key of it set while no run names the family is refused, not
-        ignored."""
-        section = getattr(self, str(family.section))
-        section.validate()
-        default = type(section)()
-        changed = [f.name for f in dataclasses.fields(section) if getattr(section, f.name) != getattr(default, f.name)]
-        if changed and family.name not in self.experiment.filters:
+    def _check_family_section(self, section: str) -> None:
+        """Validate a filter family's own section; a key of it set while the run names none of the families that
+        read it is refused, not ignored."""
+        values = getattr(self, section)
+        values.validate()
+        default = type(values)()
+        changed = [f.name for f in dataclasses.fields(values) if getattr(values, f.name) != getattr(default, f.name)]
+        readers = [f for f in FAMILIES.values() if f.section == section]
+        if changed and not any(f.name in self.experiment.filters for f in readers):
+            names = " or ".join(f.name for f in readers)
             raise SoabenchError(
-                f"{family.section}.{changed[0]} = {getattr(section, changed[0])!r} is set but experiment.filters = "
-                f"{list(self.experiment.filters)!r} runs no {family.label} filter; add {family.name} "
-                f"(--filters gmphd,{family.name}) or remove the key"
+                f"{section}.{changed[0]} = {getattr(values, changed[0])!r} is set but experiment.filters = "
+                f"{list(self.experiment.filters)!r} runs no {' or '.join(f.label for f in readers)} filter; add "
+                f"{names} (--filters gmphd,{readers[0].name}) or remove the key"
             )
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
@@ -504,9 +555,9 @@ class Config:
         unchanged)."""
         out = dataclasses.asdict(self)
         named = tuple(out["experiment"]["filters"])
-        for family in FAMILIES.values():
-            if family.section is not None and family.name not in named:
-                del out[family.section]
+        read = {f.section for f in FAMILIES.values() if f.name in named}
+        for section in {f.section for f in FAMILIES.values() if f.section is not None} - read:
+            del out[section]
         if named == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
             del out["experiment"]["filters"]
         return {
@@ -607,13 +658,15 @@ def _derived_message(key: str, value: Any) -> str:
 def filter_config_for_mode(cfg: FilterConfig, mode: str) -> tuple[FilterConfig, str, float]:
     """Filter settings of a probability mode (docs/method.md §4.6): ``(filter_cfg, filter_mode, p_D_b)``.
 
-    ``static`` and ``dynamic`` use ``cfg`` as given; ``dynamic+occ`` is ``dynamic`` with the line-of-sight gate
-    (``occlusion_pd``). ``p_D_b`` is the detection probability of a newborn term: p_D in static mode, the Beta prior
-    mean mu_D0 in the dynamic modes (§4.2).
+    ``static`` and ``dynamic`` use ``cfg`` as given; ``static+occ`` and ``dynamic+occ`` are ``static`` and ``dynamic``
+    with the line-of-sight gate of §4.4 (``occlusion_pd``). ``p_D_b`` is the detection probability of a newborn
+    term: p_D in the static modes, the Beta prior mean mu_D0 in the dynamic modes (§4.2).
     """
     _one_of("probability mode", mode, PROBABILITY_MODES)
     if mode == "static":
         return cfg, "static", cfg.p_D
+    if mode == "static+occ":
+        return dataclasses.replace(cfg, occlusion_pd=True), "static", cfg.p_D
     if mode == "dynamic+occ":
         return dataclasses.replace(cfg, occlusion_pd=True), "dynamic", cfg.mu_D0
     return cfg, "dynamic", cfg.mu_D0

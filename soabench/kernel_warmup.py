@@ -13,8 +13,8 @@ extrapolates an ETA from trials that were mostly compiling. Instead, the driver 
 * the trials then load machine code from the cache (about a second per process) and the ETA counts trials only;
 * one line says so, once per run, on its own line; off a terminal (CI, ``2> log``) a line follows every
   :data:`LINE_INTERVAL_S` seconds while it lasts;
-* a stamp file in the cache folder records that the kernels of this soabench, numba and Python (and these kernel
-  sources: path and content, as numba's own cache key) were compiled, so a later run starts no process at all.
+* a stamp file in the kernels' cache folder (keyed by their sources, numba and Python: :mod:`soabench.cache`)
+  records that they were compiled, so a later run starts no process at all.
 
 Each group calls the kernels with small inputs of the types a trial passes (the filter's own argument packing),
 so the trials find exactly these specialisations in the cache. Compiling changes no number: the arithmetic is the
@@ -24,11 +24,10 @@ they need) and is never fatal.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import TextIO
@@ -38,23 +37,12 @@ import numpy as np
 from soabench import notice
 from soabench.birth import sampling
 from soabench.birth.soa import dedup, ego_inside
-from soabench.cache import configure_numba_cache
-from soabench.config import Config, MetricsConfig
+from soabench.cache import kernel_folder
+from soabench.config import BIRTH_MODEL_NAMES, Config, MetricsConfig
 from soabench.experiment.execution.progress import LINE_INTERVAL_S, is_terminal
 from soabench.sensor import segment_meets_convex
 from soabench.types import Births, NewbornTerms, Obstacles, Scan
 
-#: the modules whose kernels are compiled here (their source files key the stamp, as they key numba's cache)
-KERNEL_MODULES = (
-    "soabench.gmphd.clock",
-    "soabench.gmphd.kernels",
-    "soabench.gmphd.cycle",
-    "soabench.metrics_kernels",
-    "soabench.geometry_kernels",
-    "soabench.tracks.kernels",
-    "soabench.lmb.gibbs",
-    "soabench.lmb.tracks",
-)
 MESSAGE = notice.MESSAGE
 
 
@@ -78,14 +66,14 @@ def _births(n: int = 2):
     return Births(np.full(n, 0.1), m, np.repeat(np.eye(4)[None], n, axis=0), np.zeros(n, dtype=np.int8))
 
 
-def _predict_update() -> None:
-    """The prediction and the update (EKF and UKF terms, posterior) of both probability modes' argument types."""
+def _predict_update(modes: tuple[str, ...]) -> None:
+    """The prediction and the update (EKF and UKF terms, posterior) of the probability modes' argument types."""
     # imported when called: numba would slow every start-up
     from soabench.gmphd import cycle
     from soabench.gmphd.filter import _birth_arrays, _mixture_arrays
 
     Z, ego = _scan_arrays()
-    for mode in ("static", "dynamic"):
+    for mode in _gate_free(modes):
         f = _filter(mode)
         pred = cycle.predict_append(
             *_mixture_arrays(f.mixture), f.F, f.Q, f._pred_pars, *_birth_arrays(_births()), f._beta0, ego, f.next_label
@@ -93,7 +81,7 @@ def _predict_update() -> None:
         cycle.update(*pred[:9], f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
 
 
-def _reduction() -> None:
+def _reduction(modes: tuple[str, ...]) -> None:
     """Pruning, merging (window and grid), capping and extraction."""
     # imported when called: numba would slow every start-up
     from soabench.gmphd import cycle
@@ -110,7 +98,7 @@ def _reduction() -> None:
         cycle.reduce(*_mixture_arrays(mix), f._red_pars, f.next_label)
 
 
-def _metrics_geometry() -> None:
+def _metrics_geometry(modes: tuple[str, ...]) -> None:
     """The per-run matchings (§5.2-5.6) and the scan-geometry kernels of the birth models and the sensor."""
     # imported when called: numba, scipy would slow every start-up
     from soabench.geometry_kernels import occlusion_layer_arrays, poisson_accept, poisson_first_free
@@ -136,26 +124,26 @@ def _no_obstacles():
     return Obstacles([], *(np.zeros(0) for _ in range(7)))
 
 
-def _fused_steps() -> None:
-    """The fused cycle's entry points as the filter calls them: one call per scan (both probability modes), and the
-    split step of the line-of-sight gate (§2.11, §4.4)."""
+def _fused_steps(modes: tuple[str, ...]) -> None:
+    """The fused cycle's entry points as the filter calls them: one call per scan, and the split step of the
+    line-of-sight gate (§2.11, §4.4) in the mode "dynamic+occ"."""
     import shapely
 
     Z, ego = _scan_arrays()
     far = [shapely.box(1000.0, 1000.0, 1001.0, 1001.0)]
-    for mode in ("static", "dynamic", "dynamic+occ"):
+    for mode in modes:
         f = _filter(mode)
         for k in range(2):  # the second step has a mixture to predict
             occluders = far if mode == "dynamic+occ" else []
             f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), occluders, shapely.box(0, 0, 1, 1)), _births())
 
 
-def _newborn_steps() -> None:
-    """The split step of measurement-driven newborn terms (§3.4) in both probability modes."""
+def _newborn_steps(modes: tuple[str, ...]) -> None:
+    """The split step of measurement-driven newborn terms (§3.4) in the probability modes."""
     import shapely
 
     Z, ego = _scan_arrays()
-    for mode in ("static", "dynamic"):
+    for mode in _gate_free(modes):
         f = _filter(mode)
         for k in range(2):
             b = _births()
@@ -165,7 +153,7 @@ def _newborn_steps() -> None:
             f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
 
 
-def _track_metrics() -> None:
+def _track_metrics(modes: tuple[str, ...]) -> None:
     """The track metrics' scan loops (§9.3): HOTA's and CLEAR's matchings and OSPA(2)'s windows."""
     from soabench.tracks.ospa2 import ospa2
     from soabench.tracks.scores import track_scores
@@ -175,7 +163,7 @@ def _track_metrics() -> None:
     ospa2(ids, xy, ids, xy)
 
 
-def _lmb_steps() -> None:
+def _lmb_steps(modes: tuple[str, ...]) -> None:
     """The LMB filter (docs/method.md "LMB filter"): steps with Gaussian births and with newborn terms (the adaptive
     birth), and the association marginals on both of their paths (enumeration and Gibbs sampling)."""
     import shapely
@@ -195,54 +183,109 @@ def _lmb_steps() -> None:
     association_marginals(np.zeros((2, 4)), 10, np.uint32(0), True)
 
 
+def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:
+    """The modes without the line-of-sight gate whose argument types ``modes`` use ("dynamic+occ": "dynamic")."""
+    return tuple(dict.fromkeys("dynamic" if m == "dynamic+occ" else m for m in modes))
+
+
 #: rounds of groups: the groups of a round are independent (no kernel in two of them) and run in parallel; a later
-#: round links the earlier rounds' cached kernels
-ROUNDS: tuple[tuple[Callable[[], None], ...], ...] = (
+#: round links the earlier rounds' cached kernels. Each group compiles the kernels of the probability modes it is
+#: given (those that take no mode ignore them).
+ROUNDS: tuple[tuple[Callable[[tuple[str, ...]], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
     (_fused_steps, _newborn_steps, _lmb_steps, _track_metrics),
 )
 
+#: the groups whose kernels take no probability mode (compiled once for all)
+MODELESS = (_reduction, _metrics_geometry, _lmb_steps, _track_metrics)
 
-def _run_group(fn: Callable[[], None]) -> None:
+#: built-in birth models whose births carry measurement-driven newborn terms (:class:`~soabench.types.NewbornTerms`)
+NEWBORN_MODELS = frozenset({"pubm", "atbm"})
+
+
+def needed(configs: Iterable[Config | dict]) -> dict[Callable[[tuple[str, ...]], None], tuple[str, ...]]:
+    """The groups a run of ``configs`` calls and, per group, its probability modes: the GM-PHD family's modes for
+    the prediction, update and fused steps; the newborn step only when a birth model may hand newborn terms (one of
+    :data:`NEWBORN_MODELS`, or a plugin); the LMB only when its family runs; the metric, geometry, reduction and
+    track kernels always (the filters' runs are labelled). A configuration given as a dict that does not load
+    asks for every group."""
+    groups: dict[Callable[[tuple[str, ...]], None], tuple[str, ...]] = {}
+
+    def add(group, modes):
+        groups[group] = tuple(dict.fromkeys(groups.get(group, ()) + tuple(modes)))
+
+    for cfg in configs:
+        if isinstance(cfg, dict):
+            try:
+                cfg = Config.from_dict(cfg)
+            except Exception:  # noqa: BLE001 - the run reports a bad configuration itself; here: compile everything
+                return everything()
+        exp = cfg.experiment
+        for group in (_reduction, _metrics_geometry, _track_metrics):
+            add(group, ("any",))
+        if "gmphd" in exp.filters:
+            add(_predict_update, exp.probabilities)
+            add(_fused_steps, exp.probabilities)
+            if any(m in NEWBORN_MODELS or m not in BIRTH_MODEL_NAMES for m in exp.models):
+                add(_newborn_steps, exp.probabilities)
+        if "lmb" in exp.filters:
+            add(_lmb_steps, ("any",))
+    return groups
+
+
+def everything() -> dict[Callable[[tuple[str, ...]], None], tuple[str, ...]]:
+    """Every group with every probability mode."""
+    from soabench.config import PROBABILITY_MODES
+
+    return {g: ("any",) if g in MODELESS else PROBABILITY_MODES for r in ROUNDS for g in r}
+
+
+def _run_group(fn: Callable[[tuple[str, ...]], None], modes: tuple[str, ...]) -> None:
 
     notice.silence()  # the driver announces compilation once; a group process never does
-    fn()
+    fn(modes)
 
 
-def stamp_path() -> Path:
-    """The file that marks this soabench's kernels compiled for this numba and Python in the cache folder."""
-    import importlib.metadata
-    import importlib.util
+def stamp_path(group: Callable | None = None, mode: str = "any") -> Path:
+    """The file that marks one group's kernels of one probability mode compiled (no group: the folder's), in their
+    cache folder (:func:`soabench.cache.kernel_folder`: keyed by the kernel sources, numba and Python)."""
+    name = "all" if group is None else f"{group.__name__.strip('_')}-{mode}"
+    return kernel_folder() / f"{name}.ready"
 
+
+def _missing(groups: dict) -> dict[Callable[[tuple[str, ...]], None], tuple[str, ...]]:
+    """The groups and modes of ``groups`` without a stamp."""
+    out = {}
+    for g, modes in groups.items():
+        todo = tuple(m for m in modes if not stamp_path(g, m).exists())
+        if todo:
+            out[g] = todo
+    return out
+
+
+def compiled(groups: dict | None = None) -> bool:
+    """True when every group and mode of ``groups`` (default: :func:`everything`) is stamped compiled."""
     try:
-        own = importlib.metadata.version("soabench")
-    except importlib.metadata.PackageNotFoundError:  # run from a checkout on PYTHONPATH: the digests below key it
-        own = "checkout"
-    parts = [sys.version, importlib.metadata.version("numba"), own]
-    for name in KERNEL_MODULES:
-        spec = importlib.util.find_spec(name)
-        origin = spec.origin if spec is not None and spec.origin else ""
-        digest = hashlib.sha256(Path(origin).read_bytes()).hexdigest()
-        parts += [origin, digest]  # numba keys its cache on the path and the content of the source file too
-    key = hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
-    return configure_numba_cache() / f"soabench-kernels-{key}.ready"
-
-
-def compiled() -> bool:
-    """True when :func:`ensure_compiled` completed for this soabench, numba and Python (stamp present)."""
-    try:
-        return stamp_path().exists()
+        return not _missing(everything() if groups is None else groups)
     except OSError:
         return False
 
 
-def ensure_compiled(stream: TextIO | None = None, workers: int | None = None) -> float:
-    """Compile every kernel into the cache unless the stamp says this was done; returns the seconds spent.
+def ensure_compiled(
+    configs: Iterable[Config | dict] | None = None, stream: TextIO | None = None, workers: int | None = None
+) -> float:
+    """Compile the kernels that runs of ``configs`` call (:func:`needed`; None: every kernel) into the cache unless
+    stamps say this was done; returns the seconds spent.
 
     ``workers``: processes to compile in (default: the number of cores, at most the size of a round). Prints
-    :data:`MESSAGE` once to ``stream`` (stderr) when it compiles, a line every :data:`LINE_INTERVAL_S` seconds off a
-    terminal, and the time taken at the end."""
-    if compiled():
+    :data:`MESSAGE` once to ``stream`` (stderr) when it compiles, the groups done and the seconds so far (redrawn on
+    a terminal, a line every :data:`LINE_INTERVAL_S` seconds off one), and the time taken at the end."""
+    try:
+        todo = _missing(everything() if configs is None else needed(configs))
+        todo = {g: modes for g, modes in todo.items() if any(g in r for r in ROUNDS)}
+    except OSError:
+        todo = {}
+    if not todo:
         return 0.0
 
     stream = stream if stream is not None else sys.stderr
@@ -250,30 +293,51 @@ def ensure_compiled(stream: TextIO | None = None, workers: int | None = None) ->
     print(MESSAGE, file=stream, flush=True)
     notice.silence()  # this process's first steps load what is compiled here: no second notice
     tty = is_terminal(stream)
-    n = max(1, min(workers or os.cpu_count() or 1, max(len(r) for r in ROUNDS)))
+    rounds = [[g for g in r if g in todo] for r in ROUNDS]
+    total, n_done = sum(len(r) for r in rounds), 0
+    n = max(1, min(workers or os.cpu_count() or 1, max(len(r) for r in rounds)))
     ok = True
+
+    def report(now: float) -> None:
+        line = f"soabench: compiling, {n_done} of {total} groups done, {now - t0:.0f} s so far ..."
+        print(("\r" + line) if tty else line, end="" if tty else "\n", file=stream, flush=True)
+
     try:
         with ProcessPoolExecutor(max_workers=n) as pool:
             last = t0
-            for group in ROUNDS:
-                pending = {pool.submit(_run_group, fn) for fn in group}
+            for group in rounds:
+                pending = {pool.submit(_run_group, g, todo[g]): g for g in group}
                 while pending:
-                    done, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
+                    done, _ = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
                     for fut in done:
-                        ok = ok and fut.exception() is None
+                        g = pending.pop(fut)
+                        n_done += 1
+                        if fut.exception() is None:
+                            _stamp(g, todo[g])
+                        else:
+                            ok = False
                     now = time.monotonic()
-                    if not tty and now - last >= LINE_INTERVAL_S:
-                        print(f"soabench: compiling, {now - t0:.0f} s so far ...", file=stream, flush=True)
-                        last = now
+                    if done or tty or now - last >= LINE_INTERVAL_S:
+                        if tty or now - last >= LINE_INTERVAL_S:
+                            report(now)
+                            last = now
     except Exception:  # noqa: BLE001 - never fatal: the trials compile what they need
         ok = False
     took = time.monotonic() - t0
+    if tty:
+        print(file=stream)
     if ok:
-        try:
-            stamp_path().write_text(f"compiled in {took:.1f} s\n")
-        except OSError:
-            pass
         print(f"soabench: kernels compiled in {took:.0f} s (cached for later runs)", file=stream, flush=True)
     else:
         print("soabench: compiling ahead failed; the trials compile what they need", file=stream, flush=True)
     return took
+
+
+def _stamp(group: Callable, modes: tuple[str, ...]) -> None:
+    try:
+        for m in modes:
+            path = stamp_path(group, m)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text("compiled\n")
+    except OSError:
+        pass

@@ -6,21 +6,25 @@ first call after installation (tens of seconds) and loaded from numba's cache af
 the metric and scan-geometry kernels (:mod:`soabench.metrics_kernels`, :mod:`soabench.geometry_kernels`, seconds).
 The first filter step of each kind (fused or array path, with or without newborn terms) and the first call of each
 of the others in a process run inside :func:`first_use_notice` (:func:`announced`): if it has not returned after
-``delay`` seconds, one line says what is happening (once per process). A call that loads cached code in time prints
-nothing.
+``delay`` seconds, one line says what is happening (once per process), and a second one the seconds it took when it
+ends. A call that loads cached code in time prints nothing.
 """
 
 from __future__ import annotations
 
 import sys
 import threading
+import time
 from collections.abc import Callable, Hashable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
 #: the one wording of every compile notice (this first-use notice and the run's compile ahead,
 #: :mod:`soabench.kernel_warmup`)
-MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version) ..."
+MESSAGE = (
+    "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version of the "
+    "kernels; cached afterwards) ..."
+)
 DELAY = 3.0  #: seconds of silence before the notice (longer than loading cached kernels takes)
 _done: set[Hashable] = set()
 _printed = threading.Event()  #: the notice is printed at most once per process
@@ -46,8 +50,16 @@ def ready(key: Hashable) -> bool:
 @contextmanager
 def first_use_notice(key: Hashable, delay: float | None = None) -> Iterator[None]:
     """Run the block; print :data:`MESSAGE` to stderr if it is still running after ``delay`` seconds (at most
-    once per process)."""
-    timer = threading.Timer(DELAY if delay is None else delay, _print_once)
+    once per process), and then, when the block ends, the seconds it took."""
+    t0 = time.monotonic()
+    fired = threading.Event()
+
+    def fire() -> None:
+        if not _printed.is_set():
+            fired.set()
+            _print_once()
+
+    timer = threading.Timer(DELAY if delay is None else delay, fire)
     timer.daemon = True
     timer.start()
     try:
@@ -55,6 +67,9 @@ def first_use_notice(key: Hashable, delay: float | None = None) -> Iterator[None
     finally:
         timer.cancel()
         _done.add(key)
+        if fired.is_set():
+            took = time.monotonic() - t0
+            print(f"soabench: compiled in {took:.0f} s (cached for later runs)", file=sys.stderr, flush=True)
 
 
 def announced(key: Hashable, fn: Callable[..., Any], *args: Any) -> Any:

@@ -55,7 +55,7 @@ class TrackerSetup:
             a tracker's measurement model should be this one.
         scene: the static scene (buildings, sidewalks, workspace box ``scene.bounds``).
         rng: this run's generator (seeded from the trial: same seed, same results).
-        mode: the probability mode label of the run ("static", "dynamic", "dynamic+occ"); trackers without
+        mode: the probability mode label of the run ("static", "dynamic", "dynamic+occ", "static+occ"); trackers without
             such modes may ignore it (their rows then repeat per mode).
         config: the whole resolved configuration (filter defaults, metrics settings), read-only.
     """

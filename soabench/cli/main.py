@@ -13,12 +13,14 @@ from pathlib import Path
 
 from soabench import __version__
 from soabench.cli import (
+    atlas,
     birth,
     check,
     checks,
     export,
     import_osm,
     kitti,
+    query,
     record,
     replay,
     report,
@@ -43,6 +45,8 @@ MODULES = {
     "study": study,
     "sensitivity": sensitivity,
     "results": results,
+    "atlas": atlas,
+    "query": query,
     "kitti": kitti,
     "export": export,
     "check": check,

@@ -124,7 +124,8 @@ def add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--probabilities",
         type=csv_list("probability mode", PROBABILITY_MODES),
-        help="static,dynamic (default) or dynamic+occ",
+        help="static,dynamic (default), dynamic+occ or static+occ (static p_D with the line of sight); the "
+        "families other than gmphd run static and static+occ only",
     )
     p.add_argument("--seed", type=int, help="base seed (default 0)")
     p.add_argument("--workers", type=int, help="process workers (default: every core)")

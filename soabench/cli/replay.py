@@ -18,7 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="birth models and trackers to show side by side (default: the run's; a run's module:Class plugin only "
         "when typed here)",
     )
-    p.add_argument("--mode", help="probability mode (default: the run's first)")
+    p.add_argument("--filter", help="filter family the birth models run in (default: the run's first)")
+    p.add_argument("--mode", help="probability mode (default: the run's first that the filter family defines)")
     p.add_argument("--clutter", type=float, help="clutter rate lambda (default: the run's first)")
     p.add_argument(
         "--out",
@@ -33,7 +34,7 @@ def handle(args: argparse.Namespace) -> int:
     from soabench.replay.pages import write_trial_replay
 
     written, rep, t_sim, t_draw = write_trial_replay(
-        args.run, args.trial, args.models, args.mode, args.clutter, args.out
+        args.run, args.trial, args.models, args.mode, args.clutter, args.out, args.filter
     )
     for note in rep.notes:
         print(note)

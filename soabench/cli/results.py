@@ -40,6 +40,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--kitti-sequences", type=int, default=d.kitti_sequences, help="KITTI sequences per scene")
     p.add_argument("--kitti-duration", type=float, default=d.kitti_duration, help="seconds per KITTI sequence")
     p.add_argument("--kitti-folds", type=int, default=d.kitti_folds, help="cross-validation folds of N_hat")
+    p.add_argument(
+        "--atlas-scenes",
+        type=csv_list("scene"),
+        default=",".join(d.atlas_scenes),
+        help="scenes of the atlas part (parking x pedestrians x clutter x p_D), or none",
+    )
+    p.add_argument("--atlas-trials", type=int, default=d.atlas_trials, help="trials per atlas point")
     p.add_argument("--workers", type=int, help="process workers (default: every core)")
     p.add_argument("--no-progress", action="store_true", help="no progress report")
 
@@ -59,6 +66,8 @@ def handle(args: argparse.Namespace) -> int:
         kitti_sequences=args.kitti_sequences,
         kitti_duration=args.kitti_duration,
         kitti_folds=args.kitti_folds,
+        atlas_scenes=() if tuple(args.atlas_scenes) == ("none",) else tuple(args.atlas_scenes),
+        atlas_trials=args.atlas_trials,
     )
     o = run_results(args.out, settings, options=RunOptions(workers=args.workers, progress=not args.no_progress))
     rows = [f"| {k} | {v} | {o.seconds.get(k, 0.0):.0f} |" for k, v in o.parts.items()]

@@ -22,6 +22,7 @@ from soabench.experiment.reports.tables import RunTables, select
 from soabench.experiment.trial.trial import FILTER_COLUMN
 from soabench.figures import style as ps
 from soabench.figures.drawing import FigureJob
+from soabench.figures.tracks import has_labels
 
 #: how a figure names a filter family (the registry's labels, :data:`soabench.config.FAMILIES`)
 FAMILY_LABEL = {name: f.label for name, f in FAMILIES.items()}
@@ -119,4 +120,16 @@ def family_jobs(tables: RunTables, out_dir: Path) -> list[FigureJob]:
     for lam in clutters:
         sfx = f"_lam{lam:g}" if len(clutters) > 1 else ""
         jobs.append(FigureJob(Path(out_dir) / f"families{sfx}.png", families_figure, (lam,), weight=1.5))
+        if has_labels(tables):
+            name = f"identity_gaps_families{sfx}.png"
+            jobs.append(FigureJob(Path(out_dir) / name, identity_gaps_by_family, (lam,), weight=2.0))
     return jobs
+
+
+def identity_gaps_by_family(tables: RunTables, clutter: float) -> Figure:
+    """:func:`soabench.figures.gaps.identity_gaps_figure` with one row per filter family."""
+    from soabench.experiment.reports.report import FAMILY_LABEL
+    from soabench.figures.gaps import identity_gaps_figure
+
+    rows = [(FAMILY_LABEL.get(f, f), family_only(tables, f)) for f in run_families(tables)]
+    return identity_gaps_figure(tables, clutter, rows)

@@ -18,7 +18,10 @@ model, static solid / dynamic dashed or hatched, panels titled "(a) ...") and sa
   stacked, mean over trials, one panel per model and mode (:mod:`soabench.figures.origins`; not drawn for
   a run written before ``steps.csv`` had the origin columns);
 * ``tracks.png``: HOTA against its threshold α and the entry vs re-emergence delay per model and mode
-  (:mod:`soabench.figures.tracks`; drawn when some model or tracker labels its estimates).
+  (:mod:`soabench.figures.tracks`; drawn when some model or tracker labels its estimates);
+* ``identity_gaps.png``: identity kept against the occlusion gap's length, per occluder kind
+  (:mod:`soabench.figures.gaps`; drawn with ``tracks.png``; a run of several filter families adds
+  ``identity_gaps_families.png``, one row per family).
 
 With several clutter rates, figures 5a–g, 6, 7, 7b and tracks are drawn per rate with a ``_lam<λ>`` suffix.
 
@@ -491,6 +494,7 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
     (:mod:`soabench.figures.families`); ``by_family`` False: the paper's figures of all the rows given."""
     from soabench.figures.families import family_jobs, family_only, in_family, run_families
     from soabench.figures.forest import paired_figure
+    from soabench.figures.gaps import identity_gaps_figure
     from soabench.figures.tracks import has_labels, run_tracks_figure
 
     if by_family and run_families(tables):
@@ -526,6 +530,7 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
             jobs.append(FigureJob(out_dir / name, components_origin_figure, (lam,), weight=0.4 * panels))
         if labelled:
             jobs.append(FigureJob(out_dir / f"tracks{sfx}.png", run_tracks_figure, (lam,), weight=2.0))
+            jobs.append(FigureJob(out_dir / f"identity_gaps{sfx}.png", identity_gaps_figure, (lam,), weight=1.5))
     jobs.append(FigureJob(out_dir / "fig5h_precision.png", precision_figure, (), weight=1.5))
     jobs.append(FigureJob(out_dir / "fig5h_precision_trials.png", precision_trials_figure, ()))
     return jobs

@@ -88,11 +88,12 @@ MODEL_STYLES: dict[str, Style] = {
 _EXTRA_COLORS = ("tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "black")
 _EXTRA_MARKERS = ("P", "X", "h", "*", "<", ">")
 
-#: probability modes: static solid, dynamic dashed (and hatched bars), dynamic+occ dotted
+#: probability modes: static solid, dynamic dashed (and hatched bars), dynamic+occ dotted, static+occ dash-dotted
 MODE_STYLES: dict[str, Style] = {
     "static": Style("0.15", "o", "-", ""),
     "dynamic": Style("0.15", "s", "--", "////"),
     "dynamic+occ": Style("0.15", "^", ":", "...."),
+    "static+occ": Style("0.15", "D", "-.", "\\\\"),
 }
 
 

@@ -55,7 +55,7 @@ class GMPHDFilter:
     Args:
         filter_cfg: filter settings (form, p_S, p_D, T, U, J_max, gate, extraction, Beta parameters, ...).
         sensor_cfg: sensor model (dt, FOV, R, clutter rate) shared with the simulator (§2.3).
-        mode: "static", "dynamic" or "dynamic+occ" (§4.6).
+        mode: "static", "dynamic", "dynamic+occ" or "static+occ" (§4.6).
         fused: run the cycle as compiled calls over arrays (:mod:`soabench.gmphd.cycle`); False takes the array
             path of :mod:`soabench.gmphd.models` and :mod:`soabench.gmphd.reduction`, which is the reference the
             fused cycle is tested against (same results to 1e-12).
@@ -80,8 +80,8 @@ class GMPHDFilter:
         self.cfg = filter_cfg
         self.sensor = sensor_cfg
         self.mode = mode
-        self.dynamic = mode != "static"
-        self.occlusion = mode == "dynamic+occ" or filter_cfg.occlusion_pd
+        self.dynamic = mode.startswith("dynamic")
+        self.occlusion = mode.endswith("+occ") or filter_cfg.occlusion_pd
         self.F, self.Q = cv_model(sensor_cfg.dt, filter_cfg.sigma_a)
         self.R = measurement_noise(sensor_cfg.sigma_r, sensor_cfg.sigma_b)
         self.gate_thr = gate_threshold(filter_cfg.gate, filter_cfg.gate_prob)

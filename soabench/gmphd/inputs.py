@@ -128,6 +128,8 @@ def check_step_inputs(
     if n_dropped:
         Z = Z[keep_z]
         if nb is not None:
-            nb = NewbornTerms(np.asarray(nb.m)[keep_z], np.asarray(nb.P)[keep_z], _subset_beta(nb.beta, keep_z))
+            nb = NewbornTerms(
+                np.asarray(nb.m)[keep_z], np.asarray(nb.P)[keep_z], _subset_beta(nb.beta, keep_z), nb.adaptive
+            )
             births = Births(births.w, births.m, births.P, births.source, nb)
     return StepInputs(Z, ego, births, n_dropped, n_births_dropped)

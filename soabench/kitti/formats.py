@@ -69,6 +69,9 @@ class Objects:
     score: np.ndarray  #: (N,) detection score (inf for labels)
     line: np.ndarray  #: (N,) 1-based line number in ``path``
     path: str = ""
+    #: (N,) float KITTI ``truncated`` (tracking: 0 not, 1 partly, 2 fully truncated; -1 if the format has none);
+    #: None: not read
+    truncated: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.frame)
@@ -77,7 +80,7 @@ class Objects:
         m = np.asarray(mask, dtype=bool)
         return Objects(
             self.frame[m], self.track_id[m], self.type[m], self.occluded[m], self.hwl[m], self.xyz[m], self.ry[m],
-            self.score[m], self.line[m], self.path,
+            self.score[m], self.line[m], self.path, None if self.truncated is None else self.truncated[m],
         )  # fmt: skip
 
     @classmethod
@@ -85,7 +88,7 @@ class Objects:
         z = np.zeros(0)
         return cls(
             np.zeros(0, int), np.zeros(0, int), np.zeros(0, "<U16"), np.zeros(0, int), np.zeros((0, 3)),
-            np.zeros((0, 3)), z, z.copy(), np.zeros(0, int), path,
+            np.zeros((0, 3)), z, z.copy(), np.zeros(0, int), path, z.copy(),
         )  # fmt: skip
 
 
@@ -170,7 +173,9 @@ def parse_objects(path: Path, kind: str) -> tuple[Objects, str]:
             "and frame)"
         )
     fmt = "label" if kind == "label" else detect_format(path, lines)
-    cols: dict[str, list] = {k: [] for k in ("frame", "tid", "type", "occ", "hwl", "xyz", "ry", "score", "line")}
+    cols: dict[str, list] = {
+        k: [] for k in ("frame", "tid", "type", "occ", "trunc", "hwl", "xyz", "ry", "score", "line")
+    }
     for line, text in lines:
         if fmt == "ab3dmot":
             tok = [t.strip() for t in text.split(",")]
@@ -180,7 +185,7 @@ def parse_objects(path: Path, kind: str) -> tuple[Objects, str]:
             if type_id not in AB3DMOT_TYPES:
                 raise ReadError(f"{path}:{line}: type id {type_id} is not one of 1 (Pedestrian), 2 (Car), 3 (Cyclist)")
             row = dict(
-                frame=_frame(path, line, tok[0]), tid=-1, type=AB3DMOT_TYPES[type_id], occ=-1,
+                frame=_frame(path, line, tok[0]), tid=-1, type=AB3DMOT_TYPES[type_id], occ=-1, trunc=-1.0,
                 score=_num(path, line, tok[6], "score"), hwl=tok[7:10], xyz=tok[10:13], ry=tok[13],
             )  # fmt: skip
         else:
@@ -193,12 +198,14 @@ def parse_objects(path: Path, kind: str) -> tuple[Objects, str]:
             row = dict(
                 frame=_frame(path, line, tok[0]), tid=int(_num(path, line, tok[1], "track id", int)), type=tok[2],
                 occ=int(_num(path, line, tok[4], "occluded", int)), hwl=tok[10:13], xyz=tok[13:16], ry=tok[16],
+                trunc=_num(path, line, tok[3], "truncated"),
                 score=math.inf if fmt == "label" else _num(path, line, tok[17], "score"),
             )  # fmt: skip
         cols["frame"].append(row["frame"])
         cols["tid"].append(row["tid"])
         cols["type"].append(row["type"])
         cols["occ"].append(row["occ"])
+        cols["trunc"].append(row["trunc"])
         cols["hwl"].append([_size(path, line, t) for t in row["hwl"]])
         cols["xyz"].append([_num(path, line, t, "location") for t in row["xyz"]])
         cols["ry"].append(_num(path, line, row["ry"], "rotation_y"))
@@ -218,6 +225,7 @@ def parse_objects(path: Path, kind: str) -> tuple[Objects, str]:
             score=np.asarray(cols["score"], dtype=float),
             line=np.asarray(cols["line"], dtype=int),
             path=str(path),
+            truncated=np.asarray(cols["trunc"], dtype=float),
         ),
         fmt,
     )

@@ -31,6 +31,7 @@ from soabench.experiment.runs.ownership import FolderLock, check_new_folder, res
 from soabench.experiment.trial.trial import run_filter
 from soabench.kitti.config import KittiConfig, KittiSpec
 from soabench.kitti.formats import ReadError, UnreadableError
+from soabench.kitti.levels import level_split
 from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
 from soabench.kitti.report import TRACK_COLUMNS, write_outputs
@@ -107,7 +108,8 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
         run = run_filter(ss.scans, birth, GMPHDFilter(filter_cfg, ss.sensor, filter_mode), p_D_b)
         m = evaluate(ss.scans, run.results, cfg.metrics, ss.sensor)
         X = [r.X for r in run.results]
-        tracks = evaluate_tracks(ss.scans, X, run_labels(run.results, X), m.episodes, cfg.metrics, ss.sensor)
+        labels = run_labels(run.results, X)
+        tracks = evaluate_tracks(ss.scans, X, labels, m.episodes, cfg.metrics, ss.sensor)
         summary = {k: (v.item() if hasattr(v, "item") else v) for k, v in m.summary.items()}
         timing = {k: summary.pop(k) for k in list(summary) if k.startswith("t_")}  # wall clock: kept apart
         out["models"][model] = {
@@ -115,6 +117,7 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
             "episodes": [dataclasses.asdict(e) for e in m.episodes],
             "series": {k: m.series[k].tolist() for k in SERIES},
             "tracks": {k: tracks[k] for k in TRACK_COLUMNS},
+            "levels": level_split(ss, X, labels, cfg.metrics),
         }
         out["timing"][model] = {**timing, "total": time.perf_counter() - t0}
     return out

@@ -276,6 +276,9 @@ class SequenceScans:
     scene: SceneMap
     sensor: SensorConfig
     info: dict
+    #: (F, P) int per frame and target the truth row's KITTI level, -1 where absent: ``"occluded"`` (0-3) and
+    #: ``"truncated"`` (0 not, 1 partly, 2 fully truncated; a fraction in (0, 1] counts as 1)
+    levels: dict[str, np.ndarray] | None = None
 
 
 def sensor_for(seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig) -> SensorConfig:
@@ -309,6 +312,11 @@ def to_scans(seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig) -> Seq
     truth[lab.frame, col] = to_world(centres_ego(lab, seq.calib), ego[lab.frame])
     present[lab.frame, col] = True
     occ_ok[lab.frame, col] = (lab.occluded >= 0) & (lab.occluded <= kcfg.max_occluded)
+    levels = {name: np.full((F, P), -1, dtype=int) for name in ("occluded", "truncated")}
+    levels["occluded"][lab.frame, col] = lab.occluded
+    if lab.truncated is not None:
+        trunc = np.asarray(lab.truncated, dtype=float)
+        levels["truncated"][lab.frame, col] = np.where(trunc >= 0, np.clip(np.ceil(trunc), 0, 2), -1).astype(int)
     d = truth - ego[:, None, :2]
     r = np.hypot(d[..., 0], d[..., 1])
     in_fov = present & (r >= sensor.r_min) & (r <= sensor.r_max)
@@ -398,7 +406,7 @@ def to_scans(seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig) -> Seq
         scans=scans, dt=float(sensor.dt), source=sources, truth_xy=truth, present=present, in_fov=in_fov,
         visible=visible, detected=detected, ped_ids=np.array([str(i) for i in ids], dtype=str),
     )  # fmt: skip
-    return SequenceScans(out, scene, sensor, info)
+    return SequenceScans(out, scene, sensor, info, levels)
 
 
 def _semantic_world(seq: KittiSequence, ego: np.ndarray, kcfg: KittiConfig) -> tuple[list, list[np.ndarray], list]:

@@ -14,14 +14,17 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from soabench.birth import LABEL
+from soabench.experiment.reports.occlusion import bin_labels
 from soabench.experiment.runs.files import write_csv, write_json_atomic, write_text_atomic
 from soabench.figures import kitti as kitti_figures
 from soabench.kitti.config import KittiSpec
+from soabench.kitti.levels import LEVEL_NAMES, LEVELS
 
 #: the paper's KITTI numbers (Table I, §V-A pairwise shares, §V-B std of the sweep means); its UBM spreads the grid
 #: across the workspace, so its numbers stand beside ``ubm-ws`` (``ubm``, clipped to the FOV, has none)
@@ -40,6 +43,90 @@ TRACK_COLUMNS = ("hota", "deta", "assa", "idf1", "idsw", "mota")
 
 def _label(m: str) -> str:
     return LABEL.get(m, m)
+
+
+def levels_table(records: dict, models: list[str]) -> dict:
+    """Per model and kind (``occluded``, ``truncated``) and level the truth-frames, those associated (and the recall
+    they give) and the identity switches (None for an unlabelled model), summed over the CV sequences
+    (:mod:`soabench.kitti.levels`); {} when no record holds the split."""
+    out: dict = {}
+    for m in models:
+        runs = [r["models"][m]["levels"] for (st, _), r in sorted(records.items()) if st == "cv"
+                and "levels" in r["models"][m]]  # fmt: skip
+        if not runs:
+            continue
+        out[m] = {}
+        for kind, values in LEVELS.items():
+            rows = []
+            for i, v in enumerate(values):
+                frames = sum(run[kind][i]["frames"] for run in runs)
+                assoc = sum(run[kind][i]["associated"] for run in runs)
+                sw = [run[kind][i]["idsw"] for run in runs]
+                idsw = None if any(x is None for x in sw) else int(sum(sw))
+                recall = assoc / frames if frames else math.nan
+                rows.append({"level": v, "frames": frames, "associated": assoc, "recall": recall, "idsw": idsw})
+            out[m][kind] = rows
+    return out
+
+
+def undetected_gaps_table(records: dict, models: list[str], bins: Sequence[int]) -> dict:
+    """Per model and gap-length bin (``bins`` as ``metrics.gap_bins``) the undetected gaps of the CV sequences
+    (:mod:`soabench.kitti.levels`): their number, the coasted share, the identity re-emergences counted and the
+    share kept (NaN when none)."""
+    out: dict = {}
+    labels = bin_labels(bins)
+    for m in models:
+        gaps = [g for (st, _), r in sorted(records.items()) if st == "cv" for g in r["models"][m].get("levels", {})
+                .get("gaps", [])]  # fmt: skip
+        rows = []
+        for label, lo, hi in zip(labels, bins, [*bins[1:], math.inf], strict=True):
+            here = [g for g in gaps if lo <= g["scans"] < hi]
+            ids = [g["id_kept"] for g in here if g["id_kept"] is not None]
+            rows.append({
+                "bin": label, "gaps": len(here),
+                "coasted": float(np.mean([g["coasted"] for g in here])) if here else math.nan,
+                "n_id": len(ids), "id_kept": float(np.mean(ids)) if ids else math.nan,
+            })  # fmt: skip
+        out[m] = rows
+    return out
+
+
+def _levels_md(lv: dict, gaps: dict, models: list[str]) -> list[str]:
+    """The occlusion-level tables of the report (nothing without the split)."""
+    if not lv:
+        return []
+    L = [
+        "## Occlusion levels: KITTI's `occluded` and `truncated`, per truth-frame",
+        "",
+        "A target counts at the level its label row gives in each frame. Frames: truth-frames of the ground-truth "
+        "set; recall: the share with an associated estimate; IDSW: identity switches at frames of that level.",
+        "",
+        "| model | level | frames | recall | IDSW |",
+        "|---|---|---|---|---|",
+    ]
+    for m in models:
+        for kind in LEVELS:
+            for row in lv.get(m, {}).get(kind, []):
+                idsw = "—" if row["idsw"] is None else str(row["idsw"])
+                name = f"{kind} {row['level']} ({LEVEL_NAMES[kind][row['level']]})"
+                L.append(f"| {_label(m)} | {name} | {row['frames']} | {_fmt(row['recall'])} | {idsw} |")
+    L += [
+        "",
+        "## Identity through undetected gaps",
+        "",
+        "Gaps: frames in which a target is present and in the FOV but not detected, with a detection before and "
+        "after. Coasted: covered by an associated estimate on every frame; identity kept: the label after the gap is "
+        "the one before it (labelled models, associated on both sides; count in brackets).",
+        "",
+        "| model | gap length (frames) | gaps | coasted | identity kept |",
+        "|---|---|---|---|---|",
+    ]
+    for m in models:
+        labelled = any(r["idsw"] is not None for r in lv.get(m, {}).get("occluded", []))
+        for row in gaps.get(m, []):
+            kept = f"{_fmt(row['id_kept'])} ({row['n_id']})" if labelled else "—"
+            L.append(f"| {_label(m)} | {row['bin']} | {row['gaps']} | {_fmt(row['coasted'])} | {kept} |")
+    return [*L, ""]
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -151,6 +238,8 @@ def write_outputs(
     models = list(spec.config.experiment.models)
     t1 = table1(records, models)
     tt = tracks_table(records, models)
+    lv = levels_table(records, models)
+    ug = undetected_gaps_table(records, models, spec.config.metrics.gap_bins)
     pw = pairwise(records, models)
     offsets = list(spec.nhat_sweep or [])
     sw = sweep_table(records, models, offsets) if offsets else {}
@@ -217,9 +306,14 @@ def write_outputs(
         "stationary_ego": stationary,
         "paper": PAPER,
         "figures": figs,
+        "occlusion_levels": lv,
+        "undetected_gaps": ug,
     }
     write_json_atomic(out / "summary.json", summary)
     md = _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, stationary, infos, out)
+    levels_md = _levels_md(lv, ug, models)
+    if levels_md:
+        md += "\n" + "\n".join(levels_md)
     write_text_atomic(out / "report.md", md)
     return md
 

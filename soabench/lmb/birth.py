@@ -1,14 +1,26 @@
-"""Birth of the LMB filter from the GM-PHD's birth models (docs/method.md "LMB filter", register row 33).
+"""Birth of the LMB filter from the GM-PHD's birth models (docs/method.md §10.7, "LMB filter").
 
-Every birth model hands the filter :class:`~soabench.types.Births` through the same contract as for the GM-PHD:
+Every birth model hands the filter :class:`~soabench.types.Births` through the same contract as for the GM-PHD;
+``[lmb] birth_mapping`` says how they become Bernoullis.
 
-* a Gaussian birth component (w_j, m_j, P_j) becomes the Bernoulli with label (k, j), existence
-  r_j = min(w_j, r_B,max) and density N(m_j, P_j) (:func:`gm_birth`);
-* measurement-driven newborn terms (PUBM, ATBM) become the adaptive birth of Reuter et al. (2014, eq. 75): at scan
-  k, one Bernoulli per measurement z of scan k-1 with r_B(z) = min(r_B,max, lambda_B (1 - r_U(z)) / sum_xi
-  (1 - r_U(xi))), r_U(z) the probability that the LMB update of scan k-1 associated z with a track, lambda_B = N_hat,
-  and the density the model's newborn term for z (given at k-1) predicted one step with the CV model
-  (:func:`adaptive_birth`). The newborn terms' own weights (beta) are not used: the LMB's birth mass is r_B.
+``"groups"`` (default, §10.7):
+
+* the scan's Gaussian birth components are grouped with the §2.9 merge test (greedy from the heaviest, d² <= U, as
+  the GM-PHD's merge groups them) and each group becomes one Bernoulli with label (k, g), existence
+  r_g = min(sum of the group's weights, r_B,max) and density the group's mixture (its J_h heaviest components,
+  weights normalised) (:func:`group_birth`): overlapping components pool their mass as they do in the GM-PHD;
+* measurement-driven newborn terms keep their own weighting. A birth intensity's terms (PUBM, §3.2) give the
+  measurement z of scan k-1 the Bernoulli r_B(z) = min(r_B,max, (1 - r_U(z)) beta_z / (kappa(z) + beta_z))
+  (:func:`intensity_existence`); terms that allocate an expected number of births (ATBM, §3.4:
+  ``NewbornTerms.adaptive``) give Reuter's adaptive birth (2014, eq. 75), r_B(z) = min(r_B,max, lambda_B
+  (1 - r_U(z)) / sum_xi (1 - r_U(xi))), lambda_B = N_hat (:func:`adaptive_existence`).
+
+``"components"`` (§9.5): each birth component is its own Bernoulli, r_j = min(w_j, r_B,max), N(m_j, P_j), label
+(k, j) (:func:`gm_birth`), and every model's newborn terms give the adaptive birth.
+
+In both, r_U(z) is the probability that the LMB update of scan k-1 associated z with a track, and the density of a
+measurement's Bernoulli is the model's newborn term for z (given at k-1) predicted one step with the CV model
+(:func:`measurement_birth`).
 """
 
 from __future__ import annotations
@@ -17,8 +29,12 @@ import numpy as np
 
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import predict as predict_mixture
+from soabench.gmphd.reduction import merge_groups
 from soabench.lmb.tracks import Tracks, make_labels
 from soabench.types import SOURCE_MEAS, Births
+
+#: the values of ``[lmb] birth_mapping``: merge groups (§10.7, the default) or one Bernoulli per component (§9.5)
+BIRTH_MAPPINGS = ("groups", "components")
 
 
 def gm_birth(births: Births, k: int, r_max: float) -> Tracks:
@@ -37,6 +53,35 @@ def gm_birth(births: Births, k: int, r_max: float) -> Tracks:
     )
 
 
+def group_birth(births: Births, k: int, r_max: float, U: float, J_h: int) -> Tracks:
+    """One Bernoulli per §2.9 merge group of the birth components of scan ``k`` (module docstring): groups in the
+    merge's order (heaviest centre first), labels (k, g), origin the centre's source; components of zero weight
+    join no group."""
+    w = np.asarray(births.w, dtype=float).reshape(-1)
+    keep = np.flatnonzero(w > 0.0)
+    if len(keep) == 0:
+        return Tracks.empty()
+    w = w[keep]
+    m = np.asarray(births.m, dtype=float).reshape(-1, 4)[keep]
+    P = np.asarray(births.P, dtype=float).reshape(-1, 4, 4)[keep]
+    source = np.asarray(births.source, dtype=np.int8).reshape(-1)[keep]
+    group, centres = merge_groups(m, P, w, U)
+    G = len(centres)
+    order = np.lexsort((np.arange(len(w)), -w, group))  # by group, heaviest first, lowest index on ties
+    counts = np.bincount(group, minlength=G)
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    rank = np.arange(len(w)) - np.repeat(first, counts)
+    kept = order[rank < J_h]  # each group's J_h heaviest, grouped in order
+    n_kept = np.minimum(counts, J_h)
+    start = np.concatenate([[0], np.cumsum(n_kept)]).astype(np.int64)
+    total = np.bincount(group, weights=w, minlength=G)
+    wk = w[kept] / np.repeat(np.add.reduceat(w[kept], start[:-1]), n_kept)
+    return Tracks(
+        np.minimum(total, r_max), make_labels(k, np.arange(G)), source[centres], np.zeros(G, dtype=np.int32),
+        start, wk, m[kept], P[kept],
+    )  # fmt: skip
+
+
 def adaptive_existence(r_U: np.ndarray, lambda_B: float, r_max: float) -> np.ndarray:
     """r_B(z) = min(r_max, lambda_B (1 - r_U(z)) / sum_xi (1 - r_U(xi))) (Reuter et al. 2014, eq. 75); all zero
     when every measurement was fully explained by the tracks."""
@@ -47,21 +92,23 @@ def adaptive_existence(r_U: np.ndarray, lambda_B: float, r_max: float) -> np.nda
     return np.minimum(r_max, lambda_B * free / total)
 
 
-def adaptive_birth(
-    m: np.ndarray,
-    P: np.ndarray,
-    r_U: np.ndarray,
-    lambda_B: float,
-    r_max: float,
-    F: np.ndarray,
-    Q: np.ndarray,
-    k: int,
-    j0: int,
+def intensity_existence(r_U: np.ndarray, beta: np.ndarray, kappa: np.ndarray, r_max: float) -> np.ndarray:
+    """r_B(z) = min(r_max, (1 - r_U(z)) beta_z / (kappa(z) + beta_z)) (docs/method.md §10.7): the chance that z
+    was a new target under a birth intensity whose term at z is beta_z, among the measurements no track took."""
+    free = np.clip(1.0 - np.asarray(r_U, dtype=float), 0.0, 1.0)
+    beta = np.asarray(beta, dtype=float)
+    den = np.asarray(kappa, dtype=float) + beta
+    share = np.divide(beta, den, out=np.zeros_like(beta), where=den > 0.0)
+    return np.minimum(r_max, free * share)
+
+
+def measurement_birth(
+    m: np.ndarray, P: np.ndarray, r: np.ndarray, F: np.ndarray, Q: np.ndarray, k: int, j0: int
 ) -> Tracks:
-    """Adaptive birth at scan ``k`` from the newborn terms (m, P) of the previous scan's measurements and their
-    association probabilities ``r_U``: labels (k, j0 + l) for measurement l."""
-    r = adaptive_existence(r_U, lambda_B, r_max)
-    keep = np.flatnonzero(r > 0.0)
+    """Bernoullis at scan ``k`` from the newborn terms (m, P) of the previous scan's measurements with existences
+    ``r`` (:func:`adaptive_existence`, :func:`intensity_existence`): labels (k, j0 + l) for measurement l, the
+    densities predicted one step."""
+    keep = np.flatnonzero(np.asarray(r) > 0.0)
     if len(keep) == 0:
         return Tracks.empty()
     mix = predict_mixture(Mixture.from_arrays(r[keep], np.asarray(m)[keep], np.asarray(P)[keep]), F, Q, 1.0)

@@ -3,11 +3,13 @@ call as :class:`soabench.gmphd.filter.GMPHDFilter`, so every birth model (built-
 
 One cycle at scan k:
 
-1. predict the tracks (r <- p_S r, CV motion) and add the birth tracks: the birth model's Gaussian components
-   (r = min(w, r_B,max), label (k, j)) and the adaptive birth from the previous scan's measurements when the model
-   gives newborn terms (:mod:`soabench.lmb.birth`);
-2. joint update with Z_k (:mod:`soabench.lmb.update`): association costs, marginals by enumeration or Gibbs
-   sampling (:mod:`soabench.lmb.gibbs`), the LMB approximation of the GLMB posterior;
+1. predict the tracks (r <- p_S r, CV motion) and add the birth tracks (:mod:`soabench.lmb.birth`,
+   docs/method.md §10.7): one Bernoulli per merge group of the birth model's Gaussian components (or one per
+   component with ``[lmb] birth_mapping = "components"``), and Bernoullis at the previous scan's measurements when
+   the model gives newborn terms;
+2. joint update with Z_k (:mod:`soabench.lmb.update`): association costs, marginals by exact enumeration where a
+   cluster has at most ``max_hypotheses`` valid hypotheses, Gibbs sampling beyond (:mod:`soabench.lmb.gibbs`,
+   §10.8), the LMB approximation of the GLMB posterior;
 3. per track: prune, merge and cap its Gaussian components (the GM-PHD's Vo-Ma kernels); drop tracks with
    r < ``prune_r``, keep the ``max_tracks`` most probable;
 4. estimates: the tracks with r > ``extract_r``, labelled.
@@ -29,7 +31,7 @@ from soabench.geometry import clutter_intensity
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
 from soabench.gmphd.probabilities import detection_gate
-from soabench.lmb.birth import adaptive_birth, gm_birth
+from soabench.lmb.birth import adaptive_existence, gm_birth, group_birth, intensity_existence, measurement_birth
 from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict, update
@@ -86,7 +88,7 @@ class LMBFilter:
         gate = gate_threshold(filter_cfg.gate, filter_cfg.gate_prob)
         self.model = model if model is not None else RangeBearingEKF(R, sensor_cfg.r_min, gate, filter_cfg.form)
         self.tracks = Tracks.empty()
-        #: newborn terms (m, P) of the previous scan's measurements and their r_U, for the adaptive birth
+        #: newborn terms (m, P) of the previous scan's measurements and their birth existences r_B
         self._newborn: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def reset(self) -> None:
@@ -119,11 +121,14 @@ class LMBFilter:
         seed = int(self.rng.integers(2**32))  # one draw per scan, used or not: the stream never depends on the data
         t0 = time.perf_counter()
 
-        born = gm_birth(births, k, lmb.r_B_max)
+        if lmb.birth_mapping == "components":
+            born = gm_birth(births, k, lmb.r_B_max)
+        else:
+            born = group_birth(births, k, lmb.r_B_max, float(self.cfg.merge_U), int(lmb.max_components))
         parts = [predict(self.tracks, self.F, self.Q, self.cfg.p_S), born]
         if self._newborn is not None:
-            m_nb, P_nb, r_U = self._newborn
-            parts.append(adaptive_birth(m_nb, P_nb, r_U, self.N_hat, lmb.r_B_max, self.F, self.Q, k, len(births)))
+            m_nb, P_nb, r_B = self._newborn
+            parts.append(measurement_birth(m_nb, P_nb, r_B, self.F, self.Q, k, len(births)))
         pred = Tracks.concatenate(parts)
         t1 = time.perf_counter()
 
@@ -134,11 +139,19 @@ class LMBFilter:
             pred, Z, ego_ok if ego_ok is not None else np.zeros(3), p_D, kappa, self.model,
             max_hyp=lmb.max_hypotheses, seed=seed,
         )  # fmt: skip
+        # A such that rho = A / (kappa + A) = r_U: what a model reading the previous step (ATBM prev_scan) needs
+        with np.errstate(divide="ignore", invalid="ignore"):
+            A = np.where(up.r_U < 1.0, kappa * up.r_U / np.maximum(1.0 - up.r_U, 1e-300), np.inf)
+        A = np.where(np.isfinite(A), A, np.finfo(float).max)
         nb = births.newborn
         self._newborn = None
         if nb is not None and len(Z):
             m_nb, P_nb = np.asarray(nb.m, dtype=float).reshape(-1, 4), np.asarray(nb.P, dtype=float).reshape(-1, 4, 4)
-            self._newborn = (m_nb, P_nb, up.r_U)
+            if nb.adaptive or lmb.birth_mapping == "components":
+                r_B = adaptive_existence(up.r_U, self.N_hat, lmb.r_B_max)
+            else:
+                r_B = intensity_existence(up.r_U, nb.beta(A, kappa), kappa, lmb.r_B_max)
+            self._newborn = (m_nb, P_nb, r_B)
         t2 = time.perf_counter()
 
         post = up.tracks
@@ -159,9 +172,6 @@ class LMBFilter:
         if not (np.isfinite(self.tracks.r).all() and np.isfinite(X).all()):
             raise SoabenchError(f"scan {scan.k}: the LMB filter produced a non-finite posterior from finite inputs")
 
-        # A such that rho = A / (kappa + A) = r_U: what a model reading the previous step (ATBM prev_scan) needs
-        with np.errstate(divide="ignore", invalid="ignore"):
-            A = np.where(up.r_U < 1.0, kappa * up.r_U / np.maximum(1.0 - up.r_U, 1e-300), np.inf)
         return StepResult(
             k=scan.k,
             X=X,
@@ -176,7 +186,7 @@ class LMBFilter:
             t_update=t2 - t1,
             t_reduce=t3 - t2,
             mean_pD=float(self.cfg.p_D),
-            A=np.where(np.isfinite(A), A, np.finfo(float).max),
+            A=A,
             kappa=np.asarray(kappa, dtype=float),
             n_pruned=len(keep),
             n_merged=len(self.tracks.w),

@@ -11,8 +11,9 @@ prod_i eta_i(theta_i). The kernels return the marginal association probabilities
 * Tracks that share no measurement are independent (the weight factorises), so the tracks are split into clusters
   (connected by a measurement both may take) and each cluster is solved alone: a track with no measurement in its
   gate has the closed form marg = (eta_absent, eta_missed) / sum.
-* A cluster whose hypothesis count is at most ``max_hyp`` (bound: the product of its tracks' option counts) is
-  enumerated exhaustively (exact).
+* A cluster whose valid hypotheses (distinct measurements) number at most ``max_hyp`` is enumerated exhaustively
+  (exact; docs/method.md §10.8): a depth-first enumeration counts them and stops at ``max_hyp`` + 1, so a cluster
+  whose product of option counts is large but whose gates overlap little is still exact.
 * A larger cluster runs the Gibbs sampler of Vo, Vo & Hoang (2017, Algorithm 1 with the all-missed start of Vo's
   toolbox; a track whose missed option is impossible starts absent): ``max_hyp`` sweeps, each redrawing every
   theta_i from its conditional given the others (measurements held by the others locked out); the distinct
@@ -93,38 +94,48 @@ def _accumulate(logc, hyps, n_hyp, marg_out, rows):
 
 
 @njit(cache=True)
-def _enumerate(logc, options, n_opt):
-    """Every joint association with distinct measurements (mixed-radix counter over each track's options)."""
-    n = logc.shape[0]
-    bound = 1
-    for i in range(n):
-        bound *= n_opt[i]
-    hyps = np.empty((bound, n), dtype=np.int64)
-    digit = np.zeros(n, dtype=np.int64)
+def _enumerate_valid(options, n_opt, M, limit):
+    """The valid joint associations (distinct measurements) depth first, track 0 varying fastest (the order of a
+    mixed-radix count over the options); stops once ``limit`` + 1 are found. Returns (hyps, count) with count
+    ``limit`` + 1 when there are more than ``limit``."""
+    n = options.shape[0]
+    cap = min(limit + 1, 1024)
+    hyps = np.empty((cap, n), dtype=np.int64)
     theta = np.empty(n, dtype=np.int64)
-    n_hyp = 0
-    M = logc.shape[1] - 2
-    used = np.zeros(M, dtype=np.int64)
-    for _ in range(bound):
-        ok = True
-        for i in range(n):
-            theta[i] = options[i, digit[i]]
-            if theta[i] >= 2:
-                if used[theta[i] - 2] == 1:
-                    ok = False
-                used[theta[i] - 2] = 1
-        for i in range(n):
-            if theta[i] >= 2:
-                used[theta[i] - 2] = 0
-        if ok:
-            hyps[n_hyp] = theta
-            n_hyp += 1
-        for i in range(n):  # next digit string
-            digit[i] += 1
-            if digit[i] < n_opt[i]:
+    digit = np.zeros(n, dtype=np.int64)
+    used = np.zeros(M, dtype=np.bool_)
+    count = 0
+    lvl = n - 1
+    while True:
+        if digit[lvl] == n_opt[lvl]:  # this level is exhausted: back up one level and advance it
+            digit[lvl] = 0
+            lvl += 1
+            if lvl == n:
                 break
-            digit[i] = 0
-    return hyps, n_hyp
+            if theta[lvl] >= 2:
+                used[theta[lvl] - 2] = False
+            digit[lvl] += 1
+            continue
+        c = options[lvl, digit[lvl]]
+        if c >= 2 and used[c - 2]:
+            digit[lvl] += 1
+            continue
+        theta[lvl] = c
+        if lvl == 0:
+            if count == cap:
+                grown = np.empty((min(2 * cap, limit + 1), n), dtype=np.int64)
+                grown[:cap] = hyps
+                hyps, cap = grown, grown.shape[0]
+            hyps[count] = theta
+            count += 1
+            if count > limit:
+                break
+            digit[0] += 1
+            continue
+        if c >= 2:
+            used[c - 2] = True
+        lvl -= 1
+    return hyps, count
 
 
 @njit(cache=True)
@@ -273,17 +284,16 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False):
         sub = np.empty((n, 2 + mc))
         options = np.empty((n, 2 + mc), dtype=np.int64)
         n_opt = np.zeros(n, dtype=np.int64)
-        bound = 1.0
         for a in range(n):
             for c in range(2 + mc):
                 sub[a, c] = logc[rows[a], c if c < 2 else 2 + cols[c - 2]]
                 if sub[a, c] > -np.inf:
                     options[a, n_opt[a]] = c
                     n_opt[a] += 1
-            bound *= n_opt[a]
-        if bound <= max_hyp and not force_gibbs:
-            hyps, n_hyp = _enumerate(sub, options, n_opt)
-        else:
+        n_hyp = max_hyp + 1
+        if not force_gibbs:
+            hyps, n_hyp = _enumerate_valid(options, n_opt, mc, max_hyp)
+        if n_hyp > max_hyp:
             hyps, n_hyp = _gibbs(sub, options, n_opt, max_hyp, state)
             n_gibbs += 1
         local = np.zeros((n, 2 + mc))

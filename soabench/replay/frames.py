@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from soabench.config import family_label
 from soabench.figures.births import SOURCE_COLORS, SOURCE_LABELS, ellipse_params
 from soabench.geometry import polar_to_world
 from soabench.sensor import fov_polygon, scan_steps
@@ -243,6 +244,7 @@ def replay_data(rep: Any) -> dict[str, Any]:
         "seed": exp.seed,
         "sumo_seed": rep.seeds.sumo_seed,
         "mode": rep.mode,
+        "filter": family_label(rep.family),
         "clutter": rep.clutter,
         "dt": float(scans.dt),
         "r_max": float(scans.sensor.r_max),

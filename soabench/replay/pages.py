@@ -8,6 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from soabench import plugins
+from soabench.config import FILTER_FAMILIES
 from soabench.errors import require
 from soabench.experiment.reports.html import REPLAYS_DIR, extreme_trials, replay_file, write_index, write_report
 from soabench.experiment.runs.ownership import check_out_file
@@ -21,12 +22,16 @@ from soabench.replay.simulate import read_run, replay_trial
 PAGE_SUFFIXES = (".html", ".htm")
 
 
-def _replay_outs(run_dir: Path, trial: int, outs: list[str] | None) -> list[Path]:
-    """The files to write, each ending in a format we write (checked before any simulation)."""
+def _replay_outs(run_dir: Path, trial: int, outs: list[str] | None, family: str | None = None) -> list[Path]:
+    """The files to write, each ending in a format we write (checked before any simulation); the default page of a
+    family other than the default one is named after it."""
     if not outs:
         folder = run_dir / REPLAYS_DIR
         folder.mkdir(exist_ok=True)
-        return [check_out_file(str(folder / replay_file(trial)))]
+        name = replay_file(trial)
+        if family not in (None, FILTER_FAMILIES[0]):
+            name = name.replace(".html", f"_{family}.html")
+        return [check_out_file(str(folder / name))]
     paths = []
     allowed = (*PAGE_SUFFIXES, *VIDEO_SUFFIXES)
     for out in outs:
@@ -48,6 +53,7 @@ def write_trial_replay(
     mode=None,
     clutter=None,
     outs: list[str] | None = None,
+    family: str | None = None,
 ):
     """Re-simulate a trial and write each of ``outs`` (default: its page under ``RUN/replays/``); returns (the
     paths and sizes in bytes written, the replay, seconds simulating, seconds writing). A run's ``module:Class``
@@ -55,10 +61,10 @@ def write_trial_replay(
     require(trial >= 0, f"--trial {trial} must be >= 0")
     plugins.allow_import_paths(models or ())
     run_dir, _, _ = read_run(run)
-    targets = _replay_outs(run_dir, trial, outs)
+    targets = _replay_outs(run_dir, trial, outs, family)
     ensure_compiled()  # announced as a run announces it, with its progress lines
     t0 = time.perf_counter()
-    rep = replay_trial(run_dir, trial, models, mode, clutter)
+    rep = replay_trial(run_dir, trial, models, mode, clutter, family)
     t1 = time.perf_counter()
     data = replay_data(rep)
     written = []

@@ -15,7 +15,7 @@ function esc(s){return String(s).replace(/[&<>"']/g,c=>"&#"+c.charCodeAt(0)+";")
 function pts(a){return a.map(p=>p[0]+","+p[1]).join(" ");}
 function el(tag,attrs){const e=document.createElementNS(NS,tag);for(const k in attrs)e.setAttribute(k,attrs[k]);return e;}
 document.getElementById("title").textContent="soabench replay: "+D.title+" (seed "+D.seed+", SUMO seed "+D.sumo_seed+
-  ", mode "+D.mode+", clutter \u03bb = "+D.clutter+")";
+  ", "+D.filter+" filter, mode "+D.mode+", clutter \u03bb = "+D.clutter+")";
 const notes=document.getElementById("notes");
 D.notes.forEach(function(n){const li=document.createElement("li");li.textContent=n;
   if(/^NOT|differ/.test(n))li.className="bad";notes.appendChild(li);});

@@ -21,7 +21,7 @@ from typing import Any
 
 from soabench import plugins
 from soabench.birth import LABEL
-from soabench.config import FILTER_FAMILIES, Config
+from soabench.config import FAMILIES, FILTER_FAMILIES, Config, family_label
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.ownership import check_existing_folder, resolve
 from soabench.experiment.runs.provenance import package_versions
@@ -68,6 +68,8 @@ class TrialReplay:
     notes: list[str] = field(default_factory=list)
     #: True when every replayed model's metrics equal the run's trials.csv row
     reproduced: bool | None = None
+    #: the filter family the birth models ran in (:data:`soabench.config.FAMILIES`)
+    family: str = FILTER_FAMILIES[0]
 
 
 def read_run(run_dir: str | Path):
@@ -97,9 +99,11 @@ def replay_trial(
     models: tuple[str, ...] | None = None,
     mode: str | None = None,
     clutter: float | None = None,
+    family: str | None = None,
 ) -> TrialReplay:
     """Re-simulate trial ``trial`` of the run in ``run_dir`` for ``models`` (default: the run's birth models) in
-    probability ``mode`` (default: the run's first) at clutter rate ``clutter`` (default: the run's first)."""
+    filter ``family`` (default: the run's first) and probability ``mode`` (default: the run's first that the family
+    defines) at clutter rate ``clutter`` (default: the run's first)."""
     # imported when called: numba, scipy would slow every start-up
     from soabench.experiment.trial.trial import RunKey, make_row
     from soabench.metrics import evaluate
@@ -120,7 +124,14 @@ def replay_trial(
     for name in names:
         require(name in (*exp.models, *exp.trackers), f"--models {name!r} is not a birth model or tracker of this "
                 f"run; choose from {', '.join((*exp.models, *exp.trackers))}")  # fmt: skip
-    mode = _choose(mode, list(exp.probabilities), "--mode")
+    family = _choose(family, list(exp.filters), "--filter")
+    modes = [m for m in exp.probabilities if m in FAMILIES[family].modes]
+    require(
+        mode is None or mode not in exp.probabilities or mode in modes,
+        f"--mode {mode!r} is not defined for the {family_label(family)} filter; choose from {', '.join(modes)}",
+    )
+    mode = _choose(mode, modes, "--mode")
+    named = None if tuple(exp.filters) == FILTER_FAMILIES[:1] else family  # the run's filter column, if it has one
     lam = float(_choose(None if clutter is None else float(clutter), [float(c) for c in exp.clutter], "--clutter"))
     scene, scenario = load_scene_cached(meta.net, meta.polys, meta.scenario)
     seeds = trial_seeds(exp.seed, trial)
@@ -136,13 +147,13 @@ def replay_trial(
             cls = plugins.resolve(plugins.BIRTH, name)
             options = {} if plugins.is_builtin_birth(name) else cfg.plugins.get(name, {})
             model = _Recorder(cls(cfg.birth, sensor_cfg, scene, seeds.placement_rng(), **options))
-            filt, p_D_b = build_filter(FILTER_FAMILIES[0], cfg, sensor_cfg, mode, seeds.association_rng())
+            filt, p_D_b = build_filter(family, cfg, sensor_cfg, mode, seeds.association_rng())
             run = run_tracker(scans, FilterTracker(model, filt, p_D_b))
             births = model.births
         metrics = evaluate(scans, run.results, cfg.metrics, sensor_cfg)
-        row = make_row(RunKey(trial, lam, name, mode), seeds, cfg.birth.N_hat, metrics, run, 0.0)
+        row = make_row(RunKey(trial, lam, name, mode, named), seeds, cfg.birth.N_hat, metrics, run, 0.0)
         runs.append(ModelReplay(name, LABEL.get(name, name), births, run.results, metrics, row))
-    out = TrialReplay(path, trial, lam, mode, cfg, scene, recording, scans, seeds, runs)
+    out = TrialReplay(path, trial, lam, mode, cfg, scene, recording, scans, seeds, runs, family=family)
     out.notes.append(_version_note(raw))
     out.reproduced, note = _check_rows(path, out)
     out.notes.append(note)
@@ -198,8 +209,8 @@ def _version_note(raw: dict) -> str:
 
 
 def _check_rows(path: Path, rep: TrialReplay) -> tuple[bool | None, str]:
-    """Compare each replayed run's metrics with its row of the run's ``trials.csv`` (of the GM-PHD family, the one a
-    replay runs, in a run that names filter families)."""
+    """Compare each replayed run's metrics with its row of the run's ``trials.csv`` (of the replayed family, in a run
+    that names filter families)."""
     from soabench.experiment.trial.trial import FILTER_COLUMN
 
     table = path / "trials.csv"
@@ -214,7 +225,7 @@ def _check_rows(path: Path, rep: TrialReplay) -> tuple[bool | None, str]:
                     same = int(r["trial"]) == rep.trial and float(r["clutter"]) == rep.clutter
                 except (KeyError, ValueError):
                     continue
-                if r.get(FILTER_COLUMN, "") not in ("", FILTER_FAMILIES[0]):  # the replay runs the GM-PHD family
+                if r.get(FILTER_COLUMN, "") not in ("", rep.family):  # the replayed family's rows (and trackers')
                     continue
                 if same and r.get("mode") == rep.mode and r.get("model") in want:
                     stored[r["model"]] = r

@@ -10,6 +10,7 @@ None for an unlabelled one.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -17,8 +18,9 @@ import numpy as np
 
 from soabench.errors import SoabenchError
 from soabench.metrics import Episode, estimate_mask, gt_mask
+from soabench.tracks.gaps import describe_gaps
 from soabench.tracks.ospa2 import ospa2_of
-from soabench.tracks.reemergence import associated_labels, occlusion_gaps, reemergence
+from soabench.tracks.reemergence import associated_labels, gap_outcomes, occlusion_gaps, reemergence
 from soabench.tracks.scores import ALPHAS, scores_of
 from soabench.tracks.sequence import ScanRows, TrackSequence, checked
 
@@ -44,6 +46,18 @@ ALPHA_KEYS = tuple(f"hota_a{round(100 * a):02d}" for a in ALPHAS)
 
 #: every per-run column of this module, in table order
 TRACK_KEYS = LABEL_KEYS + REEMERGENCE_KEYS + ALPHA_KEYS
+
+#: per-episode columns of the gap before a re-emergence episode (§9.4, :mod:`soabench.tracks.gaps`): its length in
+#: scans and seconds, the occluder kind that hid the target longest, the target's displacement across the gap (m) and
+#: whether it exceeds d_gate, the ego's and whether it exceeds EGO_MOVED_M, whether the gap was coasted and whether
+#: the identity was kept (NaN: unlabelled tracker or not counted); NaN and no occluder for an entry episode
+GAP_KEYS = (
+    "gap_scans", "gap_s", "gap_occluder", "gap_moved", "gap_displacement", "gap_ego_moved", "gap_ego_displacement",
+    "gap_coasted", "gap_id_kept",
+)  # fmt: skip
+#: the gap cells of an entry episode (and of a re-emergence's identity kept where it is not counted): NaN numbers,
+#: an empty occluder; numbers are floats throughout (1.0 / 0.0 for the flags), so a column never mixes ints and NaN
+NO_GAP: dict[str, float | str | None] = {k: None if k == "gap_occluder" else math.nan for k in GAP_KEYS}
 
 
 def _offsets(counts: np.ndarray) -> np.ndarray:
@@ -79,6 +93,15 @@ def _estimate_rows(
     return rows if labels is None else checked(rows.ids, rows.xy, rows.off, "estimates")
 
 
+def estimate_sets(
+    scans: Scans, X: Sequence[np.ndarray], labels: Sequence[np.ndarray] | None, gt_set: str, sensor_cfg: SensorConfig
+) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+    """Est_k of every scan (docs/method.md §5.1) as positions (K lists of (n_k, 2)) and, for a labelled tracker,
+    their labels (None for an unlabelled one): what the track measures match against the truth."""
+    est = _estimate_rows(scans, X, labels, gt_set, sensor_cfg)
+    return np.split(est.xy, est.off[1:-1]), None if labels is None else np.split(est.ids, est.off[1:-1])
+
+
 def run_labels(results: Sequence, X: Sequence[np.ndarray]) -> list[np.ndarray] | None:
     """The per-scan labels of a filter run's results (``results[k].labels``, ``X[k]`` its estimates), or None for
     an unlabelled run: a run is labelled when some scan carries labels and every scan with estimates does (a scan
@@ -99,6 +122,18 @@ def evaluate_tracks(
 ) -> dict[str, float | int | None]:
     """The :data:`TRACK_KEYS` of one filter run: ``X[k]`` the extracted states at scan k (positions first),
     ``labels[k]`` their labels (None: an unlabelled tracker), ``episodes`` the run's §5.4 delay episodes."""
+    return track_evaluation(scans, X, labels, episodes, cfg, sensor_cfg)[0]
+
+
+def track_evaluation(
+    scans: Scans,
+    X: Sequence[np.ndarray],
+    labels: Sequence[np.ndarray] | None,
+    episodes: Sequence[Episode],
+    cfg: MetricsConfig,
+    sensor_cfg: SensorConfig,
+) -> tuple[dict[str, float | int | None], list[dict[str, float | int | str | None]]]:
+    """:func:`evaluate_tracks` and, per episode of ``episodes`` in order, its :data:`GAP_KEYS` cells."""
     gt = gt_mask(scans, cfg.gt_set)
     est = _estimate_rows(scans, X, labels, cfg.gt_set, sensor_cfg)
     est_xy = np.split(est.xy, est.off[1:-1])
@@ -120,4 +155,36 @@ def evaluate_tracks(
         out.update(zip(ALPHA_KEYS, scores.hota_alpha.tolist(), strict=True))
         out.update(ospa2=o.ospa2, ospa2_loc=o.loc, ospa2_card=o.card)
     out.update(reemergence(episodes, gaps, assoc, assoc_labels, cfg.ddof, cfg.censored).summary())
-    return {key: out[key] for key in TRACK_KEYS}
+    return {key: out[key] for key in TRACK_KEYS}, episode_gaps(scans, episodes, gaps, assoc, assoc_labels, cfg.d_gate)
+
+
+def episode_gaps(
+    scans: Scans,
+    episodes: Sequence[Episode],
+    gaps: Sequence,
+    assoc: np.ndarray,
+    labels: np.ndarray | None,
+    d_gate: float,
+) -> list[dict[str, float | int | str | None]]:
+    """The :data:`GAP_KEYS` cells of each episode (:data:`NO_GAP` for an entry episode)."""
+    outcomes = gap_outcomes(episodes, gaps, assoc, labels)
+    described = {
+        o.gap: d
+        for o, d in zip(
+            outcomes.values(), describe_gaps(scans, [o.gap for o in outcomes.values()], d_gate), strict=True
+        )
+    }
+    rows = []
+    for e in episodes:
+        o = outcomes.get((e.target, e.k0))
+        if o is None:
+            rows.append(dict(NO_GAP))
+            continue
+        d = described[o.gap]
+        rows.append({
+            "gap_scans": float(d.scans), "gap_s": d.seconds, "gap_occluder": d.occluder, "gap_moved": float(d.moved),
+            "gap_displacement": d.displacement, "gap_ego_moved": float(d.ego_moved),
+            "gap_ego_displacement": d.ego_displacement, "gap_coasted": float(o.coasted),
+            "gap_id_kept": math.nan if o.id_kept is None else float(o.id_kept),
+        })  # fmt: skip
+    return rows

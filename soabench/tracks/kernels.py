@@ -43,16 +43,34 @@ def scan_similarity(gx, g0, ng, ex, e0, ne, d_gate):  # pragma: no cover - compi
 
 @njit(cache=True)
 def _equal_rows(C):  # pragma: no cover - compiled
-    """True if two rows of ``C`` are equal and not all zero."""
+    """True if two rows of ``C`` are equal and not all zero. Two such rows have their first non-zero entry in the
+    same column, so only rows that share it are compared (from that column on)."""
     a, b = C.shape
+    first = np.full(a, b, dtype=np.int64)  # b: an all-zero row
     for i in range(a):
-        for j in range(i + 1, a):
-            same, nonzero = True, False
-            for c in range(b):
-                same = same and C[i, c] == C[j, c]
-                nonzero = nonzero or C[i, c] != 0.0
-            if same and nonzero:
-                return True
+        for c in range(b):
+            if C[i, c] != 0.0:
+                first[i] = c
+                break
+    order = np.argsort(first, kind="mergesort")
+    s = 0
+    while s < a:
+        e = s + 1
+        while e < a and first[order[e]] == first[order[s]]:
+            e += 1
+        f = first[order[s]]
+        if f < b:
+            for x in range(s, e):
+                for y in range(x + 1, e):
+                    i, j = order[x], order[y]
+                    same = True
+                    for c in range(f, b):
+                        if C[i, c] != C[j, c]:
+                            same = False
+                            break
+                    if same:
+                        return True
+        s = e
     return False
 
 
@@ -61,6 +79,67 @@ def _tied(C):  # pragma: no cover - compiled
     """True if two rows or two columns of ``C`` are equal and not all zero: then several assignments are optimal
     and which one is taken can change the matches (a zero row or column is never a kept match)."""
     return _equal_rows(C) or _equal_rows(np.ascontiguousarray(C.T))
+
+
+@njit(cache=True)
+def _root(parent, x):  # pragma: no cover - compiled
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@njit(cache=True)
+def sparse_assignment(C):  # pragma: no cover - compiled
+    """(rows, cols) of the pairs with a non-zero cost in a minimum-cost assignment of ``C`` (a, b) whose entries
+    are <= 0, sorted by row.
+
+    A pair of zero cost changes no total, so a minimum-cost assignment's non-zero pairs are a minimum-cost matching
+    of the graph of non-zero entries, which splits into that graph's connected components: each is assigned on its
+    own rows and columns (:func:`soabench.metrics_kernels.assignment`). Where the optimum is unique (:func:`_tied`
+    sends the ties equal rows or columns make to scipy) these are the non-zero pairs of the whole matrix's
+    assignment."""
+    a, b = C.shape
+    parent = np.arange(a + b)
+    for i in range(a):
+        for j in range(b):
+            if C[i, j] != 0.0:
+                ri, rj = _root(parent, i), _root(parent, a + j)
+                if ri != rj:
+                    parent[max(ri, rj)] = min(ri, rj)
+    comp = np.empty(a + b, dtype=np.int64)
+    for x in range(a + b):
+        comp[x] = _root(parent, x)
+    out_r = np.empty(min(a, b), dtype=np.int64)
+    out_c = np.empty(min(a, b), dtype=np.int64)
+    n = 0
+    rows = np.empty(a, dtype=np.int64)
+    cols = np.empty(b, dtype=np.int64)
+    for r0 in range(a):
+        if comp[r0] != r0:  # a component is handled at its root, its smallest row
+            continue
+        na = nb = 0
+        for i in range(a):
+            if comp[i] == r0:
+                rows[na] = i
+                na += 1
+        for j in range(b):
+            if comp[a + j] == r0:
+                cols[nb] = j
+                nb += 1
+        if nb == 0:
+            continue
+        sub = np.empty((na, nb))
+        for x in range(na):
+            for y in range(nb):
+                sub[x, y] = C[rows[x], cols[y]]
+        sr, sc = assignment(sub)
+        for t in range(len(sr)):
+            if sub[sr[t], sc[t]] != 0.0:
+                out_r[n], out_c[n] = rows[sr[t]], cols[sc[t]]
+                n += 1
+    order = np.argsort(out_r[:n], kind="mergesort")
+    return out_r[:n][order], out_c[:n][order]
 
 
 @njit(cache=True)
@@ -93,14 +172,14 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
                     Q[i, j] = 0.0 if S[i, j] < threshold - _EPS else -score
             if _tied(C) or _tied(Q):
                 return t
-            rows, cols = assignment(C)
+            rows, cols = sparse_assignment(C)  # the pairs of zero similarity are never a match
             n = counts[4]
             for r in range(len(rows)):
                 hg[n + r] = g_ids[g0 + rows[r]]
                 he[n + r] = e_ids[e0 + cols[r]]
                 hs[n + r] = S[rows[r], cols[r]]
             counts[4] = n + len(rows)
-            rows, cols = assignment(Q)
+            rows, cols = sparse_assignment(Q)  # the zero entries are never kept
             for i in range(ng):
                 gt_seen[g_ids[g0 + i]] += 1
             untracked = prev_scan < 0
@@ -129,45 +208,160 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
 
 
 @njit(cache=True)
-def ospa2_scans(G, E, c, p, window):  # pragma: no cover - compiled
-    """(K, 3) OSPA(2) per scan (total, localisation, cardinality) from dense (K, n, 2) track positions, NaN where a
-    track does not exist (:func:`soabench.tracks.ospa2.ospa2_of`)."""
-    K = G.shape[0]
+def _popcount(x):  # pragma: no cover - compiled
+    """Number of set bits of the uint64 ``x``."""
+    n = 0
+    while x != 0:
+        x &= x - np.uint64(1)
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def _union_count(mg, me):  # pragma: no cover - compiled
+    """Scans of the window where either of two tracks exists: the set bits of their presence masks or-ed."""
+    n = 0
+    for w in range(len(mg)):
+        n += _popcount(mg[w] | me[w])
+    return n
+
+
+@njit(cache=True)
+def _near_events(g_ids, g0, ng, gx, e_ids, e0, ne, ex, c, ev_i, ev_j, ev_d, n_ev):  # pragma: no cover - compiled
+    """Append the pairs of one scan closer than ``c`` (truth id, estimate id, ``min(c, d)``) to the event arrays
+    from ``n_ev`` on, growing them as needed; returns the arrays and the new count."""
+    for a in range(ng):
+        for b in range(ne):
+            dx = gx[g0 + a, 0] - ex[e0 + b, 0]
+            dy = gx[g0 + a, 1] - ex[e0 + b, 1]
+            d = min(c, math.sqrt(dx * dx + dy * dy))
+            if d < c:
+                if n_ev == len(ev_i):
+                    ev_i = np.concatenate((ev_i, np.empty(len(ev_i), dtype=np.int64)))
+                    ev_j = np.concatenate((ev_j, np.empty(len(ev_j), dtype=np.int64)))
+                    ev_d = np.concatenate((ev_d, np.empty(len(ev_d))))
+                ev_i[n_ev], ev_j[n_ev], ev_d[n_ev] = g_ids[g0 + a], e_ids[e0 + b], d
+                n_ev += 1
+    return ev_i, ev_j, ev_d, n_ev
+
+
+@njit(cache=True)
+def _window_tracks(ids, off, lo, k, stamp, sel):  # pragma: no cover - compiled
+    """The ids with a row in scans lo..k, sorted, into ``sel``; returns how many (``stamp``: per id, the last
+    window that counted it)."""
+    m = 0
+    for t in range(lo, k + 1):
+        for r in range(off[t], off[t + 1]):
+            i = ids[r]
+            if stamp[i] != k:
+                stamp[i] = k
+                sel[m] = i
+                m += 1
+    sel[:m] = np.sort(sel[:m])
+    return m
+
+
+@njit(cache=True)
+def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # pragma: no cover - compiled
+    """(K, 3) OSPA(2) per scan (total, localisation, cardinality) of stacked truth and estimate rows (ids 0..n_g - 1
+    and 0..n_e - 1, scan k's rows ``off[k]:off[k + 1]``; :func:`soabench.tracks.ospa2.ospa2_of`).
+
+    The base distance of a pair is ``min(c, total / count)`` with total the in-order sum over the window's scans
+    where either track exists of ``min(c, |x(t) - y(t)|)`` (both exist) or ``c``. A pair never closer than c in the
+    window adds c at each such scan, so its total is c added ``count`` times, with ``count`` the set bits of the two
+    tracks' presence masks over the window; only the pairs closer than c at some scan of the window (kept per scan
+    as they enter it) are summed scan by scan. The cost matrix is the same, entry for entry, as summing every pair."""
+    K = len(g_off) - 1
     out = np.zeros((K, 3))
-    g_on = ~np.isnan(G[:, :, 0])
-    e_on = ~np.isnan(E[:, :, 0])
-    gsel = np.empty(G.shape[1], dtype=np.int64)
-    esel = np.empty(E.shape[1], dtype=np.int64)
+    n_words = (window + 63) // 64
+    ring = 64 * n_words
+    mask_g = np.zeros((n_g, n_words), dtype=np.uint64)
+    mask_e = np.zeros((n_e, n_words), dtype=np.uint64)
+    far = np.zeros(window + 1)  # far[n]: the base distance ** p of a pair that adds c at n scans
+    total = 0.0
+    for n in range(1, window + 1):
+        total += c
+        far[n] = min(total / n, c) ** p
+    stamp_g = np.full(n_g, -1, dtype=np.int64)
+    stamp_e = np.full(n_e, -1, dtype=np.int64)
+    gsel = np.empty(n_g, dtype=np.int64)
+    esel = np.empty(n_e, dtype=np.int64)
+    loc_g = np.zeros(n_g, dtype=np.int64)
+    loc_e = np.zeros(n_e, dtype=np.int64)
+    ev_i = np.empty(64, dtype=np.int64)
+    ev_j = np.empty(64, dtype=np.int64)
+    ev_d = np.empty(64)
+    ev_off = np.zeros(K + 1, dtype=np.int64)
+    n_ev = 0
     for k in range(K):
         lo = max(0, k - window + 1)
-        m = 0
-        for i in range(G.shape[1]):
-            if g_on[lo : k + 1, i].any():
-                gsel[m] = i
-                m += 1
-        n = 0
-        for j in range(E.shape[1]):
-            if e_on[lo : k + 1, j].any():
-                esel[n] = j
-                n += 1
+        if k >= window:  # scan k - window leaves the window
+            s = (k - window) % ring
+            bit = np.uint64(1) << np.uint64(s % 64)
+            for r in range(g_off[k - window], g_off[k - window + 1]):
+                mask_g[g_ids[r], s // 64] &= ~bit
+            for r in range(e_off[k - window], e_off[k - window + 1]):
+                mask_e[e_ids[r], s // 64] &= ~bit
+        s = k % ring
+        bit = np.uint64(1) << np.uint64(s % 64)
+        for r in range(g_off[k], g_off[k + 1]):
+            mask_g[g_ids[r], s // 64] |= bit
+        for r in range(e_off[k], e_off[k + 1]):
+            mask_e[e_ids[r], s // 64] |= bit
+        ev_i, ev_j, ev_d, n_ev = _near_events(
+            g_ids, g_off[k], g_off[k + 1] - g_off[k], gx, e_ids, e_off[k], e_off[k + 1] - e_off[k], ex, c,
+            ev_i, ev_j, ev_d, n_ev,
+        )  # fmt: skip
+        ev_off[k + 1] = n_ev
+        m = _window_tracks(g_ids, g_off, lo, k, stamp_g, gsel)
+        n = _window_tracks(e_ids, e_off, lo, k, stamp_e, esel)
         small, large = min(m, n), max(m, n)
         if large == 0:
             continue
         card_p = c**p * (large - small) / large
         loc_p = 0.0
         if small > 0:
+            for a in range(m):
+                loc_g[gsel[a]] = a
+            for b in range(n):
+                loc_e[esel[b]] = b
             Cm = np.empty((small, large))
             for a in range(m):
                 for b in range(n):
+                    d = far[_union_count(mask_g[gsel[a]], mask_e[esel[b]])]
+                    if m <= n:
+                        Cm[a, b] = d
+                    else:
+                        Cm[b, a] = d
+            # the pairs closer than c somewhere in the window: their scans' terms, c where not closer
+            slot = np.full((m, n), -1, dtype=np.int64)
+            terms = np.empty((ev_off[k + 1] - ev_off[lo], window))
+            n_near = 0
+            for e in range(ev_off[lo], ev_off[k + 1]):
+                a, b = loc_g[ev_i[e]], loc_e[ev_j[e]]
+                if slot[a, b] < 0:
+                    slot[a, b] = n_near
+                    terms[n_near, :] = c
+                    n_near += 1
+            for t in range(lo, k + 1):
+                for e in range(ev_off[t], ev_off[t + 1]):
+                    terms[slot[loc_g[ev_i[e]], loc_e[ev_j[e]]], t - lo] = ev_d[e]
+            for a in range(m):
+                for b in range(n):
+                    q = slot[a, b]
+                    if q < 0:
+                        continue
                     i, j = gsel[a], esel[b]
                     total, count = 0.0, 0
                     for t in range(lo, k + 1):
-                        if g_on[t, i] and e_on[t, j]:
-                            dx = G[t, i, 0] - E[t, j, 0]
-                            dy = G[t, i, 1] - E[t, j, 1]
-                            total += min(c, math.sqrt(dx * dx + dy * dy))
+                        s = t % ring
+                        bit = np.uint64(1) << np.uint64(s % 64)
+                        on_g = (mask_g[i, s // 64] & bit) != 0
+                        on_e = (mask_e[j, s // 64] & bit) != 0
+                        if on_g and on_e:
+                            total += terms[q, t - lo]
                             count += 1
-                        elif g_on[t, i] or e_on[t, j]:
+                        elif on_g or on_e:
                             total += c
                             count += 1
                     d = min(total / count, c) ** p

@@ -17,7 +17,7 @@ import numpy as np
 
 from soabench.errors import require
 from soabench.notice import announced
-from soabench.tracks.sequence import ScanRows, TrackSequence
+from soabench.tracks.sequence import TrackSequence
 
 #: register row 31: cut-off c (m), order p, window (scans)
 OSPA2_C, OSPA2_P, OSPA2_WINDOW = 10.0, 1.0, 10
@@ -47,13 +47,6 @@ def ospa2(
     return ospa2_of(TrackSequence.of(gt_ids, gt_xy, est_ids, est_xy), c, p, window)
 
 
-def _dense(rows: ScanRows, n_ids: int, K: int) -> np.ndarray:
-    """(K, n_ids, 2) positions of every id at every scan, NaN where the id does not exist."""
-    out = np.full((K, n_ids, 2), np.nan)
-    out[np.repeat(np.arange(K), np.diff(rows.off)), rows.ids] = rows.xy
-    return out
-
-
 def ospa2_of(seq: TrackSequence, c: float = OSPA2_C, p: float = OSPA2_P, window: int = OSPA2_WINDOW) -> Ospa2:
     """:func:`ospa2` of a checked :class:`TrackSequence` (one compiled loop over the windows,
     :func:`soabench.tracks.kernels.ospa2_scans`)."""
@@ -61,8 +54,8 @@ def ospa2_of(seq: TrackSequence, c: float = OSPA2_C, p: float = OSPA2_P, window:
 
     require(c > 0 and p >= 1 and window >= 1, f"OSPA(2) needs c > 0, p >= 1, window >= 1 (got {c}, {p}, {window})")
     K = len(seq)
-    G = _dense(seq.gt, len(seq.gt_labels), K)
-    E = _dense(seq.est, len(seq.est_labels), K)
-    series = announced("track metrics", ospa2_scans, G, E, float(c), float(p), int(window))
+    g, e = seq.gt, seq.est
+    args = (g.ids, g.off, g.xy, len(seq.gt_labels), e.ids, e.off, e.xy, len(seq.est_labels), float(c), float(p))
+    series = announced("track metrics", ospa2_scans, *args, int(window))
     mean = series.mean(axis=0) if K else np.full(3, np.nan)
     return Ospa2(float(mean[0]), float(mean[1]), float(mean[2]), series)

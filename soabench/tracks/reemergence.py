@@ -133,11 +133,7 @@ def reemergence(
     n_id: int | None = None
     id_kept: float | None = None
     if labels is not None:
-        kept = []
-        for e in reem:
-            k_before = gap_before[(e.target, e.k0)].k_a - 1
-            if assoc[k_before, e.target] and not e.censored:
-                kept.append(labels[e.k_t, e.target] == labels[k_before, e.target])
+        kept = [k for k in (_kept(e, gap_before[(e.target, e.k0)], assoc, labels) for e in reem) if k is not None]
         n_id = len(kept)
         id_kept = float(np.mean(kept)) if kept else math.nan
     return Reemergence(
@@ -149,3 +145,38 @@ def reemergence(
         n_id=n_id,
         id_kept=id_kept,
     )
+
+
+def _kept(e: Episode, gap: Gap, assoc: np.ndarray, labels: np.ndarray) -> bool | None:
+    """Whether re-emergence episode ``e`` after ``gap`` kept its label; None when it does not count (the target was
+    not associated before the gap, or the episode is censored)."""
+    k_before = gap.k_a - 1
+    if not assoc[k_before, e.target] or e.censored:
+        return None
+    return bool(labels[e.k_t, e.target] == labels[k_before, e.target])
+
+
+@dataclass(frozen=True)
+class GapOutcome:
+    """What became of one re-emergence episode's gap: ``gap``, whether it was coasted, and whether the identity was
+    kept (None: unlabelled tracker, or the episode does not count for identity kept)."""
+
+    gap: Gap
+    coasted: bool
+    id_kept: bool | None
+
+
+def gap_outcomes(
+    episodes: Sequence[Episode], gaps: Sequence[Gap], assoc: np.ndarray, labels: np.ndarray | None
+) -> dict[tuple[int, int], GapOutcome]:
+    """Per re-emergence episode (keyed by its (target, k0)) the :class:`GapOutcome` that :func:`reemergence` counts
+    into ``coasted`` and ``id_kept``."""
+    assoc = np.asarray(assoc, dtype=bool)
+    gap_before = {(g.target, g.k_b + 1): g for g in gaps}
+    out = {}
+    for e in episodes:
+        g = gap_before.get((e.target, e.k0))
+        if g is not None:
+            kept = None if labels is None else _kept(e, g, assoc, labels)
+            out[(e.target, e.k0)] = GapOutcome(g, bool(assoc[g.k_a : g.k_b + 1, g.target].all()), kept)
+    return out

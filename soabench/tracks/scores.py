@@ -21,6 +21,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from soabench.notice import announced
 from soabench.tracks.sequence import TrackSequence, similarity
@@ -295,24 +297,18 @@ def _hota(
 def _identity(
     seq: TrackSequence, potential: np.ndarray, gt_count: np.ndarray, tr_count: np.ndarray
 ) -> dict[str, float | int]:
-    """IDF1, IDP, IDR: the one-to-one truth-to-track assignment that minimises IDFN + IDFP (Ristani et al. 2016)."""
+    """IDF1, IDP, IDR: the one-to-one truth-to-track assignment that minimises IDFN + IDFP (Ristani et al. 2016).
+
+    TrackEval poses it as one square assignment over every truth and every track, each with a dummy partner: pairing
+    truth g with track t costs their unmatched detections, ``gt_count[g] + tr_count[t] - 2 potential[g, t]``, and
+    leaving either unpaired costs its own count. So the minimum is ``sum(gt_count) + sum(tr_count) - 2 M``, with M
+    the largest total ``potential`` of a matching of truths to tracks (:func:`_identity_matched`), and IDFN =
+    ``sum(gt_count) - M``, IDFP = ``sum(tr_count) - M``: integer counts, equal for every optimal assignment."""
     if seq.n_est_dets == 0 or seq.n_gt_dets == 0:
         return {"idf1": 0.0, "idp": 0.0, "idr": 0.0, "idtp": 0, "idfn": seq.n_gt_dets, "idfp": seq.n_est_dets}
-    nG, nT = len(gt_count), len(tr_count)
-    n = nG + nT
-    fp_mat = np.zeros((n, n))
-    fn_mat = np.zeros((n, n))
-    fp_mat[nG:, :nT] = 1e10
-    fn_mat[:nG, nT:] = 1e10
-    fn_mat[:nG, :nT] = gt_count[:, None]
-    fn_mat[np.arange(nG), nT + np.arange(nG)] = gt_count
-    fp_mat[:nG, :nT] = tr_count[None, :]
-    fp_mat[nG + np.arange(nT), np.arange(nT)] = tr_count
-    fn_mat[:nG, :nT] -= potential
-    fp_mat[:nG, :nT] -= potential
-    rows, cols = linear_sum_assignment(fn_mat + fp_mat)
-    idfn = int(fn_mat[rows, cols].sum())
-    idfp = int(fp_mat[rows, cols].sum())
+    matched = _identity_matched(potential)
+    idfn = int(gt_count.sum() - matched)
+    idfp = int(tr_count.sum() - matched)
     idtp = int(gt_count.sum()) - idfn
     return {
         "idf1": idtp / max(1.0, idtp + 0.5 * idfp + 0.5 * idfn),
@@ -322,3 +318,32 @@ def _identity(
         "idfn": idfn,
         "idfp": idfp,
     }
+
+
+def _identity_matched(potential: np.ndarray) -> float:
+    """The largest total of ``potential`` (nG, nT) (counts of scans where a truth and a track match) over the
+    one-to-one matchings of truths to tracks.
+
+    A pair without a potential match adds nothing, so the matching splits into the connected components of the
+    overlap graph (an edge where ``potential > 0``): each component is one maximum-weight assignment of its own truths
+    and tracks, and truths or tracks without an edge are left out. Every term is an integer count, so the sum is
+    exact and the same whichever optimal assignment a component returns."""
+    g, t = np.nonzero(potential)
+    if len(g) == 0:
+        return 0.0
+    nG, nT = potential.shape
+    graph = coo_matrix((np.ones(len(g)), (g, nG + t)), shape=(nG + nT, nG + nT))
+    _, comp = connected_components(graph, directed=False)
+    label = comp[g]
+    order = np.argsort(label, kind="stable")
+    bounds = np.flatnonzero(np.diff(label[order])) + 1
+    total = 0.0
+    for edges in np.split(order, bounds):
+        rows, cols = np.unique(g[edges]), np.unique(t[edges])
+        if len(rows) == 1 or len(cols) == 1:  # a star: the heaviest edge
+            total += float(potential[rows[:, None], cols[None, :]].max())
+            continue
+        block = potential[rows[:, None], cols[None, :]]
+        r, c = linear_sum_assignment(block, maximize=True)
+        total += float(block[r, c].sum())
+    return total

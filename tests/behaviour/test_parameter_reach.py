@@ -117,6 +117,7 @@ NON_DEFAULT: dict[str, object] = {
     "metrics.confirm_n": 2,
     "metrics.censored": "lower_bound",
     "metrics.ddof": 1,
+    "metrics.gap_bins": (1, 3, 6),
     "experiment.trials": 1,
     "experiment.duration": 6.0,
     "experiment.models": ("gmbm", "atbm", "ubm-ws", "ubm", "pubm", "soa"),  # all six, in another order
@@ -130,6 +131,7 @@ NON_DEFAULT: dict[str, object] = {
     "lmb.max_hypotheses": 500,
     "lmb.max_components": 8,
     "lmb.extract_r": 0.55,
+    "lmb.birth_mapping": "components",  # the old mapping: every other lmb key is still read
     "experiment.filters": ("lmb", "gmphd"),  # both families, the LMB first
     "experiment.plugin_budget": 30.0,  # its reach: tests/hardening/test_plugin_isolation.py (a plugin past its budget)
 }
@@ -181,7 +183,7 @@ def page_keys() -> set[str]:
 
 DOCUMENTED = sorted(page_keys())
 #: the documented keys a trial does not read, and what of the run shows them instead
-SHOWN_BY_THE_RUN = {"experiment.trials", "experiment.duration", "experiment.seed"}
+SHOWN_BY_THE_RUN = {"experiment.trials", "experiment.duration", "experiment.seed", "metrics.gap_bins"}
 
 
 def as_sections(values: dict[str, object]) -> dict[str, dict[str, object]]:
@@ -221,12 +223,13 @@ def recorded_run(tmp_path_factory):
     out = run_experiment(cfg, "intersection", out=run, options=RunOptions(workers=1, progress=False, figures=False))
     assert out.complete and out.failures == []
     stored = json.loads((run / "run.json").read_text())["config"]
-    return stored, read_csv(run / "trials.csv"), read_csv(run / "steps.csv")
+    summary = json.loads((run / "summary.json").read_text())
+    return stored, read_csv(run / "trials.csv"), read_csv(run / "steps.csv"), summary
 
 
 @pytest.mark.parametrize("key", DOCUMENTED)
 def test_a_run_records_the_key(key, recorded_run):
-    stored, _, _ = recorded_run
+    stored, *_ = recorded_run
     sec, name = key.split(".")
     value = NON_DEFAULT[key]
     assert stored[sec][name] == (list(value) if isinstance(value, tuple) else value)
@@ -235,19 +238,21 @@ def test_a_run_records_the_key(key, recorded_run):
 
 @pytest.mark.parametrize("key", sorted(SHOWN_BY_THE_RUN))
 def test_the_run_shows_the_key(key, recorded_run):
-    _, rows, steps = recorded_run
+    _, rows, steps, summary = recorded_run
     exp = Config.from_dict(as_sections(NON_DEFAULT)).experiment
     shown = {
         "experiment.trials": set(rows["trial"]) == set(range(exp.trials)),
         "experiment.seed": set(rows["seed"]) == {exp.seed},
         # one row per scan k = 0 .. duration / dt - 1
         "experiment.duration": set(steps["k"]) == set(range(int(exp.duration / NON_DEFAULT["sensor.dt"]))),
+        # the summary's occlusion breakdowns are binned by it (this short run has no gap to put in a bin)
+        "metrics.gap_bins": {tuple(r["occlusion"]["bin_labels"]) for r in summary["results"]} == {("1-2", "3-5", "6+")},
     }
     assert shown[key]
 
 
 def test_the_rows_hold_every_method_mode_and_rate(recorded_run):
-    _, rows, _ = recorded_run
+    _, rows, *_ = recorded_run
     exp = Config.from_dict(as_sections(NON_DEFAULT)).experiment
     assert set(rows["clutter"]) == set(exp.clutter)
     assert set(rows["model"]) == {*exp.models, *exp.trackers}

@@ -263,6 +263,26 @@ def test_labels_drawn_in_the_browser_and_the_video(labelled_page, tmp_path: Path
     assert (np.abs(frame.reshape(-1, 3).astype(int) - rgb).sum(axis=1) < 30).sum() > 20  # the label's colour drawn
 
 
+def test_a_family_run_is_replayed_in_each_family(tmp_path: Path, capsys) -> None:
+    """``--filter`` picks the family a run's birth models are replayed in; each reproduces its own family's rows, the
+    page names the family, and a mode the family does not define is refused with one line."""
+    run = tmp_path / "run"
+    argv = ["run", "--trials", "1", "--duration", "20", "--models", "soa,pubm", "--filters", "gmphd,lmb",
+            "--probabilities", "static,dynamic", "--workers", "1", "--no-progress", "--out", str(run)]  # fmt: skip
+    assert main(argv) == 0
+    for family, label in (("gmphd", "GM-PHD"), ("lmb", "LMB")):
+        assert main(["replay", str(run), "--trial", "0", "--filter", family]) == 0
+        page = run / "replays" / ("trial_00000.html" if family == "gmphd" else "trial_00000_lmb.html")
+        data = page_data(page)
+        assert data["reproduced"] is True and data["filter"] == label, data["notes"]
+    capsys.readouterr()
+    assert main(["replay", str(run), "--trial", "0", "--filter", "lmb", "--mode", "dynamic"]) == 2
+    err = capsys.readouterr().err
+    assert "--mode 'dynamic' is not defined for the LMB filter; choose from static" in err and err.count("\n") == 1
+    assert main(["replay", str(run), "--trial", "0", "--filter", "pf"]) == 2
+    assert "--filter 'pf' is not in this run; choose from gmphd, lmb" in capsys.readouterr().err
+
+
 def test_replay_bad_input(run_dir: Path, tmp_path: Path, capsys) -> None:
     cases = [
         (["replay", str(run_dir), "--trial", "7"], "--trial 7 is not a trial of this run; choose 0 to 1"),

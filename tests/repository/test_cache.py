@@ -62,3 +62,55 @@ def test_configure_sets_the_variable_only_when_unset(monkeypatch, tmp_path):
     assert os.environ["NUMBA_CACHE_DIR"] == str(tmp_path / "x" / "soabench" / "numba")
     assert numba_config.CACHE_DIR == os.environ["NUMBA_CACHE_DIR"]  # numba was imported already: set there too
     assert (tmp_path / "x" / "soabench" / "numba").is_dir()
+
+
+CACHE_PROBE = (
+    "import soabench.gmphd.kernels as k; k.wrap(4.0); "
+    "print(sum(k.wrap.stats.cache_hits.values()), sum(k.wrap.stats.cache_misses.values()), k.__file__)"
+)
+
+
+def _copy_of_the_package(dest: Path) -> Path:
+    import shutil
+
+    shutil.copytree(Path(soabench.__file__).parent, dest / "soabench", ignore=shutil.ignore_patterns("__pycache__"))
+    return dest
+
+
+def _hits_misses(path: Path, cache: Path) -> tuple[int, int]:
+    env = {**os.environ, "PYTHONPATH": str(path), "NUMBA_CACHE_DIR": str(cache)}
+    done = subprocess.run(
+        [sys.executable, "-c", CACHE_PROBE], env=env, cwd=path, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    hits, misses, origin = done.stdout.split()
+    assert Path(origin).is_relative_to(path)  # the copy was imported
+    return int(hits), int(misses)
+
+
+def test_the_cache_follows_the_kernel_sources_not_their_path(tmp_path):
+    """The same sources at another path (pip install ., then pip install -e .) load what the first compiled; a
+    change to any kernel source, even another module's, compiles again."""
+    cache = tmp_path / "cache"
+    first = _copy_of_the_package(tmp_path / "installed")
+    second = _copy_of_the_package(tmp_path / "editable")
+    assert _hits_misses(first, cache) == (0, 1)  # compiled
+    assert _hits_misses(second, cache) == (1, 0)  # loaded, from another path
+    other = second / "soabench" / "metrics_kernels.py"
+    other.write_text(other.read_text() + "\n# a changed kernel source\n")
+    assert _hits_misses(second, cache) == (0, 1)  # compiled again
+    assert _hits_misses(first, cache) == (1, 0)  # the unchanged sources keep their own
+
+
+def test_every_module_with_kernels_keys_the_cache():
+    """A module that compiles with numba and is missing from KERNEL_MODULES would not renew the cache folder when it
+    changes (a kernel inlined from it elsewhere would stay stale)."""
+    from soabench.cache import KERNEL_MODULES
+
+    package = Path(soabench.__file__).parent
+    using = {
+        p.relative_to(package).as_posix()
+        for p in package.rglob("*.py")
+        if "from numba import" in p.read_text() or "@njit" in p.read_text()
+    }
+    assert using == set(KERNEL_MODULES)

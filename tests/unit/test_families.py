@@ -71,7 +71,9 @@ def test_a_family_section_is_refused_unless_the_family_runs() -> None:
         key = dataclasses.fields(section)[0]
         value = getattr(section, key.name)
         changed = value / 2 if isinstance(value, float) else value + 1
-        with pytest.raises(SoabenchError, match=f"{fam.section}.{key.name} = .* runs no {fam.label} filter"):
+        with pytest.raises(
+            SoabenchError, match=rf"{fam.section}.{key.name} = .* runs no [^;]*\b{fam.label}\b[^;]* filter"
+        ):
             Config.from_dict({fam.section: {key.name: changed}}).validate()
         cfg = Config.from_dict(
             {
@@ -81,3 +83,20 @@ def test_a_family_section_is_refused_unless_the_family_runs() -> None:
         ).validate()
         assert cfg.to_dict()[fam.section][key.name] == changed
         assert fam.section not in Config().to_dict()  # a run without the family records no section
+
+
+@pytest.mark.parametrize("family", FILTER_FAMILIES)
+def test_static_occ_is_static_probabilities_with_the_line_of_sight(scans, family) -> None:
+    """``static+occ`` (docs/method.md §4.6) is every family's static mode with the p_D of §4.4: the same steps as the
+    static filter built with ``filter.occlusion_pd = true``, and not those of the plain static mode."""
+    assert "static+occ" in FAMILIES[family].modes
+    cfg = Config.from_dict({"experiment": {"filters": [family], "probabilities": ["static"]}}).validate()
+    occ = Config.from_dict({"experiment": {"filters": [family]}, "filter": {"occlusion_pd": True}}).validate()
+    runs = {}
+    for name, c, mode in (("occ", cfg, "static+occ"), ("flag", occ, "static"), ("plain", cfg, "static")):
+        tracker = sb.make_tracker("soa", NET, config=c, mode=mode, filter=family)
+        assert tracker.p_D_b == cfg.filter.p_D
+        runs[name] = [tracker.step(scan) for scan in scans]
+    for a, b in zip(runs["occ"], runs["flag"], strict=True):
+        assert np.array_equal(a.X, b.X) and np.array_equal(a.labels, b.labels) and a.sum_w == b.sum_w
+    assert any(a.sum_w != b.sum_w for a, b in zip(runs["occ"], runs["plain"], strict=True))

@@ -11,15 +11,15 @@ import pytest
 from soabench import kernel_warmup as kw
 
 
-def _quick() -> None:
+def _quick(modes) -> None:
     pass
 
 
-def _slow() -> None:
+def _slow(modes) -> None:
     time.sleep(0.8)
 
 
-def _broken() -> None:
+def _broken(modes) -> None:
     raise RuntimeError("a group that fails")
 
 
@@ -40,7 +40,7 @@ def test_compiles_once_announces_once_and_lines_off_a_terminal(cache, monkeypatc
     assert lines.count(kw.MESSAGE) == 1 and lines[0] == kw.MESSAGE
     assert any(ln.startswith("soabench: compiling, ") for ln in lines[1:-1])
     assert lines[-1].startswith("soabench: kernels compiled in ")
-    assert kw.compiled() and kw.stamp_path().parent == cache
+    assert kw.compiled() and kw.stamp_path().parent.parent == cache
     again = io.StringIO()
     assert kw.ensure_compiled(stream=again) == 0.0 and again.getvalue() == ""  # the stamp: nothing to do
 
@@ -53,7 +53,72 @@ def test_a_failing_group_is_not_fatal_and_leaves_no_stamp(cache, monkeypatch):
     assert log.getvalue().count(kw.MESSAGE) == 1 and "compiling ahead failed" in log.getvalue().splitlines()[-1]
 
 
-def test_the_stamp_names_the_versions_and_kernel_sources(cache):
-    name = kw.stamp_path().name
-    assert name.startswith("soabench-kernels-") and name.endswith(".ready")
+def test_the_stamp_lies_in_the_folder_keyed_by_the_kernel_sources(cache):
+    from soabench.cache import kernel_key
+
+    assert kw.stamp_path().parent == cache / f"soabench-{kernel_key()}"
     assert kw.stamp_path() == kw.stamp_path()  # the same sources give the same stamp
+
+
+def _config(**experiment):
+    import dataclasses
+
+    from soabench.config import Config
+
+    cfg = Config()
+    return dataclasses.replace(cfg, experiment=dataclasses.replace(cfg.experiment, **experiment))
+
+
+def test_a_run_compiles_only_the_kernels_it_calls():
+    one = kw.needed([_config(models=("soa",), probabilities=("static",))])
+    assert one[kw._fused_steps] == one[kw._predict_update] == ("static",)
+    assert kw._lmb_steps not in one and kw._newborn_steps not in one  # no LMB, no newborn terms
+    assert {kw._reduction, kw._metrics_geometry, kw._track_metrics} <= set(one)
+    both = kw.needed([_config(models=("soa",), probabilities=("static",)),
+                      _config(models=("pubm",), probabilities=("dynamic",), filters=("gmphd", "lmb"))])  # fmt: skip
+    assert both[kw._fused_steps] == ("static", "dynamic") and both[kw._newborn_steps] == ("dynamic",)
+    assert kw._lmb_steps in both
+    assert set(kw.needed([{"experiment": {"models": 7}}])) == set(kw.everything())  # unreadable: everything
+
+
+def test_the_newborn_models_are_those_that_hand_newborn_terms():
+    import importlib
+    import inspect
+
+    from soabench.plugins import BUILTIN_BIRTH_MODELS
+
+    for name, target in BUILTIN_BIRTH_MODELS.items():
+        module = importlib.import_module(target.split(":")[0])
+        assert ("births.newborn = " in inspect.getsource(module)) == (name in kw.NEWBORN_MODELS), name
+
+
+def test_stamps_are_per_group_and_mode(cache, monkeypatch):
+    monkeypatch.setattr(kw, "ROUNDS", ((kw._reduction, kw._fused_steps),))
+    monkeypatch.setattr(kw, "_run_group", lambda g, modes: None)
+    monkeypatch.setattr(kw, "ProcessPoolExecutor", _InProcess)
+    log = io.StringIO()
+    kw.ensure_compiled([_config(models=("soa",), probabilities=("static",))], stream=log)
+    assert kw.stamp_path(kw._fused_steps, "static").exists() and not kw.stamp_path(kw._fused_steps, "dynamic").exists()
+    assert kw.ensure_compiled([_config(models=("soa",), probabilities=("static",))], stream=io.StringIO()) == 0.0
+    kw.ensure_compiled([_config(models=("soa",), probabilities=("dynamic",))], stream=log)  # only the new mode
+    assert kw.stamp_path(kw._fused_steps, "dynamic").exists() and log.getvalue().count(kw.MESSAGE) == 2
+
+
+class _InProcess:
+    """A pool that runs each task when submitted (the stamps, not the processes, are under test)."""
+
+    def __init__(self, max_workers):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def submit(self, fn, *args):
+        from concurrent.futures import Future
+
+        fut = Future()
+        fut.set_result(fn(*args))
+        return fut

@@ -291,7 +291,7 @@ def test_one_target_keeps_one_label(birth):
         if birth == "adaptive":
             m, P = inverse_measurement_terms(scan.Z, scan.ego, sensor, 1.0)
             births = Births.empty()
-            births.newborn = NewbornTerms(m, P, lambda A, kappa: np.zeros(1))
+            births.newborn = NewbornTerms(m, P, lambda A, kappa: np.zeros(1), adaptive=True)
         else:  # a fixed Gaussian at the start point, every scan (as GMBM)
             births = Births(np.array([0.06]), np.array([[8.0, -6.0, 0.0, 0.0]]),
                             np.diag([9.0, 9.0, 1.0, 1.0])[None], np.array([SOURCE_GM], dtype=np.int8))  # fmt: skip
@@ -367,10 +367,11 @@ def _walk_scans(K=12):
     return scene, scans
 
 
-def _run(name, scene, scans, seed=0, atbm="same_scan"):
+def _run(name, scene, scans, seed=0, atbm="same_scan", mapping="groups"):
     cfg = BirthConfig(atbm=atbm)
     model = get_birth_model(name)(cfg, SensorConfig(), scene, np.random.default_rng(0))
-    filt = LMBFilter(FilterConfig(), SensorConfig(), N_hat=cfg.N_hat, rng=np.random.default_rng(seed))
+    filt = LMBFilter(FilterConfig(), SensorConfig(), N_hat=cfg.N_hat, rng=np.random.default_rng(seed),
+                     lmb_cfg=LMBConfig(birth_mapping=mapping))  # fmt: skip
     prev, out = None, []
     for scan in scans:
         prev = filt.step(scan, model(BirthContext(scan, prev, 0.98)))

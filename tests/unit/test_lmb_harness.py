@@ -48,7 +48,7 @@ def test_lmb_only_and_bad_families():
         Config(experiment=ExperimentConfig(filters=("kf",))).validate()
     with pytest.raises(SoabenchError, match="names 'lmb' twice"):
         Config(experiment=ExperimentConfig(filters=("lmb", "lmb"))).validate()
-    with pytest.raises(SoabenchError, match="'lmb' runs the probability modes static only"):
+    with pytest.raises(SoabenchError, match="'lmb' runs the probability modes static, static\\+occ only"):
         Config(experiment=ExperimentConfig(filters=("gmphd", "lmb"), probabilities=("dynamic",))).validate()
     assert "filters" not in Config().to_dict()["experiment"]  # a default run's run.json is as before
     assert Config(experiment=ExperimentConfig(filters=("gmphd", "lmb"))).to_dict()["experiment"]["filters"] == [

@@ -13,6 +13,11 @@ A suite file (TOML, read as data only) holds:
   (relative to the baseline value: fail when the value exceeds ``baseline * (1 + max_increase)`` or falls below
   ``baseline * (1 - max_decrease)``) and ``abs_tol`` (slack added to the relative bounds, default 1e-9).
 
+Besides the trials.csv columns, the occlusion metrics of docs/method.md §9.4 read episodes.csv: per gap-length bin
+of ``metrics.gap_bins`` (default 1, 2-3, 4-7, 8+ scans) ``identity_kept_gap_<bin>`` and ``coasted_gap_<bin>`` (e.g.
+``identity_kept_gap_2-3``), and ``identity_kept_long`` / ``coasted_long`` for the longest bin; each is pooled over
+the re-emergences of every trial and seed (kept / counted), so each bin gets its own threshold.
+
 A value is the mean of the metric over every trial and seed of one (scenario, model, mode, clutter). A value that is
 NaN (no trial produced it) fails every threshold on it, and a plugin run that failed (soabench.experiment.trial.guard)
 fails the suite. Results: a table on stdout, ``check.json`` and ``junit.xml`` in ``--out``; exit status 0 when every
@@ -242,7 +247,7 @@ def load_suite(path: str | Path) -> Suite:
     for i, raw in enumerate(data.get("threshold", [])):
         t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
         require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
-        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}")
+        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", _suite_bins(suite.config))
         th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
         th.mode, th.scenario = t.get("mode"), t.get("scenario")
         for key in ("max", "min"):
@@ -279,18 +284,54 @@ def _check_name(name: Any, allowed: list[str], where: str, what: str) -> None:
     raise SoabenchError(f"{where} = {name!r} is not {what}{guess}; allowed: {', '.join(allowed)}")
 
 
-def _check_metric(metric: Any, where: str) -> None:
-    """A threshold's metric must be a metric or timing column of trials.csv (a typo is a bad suite, not a failed
-    check)."""
+def gap_metrics(bins: Sequence[int]) -> dict[str, tuple[str, int]]:
+    """The occlusion metrics of a suite (module docstring): name -> (episodes.csv column, bin index)."""
+    from soabench.experiment.reports.occlusion import bin_labels
+
+    out = {}
+    for column, name in (("gap_id_kept", "identity_kept"), ("gap_coasted", "coasted")):
+        for i, label in enumerate(bin_labels(bins)):
+            out[f"{name}_gap_{label}"] = (column, i)
+        out[f"{name}_long"] = (column, len(bins) - 1)
+    return out
+
+
+def _check_metric(metric: Any, where: str, bins: Sequence[int] | None = None) -> None:
+    """A threshold's metric must be a metric or timing column of trials.csv or an occlusion metric of the suite's
+    gap bins (a typo is a bad suite, not a failed check)."""
     # imported when called: scipy would slow every start-up
+    from soabench.config import MetricsConfig
     from soabench.experiment.runs.store import METRIC_COLUMNS, TIMING_COLUMNS
 
-    allowed = METRIC_COLUMNS + TIMING_COLUMNS
+    allowed = METRIC_COLUMNS + TIMING_COLUMNS + tuple(gap_metrics(bins or MetricsConfig().gap_bins))
     if metric in allowed:
         return
     close = difflib.get_close_matches(str(metric), allowed, n=1)
     guess = f" (did you mean {close[0]!r}?)" if close else ""
     raise SoabenchError(f"{where}: metric {metric!r} is not a trials.csv metric{guess}; allowed: {', '.join(allowed)}")
+
+
+def _suite_bins(config: Path | None) -> tuple[int, ...]:
+    """The gap bins of a suite's configuration (the defaults without one)."""
+    return load_config(config).metrics.gap_bins
+
+
+def _gap_values(run_dir: Path, scenario: str, bins: Sequence[int], sums: dict[tuple, list[float]]) -> None:
+    """Add the kept / counted sums of every occlusion metric of one run folder's episodes.csv to ``sums`` (keyed by
+    the value key's parts)."""
+    e = read_csv(run_dir / "episodes.csv")
+    if "gap_scans" not in e or not len(e["gap_scans"]):
+        return
+    n = np.array([float(v) if v != "" else math.nan for v in np.asarray(e["gap_scans"]).tolist()])
+    which = np.searchsorted(np.asarray(bins), n, side="right") - 1
+    for name, (column, i) in gap_metrics(bins).items():
+        cells = np.array([float(v) if v != "" else math.nan for v in np.asarray(e[column]).tolist()])
+        ok = np.isfinite(n) & (which == i) & np.isfinite(cells)
+        for j in np.flatnonzero(ok):
+            key = (scenario, str(e["model"][j]), str(e["mode"][j]), float(e["clutter"][j]), name)
+            acc = sums.setdefault(key, [0.0, 0.0])
+            acc[0] += cells[j]
+            acc[1] += 1.0
 
 
 def check_import_paths(suite: Suite) -> None:
@@ -346,22 +387,35 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
     return cfg.validate()
 
 
-def run_suite(
-    suite: Suite, out: Path, workers: int | None = None, seed_offset: int = 0
-) -> tuple[dict[str, float], list[dict], dict[str, ScenarioRuns]]:
-    """Run every scenario and seed (each seed plus ``seed_offset``); return the mean of every trials.csv metric per
-    key, the plugin failures and what each scenario's runs took."""
+@dataclass
+class SuiteRun:
+    """One run of a suite's scenarios: the mean of every metric per key, the plugin failures, what each scenario's
+    runs took and the seconds spent compiling the kernels first."""
+
+    values: dict[str, float]
+    failures: list[dict]
+    took: dict[str, ScenarioRuns]
+    compile_s: float = 0.0
+
+
+def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: int = 0) -> SuiteRun:
+    """Run every scenario and seed (each seed plus ``seed_offset``) and collect a :class:`SuiteRun`."""
     # imported when called: scipy would slow every start-up
     from soabench.experiment.execution.options import RunOptions
     from soabench.experiment.execution.runner import run_experiment
     from soabench.experiment.runs.store import RunStore
+    from soabench.kernel_warmup import ensure_compiled
 
     check_import_paths(suite)
     base = load_config(suite.config)
     _refuse_protocol_keys(suite.config)
     for s in suite.scenarios:  # validate every scenario before running any
         _config_for(base, s, s.seeds[0])
+    # once, for every scenario; timed apart: a cold machine's compilation is not the suite's time
+    compile_s = ensure_compiled([_config_for(base, s, s.seeds[0]) for s in suite.scenarios])
     rows: dict[tuple, list[dict]] = {}
+    gap_sums: dict[tuple, list[float]] = {}
+    bins = base.metrics.gap_bins
     failures: list[dict] = []
     took = {s.name: ScenarioRuns() for s in suite.scenarios}
     for s in suite.scenarios:
@@ -378,6 +432,7 @@ def run_suite(
             require(o.complete, f"scenario {s.name!r} seed {seed}: {o.n_missing} trial(s) failed; see {run_dir}")
             failures += [{**f, "scenario": s.name, "seed": seed} for f in RunStore(run_dir).model_failures()]
             table = read_csv(run_dir / "trials.csv")
+            _gap_values(run_dir, s.name, bins, gap_sums)
             n = len(table["model"])
             for i in range(n):
                 key = (s.name, str(table["model"][i]), str(table["mode"][i]), float(table["clutter"][i]))
@@ -393,7 +448,10 @@ def run_suite(
                 continue
             vals = np.array([float(r[col]) for r in rs])
             values[value_key(scen, model, mode, lam, col)] = float(np.mean(vals)) if len(vals) else math.nan
-    return values, failures, took
+        for name in gap_metrics(bins):  # a labelled run with no gap in a bin: NaN, which fails its threshold
+            kept, counted = gap_sums.get((scen, model, mode, lam, name), (0.0, 0.0))
+            values[value_key(scen, model, mode, lam, name)] = kept / counted if counted else math.nan
+    return SuiteRun(values, failures, took, compile_s)
 
 
 def _matches(th: Threshold, key: str) -> bool:
@@ -584,7 +642,8 @@ def run_calibration(
         check_own_folder(out, "check folder", CHECK_ENTRIES)
         repetitions = []
         for r in range(n):
-            values, failures, _ = run_suite(suite, out, workers, seed_offset=r * CALIBRATION_SEED_STRIDE)
+            done = run_suite(suite, out, workers, seed_offset=r * CALIBRATION_SEED_STRIDE)
+            values, failures = done.values, done.failures
             if failures:  # a calibration of a failing plugin would propose bounds for runs that did not happen
                 raise SoabenchError(f"a plugin run failed in repetition {r + 1}: {failure_message(failures[0])}")
             repetitions.append(values)
@@ -635,11 +694,8 @@ def _check_locked(
     suite: Suite, out: Path, baseline: dict[str, float] | None, update_baseline: bool, workers: int | None, t0: float
 ) -> int:
     """The body of :func:`run_check` once ``out`` is checked and locked."""
-    # imported when called: numba would slow every start-up
-    from soabench.kernel_warmup import ensure_compiled
-
-    compile_s = ensure_compiled()  # timed apart: a cold machine's compilation is not the suite's time
-    values, failures, took = run_suite(suite, out, workers)
+    done = run_suite(suite, out, workers)
+    values, failures, took, compile_s = done.values, done.failures, done.took, done.compile_s
     if update_baseline:
         require(suite.baseline is not None, f'{suite.path}: --update-baseline needs [suite] baseline = "FILE.json"')
         write_baseline(suite.baseline, suite, values)

@@ -11,6 +11,9 @@ Parts, in order, under ``OUT`` (default ``results/``):
   comparison with the paper, whose numbers belong to its own protocol on the intersection);
 * ``scenes/density/<scene>.json``: each scene's occlusion density (:mod:`.occlusion_density`);
 * ``scenes/``: the cross-scene summary (:mod:`.cross_scene`): S-OA's advantage against occlusion density;
+* ``atlas/<scene>/``: the atlas over scene parameters (:mod:`soabench.experiment.campaigns.atlas`; design
+  :data:`ATLAS_AXES`: parking density x pedestrians x clutter x p_D, ``--atlas-trials`` trials per point, the six
+  birth models, static, GM-PHD) on ``--atlas-scenes``: when does S-OA pay off?
 * ``kitti/<scene>/``: SUMO trials exported in the KITTI tracking layout (``export/``) and the KITTI protocol on them
   (``run/``: k-fold N_hat, Table I; :mod:`soabench.kitti.protocol`).
 
@@ -63,6 +66,8 @@ class Settings:
     kitti_sequences: int = 21  #: like KITTI's training set
     kitti_duration: float = 40.0  #: seconds per exported sequence (400 frames at 10 Hz; KITTI's average is 381)
     kitti_folds: int = 7  #: the paper's 7-fold cross-validation (3 sequences per fold for 21)
+    atlas_scenes: tuple[str, ...] = ("intersection", "grid_block")  #: scenes of the atlas part
+    atlas_trials: int = 20  #: trials per atlas point
 
     def validate(self, shipped: Sequence[str]) -> Settings:
         """Every size in its range (the bounds of soabench/config.py and of ``export kitti``), before any part runs."""
@@ -74,14 +79,15 @@ class Settings:
             ok = isinstance(v, int) and low <= v <= high
             require(ok, f"--{name.replace('_', '-')} {v!r} is out of range; allowed: integers in [{low}, {high}]{why}")
 
-        for name in ("trials", "births_trials", "scene_trials", "density_trials"):
+        for name in ("trials", "births_trials", "scene_trials", "density_trials", "atlas_trials"):
             count(name, 1, MAX_TRIALS)
         count("kitti_sequences", 2, MAX_EXPORT_TRIALS, " (cross-validation needs 2)")
         count("kitti_folds", 2, MAX_EXPORT_TRIALS, " (more folds than sequences: one per sequence)")
         count("seed", 0, MAX_SEED)
         for name in ("duration", "kitti_duration"):
             check_time(f"--{name.replace('_', '-')}", getattr(self, name))
-        for flag, names in (("--scenes", self.scenes or ()), ("--kitti-scenes", self.kitti_scenes)):
+        lists = (("--scenes", self.scenes or ()), ("--kitti-scenes", self.kitti_scenes))
+        for flag, names in (*lists, ("--atlas-scenes", self.atlas_scenes)):
             bad = [n for n in names if n not in shipped]
             require(not bad, f"{flag} {','.join(bad)}: not a shipped scene; allowed: {', '.join(shipped)}")
         require(self.scenes is None or len(self.scenes) >= 1, "--scenes must name at least one shipped scene")
@@ -327,6 +333,59 @@ def _index_pages(root: Path, scenes: Sequence[str], log: Callable[[str], None]) 
     return "done", 0
 
 
+#: the atlas part's design: every combination of these values (static probabilities, GM-PHD, the six models)
+ATLAS_AXES: dict[str, tuple[float, ...]] = {
+    "parking.density": (0.0, 4.0, 8.0, 12.0),
+    "pedestrians.count": (3, 6, 12, 24),
+    "experiment.clutter": (0.5, 3.0, 5.0),
+    "sensor.p_D": (0.7, 0.9, 0.98),
+}
+
+
+def atlas_axes(scene: str) -> dict[str, tuple[float, ...]]:
+    """:data:`ATLAS_AXES` on ``scene``; a scene without parking lanes (grid_block: its kerbs are sidewalks and shop
+    fronts) has no parked cars to vary, so it drops the parking axis (its occluders are its buildings)."""
+    from soabench.experiment.campaigns.occlusion import base_scenario
+    from soabench.scenario.network import read_net
+    from soabench.scenario.parking import parking_lanes
+
+    net_file = base_scenario(scene, None).get("files", {}).get("net")
+    if net_file and not parking_lanes(read_net(net_file)):
+        return {k: v for k, v in ATLAS_AXES.items() if k != "parking.density"}
+    return dict(ATLAS_AXES)
+
+
+def atlas_request(folder: Path, scene: str, s: Settings):
+    """The atlas of ``scene`` in ``folder`` (:func:`atlas_axes`, ``s.atlas_trials`` trials per point)."""
+    from soabench.experiment.campaigns.atlas.design import make_axis, make_design
+    from soabench.experiment.campaigns.atlas.run import AtlasRequest
+
+    axes = [make_axis(k, list(v)) for k, v in atlas_axes(scene).items()]
+    cfg = _base_config(s, s.atlas_trials, probabilities=("static",))
+    keys = {"experiment.trials", "experiment.duration", "experiment.seed", "experiment.models"}
+    keys.add("experiment.probabilities")
+    return AtlasRequest(out=folder, net=scene, design=make_design(axes), config=cfg, force=True, explicit=keys)
+
+
+def _atlas_part(folder: Path, scene: str, s: Settings, exe: RunOptions, log: Callable[[str], None]):
+    """The atlas of ``scene``: kept when complete with these settings, else resumed (more trials: extended) or
+    started; its report is drawn whenever trials were added."""
+    from soabench.experiment.campaigns.atlas.run import run_atlas
+    from soabench.experiment.campaigns.atlas.store import done_chunks, is_atlas, read_meta
+
+    req = atlas_request(folder, scene, s)
+    if is_atlas(folder):
+        meta = read_meta(folder)
+        n_chunks = meta["trials"] * len(meta["scenes"])
+        same = meta["trials"] == s.atlas_trials and req.design is not None
+        if same and len({c for c in done_chunks(folder) if c[0] < meta["trials"]}) == n_chunks:
+            if (folder / "report" / "summary.md").is_file():
+                log(f"kept {folder} (the atlas is complete)")
+                return "kept", 0
+    o = run_atlas(req, exe, log=log)
+    return ("done" if o.complete else "incomplete"), o.n_missing
+
+
 #: the filter families of the ``filters/`` part, and the one mode every family runs (docs/method.md "LMB filter")
 FILTERS_PART = {"filters": ("gmphd", "lmb"), "probabilities": ("static",)}
 
@@ -377,7 +436,15 @@ def run_results(
     scenes = list(s.scenes or shipped)
     log = log or (lambda msg: print(f"soabench results: {msg}", file=sys.stderr, flush=True))
     root = resolve(out)
-    own = (*shipped, "scenes", "filters", "kitti", "README.md", "index.html")  # README.md: results/'s own description
+    own = (
+        *shipped,
+        "scenes",
+        "filters",
+        "atlas",
+        "kitti",
+        "README.md",
+        "index.html",
+    )  # README.md: results/'s own description
     check_own_folder(root, "results folder", own)
     root.mkdir(parents=True, exist_ok=True)
     hint = f"finish with: soabench results --out {root} (and the same options)"
@@ -435,6 +502,11 @@ def run_results(
                 return ("done" if len(ready) == len(scenes) else "incomplete"), 0
 
             step("cross-scene summary", summary, banner=False)
+            for scene in s.atlas_scenes:
+                step(
+                    f"{scene} atlas",
+                    lambda scene=scene: _atlas_part(root / "atlas" / scene, scene, s, exe, log),
+                )
             for scene in s.kitti_scenes:
                 step(
                     f"{scene} KITTI export and protocol",

@@ -117,7 +117,7 @@ def run_group(
         for d in deferred:
             d.store.clear_merged()
         if any(uses_kernels(d.spec) for d in deferred):  # before the progress line: its ETA counts trials only
-            ensure_compiled()
+            ensure_compiled([d.spec.config for d in deferred if uses_kernels(d.spec)])
         bar = Progress(total, done0, progress, label=label)
         gen = exe.results(group, trials)
         try:

@@ -477,7 +477,7 @@ def _run_trials(
     store.clear_merged()
     t_start = time.time()
     if uses_kernels(spec):  # once per machine: before the progress line, so that its ETA counts trials only
-        ensure_compiled()
+        ensure_compiled([spec.config])
     bar = Progress(n_trials, n_done, progress, label=store.run_dir.name)
     gen = exe.results(spec, todo)
     try:

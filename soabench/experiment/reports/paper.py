@@ -19,7 +19,12 @@ from scipy import stats
 
 from soabench.birth import BASELINES, LABEL
 
-MODE_LABEL = {"static": "without dyn. p", "dynamic": "with dyn. p", "dynamic+occ": "dyn. p + occlusion"}
+MODE_LABEL = {
+    "static": "without dyn. p",
+    "dynamic": "with dyn. p",
+    "dynamic+occ": "dyn. p + occlusion",
+    "static+occ": "static p + occlusion",
+}
 
 #: The paper's numbers; its UBM spreads the grid "uniformly across the workspace", so they stand beside our
 #: ``ubm-ws``. Our ``ubm`` (the grid clipped to the field of view) has no paper counterpart: its paper cells are "-".
@@ -98,11 +103,25 @@ def _wilcoxon(x: np.ndarray, y: np.ndarray) -> float:
     return float(stats.wilcoxon(x, y, zero_method="wilcox").pvalue)
 
 
+def wilcoxon_p(x: np.ndarray, y: np.ndarray) -> float:
+    """Two-sided Wilcoxon signed-rank p of paired values (NaN for fewer than 2 pairs or all differences 0)."""
+    return _wilcoxon(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+
+
+def resample_indices(n: int) -> np.ndarray:
+    """(N_BOOT, n) trial indices drawn with replacement from the fixed seed: every bootstrap of this package."""
+    return np.random.default_rng(BOOT_SEED).integers(0, n, size=(N_BOOT, n))
+
+
+def paired_interval(statistic, x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """The paired bootstrap percentile interval of ``statistic(x[idx], y[idx])`` over resampled trials."""
+    return _bootstrap(statistic, np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+
+
 def _bootstrap(statistic, x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     if len(x) < 2:
         return math.nan, math.nan
-    rng = np.random.default_rng(BOOT_SEED)
-    idx = rng.integers(0, len(x), size=(N_BOOT, len(x)))
+    idx = resample_indices(len(x))
     values = statistic(x[idx], y[idx])
     lo, hi = np.nanquantile(values, [(1 - CI_LEVEL) / 2, (1 + CI_LEVEL) / 2])
     return float(lo), float(hi)
@@ -204,6 +223,10 @@ def _p(x: float) -> str:
     if not np.isfinite(x):
         return "n/a"
     return "< 1e-4" if x < 1e-4 else f"{x:.3g}"
+
+
+#: a p-value as the tables print it
+format_p = _p
 
 
 def markdown(rows: Sequence[dict], clutter: float = 3.0) -> str:

@@ -38,7 +38,7 @@ import numpy as np
 from soabench.birth import BASELINES, LABEL
 from soabench.config import FAMILIES, FAMILY_MODES, FILTER_FAMILIES, Config, MetricsConfig
 from soabench.errors import SoabenchError
-from soabench.experiment.reports import paper
+from soabench.experiment.reports import occlusion, paper, track_intervals
 from soabench.experiment.reports.paper import percent_reduction
 from soabench.experiment.reports.tables import RunTables, load_tables, select, tables_models  # noqa: F401 (shared)
 from soabench.experiment.runs.failures import write_model_failures
@@ -245,7 +245,11 @@ def _clutter_results(tables: RunTables, clutter: float, family: str | None) -> d
             for b in others:
                 comps.append(compare(tables, clutter, md, b, stats))
     out = {"clutter": clutter, "models": list(stats.values()), "vs_soa": comps, "warning": warning}
-    out["tracks"] = _tracks(tables, clutter, [c["baseline"] for c in comps if c["mode"] == tables.modes[0]])
+    baselines = [c["baseline"] for c in comps if c["mode"] == tables.modes[0]]
+    out["tracks"] = _tracks(tables, clutter, baselines)
+    bins = tuple(meta["config"].get("metrics", {}).get("gap_bins", MetricsConfig().gap_bins))
+    out["occlusion"] = occlusion.breakdown(tables, clutter, bins, baselines)
+    out["track_intervals"] = _track_intervals(tables, clutter, baselines)
     if family is not None:
         out["filter"] = family
     return out
@@ -280,6 +284,57 @@ def _tracks(tables: RunTables, clutter: float, baselines: list[str]) -> dict:
             if ("soa", md) in by_trial and (b, md) in by_trial:
                 versus.append((md, b, tracks_vs_soa(by_trial[("soa", md)], by_trial[(b, md)])))
     return {"rows": rows, "versus": versus}
+
+
+def _track_intervals(tables: RunTables, clutter: float, baselines: list[str]) -> dict:
+    """The intervals on the Tracks table of one clutter rate (:mod:`soabench.experiment.reports.track_intervals`):
+    ``rows`` per labelled model and mode, ``vs_soa`` per mode and labelled baseline; {} without a labelled tracker."""
+    t = tables.trials
+    if "hota" not in t:
+        return {}
+    rows, by_trial = [], {}
+    for mo in tables.models:
+        for md in tables.modes:
+            m = select(t, clutter=clutter, model=mo, mode=md)
+            cols = {c: _floats(t[c][m]) if c in t else np.full(int(m.sum()), math.nan) for c in TRACK_KEYS}
+            if not m.any() or not np.isfinite(cols["hota"]).any():
+                continue
+            rows.append({"model": mo, "mode": md, **track_intervals.row_intervals(cols.__getitem__)})
+            by_trial[(mo, md)] = {
+                int(n): {k: float(cols[k][i]) for k in track_intervals.PAIRED_KEYS} for i, n in enumerate(t["trial"][m])
+            }
+    versus = [
+        {"mode": md, "baseline": b, **track_intervals.paired(by_trial[("soa", md)], by_trial[(b, md)])}
+        for md in tables.modes
+        for b in baselines
+        if ("soa", md) in by_trial and (b, md) in by_trial
+    ]
+    return {"rows": rows, "vs_soa": versus} if rows else {}
+
+
+def render_occlusion(summary: dict) -> str:
+    """The occlusion section of summary.md (after every other section): per clutter rate (and filter family) the
+    Tracks table's intervals and paired S-OA tests, then identity kept, coasted share and re-emergence delay by gap
+    length and by occluder kind (docs/method.md §9.4)."""
+    lines: list[str] = []
+    for res in summary["results"]:
+        iv, occ = res.get("track_intervals") or {}, res.get("occlusion") or {}
+        occ = occ if occ.get("rows") else {}  # bins without a gap: nothing to tabulate
+        if not iv and not occ:
+            continue
+        family = res.get("filter")
+        where = f"λ = {res['clutter']:g}" + (f", {FAMILY_LABEL.get(family, family)}" if family else "")
+        lines += ["", f"## Occlusion and identity, {where}"]
+        if iv:
+            stats = {(mo, md): st for mo, md, st in (res.get("tracks") or {}).get("rows", [])}
+            rows = [(r["model"], r["mode"], stats[(r["model"], r["mode"])], r) for r in iv["rows"]]
+            versus = [(c["mode"], c["baseline"], c) for c in iv["vs_soa"]]
+            lines += ["", f"### Tracks with intervals, {where}", "", *track_intervals.render(rows, versus)]
+        if occ:
+            labelled = {mo: bool(st["labelled"]) for mo, _, st in (res.get("tracks") or {}).get("rows", [])}
+            lines += ["", f"### Identity through occlusion gaps, {where}", *occlusion.render(occ, labelled)]
+            lines += ["", occlusion.LEGEND]
+    return "\n".join(lines) + "\n" if lines else ""
 
 
 # ------------------------------------------------------------------------------------------------ Markdown
@@ -493,6 +548,7 @@ def write_report(run_dir: Path, figures: bool = True, store: RunStore | None = N
     paper_md = paper_section(run_dir, tables)
     if paper_md:
         md += "\n" + paper_md
+    md += render_occlusion(summary)
     for warning in summary["warnings"]:
         print(f"soabench: warning: {warning}", file=sys.stderr)
     write_json_atomic(run_dir / "summary.json", summary)

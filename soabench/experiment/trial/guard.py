@@ -106,7 +106,7 @@ def _check_newborn(nb: Any, M: int) -> NewbornTerms:
             raise PluginOutputError(f"NewbornTerms.beta(A, kappa) is negative (min {out.min():g})")
         return out
 
-    return NewbornTerms(m, P, checked_beta)
+    return NewbornTerms(m, P, checked_beta, adaptive=nb.adaptive is True)
 
 
 def check_estimates(out: Any, scan: Scan, t_step: float) -> StepResult:

@@ -47,7 +47,7 @@ from soabench.seeding import TrialSeeds, trial_seeds
 from soabench.sensor import observe
 from soabench.trackers import FilterTracker, ScanFailure, build_filter, run_tracker
 from soabench.trackers import TrackerRun as FilterRun  # the step results and times of one run
-from soabench.tracks.evaluate import TRACK_KEYS, evaluate_tracks, run_labels
+from soabench.tracks.evaluate import GAP_KEYS, NO_GAP, TRACK_KEYS, run_labels, track_evaluation
 
 if TYPE_CHECKING:
     from soabench.config import Config, SensorConfig
@@ -61,7 +61,8 @@ ROW_ID_KEYS = ("trial", "seed", "sumo_seed", "clutter", "N_hat", "model", "mode"
 ROW_TIME_KEYS = ("t_birth", "t_predict", "t_update", "t_reduce", "t_metrics", "t_filter_total")
 #: every column of a row, in order: ids, the metrics of :data:`soabench.metrics.SUMMARY_KEYS`, wall-clock times
 ROW_KEYS = ROW_ID_KEYS + tuple(k for k in SUMMARY_KEYS if k not in ROW_TIME_KEYS) + ROW_TIME_KEYS + TRACK_KEYS
-#: columns of an episode row (§5.4); k_t = -1 and delay = NaN when censored
+#: columns of an episode row (§5.4); k_t = -1 and delay = NaN when censored; then the gap before a re-emergence
+#: episode (§9.4, empty for an entry episode)
 EPISODE_KEYS = (
     "trial",
     "clutter",
@@ -75,6 +76,7 @@ EPISODE_KEYS = (
     "delay",
     "delay_lb",
     "censored",
+    *GAP_KEYS,
 )
 #: columns of a step row (one per filter run and scan k): the run's keys, k, and the metrics' per-scan series
 STEP_KEYS = ("trial", "clutter", "model", "mode", "k", *SERIES_KEYS)
@@ -270,13 +272,20 @@ def make_row(
     return out
 
 
-def episode_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
-    """One row of :data:`EPISODE_KEYS` per delay episode."""
+def episode_rows(
+    key: RunKey, metrics: TrialMetrics, gaps: Sequence[dict[str, Any]] | None = None
+) -> list[dict[str, Any]]:
+    """One row of :data:`EPISODE_KEYS` per delay episode; ``gaps``: each episode's :data:`GAP_KEYS` cells
+    (:func:`~soabench.tracks.evaluate.track_evaluation`; None: :data:`~soabench.tracks.evaluate.NO_GAP`)."""
     base = key.as_dict()
     head = {k: _scalar(base[k]) for k in EPISODE_KEYS if k in base}
-    own = [k for k in EPISODE_KEYS if k not in base]  # the Episode's fields: scalars, read as they are
+    own = [k for k in EPISODE_KEYS if k not in base and k not in GAP_KEYS]  # the Episode's fields, read as they are
     tail = {FILTER_COLUMN: base[FILTER_COLUMN]} if FILTER_COLUMN in base else {}
-    return [{**head, **{k: _scalar(getattr(e, k)) for k in own}, **tail} for e in metrics.episodes]
+    gaps = gaps if gaps is not None else [NO_GAP] * len(metrics.episodes)
+    return [
+        {**head, **{k: _scalar(getattr(e, k)) for k in own}, **{k: _scalar(g[k]) for k in GAP_KEYS}, **tail}
+        for e, g in zip(metrics.episodes, gaps, strict=True)
+    ]
 
 
 def step_rows(key: RunKey, metrics: TrialMetrics) -> list[dict[str, Any]]:
@@ -656,9 +665,9 @@ def _record(
     metrics = evaluate(scans, run.results, config.metrics, sensor_cfg)
     t_metrics = time.perf_counter() - t0
     X = [r.X for r in run.results]
-    tracks = evaluate_tracks(scans, X, run_labels(run.results, X), metrics.episodes, config.metrics, sensor_cfg)
+    tracks, gaps = track_evaluation(scans, X, run_labels(run.results, X), metrics.episodes, config.metrics, sensor_cfg)
     out.rows.append(make_row(key, seeds, config.birth.N_hat, metrics, run, t_metrics, tracks))
-    out.episodes.extend(episode_rows(key, metrics))
+    out.episodes.extend(episode_rows(key, metrics, gaps))
     out.steps.extend(step_rows(key, metrics))
     if out.estimates is not None:
         out.estimates.extend(estimate_rows(key, run.results))

@@ -1,0 +1,247 @@
+"""The atlas at scale (docs/user-guide/atlas.md), measured in one run:
+
+1. **Throughput per core** of real trials: an atlas (parking density x clutter, 60 s, three birth models, static)
+   against the plain protocol doing the same work (one `run` per parking density with the three clutter rates, which
+   shares SUMO and the scans the same way), on the same executor; ratio = atlas point-trials per core-second /
+   plain point-trials per core-second.
+2. **Peak memory** of an atlas of N1 and N2 trials (default 1,000 and 10,000), each in a fresh process on one core,
+   with a synthetic trial kind that returns rows of the real schema (``soabench.experiment.runs.store`` columns,
+   three models, episodes) instantly, so the measurement is the atlas's own pipeline (plan, tasks, chunks, report)
+   and not SUMO.
+3. **DuckDB** over the whole dataset: a GROUP BY over the N2-trial atlas, and over a generated dataset of 10^6 trial
+   rows (what 10^5 trials x 10 models give), best of 3.
+
+    python benchmarks/bench_atlas.py --trials 4 --mem 1000,10000 --rows 1000000 --workers 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+MODELS = ("soa", "pubm", "ubm")
+QUERY = "SELECT point, model, avg(delay_mean) AS delay, avg(ospa) AS ospa, count(*) AS n FROM trials GROUP BY ALL"
+
+
+# ------------------------------------------------------------------------------------------------ synthetic trial
+def synthetic_trial(trial, config, scene, scenario, *, save_estimates=False):
+    """Rows of the real schema with numbers from the seeds, for the memory measurement (no SUMO, no filter)."""
+    import numpy as np
+
+    from soabench.experiment.runs.store import EPISODE_COLUMNS, TIMING_COLUMNS, TRIAL_COLUMNS
+    from soabench.experiment.trial.trial import TrialResult
+
+    exp = config.experiment
+    rng = np.random.default_rng([exp.seed, trial, int(1000 * config.sensor.p_D)])
+    out = TrialResult(trial, exp.seed, int(rng.integers(2**31)))
+    for m in exp.models:
+        for lam in exp.clutter:
+            row = {c: float(rng.random()) for c in TRIAL_COLUMNS + TIMING_COLUMNS}
+            row.update(trial=trial, seed=exp.seed, sumo_seed=out.sumo_seed, clutter=float(lam), model=m, mode="static")
+            out.rows.append(row)
+            for t in range(10):
+                ep = {c: float(rng.random()) for c in EPISODE_COLUMNS}
+                ep.update(trial=trial, clutter=float(lam), model=m, mode="static", target=t, censored=0)
+                out.episodes.append(ep)
+    return out
+
+
+def synthetic_load(net, polys=(), scenario=None):
+    return "scene", None
+
+
+def _register() -> None:
+    from soabench.experiment.trial import registry
+
+    if "bench-synthetic" not in registry.trial_kinds():
+        registry.register_trial_kind("bench-synthetic", synthetic_trial)
+        registry.register_scene_loader("bench-none", synthetic_load)
+
+
+def memory_child(n_trials: int, out: Path) -> None:
+    """Run an atlas of ``n_trials`` synthetic trials in this process; print its peak RSS (MB) and times as JSON."""
+    from soabench.config import Config
+    from soabench.experiment.campaigns.atlas.design import make_design, parse_axis
+    from soabench.experiment.campaigns.atlas.run import AtlasRequest, run_atlas
+    from soabench.experiment.execution.options import RunOptions
+
+    _register()
+    points = 10
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(
+        cfg.experiment, trials=n_trials // points, duration=60.0, models=MODELS, probabilities=("static",)
+    )
+    design = make_design([parse_axis("sensor.p_D=" + ",".join(f"{0.5 + 0.05 * i:.2f}" for i in range(points)))])
+    req = AtlasRequest(
+        out=out, design=design, config=cfg.validate(), force=True, trial_kind="bench-synthetic",
+        scene_loader="bench-none",
+    )  # fmt: skip
+    t0 = time.perf_counter()
+    o = run_atlas(req, RunOptions(workers=1, progress=False), log=lambda m: None)
+    wall = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps({"trials": o.n_done, "complete": o.complete, "wall_s": wall, "peak_mb": peak}))
+
+
+# ------------------------------------------------------------------------------------------------ measurements
+def throughput(trials: int, workers: int, tmp: Path) -> dict:
+    from soabench.config import Config
+    from soabench.experiment.campaigns.atlas.design import make_design, parse_axis
+    from soabench.experiment.campaigns.atlas.run import AtlasRequest, run_atlas
+    from soabench.experiment.campaigns.occlusion import base_scenario, dump_toml
+    from soabench.experiment.execution.options import RunOptions
+    from soabench.experiment.execution.runner import run_experiment
+    from soabench.kernel_warmup import ensure_compiled
+
+    ensure_compiled()
+    densities, clutter = (0.0, 8.0), (0.5, 3.0, 5.0)
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(
+        cfg.experiment, trials=trials, duration=60.0, models=MODELS, probabilities=("static",), clutter=clutter
+    )
+    cfg.validate()
+    opts = RunOptions(workers=workers, progress=False, figures=False)
+    # the plain protocol: one run per parking density, its clutter rates sharing SUMO and the scans
+    t0 = time.perf_counter()
+    for d in densities:
+        data = {k: dict(v) for k, v in base_scenario("intersection", None).items()}
+        data.setdefault("parking", {})["density"] = d
+        scen = tmp / f"plain_{d:g}.scenario.toml"
+        scen.write_text(dump_toml(data))
+        run_experiment(cfg, "intersection", (), str(scen), out=tmp / f"plain_{d:g}", options=opts)
+    plain = time.perf_counter() - t0
+    design = make_design([parse_axis("parking.density=0,8"), parse_axis("experiment.clutter=0.5,3,5")])
+    one = Config.from_dict(cfg.to_dict())
+    one.experiment = dataclasses.replace(one.experiment, clutter=(3.0,))
+    t0 = time.perf_counter()
+    o = run_atlas(
+        AtlasRequest(out=tmp / "atlas", design=design, config=one.validate(), report=False), opts, log=lambda m: None
+    )
+    atlas = time.perf_counter() - t0
+    n = len(densities) * len(clutter) * trials
+    assert o.complete and o.n_done == n
+    return {
+        "point_trials": n,
+        "workers": workers,
+        "plain_s": plain,
+        "atlas_s": atlas,
+        "plain_per_core_s": n / (plain * workers),
+        "atlas_per_core_s": n / (atlas * workers),
+        "ratio": plain / atlas,
+        "shared": o.shared,
+    }
+
+
+def memory(sizes: list[int], tmp: Path) -> list[dict]:
+    out = []
+    for n in sizes:
+        folder = tmp / f"mem_{n}"
+        env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+        res = subprocess.run(
+            [sys.executable, __file__, "--memory-child", str(n), "--out", str(folder)],
+            capture_output=True, text=True, env=env, check=True,
+        )  # fmt: skip
+        out.append({**json.loads(res.stdout.strip().splitlines()[-1]), "folder": str(folder)})
+    return out
+
+
+def duckdb_times(atlas: Path, rows: int, tmp: Path) -> dict:
+    import numpy as np
+
+    from soabench.experiment.campaigns.atlas.query import connect, run_query
+    from soabench.experiment.campaigns.atlas.store import parquet_bytes
+    from soabench.experiment.runs.store import TIMING_COLUMNS, TRIAL_COLUMNS
+
+    def best(path: Path) -> tuple[float, int]:
+        times, n = [], 0
+        for _ in range(3):
+            t0 = time.perf_counter()
+            n = run_query(path, QUERY).num_rows
+            times.append(time.perf_counter() - t0)
+        return min(times), n
+
+    con = connect(atlas)
+    n_atlas = con.execute("SELECT count(*) FROM trials").fetchone()[0]
+    con.close()
+    t_atlas, g_atlas = best(atlas)
+    # a generated dataset of `rows` trial rows: 100 chunks, 10 models, 1000 points
+    gen = tmp / "generated"
+    shutil.copytree(atlas, gen, ignore=shutil.ignore_patterns("trials", "episodes", "report"))
+    (gen / "trials").mkdir()
+    rng = np.random.default_rng(0)
+    per = rows // 100
+    models = [f"m{i}" for i in range(10)]
+    for c in range(100):
+        cols = {"point": (rng.integers(0, 1000, per)).tolist(), "scene": [0] * per, "sensor_p_D": [0.9] * per}
+        cols["family"] = ["gmphd"] * per
+        for name in TRIAL_COLUMNS + TIMING_COLUMNS:
+            if name == "model":
+                cols[name] = [models[i % 10] for i in range(per)]
+            elif name == "mode":
+                cols[name] = ["static"] * per
+            else:
+                cols[name] = rng.random(per).tolist()
+        (gen / "trials" / f"n{c:05d}-s0000.parquet").write_bytes(parquet_bytes(cols))
+    t_gen, g_gen = best(gen)
+    size = sum(f.stat().st_size for f in (gen / "trials").iterdir())
+    return {
+        "atlas_rows": n_atlas, "atlas_query_s": t_atlas, "atlas_groups": g_atlas,
+        "generated_rows": per * 100, "generated_query_s": t_gen, "generated_groups": g_gen,
+        "generated_mb": size / 2**20,
+    }  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--trials", type=int, default=4, help="trials per point of the throughput measurement")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--mem", default="1000,10000", help="trials of the two memory measurements")
+    ap.add_argument("--rows", type=int, default=1_000_000, help="rows of the generated DuckDB dataset")
+    ap.add_argument("--skip-throughput", action="store_true")
+    ap.add_argument("--memory-child", type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--out", type=Path, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.memory_child:
+        memory_child(args.memory_child, args.out)
+        return
+    tmp = Path(tempfile.mkdtemp(prefix="bench-atlas-"))
+    try:
+        report = {}
+        if not args.skip_throughput:
+            report["throughput"] = throughput(args.trials, args.workers, tmp)
+            print(json.dumps(report["throughput"]), flush=True)
+        report["memory"] = memory([int(s) for s in args.mem.split(",")], tmp)
+        print(json.dumps(report["memory"]), flush=True)
+        report["duckdb"] = duckdb_times(Path(report["memory"][-1]["folder"]), args.rows, tmp)
+        print(json.dumps(report["duckdb"]), flush=True)
+        if "throughput" in report:
+            t = report["throughput"]
+            print(
+                f"throughput: atlas {t['atlas_per_core_s']:.3f} vs plain {t['plain_per_core_s']:.3f} point-trials per "
+                f"core-second ({t['point_trials']} point-trials, {t['workers']} workers): ratio {t['ratio']:.2f}"
+            )
+        for m in report["memory"]:
+            print(f"memory: {m['trials']} trials, peak {m['peak_mb']:.0f} MB, {m['wall_s']:.1f} s")
+        d = report["duckdb"]
+        print(
+            f"duckdb: {d['atlas_rows']} rows in {d['atlas_query_s'] * 1000:.0f} ms; {d['generated_rows']} generated "
+            f"rows ({d['generated_mb']:.0f} MB) in {d['generated_query_s'] * 1000:.0f} ms"
+        )
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,203 @@
+"""The PMBM filter cycle and its PMB variant (docs/method.md §10): ``PMBMFilter.step(scan, births)`` once per scan,
+the same call as :class:`soabench.gmphd.filter.GMPHDFilter`, so every birth model (built-in or plugin) runs inside
+it unchanged.
+
+One cycle at scan k:
+
+1. predict (§10.2): the undetected intensity with the GM-PHD's prediction, plus the birth model's components exactly
+   as the GM-PHD appends them; every single-target hypothesis r <- p_S r, density predicted with F, Q;
+2. update with Z_k (§10.3, :mod:`soabench.pmbm.update`): the GM-PHD's measurement terms and gate, the birth model's
+   newborn terms in each measurement's new track, global hypotheses by Murty's algorithm per cluster;
+3. reduce: the intensity with the GM-PHD's prune, merge and cap (T, U, J_max, and ``max_undetected_birth_age``); each
+   hypothesis's density with the same merge and prune, at most ``J_h`` components; ``pmb``: the track-oriented
+   collapse to one multi-Bernoulli (:mod:`soabench.pmbm.pmb`);
+4. estimates (§10.4, estimator 1): in the global hypothesis of highest weight, every track whose hypothesis has
+   r > 0.5, at the mean of its heaviest component, labelled.
+
+Labels: the new track of measurement l at a scan gets the run's counter value plus l; the counter then advances by
+the number of measurements. Static probabilities (§4.1): p_S, and p_D g(x) at each component mean with the FOV gate,
+times line of sight with ``filter.occlusion_pd`` (§4.4); the Beta (dynamic) mode is refused.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from soabench import notice
+from soabench.config import FilterConfig, PMBMConfig, SensorConfig
+from soabench.errors import SoabenchError, require
+from soabench.geometry import clutter_intensity
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
+from soabench.gmphd.mixture import Mixture
+from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
+from soabench.gmphd.models import predict as predict_mixture
+from soabench.gmphd.probabilities import detection_gate
+from soabench.gmphd.reduction import prune_merge_cap
+from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
+from soabench.lmb.tracks import Tracks, reduce_components
+from soabench.lmb.update import predict as predict_tracks
+from soabench.origins import origin_counts
+from soabench.pmbm.density import PMBMDensity
+from soabench.pmbm.pmb import collapse
+from soabench.pmbm.update import Hypotheses, update
+from soabench.types import Births, Scan, StepResult, scan_once
+
+#: the probability modes the PMBM family runs (docs/method.md §10.6): static, with or without ``occlusion_pd``
+PMBM_MODES = ("static",)
+EXTRACT_R = 0.5  #: estimator 1 (§10.4): a track is reported when its hypothesis has r above this
+
+
+class PMBMFilter:
+    """The PMBM filter (``pmb=False``) or the PMB filter (``pmb=True``) of one run (module docstring).
+
+    Args:
+        filter_cfg: the GM-PHD's settings it shares: form (EKF or UKF), sigma_a, p_S, p_D, gate, prune_T, merge_U,
+            J_max, max_undetected_birth_age (the intensity's reduction), occlusion_pd, nonfinite.
+        sensor_cfg: the sensor model (dt, FOV, R, clutter) shared with the simulator (§2.3).
+        mode: "static" (the family's probability model; ``static+occ`` is static with ``occlusion_pd``).
+        pmbm_cfg: :class:`PMBMConfig` (defaults if None).
+        pmb: collapse to one multi-Bernoulli after every update (§10.5).
+        model: the measurement model; the GM-PHD's range-bearing EKF/UKF with its gate if None.
+
+    Attributes:
+        density: the posterior PMBM after the last step.
+        next_label: the next fresh track label of this run.
+    """
+
+    def __init__(
+        self,
+        filter_cfg: FilterConfig,
+        sensor_cfg: SensorConfig,
+        mode: str = "static",
+        *,
+        pmbm_cfg: PMBMConfig | None = None,
+        pmb: bool = False,
+        model: MeasurementModel | None = None,
+    ) -> None:
+        require(
+            mode in PMBM_MODES,
+            f"probability mode {mode!r} is not supported by the {'PMB' if pmb else 'PMBM'} filter; it runs static "
+            "probabilities (with or without occlusion_pd) only",
+        )
+        filter_cfg.validate()
+        sensor_cfg.validate()
+        self.cfg, self.sensor, self.mode = filter_cfg, sensor_cfg, mode
+        self.pmbm = (pmbm_cfg or PMBMConfig()).validate()
+        self.pmb = bool(pmb)
+        self.name = "pmb" if self.pmb else "pmbm"
+        self.hyp = Hypotheses(self.pmbm.M_max, self.pmbm.w_floor, self.pmbm.r_floor)
+        self.F, self.Q = cv_model(sensor_cfg.dt, filter_cfg.sigma_a)
+        R = measurement_noise(sensor_cfg.sigma_r, sensor_cfg.sigma_b)
+        gate = gate_threshold(filter_cfg.gate, filter_cfg.gate_prob)
+        self.model = model if model is not None else RangeBearingEKF(R, sensor_cfg.r_min, gate, filter_cfg.form)
+        self.density = PMBMDensity.empty()
+        self.next_label = 1
+
+    def reset(self) -> None:
+        """Forget the posterior and restart the label counter (next step is k = 0 again)."""
+        self.density = PMBMDensity.empty()
+        self.next_label = 1
+
+    def _p_D(self, m: np.ndarray, ego: np.ndarray | None, scan: Scan) -> np.ndarray:
+        """p_D g(m_c) at each component mean (§4.1, §4.4 with ``occlusion_pd``); 0 for a dropped scan."""
+        if ego is None:
+            return np.zeros(len(m))
+        occ = scan.occluders if self.cfg.occlusion_pd else None
+        return self.cfg.p_D * detection_gate(m, ego, self.sensor, occ)
+
+    def predict(self, births: Births) -> PMBMDensity:
+        """§10.2: the predicted density with the birth components appended to the intensity."""
+        d, cfg = self.density, self.cfg
+        ppp = predict_mixture(d.ppp, self.F, self.Q, cfg.p_S)
+        if len(births):
+            born = Mixture.from_arrays(births.w, births.m, births.P, origin=births.source)
+            ppp = Mixture.concatenate([ppp, born]) if len(ppp) else born
+        hyps = predict_tracks(d.hyps, self.F, self.Q, cfg.p_S)
+        return PMBMDensity(ppp, hyps, d.track, d.table, d.log_w)
+
+    def step(self, scan: Scan, births: Births) -> StepResult:
+        """One cycle (module docstring) with the births of ``scan``; returns the labelled estimates
+        (``StepResult.labels``) and the cost figures (components of the intensity and of every hypothesis)."""
+        kind = f"{self.name}.step"
+        if not notice.ready(kind):
+            with notice.first_use_notice(kind):
+                return self._step(scan, births)
+        return self._step(scan, births)
+
+    def _step(self, scan: Scan, births: Births) -> StepResult:
+        key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the other filters of the scan
+        Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
+        checked: StepInputs = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
+        Z, births, cfg = checked.Z, checked.births, self.cfg
+        t0 = time.perf_counter()
+        pred = self.predict(births)
+        t1 = time.perf_counter()
+
+        ego_ok = checked.ego
+        kappa = clutter_intensity(Z, self.sensor)
+        up = update(
+            pred, Z, ego_ok if ego_ok is not None else np.zeros(3), self._p_D(pred.ppp.m, ego_ok, scan),
+            self._p_D(pred.hyps.m, ego_ok, scan), kappa, self.model, newborn=births.newborn, label0=self.next_label,
+            hyp=self.hyp,
+        )  # fmt: skip
+        self.next_label += len(Z)
+        post = up.density
+        t2 = time.perf_counter()
+
+        sum_w = post.phd_mass()
+        ppp = post.ppp
+        if cfg.max_undetected_birth_age is not None and len(ppp):
+            keep = ~((ppp.n_det == 0) & (ppp.age > cfg.max_undetected_birth_age))
+            if not keep.all():
+                ppp = ppp.select(keep)
+        red = prune_merge_cap(ppp, cfg.prune_T, cfg.merge_U, cfg.J_max, cfg.theta_min)
+        h = post.hyps
+        start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, float(cfg.prune_T), float(cfg.merge_U),
+                                           int(self.pmbm.J_h))  # fmt: skip
+        post = PMBMDensity(red.mix, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track, post.table,
+                           post.log_w)  # fmt: skip
+        if self.pmb:
+            post = collapse(post)
+            h = post.hyps
+            start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, float(cfg.prune_T), float(cfg.merge_U),
+                                               int(self.pmbm.J_h))  # fmt: skip
+            post = PMBMDensity(post.ppp, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track,
+                               post.table, post.log_w)  # fmt: skip
+        self.density = post
+        best = int(np.argmax(post.log_w)) if len(post.log_w) else 0
+        chosen = post.hyps.select(post.table[best]) if post.n_tracks else Tracks.empty()
+        X, X_r, labels = chosen.estimates(EXTRACT_R)
+        t3 = time.perf_counter()
+        if not (np.isfinite(post.hyps.r).all() and np.isfinite(X).all() and np.isfinite(post.ppp.w).all()):
+            raise SoabenchError(f"scan {scan.k}: the {self.name.upper()} filter produced a non-finite posterior from "
+                                "finite inputs")  # fmt: skip
+        n_comp = len(post.ppp) + len(post.hyps.w)
+        return StepResult(
+            k=scan.k,
+            X=X,
+            X_w=X_r,
+            sum_w=sum_w,
+            sum_w_reduced=post.phd_mass(),
+            n_predicted=len(pred.ppp) + len(pred.hyps.w),
+            n_updated=len(up.density.ppp) + len(up.density.hyps.w),
+            n_reduced=n_comp,
+            cap_hit=bool(red.cap_hit),
+            t_predict=t1 - t0,
+            t_update=t2 - t1,
+            t_reduce=t3 - t2,
+            mean_pD=float(cfg.p_D),
+            A=np.asarray(up.A, dtype=float),
+            kappa=np.asarray(kappa, dtype=float),
+            n_pruned=red.n_pruned,
+            n_merged=red.n_merged,
+            n_pairs=up.n_pairs,
+            n_newborn=up.n_newborn,
+            n_dropped=checked.n_dropped,
+            n_dropped_births=checked.n_dropped_births,
+            origin_counts=origin_counts(
+                np.concatenate([post.ppp.origin, post.hyps.origin]), np.concatenate([post.ppp.age, post.hyps.age])
+            ),
+            labels=labels,
+        )

@@ -1,0 +1,108 @@
+"""What an occlusion gap was (docs/method.md §9.4, "Gaps described"): how long, behind what, and what moved.
+
+For a gap k_a..k_b of target i (:class:`~soabench.tracks.reemergence.Gap`):
+
+* its length in scans (k_b − k_a + 1) and in seconds (that times the scan period);
+* the **occluder kind** that hid i longest: on each scan of the gap, the hiding occluder is the first one the sight
+  line from the sensor to i's true position runs through (the nearest to the sensor among those that block it, by
+  the sensor's own rule, :func:`soabench.sensor.line_of_sight`); its kind is the scan's obstacle kind
+  (:attr:`soabench.types.Obstacles.kind`: ``"parked"`` car, ``"vehicle"`` in traffic, ``"building"``), or
+  ``"other"`` for any other occluder or none found. The kind with the most scans wins; a tie goes to the kind that
+  hid i first;
+* whether i **moved** more than ``d_gate`` while hidden: the distance between its true positions at k_a − 1 (last
+  seen) and k_b + 1 (seen again);
+* whether the **ego moved**: its position changed by more than :data:`EGO_MOVED_M` between those two scans.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+
+from soabench.sensor import SIGHT_TOL, oriented_hulls
+
+if TYPE_CHECKING:
+    from soabench.tracks.reemergence import Gap
+    from soabench.types import Scan, Scans
+
+#: occluder kinds of a gap, in the order tables and figures list them, with their names for a reader
+OCCLUDER_KINDS = ("parked", "vehicle", "building", "other")
+OCCLUDER_LABEL = {
+    "parked": "parked car",
+    "vehicle": "moving vehicle",
+    "building": "building",
+    "other": "other obstacle",
+}
+#: the ego "moved" during a gap when its position changed by more than this (m)
+EGO_MOVED_M = 0.5
+#: an occluder is the obstacle of O_k whose hull centroid lies this close to its own (m)
+_SAME_CENTROID_M = 1e-6
+
+
+@dataclass(frozen=True)
+class GapDescription:
+    """One gap described (module docstring): scans and seconds hidden, the occluder kind, the target's and the
+    ego's displacement between the scans before and after the gap (m) and whether each counts as moved."""
+
+    scans: int
+    seconds: float
+    occluder: str
+    displacement: float
+    moved: bool
+    ego_displacement: float
+    ego_moved: bool
+
+
+def _obstacle_kind(scan: Scan, occluder: shapely.Geometry) -> str:
+    """The kind of the obstacle of O_k that is ``occluder``'s hull (matched by hull centroid), else "other"."""
+    obs = scan.obstacles
+    if obs is None or not len(obs):
+        return "other"
+    ego = np.asarray(scan.ego, dtype=float)[:2]
+    b = np.asarray(obs.centroid_bearing, dtype=float)
+    centroids = ego + np.asarray(obs.centroid_range, dtype=float)[:, None] * np.column_stack([np.cos(b), np.sin(b)])
+    c = shapely.get_coordinates(shapely.centroid(oriented_hulls(np.array([occluder], dtype=object))))[0]
+    d = np.hypot(*(centroids - c).T)
+    j = int(np.argmin(d))
+    kind = str(obs.kind[j])
+    return kind if d[j] <= _SAME_CENTROID_M and kind in OCCLUDER_KINDS else "other"
+
+
+def hiding_kind(scan: Scan, xy: np.ndarray) -> str:
+    """The kind of the occluder that hides the point ``xy`` from the sensor at ``scan``: the nearest to the sensor
+    of the occluders whose core the sight line runs through (:func:`soabench.sensor.line_of_sight`'s rule), "other"
+    when none does."""
+    ego = np.asarray(scan.ego, dtype=float)[:2]
+    occ = np.asarray(list(scan.occluders), dtype=object).reshape(-1)
+    if not len(occ) or not np.isfinite(xy).all():
+        return "other"
+    ego_pt = shapely.points(ego)
+    occ = occ[~shapely.contains(occ, ego_pt)]  # the sensor is never hidden by what it sits in
+    line = shapely.linestrings(np.stack([ego, np.asarray(xy, dtype=float)[:2]]))
+    occ = occ[shapely.intersects(line, occ)]
+    if len(occ):
+        occ = occ[shapely.intersects(line, shapely.buffer(occ, -SIGHT_TOL, join_style="mitre"))]
+    if not len(occ):
+        return "other"
+    return _obstacle_kind(scan, occ[int(np.argmin(shapely.distance(ego_pt, occ)))])
+
+
+def describe_gaps(scans: Scans, gaps: Sequence[Gap], d_gate: float) -> list[GapDescription]:
+    """:class:`GapDescription` of each gap of ``scans`` (the truth and the per-scan occluders of the sensor)."""
+    xy, dt = np.asarray(scans.truth_xy, dtype=float), float(scans.dt)
+    out = []
+    for g in gaps:
+        kinds = [hiding_kind(scans.scans[k], xy[k, g.target]) for k in range(g.k_a, g.k_b + 1)]
+        counts = {kd: kinds.count(kd) for kd in dict.fromkeys(kinds)}  # in order of first appearance: the tie rule
+        kind = max(counts, key=counts.__getitem__)
+        before, after = g.k_a - 1, g.k_b + 1
+        moved = float(np.hypot(*(xy[after, g.target] - xy[before, g.target])))
+        ego = [np.asarray(scans.scans[k].ego, dtype=float)[:2] for k in (before, after)]
+        ego_moved = float(np.hypot(*(ego[1] - ego[0])))
+        n = g.k_b - g.k_a + 1
+        out.append(GapDescription(n, n * dt, kind, moved, moved > d_gate, ego_moved, ego_moved > EGO_MOVED_M))
+    return out

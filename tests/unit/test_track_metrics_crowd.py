@@ -1,0 +1,138 @@
+"""Track metrics at crowd sizes (docs/method.md §9.3): IDF1's assignment split into the components of the overlap
+graph, and OSPA(2)'s windows with far pairs kept apart, give the values of the whole-problem forms, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from soabench.tracks.ospa2 import ospa2
+from soabench.tracks.scores import _identity_matched, track_scores
+from soabench.tracks.sequence import TrackSequence
+from tests.unit.test_track_metrics import D_GATE, assert_equal_trackeval, random_sequence
+
+
+def square_identity(potential: np.ndarray, gt_count: np.ndarray, tr_count: np.ndarray) -> tuple[int, int]:
+    """(IDFN, IDFP) of TrackEval's square assignment over every truth and track, each with a dummy partner."""
+    nG, nT = potential.shape
+    n = nG + nT
+    fp_mat, fn_mat = np.zeros((n, n)), np.zeros((n, n))
+    fp_mat[nG:, :nT] = 1e10
+    fn_mat[:nG, nT:] = 1e10
+    fn_mat[:nG, :nT] = gt_count[:, None] - potential
+    fn_mat[np.arange(nG), nT + np.arange(nG)] = gt_count
+    fp_mat[:nG, :nT] = tr_count[None, :] - potential
+    fp_mat[nG + np.arange(nT), np.arange(nT)] = tr_count
+    rows, cols = linear_sum_assignment(fn_mat + fp_mat)
+    return int(fn_mat[rows, cols].sum()), int(fp_mat[rows, cols].sum())
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_identity_by_components_equals_the_square_assignment(seed):
+    """Sparse overlap counts with many equal values (ties), stars, isolated truths and tracks: the same IDFN and
+    IDFP as the square problem."""
+    rng = np.random.default_rng(seed)
+    nG, nT = int(rng.integers(1, 25)), int(rng.integers(1, 40))
+    potential = np.where(rng.random((nG, nT)) < rng.uniform(0.02, 0.4), rng.integers(1, 4, (nG, nT)), 0).astype(float)
+    gt_count = potential.sum(axis=1) + rng.integers(0, 5, nG)
+    tr_count = potential.sum(axis=0) + rng.integers(0, 5, nT)
+    matched = _identity_matched(potential)
+    idfn, idfp = square_identity(potential, gt_count, tr_count)
+    assert (int(gt_count.sum() - matched), int(tr_count.sum() - matched)) == (idfn, idfp)
+
+
+def crowd_sequence(seed: int, groups: int = 4, K: int = 30) -> tuple[list, list, list, list]:
+    """``groups`` copies of :func:`random_sequence` 200 m apart, with their own ids: several components."""
+    parts = [random_sequence(seed * 10 + g, K) for g in range(groups)]
+    out: tuple[list, list, list, list] = ([], [], [], [])
+    for k in range(K):
+        out[0].append(np.concatenate([p[0][k] + 1000 * g for g, p in enumerate(parts)]))
+        out[1].append(np.concatenate([p[1][k] + [200.0 * g, 0.0] for g, p in enumerate(parts)]))
+        out[2].append(np.concatenate([p[2][k] + 1000 * g for g, p in enumerate(parts)]))
+        out[3].append(np.concatenate([p[3][k] + [200.0 * g, 0.0] for g, p in enumerate(parts)]))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_crowd_sequences_equal_trackeval(seed):
+    assert_equal_trackeval(*crowd_sequence(seed))
+    assert track_scores(*crowd_sequence(seed), D_GATE).idf1 < 1  # something to get wrong
+
+
+def ospa2_every_pair(seq: TrackSequence, c: float, p: float, window: int) -> np.ndarray:
+    """(K,) OSPA(2) with every pair's base distance summed scan by scan, in the operations of the compiled loop
+    (the window's tracks in id order, the minimum-cost assignment and numpy's pairwise sum of the same kernels)."""
+    from soabench.metrics_kernels import assignment, np_sum
+
+    K = len(seq)
+
+    def dense(rows, n):
+        out = np.full((K, n, 2), np.nan)
+        out[np.repeat(np.arange(K), np.diff(rows.off)), rows.ids] = rows.xy
+        return out
+
+    G, E = dense(seq.gt, len(seq.gt_labels)), dense(seq.est, len(seq.est_labels))
+    out = np.zeros(K)
+    for k in range(K):
+        lo = max(0, k - window + 1)
+        gsel = np.flatnonzero(~np.isnan(G[lo : k + 1, :, 0]).all(axis=0))
+        esel = np.flatnonzero(~np.isnan(E[lo : k + 1, :, 0]).all(axis=0))
+        m, n = len(gsel), len(esel)
+        if max(m, n) == 0:
+            continue
+        total, count = np.zeros((m, n)), np.zeros((m, n))
+        for t in range(lo, k + 1):
+            gp, ep = G[t, gsel], E[t, esel]
+            dx = gp[:, None, 0] - ep[None, :, 0]
+            dy = gp[:, None, 1] - ep[None, :, 1]
+            both = ~np.isnan(gp[:, None, 0]) & ~np.isnan(ep[None, :, 0])
+            either = ~np.isnan(gp[:, None, 0]) | ~np.isnan(ep[None, :, 0])
+            term = np.where(both, np.minimum(c, np.sqrt(dx * dx + dy * dy)), c)
+            total = np.where(either, total + term, total)
+            count += either
+        D = np.minimum(total / np.maximum(count, 1), c) ** p
+        Cm = D if m <= n else D.T.copy()
+        loc_p = 0.0
+        if min(m, n):
+            rows, cols = assignment(np.ascontiguousarray(Cm))
+            loc_p = np_sum(Cm[rows, cols].copy(), min(m, n)) / max(m, n)
+        out[k] = (loc_p + c**p * (max(m, n) - min(m, n)) / max(m, n)) ** (1.0 / p)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("window", [10, 70])
+def test_ospa2_far_pairs_apart_equals_every_pair(seed, window):
+    """Groups 200 m apart (most pairs never within c), label changes, gaps; windows of one and two mask words."""
+    seq = TrackSequence.of(*crowd_sequence(seed, K=90))
+    got = ospa2(*crowd_sequence(seed, K=90), c=10.0, p=1.0, window=window).series[:, 0]
+    np.testing.assert_array_equal(got, ospa2_every_pair(seq, 10.0, 1.0, window))
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_sparse_assignment_keeps_the_nonzero_pairs_of_the_whole_assignment(seed):
+    """Clusters of non-zero (negative, continuous: one optimum) costs among zeros, rows and columns without any:
+    the non-zero pairs of the whole matrix's minimum-cost assignment, in row order."""
+    from soabench.tracks.kernels import sparse_assignment
+
+    rng = np.random.default_rng(seed)
+    a, b = int(rng.integers(1, 30)), int(rng.integers(1, 30))
+    C = np.where(rng.random((a, b)) < rng.uniform(0.02, 0.3), -rng.random((a, b)), 0.0)
+    rows, cols = linear_sum_assignment(C)
+    keep = C[rows, cols] != 0
+    got = sparse_assignment(C)
+    np.testing.assert_array_equal(got[0], rows[keep])
+    np.testing.assert_array_equal(got[1], cols[keep])
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_equal_rows_as_compared_pair_by_pair(seed):
+    """Rows with few values (zeros, repeats, -0.0): the same answer as comparing every pair of rows."""
+    from soabench.tracks.kernels import _equal_rows
+
+    rng = np.random.default_rng(seed)
+    a, b = int(rng.integers(1, 12)), int(rng.integers(1, 6))
+    C = rng.choice([0.0, -0.0, -0.5, -1.0], size=(a, b), p=[0.6, 0.1, 0.15, 0.15])
+    expected = any((C[i] == C[j]).all() and (C[i] != 0).any() for i in range(a) for j in range(i + 1, a))
+    assert _equal_rows(C) == expected
