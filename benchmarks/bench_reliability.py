@@ -13,9 +13,18 @@
    CSV files must be byte-identical.
 4. Filter steps: random mixtures and scans with NaN/inf injected, ``filter.nonfinite = "drop"``: no NaN anywhere.
 
+5. Fuzzing (``--fuzz MINUTES``, on its own): the targets of ``tests/fuzz_targets.py`` (config and scenario TOML,
+   run.json, trial records, run CSVs, KITTI text files and .bin/.label scans, plugin births, estimates and labels)
+   take turns on random Hypothesis inputs for MINUTES; prints the inputs tried, refused and accepted per target and
+   every distinct failure (a traceback, an error of several lines, a wrong result, a file outside the folder) with
+   an input that shows it.
+
 Uses the fake trial of the tests (no SUMO), so it takes a few minutes (``--catalogue``: part 1 only)::
 
-    python benchmarks/bench_reliability.py [--catalogue]
+    python benchmarks/bench_reliability.py [--catalogue [--timeout S] | --fuzz MINUTES]
+
+``--timeout S`` is the time bound of a catalogue case (default 30 s; on a loaded shared machine a forked case can
+wait that long for a core before it starts).
 """
 
 from __future__ import annotations
@@ -28,6 +37,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -79,9 +89,8 @@ def _case_in_child(make, needle: str, case_dir: Path, limit_bytes: int, say_comm
             traceback.print_exc()
     started = started or bool(bad_inputs.STARTED)
     verdict = "silent" if started else bad_inputs.verdict(code, out.getvalue(), err.getvalue(), needle)
-    theirs = case_dir / "theirs"
-    if theirs.is_dir() and sorted(p.name for p in theirs.iterdir()) != ["README.md", "notes.txt"]:
-        verdict = "silent"  # wrote into a folder that is not the command's
+    if not bad_inputs.foreign_untouched(case_dir):
+        verdict = "silent"  # wrote (or probed) into a folder that is not the command's
     return {"verdict": verdict, "code": code, "started": started, "err": err.getvalue()[-2000:]}
 
 
@@ -283,14 +292,68 @@ def filter_steps(n: int = 2000) -> dict:
     return {"steps": n, "measurements dropped": dropped, "non-finite results": nan_results}
 
 
+def fuzz(minutes: float, batch: int = 50) -> dict:
+    """Every fuzz target in turn, ``batch`` random inputs at a time, until ``minutes`` have passed; failures are
+    recorded (not raised, so the search goes on) and counted once per distinct first line."""
+    from fuzz_targets import TARGETS, FuzzFailure, short_id
+    from hypothesis import HealthCheck, Phase, given, settings
+
+    stop = time.monotonic() + 60.0 * minutes
+    seen = {name: {"ok": 0, "refused": 0, "failed": 0} for name in TARGETS}
+    failures: dict[tuple[str, str], dict] = {}
+    quick = settings(
+        max_examples=batch, derandomize=False, database=None, deadline=None, phases=[Phase.generate],
+        suppress_health_check=list(HealthCheck),
+    )  # fmt: skip
+
+    def runner(name: str, target) -> Callable[[object], None]:
+        def run(value: object) -> None:
+            if time.monotonic() >= stop:
+                return
+            try:
+                seen[name][target(value)] += 1
+            except FuzzFailure as exc:
+                seen[name]["failed"] += 1
+                key = (name, short_id(exc))
+                if key not in failures:
+                    failures[key] = {"count": 0, "detail": str(exc)[-3000:], "input": repr(value)[:600]}
+                failures[key]["count"] += 1
+
+        return run
+
+    while time.monotonic() < stop:
+        for name, (strategy, target) in TARGETS.items():
+            if time.monotonic() < stop:
+                quick(given(strategy())(runner(name, target)))()
+    return {"seen": seen, "failures": failures}
+
+
+def main_fuzz(minutes: float) -> None:
+    t0 = time.monotonic()
+    out = fuzz(minutes)
+    total = {k: sum(c[k] for c in out["seen"].values()) for k in ("ok", "refused", "failed")}
+    n = sum(total.values())
+    print(f"fuzzing: {n} inputs in {time.monotonic() - t0:.0f} s: {total['ok']} accepted, {total['refused']} refused "
+          f"with one line, {total['failed']} failed ({len(out['failures'])} distinct failures)")  # fmt: skip
+    for name, c in out["seen"].items():
+        print(f"  {name:28s} tried {sum(c.values()):7d}  accepted {c['ok']:7d}  refused {c['refused']:7d}  "
+              f"failed {c['failed']:5d}")  # fmt: skip
+    for (name, first), f in out["failures"].items():
+        print(f"\nFAILURE {name} ({f['count']}x): {first}\n  input: {f['input']}\n{f['detail']}")
+
+
 def main_() -> None:
+    if "--fuzz" in sys.argv[1:]:
+        main_fuzz(float(sys.argv[sys.argv.index("--fuzz") + 1]))
+        return
     report.write_report = lambda run_dir, figures=True, store=None: (
         "summary"
     )  # the figures are not what is measured here
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.monotonic()
-        counts, bad = catalogue_counts(tmp / "bad")
+        bound = float(sys.argv[sys.argv.index("--timeout") + 1]) if "--timeout" in sys.argv else 30.0
+        counts, bad = catalogue_counts(tmp / "bad", timeout_s=bound)
         total = dict.fromkeys(VERDICTS, 0)
         for c in counts.values():
             for k, v in c.items():

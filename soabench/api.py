@@ -235,6 +235,10 @@ def make_tracker(
             naming several is refused, as is one that names others than ``filter``.
         options: a plugin's own options (default: the configuration's ``[plugins.<name>]`` table).
 
+    The configuration's ``[sensor]``, ``[birth]``, ``[filter]``, ``[plugins.<name>]`` sections and the family's own
+    (``[lmb]``, ...) shape the tracker, ``experiment.filters`` picks its family (above); the rest of ``[experiment]``
+    and ``[metrics]`` describe a run and its scoring (:func:`run`, :func:`evaluate`), not one tracker.
+
     Returns:
         A :class:`FilterTracker` for a birth model (``step`` returns :class:`StepResult`, labelled), else the
         tracker (``step`` returns :class:`Estimates`). Stepping it through :func:`simulate_trial`'s scans gives the
@@ -248,7 +252,6 @@ def make_tracker(
         >>> type(results[0]).__name__, len(results) == len(scans)
         ('StepResult', True)
     """
-    from soabench.experiment.trial.trial import guard
     from soabench.seeding import trial_seeds
     from soabench.trackers import build_filter
 
@@ -267,7 +270,14 @@ def make_tracker(
         return cls(TrackerSetup(cfg.sensor, scene, rng, mode, cfg), **options)
     filt, p_D_b = build_filter(family, cfg, cfg.sensor, mode, seeds.association_rng())
     birth_model = cls(cfg.birth, cfg.sensor, scene, rng, **options)
-    return FilterTracker(birth_model, filt, p_D_b, check_births=None if builtin else guard.check_births)
+    return FilterTracker(birth_model, filt, p_D_b, check_births=None if builtin else _named_check(name))
+
+
+def _named_check(plugin: str) -> _Any:
+    """The births check of a plugin birth model, its errors naming ``plugin``."""
+    from soabench.experiment.trial.guard import check_births
+
+    return lambda births, scan: check_births(births, scan, plugin)
 
 
 def evaluate(

@@ -66,7 +66,7 @@ FAMILIES: dict[str, FilterFamily] = {
             "pmbm", "PMBM", ("static", "static+occ"), "soabench.pmbm.family:build", section="pmbm", hatch="xx"
         ),
         FilterFamily(
-            "pmb", "PMB", ("static", "static+occ"), "soabench.pmbm.family:build_pmb", section="pmbm", hatch=".."
+            "pmb", "PMB", ("static", "static+occ"), "soabench.pmbm.family:build_pmb", section="pmbm", hatch="\\\\\\\\"
         ),
     )
 }

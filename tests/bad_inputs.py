@@ -193,13 +193,29 @@ def _suite(tmp: Path, scenarios: str, extra: str = "") -> str:
 GOOD_SCENARIO = '[[scenario]]\nname = "a"\nnet = "intersection"\nduration = 5\n'
 
 
+#: modification time (ns) of each foreign folder made by :func:`_foreign`, by path
+_FOREIGN_MTIME: dict[str, int] = {}
+
+
 def _foreign(tmp: Path, name: str = "theirs") -> Path:
-    """A folder holding someone else's files (never to be written into)."""
+    """A folder holding someone else's files (never to be written into, nor probed: its modification time must not
+    change)."""
     d = tmp / name
     d.mkdir()
     (d / "README.md").write_text("mine\n")
     (d / "notes.txt").write_text("mine\n")
+    _FOREIGN_MTIME[str(d)] = d.stat().st_mtime_ns
     return d
+
+
+def foreign_untouched(tmp: Path) -> bool:
+    """The foreign folder ``tmp/theirs`` (if a case made one) holds its two files and was not modified (no file
+    created in it, even for a moment)."""
+    theirs = tmp / "theirs"
+    if not theirs.is_dir():
+        return True
+    same = _FOREIGN_MTIME.get(str(theirs), theirs.stat().st_mtime_ns) == theirs.stat().st_mtime_ns
+    return same and sorted(p.name for p in theirs.iterdir()) == ["README.md", "notes.txt"]
 
 
 #: the commands with a valid argument list each (a bad value or flag is put into them)
@@ -222,6 +238,8 @@ def _base(command: str, tmp: Path) -> list[str]:
         "check": ["check", "--suite", _suite(tmp, GOOD_SCENARIO), "--out", out],
         "import": ["import", "osm", str(OSM_FIXTURE), "--out", out],
         "scenes": ["scenes"],
+        "atlas": ["atlas", *quick, "--axis", "sensor.p_D=0.8,0.9", "--out", out],
+        "query": ["query", str(tmp), "SELECT 1"],
     }[command]
 
 
@@ -323,7 +341,7 @@ def _option_cases() -> list[Case]:
 
 ALL_COMMANDS = (
     "scene", "record", "birth", "run", "sweep clutter", "sweep births", "sweep occlusion", "study", "sensitivity",
-    "results", "kitti", "export", "check", "import", "scenes",
+    "results", "kitti", "export", "check", "import", "scenes", "atlas", "query",
 )  # fmt: skip
 
 
@@ -606,6 +624,62 @@ def _replay_cases() -> list[Case]:
     ]  # fmt: skip
 
 
+# ------------------------------------------------------------------------------------------------ atlas, query
+def _atlas(*extra: str) -> Callable[[Path], list[str]]:
+    quick = ["--trials", "1", "--duration", "5", "--workers", "1", "--no-progress"]
+    return lambda t: ["atlas", *quick, "--out", str(t / "atl"), *extra]
+
+
+def _not_an_atlas(tmp: Path) -> str:
+    d = tmp / "notes"
+    d.mkdir()
+    (d / "x.txt").write_text("mine\n")
+    return str(d)
+
+
+def _atlas_cases() -> list[Case]:
+    return [
+        ("atlas axis unknown key", _atlas("--axis", "nope.x=1,2"), "axis 'nope.x' is unknown"),
+        ("atlas axis value out of range", _atlas("--axis", "sensor.p_D=1.5,0.9"), "sensor.p_D = 1.5 is out of range"),
+        ("atlas axis empty", _atlas("--axis", "sensor.p_D="), "axis sensor.p_D is empty"),
+        ("atlas axis clutter -1", _atlas("--axis", "experiment.clutter=-1"), "clutter = -1.0 is out of range"),
+        ("atlas axis NaN", _atlas("--axis", "birth.N_hat=nan"), "value 'nan' is not allowed"),
+        ("atlas axis value twice", _atlas("--axis", "sensor.p_D=0.9,0.9"), "names 0.9 twice"),
+        ("atlas axis unknown family", _atlas("--axis", "filters=kalman"), "'kalman' is unknown"),
+        ("atlas axis unknown scene", _atlas("--axis", "net=atlantis"), "'atlantis'"),
+        ("atlas axis count 1e12", _atlas("--axis", "pedestrians.count=1e12"), "pedestrians.count = 1000000000000"),
+        ("atlas too many trials", _atlas("--axis", "sensor.p_D=0.5,0.6,0.7", "--trials=10000"), "add --force"),
+        ("atlas sobol without points", _atlas("--axis", "sensor.p_D=0.5:0.9", "--sample", "sobol"), "--points"),
+        ("query not an atlas", lambda t: ["query", _not_an_atlas(t), "SELECT 1"], "neither an atlas"),
+        ("query missing folder", lambda t: ["query", str(t / "nowhere"), "SELECT 1"], "is not a folder"),
+        ("query failing SQL", lambda t: ["query", _atlas_run(t), "SELEC 1"], "the SQL failed"),
+        ("query unknown column", lambda t: ["query", _atlas_run(t), "SELECT nope FROM trials"], "the SQL failed"),
+        ("query SQL writing a file", lambda t: ["query", _atlas_run(t), f"COPY (SELECT 1) TO '{t / 'leak.csv'}'"],
+         "file system operations are disabled"),
+        ("query SQL reading a file", lambda t: ["query", _atlas_run(t), "SELECT * FROM read_csv('/etc/passwd')"],
+         "file system operations are disabled"),
+        ("query empty SQL", lambda t: ["query", _atlas_run(t), ""], "the SQL is empty"),
+        ("query --out wrong suffix", lambda t: ["query", _atlas_run(t), "SELECT 1", "--out", str(t / "q.txt")],
+         "a .csv or .parquet file"),
+        ("query --out missing folder",
+         lambda t: ["query", _atlas_run(t), "SELECT 1", "--out", str(t / "no" / "q.csv")], "does not exist"),
+    ]  # fmt: skip
+
+
+def _atlas_run(tmp: Path) -> str:
+    """A finished run folder of the tests' fake trial (what ``query`` reads besides an atlas)."""
+    import fake_trial as ft
+
+    from soabench.config import Config
+    from soabench.experiment.execution.runner import run_experiment
+
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(cfg.experiment, trials=2, duration=10.0, models=("soa",))
+    opts = RunOptions(workers=1, progress=False, figures=False)
+    run_experiment(cfg.validate(), "x", out=tmp / "r", options=opts, trial_fn=ft.fake_trial, load_fn=ft.fake_load)
+    return str(tmp / "r")
+
+
 # ------------------------------------------------------------------------------------------------ the catalogue
 def _sections() -> dict[str, list[Case]]:
     return {
@@ -618,6 +692,7 @@ def _sections() -> dict[str, list[Case]]:
         "check suites": _check_cases(),
         "import osm": _import_cases(),
         "replay and report": _replay_cases(),
+        "atlas and query": _atlas_cases(),
     }
 
 

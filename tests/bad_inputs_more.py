@@ -229,6 +229,11 @@ FAMILY_CASES: list[Case] = [
     _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nmax_tracks = 0\n', "lmb.max_tracks = 0 is out of range"),
     _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nmax_hypotheses = 2.5\n', "must be an integer"),
     _cfg("[lmb]\nr_B = 0.3\n", "unknown config key lmb.r_B"),
+    ("run --filters pmbm dynamic only", lambda t: _run(t, "--filters", "pmbm", "--probabilities", "dynamic"), "static"),
+    _cfg("[pmbm]\nJ_h = 3\n", "runs no PMBM or PMB filter"),
+    _cfg('[experiment]\nfilters = ["pmb"]\n[pmbm]\nM_max = 0\n', "pmbm.M_max = 0 is out of range"),
+    _cfg('[experiment]\nfilters = ["pmbm"]\n[pmbm]\nw_floor = nan\n', "pmbm.w_floor = nan is out of range"),
+    _cfg('[experiment]\nfilters = ["pmbm"]\n[pmbm]\nmarginals = "lbp"\n', "pmbm.marginals = 'lbp' is not allowed"),
     ("sweep clutter config filters", _with_config("sweep", "clutter", "--trials", "1", "--out", "sw"), "GM-PHD"),
     ("sweep births config filters", _with_config("sweep", "births", "--trials", "1", "--out", "sw"), "GM-PHD"),
     ("study config filters", _with_config("study", "--trials", "1", "--out", "st"), "`soabench study` runs the GM"),
@@ -239,3 +244,107 @@ FAMILY_CASES: list[Case] = [
     ("check threshold filter", _suite_with_config("", 'filter = "lmb"\n'), "unknown key 'filter'"),
 ]
 CASES += FAMILY_CASES
+
+
+# ------------------------------------------------------------------------------------------------ third pass
+def _fake_run(tmp: Path, trials: int = 3) -> Path:
+    """A finished run folder of the tests' fake trial whose run.json names the built-in trial kind (so that
+    ``report`` and ``replay`` read it as a run of ``soabench run``)."""
+    import dataclasses
+
+    import fake_trial as ft
+
+    from soabench.experiment.execution.options import RunOptions
+    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.trial import registry
+
+    cfg = Config()
+    cfg.experiment = dataclasses.replace(cfg.experiment, trials=trials, duration=10.0, clutter=(3.0,), models=("soa",))
+    run = tmp / "run"
+    opts = RunOptions(workers=1, progress=False, figures=False)
+    run_experiment(cfg.validate(), "intersection", out=run, options=opts, trial_fn=ft.fake_trial, load_fn=ft.fake_load)
+    meta = json.loads((run / "run.json").read_text())
+    meta["trial_kind"], meta["scene_loader"] = registry.DEFAULT_TRIAL_KIND, registry.DEFAULT_SCENE_LOADER
+    (run / "run.json").write_text(json.dumps(meta))
+    return run
+
+
+def _cut_trials(keep: float):
+    def make(tmp: Path) -> list[str]:
+        run = _fake_run(tmp)
+        data = (run / "trials.csv").read_bytes()
+        (run / "trials.csv").write_bytes(data[: int(len(data) * keep)])
+        (run / "report.html").unlink(missing_ok=True)
+        return ["report", str(run)]
+
+    return make
+
+
+def _suite_threshold(metric: str, bounds: str) -> Callable[[Path], list[str]]:
+    def make(tmp: Path) -> list[str]:
+        suite = tmp / "suite.toml"
+        suite.write_text(
+            '[suite]\nname = "t"\n[[scenario]]\nname = "a"\nnet = "intersection"\nduration = 5\n'
+            f'[[threshold]]\nmetric = "{metric}"\n{bounds}\n'
+        )
+        return ["check", "--suite", str(suite), "--out", str(tmp / "chk")]
+
+    return make
+
+
+def _kitti_config(text: str, *flags: str):
+    def make(tmp: Path) -> list[str]:
+        argv = _kitti()(tmp)
+        root = Path(argv[argv.index("--root") + 1])
+        (root / "semantics").mkdir(exist_ok=True)
+        extra = [str(root / f.lower()) if f in ("SEMANTICS", "VELODYNE") else f for f in flags]
+        return [*argv, "--config", _toml(tmp, text), *extra]
+
+    return make
+
+
+NO_SEMANTIC_CLASSES = "[kitti]\nsemantic_classes = []\n"
+
+THIRD_PASS: list[Case] = [
+    # a damaged trials.csv is named, not read as "no trials"
+    ("report trials.csv cut mid-row", _cut_trials(0.5), "is damaged (row"),
+    ("report trials.csv cut before its newline", _cut_trials(0.9999), "trials.csv' is damaged"),
+    # output files: as every command's (an existing folder, the format's ending)
+    ("report --out under a missing folder", lambda t: ["report", str(_fake_run(t)), "--out", str(t / "no" / "r.html")],
+     "does not exist"),
+    ("report --out wrong suffix", lambda t: ["report", str(_fake_run(t)), "--out", str(t / "r.txt")],
+     "must end in .html"),
+    ("replay --out under a missing folder",
+     lambda t: ["replay", str(_fake_run(t)), "--trial", "0", "--out", str(t / "no" / "r.html")], "does not exist"),
+    ("replay --out wrong suffix", lambda t: ["replay", str(_fake_run(t)), "--trial", "0", "--out", str(t / "r.txt")],
+     "r.txt"),
+    # check thresholds outside their metric's range
+    ("check threshold hota max 2", _suite_threshold("hota", "max = 2.0"), "hota max = 2.0 is outside"),
+    ("check threshold hota min -1", _suite_threshold("hota", "min = -1.0"), "hota min = -1.0 is outside"),
+    ("check threshold idsw min -5", _suite_threshold("idsw", "min = -5"), "idsw min = -5 is outside"),
+    ("check threshold precision max 1.5", _suite_threshold("precision", "max = 1.5"), "range [0, 1]"),
+    ("check threshold mota max 2", _suite_threshold("mota", "max = 2.0"), "range [-inf, 1]"),
+    ("check threshold ospa max -1", _suite_threshold("ospa", "max = -1.0"), "ospa max = -1.0 is outside"),
+    ("check threshold min above max", _suite_threshold("ospa", "min = 5.0\nmax = 1.0"), "is above max = 1.0"),
+    # a semantic source with no semantic class
+    ("kitti semantic_classes [] --point-labels", _kitti_config(NO_SEMANTIC_CLASSES, "--point-labels", "SEMANTICS"),
+     "kitti.semantic_classes = [] names no class of the birth region --point-labels gives"),
+    ("kitti semantic_classes [] --semantics", _kitti_config(NO_SEMANTIC_CLASSES, "--semantics", "SEMANTICS"),
+     "kitti.semantic_classes = [] names no class of the birth region --semantics gives"),
+]  # fmt: skip
+CASES += THIRD_PASS
+
+LMB = '[experiment]\nfilters = ["lmb"]\n'
+FAMILY_CASES_MORE: list[Case] = [
+    ("run --filters gmphd,LMB", lambda t: _run(t, "--filters", "gmphd,LMB"), "filter family 'LMB' is unknown"),
+    ("run --filters ''", lambda t: _run(t, "--filters="), "--filters"),
+    _cfg('[experiment]\nfilters = ["gmphd", "nope"]\n', "filter family = 'nope' is not allowed"),
+    _cfg(LMB + 'probabilities = ["dynamic+occ"]\n', "filter family 'lmb' runs the probability modes static"),
+    _cfg(LMB + "[lmb]\nprune_r = 1.0\n", "lmb.prune_r = 1.0 is out of range"),
+    _cfg(LMB + "[lmb]\nextract_r = nan\n", "lmb.extract_r = nan is out of range"),
+    _cfg(LMB + "[lmb]\nmax_components = 0\n", "lmb.max_components = 0 is out of range"),
+    _cfg(LMB + "[lmb]\nr_B_max = -0.1\n", "lmb.r_B_max = -0.1 is out of range"),
+    _cfg(LMB + "[lmb]\nmax_hypotheses = 100000000\n", "lmb.max_hypotheses = 100000000 is out of range"),
+    _cfg(LMB + '[lmb]\nr_B_max = "0.3"\n', "lmb.r_B_max"),
+]
+CASES += FAMILY_CASES_MORE

@@ -247,3 +247,18 @@ for _name, _fn in (
     ("fake-crashing", crashing_trial),
 ):
     register_trial_kind(_name, _fn)
+
+
+def renumbered(record: dict, trial: int) -> dict:
+    """A copy of a trial record as trial ``trial``'s: its ``trial`` and the trial cell of every packed table."""
+    import json
+
+    out = json.loads(json.dumps(record))
+    out["trial"] = trial
+    for name in ("rows", "episodes", "steps"):
+        table = out.get(name)
+        if table:
+            j = table["columns"].index("trial")
+            for row in table["rows"]:
+                row[j] = trial
+    return out

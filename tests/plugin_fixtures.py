@@ -39,6 +39,13 @@ class NaNWeights(OneBirth):
         return b
 
 
+class HugeWeights(OneBirth):
+    def __call__(self, ctx) -> Births:
+        b = super().__call__(ctx)
+        b.w = np.full(len(b.w), 1e300)
+        return b
+
+
 class NegativeWeights(OneBirth):
     def __call__(self, ctx) -> Births:
         b = super().__call__(ctx)

@@ -79,6 +79,12 @@ def handle(args: argparse.Namespace) -> int:
         )
         if args.nhat_sweep is not None:
             require_distinct("--nhat-sweep offsets", tuple(args.nhat_sweep))
+        source = "--point-labels" if args.point_labels is not None else "--semantics" if args.semantics else None
+        require(
+            source is None or len(kcfg.semantic_classes) > 0,
+            f"kitti.semantic_classes = [] names no class of the birth region {source} gives (S-OA's semantic births "
+            "would have none); name at least one, e.g. ['sidewalk'] (the default)",
+        )
         lidar = lidar_options(
             args.root, args.point_labels, args.velodyne, args.semantics, args.lidar_grid, args.lidar_closing,
             args.lidar_fill, kcfg.semantic_classes + kcfg.occluder_classes,

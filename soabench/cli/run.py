@@ -18,8 +18,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--filters",
         type=csv_list("filter family", FILTER_FAMILIES),
-        help="filter families every birth model runs in: gmphd (default), lmb (labelled multi-Bernoulli: static "
-        "probabilities only), or both",
+        help="filter families every birth model runs in, comma-separated: gmphd (default), lmb (labelled "
+        "multi-Bernoulli), pmbm (Poisson multi-Bernoulli mixture), pmb (its multi-Bernoulli variant); lmb, pmbm and "
+        "pmb run the static modes (static, static+occ) only",
     )
     p.add_argument(
         "--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run (default: new run)"

@@ -116,8 +116,15 @@ def frame_files(velodyne: Path, labels: Path, seq: str, n_frames: int) -> list[t
 
 
 def read_frame(scan: Path, labels: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(N, 4) float32 points and (N,) uint32 class ids (lower 16 bits) of one frame."""
+    """(N, 4) float32 points and (N,) uint32 class ids (lower 16 bits) of one frame; :class:`ReadError` naming the
+    scan if a point's x, y or z is NaN or infinite (it would land in no cell, or in a wrong one)."""
     pts = np.fromfile(scan, dtype="<f4").reshape(-1, 4)
+    bad = int(np.count_nonzero(~np.isfinite(pts[:, :3]).all(axis=1)))
+    if bad:
+        raise ReadError(
+            f"{scan}: {bad} of {len(pts)} points have a NaN or infinite coordinate; a scan holds finite float32 "
+            "x y z intensity"
+        )
     lab = np.fromfile(labels, dtype="<u4") & np.uint32(0xFFFF)
     return pts, lab
 

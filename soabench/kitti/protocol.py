@@ -35,6 +35,7 @@ from soabench.kitti.levels import level_split
 from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
 from soabench.kitti.report import TRACK_COLUMNS, write_outputs
+from soabench.kitti.trackeval_kitti import write_inputs
 from soabench.metrics import evaluate
 from soabench.tracks.evaluate import evaluate_tracks, run_labels
 
@@ -88,8 +89,12 @@ def count_targets(seq: KittiSequence, kcfg: KittiConfig) -> int:
 # one (setting, sequence) task
 
 
-def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: str) -> dict:
+def run_sequence(
+    ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: str, kitti_seq: KittiSequence | None = None
+) -> dict:
     """Every model of ``cfg.experiment`` (first probability mode) on one sequence with N-hat; a JSON-ready record.
+    ``kitti_seq``: the parsed sequence, to add under ``"kitti_results"`` each labelled model's estimates and labels
+    per frame (for :func:`soabench.kitti.trackeval_kitti.write_inputs`; not part of the written record).
 
     Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])``. Wall-clock
     times go to ``record["timing"]``, so everything else is bit-identical for the same inputs and seed.
@@ -119,6 +124,8 @@ def run_sequence(ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: s
             "tracks": {k: tracks[k] for k in TRACK_COLUMNS},
             "levels": level_split(ss, X, labels, cfg.metrics),
         }
+        if kitti_seq is not None and labels is not None:
+            out.setdefault("kitti_results", {})[model] = (X, labels)
         out["timing"][model] = {**timing, "total": time.perf_counter() - t0}
     return out
 
@@ -228,7 +235,11 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
             for note in cache[s].info["notes"]:
                 log(f"warning: {note}")
         t0 = time.perf_counter()
-        rec = run_sequence(cache[s], spec.config, nh, spec.config.experiment.seed, s)
+        rec = run_sequence(
+            cache[s], spec.config, nh, spec.config.experiment.seed, s, seqs[s] if setting == CV else None
+        )
+        if setting == CV:  # TrackEval's own KITTI evaluation reads these (soabench.kitti.trackeval_kitti)
+            write_inputs(out, seqs[s], cache[s], rec.pop("kitti_results", {}))
         rec.update({"setting": setting, "sequence": s, "N_hat": nh, "info": cache[s].info, "targets": targets[s]})
         write_json_atomic(path, rec)
         brief = ", ".join(

@@ -23,6 +23,7 @@ from soabench.birth import LABEL
 from soabench.experiment.reports.occlusion import bin_labels
 from soabench.experiment.runs.files import write_csv, write_json_atomic, write_text_atomic
 from soabench.figures import kitti as kitti_figures
+from soabench.kitti import trackeval_kitti
 from soabench.kitti.config import KittiSpec
 from soabench.kitti.levels import LEVEL_NAMES, LEVELS
 
@@ -89,6 +90,36 @@ def undetected_gaps_table(records: dict, models: list[str], bins: Sequence[int])
             })  # fmt: skip
         out[m] = rows
     return out
+
+
+def _trackeval_md(te: dict, tt: dict, lv: dict, models: list[str]) -> list[str]:
+    """TrackEval's own KITTI evaluation beside our Tracks numbers (nothing when it did not run)."""
+    if not te:
+        return []
+    L = ["## TrackEval's own KITTI evaluation beside ours", ""]
+    if "error" in te:
+        return [*L, f"TrackEval refused the inputs: {te['error']}", ""]
+    L += [
+        "TrackEval's KITTI reader scores 2-D image boxes (each estimate drawn as a pedestrian box at its position) "
+        "matched by IoU, pooled over the sequences, and drops every pedestrian labelled occluded above 2 or "
+        "truncated above 0 (and the estimates matched to them); ours scores every labelled pedestrian in the field "
+        "of view in the ground plane (mean over sequences). Truth: the truth boxes TrackEval keeps, and our "
+        "truth-frames.",
+        "",
+        "| model | HOTA, TrackEval | HOTA, ours | IDF1, TrackEval | IDF1, ours | MOTA, TrackEval | IDSW, TrackEval "
+        "| IDSW, ours | truth, TrackEval | truth, ours |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for m in models:
+        t, o = te.get(m), tt.get(m)
+        if t is None or o is None:
+            continue
+        ours = sum(r["frames"] for r in lv.get(m, {}).get("occluded", []))
+        L.append(
+            f"| {_label(m)} | {_fmt(t['hota'])} | {_fmt(o['hota_mean'])} | {_fmt(t['idf1'])} | {_fmt(o['idf1_mean'])} "
+            f"| {_fmt(t['mota'])} | {t['idsw']} | {o['idsw']} | {t['gt_dets']} | {ours} |"
+        )
+    return [*L, ""]
 
 
 def _levels_md(lv: dict, gaps: dict, models: list[str]) -> list[str]:
@@ -239,6 +270,8 @@ def write_outputs(
     t1 = table1(records, models)
     tt = tracks_table(records, models)
     lv = levels_table(records, models)
+    cv_seqs = sorted(s for (st, s) in records if st == "cv")
+    te = trackeval_kitti.evaluate(out, cv_seqs, frames, models)
     ug = undetected_gaps_table(records, models, spec.config.metrics.gap_bins)
     pw = pairwise(records, models)
     offsets = list(spec.nhat_sweep or [])
@@ -308,10 +341,11 @@ def write_outputs(
         "figures": figs,
         "occlusion_levels": lv,
         "undetected_gaps": ug,
+        "trackeval_kitti": te,
     }
     write_json_atomic(out / "summary.json", summary)
     md = _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, stationary, infos, out)
-    levels_md = _levels_md(lv, ug, models)
+    levels_md = _levels_md(lv, ug, models) + _trackeval_md(te, tt, lv, models)
     if levels_md:
         md += "\n" + "\n".join(levels_md)
     write_text_atomic(out / "report.md", md)

@@ -29,6 +29,8 @@ def tracking_rows(
 ) -> list[str]:
     """KITTI result rows of frame ``frame``: ``X`` (n, 4) estimated states [x, y, vx, vy] (world, m and m/s) or
     (n, 2) positions, ``labels`` (n,) their int track ids, ``w`` (n,) their scores."""
+    if len(labels) == 0:  # a frame without estimates
+        return []
     X = np.asarray(X, dtype=float).reshape(len(labels), -1)
     require(X.shape[1] in (2, 4), f"estimates of shape {X.shape}: give (n, 2) positions or (n, 4) states")
     rows = []

@@ -81,8 +81,9 @@ def cluster_costs(
     track costs finite wherever the detection factor is positive."""
     nT, nL = len(hs), len(L)
     C = np.full((nL, nT + nL), np.inf)
-    C[:, :nT] = (log_l_miss[hs][:, None] - log_l_det[np.ix_(hs, L)]).T
-    C[np.arange(nL), nT + np.arange(nL)] = -log_new[L]
+    C[:, :nT] = (log_l_miss[hs][:, None] - log_l_det[hs][:, L]).T
+    idx = np.arange(nL)
+    C[idx, nT + idx] = -log_new[L]
     return C
 
 
@@ -208,8 +209,9 @@ def new_global_hypotheses(
         feasible &= n_sol[inv] > 0
         single = (n_sol[inv] == 1) | (ks == 1)
         base[single] += costs0[inv[single]]
-        for a in np.flatnonzero(single & (n_sol[inv] > 0)):
-            fixed[a, T] = sols[inv[a]][1][0]
+        first = np.stack([s[1][0] if len(s[0]) else np.full(len(T), MISS, dtype=np.int64) for s in sols])
+        rows = np.flatnonzero(single)
+        fixed[np.ix_(rows, T)] = first[inv[rows]]
         for a in np.flatnonzero(~single):
             multi[a].append((T, *sols[inv[a]]))
     parents, choices, logs = [], [], []

@@ -24,9 +24,7 @@ def _solve(C: np.ndarray) -> tuple[float, np.ndarray] | None:
     except ValueError:  # scipy: "cost matrix is infeasible"
         return None
     cost = float(C[rows, cols].sum())
-    if not np.isfinite(cost):
-        return None
-    return cost, cols
+    return (cost, cols) if cost < np.inf else None
 
 
 def murty(C: np.ndarray, k: int, max_gap: float = np.inf) -> list[tuple[float, np.ndarray]]:

@@ -270,7 +270,10 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     where either track exists of ``min(c, |x(t) - y(t)|)`` (both exist) or ``c``. A pair never closer than c in the
     window adds c at each such scan, so its total is c added ``count`` times, with ``count`` the set bits of the two
     tracks' presence masks over the window; only the pairs closer than c at some scan of the window (kept per scan
-    as they enter it) are summed scan by scan. The cost matrix is the same, entry for entry, as summing every pair."""
+    as they enter it) are summed scan by scan. The cost matrix is the same, entry for entry, as summing every pair.
+    When every far pair costs exactly c^p (the largest cost there is), an optimal assignment pairs the rest at c^p
+    and matches only pairs nearer than that, so it is found on those (:func:`sparse_assignment` of the costs less
+    c^p); each row's cost is then summed in row order as before."""
     K = len(g_off) - 1
     out = np.zeros((K, 3))
     n_words = (window + 63) // 64
@@ -282,6 +285,10 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     for n in range(1, window + 1):
         total += c
         far[n] = min(total / n, c) ** p
+    cp = c**p  # what a pair costs at most (min(., c) ** p)
+    uniform = True  # every far pair costs exactly c^p (c summed n times, over n, is c)
+    for n in range(1, window + 1):
+        uniform = uniform and far[n] == cp
     stamp_g = np.full(n_g, -1, dtype=np.int64)
     stamp_e = np.full(n_e, -1, dtype=np.int64)
     gsel = np.empty(n_g, dtype=np.int64)
@@ -292,7 +299,7 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     ev_j = np.empty(64, dtype=np.int64)
     ev_d = np.empty(64)
     ev_off = np.zeros(K + 1, dtype=np.int64)
-    n_ev = 0
+    n_ev = np.int64(0)  # not the literal 0: one specialisation of _near_events
     for k in range(K):
         lo = max(0, k - window + 1)
         if k >= window:  # scan k - window leaves the window
@@ -369,10 +376,20 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                         Cm[a, b] = d
                     else:
                         Cm[b, a] = d
-            rows, cols = assignment(Cm)
             vals = np.empty(small)
-            for r in range(small):
-                vals[r] = Cm[rows[r], cols[r]]
+            if uniform:  # far pairs cost c^p, the most any pair costs: only the nearer ones are matched
+                below = np.empty((small, large))  # zero for a far pair, negative for a nearer one
+                for r in range(small):
+                    for q in range(large):
+                        below[r, q] = Cm[r, q] - cp
+                rows, cols = sparse_assignment(below)
+                vals[:] = cp
+                for r in range(len(rows)):
+                    vals[rows[r]] = Cm[rows[r], cols[r]]
+            else:
+                rows, cols = assignment(Cm)
+                for r in range(small):
+                    vals[r] = Cm[rows[r], cols[r]]
             loc_p = np_sum(vals, small) / large
         out[k, 0] = (loc_p + card_p) ** (1.0 / p)
         out[k, 1] = loc_p ** (1.0 / p)

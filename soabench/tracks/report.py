@@ -152,5 +152,5 @@ TRACKS_LEGEND = (
     "re-emergence episode starts when a pedestrian comes back into sight after an occlusion inside the field of "
     "view. **coasted**: the fraction of occlusion gaps covered by an estimate on every scan; **identity kept**: the "
     "fraction of re-emergences re-acquired under the label the pedestrian had before the gap. "
-    f"{ABSENT}: the tracker gives no labels."
+    f"{ABSENT}: no track metric: the tracker gives no labels, or its filter family defines no run in that mode."
 )

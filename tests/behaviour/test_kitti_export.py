@@ -180,6 +180,21 @@ def test_kitti_protocol_end_to_end_and_resume(exported, tmp_path, capsys):
         )
     t = tracks["soa"]
     assert f"| S-OA | {t['hota_mean']:.3f} ± {t['hota_std']:.3f} |" in report
+    # KITTI's occluded levels, per truth-frame: every CV frame of the export's pedestrians counts at one level, the
+    # export writes 0 (in sight), 2 (hidden) and 3 (centre outside the FOV) only
+    levels = summary["occlusion_levels"]["soa"]["occluded"]
+    assert levels[1]["frames"] == 0 and sum(r["frames"] for r in levels) > 0
+    assert all(0 <= r["associated"] <= r["frames"] and r["idsw"] is not None for r in levels)
+    assert "## Occlusion levels" in report and "## Identity through undetected gaps" in report
+    # TrackEval's own KITTI evaluation of the same estimates, beside ours: it keeps fewer truth rows (its distractor
+    # rule drops the hidden and the truncated ones)
+    te = summary["trackeval_kitti"]
+    assert set(te) == {"soa", "pubm", "ubm", "ubm-ws"}
+    for m, r in te.items():
+        assert 0 <= r["hota"] <= 1 and 0 < r["gt_dets"] <= sum(
+            x["frames"] for x in summary["occlusion_levels"][m]["occluded"]
+        )
+    assert "## TrackEval's own KITTI evaluation beside ours" in report
 
     # resume: a lost record is recomputed bit for bit, nothing else is rerun
     record = run / "records" / "cv" / "0001.json"

@@ -16,7 +16,7 @@ from shapely.geometry import box
 
 import soabench.scenario
 from soabench.cli.main import main
-from soabench.config import SensorConfig
+from soabench.config import FILTER_FAMILIES, SensorConfig
 from soabench.experiment.campaigns import cross_scene
 from soabench.experiment.campaigns.occlusion_density import scan_occlusion
 from soabench.experiment.reports import paper
@@ -88,8 +88,16 @@ def test_one_command_writes_every_part(suite):
         "kitti/intersection/export/label_02/0001.txt",
         "kitti/intersection/run/summary.json",
         "kitti/intersection/run/report.md",
+        "filters/trials.csv",
+        "filters-lmb-components/trials.csv",
     ):
         assert (out / f).is_file(), f
+    families = read_json(out / "filters/run.json")["config"]
+    assert families["experiment"]["filters"] == list(FILTER_FAMILIES)  # every family of the registry
+    assert families["experiment"]["probabilities"] == ["static", "static+occ"]
+    assert families["lmb"]["birth_mapping"] == "groups"
+    ablation = read_json(out / "filters-lmb-components/run.json")["config"]
+    assert ablation["experiment"]["filters"] == ["lmb"] and ablation["lmb"]["birth_mapping"] == "components"
     sens = out / "intersection/sensitivity"
     assert read_json(sens / "visible/run.json")["config"]["metrics"]["gt_set"] == "visible"
     assert read_json(sens / "gate_off/run.json")["config"]["filter"]["gate"] is False
@@ -313,11 +321,12 @@ def test_the_filters_part_is_kept_extended_or_refused(suite, tmp_path):
         before = read_csv(part / "trials.csv")
         assert _filters_part(part, Settings(trials=3, duration=10.0), exe, log) == ("done", 0)
     after = read_csv(part / "trials.csv")
-    assert set(after["trial"]) == {0, 1, 2} and set(after["filter"]) == {"gmphd", "lmb"}
+    assert set(after["trial"]) == {0, 1, 2} and set(after["filter"]) == set(FILTER_FAMILIES)
     old = after["trial"] < 2
     assert list(after["ospa"][old]) == list(before["ospa"])  # the finished trials are kept as they were
     meta = json.loads((part / "run.json").read_text())
     meta["config"]["experiment"]["filters"] = ["gmphd"]
     (part / "run.json").write_text(json.dumps(meta))
-    with pytest.raises(SoabenchError, match=r"experiment.filters: stored \['gmphd'\], requested \['gmphd', 'lmb'\]"):
+    want = r"experiment.filters: stored \['gmphd'\], requested \['gmphd', 'lmb', 'pmbm'"
+    with pytest.raises(SoabenchError, match=want):
         _filters_part(part, Settings(trials=3, duration=10.0), exe, log)

@@ -11,6 +11,7 @@ import shutil
 import bad_inputs
 import bad_inputs_more
 import pytest
+from fake_trial import renumbered
 from test_command_line import test_bad_input_is_one_line_and_exit_2 as one_line_and_exit_2
 
 from soabench.cli.main import main
@@ -97,6 +98,40 @@ def test_a_copy_of_trial_0_saved_as_trial_2_is_moved_aside_and_trial_2_runs(tmp_
     assert json.loads((trials / "trial_00002.json").read_text())["trial"] == 2
     assert json.loads((out / "rejected" / "trials" / "trial_00002.json").read_text())["trial"] == 0
     assert _rows(out) == before  # the rows of trials 0, 1, 2, once each
+
+
+def test_a_stray_record_beyond_the_trial_count_is_not_said_to_run_again(tmp_path, fake_cli_runs, capsys):
+    out = _new_run(tmp_path)
+    before = _rows(out)
+    shutil.copy(out / "trials" / "trial_00000.json", out / "trials" / "trial_00007.json")
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "trials/trial_00007.json: it is not trial 7 of this run: it holds trial 0" in err
+    assert "the run has trials 0-2, so no trial 7 runs" in err and "runs again" not in err
+    assert not (out / "trials" / "trial_00007.json").exists() and _rows(out) == before
+
+
+def test_a_record_whose_tables_hold_another_trial_is_moved_aside(tmp_path, fake_cli_runs, capsys):
+    out = _new_run(tmp_path)
+    before = _rows(out)
+    rec = json.loads((out / "trials" / "trial_00001.json").read_text())
+    (out / "trials" / "trial_00002.json").write_text(json.dumps({**rec, "trial": 2}))  # trial 1's rows, renamed
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "trial_00002.json: it is not trial 2 of this run: row 0 of its rows table has a key cell" in err
+    assert "trial 2 runs again" in err and _rows(out) == before
+
+
+def test_a_record_of_a_trial_beyond_the_trial_count_is_refused_in_one_line(tmp_path, fake_cli_runs, capsys):
+    out = _new_run(tmp_path)
+    before = _rows(out)
+    rec = json.loads((out / "trials" / "trial_00001.json").read_text())
+    (out / "trials" / "trial_00007.json").write_text(json.dumps(renumbered(rec, 7)))
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds trial [7] beyond its 3 trials" in err[0]
+    assert _rows(out) == before
 
 
 @pytest.mark.parametrize(

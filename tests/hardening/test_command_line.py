@@ -50,8 +50,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch, no_work
     assert bad_inputs.verdict(code, out, err, needle) == "clean", (name, code, err)
     assert not bad_inputs.STARTED
     assert not (tmp_path / "out" / "run.json").exists()
-    theirs = tmp_path / "theirs"  # a foreign folder a case offered as --out is left as it was
-    assert not theirs.exists() or sorted(p.name for p in theirs.iterdir()) == ["README.md", "notes.txt"]
+    assert bad_inputs.foreign_untouched(tmp_path)  # a foreign folder a case offered as --out is left as it was
 
 
 def test_the_bad_input_catalogue_is_large_distinct_and_covers_every_command():

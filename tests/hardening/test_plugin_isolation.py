@@ -147,7 +147,10 @@ def test_a_plugin_that_hangs_is_stopped_by_the_budget(tmp_path, capsys) -> None:
     assert time.perf_counter() - t0 < 120
     assert rc == 1
     lines = [ln for ln in err.splitlines() if "budget" in ln and "SleepsForever" in ln]
-    assert len(lines) == 2 and "budget of 1 s (experiment.plugin_budget)" in lines[0], err
+    said = [ln for ln in lines if "passed its budget of 1 s (experiment.plugin_budget) in one call: stopped" in ln]
+    assert [ln.split("(trial ")[1][:1] for ln in said] == ["0", "1"], err  # each said when its budget passed
+    assert lines.index(said[1]) > lines.index(said[0]) + 1  # trial 0's failure record came in between
+    assert len(lines) == 4 and "budget of 1 s (experiment.plugin_budget)" in lines[1], err
     record = json.loads((tmp_path / "run" / "trials" / "trial_00000.json").read_text())
     assert "time.sleep(1e6)" in record["model_failures"][0]["traceback"]  # where it hung
 

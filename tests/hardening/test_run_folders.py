@@ -182,7 +182,7 @@ def test_foreign_folder_is_never_adopted(tmp_path):
 def test_trial_records_beyond_the_run_are_foreign(tmp_path):
     run = make_run(tmp_path / "run")
     rec = json.loads((run / "trials" / "trial_00000.json").read_text())  # a record of this run, as trial 99
-    (run / "trials" / "trial_00099.json").write_text(json.dumps({**rec, "trial": 99}))
+    (run / "trials" / "trial_00099.json").write_text(json.dumps(ft.renumbered(rec, 99)))
     with pytest.raises(SoabenchError, match="beyond its 3 trials"):
         run_experiment(None, "x", resume=run, options=RunOptions(progress=False, figures=False))
 

@@ -216,6 +216,26 @@ def test_wrong_objects_fail_at_the_boundary_in_one_line(trial1) -> None:
     assert "config must be a Config or dict or str or Path" in _one_line(exc)
 
 
+def test_make_tracker_names_the_plugin_whose_births_are_unusable(trial1) -> None:
+    _, scans = trial1
+    tracker = sb.make_tracker("plugin_fixtures:HugeWeights", NET)
+    with pytest.raises(ValueError) as exc:
+        tracker.step(scans[0])
+    assert "birth model 'plugin_fixtures:HugeWeights' at scan 0: Births.w[0] = 1e+300" in _one_line(exc)
+
+
+def test_make_tracker_honours_the_configured_filter_family_or_refuses_in_one_line() -> None:
+    lmb = {"experiment": {"filters": ["lmb"]}}
+    with pytest.raises(ValueError) as exc:
+        sb.make_tracker("soa", NET, mode="dynamic", config=lmb)
+    assert "probability mode 'dynamic' is not defined for the LMB filter" in _one_line(exc)
+    tracker = sb.make_tracker("soa", NET, mode="static", config=lmb)
+    assert type(tracker.filt).__module__.startswith("soabench.lmb")
+    with pytest.raises(ValueError) as exc:
+        sb.make_tracker("soa", NET, config={"experiment": {"filters": ["gmphd", "lmb"]}})
+    assert "names 2 filter families; a tracker runs one" in _one_line(exc)
+
+
 def test_nan_truth_rows_are_refused_by_the_metric_helpers(trial1) -> None:
     from soabench.metrics import gated_assignment, gospa, gt_mask, ospa
 

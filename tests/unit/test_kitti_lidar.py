@@ -17,6 +17,7 @@ import shapely
 
 from soabench.cli.main import main
 from soabench.kitti.config import KittiConfig, kitti_base_config
+from soabench.kitti.formats import ReadError
 from soabench.kitti.lidar import (
     LidarParams,
     _label_lut,
@@ -171,6 +172,18 @@ def ndimage_smooth(occ):
     from scipy import ndimage
 
     return ndimage.uniform_filter(occ.astype(float), 5) > 0.5
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_scan_with_non_finite_points_is_a_read_error_naming_it(tmp_path, bad):
+    vel, lab = tmp_path / "velodyne" / "0003", tmp_path / "labels" / "0003"
+    vel.mkdir(parents=True)
+    lab.mkdir(parents=True)
+    pts = np.full((50, 4), bad, dtype="<f4")
+    pts.tofile(vel / "000000.bin")
+    np.full(len(pts), 48, dtype="<u4").tofile(lab / "000000.label")
+    with pytest.raises(ReadError, match=r"000000\.bin: 50 of 50 points have a NaN or infinite coordinate"):
+        sequence_regions(tmp_path / "velodyne", tmp_path / "labels", "0003", 1, ("sidewalk",), LidarParams(), 50.0)
 
 
 def test_regions_are_cached_by_files_and_parameters(tmp_path):

@@ -128,11 +128,25 @@ def _births(**change) -> Births:
         ({"w": np.array(["a"])}, "dtype <U1; a real-valued numeric array"),
         ({"source": np.zeros(1)}, r"Births.source .* int needed"),
         ({"P": np.triu(np.ones((4, 4)))[None]}, "not symmetric"),
+        ({"w": np.array([1e300])}, r"Births.w\[0\] = 1e\+300; a birth weight .* in \[0, 100\]"),
+        ({"m": np.full((1, 4), 1e300)}, r"Births.m\[0\] = .* within \+-1e\+07"),
+        ({"P": -np.eye(4)[None]}, r"Births.P\[0\] is not positive definite \(smallest eigenvalue -1\)"),
+        ({"P": np.zeros((1, 4, 4))}, r"Births.P\[0\] is not positive definite"),
+        ({"P": np.ones((1, 4, 4))}, r"Births.P\[0\] is not positive definite"),
+        ({"P": 1e300 * np.eye(4)[None]}, r"Births.P\[0\] has an eigenvalue of 1e\+300"),
     ],
 )
 def test_check_births_rejects(change, message) -> None:
     with pytest.raises(guard.PluginOutputError, match=message):
         guard.check_births(_births(**change), _scan())
+
+
+def test_check_births_names_the_plugin_when_given() -> None:
+    with pytest.raises(guard.PluginOutputError, match=r"^birth model 'pkg:Mine' at scan 0: Births.w\[0\] = 1e\+300"):
+        guard.check_births(_births(w=np.array([1e300])), _scan(), "pkg:Mine")
+    nb = NewbornTerms(np.zeros((2, 4)), np.zeros((2, 4, 4)), lambda A, k: np.ones(2))
+    with pytest.raises(guard.PluginOutputError, match=r"NewbornTerms.P\[0\] is not positive definite"):
+        guard.check_births(_births(newborn=nb), _scan(2), "pkg:Mine")
 
 
 def test_check_births_accepts_and_checks_newborn_beta() -> None:

@@ -168,6 +168,24 @@ def _strs(v: Any, where: str) -> tuple[str, ...]:
     return tuple(v)
 
 
+#: metrics of trials.csv that are fractions or scores in [0, 1] (docs/user-guide/outputs.md); MOTA may be negative
+#: and is at most 1; every other metric and timing column is a count, a distance, a delay or a time, >= 0
+UNIT_METRICS = frozenset(
+    ("precision", "recall", "mean_pD", "hota", "deta", "assa", "loca", "motp", "idf1", "idp", "idr", "coasted",
+     "id_kept", *(f"hota_a{a:02d}" for a in range(5, 100, 5)))
+)  # fmt: skip
+
+
+def metric_range(metric: str) -> tuple[float, float]:
+    """The values ``metric`` (a trials.csv metric or timing column) can take: a threshold outside them passes or
+    fails whatever the tracker does."""
+    if metric in UNIT_METRICS:
+        return 0.0, 1.0
+    if metric == "mota":
+        return -math.inf, 1.0
+    return 0.0, math.inf
+
+
 def _number(v: Any, where: str, lo: float = -math.inf) -> float:
     ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= lo
     require(ok, f"{where} = {v!r} must be a finite number >= {lo:g}")
@@ -250,9 +268,20 @@ def load_suite(path: str | Path) -> Suite:
         _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", _suite_bins(suite.config))
         th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
         th.mode, th.scenario = t.get("mode"), t.get("scenario")
+        lo, hi = metric_range(th.metric)
         for key in ("max", "min"):
             if key in t:
-                setattr(th, key, _number(t[key], f"threshold {th.metric}: {key}"))
+                v = _number(t[key], f"threshold {th.metric}: {key}")
+                setattr(th, key, v)
+                require(
+                    lo <= v <= hi,
+                    f"{p}: [[threshold]] #{i + 1}: {th.metric} {key} = {t[key]!r} is outside the metric's range "
+                    f"[{lo:g}, {hi:g}] (such a threshold passes or fails whatever the tracker does)",
+                )
+        require(
+            th.max is None or th.min is None or th.min <= th.max,
+            f"{p}: [[threshold]] #{i + 1}: {th.metric} min = {th.min!r} is above max = {th.max!r} (no value passes)",
+        )
         for key in ("max_increase", "max_decrease", "abs_tol"):
             if key in t:
                 setattr(th, key, _number(t[key], f"threshold {th.metric}: {key}", 0.0))

@@ -4,9 +4,12 @@ Parts, in order, under ``OUT`` (default ``results/``):
 
 * ``intersection/``: the paper's study (:mod:`soabench.experiment.campaigns.study`: main protocol, clutter sweep, N_hat
   sweep, comparison with the paper) on the shipped intersection;
-* ``filters/``: the main protocol on the shipped intersection (its trials, duration and seed; static
-  probabilities, λ = 3) with every birth model in both filter families, the GM-PHD and the labelled multi-Bernoulli
-  filter (``--filters gmphd,lmb``; :func:`_filters_part`): does occlusion-aware birth help a labelled filter?
+* ``filters/``: the main protocol on the shipped intersection (its trials, duration and seed; λ = 3) with every
+  birth model in every filter family of the registry (the GM-PHD, the LMB, the PMBM and the PMB;
+  ``--filters gmphd,lmb,pmbm,pmb``), in the modes every family runs, ``static`` and ``static+occ``
+  (:func:`_filters_part`): does occlusion-aware birth help a labelled filter? Beside it
+  ``filters-lmb-components/``: the LMB with its earlier birth mapping (``[lmb] birth_mapping = "components"``,
+  static), the ablation that shows what the mapping changes.
 * ``<scene>/``: the same study on every other shipped scene (``--scene-trials`` trials of its main protocol; no
   comparison with the paper, whose numbers belong to its own protocol on the intersection);
 * ``scenes/density/<scene>.json``: each scene's occlusion density (:mod:`.occlusion_density`);
@@ -34,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from soabench.birth import CORE_MODELS
-from soabench.config import MAX_SEED, MAX_TRIALS, Config, check_time
+from soabench.config import FILTER_FAMILIES, MAX_SEED, MAX_TRIALS, Config, check_time
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns.occlusion_density import write_density
 from soabench.experiment.execution.executors import MAX_WORKERS
@@ -386,23 +389,39 @@ def _atlas_part(folder: Path, scene: str, s: Settings, exe: RunOptions, log: Cal
     return ("done" if o.complete else "incomplete"), o.n_missing
 
 
-#: the filter families of the ``filters/`` part, and the one mode every family runs (docs/method.md "LMB filter")
-FILTERS_PART = {"filters": ("gmphd", "lmb"), "probabilities": ("static",)}
+#: the filter families of the ``filters/`` part (every family of the registry), and the modes every family runs
+FILTERS_PART = {"filters": FILTER_FAMILIES, "probabilities": ("static", "static+occ")}
+#: the ``filters-lmb-components/`` ablation: the LMB with one Bernoulli per birth component (docs/method.md §10.7)
+ABLATION_PART = {"filters": ("lmb",), "probabilities": ("static",)}
+ABLATION_LMB = {"birth_mapping": "components"}
+#: the keys a stored families run must share with the requested one
+FILTERS_KEYS = (*SIZE_KEYS, "experiment.filters", "experiment.probabilities", "lmb.birth_mapping")
 
 
 def filters_config(s: Settings) -> Config:
-    """The configuration of the ``filters/`` part: the main protocol's sizes with both families, static mode."""
+    """The configuration of the ``filters/`` part: the main protocol's sizes with every family."""
     return _base_config(s, s.trials, **FILTERS_PART)
 
 
-def _filters_part(folder: Path, s: Settings, exe: RunOptions, log: Callable[[str], None]) -> tuple[str, int]:
-    """The main protocol on the intersection with both filter families (module docstring) in ``folder``: kept when
-    complete with these settings, else resumed (more trials: extended) or started."""
+def ablation_config(s: Settings) -> Config:
+    """The configuration of the ``filters-lmb-components/`` part: the main protocol's sizes, the LMB with its
+    earlier birth mapping."""
+    cfg = _base_config(s, s.trials, **ABLATION_PART)
+    cfg.lmb = dataclasses.replace(cfg.lmb, **ABLATION_LMB)
+    return cfg.validate()
+
+
+def _filters_part(
+    folder: Path, s: Settings, exe: RunOptions, log: Callable[[str], None], cfg: Config | None = None
+) -> tuple[str, int]:
+    """The main protocol on the intersection with every filter family (module docstring) in ``folder`` (``cfg``:
+    the ablation's instead): kept when complete with these settings, else resumed (more trials: extended) or
+    started."""
     # imported when called: scipy would slow every start-up
     from soabench.experiment.execution.runner import run_experiment
 
-    cfg = filters_config(s)
-    keys = (*SIZE_KEYS, "experiment.filters")
+    cfg = cfg if cfg is not None else filters_config(s)
+    keys = FILTERS_KEYS
     if (folder / "run.json").is_file():
         if same_settings(folder, cfg, keys) and run_complete(folder):
             log(f"kept {folder} (the families run is complete)")
@@ -440,6 +459,7 @@ def run_results(
         *shipped,
         "scenes",
         "filters",
+        "filters-lmb-components",
         "atlas",
         "kitti",
         "README.md",
@@ -471,6 +491,10 @@ def run_results(
             if "intersection" in scenes:
                 step("intersection study", lambda: _study_part(root / "intersection", s, exe, log))
                 step("intersection filter families", lambda: _filters_part(root / "filters", s, exe, log))
+                step(
+                    "intersection LMB, one Bernoulli per birth component",
+                    lambda: _filters_part(root / "filters-lmb-components", s, exe, log, ablation_config(s)),
+                )
             for scene in (n for n in scenes if n != "intersection"):
                 step(
                     f"{scene} study",

@@ -303,7 +303,7 @@ def run_experiment(
                 f"--save-estimates does not apply to --resume of {str(run_dir)!r}: the run was started without it, "
                 "so its finished trials have no estimates; start a new run with --save-estimates --out",
             )
-            for line in store.reject_foreign_records():  # copies, strays: moved aside, their trials run again
+            for line in store.reject_foreign_records(meta.trials):  # copies, strays: moved aside, their trials rerun
                 print(f"soabench: {line}", file=sys.stderr)
             config = meta.config
             net, polys, scenario = meta.net, meta.polys, meta.scenario

@@ -38,7 +38,7 @@ from soabench.experiment.reports.headline import METRICS, Headline, Metric, head
 from soabench.experiment.reports.report import FAMILY_LABEL, families, family_tables, paper_section, table_legend
 from soabench.experiment.reports.tables import RunTables, load_tables, select
 from soabench.experiment.runs.files import write_text_atomic
-from soabench.experiment.runs.ownership import resolve
+from soabench.experiment.runs.ownership import check_out_file, resolve
 from soabench.experiment.runs.runmeta import validate_run_meta
 from soabench.experiment.runs.store import FORMAT_VERSION, RUN_FILE, RunStore
 from soabench.tracks.report import ABSENT, TRACKS_LEGEND
@@ -389,7 +389,8 @@ def _title(key: str) -> str:
 # ------------------------------------------------------------------------------------------------ extremes
 def extreme_trials(run_dir: Path) -> list[dict[str, Any]]:
     """Per (model, mode) of the first clutter rate: the trials of lowest and highest mean delay (NaN excluded; ties
-    go to the lower trial index), from ``trials.csv``."""
+    go to the lower trial index), from ``trials.csv``; one line naming the file and the row when it is damaged (a
+    row with too few or too many cells, a cell that is not a number, no newline at its end: a cut-off write)."""
     table = run_dir / "trials.csv"
     if not table.is_file():
         return []
@@ -397,15 +398,24 @@ def extreme_trials(run_dir: Path) -> list[dict[str, Any]]:
     first_clutter = None
     try:
         with table.open(newline="", encoding="utf-8") as fh:
-            for r in csv.DictReader(fh):
-                try:
-                    lam, trial, delay = float(r["clutter"]), int(r["trial"]), float(r["delay_mean"])
-                except (KeyError, TypeError, ValueError):
-                    continue
-                first_clutter = lam if first_clutter is None else first_clutter
-                if lam != first_clutter or math.isnan(delay):
-                    continue
-                by.setdefault((str(r.get("model")), str(r.get("mode"))), []).append((delay, trial))
+            text = fh.read()
+        reader = csv.DictReader(text.splitlines())
+        for line, r in enumerate(reader, start=2):
+            try:
+                if None in r or None in r.values():
+                    raise ValueError(f"{len(reader.fieldnames or ())} columns in the header, other count here")
+                lam, trial = float(r["clutter"]), int(r["trial"])
+                delay = math.nan if r["delay_mean"] == "" else float(r["delay_mean"])
+            except KeyError as exc:
+                raise SoabenchError(f"{str(table)!r} has no column {exc}: it is not a run's trials.csv") from None
+            except ValueError:
+                raise SoabenchError(_damaged(table, f"row {line} is not a whole trials.csv row")) from None
+            first_clutter = lam if first_clutter is None else first_clutter
+            if lam != first_clutter or math.isnan(delay):
+                continue
+            by.setdefault((str(r.get("model")), str(r.get("mode"))), []).append((delay, trial))
+        if text and not text.endswith("\n"):
+            raise SoabenchError(_damaged(table, "its last row has no newline"))
     except (OSError, csv.Error, UnicodeDecodeError) as exc:
         raise SoabenchError(f"cannot read {str(table)!r}: {exc}") from None
     out = []
@@ -413,6 +423,14 @@ def extreme_trials(run_dir: Path) -> list[dict[str, Any]]:
         best, worst = min(rows), max(rows, key=lambda r: (r[0], -r[1]))
         out.append({"model": model, "mode": mode, "clutter": first_clutter, "best": best, "worst": worst})
     return out
+
+
+def _damaged(table: Path, what: str) -> str:
+    run = shlex.quote(str(table.parent))
+    return (
+        f"{str(table)!r} is damaged ({what}: a cut-off or edited file); rebuild it from the trial records with "
+        f"soabench run --resume {run}"
+    )
 
 
 def _extremes_html(run_dir: Path, rows: list[dict[str, Any]]) -> str:
@@ -577,9 +595,10 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, embed: bool
     """Write the report page of a run folder (default ``RUN/report.html``); returns its path and size in bytes.
 
     ``embed``: figures inlined (one file to share) or linked to ``figures/``. An existing file at the target that
-    this command did not write is left alone (an error says so)."""
+    this command did not write is left alone (an error says so); ``out`` must end in .html and lie in an existing
+    folder, as every command's output file does."""
     path, _, raw = read_meta(run_dir)
-    target = path / REPORT_FILE if out is None else Path(out)
+    target = path / REPORT_FILE if out is None else check_out_file(str(out), ".html")
     _check_ours(target)
     return target, write_page(target, report_html(path, raw, embed))
 

@@ -249,18 +249,32 @@ def read_csv(path: Path) -> dict[str, np.ndarray]:
     (every file soabench writes unless a cell holds a comma or a quote) is split on newlines and commas directly,
     which gives the cells the :mod:`csv` module gives, a block of rows at a time, so that a study's steps.csv (millions
     of cells) is never held as one Python string per cell; any other file goes through :mod:`csv`.
+
+    A file that is not UTF-8 text or CSV, or has a row of another number of cells than its header (a cut-off or
+    edited file; blank lines hold no row), is one line naming it (:class:`SoabenchError`).
     """
-    with gc_paused():
-        out = _read_plain(path)
-        if out is not None:
-            return out
-        with open(path, newline="", encoding="utf-8") as fh:
-            reader = csv.reader(fh)
-            header = next(reader, None)
-            if header is None:
-                raise SoabenchError(f"{str(path)!r} is empty")
-            data = list(reader)
-        return {name: _parse_column([r[j] for r in data]) for j, name in enumerate(header)}
+    try:
+        with gc_paused():
+            out = _read_plain(path)
+            if out is not None:
+                return out
+            with open(path, newline="", encoding="utf-8") as fh:
+                reader = csv.reader(fh)
+                header = next(reader, None)
+                if header is None:
+                    raise SoabenchError(f"{str(path)!r} is empty")
+                data = [r for r in reader if r]
+    except UnicodeDecodeError as exc:
+        raise SoabenchError(f"{str(path)!r} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except csv.Error as exc:
+        raise SoabenchError(f"{str(path)!r} is not a CSV table: {exc}") from None
+    for i, r in enumerate(data):
+        if len(r) != len(header):
+            raise SoabenchError(
+                f"{str(path)!r} is damaged: a row ({i + 1} after the header) has {len(r)} cells, the header "
+                f"{len(header)} (a cut-off or edited file)"
+            )
+    return {name: _parse_column([r[j] for r in data]) for j, name in enumerate(header)}
 
 
 def header_of(path: Path) -> list[str] | None:

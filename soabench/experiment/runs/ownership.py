@@ -67,36 +67,35 @@ def check_writable_target(path: Path, what: str) -> None:
 
 def check_new_folder(path: Path, marker: str, what: str, resume_hint: str) -> None:
     """``path`` (resolved) may receive a new run/sweep: absent or empty; a folder holding ``marker`` already holds a
-    run (``resume_hint`` says how to finish it); any other content is a stale or foreign folder."""
+    run (``resume_hint`` says how to finish it); any other content is a stale or foreign folder. A folder refused
+    is refused before the writability probe, so nothing is created in it, even for a moment."""
+    if path.is_dir():
+        if (path / marker).is_file():
+            raise SoabenchError(f"{str(path)!r} already holds a {what}; {resume_hint}, or give another --out")
+        content = sorted(p.name for p in path.iterdir() if p.name != LOCK_FILE)
+        if content:
+            shown = ", ".join(content[:4]) + (", ..." if len(content) > 4 else "")
+            raise SoabenchError(
+                f"{str(path)!r} is not empty ({shown}) but holds no {marker}: a stale or foreign folder is never "
+                "adopted; give a new or empty folder with --out"
+            )
     check_writable_target(path, what)
-    if not path.is_dir():
-        return
-    if (path / marker).is_file():
-        raise SoabenchError(f"{str(path)!r} already holds a {what}; {resume_hint}, or give another --out")
-    content = sorted(p.name for p in path.iterdir() if p.name != LOCK_FILE)
-    if content:
-        shown = ", ".join(content[:4]) + (", ..." if len(content) > 4 else "")
-        raise SoabenchError(
-            f"{str(path)!r} is not empty ({shown}) but holds no {marker}: a stale or foreign folder is never adopted; "
-            "give a new or empty folder with --out"
-        )
 
 
 def check_own_folder(path: Path, what: str, own: Iterable[str]) -> None:
     """``path`` (resolved) may be written by a command whose entries all have one of the names ``own``: it is
     absent, empty, or holds nothing else (the command's own folder, re-run to finish or refresh it). Any other entry
-    belongs to someone else, and the folder is refused before anything is written."""
+    belongs to someone else, and the folder is refused before anything is written (or probed)."""
+    if path.is_dir():
+        names = set(own) | {LOCK_FILE}
+        foreign = sorted(p.name for p in path.iterdir() if p.name not in names)
+        if foreign:
+            shown = ", ".join(foreign[:4]) + (", ..." if len(foreign) > 4 else "")
+            raise SoabenchError(
+                f"{str(path)!r} is not empty ({shown}) and is not a {what}: a folder that is not ours is never "
+                "written into; give a new or empty folder with --out"
+            )
     check_writable_target(path, what)
-    if not path.is_dir():
-        return
-    names = set(own) | {LOCK_FILE}
-    foreign = sorted(p.name for p in path.iterdir() if p.name not in names)
-    if foreign:
-        shown = ", ".join(foreign[:4]) + (", ..." if len(foreign) > 4 else "")
-        raise SoabenchError(
-            f"{str(path)!r} is not empty ({shown}) and is not a {what}: a folder that is not ours is never written "
-            "into; give a new or empty folder with --out"
-        )
 
 
 def check_existing_folder(path: Path, marker: str, what: str) -> None:

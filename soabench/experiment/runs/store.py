@@ -171,10 +171,11 @@ class RunStore:
     def _record_path(self, folder: str, trial: int) -> Path:
         return self.run_dir / folder / f"{trial_name(trial)}.json"
 
-    def record_problem(self, record: Any, trial: int, ok: bool = True) -> str | None:
+    def record_problem(self, record: Any, trial: int, ok: bool = True, tables: bool = False) -> str | None:
         """Why ``record`` (read from the file of ``trial``) is not trial ``trial`` of this run, or None if it is:
         a JSON object whose ``trial`` is that index, whose ``run_id`` is this run's (folders whose run.json has
-        none: not checked) and, for a finished trial (``ok``), whose status is "ok"."""
+        none: not checked) and, for a finished trial (``ok``), whose status is "ok"; with ``tables`` (a resume, before
+        it merges records it did not write) also whose packed tables the merge can sort (:func:`_table_problem`)."""
         if not isinstance(record, dict):
             return f"it holds a JSON {type(record).__name__}, not a trial record"
         held = record.get("trial")
@@ -185,12 +186,16 @@ class RunStore:
         rid = self.run_id()
         if rid and record.get("run_id") != rid:
             return "it was made by another run (other settings: its run_id differs from run.json's)"
+        for name, keys in _TABLE_KEYS.items() if tables and ok else ():
+            problem = _table_problem(record.get(name), name, trial, keys)
+            if problem is not None:
+                return problem
         return None
 
-    def reject_foreign_records(self) -> list[str]:
+    def reject_foreign_records(self, n_trials: int | None = None) -> list[str]:
         """Move every file of trials/ and failed/ that is not the record its name says aside into rejected/
         (:meth:`record_problem`; also names :func:`trial_name` never writes); returns one line per file moved.
-        A moved trial counts as missing, so a resume runs it again."""
+        A moved trial counts as missing, so a resume runs it again when it is one of the run's ``n_trials``."""
         lines = []
         for folder in (TRIALS_DIR, FAILED_DIR):
             d = self.run_dir / folder
@@ -202,7 +207,7 @@ class RunStore:
                     problem = f"{p.name!r} is not a trial record name (trial_NNNNN.json)"
                 else:
                     try:
-                        problem = self.record_problem(read_json(p), trial, ok=folder == TRIALS_DIR)
+                        problem = self.record_problem(read_json(p), trial, ok=folder == TRIALS_DIR, tables=True)
                     except SoabenchError as exc:
                         problem = str(exc)
                     if problem is not None:
@@ -215,7 +220,12 @@ class RunStore:
                 while dest.exists():
                     dest, n = dest.with_name(f"{p.name}.{n}"), n + 1
                 os.replace(p, dest)
-                again = "" if trial is None else f"; trial {trial} runs again"
+                if trial is None:
+                    again = ""
+                elif n_trials is not None and trial >= n_trials:
+                    again = f"; the run has trials 0-{n_trials - 1}, so no trial {trial} runs"
+                else:
+                    again = f"; trial {trial} runs again"
                 lines.append(f"{folder}/{p.name}: {problem}; moved to {dest.relative_to(self.run_dir)}{again}")
         self._merged_failures = None
         return lines
@@ -375,6 +385,43 @@ class RunStore:
 
 #: the files a merge writes, with run.json: a folder whose :func:`merged_stamp` is unchanged is as its merge left it
 MERGED_FILES = ("trials.csv", "episodes.csv", "steps.csv", "timing.csv", RUN_FILE)
+
+
+#: the packed tables of a trial record and the key columns each row must hold, by the types the merge sorts on
+_TABLE_KEYS = {
+    "rows": ("trial", "clutter", "model", "mode"),
+    "episodes": ("trial", "clutter", "model", "mode", "target", "k0"),
+    "steps": ("trial", "clutter", "model", "mode", "k"),
+}
+_KEY_TYPES: dict[str, tuple[type, ...]] = {
+    "trial": (int,), "clutter": (int, float), "model": (str,), "mode": (str,), "target": (str, int, float),
+    "k0": (int,), "k": (int,),
+}  # fmt: skip
+
+
+def _table_problem(table: Any, name: str, trial: int, keys: Sequence[str]) -> str | None:
+    """Why the packed table ``name`` of trial ``trial``'s record (:func:`pack_table`; absent: none) cannot be
+    merged, or None: columns named by strings, rows as long as the columns, key cells of the merge's types (the
+    trial cell that trial), every cell a JSON scalar."""
+    if table is None:
+        return None
+    cols = table.get("columns") if isinstance(table, dict) else None
+    rows = table.get("rows") if isinstance(table, dict) else None
+    if not (isinstance(cols, list) and isinstance(rows, list) and all(isinstance(c, str) for c in cols)):
+        return f"its {name} table is not {{columns: [names], rows: [[cells]]}}"
+    missing = [k for k in keys if k not in cols]
+    if missing or len(set(cols)) != len(cols):
+        return f"its {name} table lacks the column {missing[0]!r}" if missing else f"its {name} columns repeat"
+    at = [(cols.index(k), _KEY_TYPES[k]) for k in keys]
+    it = cols.index("trial")
+    for i, r in enumerate(rows):
+        if not (isinstance(r, list) and len(r) == len(cols)):
+            return f"row {i} of its {name} table is not a list of {len(cols)} cells"
+        if any(type(r[j]) not in types for j, types in at) or r[it] != trial:
+            return f"row {i} of its {name} table has a key cell of the wrong type or trial"
+        if any(isinstance(v, (list, dict)) for v in r):
+            return f"row {i} of its {name} table holds a list or a table in a cell"
+    return None
 
 
 def merged_stamp(run_dir: Path | str) -> tuple:

@@ -1,8 +1,9 @@
 """Checks on what a plugin hands the harness, and the record of a plugin that failed (docs/user-guide/tracker.md).
 
 A plugin's output is checked at every scan before anything uses it: :func:`check_births` (shapes, numeric dtypes,
-finite values, non-negative weights, symmetric covariances; newborn terms: one per measurement and a ``beta`` that
-returns (M,) finite non-negative values) and :func:`check_estimates` (an :class:`~soabench.types.Estimates`, not
+finite values, weights in [0, :data:`BIRTH_W_MAX`], means within :data:`BIRTH_M_MAX`, symmetric positive definite
+covariances; newborn terms: one per measurement, positive definite covariances and a ``beta`` that returns (M,)
+finite non-negative values) and :func:`check_estimates` (an :class:`~soabench.types.Estimates`, not
 None, (n, 2) or (n, 4) finite states, optional track labels: (n,) distinct integers). A failed check or an exception
 raises, :func:`soabench.trackers.run_tracker` names the scan, and the trial keeps every other run and records
 this one in :func:`failure_row` form: no row of metrics is written for a run that failed, so no zero or NaN can
@@ -68,8 +69,43 @@ def _labels(value: Any, what: str, n: int) -> np.ndarray | None:
     return a
 
 
-def check_births(births: Any, scan: Scan) -> Births:
-    """The plugin's :class:`Births` of scan k, checked (see the module docstring); PluginOutputError otherwise."""
+#: the largest birth weight accepted from a plugin: the expected number of targets born in one component per scan
+BIRTH_W_MAX = 100.0
+#: the largest |value| of a birth mean (m, m/s) and eigenvalue of a birth covariance (m^2, (m/s)^2) accepted: beyond
+#: them the filter's squares overflow
+BIRTH_M_MAX = 1e7
+BIRTH_P_MAX = 1e12
+
+
+def check_births(births: Any, scan: Scan, plugin: str | None = None) -> Births:
+    """The plugin's :class:`Births` of scan k, checked (see the module docstring); PluginOutputError otherwise, its
+    message starting with the birth model's name when ``plugin`` gives it."""
+    try:
+        return _checked_births(births, scan)
+    except PluginOutputError as exc:
+        if plugin is None:
+            raise
+        raise PluginOutputError(f"birth model {plugin!r} at scan {scan.k}: {exc}") from None
+
+
+def _spd(P: np.ndarray, what: str) -> None:
+    """Each of the (J, 4, 4) ``P`` is symmetric with eigenvalues in (0, BIRTH_P_MAX]; PluginOutputError otherwise."""
+    if not len(P):
+        return
+    if not np.allclose(P, np.swapaxes(P, 1, 2), rtol=1e-9, atol=1e-12):
+        raise PluginOutputError(f"{what} holds a covariance that is not symmetric")
+    eig = np.linalg.eigvalsh(P)
+    j = int(np.argmin(eig[:, 0]))
+    if eig[j, 0] <= 0:
+        raise PluginOutputError(
+            f"{what}[{j}] is not positive definite (smallest eigenvalue {eig[j, 0]:g}); a covariance must be > 0"
+        )
+    j = int(np.argmax(eig[:, -1]))
+    if eig[j, -1] > BIRTH_P_MAX:
+        raise PluginOutputError(f"{what}[{j}] has an eigenvalue of {eig[j, -1]:g}; at most {BIRTH_P_MAX:g} is allowed")
+
+
+def _checked_births(births: Any, scan: Scan) -> Births:
     if births is None:
         raise PluginOutputError("the birth model returned None; return Births (Births.empty() for none)")
     if not isinstance(births, Births):
@@ -83,8 +119,15 @@ def check_births(births: Any, scan: Scan) -> Births:
         raise PluginOutputError(f"Births.source has shape {source.shape} and dtype {source.dtype}; ({J},) int needed")
     if np.any(w < 0):
         raise PluginOutputError(f"Births.w has negative weights (min {w.min():g})")
-    if not np.allclose(P, np.swapaxes(P, 1, 2), rtol=1e-9, atol=1e-12):
-        raise PluginOutputError("Births.P holds a covariance that is not symmetric")
+    if np.any(w > BIRTH_W_MAX):
+        raise PluginOutputError(
+            f"Births.w[{int(np.argmax(w))}] = {w.max():g}; a birth weight is the expected number of targets born in "
+            f"its component per scan, in [0, {BIRTH_W_MAX:g}]"
+        )
+    if np.any(np.abs(m) > BIRTH_M_MAX):
+        j = int(np.argmax(np.abs(m).max(axis=1)))
+        raise PluginOutputError(f"Births.m[{j}] = {m[j].tolist()}; means must lie within +-{BIRTH_M_MAX:g} (m, m/s)")
+    _spd(P, "Births.P")
     newborn = births.newborn
     if newborn is not None:
         newborn = _check_newborn(newborn, len(np.asarray(scan.Z).reshape(-1, 2)))
@@ -96,6 +139,7 @@ def _check_newborn(nb: Any, M: int) -> NewbornTerms:
         raise PluginOutputError(f"Births.newborn is {type(nb).__name__}; soabench.api.NewbornTerms is required")
     m = _array(nb.m, "NewbornTerms.m", (M, 4))
     P = _array(nb.P, "NewbornTerms.P", (M, 4, 4))
+    _spd(P, "NewbornTerms.P")
     if not callable(nb.beta):
         raise PluginOutputError("NewbornTerms.beta is not callable: beta(A, kappa) -> (M,) is required")
     beta = nb.beta

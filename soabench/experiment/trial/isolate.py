@@ -111,11 +111,14 @@ class PluginCalls:
     Args:
         budget: seconds each call may take (0: no limit).
         label: what the plugin is, for its thread's name (e.g. ``tracker 'pkg:T'``).
+        where: which run it is (e.g. ``trial 3, clutter 3, mode static``), for the line said on stderr the moment a
+            call passes its budget (the failure record follows at the end of the trial).
     """
 
-    def __init__(self, budget: float, label: str = "plugin") -> None:
+    def __init__(self, budget: float, label: str = "plugin", where: str = "") -> None:
         self.budget = float(budget)
         self.label = label
+        self.where = where
         self._thread: _Thread | None = None
 
     def __enter__(self) -> PluginCalls:
@@ -139,6 +142,13 @@ class PluginCalls:
             try:
                 ok, value = thread.results.get(timeout=self.budget if self.budget > 0 else None)
             except queue.Empty:
+                run = f" ({self.where})" if self.where else ""
+                print(
+                    f"soabench: {self.label}{run} passed its budget of {self.budget:g} s (experiment.plugin_budget) "
+                    "in one call: stopped; this run of it fails, the trial goes on",
+                    file=sys.stderr,
+                    flush=True,
+                )
                 where = self._abandon(thread)
                 raise PluginFailed(
                     f"the call took longer than its budget of {self.budget:g} s (experiment.plugin_budget)", where

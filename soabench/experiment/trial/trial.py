@@ -638,7 +638,8 @@ def _guarded(
     k: int | None = None
     note_activity(key.trial, f"{kind} plugin {key.model!r} (clutter {key.clutter:g}, mode {key.mode})")
     try:
-        with isolate.PluginCalls(budget, f"{kind} {key.model!r}") as calls:
+        where = f"trial {key.trial}, clutter {key.clutter:g}, mode {key.mode}"
+        with isolate.PluginCalls(budget, f"{kind} {key.model!r}", where) as calls:
             tracker = calls(build)
             return run_tracker(scans, _Isolated(tracker, calls, private=kind == plugins.TRACKER), check)
     except isolate.PluginFailed as exc:  # in its constructor
