@@ -520,6 +520,7 @@ def report_html(run_dir: Path, raw: dict, embed: bool = True) -> str:
         f"{summary['n_ok']} of {summary['n_trials']} trials succeeded"
         + (f", {len(summary['failures'])} failed" if summary.get("failures") else "")
     )
+    extremes = extreme_trials(run_dir)  # first: a damaged trials.csv is named with its row and the way to rebuild it
     tables = load_tables(run_dir) if (run_dir / "trials.csv").is_file() else None
     heads = headlines(tables) if tables is not None else []
     results = summary.get("results", [])
@@ -557,7 +558,7 @@ def report_html(run_dir: Path, raw: dict, embed: bool = True) -> str:
         sections.append(("Failures", failures))
     shown = [f"{Path(PAIRED_FIGURE).stem}_lam{c:g}.png" for c in clutters] + [PAIRED_FIGURE]  # in the headline
     sections.append(("Figures", _figures(run_dir, embed, skip=shown if heads else ())))
-    sections.append(("Best and worst trials (mean delay)", _extremes_html(run_dir, extreme_trials(run_dir))))
+    sections.append(("Best and worst trials (mean delay)", _extremes_html(run_dir, extremes)))
     tm = summary.get("timing") or {}
     timing = (
         f"<p>Wall time {_num(tm.get('wall_s'), 1)} s; SUMO {_num(tm.get('sumo_s'), 1)} s and sensor "
