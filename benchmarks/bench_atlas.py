@@ -88,11 +88,19 @@ def memory_child(n_trials: int, out: Path) -> None:
         out=out, design=design, config=cfg.validate(), force=True, trial_kind="bench-synthetic",
         scene_loader="bench-none",
     )  # fmt: skip
+    req.report = False
     t0 = time.perf_counter()
     o = run_atlas(req, RunOptions(workers=1, progress=False), log=lambda m: None)
     wall = time.perf_counter() - t0
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(json.dumps({"trials": o.n_done, "complete": o.complete, "wall_s": wall, "peak_mb": peak}))
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # the trials and their chunks
+    from soabench.experiment.campaigns.atlas.report import write_report
+
+    t0 = time.perf_counter()
+    write_report(out)
+    report_s = time.perf_counter() - t0
+    peak_report = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # and the report (DuckDB, figures)
+    print(json.dumps({"trials": o.n_done, "complete": o.complete, "wall_s": wall, "peak_mb": peak,
+                      "report_s": report_s, "peak_with_report_mb": peak_report}))  # fmt: skip
 
 
 # ------------------------------------------------------------------------------------------------ measurements
@@ -208,7 +216,7 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=4, help="trials per point of the throughput measurement")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--mem", default="1000,10000", help="trials of the two memory measurements")
-    ap.add_argument("--rows", type=int, default=1_000_000, help="rows of the generated DuckDB dataset")
+    ap.add_argument("--rows", type=int, default=1_000_000, help="rows of the generated DuckDB dataset (0: none)")
     ap.add_argument("--skip-throughput", action="store_true")
     ap.add_argument("--memory-child", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--out", type=Path, help=argparse.SUPPRESS)
@@ -224,8 +232,9 @@ def main() -> None:
             print(json.dumps(report["throughput"]), flush=True)
         report["memory"] = memory([int(s) for s in args.mem.split(",")], tmp)
         print(json.dumps(report["memory"]), flush=True)
-        report["duckdb"] = duckdb_times(Path(report["memory"][-1]["folder"]), args.rows, tmp)
-        print(json.dumps(report["duckdb"]), flush=True)
+        if args.rows:
+            report["duckdb"] = duckdb_times(Path(report["memory"][-1]["folder"]), args.rows, tmp)
+            print(json.dumps(report["duckdb"]), flush=True)
         if "throughput" in report:
             t = report["throughput"]
             print(
@@ -233,12 +242,16 @@ def main() -> None:
                 f"core-second ({t['point_trials']} point-trials, {t['workers']} workers): ratio {t['ratio']:.2f}"
             )
         for m in report["memory"]:
-            print(f"memory: {m['trials']} trials, peak {m['peak_mb']:.0f} MB, {m['wall_s']:.1f} s")
-        d = report["duckdb"]
-        print(
-            f"duckdb: {d['atlas_rows']} rows in {d['atlas_query_s'] * 1000:.0f} ms; {d['generated_rows']} generated "
-            f"rows ({d['generated_mb']:.0f} MB) in {d['generated_query_s'] * 1000:.0f} ms"
-        )
+            print(
+                f"memory: {m['trials']} trials, peak {m['peak_mb']:.0f} MB ({m['wall_s']:.1f} s); with the report "
+                f"{m['peak_with_report_mb']:.0f} MB ({m['report_s']:.1f} s)"
+            )
+        d = report.get("duckdb")
+        if d:
+            print(
+                f"duckdb: {d['atlas_rows']} rows in {d['atlas_query_s'] * 1000:.0f} ms; {d['generated_rows']} "
+                f"generated rows ({d['generated_mb']:.0f} MB) in {d['generated_query_s'] * 1000:.0f} ms"
+            )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

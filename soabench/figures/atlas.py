@@ -80,7 +80,7 @@ def pair_heatmaps(
         ax.set_xticks(range(len(xs)), [_tick(v) for v in xs])
         ax.set_yticks(range(len(ys)), [_tick(v) for v in ys])
         ax.set_xlabel(names[x])
-        panel_title(ax, letter, f"vs {label(b)}")
+        panel_title(ax, letter, f"vs {label(b)}".replace(" (", "\n("))  # "UBM (workspace)" on two lines
     axs[0].set_ylabel(names[y])
     cb = fig.colorbar(im, ax=list(axs), fraction=0.035 / max(1, ncol / 3), pad=0.02)
     cb.set_label(METRICS[metric], fontsize=6.5)

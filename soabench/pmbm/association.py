@@ -87,6 +87,22 @@ def cluster_costs(
     return C
 
 
+def unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of the int array ``x`` (A, n) in lexicographic order and the index of each row among them:
+    ``np.unique(x, axis=0, return_inverse=True)`` without its structured-view overhead."""
+    A = x.shape[0]
+    if x.shape[1] == 0 or A <= 1:
+        return x[:1], np.zeros(A, dtype=np.int64)
+    order = np.lexsort(x.T[::-1])
+    xs = x[order]
+    new = np.empty(A, dtype=bool)
+    new[0] = True
+    new[1:] = (xs[1:] != xs[:-1]).any(axis=1)
+    inv = np.empty(A, dtype=np.int64)
+    inv[order] = np.cumsum(new) - 1
+    return xs[new], inv
+
+
 def best_sums(costs: list[np.ndarray], k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest sums of one entry of each sorted cost array: (sums (K,), index of each term (K, len))."""
     total = np.zeros(1)
@@ -196,11 +212,7 @@ def new_global_hypotheses(
         if len(T) == 0:
             continue
         local = table[:, T]
-        if A == 1:
-            uniq, inv = local, np.zeros(1, dtype=np.int64)
-        else:
-            uniq, inv = np.unique(local, axis=0, return_inverse=True)
-            inv = inv.reshape(-1)
+        uniq, inv = unique_rows(local)
         k_u = np.zeros(len(uniq), dtype=np.int64)
         np.maximum.at(k_u, inv, ks)
         sols = [solver.solve(c, uniq[u], int(k_u[u])) for u in range(len(uniq))]

@@ -29,7 +29,7 @@ from soabench.gmphd.models import logsumexp0
 from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
 from soabench.lmb.update import KAPPA_FLOOR, association_costs
-from soabench.pmbm.association import MISS, ClusterSolver, clusters, new_global_hypotheses
+from soabench.pmbm.association import MISS, ClusterSolver, clusters, new_global_hypotheses, unique_rows
 from soabench.pmbm.density import PMBMDensity
 from soabench.types import SOURCE_MEAS, NewbornTerms
 
@@ -264,8 +264,7 @@ def _prune_tracks(d: PMBMDensity, r_floor: float) -> PMBMDensity:
     table = d.table[:, cols]
     log_w = d.log_w
     if len(cols) < n and table.shape[0] > 1:
-        uniq, inv = np.unique(table, axis=0, return_inverse=True)
-        inv = inv.reshape(-1)
+        uniq, inv = unique_rows(table)
         if len(uniq) < table.shape[0]:
             merged = np.full(len(uniq), -np.inf)
             np.logaddexp.at(merged, inv, log_w)

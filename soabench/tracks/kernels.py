@@ -8,7 +8,9 @@ Each assignment is the minimum-cost one of :func:`soabench.metrics_kernels.assig
 TrackEval and :func:`soabench.metrics.ospa` build, with the same floating-point operations (IEEE double, no
 ``fastmath``). An optimal assignment is unique unless two have the same cost; :func:`match_scans` stops at a scan
 whose cost matrix has two equal rows or columns (two equal positions that the labels do not tell apart) so that the
-caller matches it with scipy, as TrackEval does.
+caller matches it with scipy, as TrackEval does. :func:`match_scans` finds each scan's assignments per connected
+component of the non-zero costs (:func:`sparse_assignment`): a pair of zero similarity is never a match, so these
+are the matches of the whole matrix's assignment.
 """
 
 from __future__ import annotations
@@ -270,10 +272,7 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     where either track exists of ``min(c, |x(t) - y(t)|)`` (both exist) or ``c``. A pair never closer than c in the
     window adds c at each such scan, so its total is c added ``count`` times, with ``count`` the set bits of the two
     tracks' presence masks over the window; only the pairs closer than c at some scan of the window (kept per scan
-    as they enter it) are summed scan by scan. The cost matrix is the same, entry for entry, as summing every pair.
-    When every far pair costs exactly c^p (the largest cost there is), an optimal assignment pairs the rest at c^p
-    and matches only pairs nearer than that, so it is found on those (:func:`sparse_assignment` of the costs less
-    c^p); each row's cost is then summed in row order as before."""
+    as they enter it) are summed scan by scan. The cost matrix is the same, entry for entry, as summing every pair."""
     K = len(g_off) - 1
     out = np.zeros((K, 3))
     n_words = (window + 63) // 64
@@ -285,10 +284,6 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     for n in range(1, window + 1):
         total += c
         far[n] = min(total / n, c) ** p
-    cp = c**p  # what a pair costs at most (min(., c) ** p)
-    uniform = True  # every far pair costs exactly c^p (c summed n times, over n, is c)
-    for n in range(1, window + 1):
-        uniform = uniform and far[n] == cp
     stamp_g = np.full(n_g, -1, dtype=np.int64)
     stamp_e = np.full(n_e, -1, dtype=np.int64)
     gsel = np.empty(n_g, dtype=np.int64)
@@ -376,20 +371,10 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                         Cm[a, b] = d
                     else:
                         Cm[b, a] = d
+            rows, cols = assignment(Cm)
             vals = np.empty(small)
-            if uniform:  # far pairs cost c^p, the most any pair costs: only the nearer ones are matched
-                below = np.empty((small, large))  # zero for a far pair, negative for a nearer one
-                for r in range(small):
-                    for q in range(large):
-                        below[r, q] = Cm[r, q] - cp
-                rows, cols = sparse_assignment(below)
-                vals[:] = cp
-                for r in range(len(rows)):
-                    vals[rows[r]] = Cm[rows[r], cols[r]]
-            else:
-                rows, cols = assignment(Cm)
-                for r in range(small):
-                    vals[r] = Cm[rows[r], cols[r]]
+            for r in range(small):
+                vals[r] = Cm[rows[r], cols[r]]
             loc_p = np_sum(vals, small) / large
         out[k, 0] = (loc_p + card_p) ** (1.0 / p)
         out[k, 1] = loc_p ** (1.0 / p)

@@ -112,3 +112,24 @@ def test_resume_runs_only_missing_chunks_and_query_report(pool_atlas, tmp_path, 
     assert main(["query", str(root), sql]) == 0
     assert "8" in capsys.readouterr().out
     assert not os.path.exists(tmp_path / "copy" / "failures") or not list((tmp_path / "copy" / "failures").iterdir())
+
+
+def test_the_results_part_is_kept_when_complete_and_extended_with_more_trials(tmp_path, monkeypatch):
+    import fake_trial as ft
+
+    from soabench.experiment.campaigns import results_suite as rs
+
+    monkeypatch.setattr(rs, "ATLAS_AXES", {"pedestrians.count": (3, 6), "experiment.clutter": (0.5, 3.0)})
+    part, log = tmp_path / "atlas" / "intersection", []
+    exe = RunOptions(workers=1, progress=False)
+    with ft.as_builtins():
+        s = rs.Settings(duration=10.0, atlas_trials=2)
+        assert rs._atlas_part(part, "intersection", s, exe, log.append) == ("done", 0)
+        files = {p: p.stat().st_mtime_ns for p in part.rglob("*.parquet")}
+        assert rs._atlas_part(part, "intersection", s, exe, log.append) == ("kept", 0)
+        assert {p: p.stat().st_mtime_ns for p in part.rglob("*.parquet")} == files
+        more = dataclasses.replace(s, atlas_trials=3)
+        assert rs._atlas_part(part, "intersection", more, exe, log.append) == ("done", 0)
+    assert len(list((part / "trials").iterdir())) == 3 * 2  # trials x scene variants
+    assert all(p.stat().st_mtime_ns == t for p, t in files.items())  # the first chunks were not written again
+    assert (part / "report" / "summary.md").is_file()

@@ -27,7 +27,7 @@ pytestmark = pytest.mark.slow  # `soabench results` with SUMO scenes
 TINY = [
     "--scenes", "intersection,tjunction", "--trials", "2", "--duration", "10", "--births-trials", "1",
     "--scene-trials", "2", "--density-trials", "1", "--kitti-sequences", "2",
-    "--kitti-duration", "10", "--kitti-folds", "2", "--workers", "1", "--no-progress",
+    "--kitti-duration", "10", "--kitti-folds", "2", "--atlas-scenes", "none", "--workers", "1", "--no-progress",
 ]  # fmt: skip
 
 

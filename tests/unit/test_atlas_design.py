@@ -164,3 +164,17 @@ def test_not_an_atlas_is_refused(tmp_path):
         from soabench.experiment.campaigns.atlas.query import tables_of
 
         tables_of(tmp_path)
+
+
+def test_a_folder_that_is_not_an_atlas_is_refused(tmp_path, capsys):
+    folder = tmp_path / "stuff"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("mine")
+    assert main(["atlas", "--axis", "sensor.p_D=0.5,0.6", "--out", str(folder)]) == 2
+    assert "holds no atlas" in capsys.readouterr().err
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
+    assert main(["atlas", "--out", str(folder)]) == 2  # nothing to resume
+    assert "not an atlas to resume" in capsys.readouterr().err
+    (folder / "atlas.json").write_text("[1, 2]")
+    assert main(["query", str(folder), "SELECT 1"]) == 2
+    assert "is not an atlas folder" in capsys.readouterr().err

@@ -82,6 +82,19 @@ def test_each_association_is_listed_once():
     np.testing.assert_allclose(costs, sorted(want), rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("shape", [(1, 3), (7, 0), (40, 3), (25, 1)])
+def test_unique_rows_is_numpys(shape):
+    from soabench.pmbm.association import unique_rows
+
+    x = np.random.default_rng(shape[0]).integers(0, 3, shape)
+    u, inv = unique_rows(x)
+    if shape[1]:
+        want_u, want_inv = np.unique(x, axis=0, return_inverse=True)
+        np.testing.assert_array_equal(u, want_u)
+        np.testing.assert_array_equal(inv, want_inv.reshape(-1))
+    np.testing.assert_array_equal(u[inv], x)
+
+
 def test_murty_infeasible_gives_nothing():
     C = np.array([[1.0, np.inf], [2.0, np.inf]])
     assert murty(C, 5) == []

@@ -69,11 +69,14 @@ def _value(c: stats.Cell) -> str:
 
 
 def _sig(c: stats.Cell) -> str:
-    return ", significant" if c.significant else ", not significant"
+    if not c.significant:
+        return ", not significant"
+    return ", significantly better" if c.estimate > NULL[c.metric] else ", significantly worse"
 
 
 def words(cells: Sequence[stats.Cell], col_of: dict[str, str], label: Any) -> list[str]:
-    """The cells a user would look at first, per baseline and metric, in sentences."""
+    """The cells a user would look at first, per baseline and metric, in sentences: how many two-axis cells show a
+    significant advantage or disadvantage, and where the advantage is largest and smallest."""
     lines = []
     pairs = [c for c in cells if len(c.axes) == 2]
     use = pairs or [c for c in cells if len(c.axes) == 1]
@@ -85,18 +88,24 @@ def words(cells: Sequence[stats.Cell], col_of: dict[str, str], label: Any) -> li
             if not sel:
                 continue
             null = NULL[metric]
-            good = [c for c in sel if c.significant and c.estimate > null]
-            bad = [c for c in sel if c.significant and c.estimate < null]
+            good = sum(c.significant and c.estimate > null for c in sel)
+            bad = sum(c.significant and c.estimate < null for c in sel)
             best = max(sel, key=lambda c: c.estimate)
             worst = min(sel, key=lambda c: c.estimate)
-            text = (
-                f"{METRICS[metric]}: S-OA is significantly better in {len(good)} of {len(sel)} cells and worse in "
-                f"{len(bad)}; it pays off most when {_where(best, col_of)} ({_value(best)}{_sig(best)}), and least "
-                f"when {_where(worst, col_of)} ({_value(worst)}{_sig(worst)})."
+            verdict = (
+                "pays off in every cell"
+                if good == len(sel)
+                else "is worse in every cell"
+                if bad == len(sel)
+                else f"pays off in {good} of {len(sel)} cells and is worse in {bad}"
             )
-            parts.append(text)
+            parts.append(
+                f"{METRICS[metric]}: S-OA {verdict} (significant after BH-FDR); largest when {_where(best, col_of)} "
+                f"({_value(best)}{_sig(best)}), smallest when {_where(worst, col_of)} ({_value(worst)}{_sig(worst)})."
+            )
         if parts:
             lines.append(f"**S-OA vs {label(b)}** ({mode}, {fam}):")
+            lines.append("")
             lines += [f"- {p}" for p in parts]
             lines.append("")
     return lines

@@ -89,7 +89,7 @@ def run_chunk_task(task: int, spec: AtlasSpec) -> dict:
             scene, scen = registry.load_scene_cached(net, (), scenario, load_fn)
             fn = registry.trial_kind(spec.trial_kind)
             share = None
-            if fn is registry.trial_kind(registry.DEFAULT_TRIAL_KIND):
+            if fn is registry._builtin_trial:  # soabench's own trial: run_trial, with the share
                 from soabench.experiment.trial.trial import TrialShare, run_trial
 
                 share = TrialShare()
@@ -344,7 +344,7 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
         shared: dict[str, int] = {}
         elapsed = 0.0
         if todo_n:
-            if spec.trial_kind == registry.DEFAULT_TRIAL_KIND:
+            if registry.trial_kind(spec.trial_kind) is registry._builtin_trial:
                 from soabench.kernel_warmup import ensure_compiled
 
                 ensure_compiled()

@@ -92,15 +92,20 @@ def paired_units(con, axes: Sequence[str], baselines: Sequence[str]) -> bool:
     extra = [a for a in axes if a not in keys]
     names = ", ".join("'" + b.replace("'", "''") + "'" for b in baselines) or "''"
     ax = "".join(f', s."{a}"' for a in extra)
-    ds, db = _clean("s.delay_mean"), _clean("b.delay_mean")
+    have = {r[0] for r in con.execute("DESCRIBE trials").fetchall()}
+
+    def col(name: str, side: str) -> str:  # a metric a trial kind does not write is missing (NULL)
+        return _clean(f"{side}.{name}") if name in have else "CAST(NULL AS DOUBLE)"
+
+    ds, db = col("delay_mean", "s"), col("delay_mean", "b")
     con.execute(
         f"""CREATE TEMP TABLE units AS
         SELECT b.model AS baseline, s.point, s.clutter, s.mode, s.family, s.trial{ax},
             CASE WHEN {ds} IS NULL OR {db} IS NULL THEN NULL WHEN {db} > {ds} THEN 1.0
                  WHEN {db} < {ds} THEN 0.0 ELSE 0.5 END AS delay_win,
-            {_clean("b.card_err")} - {_clean("s.card_err")} AS card_d, {_clean("b.card_err")} AS card_b,
-            {_clean("b.ospa")} - {_clean("s.ospa")} AS ospa_d, {_clean("b.ospa")} AS ospa_b,
-            {_clean("s.hota")} - {_clean("b.hota")} AS dhota
+            {col("card_err", "b")} - {col("card_err", "s")} AS card_d, {col("card_err", "b")} AS card_b,
+            {col("ospa", "b")} - {col("ospa", "s")} AS ospa_d, {col("ospa", "b")} AS ospa_b,
+            {col("hota", "s")} - {col("hota", "b")} AS dhota
         FROM (SELECT * FROM trials WHERE model = '{REFERENCE}') s
         JOIN (SELECT * FROM trials WHERE model IN ({names})) b USING (point, clutter, mode, family, trial)"""
     )
@@ -154,6 +159,8 @@ def cell_stats(con, cells_of: Sequence[tuple[str, ...]]) -> list[Cell]:
                 if len(x) == 0 or not math.isfinite(scale):
                     continue
                 m, lo, hi, p = _t_interval(x, NULL[metric] if metric == "delay_win" else 0.0)
+                if metric == "delay_win":  # a share: its interval inside [0, 1] (the p-value is the t-test's)
+                    lo, hi = max(lo, 0.0), min(hi, 1.0)
                 cells.append(
                     Cell(metric, b, mode, fam, tuple(combo), tuple(vals), len(x), m * scale, lo * scale, hi * scale, p)
                 )
