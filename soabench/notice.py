@@ -17,7 +17,7 @@ import threading
 import time
 from collections.abc import Callable, Hashable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, TextIO
 
 #: the one wording of every compile notice (this first-use notice and the run's compile ahead,
 #: :mod:`soabench.kernel_warmup`)
@@ -25,9 +25,19 @@ MESSAGE = (
     "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version of the "
     "kernels; cached afterwards) ..."
 )
+#: off a terminal, a long wait (a run's trials, the kernels' compilation) writes a line at least this often (s)
+LINE_INTERVAL_S = 10.0
 DELAY = 3.0  #: seconds of silence before the notice (longer than loading cached kernels takes)
 _done: set[Hashable] = set()
 _printed = threading.Event()  #: the notice is printed at most once per process
+
+
+def is_terminal(stream: TextIO) -> bool:
+    """Whether ``stream`` is a terminal (a redrawn bar) rather than a file or a pipe (a line now and then)."""
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
 
 
 def _print_once() -> None:

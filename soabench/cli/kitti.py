@@ -62,9 +62,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     from soabench.config import require_distinct
-    from soabench.kitti.config import kitti_run_config
+    from soabench.experiment.campaigns.kitti.protocol import run_kitti
+    from soabench.kitti.config import KittiSpec, kitti_run_config
     from soabench.kitti.lidar import lidar_options
-    from soabench.kitti.protocol import KittiSpec, run_kitti
     from soabench.kitti.reader import parse_sequences
 
     if args.resume is not None:

@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from soabench.figures import style as ps
-from soabench.figures.results import mean_ci
+from soabench.figures.bars import mean_ci
 
 _CLUTTER_LABEL = "clutter rate λ (false alarms per scan)"
 

@@ -11,8 +11,8 @@ from soabench import plugins
 from soabench.config import FILTER_FAMILIES
 from soabench.errors import require
 from soabench.experiment.reports.html import REPLAYS_DIR, extreme_trials, replay_file, write_index, write_report
-from soabench.experiment.runs.ownership import check_out_file
 from soabench.experiment.runs.store import RUN_FILE
+from soabench.folders import check_out_file
 from soabench.kernel_warmup import ensure_compiled
 from soabench.replay.animation import VIDEO_SUFFIXES, require_mp4, write_video
 from soabench.replay.frames import replay_data

@@ -38,7 +38,7 @@ def _direct(trial: int):
     from soabench.sensor import observe
 
     cfg = kitti_base_config()
-    sensor = dataclasses.replace(cfg.sensor, fov_deg=export_default_fov(cfg.sensor))
+    sensor = dataclasses.replace(cfg.sensor_at(), fov_deg=export_default_fov(cfg.sensor))
     scene, scenario = load("intersection")
     seeds = trial_seeds(cfg.experiment.seed, trial)
     recording = simulate(scene, scenario, seeds, duration=DURATION)

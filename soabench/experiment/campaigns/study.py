@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from soabench import plugins
+from soabench.atomic import write_text_atomic
 from soabench.birth import CORE_MODELS
 from soabench.config import Config
 from soabench.errors import Interrupted, require
@@ -48,11 +49,10 @@ from soabench.experiment.reports.headline import KEY_METRICS, headline
 from soabench.experiment.reports.html import write_index
 from soabench.experiment.reports.report import families, family_tables, paper_protocol_mismatch
 from soabench.experiment.reports.tables import load_tables
-from soabench.experiment.runs.files import write_text_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runs.runmeta import flatten_config
 from soabench.experiment.runs.store import RunStore
 from soabench.figures.drawing import parallel
+from soabench.folders import FolderLock, check_own_folder, resolve
 from soabench.tracks.report import render_hota, track_stats
 
 #: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
@@ -293,9 +293,9 @@ def key_figure(root: Path) -> Path | None:
         return None
     tables = load_tables(main)
     tables = family_tables(tables, families(tables)[0])
-    if "soa" not in tables.models or len(tables.models) < 2 or 3.0 not in tables.clutters:
+    if "soa" not in tables.models or len(tables.models) < 2 or paper.PAPER_CLUTTER not in tables.clutters:
         return None
-    return save_png(forest_figure(headline(tables, 3.0), KEY_METRICS), Path(root) / "key_figure.png")
+    return save_png(forest_figure(headline(tables, paper.PAPER_CLUTTER), KEY_METRICS), Path(root) / "key_figure.png")
 
 
 def write_comparison(root: Path) -> str:

@@ -32,15 +32,15 @@ from urllib.parse import urlsplit
 import numpy as np
 from markdown_it import MarkdownIt
 
+from soabench.atomic import write_text_atomic
 from soabench.birth import LABEL
 from soabench.errors import SoabenchError, require
 from soabench.experiment.reports.headline import METRICS, Headline, Metric, headline, mean_interval
 from soabench.experiment.reports.report import FAMILY_LABEL, families, family_tables, paper_section, table_legend
 from soabench.experiment.reports.tables import RunTables, load_tables, select
-from soabench.experiment.runs.files import write_text_atomic
-from soabench.experiment.runs.ownership import check_out_file, resolve
 from soabench.experiment.runs.runmeta import validate_run_meta
 from soabench.experiment.runs.store import FORMAT_VERSION, RUN_FILE, RunStore
+from soabench.folders import check_out_file, resolve
 from soabench.tracks.report import ABSENT, TRACKS_LEGEND
 
 GENERATOR = "soabench report"

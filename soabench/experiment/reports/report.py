@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.birth import BASELINES, LABEL
 from soabench.config import FAMILIES, FAMILY_MODES, FILTER_FAMILIES, Config, MetricsConfig
 from soabench.errors import SoabenchError
@@ -42,7 +43,6 @@ from soabench.experiment.reports import occlusion, paper, track_intervals
 from soabench.experiment.reports.paper import percent_reduction
 from soabench.experiment.reports.tables import RunTables, load_tables, select, tables_models  # noqa: F401 (shared)
 from soabench.experiment.runs.failures import write_model_failures
-from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE
 from soabench.experiment.runs.store import RunStore
 from soabench.experiment.trial.observable import duration_hint
@@ -497,7 +497,7 @@ def paper_protocol_mismatch(meta: dict) -> str:
     return ""
 
 
-def paper_section(run_dir: Path, tables: RunTables, clutter: float = 3.0) -> str:
+def paper_section(run_dir: Path, tables: RunTables, clutter: float = paper.PAPER_CLUTTER) -> str:
     """The paper's headline numbers beside ours (:mod:`soabench.experiment.reports.paper`), when the run follows the
     paper's
     protocol on the shipped intersection (:func:`paper_protocol_mismatch`) and S-OA, a baseline and lambda = 3 were

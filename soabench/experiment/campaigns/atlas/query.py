@@ -140,7 +140,7 @@ def write_result(table: Any, out: Path) -> None:
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
 
-    from soabench.experiment.runs.files import write_bytes_atomic
+    from soabench.atomic import write_bytes_atomic
 
     suffix = Path(out).suffix.lower()
     require(suffix in (".csv", ".parquet"), f"--out {str(out)!r}: allowed: a .csv or .parquet file")

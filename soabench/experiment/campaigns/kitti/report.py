@@ -19,12 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.birth import LABEL
 from soabench.config import family_label
+from soabench.experiment.campaigns.kitti import trackeval_kitti
 from soabench.experiment.reports.occlusion import bin_labels
-from soabench.experiment.runs.files import write_csv, write_json_atomic, write_text_atomic
+from soabench.experiment.runs.files import write_csv
 from soabench.figures import kitti as kitti_figures
-from soabench.kitti import trackeval_kitti
 from soabench.kitti.config import KittiSpec
 from soabench.kitti.levels import LEVEL_NAMES, LEVELS
 
@@ -265,7 +266,7 @@ def _fmt(v: float, nd: int = 3) -> str:
 
 def family_records(records: dict, family: str) -> dict:
     """The records of a run's other filter family ``family`` as the tables read a run's first family: its runs in
-    place of ``models`` (:func:`soabench.kitti.protocol.run_sequence` keeps them under ``families``)."""
+    place of ``models`` (:func:`.protocol.run_sequence` keeps them under ``families``)."""
     return {key: {**r, "models": r["families"][family]} for key, r in records.items()}
 
 

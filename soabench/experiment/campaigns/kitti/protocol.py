@@ -9,7 +9,7 @@ registered birth model on every held-out sequence, the N-hat sweep.
 
 The run folder holds ``run.json`` (everything needed to resume), one record per (setting, sequence) under
 ``records/`` (written atomically; ``--resume`` runs the missing ones), then ``summary.json``, ``report.md``,
-``sequences.csv``, ``episodes.csv`` and ``figures/`` (:mod:`soabench.kitti.report`).
+``sequences.csv``, ``episodes.csv`` and ``figures/`` (:mod:`soabench.experiment.campaigns.kitti.report`).
 """
 
 from __future__ import annotations
@@ -23,18 +23,19 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic
 from soabench.birth import get_birth_model
 from soabench.config import Config
 from soabench.errors import SoabenchError, require
-from soabench.experiment.runs.files import read_json, write_json_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
+from soabench.experiment.campaigns.kitti.report import TRACK_COLUMNS, write_outputs
+from soabench.experiment.campaigns.kitti.trackeval_kitti import write_inputs
+from soabench.experiment.runs.files import read_json
+from soabench.folders import FolderLock, check_new_folder, resolve
 from soabench.kitti.config import KittiConfig, KittiSpec
 from soabench.kitti.formats import ReadError, UnreadableError
 from soabench.kitti.levels import level_split
 from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
-from soabench.kitti.report import TRACK_COLUMNS, write_outputs
-from soabench.kitti.trackeval_kitti import write_inputs
 from soabench.metrics import evaluate
 from soabench.trackers import FilterTracker, build_filter, run_tracker
 from soabench.tracks.evaluate import evaluate_tracks, run_labels
@@ -95,7 +96,7 @@ def run_sequence(
     """Every model of ``cfg.experiment`` (first probability mode) in every filter family of
     ``cfg.experiment.filters`` on one sequence with N-hat; a JSON-ready record. ``kitti_seq``: the parsed sequence,
     to add under ``"kitti_results"`` each labelled model's estimates and labels per frame in the first family (for
-    :func:`soabench.kitti.trackeval_kitti.write_inputs`; not part of the written record).
+    :func:`.trackeval_kitti.write_inputs`; not part of the written record).
 
     Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])`` (a family that
     draws, the LMB, its first child). The first family's runs are ``record["models"]``, every other family's
@@ -173,7 +174,7 @@ def run_kitti(
 ) -> KittiOutcome:
     """Run (or finish, ``resume=True``) the protocol into the run folder ``out``: resolved, new or empty for a new
     run (holding this run's ``run.json`` on resume), locked while it works
-    (:mod:`soabench.experiment.runs.ownership`)."""
+    (:mod:`soabench.folders`)."""
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = resolve(out)
@@ -239,7 +240,7 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
                 "start a new run folder",
             )
     cache: dict[str, SequenceScans] = {}
-    sensor = spec.config.sensor
+    sensor = spec.config.sensor_at()
     for n, (setting, s, nh) in enumerate(tasks, start=1):
         path = out / RECORDS / setting / f"{s}.json"
         if path.is_file():
@@ -254,7 +255,9 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
         rec = run_sequence(
             cache[s], spec.config, nh, spec.config.experiment.seed, s, seqs[s] if setting == CV else None
         )
-        if setting == CV:  # TrackEval's own KITTI evaluation reads these (soabench.kitti.trackeval_kitti)
+        if (
+            setting == CV
+        ):  # TrackEval's own KITTI evaluation reads these (soabench.experiment.campaigns.kitti.trackeval_kitti)
             write_inputs(out, seqs[s], cache[s], rec.pop("kitti_results", {}))
         rec.update({"setting": setting, "sequence": s, "N_hat": nh, "info": cache[s].info, "targets": targets[s]})
         write_json_atomic(path, rec)
