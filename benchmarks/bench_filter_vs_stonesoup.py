@@ -205,10 +205,10 @@ def fused_update_reduce(mix: Mixture, Z: np.ndarray):
     """``GMPHDFilter.step`` (fused) from ``mix`` with F = I, Q = 0, p_S = 1: update, reduce and extract only."""
     from shapely.geometry import Polygon
 
-    from soabench.config import FilterConfig, SensorConfig
+    from soabench.config import FilterConfig, Sensor
     from soabench.types import Births, Scan
 
-    filt = GMPHDFilter(FilterConfig(p_S=1.0, p_D=P_D), SensorConfig())
+    filt = GMPHDFilter(FilterConfig(p_S=1.0, p_D=P_D), Sensor())
     filt.F, filt.Q = np.eye(4), np.zeros((4, 4))  # Stone Soup's side: components and detections share a timestamp
     scan = Scan(1, 1.0, EGO, Z, None, [], Polygon())
     births = Births.empty()
@@ -290,11 +290,11 @@ def main() -> int:
     if not args.quick:
         from shapely.geometry import Polygon
 
-        from soabench.config import FilterConfig, SensorConfig
+        from soabench.config import FilterConfig, Sensor
         from soabench.types import Births, Scan
 
         mix, Z = make_inputs(1000, 20, seed=7)
-        filt = GMPHDFilter(FilterConfig(), SensorConfig())
+        filt = GMPHDFilter(FilterConfig(), Sensor())
         scan = Scan(1, 1.0, EGO, Z, None, [], Polygon())
 
         def step():

@@ -121,7 +121,7 @@ def _record(path: Path, duration: float, cwd: str) -> None:
         "cfg = Config()\n"
         "seeds = trial_seeds(0, 1)\n"
         "rec = simulate(scene, scenario, seeds, duration=float(sys.argv[2]))\n"
-        "observe(rec, scene, cfg.sensor, seeds.sensor_rngs()).save_npz(sys.argv[1])\n"
+        "observe(rec, scene, cfg.sensor_at(), seeds.sensor_rngs()).save_npz(sys.argv[1])\n"
     )
     _child(code, [str(path), str(duration)], None, cwd)
 

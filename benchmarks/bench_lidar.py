@@ -12,7 +12,8 @@ then times, in this one run:
 * ``regions (cached)``: the same call reading back the run folder's ``.npz``;
 * ``to_scans``: the reader's Scans of the sequence with those regions (Omega_k per frame), and with the export's own
   sidewalk polygons (``--semantics``) for comparison;
-* ``filters``: :func:`soabench.kitti.protocol.run_sequence` with S-OA alone and with the protocol's four models.
+* ``filters``: :func:`soabench.experiment.campaigns.kitti.protocol.run_sequence` with S-OA alone and with the
+  protocol's four models.
 
 Regions and filters are each timed ``--repeat`` times and the shortest time of each counts (on a shared machine the
 longer ones measure the neighbours). It prints each time and the ratios regions / filters.
@@ -27,10 +28,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from soabench.experiment.campaigns.kitti.protocol import run_sequence
 from soabench.kitti.config import KittiConfig, kitti_base_config
 from soabench.kitti.export import export_kitti
 from soabench.kitti.lidar import LidarParams, class_ids, frame_files, frame_regions, read_frame, sequence_regions
-from soabench.kitti.protocol import run_sequence
 from soabench.kitti.reader import open_dataset, read_sequence, sensor_for, to_scans
 
 
@@ -56,7 +57,7 @@ def main() -> None:
     names = ("sidewalk", "building")
     cache = tmp / "lidar"
     vel, lab = root / "velodyne", root / "point_labels"
-    fov = sensor_for(seq, kc, cfg.sensor).fov_deg
+    fov = sensor_for(seq, kc, cfg.sensor_at()).fov_deg
     scan, labels, _ = frame_files(vel, lab, "0000", 1)[0]
     frame_regions(*read_frame(scan, labels), class_ids(names), LidarParams(), cfg.sensor.r_max, fov)  # compile/load
     t_regions = []
@@ -70,10 +71,10 @@ def main() -> None:
     t_cached = time.perf_counter() - t0
     assert hit
     t0 = time.perf_counter()
-    ss = to_scans(dataclasses.replace(seq, semantics=sem), kc, cfg.sensor)
+    ss = to_scans(dataclasses.replace(seq, semantics=sem), kc, cfg.sensor_at())
     t_scans = time.perf_counter() - t0
     t0 = time.perf_counter()
-    to_scans(read_sequence(open_dataset(root, None, root / "semantics"), "0000"), kc, cfg.sensor)
+    to_scans(read_sequence(open_dataset(root, None, root / "semantics"), "0000"), kc, cfg.sensor_at())
     t_poly = time.perf_counter() - t0
     n_hat = 6 / 100
     run_sequence(ss, cfg, n_hat, 0, "0000")  # compile the kernels outside the timed calls

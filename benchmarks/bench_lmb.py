@@ -36,7 +36,7 @@ def scans_of(peds: int, duration: float, lam: float, seed: int):
     scenario = dataclasses.replace(scenario, n_pedestrians=peds)
     seeds = trial_seeds(seed, 0)
     rec = simulate(scene, scenario, seeds, duration=duration)
-    sensor = dataclasses.replace(cfg.sensor, lambda_c=float(lam))
+    sensor = cfg.sensor_at(lam)
     return cfg, scene, sensor, seeds, observe(rec, scene, sensor, seeds.sensor_rngs())
 
 

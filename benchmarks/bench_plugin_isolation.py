@@ -52,7 +52,7 @@ def trial_time(pythonpath: str | None, duration: float) -> dict:
 
 
 def per_scan_costs(duration: float, calls: int = 2000) -> dict:
-    from soabench.config import SensorConfig
+    from soabench.config import Sensor
     from soabench.experiment.trial.isolate import PluginCalls, private_scan
     from soabench.scenario import load, simulate
     from soabench.seeding import trial_seeds
@@ -60,7 +60,7 @@ def per_scan_costs(duration: float, calls: int = 2000) -> dict:
 
     scene, scenario = load("intersection")
     seeds = trial_seeds(0, 0)
-    scans = observe(simulate(scene, scenario, seeds, duration=duration), scene, SensorConfig(), seeds.sensor_rngs())
+    scans = observe(simulate(scene, scenario, seeds, duration=duration), scene, Sensor(), seeds.sensor_rngs())
     t0 = time.perf_counter()
     for _ in range(5):
         for s in scans.scans:

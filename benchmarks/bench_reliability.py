@@ -268,12 +268,12 @@ def executors(tmp: Path) -> dict:
 def filter_steps(n: int = 2000) -> dict:
     from shapely.geometry import Polygon
 
-    from soabench.config import FilterConfig, SensorConfig
+    from soabench.config import FilterConfig, Sensor
     from soabench.gmphd import GMPHDFilter
     from soabench.types import SOURCE_GRID, Births, Scan
 
     rng = np.random.default_rng(0)
-    filt = GMPHDFilter(FilterConfig(nonfinite="drop", J_max=100), SensorConfig(), "dynamic")
+    filt = GMPHDFilter(FilterConfig(nonfinite="drop", J_max=100), Sensor(), "dynamic")
     dropped = nan_results = 0
     for k in range(n):
         M, J = int(rng.integers(0, 10)), int(rng.integers(0, 6))

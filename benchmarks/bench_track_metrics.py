@@ -95,10 +95,10 @@ def filter_run(duration: float, repeat: int) -> None:
         near = np.argmin(pairwise_distances(x[:, :2], np.nan_to_num(scans.truth_xy[k], nan=1e9)), axis=1)
         again = np.array([np.sum(near[:i] == near[i]) for i in range(len(near))], dtype=np.int64)
         labels.append(near + 10_000 * again)  # two estimates near one pedestrian: the second a track of its own
-    metrics = evaluate(scans, results, cfg.metrics, cfg.sensor)
-    evaluate_tracks(scans, X, labels, metrics.episodes, cfg.metrics, cfg.sensor)  # compiled kernels loaded
-    t5 = best_of(lambda: evaluate(scans, results, cfg.metrics, cfg.sensor), repeat)
-    t9 = best_of(lambda: evaluate_tracks(scans, X, labels, metrics.episodes, cfg.metrics, cfg.sensor), repeat)
+    metrics = evaluate(scans, results, cfg.metrics, cfg.sensor_at())
+    evaluate_tracks(scans, X, labels, metrics.episodes, cfg.metrics, cfg.sensor_at())  # compiled kernels loaded
+    t5 = best_of(lambda: evaluate(scans, results, cfg.metrics, cfg.sensor_at()), repeat)
+    t9 = best_of(lambda: evaluate_tracks(scans, X, labels, metrics.episodes, cfg.metrics, cfg.sensor_at()), repeat)
     print(f"S-OA filter run of {len(X)} scans: track columns / §5 metrics of the same run = {t9 / t5:.2f}x")
 
 

@@ -123,20 +123,15 @@ def parameter_table() -> str:
         doc = re.sub(r"\s*\(docs/method\.md[^)]*\)", "", doc).rstrip(".")
         parts.append(f"### `[{sec.name}]`\n")
         parts.append(f"{doc}. Method: {_SECTION_REFS.get(sec.name, 'docs/method.md')}.\n")
-        parts.append(key_table(obj, sec.name))
+        parts.append(key_table(obj))
     return "\n".join(parts)
 
 
-def key_table(obj: object, section: str = "") -> str:
-    """Markdown: the fields of the dataclass instance ``obj`` with their values as defaults and ``#:`` comments;
-    the fields of ``[section]`` that are not keys (``soabench.config.DERIVED_KEYS``) are left out."""
-    from soabench.config import DERIVED_KEYS
-
+def key_table(obj: object) -> str:
+    """Markdown: the fields of the dataclass instance ``obj`` with their values as defaults and ``#:`` comments."""
     comments = _field_comments(type(obj))
     rows = ["| key | default | meaning |", "|---|---|---|"]
     for f in dataclasses.fields(obj):  # type: ignore[arg-type]
-        if f"{section}.{f.name}" in DERIVED_KEYS:
-            continue
         meaning = _link_sections(_escape(comments.get(f.name, "")), "../method.md")
         rows.append(f"| `{f.name}` | {_fmt_default(getattr(obj, f.name))} | {meaning} |")
     return "\n".join(rows) + "\n"

@@ -184,7 +184,7 @@ def simulate_trial(
     check_against_scenario(cfg, scenario)
     seeds = trial_seeds(seed, trial)
     recording = simulate(scene, scenario, seeds, duration=cfg.experiment.duration)
-    return recording, observe(recording, scene, cfg.sensor, seeds.sensor_rngs())
+    return recording, observe(recording, scene, cfg.sensor_at(), seeds.sensor_rngs())
 
 
 def _is_int(v: _Any) -> bool:
@@ -243,9 +243,9 @@ def make_tracker(
     options = options or dict(cfg.plugins.get(name, {}))
     _plugins.check_options(kind, name, cls, options)
     if kind == TRACKER:
-        return cls(TrackerSetup(cfg.sensor, scene, rng, mode, cfg), **options)
-    filt, p_D_b = build_filter(family, cfg, cfg.sensor, mode, seeds.association_rng())
-    birth_model = cls(cfg.birth, cfg.sensor, scene, rng, **options)
+        return cls(TrackerSetup(cfg.sensor_at(), scene, rng, mode, cfg), **options)
+    filt, p_D_b = build_filter(family, cfg, cfg.sensor_at(), mode, seeds.association_rng())
+    birth_model = cls(cfg.birth, cfg.sensor_at(), scene, rng, **options)
     return FilterTracker(birth_model, filt, p_D_b, check_births=None if builtin else _named_check(name))
 
 
@@ -284,9 +284,7 @@ def evaluate(
     from soabench.tracks.evaluate import evaluate_tracks, run_labels
 
     results = _boundary.step_results(scans, estimates, order)
-    _require(
-        scans.sensor is not None, "these Scans carry no SensorConfig (Scans.sensor); set it to the sensor's settings"
-    )
+    _require(scans.sensor is not None, "these Scans carry no Sensor (Scans.sensor); set it to the sensor's settings")
     cfg = _boundary.metrics_config(config)
     metrics = _evaluate(scans, results, cfg, scans.sensor)
     X = [r.X for r in results]

@@ -8,10 +8,12 @@ Defaults are the register's bold options. A TOML file may set any of them, secti
     sem_mode = "dbscan"
 
 Unknown sections or keys and out-of-range values raise :class:`~soabench.errors.SoabenchError` naming the value
-and what is allowed. Each parameter has one key: the clutter rate λ is ``experiment.clutter`` (the rates a run
-loops over; a command that observes one scene uses its single rate), and ``sensor.lambda_c`` is the rate of the
-scans being made, set from it and refused in a file (:data:`DERIVED_KEYS`). The scenario itself (network,
-vehicles, pedestrians) is configured by the network's ``scenario.toml`` (see :mod:`soabench.scenario`).
+and what is allowed. Each parameter has one key and one home: the clutter rate λ is ``experiment.clutter`` (the
+rates a run loops over; a command that observes one scene uses its single rate). The ``[sensor]`` section holds no
+rate: the sensor that makes a run's scans is :class:`Sensor`, the section at one rate of ``experiment.clutter``
+(:meth:`Config.sensor_at`); ``sensor.lambda_c`` in a file is refused with one line naming the key
+(:data:`NOT_KEYS`). The scenario itself (network, vehicles, pedestrians) is configured by the network's
+``scenario.toml`` (see :mod:`soabench.scenario`).
 """
 
 from __future__ import annotations
@@ -81,8 +83,10 @@ def family_label(name: str) -> str:
     return FAMILIES[name].label if name in FAMILIES else name
 
 
-#: fields that are not config keys: their value comes from the key named beside them (one home per parameter)
-DERIVED_KEYS = {"sensor.lambda_c": "experiment.clutter"}
+#: names a file may give that are not config keys, with the key that holds the value (one home per parameter)
+NOT_KEYS = {"sensor.lambda_c": "experiment.clutter"}
+#: the default clutter rate λ (mean clutter count per scan): the default of ``experiment.clutter``
+CLUTTER_RATE = 3.0
 
 MAX_TRIALS = 100_000  #: upper bound of experiment.trials (and --trials): 1000 times the paper's 100-trial protocol
 MAX_SEED = 2**63 - 1  #: largest base seed
@@ -178,8 +182,6 @@ class SensorConfig:
     p_D: float = 0.98  #: detection probability of a visible target [P]
     sigma_r: float = 1.0  #: range noise std (m) [P]
     sigma_b_deg: float = 5.0  #: bearing noise std (deg) [P]
-    #: mean clutter count per scan; in a :class:`Config` set from ``experiment.clutter``, not a key of its own
-    lambda_c: float = 3.0
     clutter_space: str = "polar"  #: "polar" (uniform in (r, b)) or "cartesian" (uniform in area, kappa ~ r)
     visibility_points: int = 1  #: 1 (centre) or 3 (centre and +-offset across the line of sight)
     visibility_offset: float = 0.3  #: lateral offset (m) of the extra sight points
@@ -212,10 +214,36 @@ class SensorConfig:
         _in_range("sensor.p_D", self.p_D, 0.0, 1.0)
         _positive("sensor.sigma_r", self.sigma_r, hi=1e3)
         _positive("sensor.sigma_b_deg", self.sigma_b_deg, hi=180.0)
-        _non_negative("sensor.lambda_c", self.lambda_c, hi=1e4)
         _one_of("sensor.clutter_space", self.clutter_space, ("polar", "cartesian"))
         _one_of("sensor.visibility_points", self.visibility_points, (1, 3))
         _non_negative("sensor.visibility_offset", self.visibility_offset, hi=100.0)
+
+    def at(self, lambda_c: float) -> Sensor:
+        """The sensor of these settings at clutter rate ``lambda_c`` (a rate of ``experiment.clutter``)."""
+        return Sensor(**{f.name: getattr(self, f.name) for f in dataclasses.fields(SensorConfig)}, lambda_c=lambda_c)
+
+
+@dataclass
+class Sensor(SensorConfig):
+    """The sensor that makes a run's scans (docs/method.md §2.3): the ``[sensor]`` settings at one clutter rate λ.
+
+    A run builds one per rate of ``experiment.clutter`` (:meth:`Config.sensor_at`); ``lambda_c`` is not a key of its
+    own. The scans, the filter's clutter intensity kappa and a tracker plugin read λ from here.
+    """
+
+    lambda_c: float = field(default=CLUTTER_RATE, kw_only=True)  #: mean clutter count per scan (1/scan)
+
+    def __post_init__(self) -> None:
+        self.lambda_c = float(self.lambda_c) if _is_number(self.lambda_c) else self.lambda_c
+
+    @property
+    def settings(self) -> SensorConfig:
+        """The ``[sensor]`` settings without the rate: what the line-of-sight geometry of the scans depends on."""
+        return SensorConfig(**{f.name: getattr(self, f.name) for f in dataclasses.fields(SensorConfig)})
+
+    def validate(self, sumo_step: float | None = None) -> None:
+        super().validate(sumo_step)
+        _non_negative("sensor.lambda_c", self.lambda_c, hi=1e4)
 
 
 @dataclass
@@ -401,7 +429,7 @@ class ExperimentConfig:
     models: tuple[str, ...] = BIRTH_MODEL_NAMES  #: birth models to run in our GM-PHD (built-ins or plugins)
     trackers: tuple[str, ...] = ()  #: whole trackers to run beside them (soabench.plugins)
     probabilities: tuple[str, ...] = ("static", "dynamic")  #: probability modes to run (each once)
-    clutter: tuple[float, ...] = (3.0,)  #: clutter rates lambda, each once (each gets every model x mode)
+    clutter: tuple[float, ...] = (CLUTTER_RATE,)  #: clutter rates lambda, each once (each gets every model x mode)
     filters: tuple[str, ...] = FILTER_FAMILIES[:1]  #: filter families every birth model runs in: gmphd, lmb, pmbm, pmb
     seed: int = 0  #: base seed; trial n uses SeedSequence([seed, n])
     plugin_budget: float = 120.0  #: plugin time budget (s) to build and per scan; past it the run fails (0: no limit)
@@ -516,8 +544,7 @@ class Config:
             for f in dataclasses.fields(obj):
                 default = f.default_factory() if f.default is dataclasses.MISSING else f.default
                 _check_type(f"{sec.name}.{f.name}", default, getattr(obj, f.name))
-        self.experiment.validate()  # first: the sensor's clutter rate comes from it
-        self.sync_derived()
+        self.experiment.validate()
         self.sensor.validate(sumo_step)
         self.filter.validate()
         self.birth.validate()
@@ -549,9 +576,9 @@ class Config:
             )
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without :data:`DERIVED_KEYS`,
-        without the sections of the filter families the run does not name (then at their defaults) and, when the
-        run names the default family only, without ``experiment.filters`` (the identity of a default run is
+        """Plain nested dict (tuples as lists), for the summary JSON and ``from_dict``; without the sections of the
+        filter families the run does not name (then at their defaults) and, when the run names the default family
+        only, without ``experiment.filters`` (the identity of a default run is
         unchanged)."""
         out = dataclasses.asdict(self)
         named = tuple(out["experiment"]["filters"])
@@ -560,31 +587,12 @@ class Config:
             del out[section]
         if named == FILTER_FAMILIES[:1]:  # the default family: run.json as before the key
             del out["experiment"]["filters"]
-        return {
-            sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items() if f"{sec}.{k}" not in DERIVED_KEYS}
-            for sec, d in out.items()
-        }
+        return {sec: {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()} for sec, d in out.items()}
 
-    def __post_init__(self) -> None:
-        # the clutter rate the sensor holds unset (its default) or got from experiment.clutter: a sensor.lambda_c
-        # set to anything else is a second value for the one key, refused by validate() unless the two agree
-        lam = self.sensor.lambda_c
-        unset = lam == SensorConfig.lambda_c or not self.experiment.clutter
-        self._lambda_c = lam if unset else float(self.experiment.clutter[0])
-
-    def sync_derived(self) -> Config:
-        """Set the :data:`DERIVED_KEYS` fields from their keys: the scans' clutter rate is the first of
-        ``experiment.clutter`` (a run sets each rate in turn, docs/method.md §5.8). A ``sensor.lambda_c`` changed
-        in place to another value than these keys gave it is refused with one line naming both keys."""
-        lam = self.sensor.lambda_c
-        require(
-            lam == self._lambda_c or (bool(self.experiment.clutter) and lam == self.experiment.clutter[0]),
-            f"sensor.lambda_c = {lam!r} disagrees with experiment.clutter = {list(self.experiment.clutter)!r}: "
-            "the clutter rate has one key, experiment.clutter; set the rate there",
-        )
-        if self.experiment.clutter:
-            self.sensor.lambda_c = self._lambda_c = float(self.experiment.clutter[0])
-        return self
+    def sensor_at(self, lambda_c: float | None = None) -> Sensor:
+        """The sensor at clutter rate ``lambda_c``, one of ``experiment.clutter`` (docs/method.md §5.8: a run makes
+        the scans of each rate in turn); None: the first rate, the one rate of a command that observes one scene."""
+        return self.sensor.at(self.experiment.clutter[0] if lambda_c is None else lambda_c)
 
     def gmphd_only(self, command: str) -> Config:
         """This configuration, for a command that runs the GM-PHD family only (docs/user-guide/outputs.md "Filter
@@ -629,14 +637,13 @@ class Config:
             obj = sections[sec]
             fields = {f.name: f for f in dataclasses.fields(obj)}
             for key, value in values.items():
-                if f"{sec}.{key}" in DERIVED_KEYS:
-                    raise SoabenchError(_derived_message(f"{sec}.{key}", value))
-                allowed = sorted(k for k in fields if f"{sec}.{k}" not in DERIVED_KEYS)
-                require(key in fields, f"unknown config key {sec}.{key}; allowed: {', '.join(allowed)}")
+                if f"{sec}.{key}" in NOT_KEYS:
+                    raise SoabenchError(_not_key_message(f"{sec}.{key}", value))
+                require(key in fields, f"unknown config key {sec}.{key}; allowed: {', '.join(sorted(fields))}")
                 f = fields[key]
                 default = f.default_factory() if f.default is dataclasses.MISSING else f.default
                 setattr(obj, key, _check_type(f"{sec}.{key}", default, value))
-        return cfg.sync_derived()
+        return cfg
 
     @classmethod
     def from_record(cls, data: Any) -> Config:
@@ -647,9 +654,9 @@ class Config:
         return cls.from_dict(data)
 
 
-def _derived_message(key: str, value: Any) -> str:
-    """One line naming a field that is not a key and the key that sets it."""
-    home = DERIVED_KEYS[key]
+def _not_key_message(key: str, value: Any) -> str:
+    """One line naming a name that is not a key and the key that holds its value."""
+    home = NOT_KEYS[key]
     example = f"[{value!r}]" if _is_number(value) else "[3.0]"
     section, name = home.split(".")
     return f"{key} is not a config key: the clutter rate has one key, {home} (a list: [{section}] {name} = {example})"

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from soabench.config import SensorConfig
+from soabench.config import Sensor, SensorConfig
 
 
 def wrap(a: np.ndarray | float) -> np.ndarray:
@@ -75,7 +75,7 @@ def fov_area(cfg: SensorConfig) -> float:
     return 0.5 * cfg.fov * (cfg.r_max**2 - cfg.r_min**2)
 
 
-def clutter_intensity(Z: np.ndarray, cfg: SensorConfig) -> np.ndarray:
+def clutter_intensity(Z: np.ndarray, cfg: Sensor) -> np.ndarray:
     """kappa(z_l) for each row of ``Z`` (M, 2) (§2.3).
 
     ``polar``: lambda / |V_z| (uniform in (r, b)); ``cartesian``: lambda * r / A (uniform in area).

@@ -39,7 +39,7 @@ from soabench.birth import sampling
 from soabench.birth.soa import dedup, ego_inside
 from soabench.cache import kernel_folder
 from soabench.config import BIRTH_MODEL_NAMES, Config, MetricsConfig
-from soabench.experiment.execution.progress import LINE_INTERVAL_S, is_terminal
+from soabench.notice import LINE_INTERVAL_S, is_terminal
 from soabench.sensor import segment_meets_convex
 from soabench.types import Births, NewbornTerms, Obstacles, Scan
 
@@ -51,7 +51,7 @@ def _filter(mode: str):
     from soabench.gmphd import GMPHDFilter
 
     cfg = Config()
-    return GMPHDFilter(cfg.filter, cfg.sensor, mode)
+    return GMPHDFilter(cfg.filter, cfg.sensor_at(), mode)
 
 
 def _scan_arrays() -> tuple[np.ndarray, np.ndarray]:
@@ -168,14 +168,12 @@ def _lmb_steps(modes: tuple[str, ...]) -> None:
     birth), and the association marginals on both of their paths (enumeration and Gibbs sampling)."""
     import shapely
 
-    from soabench.config import Config
     from soabench.lmb import LMBFilter
     from soabench.lmb.gibbs import association_marginals
-    from soabench.types import NewbornTerms, Scan
 
     cfg = Config()
     Z, ego = _scan_arrays()
-    f = LMBFilter(cfg.filter, cfg.sensor)
+    f = LMBFilter(cfg.filter, cfg.sensor_at())
     for k in range(3):
         b = _births()
         b.newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0 * A)

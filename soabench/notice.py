@@ -17,15 +17,25 @@ import threading
 import time
 from collections.abc import Callable, Hashable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, TextIO
 
 MESSAGE = (
     "soabench: compiling the GM-PHD filter, metric and scan-geometry kernels with numba (once per version of the "
     "kernels; cached afterwards) ..."
 )
+#: off a terminal, a long wait (a run's trials, the kernels' compilation) writes a line at least this often (s)
+LINE_INTERVAL_S = 10.0
 DELAY = 3.0  #: seconds of silence before the notice (longer than loading cached kernels takes)
 _done: set[Hashable] = set()
 _printed = threading.Event()  #: the notice is printed at most once per process
+
+
+def is_terminal(stream: TextIO) -> bool:
+    """Whether ``stream`` is a terminal (a redrawn bar) rather than a file or a pipe (a line now and then)."""
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
 
 
 def _print_once() -> None:

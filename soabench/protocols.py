@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 if TYPE_CHECKING:
     import numpy as np
 
-    from soabench.config import BirthConfig, Config, FilterConfig, SensorConfig
+    from soabench.config import BirthConfig, Config, FilterConfig, Sensor
     from soabench.scenario.scene import SceneMap
     from soabench.types import BirthContext, Births, Estimates, Scan, StepResult
 
@@ -40,7 +40,7 @@ class BirthModel(Protocol):
     name: str
 
     def __init__(
-        self, cfg: BirthConfig, sensor: SensorConfig, scene: SceneMap, rng: np.random.Generator, **options: Any
+        self, cfg: BirthConfig, sensor: Sensor, scene: SceneMap, rng: np.random.Generator, **options: Any
     ) -> None: ...
 
     def __call__(self, ctx: BirthContext) -> Births: ...
@@ -60,7 +60,7 @@ class TrackerSetup:
         config: the whole resolved configuration (filter defaults, metrics settings), read-only.
     """
 
-    sensor: SensorConfig
+    sensor: Sensor
     scene: SceneMap
     rng: np.random.Generator
     mode: str
@@ -102,7 +102,7 @@ class FamilySetup:
     """
 
     config: Config
-    sensor: SensorConfig
+    sensor: Sensor
     mode: str
     filter_cfg: FilterConfig
     filter_mode: str

@@ -27,7 +27,7 @@ import shapely
 from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
-from soabench.config import SensorConfig
+from soabench.config import Sensor, SensorConfig
 from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import fov_mask, range_bearing, wrap
 from soabench.notice import announced
@@ -500,7 +500,7 @@ def scan_steps(t: np.ndarray, step_length: float, dt: float) -> np.ndarray:
     return idx
 
 
-def draw_clutter(rng: np.random.Generator, cfg: SensorConfig, n_scans: int) -> list[np.ndarray]:
+def draw_clutter(rng: np.random.Generator, cfg: Sensor, n_scans: int) -> list[np.ndarray]:
     """Poisson clutter for ``n_scans`` scans (§2.3): (M_k, 2) (range, bearing) arrays, uniform over
     [r_min, r_max] x [-Theta/2, Theta/2] (``polar``) or uniform in area over the FOV (``cartesian``)."""
     counts = rng.poisson(cfg.lambda_c, n_scans)
@@ -522,9 +522,7 @@ class _Draws:
     clutter: list[np.ndarray]  #: K (M_k, 2) clutter measurements
 
 
-def _draw(
-    rngs: tuple[np.random.Generator, np.random.Generator], cfg: SensorConfig, n_scans: int, n_peds: int
-) -> _Draws:
+def _draw(rngs: tuple[np.random.Generator, np.random.Generator], cfg: Sensor, n_scans: int, n_peds: int) -> _Draws:
     """Detection uniforms and noise (detection rng, fixed shape) and clutter (clutter rng)."""
     det_rng, clutter_rng = rngs
     u_detect = det_rng.random((n_scans, n_peds))
@@ -553,7 +551,9 @@ def observe(
 
     require_type(recording, Recording, "observe's recording", "simulate one with soabench.scenario.simulate")
     require_type(scene, SceneMap, "observe's scene", "load it with soabench.scenario.load(net)")
-    require_type(cfg, SensorConfig, "observe's sensor settings", "pass Config().sensor, not the whole Config")
+    require_type(
+        cfg, Sensor, "observe's sensor", "pass config.sensor_at(rate): the [sensor] settings at a clutter rate"
+    )
     require(
         isinstance(rngs, tuple) and len(rngs) == 2 and all(isinstance(g, np.random.Generator) for g in rngs),
         f"observe's rngs must be the pair (detection, clutter) of numpy Generators of TrialSeeds.sensor_rngs(), "
@@ -561,7 +561,7 @@ def observe(
     )
     cfg.validate(recording.step_length)
     if geometry is not None:
-        key = (id(recording), id(scene), repr(dataclasses.replace(cfg, lambda_c=0.0)))
+        key = (id(recording), id(scene), repr(cfg.settings))
         if geometry.get("key") != key:
             geometry.clear()
             geometry.update(key=key, recording=recording, scene=scene, steps={})  # held: their ids stay unique

@@ -27,7 +27,7 @@ from soabench.protocols import FamilySetup, Filter, Tracker
 from soabench.types import BirthContext, Births, Estimates, Scan, Scans, StepResult
 
 if TYPE_CHECKING:
-    from soabench.config import Config, SensorConfig
+    from soabench.config import Config, Sensor
 
 __all__ = [
     "FilterTracker",
@@ -49,7 +49,7 @@ def family_builder(family: str) -> Callable[[FamilySetup], Filter]:
 
 
 def build_filter(
-    family: str, config: Config, sensor: SensorConfig, mode: str, rng: np.random.Generator | None = None
+    family: str, config: Config, sensor: Sensor, mode: str, rng: np.random.Generator | None = None
 ) -> tuple[Filter, float]:
     """One run's filter of ``family`` in probability ``mode``, and the detection probability p_D_b its birth
     models read (:func:`soabench.config.filter_config_for_mode`); ``rng``: the trial's association stream (a fixed

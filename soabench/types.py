@@ -27,7 +27,7 @@ from shapely.geometry.base import BaseGeometry
 from soabench.errors import SoabenchError, require
 
 if TYPE_CHECKING:  # soabench.config sits above this module; imported at run time only where a config is built
-    from soabench.config import SensorConfig
+    from soabench.config import Sensor
 
 CLUTTER = -1  #: source id of a clutter measurement
 OCCLUDER_KINDS = ("building", "parked", "vehicle")  #: values of ``Obstacles.kind``
@@ -327,7 +327,7 @@ class Scans:
         ped_ids: (P,) pedestrian ids.
         ped_labels: (P,) int64 truth track label of each pedestrian (read-only property, derived from ``ped_ids``
             by :func:`truth_labels`).
-        sensor: the :class:`~soabench.config.SensorConfig` that produced the scans (written into every exported
+        sensor: the :class:`~soabench.config.Sensor` that produced the scans (written into every exported
             file).
     """
 
@@ -340,7 +340,7 @@ class Scans:
     visible: np.ndarray
     detected: np.ndarray
     ped_ids: np.ndarray
-    sensor: SensorConfig | None = None
+    sensor: Sensor | None = None
 
     def __len__(self) -> int:
         return len(self.scans)
@@ -373,7 +373,7 @@ class Scans:
         parameters and their units (:func:`sensor_arrays`): a tracker reading the file needs R, p_D and kappa."""
         require(
             self.sensor is not None,
-            "these Scans carry no SensorConfig (Scans.sensor); set it before exporting: the file must say how it "
+            "these Scans carry no Sensor (Scans.sensor); set it before exporting: the file must say how it "
             "was measured",
         )
         np.savez_compressed(Path(path), **_scans_to_arrays(self), **sensor_arrays(self.sensor))
@@ -531,10 +531,10 @@ SENSOR_UNITS: dict[str, str] = {
 }
 
 
-def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
+def sensor_arrays(cfg: Sensor) -> dict[str, np.ndarray]:
     """The sensor parameters of a scans file: one float64 scalar per parameter in SI units and radians
     (``sigma_r``, ``sigma_b``, ``p_D``, ``lambda_c``, ``r_min``, ``r_max``, ``fov``; ``dt`` is written with the
-    scans) and ``sensor_json``: every :class:`SensorConfig` field as configured (degrees where the config uses them)
+    scans) and ``sensor_json``: every :class:`Sensor` field as configured (degrees where the config uses them)
     plus the units of the scalars."""
     values = {
         "sigma_r": cfg.sigma_r,
@@ -551,13 +551,13 @@ def sensor_arrays(cfg: SensorConfig) -> dict[str, np.ndarray]:
     return out
 
 
-def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> SensorConfig | None:
-    from soabench.config import SensorConfig  # run time only: soabench.config sits above this bottom module
+def _sensor_from_arrays(a: dict[str, np.ndarray], where: str) -> Sensor | None:
+    from soabench.config import Sensor  # run time only: soabench.config sits above this bottom module
 
     if "sensor_json" not in a:
         return None
     try:
-        return SensorConfig(**json.loads(str(a["sensor_json"]))["config"])
+        return Sensor(**json.loads(str(a["sensor_json"]))["config"])
     except (ValueError, TypeError, KeyError) as exc:
         raise SoabenchError(f"{where}: sensor_json is not a soabench sensor configuration ({exc})") from None
 

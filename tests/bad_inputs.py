@@ -743,13 +743,13 @@ def work_stubbed(setattr_: Callable) -> Iterator[None]:
     """A block in which every entry point of real work is :func:`_started`: the built-in trial kind (through the
     registry's public hook) and, with ``setattr_`` (pytest's ``monkeypatch.setattr``), the SUMO simulation, the KITTI
     sequence and netconvert."""
-    import soabench.kitti.protocol
+    import soabench.experiment.campaigns.kitti.protocol
     import soabench.scenario
     import soabench.scenario.osm
     from soabench.experiment.trial import registry
 
     setattr_(soabench.scenario, "simulate", _started)
-    setattr_(soabench.kitti.protocol, "run_sequence", _started)
+    setattr_(soabench.experiment.campaigns.kitti.protocol, "run_sequence", _started)
     setattr_(soabench.scenario.osm, "_tool", _started)
     with registry.registered({registry.DEFAULT_TRIAL_KIND: _started}):
         yield

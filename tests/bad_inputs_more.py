@@ -238,8 +238,15 @@ FAMILY_CASES: list[Case] = [
     ("sweep births config filters", _with_config("sweep", "births", "--trials", "1", "--out", "sw"), "GM-PHD"),
     ("study config filters", _with_config("study", "--trials", "1", "--out", "st"), "`soabench study` runs the GM"),
     ("scene config filters", _with_config("scene", "--out", "s.png"), "`soabench scene` runs the GM-PHD"),
-    ("kitti config filters", lambda t: [*_kitti()(t), "--config", _toml(t, FAMILIES)], "a KITTI run runs the GM-PHD"),
-    ("kitti --filters", _kitti(None, "--filters", "gmphd,lmb"), "unrecognized arguments: --filters"),
+    ("kitti --filters kalman", _kitti(None, "--filters", "kalman"), "filter family 'kalman' is unknown"),
+    (
+        "kitti --filters lmb dynamic",
+        _kitti(None, "--filters", "gmphd,lmb", "--probability", "dynamic"),
+        "filter family 'lmb' runs the probability modes static, static+occ only",
+    ),
+    _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nbirth_mapping = "pairs"\n', "lmb.birth_mapping = 'pairs'"),
+    _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nextract_r = nan\n', "lmb.extract_r = nan is out of range"),
+    ("run --probabilities NaN", lambda t: _run(t, "--probabilities", "static,nan"), "probability mode 'nan'"),
     ("check suite config filters", _suite_with_config(FAMILIES), "a check suite runs the GM-PHD family only"),
     ("check threshold filter", _suite_with_config("", 'filter = "lmb"\n'), "unknown key 'filter'"),
 ]

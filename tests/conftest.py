@@ -59,7 +59,6 @@ def no_work(monkeypatch):
 def recorded_intersection():
     """(config, scene, {lambda: (sensor, scans)} at lambda = 3 and 10, seeds) of a 30 s trial of the shipped
     intersection (SUMO), shared by the filter tests that run on recorded scans."""
-    import dataclasses
 
     from soabench.config import Config
     from soabench.scenario import load, simulate
@@ -72,7 +71,7 @@ def recorded_intersection():
     rec = simulate(scene, scenario, seeds, duration=30.0)
     scans = {}
     for lam in (3.0, 10.0):
-        sensor = dataclasses.replace(cfg.sensor, lambda_c=lam)
+        sensor = cfg.sensor_at(lam)
         scans[lam] = (sensor, observe(rec, scene, sensor, seeds.sensor_rngs()))
     return cfg, scene, scans, seeds
 

@@ -531,7 +531,7 @@ def births_target(value: tuple[Any, int]) -> str:
     """A birth model's output through the harness's check; accepted births run through a GM-PHD step."""
     from shapely.geometry import Polygon
 
-    from soabench.config import FilterConfig, SensorConfig
+    from soabench.config import FilterConfig, Sensor
     from soabench.experiment.trial.guard import BIRTH_W_MAX, PluginOutputError, check_births
     from soabench.gmphd import GMPHDFilter
     from soabench.types import Scan
@@ -543,7 +543,7 @@ def births_target(value: tuple[Any, int]) -> str:
 
     def read() -> Any:
         ok = check_births(b, scan, "fuzz:Births")
-        res = GMPHDFilter(FilterConfig(), SensorConfig(), "dynamic").step(scan, ok)
+        res = GMPHDFilter(FilterConfig(), Sensor(), "dynamic").step(scan, ok)
         return ok, res
 
     def check(value: Any) -> None:

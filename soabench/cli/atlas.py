@@ -93,7 +93,7 @@ def handle(args: argparse.Namespace) -> int:
     )
     if design is None:
         from soabench.experiment.campaigns.atlas.store import is_atlas
-        from soabench.experiment.runs.ownership import resolve
+        from soabench.folders import resolve
 
         require(
             is_atlas(resolve(args.out)),

@@ -18,10 +18,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     from soabench.birth import LABEL
-    from soabench.experiment.runs.ownership import check_out_file
     from soabench.experiment.trial.snapshot import births_at_end, check_birth_model, take_snapshot
     from soabench.figures.births import births_snapshot_figure
     from soabench.figures.style import save_png
+    from soabench.folders import check_out_file
 
     out = check_out_file(args.out, ".png")
     check_birth_model(args.model)  # an unknown or broken model fails before SUMO runs

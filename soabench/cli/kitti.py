@@ -7,14 +7,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from soabench.cli.parsing import csv_list, offsets
-from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES
+from soabench.cli.parsing import FILTERS_HELP, csv_list, offsets
+from soabench.config import BIRTH_MODEL_NAMES, FILTER_FAMILIES, PROBABILITY_MODES
 from soabench.errors import require
 
 #: the options of a new run: ``--resume`` takes them from the run folder and refuses them
 NEW_RUN_OPTIONS = (
     "root", "detections", "semantics", "sequences", "out", "config", "models", "nhat_sweep", "classes", "velodyne",
-    "point_labels", "lidar_grid", "lidar_closing", "lidar_fill",
+    "point_labels", "lidar_grid", "lidar_closing", "lidar_fill", "filters",
 )  # fmt: skip
 
 
@@ -41,6 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--nhat-sweep", type=offsets, help="N_hat offsets per sequence, e.g. -10:10 (default: no sweep)")
     p.add_argument("--models", type=csv_list("model", BIRTH_MODEL_NAMES), help="default soa,pubm,ubm,ubm-ws")
     p.add_argument("--probability", choices=PROBABILITY_MODES, help="probability mode (default static)")
+    p.add_argument("--filters", type=csv_list("filter family", FILTER_FAMILIES), help=FILTERS_HELP)
     p.add_argument(
         "--config",
         metavar="FILE.toml",
@@ -61,9 +62,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     from soabench.config import require_distinct
-    from soabench.kitti.config import kitti_run_config
+    from soabench.experiment.campaigns.kitti.protocol import run_kitti
+    from soabench.kitti.config import KittiSpec, kitti_run_config
     from soabench.kitti.lidar import lidar_options
-    from soabench.kitti.protocol import KittiSpec, run_kitti
     from soabench.kitti.reader import parse_sequences
 
     if args.resume is not None:
@@ -75,7 +76,7 @@ def handle(args: argparse.Namespace) -> int:
         require(args.root is not None, "--root DIR is required (a KITTI tracking folder holding label_02/)")
         require(args.out is not None, "--out RUN is required (the run folder to create)")
         cfg, kcfg = kitti_run_config(
-            args.config, args.models, args.seed, args.probability, args.classes, args.score_min
+            args.config, args.models, args.seed, args.probability, args.classes, args.score_min, args.filters
         )
         if args.nhat_sweep is not None:
             require_distinct("--nhat-sweep offsets", tuple(args.nhat_sweep))

@@ -7,13 +7,23 @@ import argparse
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from soabench.config import PROBABILITY_MODES
+from soabench.config import FAMILIES, PROBABILITY_MODES
 from soabench.errors import SoabenchError, require
 
 EXIT_USAGE = 2  #: exit status of every error a user can cause
 
 MAX_OFFSETS = 1001  #: values of one --offsets / --nhat-sweep (e.g. -500:500)
 MAX_OFFSET = 10_000  #: largest |offset| (N_hat itself is at most 10000: soabench/config.py)
+
+
+#: the help of ``--filters``, from the registry of filter families (soabench.config.FAMILIES)
+FILTERS_HELP = (
+    "filter families every birth model runs in, e.g. gmphd,lmb: "
+    + ", ".join(f"{name} ({f.label})" for name, f in FAMILIES.items())
+    + " (default gmphd); a family runs the probability modes it defines ("
+    + "; ".join(f"{name}: {', '.join(f.modes)}" for name, f in FAMILIES.items())
+    + ")"
+)
 
 
 def csv_list(kind: str, allowed: Sequence[str] | None = None) -> Callable[[str], tuple[str, ...]]:

@@ -18,7 +18,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     from soabench.experiment.campaigns.atlas.query import format_table, run_query, write_result
-    from soabench.experiment.runs.ownership import check_out_file
+    from soabench.folders import check_out_file
 
     if args.out is not None:
         check_out_file(str(args.out))

@@ -23,8 +23,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.runs.ownership import check_out_file
     from soabench.experiment.trial.snapshot import take_snapshot
+    from soabench.folders import check_out_file
 
     out = check_out_file(args.out, ".npz")
     scans_out = None

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from soabench.cli import common
-from soabench.cli.parsing import add_run_args, csv_list, float_list
+from soabench.cli.parsing import FILTERS_HELP, add_run_args, csv_list, float_list
 from soabench.config import FILTER_FAMILIES
 from soabench.errors import require
 
@@ -15,13 +15,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
     add_run_args(p)
     p.add_argument("--clutter", type=float_list, help="clutter rate(s) lambda, e.g. 3 or 0.5,3,5 (default 3)")
-    p.add_argument(
-        "--filters",
-        type=csv_list("filter family", FILTER_FAMILIES),
-        help="filter families every birth model runs in, comma-separated: gmphd (default), lmb (labelled "
-        "multi-Bernoulli), pmbm (Poisson multi-Bernoulli mixture), pmb (its multi-Bernoulli variant); lmb, pmbm and "
-        "pmb run the static modes (static, static+occ) only",
-    )
+    p.add_argument("--filters", type=csv_list("filter family", FILTER_FAMILIES), help=FILTERS_HELP)
     p.add_argument(
         "--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run (default: new run)"
     )

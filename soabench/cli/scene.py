@@ -16,10 +16,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.runs.ownership import check_out_file
     from soabench.experiment.trial.snapshot import take_snapshot
     from soabench.figures.sensor import scene_snapshot_figure
     from soabench.figures.style import save_png
+    from soabench.folders import check_out_file
 
     out = check_out_file(args.out, ".png")
     snap = take_snapshot(

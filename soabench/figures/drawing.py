@@ -10,9 +10,8 @@ worker draws the figure exactly as the serial path does, so the PNG files are by
 processes draw them. :func:`draw_all` returns only once every figure is on disk (the report's ``summary.json`` is
 written after it, so a report is never passed off as complete with a figure missing); a figure that fails raises.
 
-Only a local :class:`~soabench.experiment.execution.executors.PoolExecutor` draws (a Dask worker may not see the run
-folder);
-without one, and for tables not read from a folder, the figures are drawn here one after another.
+Only an executor whose workers are local processes draws (``executor.local``: a Dask worker may not see the run
+folder); without one, and for tables not read from a folder, the figures are drawn here one after another.
 """
 
 from __future__ import annotations
@@ -22,11 +21,9 @@ import json
 import os
 import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-
-from soabench.experiment.execution.executors import PoolExecutor
 
 #: the executor figures are drawn on (innermost :func:`parallel`), or None: serial
 _ACTIVE: list[Any] = []
@@ -58,7 +55,7 @@ class FigureBatch:
     jobs: tuple[FigureJob, ...]
     #: the tables as arrays (:func:`save_arrays`), or "": read them from ``run_dir``
     arrays: str = ""
-    config: dict = field(default_factory=dict)  # read by the executors for a failure record's seed
+    base_seed: int = 0  #: the seed of a failure record (a figure has no trial seed of its own)
 
     @property
     def task_fn(self) -> Callable[[int, FigureBatch], dict]:
@@ -186,9 +183,10 @@ def draw_task(i: int, batch: FigureBatch) -> dict:
 
 @contextlib.contextmanager
 def parallel(executor: Any) -> Iterator[None]:
-    """Draw the figures of every report written inside the block on ``executor`` (a local process pool with more
-    than one worker; anything else draws serially)."""
-    usable = isinstance(executor, PoolExecutor) and executor.n_workers > 1
+    """Draw the figures of every report written inside the block on ``executor`` when its workers are local
+    processes that read this machine's files (``executor.local``) and there is more than one; anything else (Dask,
+    one worker, None) draws serially."""
+    usable = getattr(executor, "local", False) and executor.n_workers > 1
     _ACTIVE.append(executor if usable else None)
     try:
         yield
@@ -196,25 +194,9 @@ def parallel(executor: Any) -> Iterator[None]:
         _ACTIVE.pop()
 
 
-@contextlib.contextmanager
-def report_pool(workers: int | None, executor: Any = None) -> Iterator[None]:
-    """The figures of a report written inside the block in parallel: on ``executor`` when it is a local process
-    pool, else (unless an enclosing :func:`parallel` decides already) on a pool of ``workers`` processes (None: one
-    per core) opened here and closed on the way out, terminated if the block is left by an exception (Ctrl-C)."""
-    if isinstance(executor, PoolExecutor) or _ACTIVE:
-        with parallel(executor if isinstance(executor, PoolExecutor) else _ACTIVE[-1]):
-            yield
-        return
-    n = int(workers or os.cpu_count() or 1)
-    pool = PoolExecutor(n) if n > 1 else None  # its processes start at the first figure
-    ok = False
-    try:
-        with parallel(pool):
-            yield
-        ok = True
-    finally:
-        if pool is not None:
-            pool.close(abort=not ok)
+def pool_open() -> bool:
+    """True inside a :func:`parallel` block: it decides where the figures of a report are drawn."""
+    return bool(_ACTIVE)
 
 
 def draw_all(jobs: Sequence[FigureJob], tables: Any) -> list[Path]:

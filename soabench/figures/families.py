@@ -21,7 +21,9 @@ from soabench.config import FAMILIES
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.experiment.trial.trial import FILTER_COLUMN
 from soabench.figures import style as ps
+from soabench.figures.bars import grouped_bars
 from soabench.figures.drawing import FigureJob
+from soabench.figures.gaps import identity_gaps_figure
 from soabench.figures.tracks import has_labels
 
 #: how a figure names a filter family (the registry's labels, :data:`soabench.config.FAMILIES`)
@@ -72,7 +74,6 @@ def in_family(tables: RunTables, family: str, build, *args) -> Figure:
 
 def families_figure(tables: RunTables, clutter: float) -> Figure:
     """Delay, cardinality error and OSPA per birth model and family, static mode (module docstring)."""
-    from soabench.figures.results import _bars
 
     t = tables.trials
     fams = run_families(tables)
@@ -86,7 +87,7 @@ def families_figure(tables: RunTables, clutter: float) -> Figure:
                 keep = select(t, clutter=clutter, model=model, mode=SHARED_MODE) & (t[FILTER_COLUMN] == fam)
                 return t[column][keep]
 
-            _bars(ax, models, fams, values, hatch=lambda fam: FAMILY_HATCH.get(fam, "xx"))
+            grouped_bars(ax, models, fams, values, hatch=lambda fam: FAMILY_HATCH.get(fam, "xx"))
             if column == "ospa":
                 c = float(tables.meta["config"].get("metrics", {}).get("ospa_c", math.nan))
                 if math.isfinite(c):
@@ -128,8 +129,5 @@ def family_jobs(tables: RunTables, out_dir: Path) -> list[FigureJob]:
 
 def identity_gaps_by_family(tables: RunTables, clutter: float) -> Figure:
     """:func:`soabench.figures.gaps.identity_gaps_figure` with one row per filter family."""
-    from soabench.experiment.reports.report import FAMILY_LABEL
-    from soabench.figures.gaps import identity_gaps_figure
-
     rows = [(FAMILY_LABEL.get(f, f), family_only(tables, f)) for f in run_families(tables)]
     return identity_gaps_figure(tables, clutter, rows)

@@ -1,5 +1,5 @@
 """The KITTI protocol's figures (paper Figs. 6-8, §V; docs/method.md §5.9), in the package style
-(:mod:`soabench.figures.style`), from the numbers :mod:`soabench.kitti.report` computes."""
+(:mod:`soabench.figures.style`), from the numbers :mod:`soabench.experiment.campaigns.kitti.report` computes."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ from matplotlib.figure import Figure
 
 from soabench.experiment.reports.paper import read_rows
 from soabench.figures import style as ps
-from soabench.figures.results import mean_ci
+from soabench.figures.bars import mean_ci
 
 
 def _trial_values(sweep_dir: Path, points: list[dict], clutter: float) -> dict[tuple, np.ndarray]:

@@ -39,89 +39,20 @@ from matplotlib.figure import Figure
 
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.figures import style as ps
+from soabench.figures.bars import grouped_bars, mean_ci, offsets
 from soabench.figures.drawing import FigureJob, draw_all
+from soabench.figures.families import family_jobs, family_only, in_family, run_families
+from soabench.figures.gaps import identity_gaps_figure
 from soabench.figures.origins import components_origin_figure, has_origins
+from soabench.figures.tracks import has_labels, run_tracks_figure
 
 #: the paper's Fig. 5 panels (its UBM is the workspace grid); other models are drawn as fig5x_delay_<model>.png
 LETTER = {"soa": "a", "pubm": "b", "ubm-ws": "c", "gmbm": "d", "atbm": "e"}
 
 
 # ------------------------------------------------------------------------------------------------------- helpers
-def mean_ci(v: np.ndarray, level: float = 0.95) -> tuple[float, float]:
-    """Mean of the finite values and the half-width of its Student-t confidence interval (NaN if undefined)."""
-    from scipy.stats import t as student_t
-
-    v = np.asarray(v, dtype=float)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return math.nan, math.nan
-    if v.size == 1:
-        return float(v[0]), math.nan
-    half = student_t.ppf(0.5 + level / 2, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)
-    return float(v.mean()), float(half)
-
-
-def pooled_mean_ci(values: np.ndarray, trials: np.ndarray, level: float = 0.95) -> float:
-    """Half-width of the Student-t confidence interval, over trials, of the mean of ``values`` pooled over every
-    trial (each value tagged with its trial): the ratio estimator sum / count with trials as the sampled units,
-    variance T/(T-1) * sum_t (S_t - mean * n_t)^2 / (sum_t n_t)^2 over the T trials with a value. NaN for T < 2."""
-    from scipy.stats import t as student_t
-
-    values, trials = np.asarray(values, dtype=float), np.asarray(trials)
-    keep = np.isfinite(values)
-    values, trials = values[keep], trials[keep]
-    ids, which = np.unique(trials, return_inverse=True)
-    if ids.size < 2:
-        return math.nan
-    sums, counts = np.bincount(which, weights=values), np.bincount(which).astype(float)
-    mean = sums.sum() / counts.sum()
-    var = ids.size / (ids.size - 1) * float(np.sum((sums - mean * counts) ** 2)) / counts.sum() ** 2
-    return float(student_t.ppf(0.5 + level / 2, ids.size - 1) * math.sqrt(var))
-
-
 def _dt(tables: RunTables) -> float:
     return float(tables.meta["config"]["sensor"]["dt"])
-
-
-def _offsets(n: int, width: float = 0.8) -> np.ndarray:
-    """x offsets of ``n`` grouped bars / strips inside one slot of ``width``."""
-    return (np.arange(n) - (n - 1) / 2) * (width / max(n, 1))
-
-
-def _bars(
-    ax, slots: list[str], modes: list[str], values, models_for_color: list[str] | None = None, hatch=None
-) -> None:
-    """Grouped bars: one slot per model, one hatched/plain bar per mode, mean ± σ (lower bar clipped at 0) and
-    every per-trial value as a small dot. ``values(slot, mode)`` gives the per-trial values; ``hatch(mode)`` the
-    bar hatch of a group (default: the probability mode's)."""
-    hatch = hatch or (lambda mode: ps.mode_style(mode).hatch)
-    rng = np.random.default_rng(0)  # jitter only; fixed so the figure is reproducible
-    width = 0.8 / max(len(modes), 1)
-    for j, mode in enumerate(modes):
-        off = _offsets(len(modes))[j]
-        for i, slot in enumerate(slots):
-            v = np.asarray(values(slot, mode), dtype=float)
-            v = v[np.isfinite(v)]
-            mu, sd = (float(v.mean()), float(v.std())) if v.size else (math.nan, math.nan)
-            st = ps.model_style(slot)
-            ax.bar(
-                i + off,
-                mu,
-                width * 0.92,
-                yerr=[[min(sd, mu) if v.size else 0.0], [sd if v.size else 0.0]],
-                color=st.color,
-                alpha=0.55,
-                hatch=hatch(mode),
-                edgecolor="k",
-                linewidth=0.5,
-                error_kw={"elinewidth": 0.8, "capsize": 2},
-                zorder=2,
-            )
-            if v.size:
-                x = i + off + rng.uniform(-0.25, 0.25, v.size) * width
-                ax.plot(x, v, ".", color=st.color, mec="k", mew=0.2, ms=2.5, alpha=0.8, zorder=3)
-    ax.set_xticks(np.arange(len(slots)), [ps.tick_label(s) for s in slots])
-    ax.grid(axis="x", visible=False)
 
 
 # ------------------------------------------------------------------------------------------------- Fig. 5a–e
@@ -163,7 +94,7 @@ def delay_figure(
         for j, mode in enumerate(modes):
             m = select(t, clutter=clutter, model=model, mode=mode)
             order = np.argsort(t["trial"][m], kind="stable")
-            x = t["trial"][m][order] + _offsets(len(modes), 0.5)[j]
+            x = t["trial"][m][order] + offsets(len(modes), 0.5)[j]
             mu, sd = t["delay_mean"][m][order], np.nan_to_num(t["delay_std"][m][order])
             ok = np.isfinite(mu)
             ms = ps.mode_style(mode)
@@ -261,7 +192,7 @@ def bars_figure(tables: RunTables, column: str, ylabel: str, title: str, clutter
     with ps.style():
         fig = ps.figure("single", 2.6)
         ax = fig.add_subplot()
-        _bars(ax, models, modes, lambda mo, md: t[column][select(t, clutter=clutter, model=mo, mode=md)])
+        grouped_bars(ax, models, modes, lambda mo, md: t[column][select(t, clutter=clutter, model=mo, mode=md)])
         handles = ps.mode_handles(modes, bars=True)
         if column == "ospa":
             mc = tables.meta["config"].get("metrics", {})
@@ -361,7 +292,7 @@ def precision_trials_figure(tables: RunTables) -> Figure:
                 for lam in clutters:
                     v = t["precision"][select(t, clutter=lam, model=model, mode=mode)]
                     vals.append(v[np.isfinite(v)])
-                pos = np.arange(len(clutters)) + _offsets(len(models))[i]
+                pos = np.arange(len(clutters)) + offsets(len(models))[i]
                 keep = [n for n, v in enumerate(vals) if v.size]
                 if keep:
                     ax.boxplot(
@@ -422,7 +353,7 @@ def delay_hist_figure(tables: RunTables, clutter: float, max_bin: int = 10) -> F
                     if steps.size:
                         share = np.bincount(np.minimum(steps, max_bin + 1), minlength=max_bin + 2) / steps.size
                 st = ps.model_style(model)
-                ax.bar(x + _offsets(len(models))[i], share, width, color=st.color, hatch=ps.mode_style(mode).hatch,
+                ax.bar(x + offsets(len(models))[i], share, width, color=st.color, hatch=ps.mode_style(mode).hatch,
                        edgecolor="k", linewidth=0.3)  # fmt: skip
             ax.set_xticks(x, [f"{k * dt:g}" for k in range(max_bin + 1)] + [f">{max_bin * dt:g}"])
             ax.set_xlabel("tracking delay k_delay (s)")
@@ -492,10 +423,6 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
     """Every figure of the run (module docstring) as a :class:`~soabench.figures.drawing.FigureJob`, in order; for a
     run that names filter families, those of its GM-PHD family, then the families side by side
     (:mod:`soabench.figures.families`); ``by_family`` False: the paper's figures of all the rows given."""
-    from soabench.figures.families import family_jobs, family_only, in_family, run_families
-    from soabench.figures.gaps import identity_gaps_figure
-    from soabench.figures.tracks import has_labels, run_tracks_figure
-
     if by_family and run_families(tables):
         first = run_families(tables)[0]
         jobs = [

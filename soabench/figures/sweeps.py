@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from soabench.figures import style as ps
-from soabench.figures.results import mean_ci
+from soabench.figures.bars import mean_ci
 
 _CLUTTER_LABEL = "clutter rate λ (false alarms per scan)"
 
@@ -123,7 +123,7 @@ def births_figure(
     return fig
 
 
-def key_figure(main_rows: Sequence[Mapping], clutter_rows: Sequence[Mapping], clutter: float = 3.0) -> Figure:
+def key_figure(main_rows: Sequence[Mapping], clutter_rows: Sequence[Mapping], clutter: float) -> Figure:
     """The README's key figure from per-trial rows: (a) mean delay k̄ ± 0.5σ̄, (b) mean abs. cardinality error ±
     σ over trials (both at λ = ``clutter``, every model, plain bars static, hatched dynamic) and (c) precision vs λ
     (mean ± 95% CI over trials)."""

@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.figures import style as ps
-from soabench.figures.results import mean_ci
+from soabench.figures.bars import mean_ci
 from soabench.tracks.evaluate import ALPHA_KEYS
 from soabench.tracks.scores import ALPHAS
 

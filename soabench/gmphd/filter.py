@@ -2,7 +2,7 @@
 
 Usage per trial and (birth model x probability mode)::
 
-    filt = GMPHDFilter(cfg.filter, cfg.sensor, mode="static")      # or "dynamic", "dynamic+occ"
+    filt = GMPHDFilter(cfg.filter, cfg.sensor_at(), mode="static")      # or "dynamic", "dynamic+occ"
     prev = None
     for scan in scans.scans:
         births = birth_model(BirthContext(scan, prev))
@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from soabench import notice
-from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig
+from soabench.config import PROBABILITY_MODES, FilterConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle, reduction
@@ -69,7 +69,7 @@ class GMPHDFilter:
     name = "gmphd"
 
     def __init__(
-        self, filter_cfg: FilterConfig, sensor_cfg: SensorConfig, mode: str = "static", *, fused: bool = True
+        self, filter_cfg: FilterConfig, sensor_cfg: Sensor, mode: str = "static", *, fused: bool = True
     ) -> None:
         require(
             mode in PROBABILITY_MODES,

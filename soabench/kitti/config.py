@@ -87,7 +87,7 @@ def load_kitti_config(path: str | Path | None) -> tuple[Config, KittiConfig]:
     require(p.is_file(), f"config file {str(p)!r} does not exist")
     data = read_toml(p, "config file")
     kitti = kitti_from_dict(data.pop("kitti", {}))
-    cfg = Config.from_dict(data, base).validate().gmphd_only("a KITTI run")
+    cfg = Config.from_dict(data, base).validate()
     cfg.single_clutter_rate("a KITTI run")
     return cfg, kitti
 
@@ -179,11 +179,13 @@ def kitti_run_config(
     probability: str | None = None,
     classes: tuple[str, ...] | None = None,
     score_min: float | None = None,
+    filters: tuple[str, ...] | None = None,
 ) -> tuple[Config, KittiConfig]:
     """The configuration of a new KITTI run: the file ``path`` (:func:`load_kitti_config`) overlaid by the given
-    values (None: the file's), validated."""
+    values (None: the file's), validated; ``filters``: the filter families every model runs in (each must define
+    the run's probability mode)."""
     cfg, kcfg = load_kitti_config(path)
-    overrides: dict[str, Any] = {"models": models, "seed": seed}
+    overrides: dict[str, Any] = {"models": models, "seed": seed, "filters": filters}
     if probability is not None:
         overrides["probabilities"] = (probability,)
     cfg.experiment = dataclasses.replace(cfg.experiment, **{k: v for k, v in overrides.items() if v is not None})

@@ -36,10 +36,10 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from soabench import scenario as sumo_scenario
+from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.config import Config, SensorConfig, check_time
 from soabench.errors import require
-from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
+from soabench.folders import FolderLock, check_new_folder, resolve
 from soabench.geometry import wrap
 from soabench.kitti.camera import image_box
 from soabench.kitti.formats import (
@@ -295,7 +295,7 @@ def export_kitti(
     check_new_folder(out, EXPORT_FILE, "KITTI export", "remove it to export again")
     fov = float(fov_deg) if fov_deg is not None else export_default_fov(cfg.sensor)
     require(0.0 < fov < 180.0, f"--fov-deg {fov!r} must be in (0, 180): a camera's horizontal field of view")
-    sensor = dataclasses.replace(cfg.sensor, fov_deg=fov)
+    sensor = dataclasses.replace(cfg.sensor_at(), fov_deg=fov)
     calib = export_calib(sensor)
     scene, scen = load(net, polys, scenario)
     sensor.validate(scen.step_length)

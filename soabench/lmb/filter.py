@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from soabench import notice
-from soabench.config import FilterConfig, LMBConfig, SensorConfig
+from soabench.config import FilterConfig, LMBConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
@@ -65,7 +65,7 @@ class LMBFilter:
     def __init__(
         self,
         filter_cfg: FilterConfig,
-        sensor_cfg: SensorConfig,
+        sensor_cfg: Sensor,
         mode: str = "static",
         *,
         lmb_cfg: LMBConfig | None = None,

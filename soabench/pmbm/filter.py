@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from soabench import notice
-from soabench.config import FilterConfig, PMBMConfig, SensorConfig
+from soabench.config import FilterConfig, PMBMConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
@@ -69,7 +69,7 @@ class PMBMFilter:
     def __init__(
         self,
         filter_cfg: FilterConfig,
-        sensor_cfg: SensorConfig,
+        sensor_cfg: Sensor,
         mode: str = "static",
         *,
         pmbm_cfg: PMBMConfig | None = None,

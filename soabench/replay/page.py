@@ -15,7 +15,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from soabench.experiment.runs.files import write_text_atomic
+from soabench.atomic import write_text_atomic
 
 GENERATOR = "soabench replay"
 

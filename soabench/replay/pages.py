@@ -10,8 +10,8 @@ from pathlib import Path
 from soabench import plugins
 from soabench.config import FILTER_FAMILIES
 from soabench.errors import require
-from soabench.experiment.runs.ownership import check_out_file
 from soabench.experiment.runs.store import RUN_FILE
+from soabench.folders import check_out_file
 from soabench.replay.animation import VIDEO_SUFFIXES, require_mp4, write_video
 from soabench.replay.frames import replay_data
 from soabench.replay.page import write_replay

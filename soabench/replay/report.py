@@ -20,10 +20,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from soabench.atomic import write_text_atomic
 from soabench.birth import LABEL
 from soabench.errors import SoabenchError, require
-from soabench.experiment.runs.files import write_text_atomic
-from soabench.experiment.runs.ownership import check_out_file, resolve
+from soabench.folders import check_out_file, resolve
 from soabench.replay.page import asset, fill
 from soabench.replay.simulate import read_run
 

@@ -23,11 +23,11 @@ from soabench import plugins
 from soabench.birth import LABEL
 from soabench.config import FAMILIES, FILTER_FAMILIES, Config, family_label
 from soabench.errors import SoabenchError, require
-from soabench.experiment.runs.ownership import check_existing_folder, resolve
 from soabench.experiment.runs.provenance import package_versions
 from soabench.experiment.runs.runmeta import validate_run_meta
 from soabench.experiment.trial import guard, registry
 from soabench.experiment.trial.registry import load_scene_cached
+from soabench.folders import check_existing_folder, resolve
 from soabench.protocols import TrackerSetup
 from soabench.scenario import simulate
 from soabench.seeding import trial_seeds
@@ -136,7 +136,7 @@ def replay_trial(
     scene, scenario = load_scene_cached(meta.net, meta.polys, meta.scenario)
     seeds = trial_seeds(exp.seed, trial)
     recording = simulate(scene, scenario, seeds, duration=exp.duration)
-    sensor_cfg = dataclasses.replace(cfg.sensor, lambda_c=lam)
+    sensor_cfg = cfg.sensor_at(lam)
     scans = observe(recording, scene, sensor_cfg, seeds.sensor_rngs())
     runs: list[ModelReplay] = []
     for name in names:

@@ -271,8 +271,6 @@ def load_scene(
         skip_parked: leave out the polygon files' parked cars (see :func:`read_polygons`).
         door_limit: refuse a door farther than this (m) from every sidewalk (:func:`project_doors`).
     """
-    import shapely.ops  # noqa: F401  (nearest_points)
-
     net = net if net is not None else read_net(net_file)
     regions = net_regions(net)
     require(

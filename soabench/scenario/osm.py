@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from soabench.errors import SoabenchError, require
-from soabench.experiment.runs.ownership import check_new_folder, resolve
+from soabench.folders import check_new_folder, resolve
 from soabench.scenario import ScenarioConfig
 from soabench.scenario.derive import derive_defaults
 from soabench.scenario.network import read_net

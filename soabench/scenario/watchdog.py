@@ -28,7 +28,7 @@ from collections.abc import Callable
 from typing import Any
 
 from soabench.errors import SoabenchError
-from soabench.experiment.execution.workers import _set_pdeathsig
+from soabench.processes import die_with_parent
 
 #: environment variable holding the stall limit in seconds (``inf`` waits for ever).
 STALL_ENV = "SOABENCH_SUMO_TIMEOUT"
@@ -97,7 +97,7 @@ def run_watched(fn: Callable[..., Any], args: tuple, describe: str, hint: str = 
         warnings.simplefilter("ignore", DeprecationWarning)
         pid = os.fork()
     if pid == 0:  # the child
-        _child(read_fd, write_fd, page, fn, args, _set_pdeathsig)
+        _child(read_fd, write_fd, page, fn, args, die_with_parent)
     os.close(write_fd)
     finished = False
     try:

@@ -38,7 +38,7 @@ def _direct(trial: int):
     from soabench.sensor import observe
 
     cfg = kitti_base_config()
-    sensor = dataclasses.replace(cfg.sensor, fov_deg=export_default_fov(cfg.sensor))
+    sensor = dataclasses.replace(cfg.sensor_at(), fov_deg=export_default_fov(cfg.sensor))
     scene, scenario = load("intersection")
     seeds = trial_seeds(cfg.experiment.seed, trial)
     recording = simulate(scene, scenario, seeds, duration=DURATION)
@@ -208,6 +208,29 @@ def test_kitti_protocol_end_to_end_and_resume(exported, tmp_path, capsys):
     before.pop("timing"), after.pop("timing")
     assert after == before
     assert json.loads((run / "summary.json").read_text())["table1"] == t1
+
+
+def test_kitti_protocol_scores_identities_per_filter_family(exported, tmp_path, capsys):
+    """``--filters gmphd,lmb``: the first family's tables are a GM-PHD-only run's, bit for bit; the LMB's Table I,
+    Tracks table and S-OA comparison stand beside them, and sequences.csv names each row's family."""
+    common = ["kitti", "--root", str(exported), "--semantics", str(exported / "semantics"), "--models", "soa,pubm"]
+    assert main([*common, "--out", str(tmp_path / "gm")]) == 0
+    assert main([*common, "--filters", "gmphd,lmb", "--out", str(tmp_path / "both")]) == 0
+    capsys.readouterr()
+    gm = json.loads((tmp_path / "gm" / "summary.json").read_text())
+    both = json.loads((tmp_path / "both" / "summary.json").read_text())
+    assert both["table1"] == gm["table1"] and both["tracks"] == gm["tracks"] and "families" not in gm
+    lmb = both["families"]["lmb"]
+    assert set(lmb["tracks"]) == {"soa", "pubm"} and all(0 < t["hota_mean"] <= 1 for t in lmb["tracks"].values())
+    assert lmb["table1"] != both["table1"]  # another filter: other numbers
+    rows = _rows(tmp_path / "both" / "sequences.csv")
+    assert {r["filter"] for r in rows} == {"gmphd", "lmb"} and len(rows) == 2 * 2 * 2  # families x sequences x models
+    report = (tmp_path / "both" / "report.md").read_text()
+    assert "## The LMB filter" in report and "### Tracks, LMB" in report
+    assert main([*common, "--filters", "lmb", "--probability", "dynamic", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "filter family 'lmb' runs the probability modes static, static+occ only" in err and err.count("\n") == 1
+    assert not (tmp_path / "bad").exists()
 
 
 def test_without_semantics_the_report_says_so(exported, tmp_path, capsys):

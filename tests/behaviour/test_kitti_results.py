@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from soabench.errors import SoabenchError
+from soabench.experiment.campaigns.kitti.results import tracking_rows, write_tracking_results
 from soabench.kitti.config import kitti_base_config
 from soabench.kitti.export import export_calib, export_default_fov, export_trial
-from soabench.kitti.results import tracking_rows, write_tracking_results
 from soabench.scenario import load, simulate
 from soabench.seeding import trial_seeds
 from soabench.sensor import observe
@@ -21,7 +21,7 @@ from soabench.sensor import observe
 def trial(tmp_path_factory):
     """Trial 0 of the intersection (30 s) observed as the export observes it, and its label_02 file."""
     cfg = kitti_base_config()
-    sensor = dataclasses.replace(cfg.sensor, fov_deg=export_default_fov(cfg.sensor))
+    sensor = dataclasses.replace(cfg.sensor_at(), fov_deg=export_default_fov(cfg.sensor))
     calib = export_calib(sensor)
     scene, scenario = load("intersection", (), None)
     seeds = trial_seeds(cfg.experiment.seed, 0)

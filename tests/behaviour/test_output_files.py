@@ -12,11 +12,11 @@ import stat
 import numpy as np
 import pytest
 
+from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.cli.main import build_parser, main
 from soabench.cli.parsing import DefaultsHelpFormatter
-from soabench.config import SensorConfig
+from soabench.config import Sensor
 from soabench.errors import SoabenchError
-from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
 from soabench.types import SENSOR_UNITS, Scans
 
 
@@ -46,7 +46,7 @@ def test_record_scans_carry_the_sensor_parameters_and_units(tmp_path, umask):
     scans_path = tmp_path / "rec.scans.npz"
     for path in (out, scans_path):
         assert stat.S_IMODE(path.stat().st_mode) == 0o644
-    expected = SensorConfig(fov_deg=120.0, lambda_c=2.5, sigma_b_deg=3.0)
+    expected = Sensor(fov_deg=120.0, lambda_c=2.5, sigma_b_deg=3.0)
     with np.load(scans_path, allow_pickle=False) as d:
         assert float(d["sigma_r"]) == expected.sigma_r and float(d["p_D"]) == expected.p_D
         assert float(d["sigma_b"]) == pytest.approx(math.radians(3.0))
@@ -61,7 +61,7 @@ def test_record_scans_carry_the_sensor_parameters_and_units(tmp_path, umask):
 
 def test_scans_without_a_sensor_are_not_exported(tmp_path):
     scans = Scans([], 1.0, [], np.zeros((0, 0, 2)), *(np.zeros((0, 0), bool),) * 4, np.zeros(0, str))
-    with pytest.raises(SoabenchError, match="carry no SensorConfig"):
+    with pytest.raises(SoabenchError, match="carry no Sensor"):
         scans.save_npz(tmp_path / "s.npz")
     assert not (tmp_path / "s.npz").exists()
 

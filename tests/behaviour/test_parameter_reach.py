@@ -16,6 +16,7 @@ import json
 import re
 import sys
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -25,13 +26,13 @@ from shapely.geometry import Polygon
 import soabench.config as config_module
 from soabench import plugins
 from soabench.config import (
-    DERIVED_KEYS,
     BirthConfig,
     Config,
     ExperimentConfig,
     FilterConfig,
     LMBConfig,
     MetricsConfig,
+    Sensor,
     SensorConfig,
 )
 from soabench.experiment.execution.options import RunOptions
@@ -159,9 +160,9 @@ PROPERTY_KEYS = {"sigma_b": "sigma_b_deg", "fov": "fov_deg"}
 
 
 def config_keys() -> set[str]:
-    """The keys of :class:`Config` (without the derived fields, which are not keys)."""
+    """The keys of :class:`Config`."""
     cfg = Config()
-    return {f"{sec}.{f.name}" for sec in SPIED for f in dataclasses.fields(getattr(cfg, sec))} - set(DERIVED_KEYS)
+    return {f"{sec}.{f.name}" for sec in SPIED for f in dataclasses.fields(getattr(cfg, sec))}
 
 
 def page_keys() -> set[str]:
@@ -261,27 +262,30 @@ def test_the_rows_hold_every_method_mode_and_rate(recorded_run):
     assert set(rows["filter"][birth]) == set(exp.filters) and set(rows["filter"][~birth]) == {""}
 
 
-def spy_config(values: dict[str, object], reads: dict[str, set]) -> Config:
-    """``values`` as a Config whose sections log ``{key: values read}`` when code outside soabench/config.py and
-    the dataclass machinery (copies, comparisons, conversion to dicts) reads a key."""
+def spied(section: str, cls: type, reads: dict[str, set]) -> type:
+    """``cls`` logging ``{section.key: values read}`` when code outside soabench/config.py and the dataclass
+    machinery (copies, comparisons, conversion to dicts) reads a key."""
     skip = {str(Path(config_module.__file__)), dataclasses.__file__, "<string>"}
+    names = {f.name for f in dataclasses.fields(cls)}
 
-    def spied(section: str, cls: type) -> type:
-        names = {f.name for f in dataclasses.fields(cls)}
+    def getattribute(self, name):
+        value = object.__getattribute__(self, name)
+        key = PROPERTY_KEYS.get(name, name)
+        if key in names and sys._getframe(1).f_code.co_filename not in skip:
+            reads.setdefault(f"{section}.{key}", set()).add(
+                repr(object.__getattribute__(self, key) if key != name else value)
+            )
+        return value
 
-        def getattribute(self, name):
-            value = object.__getattribute__(self, name)
-            key = PROPERTY_KEYS.get(name, name)
-            if key in names and sys._getframe(1).f_code.co_filename not in skip:
-                reads.setdefault(f"{section}.{key}", set()).add(
-                    repr(object.__getattribute__(self, key) if key != name else value)
-                )
-            return value
+    return type(cls.__name__, (cls,), {"__getattribute__": getattribute})
 
-        return type(cls.__name__, (cls,), {"__getattribute__": getattribute})
 
+def spy_config(values: dict[str, object], reads: dict[str, set]) -> Config:
+    """``values`` as a Config whose sections log the keys read (:func:`spied`)."""
     plain = Config.from_dict(as_sections(values)).validate()
-    cfg = Config(**{sec: spied(sec, cls)(**dataclasses.asdict(getattr(plain, sec))) for sec, cls in SPIED.items()})
+    cfg = Config(
+        **{sec: spied(sec, cls, reads)(**dataclasses.asdict(getattr(plain, sec))) for sec, cls in SPIED.items()}
+    )
     cfg.plugins = plain.plugins
     return cfg.validate()
 
@@ -296,13 +300,15 @@ def reads() -> dict[str, set]:
     plugins.allow_import_paths([TRACKER])
     scene, scenario = load("intersection")
     seen: dict[str, set] = {}
-    for values in (NON_DEFAULT, {**NON_DEFAULT, **SWITCHES_BACK}):
-        cfg = spy_config(values, seen)
-        result = run_trial(0, cfg, scene, scenario)
-        assert result.failures == [] and result.rows
-    # filter.nonfinite is read only when an input is not finite: one scan with a NaN measurement
-    scan = Scan(0, 0.0, np.zeros(3), np.array([[10.0, 0.1], [np.nan, 0.2]]), None, [], Polygon())
-    assert GMPHDFilter(cfg.filter, cfg.sensor).step(scan, Births.empty()).n_dropped == 1
+    # the sensor a trial builds from [sensor] at each clutter rate (Config.sensor_at) logs its reads too
+    with mock.patch.object(config_module, "Sensor", spied("sensor", Sensor, seen)):
+        for values in (NON_DEFAULT, {**NON_DEFAULT, **SWITCHES_BACK}):
+            cfg = spy_config(values, seen)
+            result = run_trial(0, cfg, scene, scenario)
+            assert result.failures == [] and result.rows
+        # filter.nonfinite is read only when an input is not finite: one scan with a NaN measurement
+        scan = Scan(0, 0.0, np.zeros(3), np.array([[10.0, 0.1], [np.nan, 0.2]]), None, [], Polygon())
+        assert GMPHDFilter(cfg.filter, cfg.sensor_at()).step(scan, Births.empty()).n_dropped == 1
     return seen
 
 

@@ -16,7 +16,7 @@ from shapely.geometry import box
 
 import soabench.scenario
 from soabench.cli.main import main
-from soabench.config import FILTER_FAMILIES, SensorConfig
+from soabench.config import FILTER_FAMILIES, Sensor
 from soabench.experiment.campaigns import cross_scene
 from soabench.experiment.campaigns.occlusion_density import scan_occlusion
 from soabench.experiment.reports import paper
@@ -242,9 +242,9 @@ def test_density_of_a_scan_is_the_hidden_share_of_the_sidewalk_in_the_fov():
     far = SimpleNamespace(ego=np.array([500.0, 500.0, 0.0]), visible_region=box(0, 0, 0, 0))  # no sidewalk in FOV
     in_fov = np.array([[True, True, True, False], [False, False, False, False]])
     visible = np.array([[True, False, False, False], [False, False, False, False]])
-    scans = _Scans(scans=[scan, far], sensor=SensorConfig(), in_fov=in_fov, visible=visible)
+    scans = _Scans(scans=[scan, far], sensor=Sensor(), in_fov=in_fov, visible=visible)
     occ = scan_occlusion(scans, SimpleNamespace(sidewalk=sidewalk))
-    in_view = 100.0 - math.pi * SensorConfig().r_min ** 2  # the FOV's inner hole (r < r_min) is not in view
+    in_view = 100.0 - math.pi * Sensor().r_min ** 2  # the FOV's inner hole (r < r_min) is not in view
     assert occ["shares"][0] == pytest.approx(1.0 - 25.0 / in_view, abs=1e-4)
     assert math.isnan(occ["shares"][1])
     assert (occ["in_fov"], occ["hidden"]) == (3, 2)

@@ -114,10 +114,10 @@ def random_case(rng: np.random.Generator, J: int, M: int, dynamic: bool):
 def test_fused_equals_array_path_random(dynamic, newborn):
     """Wide, heavy, undetectable (r < r_min, outside the FOV) components, births, newborn terms, the J_max cap,
     the undetected-birth age limit and top-n extraction: the branches a short recording may not reach."""
-    from soabench.config import FilterConfig, SensorConfig
+    from soabench.config import FilterConfig, Sensor
 
     rng = np.random.default_rng(17 + dynamic + 2 * newborn)
-    sensor = SensorConfig(fov_deg=200.0)
+    sensor = Sensor(fov_deg=200.0)
     for extraction, J_max, max_age in (("vo_ma", 1000, None), ("top_n", 40, 3), ("vo_ma", 25, 0)):
         cfg = FilterConfig(J_max=J_max, extraction=extraction, max_undetected_birth_age=max_age)
         mode = "dynamic" if dynamic else "static"
@@ -178,11 +178,11 @@ def test_fused_ukf_equals_array_path(recorded, mode):
 def test_fused_ukf_with_a_non_positive_definite_covariance_takes_the_array_path():
     """The array path's jitter retry perturbs every component when one is not positive definite; the fused UKF
     hands such a step to it, so the results are the array path's."""
-    from soabench.config import FilterConfig, SensorConfig
+    from soabench.config import FilterConfig, Sensor
 
     rng = np.random.default_rng(5)
     cfg = FilterConfig(form="ukf")
-    fused, ref = GMPHDFilter(cfg, SensorConfig()), GMPHDFilter(cfg, SensorConfig(), fused=False)
+    fused, ref = GMPHDFilter(cfg, Sensor()), GMPHDFilter(cfg, Sensor(), fused=False)
     prior, Z = random_case(rng, 40, 6, False)
     prior.P[3] = np.diag([1.0, 1.0, 1.0, -1e-12])  # not positive definite (after prediction still not)
     prior.P[3, 2, 2] = -5.0

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from soabench.config import FilterConfig, SensorConfig
+from soabench.config import FilterConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.gmphd import GMPHDFilter, cycle
 from soabench.gmphd.inputs import births_finite
@@ -66,9 +66,9 @@ def test_fused_step_raises_or_drops_a_bad_birth_as_the_array_path(mode, bad):
     births = _births(np.array([0.1, bad, 0.2]))
     for fused in (True, False):
         with pytest.raises(SoabenchError, match=r"scan 0: 1 of 3 birth components .* filter.nonfinite"):
-            GMPHDFilter(FilterConfig(), SensorConfig(), mode, fused=fused).step(scan, births)
+            GMPHDFilter(FilterConfig(), Sensor(), mode, fused=fused).step(scan, births)
     drop = dataclasses.replace(FilterConfig(), nonfinite="drop")
-    res = {f: GMPHDFilter(drop, SensorConfig(), mode, fused=f).step(scan, births) for f in (True, False)}
+    res = {f: GMPHDFilter(drop, Sensor(), mode, fused=f).step(scan, births) for f in (True, False)}
     assert res[True].n_dropped_births == res[False].n_dropped_births == 1
     assert res[True].n_predicted == res[False].n_predicted == 2
     np.testing.assert_allclose(res[True].X, res[False].X, rtol=1e-12, atol=1e-12)
@@ -78,8 +78,8 @@ def test_fused_step_raises_or_drops_a_bad_birth_as_the_array_path(mode, bad):
 def test_kappa_is_computed_once_per_scan_and_clutter_setting():
     """Filters with the same clutter settings share kappa of a scan; another clutter rate gets its own."""
     scan = Scan(0, 0.0, np.zeros(3), np.array([[10.0, 0.1], [20.0, -0.3]]), None, [], Polygon())
-    a = GMPHDFilter(FilterConfig(), SensorConfig(), "static").step(scan, _births(np.full(2, 0.1)))
-    b = GMPHDFilter(FilterConfig(), SensorConfig(), "dynamic").step(scan, _births(np.full(2, 0.1)))
-    c = GMPHDFilter(FilterConfig(), SensorConfig(lambda_c=10.0), "static").step(scan, _births(np.full(2, 0.1)))
+    a = GMPHDFilter(FilterConfig(), Sensor(), "static").step(scan, _births(np.full(2, 0.1)))
+    b = GMPHDFilter(FilterConfig(), Sensor(), "dynamic").step(scan, _births(np.full(2, 0.1)))
+    c = GMPHDFilter(FilterConfig(), Sensor(lambda_c=10.0), "static").step(scan, _births(np.full(2, 0.1)))
     assert a.kappa is b.kappa
-    np.testing.assert_allclose(c.kappa, a.kappa * 10.0 / SensorConfig().lambda_c, rtol=1e-15)
+    np.testing.assert_allclose(c.kappa, a.kappa * 10.0 / Sensor().lambda_c, rtol=1e-15)

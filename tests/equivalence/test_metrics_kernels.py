@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from soabench.config import Config, MetricsConfig, SensorConfig
+from soabench.config import Config, MetricsConfig, Sensor
 from soabench.metrics import evaluate
 from soabench.metrics_kernels import assignment, np_sum
 from soabench.types import Obstacles, Scan, Scans, StepResult
@@ -71,7 +71,7 @@ def _same(a, b) -> None:
     assert a.episodes == b.episodes
 
 
-def _scans(truth: np.ndarray, ego: np.ndarray, cfg: SensorConfig) -> Scans:
+def _scans(truth: np.ndarray, ego: np.ndarray, cfg: Sensor) -> Scans:
     K, P = truth.shape[:2]
     present = np.isfinite(truth).all(axis=-1)
     r = np.hypot(truth[..., 0] - ego[:, None, 0], truth[..., 1] - ego[:, None, 1])
@@ -96,7 +96,7 @@ def test_constructed_edge_cases_match_the_numpy_path(gt_set, fov_deg):
     """Empty scans, duplicated estimates, estimates exactly at d_gate and at the GOSPA cut-off, more estimates than
     truths and the reverse, estimates outside the FOV."""
     rng = np.random.default_rng(3)
-    sensor = dataclasses.replace(SensorConfig(), fov_deg=fov_deg)
+    sensor = dataclasses.replace(Sensor(), fov_deg=fov_deg)
     mcfg = dataclasses.replace(MetricsConfig(), gt_set=gt_set)
     K, P = 60, 5
     ego = np.column_stack([rng.uniform(-5, 5, (K, 2)), rng.uniform(-np.pi, np.pi, K)])
@@ -138,7 +138,7 @@ def test_filter_runs_of_a_trial_match_the_numpy_path(monkeypatch):
 
 
 def test_other_orders_use_the_numpy_path():
-    sensor = SensorConfig()
+    sensor = Sensor()
     mcfg = dataclasses.replace(MetricsConfig(), ospa_p=2.0)
     truth = np.array([[[1.0, 0.0], [5.0, 5.0]]])
     scans = _scans(truth, np.zeros((1, 3)), sensor)
@@ -153,7 +153,7 @@ def test_coinciding_estimates_are_scored_with_scipys_choice():
     and the order of the summed distances (their last bit) follows the assignment. Scans like trial 0's step 59 of
     the shipped protocol (two equal estimates between two truths) score exactly as on the numpy path."""
     rng = np.random.default_rng(9)
-    sensor, mcfg = SensorConfig(), MetricsConfig()
+    sensor, mcfg = Sensor(), MetricsConfig()
     K, P = 400, 6
     ego = np.zeros((K, 3))
     truth = rng.uniform(-30, 30, (K, P, 2))

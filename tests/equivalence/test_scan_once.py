@@ -14,7 +14,7 @@ import shapely
 from shapely.geometry import box
 
 from soabench.birth.base import FOVRule, inside_any
-from soabench.config import FilterConfig, SensorConfig
+from soabench.config import FilterConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.experiment.runs.files import format_value, pack_table, unpack_table, write_csv, write_csv_lists
 from soabench.experiment.runs.store import _rows_of
@@ -103,7 +103,7 @@ def test_births_check():
 
 
 def test_filter_scan_inputs_checked_once_per_scan_and_errors_still_raised():
-    sensor = SensorConfig()
+    sensor = Sensor()
     scan = _scan([], Z=np.array([[10.0, 0.1]]))
     f1, f2 = GMPHDFilter(FilterConfig(), sensor, "static"), GMPHDFilter(FilterConfig(), sensor, "dynamic")
     r1, r2 = f1.step(scan, _births([0.1])), f2.step(scan, _births([0.1]))

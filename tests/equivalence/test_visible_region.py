@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import shapely
 
-from soabench.config import SensorConfig
+from soabench.config import Sensor
 from soabench.seeding import trial_seeds
 from soabench.sensor import VisibleRegion, observe, segment_meets_convex, visible_region
 from soabench.types import DeferredRegion, Obstacles, Scan
@@ -41,7 +41,7 @@ def test_point_test_agrees_with_the_built_polygon(recordings, net, fov_deg, r_mi
     """Random points over and around the FOV, and points 1e-6 m either side of every vertex of the built polygon:
     the deferred test and contains_xy on the polygon give the same answer for each one."""
     scene, rec, seeds = recordings[net]
-    cfg = dataclasses.replace(SensorConfig(), fov_deg=fov_deg, r_min=r_min)
+    cfg = dataclasses.replace(Sensor(), fov_deg=fov_deg, r_min=r_min)
     scans = observe(rec, scene, cfg, seeds.sensor_rngs())
     rng = np.random.default_rng(1)
     tested = inside = 0
@@ -65,7 +65,7 @@ def test_point_test_agrees_with_the_built_polygon(recordings, net, fov_deg, r_mi
 
 def test_built_region_is_the_eager_one_and_reading_does_not_change_the_point_test(recordings):
     scene, rec, seeds = recordings["intersection"]
-    cfg = SensorConfig()
+    cfg = Sensor()
     scans = observe(rec, scene, cfg, seeds.sensor_rngs())
     scan = scans.scans[7]
     region = _deferred(scan)

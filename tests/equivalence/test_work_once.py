@@ -214,13 +214,13 @@ def test_sensor_geometry_once_for_every_clutter_rate(intersection):
     recording = simulate(scene, scenario, seeds, duration=cfg.experiment.duration)
     geometry: dict = {}
     for lam in (0.5, 5.0, 0.0):
-        sensor = dataclasses.replace(cfg.sensor, lambda_c=lam)
+        sensor = cfg.sensor_at(lam)
         fresh = observe(recording, scene, sensor, seeds.sensor_rngs())
         reused = observe(recording, scene, sensor, seeds.sensor_rngs(), geometry=geometry)
         assert _scan_data(fresh) == _scan_data(reused), lam
     assert len(geometry["steps"]) == len(fresh.scans)
     # another setting than lambda_c starts the geometry afresh
-    narrow = dataclasses.replace(cfg.sensor, r_max=cfg.sensor.r_max / 2)
+    narrow = dataclasses.replace(sensor, r_max=sensor.r_max / 2)
     a = observe(recording, scene, narrow, seeds.sensor_rngs(), geometry=geometry)
     assert _scan_data(a) == _scan_data(observe(recording, scene, narrow, seeds.sensor_rngs()))
 
@@ -281,10 +281,10 @@ def test_inverse_measurement_terms_once_per_scan():
     import numpy as np
 
     from soabench.baselines.partially_uniform import inverse_measurement_terms, scan_inverse_terms
-    from soabench.config import SensorConfig
+    from soabench.config import Sensor
     from soabench.types import Obstacles, Scan
 
-    sensor = SensorConfig()
+    sensor = Sensor()
     Z = np.array([[10.0, 0.3], [25.0, -2.0], [3.0, 3.1]])
     scan = Scan(4, 4.0, np.array([1.0, -2.0, 0.7]), Z, Obstacles.empty(), [], None)
     m, P = scan_inverse_terms(scan, sensor, 0.8)

@@ -33,10 +33,22 @@ def test_bad_value_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch, no_work
         assert not (tmp_path / folder).exists(), folder
 
 
-def test_the_new_cases_are_distinct_from_each_other_and_from_the_first_table():
-    names = [c[0] for c in bad_inputs_more.CASES]
-    assert len(names) == len(set(names)) >= 40
-    assert not set(names) & {c[0] for c in bad_inputs.CASES}
+@pytest.mark.parametrize(
+    ("code", "err", "want"),
+    [
+        (2, "soabench: error: --trials 0 must be >= 1\n", "clean"),
+        (2, "Traceback (most recent call last):\nValueError: --trials 0\n", "traceback"),
+        (1, "soabench: error: --trials 0 must be >= 1\n", "silent"),
+        (0, "", "silent"),
+        (2, "soabench: error: --trials 0 must be >= 1\nsoabench: error: again\n", "unclear"),
+        (2, "soabench: error: a value is wrong\n", "unclear"),  # the line does not name the value
+        (2, "error: --trials 0 must be >= 1\n", "unclear"),
+    ],
+)
+def test_the_verdict_of_every_case_tells_a_clean_refusal_from_the_others(code, err, want):
+    """Each case above passes only on the verdict "clean": exit 2 and one line ``soabench: error: ...`` naming the
+    value; a traceback, another exit status, a second line or a line without the value is not clean."""
+    assert bad_inputs.verdict(code, "", err, "--trials 0") == want
 
 
 # ---------------------------------------------------------------------------------------- values given twice

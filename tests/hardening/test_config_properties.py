@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon
 
-from soabench.config import Config, FilterConfig, SensorConfig, load_config
+from soabench.config import Config, FilterConfig, Sensor, load_config
 from soabench.errors import SoabenchError
 from soabench.gmphd import GMPHDFilter
 from soabench.types import SOURCE_GRID, SOURCE_MEAS, Births, NewbornTerms, Scan
@@ -153,7 +153,7 @@ def _bad_rows(a: np.ndarray) -> int:
 @given(poisoned_steps())
 def test_filter_step_raises_on_non_finite_inputs_by_default(case):
     Z, ego, births, mode = case
-    filt = GMPHDFilter(FilterConfig(J_max=60), SensorConfig(), mode=mode)
+    filt = GMPHDFilter(FilterConfig(J_max=60), Sensor(), mode=mode)
     bad = not (np.isfinite(Z).all() and np.isfinite(ego).all() and np.isfinite(births.w).all())
     bad = bad or not np.isfinite(births.m).all()
     if bad:
@@ -168,7 +168,7 @@ def test_filter_step_raises_on_non_finite_inputs_by_default(case):
 @given(poisoned_steps())
 def test_filter_step_drops_and_counts_non_finite_inputs(case):
     Z, ego, births, mode = case
-    filt = GMPHDFilter(FilterConfig(J_max=60, nonfinite="drop"), SensorConfig(), mode=mode)
+    filt = GMPHDFilter(FilterConfig(J_max=60, nonfinite="drop"), Sensor(), mode=mode)
     ego_ok = bool(np.isfinite(ego).all())
     n_bad_births = int((~(np.isfinite(births.w) & np.isfinite(births.m).all(axis=1))).sum()) if len(births) else 0
     for k in range(2):
@@ -192,7 +192,7 @@ def test_mass_is_conserved_without_detection(scene, p_S, form):
     the measurements (T1 with p_D = 0), across two steps."""
     mix, Z, ego, _ = scene
     cfg = FilterConfig(form=form, p_S=p_S, p_D=0.0, J_max=1000, prune_T=0.0)
-    filt = GMPHDFilter(cfg, SensorConfig(), mode="static")
+    filt = GMPHDFilter(cfg, Sensor(), mode="static")
     births = Births(mix.w, mix.m, mix.P, np.full(len(mix), SOURCE_MEAS, dtype=np.int8))
     prev = 0.0
     for k in range(2):
@@ -212,9 +212,9 @@ def test_nan_measurement_with_measurement_driven_births_never_reaches_a_state():
     births.newborn = NewbornTerms(nb_m, np.tile(np.eye(4), (3, 1, 1)), lambda A, k: np.full(len(A), 0.5))
     scan = Scan(0, 0.0, np.zeros(3), Z, None, [], Polygon())
     with pytest.raises(SoabenchError, match=r"scan 0: 2 of 3 measurements .* are not finite"):
-        GMPHDFilter(FilterConfig(), SensorConfig()).step(scan, births)
-    res = GMPHDFilter(FilterConfig(nonfinite="drop"), SensorConfig()).step(scan, births)
+        GMPHDFilter(FilterConfig(), Sensor()).step(scan, births)
+    res = GMPHDFilter(FilterConfig(nonfinite="drop"), Sensor()).step(scan, births)
     assert res.n_dropped == 2 and res.n_newborn == 1 and np.isfinite(res.X).all() and len(res.X) == 1
     bad_pose = Scan(0, 0.0, np.array([0.0, np.nan, 0.0]), Z[:1], None, [], Polygon())
     with pytest.raises(SoabenchError, match="ego pose"):
-        GMPHDFilter(FilterConfig(), SensorConfig()).step(bad_pose, births)
+        GMPHDFilter(FilterConfig(), Sensor()).step(bad_pose, births)

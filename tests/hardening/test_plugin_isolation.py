@@ -184,7 +184,7 @@ def test_a_plugin_that_changes_its_scan_changes_no_other_method(intersection) ->
 
 
 def test_private_scan_is_equal_and_shares_nothing(intersection) -> None:
-    from soabench.config import SensorConfig
+    from soabench.config import Sensor
     from soabench.experiment.trial.isolate import private_scan
     from soabench.scenario import simulate
     from soabench.seeding import trial_seeds
@@ -192,7 +192,7 @@ def test_private_scan_is_equal_and_shares_nothing(intersection) -> None:
 
     scene, scenario = intersection
     seeds = trial_seeds(3, 0)
-    scans = observe(simulate(scene, scenario, seeds, duration=3.0), scene, SensorConfig(), seeds.sensor_rngs())
+    scans = observe(simulate(scene, scenario, seeds, duration=3.0), scene, Sensor(), seeds.sensor_rngs())
     scan = next(s for s in scans.scans if len(s.obstacles))
     copy = private_scan(scan)
     for f in ("ego", "Z"):

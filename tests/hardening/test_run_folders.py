@@ -19,8 +19,8 @@ from soabench.errors import SoabenchError
 from soabench.experiment.campaigns.sweep import run_sweep
 from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.execution.runner import TodoTrials, run_experiment
-from soabench.experiment.runs.ownership import FolderLock
 from soabench.experiment.trial import registry
+from soabench.folders import FolderLock
 
 HERE = TESTS
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")

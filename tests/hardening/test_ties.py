@@ -13,7 +13,7 @@ import shapely
 from gmphd_cases import reference_merge_groups
 
 from soabench.birth.soa import occlusion_layers
-from soabench.config import BirthConfig, FilterConfig, SensorConfig
+from soabench.config import BirthConfig, FilterConfig, Sensor
 from soabench.gmphd import cycle, kernels
 from soabench.gmphd.filter import GMPHDFilter, _mixture_arrays
 from soabench.gmphd.mixture import Mixture
@@ -49,7 +49,7 @@ def test_the_compiled_cycle_reduces_with_the_same_tie_rule():
     """The filter's compiled reduction (one call per scan) merges a pair at the threshold under any 1e-12
     perturbation, as :func:`merge` does: the cycle calls the merge kernel with the tie rule, not a copy compiled
     before it."""
-    red = GMPHDFilter(FilterConfig(), SensorConfig(), "static")._red_pars
+    red = GMPHDFilter(FilterConfig(), Sensor(), "static")._red_pars
     rng = np.random.default_rng(350)
     for d2 in (4.0, 4.0 * (1.0 + 1e-12), 4.0 * (1.0 - 1e-12)):
         for _ in range(20):

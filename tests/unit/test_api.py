@@ -197,7 +197,7 @@ def test_wrong_objects_fail_at_the_boundary_in_one_line(trial1) -> None:
     assert "seeds must be a TrialSeeds, got 3" in _one_line(exc)
     with pytest.raises(TypeError) as exc:
         observe(recording, scene, Config(), trial_seeds(0, 0).sensor_rngs())
-    assert "must be a SensorConfig, got a Config" in _one_line(exc)
+    assert "must be a Sensor, got a Config" in _one_line(exc)
     tracker = sb.make_tracker("soa", NET)
     with pytest.raises(TypeError) as exc:
         tracker.step(scans)

@@ -15,7 +15,7 @@ from soabench.baselines.standard_gm import StandardGMBirth, boundary_exits, entr
 from soabench.baselines.uniform import UniformBirth, grid_nodes
 from soabench.birth import get_birth_model
 from soabench.birth.base import inside_any
-from soabench.config import BirthConfig, SensorConfig
+from soabench.config import BirthConfig, Sensor
 from soabench.geometry import clutter_intensity, fov_mask
 from soabench.plugins import BUILTIN_BIRTH_MODELS
 from soabench.scenario.scene import SceneMap
@@ -65,7 +65,7 @@ def test_registry_constructs_every_model_and_returns_births(name):
     scene = make_scene()
     cls = get_birth_model(name)
     assert cls.name == name and name in BUILTIN_BIRTH_MODELS
-    model = cls(BirthConfig(), SensorConfig(), scene, np.random.default_rng(0))
+    model = cls(BirthConfig(), Sensor(), scene, np.random.default_rng(0))
     scan = make_scan(scene, Z=[[10.0, 0.5]])
     scan.visible_region = scene.sidewalk.intersection(shapely.Point(10, 0).buffer(50))
     births = model(ctx(scan))
@@ -80,7 +80,7 @@ def test_registry_constructs_every_model_and_returns_births(name):
 
 @pytest.mark.parametrize("lam, expected", [(3.0, 0.0192232), (0.5, 0.105225)])
 def test_t20_pubm_isolated_measurement_weight(lam, expected):
-    sensor = SensorConfig(r_min=0.0, lambda_c=lam)
+    sensor = Sensor(r_min=0.0, lambda_c=lam)
     scene = make_scene()
     model = PartiallyUniformBirth(BirthConfig(), sensor, scene, np.random.default_rng(0))
     Z = np.array([[20.0, 0.0]])
@@ -97,7 +97,7 @@ def test_t20_pubm_isolated_measurement_weight(lam, expected):
 
 def test_pubm_inverse_measurement_uses_ego_pose():
     scene = make_scene()
-    sensor = SensorConfig()
+    sensor = Sensor()
     model = PartiallyUniformBirth(BirthConfig(), sensor, scene, np.random.default_rng(0))
     births = model(ctx(make_scan(scene, ego=(5.0, -2.0, math.pi / 2), Z=[[10.0, -math.pi / 2], [4.0, 0.0]])))
     np.testing.assert_allclose(births.newborn.m[:, :2], [[15.0, -2.0], [5.0, 2.0]], atol=1e-12)
@@ -105,7 +105,7 @@ def test_pubm_inverse_measurement_uses_ego_pose():
 
 def test_pubm_cart_variant_and_empty_scan():
     scene = make_scene()
-    sensor = SensorConfig(r_min=0.0)
+    sensor = Sensor(r_min=0.0)
     model = PartiallyUniformBirth(BirthConfig(pubm_space="cart"), sensor, scene, np.random.default_rng(0))
     Z = np.array([[20.0, 0.3], [40.0, -1.0]])
     births = model(ctx(make_scan(scene, Z=Z)))
@@ -120,7 +120,7 @@ def test_pubm_hybrid_adds_gm_components_with_eta_mass():
     scene = make_scene()
     eta = 0.25
     cfg = BirthConfig(pubm_hybrid=eta)
-    sensor = SensorConfig(r_max=500.0)  # every entry point in range
+    sensor = Sensor(r_max=500.0)  # every entry point in range
     model = PartiallyUniformBirth(cfg, sensor, scene, np.random.default_rng(0))
     births = model(ctx(make_scan(scene, ego=(35.0, 0.0, 0.0), Z=[[10.0, 0.0]])))
     assert np.all(births.source == SOURCE_GM)
@@ -135,7 +135,7 @@ def test_pubm_hybrid_adds_gm_components_with_eta_mass():
 
 
 def test_t21_atbm_isolated_measurement_weight():
-    sensor = SensorConfig()
+    sensor = Sensor()
     assert newborn_likelihood(sensor) == pytest.approx(0.911891, abs=1e-6)
     scene = make_scene()
     model = AdaptiveBirth(BirthConfig(), sensor, scene, np.random.default_rng(0))
@@ -155,7 +155,7 @@ def test_t21_atbm_isolated_measurement_weight():
 
 def test_atbm_raw_mass_and_unexplained_allocation():
     scene = make_scene()
-    sensor = SensorConfig()
+    sensor = Sensor()
     Z = np.array([[10.0, 0.0], [20.0, 1.0], [30.0, -1.0]])
     raw = AdaptiveBirth(BirthConfig(atbm_raw_mass=True), sensor, scene, np.random.default_rng(0))
     b = raw(ctx(make_scan(scene, Z=Z)))
@@ -194,7 +194,7 @@ def _step(k: int, A, kappa) -> StepResult:
 
 def test_atbm_prev_scan_appends_predicted_components_from_the_previous_scan():
     scene = make_scene()
-    sensor = SensorConfig()
+    sensor = Sensor()
     cfg = BirthConfig(atbm="prev_scan")
     model = AdaptiveBirth(cfg, sensor, scene, np.random.default_rng(0))
     Z0 = np.array([[10.0, 0.0], [12.0, math.pi]])
@@ -228,7 +228,7 @@ def test_ubm_grid_of_the_paper_workspace():
 @pytest.mark.parametrize("ego", [(10.0, 0.0, 0.0), (35.0, 0.0, 1.0), (110.0, 40.0, 2.0)])
 def test_t18_ubm_mass_is_n_hat_after_the_fov_rule(ego):
     scene = make_scene()
-    cfg, sensor = BirthConfig(), SensorConfig()
+    cfg, sensor = BirthConfig(), Sensor()
     model = UniformBirth(cfg, sensor, scene, np.random.default_rng(0))
     car = np.array([[15.0, -3.0], [19.5, -3.0], [19.5, -1.0], [15.0, -1.0]])
     scan = make_scan(scene, ego=ego, vehicles=(car,))
@@ -248,7 +248,7 @@ def test_t18_ubm_mass_is_n_hat_after_the_fov_rule(ego):
 def test_ubm_no_buildings_gives_about_pi_r2_over_du2_nodes():
     scene = make_scene(box_=(-100.0, -100.0, 100.0, 100.0))
     scene.buildings, scene.static_occluders = [], []
-    births = UniformBirth(BirthConfig(), SensorConfig(), scene, np.random.default_rng(0))(
+    births = UniformBirth(BirthConfig(), Sensor(), scene, np.random.default_rng(0))(
         ctx(make_scan(scene, ego=(0.0, 0.0, 0.0)))
     )
     assert abs(len(births) - math.pi * 49.5**2 / 25) < 15  # ~ 308 nodes within 49.5 m
@@ -280,7 +280,7 @@ def test_gmbm_components_derived_from_sidewalk_lines_and_doors():
 
 def test_gmbm_fixed_weights_skip_outside_fov_without_renormalising():
     scene = make_scene()
-    cfg, sensor = BirthConfig(), SensorConfig()
+    cfg, sensor = BirthConfig(), Sensor()
     model = StandardGMBirth(cfg, sensor, scene, np.random.default_rng(0))
     assert model.J_GM == 10
     scan = make_scan(scene, ego=(-30.0, 0.0, 0.0))
@@ -292,5 +292,5 @@ def test_gmbm_fixed_weights_skip_outside_fov_without_renormalising():
     np.testing.assert_allclose(births.w, cfg.N_hat / 10)
     assert births.w.sum() == pytest.approx(0.3 * cfg.N_hat)
     np.testing.assert_allclose(births.P[:, :2, :2], np.broadcast_to(9.0 * np.eye(2), (3, 2, 2)))
-    wide = StandardGMBirth(cfg, SensorConfig(r_max=500.0), scene, np.random.default_rng(0))
+    wide = StandardGMBirth(cfg, Sensor(r_max=500.0), scene, np.random.default_rng(0))
     assert wide(ctx(make_scan(scene, ego=(35.0, 0.0, 0.0)))).w.sum() == pytest.approx(cfg.N_hat, abs=1e-15)

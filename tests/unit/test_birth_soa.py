@@ -13,7 +13,7 @@ from shapely.geometry import MultiLineString, Point, Polygon, box
 from soabench.birth import get_birth_model
 from soabench.birth.base import FOVRule, build_components, inside_any
 from soabench.birth.soa import SOABirth, combined_weights, dedup, ego_inside, occlusion_layers
-from soabench.config import BirthConfig, SensorConfig
+from soabench.config import BirthConfig, Sensor
 from soabench.geometry import fov_mask, range_bearing, wrap
 from soabench.scenario.scene import SceneMap
 from soabench.types import SOURCE_FOV, SOURCE_OCCL, SOURCE_SEM, BirthContext, Obstacles, Scan
@@ -87,13 +87,13 @@ def make_scan(
     scene: SceneMap,
     ego=(10.0, 0.0, 0.0),
     vehicles: tuple[np.ndarray, ...] = (),
-    sensor: SensorConfig | None = None,
+    sensor: Sensor | None = None,
     k: int = 0,
     Z: np.ndarray | None = None,
 ) -> Scan:
     """A scan at ``ego`` with the scene's buildings, parked cars and ``vehicles`` as occluders; Omega_k is the
     sidewalk in the FOV minus the occluders and their shadows (clipped by a line-of-sight grid-free construction)."""
-    sensor = sensor or SensorConfig()
+    sensor = sensor or Sensor()
     e = np.asarray(ego, dtype=float)
     polys = [np.asarray(p.exterior.coords)[:-1] for p in [*scene.buildings, *scene.static_occluders]]
     polys += [np.asarray(v, dtype=float) for v in vehicles]
@@ -112,11 +112,11 @@ def make_scan(
 CAR = box_xy(15.0, -3.0, 19.5, -1.0)
 
 
-def soa(cfg: BirthConfig | None = None, sensor: SensorConfig | None = None, seed: int = 1, scene=None) -> SOABirth:
-    return SOABirth(cfg or BirthConfig(), sensor or SensorConfig(), scene or make_scene(), np.random.default_rng(seed))
+def soa(cfg: BirthConfig | None = None, sensor: Sensor | None = None, seed: int = 1, scene=None) -> SOABirth:
+    return SOABirth(cfg or BirthConfig(), sensor or Sensor(), scene or make_scene(), np.random.default_rng(seed))
 
 
-def check_rule(births, scan: Scan, scene: SceneMap, sensor: SensorConfig, cfg: BirthConfig) -> None:
+def check_rule(births, scan: Scan, scene: SceneMap, sensor: Sensor, cfg: BirthConfig) -> None:
     """Every birth mean in FOV_k (inset delta_in), in the workspace, not inside a building or occluder."""
     xy = births.m[:, :2]
     assert fov_mask(xy, scan.ego, sensor, inset=cfg.delta_in).all()
@@ -143,7 +143,7 @@ def test_build_components_blocks():
 
 def test_fov_rule_drops_outside_fov_workspace_buildings_and_occluders():
     scene = make_scene()
-    sensor = SensorConfig()
+    sensor = Sensor()
     scan = make_scan(scene, vehicles=(CAR,))
     rule = FOVRule(BirthConfig(), sensor, scene)
     pts = np.array(
@@ -309,7 +309,7 @@ POSES = [(10.0, 0.0, 0.0), (35.0, 0.0, 1.0), (35.0, 30.0, -2.0), (100.0, -7.5, 3
 @pytest.mark.parametrize("ego", POSES)
 def test_t18_mass_is_n_hat_and_every_mean_passes_the_fov_rule(ego):
     scene = make_scene()
-    cfg, sensor = BirthConfig(), SensorConfig()
+    cfg, sensor = BirthConfig(), Sensor()
     scan = make_scan(scene, ego=ego, vehicles=(CAR,))
     births = soa(cfg, sensor, scene=scene)(BirthContext(scan, None))
     assert len(births) > 0
@@ -349,7 +349,7 @@ def test_combined_weights_component_and_source_normalisation():
 
 def test_fov_ring_has_world_frame_phase_and_count():
     scene = make_scene()
-    cfg, sensor = BirthConfig(), SensorConfig()
+    cfg, sensor = BirthConfig(), Sensor()
     model = soa(cfg, sensor, scene=scene)
     n_fov = math.floor(2 * math.pi * (sensor.r_max - cfg.sigma_fov) / cfg.d_fov)
     assert len(model.fov_local) == n_fov
@@ -363,7 +363,7 @@ def test_fov_ring_has_world_frame_phase_and_count():
 
 def test_sector_fov_births_stay_in_the_sector():
     scene = make_scene()
-    cfg, sensor = BirthConfig(), SensorConfig(fov_deg=120.0)
+    cfg, sensor = BirthConfig(), Sensor(fov_deg=120.0)
     for ego in [(10.0, 0.0, 0.0), (35.0, 0.0, 2.5), (35.0, 20.0, -1.6)]:
         scan = make_scan(scene, ego=ego, vehicles=(CAR,), sensor=sensor)
         births = soa(cfg, sensor, scene=scene)(BirthContext(scan, None))
@@ -414,7 +414,7 @@ def test_poisson_points_are_sampled_once_and_clipped_per_step():
 )
 def test_options_keep_mass_and_fov_rule(overrides):
     scene = make_scene()
-    cfg, sensor = BirthConfig(**overrides), SensorConfig()
+    cfg, sensor = BirthConfig(**overrides), Sensor()
     model = soa(cfg, sensor, scene=scene)
     for k, ego in enumerate(POSES[:3]):
         scan = make_scan(scene, ego=ego, vehicles=(CAR,), k=k)

@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
 
-from soabench.config import Config, filter_config_for_mode, load_config
+from soabench.config import Config, Sensor, filter_config_for_mode, load_config
 from soabench.errors import SoabenchError
 
 
 def test_defaults_are_the_registers_bold_options():
     cfg = Config().validate()
     assert (cfg.sensor.dt, cfg.sensor.r_min, cfg.sensor.r_max, cfg.sensor.fov_deg) == (1.0, 0.5, 50.0, 360.0)
-    assert (cfg.sensor.p_D, cfg.sensor.sigma_r, cfg.sensor.sigma_b_deg, cfg.sensor.lambda_c) == (0.98, 1.0, 5.0, 3.0)
+    assert (cfg.sensor.p_D, cfg.sensor.sigma_r, cfg.sensor.sigma_b_deg, cfg.sensor_at().lambda_c) == (
+        0.98,
+        1.0,
+        5.0,
+        3.0,
+    )
     assert (cfg.filter.p_S, cfg.filter.p_D, cfg.filter.prune_T, cfg.filter.merge_U) == (0.99, 0.98, 1e-5, 4.0)
     assert (cfg.filter.J_max, cfg.filter.form, cfg.filter.extract_thr) == (1000, "ekf", 0.5)
     assert cfg.birth.N_hat == pytest.approx(6 / 100)
@@ -30,7 +33,9 @@ def test_toml_overlay_and_round_trip(tmp_path):
     p = tmp_path / "c.toml"
     p.write_text('[sensor]\nfov_deg = 120.0\n[birth]\nrho = [2, 1, 1]\n[experiment]\nmodels = ["soa"]\nclutter = [5]\n')
     cfg = load_config(p)
-    assert cfg.sensor.lambda_c == 5.0 and isinstance(cfg.sensor.lambda_c, float)  # the scans' rate, from the key
+    assert cfg.sensor_at().lambda_c == 5.0 and isinstance(
+        cfg.sensor_at().lambda_c, float
+    )  # the scans' rate, from the key
     assert cfg.birth.rho == (2, 1, 1) and cfg.experiment.models == ("soa",)
     again = Config.from_dict(cfg.to_dict()).validate()
     assert again == cfg
@@ -87,22 +92,20 @@ def test_missing_config_file():
 
 
 def test_the_clutter_rate_has_one_key(tmp_path):
-    """λ is experiment.clutter: the sensor's lambda_c follows it, and a second value for λ is refused with one line
-    naming both keys (docs/user-guide/parameters.md)."""
+    """λ is experiment.clutter: the [sensor] section holds no rate, the sensor of the scans is the section at a rate
+    of it, and sensor.lambda_c in a file is refused with one line naming both (docs/user-guide/parameters.md)."""
     cfg = Config.from_dict({"experiment": {"clutter": [5.0, 0.5]}}).validate()
-    assert cfg.sensor.lambda_c == 5.0 and "lambda_c" not in cfg.to_dict()["sensor"]
+    assert not hasattr(cfg.sensor, "lambda_c") and "lambda_c" not in cfg.to_dict()["sensor"]
+    assert cfg.sensor_at().lambda_c == 5.0 and isinstance(cfg.sensor_at(1).lambda_c, float)  # the first rate
+    assert cfg.sensor_at(0.5).settings == cfg.sensor and isinstance(cfg.sensor_at(0.5), Sensor)
     assert Config.from_dict(cfg.to_dict()).validate() == cfg
     for data in ({"sensor": {"lambda_c": 5.0}}, {"sensor": {"lambda_c": 5.0}, "experiment": {"clutter": [5.0]}}):
         with pytest.raises(SoabenchError) as err:
             Config.from_dict(data)
         line = str(err.value)
         assert "\n" not in line and "sensor.lambda_c" in line and "experiment.clutter" in line
-    changed = Config().validate()
-    changed.sensor = dataclasses.replace(changed.sensor, lambda_c=1.0)  # in place, beside experiment.clutter = [3]
-    with pytest.raises(SoabenchError, match=r"sensor.lambda_c = 1.0 disagrees with experiment.clutter = \[3.0\]"):
-        changed.validate()
-    changed.experiment = dataclasses.replace(changed.experiment, clutter=(1.0,))  # both agree: accepted
-    assert changed.validate().sensor.lambda_c == 1.0
+    with pytest.raises(SoabenchError, match=r"sensor.lambda_c = -1.0"):
+        cfg.sensor_at(-1.0).validate()
     with pytest.raises(SoabenchError, match=r"experiment.clutter = \[0.5, 3.0\] gives 2 rates; `soabench scene`"):
         Config.from_dict({"experiment": {"clutter": [0.5, 3.0]}}).validate().single_clutter_rate("`soabench scene`")
 
@@ -112,7 +115,7 @@ def test_a_run_record_with_the_sensor_rate_is_read():
     stored = Config.from_dict({"experiment": {"clutter": [0.5, 3.0, 5.0]}}).to_dict()
     stored["sensor"]["lambda_c"] = 3.0
     cfg = Config.from_record(stored).validate()
-    assert cfg.experiment.clutter == (0.5, 3.0, 5.0) and cfg.sensor.lambda_c == 0.5
+    assert cfg.experiment.clutter == (0.5, 3.0, 5.0) and cfg.sensor_at().lambda_c == 0.5
 
 
 def test_the_clutter_sweep_takes_its_rates_from_values_only(tmp_path, capsys):

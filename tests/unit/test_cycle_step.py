@@ -38,7 +38,7 @@ def recorded():
     cfg = Config()
     seeds = trial_seeds(7, 1)
     rec = simulate(scene, scenario, seeds, duration=20.0)
-    return cfg, scene, observe(rec, scene, cfg.sensor, seeds.sensor_rngs()), seeds
+    return cfg, scene, observe(rec, scene, cfg.sensor_at(), seeds.sensor_rngs()), seeds
 
 
 def _same(a, b):
@@ -59,8 +59,8 @@ def _same(a, b):
 def test_one_call_equals_the_stage_calls(recorded, mode, form):
     cfg, scene, scans, seeds = recorded
     fcfg, fmode, _ = filter_config_for_mode(cfg.filter, mode)
-    filt = GMPHDFilter(dataclasses.replace(fcfg, form=form), cfg.sensor, mode=fmode)
-    birth = get_birth_model("soa")(cfg.birth, cfg.sensor, scene, seeds.placement_rng())
+    filt = GMPHDFilter(dataclasses.replace(fcfg, form=form), cfg.sensor_at(), mode=fmode)
+    birth = get_birth_model("soa")(cfg.birth, cfg.sensor_at(), scene, seeds.placement_rng())
     prev, checked = None, 0
     for scan in scans.scans:
         births = birth(BirthContext(scan, prev))
@@ -94,8 +94,8 @@ def test_one_call_equals_the_stage_calls(recorded, mode, form):
 
 def test_bad_births_change_nothing(recorded):
     cfg, scene, scans, seeds = recorded
-    filt = GMPHDFilter(cfg.filter, cfg.sensor, mode="static")
-    birth = get_birth_model("soa")(cfg.birth, cfg.sensor, scene, seeds.placement_rng())
+    filt = GMPHDFilter(cfg.filter, cfg.sensor_at(), mode="static")
+    birth = get_birth_model("soa")(cfg.birth, cfg.sensor_at(), scene, seeds.placement_rng())
     scan = scans.scans[3]
     births = birth(BirthContext(scan, None))
     b = list(_birth_arrays(births))

@@ -54,12 +54,12 @@ def test_every_family_runs_every_builtin_birth_model(scans, family) -> None:
 def test_build_filter_refuses_what_the_registry_does_not_define() -> None:
     cfg = Config().validate()
     with pytest.raises(SoabenchError, match="filter family 'kf' is not allowed; choose one of gmphd, lmb"):
-        build_filter("kf", cfg, cfg.sensor, "static")
+        build_filter("kf", cfg, cfg.sensor_at(), "static")
     undefined = [(name, m) for name, f in FAMILIES.items() for m in PROBABILITY_MODES if m not in f.modes]
     for name, mode in undefined:
         with pytest.raises(SoabenchError, match=re.escape(f"probability mode '{mode}' is not defined for the")):
-            build_filter(name, cfg, cfg.sensor, mode)
-    filt, p_D_b = build_filter("gmphd", cfg, cfg.sensor, "dynamic")
+            build_filter(name, cfg, cfg.sensor_at(), mode)
+    filt, p_D_b = build_filter("gmphd", cfg, cfg.sensor_at(), "dynamic")
     assert filt.name == "gmphd" and filt.mode == "dynamic" and p_D_b == cfg.filter.mu_D0
 
 

@@ -252,7 +252,7 @@ def test_pooled_mean_ci_is_the_trial_cluster_interval():
     """Pooled over trials with equal counts, the ratio estimator's CI is the Student-t CI of the trial means."""
     from scipy.stats import t as student_t
 
-    from soabench.figures.results import mean_ci, pooled_mean_ci
+    from soabench.figures.bars import mean_ci, pooled_mean_ci
 
     rng = np.random.default_rng(4)
     values, trials = rng.exponential(1.5, 40), np.repeat(np.arange(8), 5)

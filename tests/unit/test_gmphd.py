@@ -10,7 +10,7 @@ import pytest
 from gmphd_cases import reference_merge_groups
 from shapely.geometry import Polygon
 
-from soabench.config import FilterConfig, SensorConfig
+from soabench.config import FilterConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.geometry import wrap
 from soabench.gmphd import GMPHDFilter, Mixture
@@ -100,7 +100,7 @@ def test_t2_kappa_zero_pd_one_gives_mass_M():
 def _t3_errors(sigma_a: float, sigma_v: float, runs: int) -> list[float]:
     # gate off: with p_D = 1 and lambda = 0 a measurement outside the 99.9 % gate would kill the only track
     fcfg = FilterConfig(p_S=1.0, p_D=1.0, sigma_a=sigma_a, gate=False)
-    scfg = SensorConfig(lambda_c=0.0)
+    scfg = Sensor(lambda_c=0.0)
     target = np.array([20.0, 5.0])
     r0, b0 = np.hypot(*target), math.atan2(target[1], target[0])
     rng = np.random.default_rng(3)
@@ -415,7 +415,7 @@ def test_t17_missed_detection_drop():
     up0 = update(mix, np.zeros((0, 2)), EGO, 0.0, np.zeros(0), R)
     assert up0.mix.w[0] == 1.0
     # through the filter: outside the FOV p_D = 0, so w only decays by p_S
-    filt = GMPHDFilter(FilterConfig(), SensorConfig())
+    filt = GMPHDFilter(FilterConfig(), Sensor())
     filt.step(scan_at(0, np.zeros((0, 2))), births_of(1.0, [100.0, 0, 0, 0], np.eye(4)))
     assert filt.mixture.w[0] == pytest.approx(1.0)
     filt.step(scan_at(1, np.zeros((0, 2))), Births.empty())
@@ -502,8 +502,8 @@ def _pubm_births(Z: np.ndarray, beta_value: float) -> Births:
 
 def test_filter_api_and_diagnostics():
     with pytest.raises(SoabenchError, match="probability mode"):
-        GMPHDFilter(FilterConfig(), SensorConfig(), mode="magic")
-    filt = GMPHDFilter(FilterConfig(), SensorConfig())
+        GMPHDFilter(FilterConfig(), Sensor(), mode="magic")
+    filt = GMPHDFilter(FilterConfig(), Sensor())
     assert len(filt.mixture) == 0
     births = births_of(np.full(3, 0.02), [[10, 0, 0, 0], [0, 20, 0, 0], [-30, 5, 0, 0]], np.tile(np.eye(4), (3, 1, 1)))
     Z = np.array([[10.0, 0.0], [33.0, 1.0]])
@@ -526,7 +526,7 @@ def test_filter_api_and_diagnostics():
 
 def test_filter_dynamic_mode_beta_priors():
     fcfg = FilterConfig()
-    filt = GMPHDFilter(fcfg, SensorConfig(lambda_c=0.5), mode="dynamic")
+    filt = GMPHDFilter(fcfg, Sensor(lambda_c=0.5), mode="dynamic")
     births = births_of([0.3, 0.4], [[10, 0, 0, 0], [-20, 0, 0, 0]], np.tile(np.eye(4), (2, 1, 1)))
     Z = np.array([[10.0, 0.0], [40.0, 2.0]])
     res = filt.step(scan_at(0, Z), _merge_births(births, _pubm_births(Z, 0.01)))
@@ -558,13 +558,13 @@ def test_filter_occlusion_pd_coasts_behind_occluder():
     births = births_of(1.0, [20.0, 0, 0, 0], np.eye(4))
     out = {}
     for mode in ("static", "dynamic", "dynamic+occ"):
-        filt = GMPHDFilter(FilterConfig(), SensorConfig(lambda_c=0.0), mode=mode)
+        filt = GMPHDFilter(FilterConfig(), Sensor(lambda_c=0.0), mode=mode)
         filt.step(scan_at(0, np.zeros((0, 2)), occluders=[box]), births)
         out[mode] = filt.mixture.w.sum()
     assert out["static"] == pytest.approx(0.02)
     assert out["dynamic"] == pytest.approx(0.02)
     assert out["dynamic+occ"] == pytest.approx(1.0)
-    filt = GMPHDFilter(FilterConfig(occlusion_pd=True), SensorConfig(lambda_c=0.0), mode="static")
+    filt = GMPHDFilter(FilterConfig(occlusion_pd=True), Sensor(lambda_c=0.0), mode="static")
     filt.step(scan_at(0, np.zeros((0, 2)), occluders=[box]), births)
     assert filt.mixture.w.sum() == pytest.approx(1.0)
 
@@ -573,7 +573,7 @@ def test_filter_max_undetected_birth_age():
     births = births_of(1.0, [200.0, 0, 0, 0], np.eye(4))  # out of FOV: undetectable, n_det stays 0
     counts = {}
     for age in (None, 2):
-        filt = GMPHDFilter(FilterConfig(max_undetected_birth_age=age), SensorConfig())
+        filt = GMPHDFilter(FilterConfig(max_undetected_birth_age=age), Sensor())
         n = []
         for k in range(5):
             filt.step(scan_at(k, np.zeros((0, 2))), births if k == 0 else Births.empty())
@@ -589,7 +589,7 @@ def test_filter_ukf_form_runs_and_agrees_roughly():
     r0, b0 = np.hypot(*target), math.atan2(target[1], target[0])
     ests = {}
     for form in ("ekf", "ukf"):
-        filt = GMPHDFilter(FilterConfig(form=form), SensorConfig(lambda_c=0.0))
+        filt = GMPHDFilter(FilterConfig(form=form), Sensor(lambda_c=0.0))
         rng = np.random.default_rng(7)
         for k in range(10):
             z = np.array([[r0 + rng.normal(0, 1), b0 + rng.normal(0, SIG_B)]])

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon
 
-from soabench.config import FilterConfig, SensorConfig
+from soabench.config import FilterConfig, Sensor
 from soabench.gmphd import GMPHDFilter, Mixture
 from soabench.gmphd.models import cv_model, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_prior
@@ -77,7 +77,7 @@ def test_predict_stays_healthy(scene, p_S):
 @given(scenes(), st.sampled_from(["static", "dynamic", "dynamic+occ"]), st.sampled_from(["ekf", "ukf"]))
 def test_filter_steps_stay_healthy(scene, mode, form):
     mix, Z, ego, _ = scene
-    filt = GMPHDFilter(FilterConfig(form=form, J_max=40), SensorConfig(), mode=mode)
+    filt = GMPHDFilter(FilterConfig(form=form, J_max=40), Sensor(), mode=mode)
     occ = [
         Polygon(
             [(ego[0] + 5, ego[1] - 1), (ego[0] + 7, ego[1] - 1), (ego[0] + 7, ego[1] + 1), (ego[0] + 5, ego[1] + 1)]

@@ -53,11 +53,36 @@ def test_a_failing_group_is_not_fatal_and_leaves_no_stamp(cache, monkeypatch):
     assert log.getvalue().count(kw.MESSAGE) == 1 and "compiling ahead failed" in log.getvalue().splitlines()[-1]
 
 
-def test_the_stamp_lies_in_the_folder_keyed_by_the_kernel_sources(cache):
-    from soabench.cache import kernel_key
+def test_the_stamp_lies_in_the_folder_keyed_by_the_kernel_sources(cache, tmp_path, monkeypatch):
+    """An edited kernel source or a new numba needs another compilation: another folder, so another stamp; the same
+    sources and versions give the same stamp again."""
+    import importlib.metadata
 
-    assert kw.stamp_path().parent == cache / f"soabench-{kernel_key()}"
-    assert kw.stamp_path() == kw.stamp_path()  # the same sources give the same stamp
+    from soabench import cache as cache_module
+
+    assert kw.stamp_path().parent == cache / f"soabench-{cache_module.kernel_key()}"
+    (tmp_path / "kernels.py").write_text("X = 1\n")
+    monkeypatch.setattr(cache_module, "PACKAGE_DIR", tmp_path)
+    monkeypatch.setattr(cache_module, "KERNEL_MODULES", ("kernels.py",))
+    versions = {"numba": "0.60.0"}
+    monkeypatch.setattr(importlib.metadata, "version", lambda name: versions[name])
+
+    def stamp():  # the key is computed once per process: forget it, as a new process would
+        cache_module.kernel_key.cache_clear()
+        return kw.stamp_path()
+
+    try:
+        first = stamp()
+        (tmp_path / "kernels.py").write_text("X = 2\n")
+        edited = stamp()
+        versions["numba"] = "0.61.0"
+        newer = stamp()
+        assert len({first, edited, newer}) == 3 and first.parent.parent == cache
+        (tmp_path / "kernels.py").write_text("X = 1\n")
+        versions["numba"] = "0.60.0"
+        assert stamp() == first
+    finally:
+        cache_module.kernel_key.cache_clear()  # the real sources' key is computed again after the test
 
 
 def _config(**experiment):

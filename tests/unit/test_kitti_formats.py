@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from kitti_files import ab3dmot_rows, write_dataset, write_sequence
 
-from soabench.config import SensorConfig
+from soabench.config import Sensor
+from soabench.experiment.campaigns.kitti.protocol import fold_partition, n_hat, sweep_n_hat
 from soabench.kitti.config import KittiConfig, kitti_from_dict
 from soabench.kitti.formats import (
     EARTH_RADIUS,
@@ -19,10 +20,9 @@ from soabench.kitti.formats import (
     parse_objects,
     poses_from_oxts,
 )
-from soabench.kitti.protocol import fold_partition, n_hat, sweep_n_hat
 from soabench.kitti.reader import footprints_ego, open_dataset, parse_sequences, read_sequence, to_scans
 
-SENSOR = SensorConfig(dt=0.1, r_max=50.0)
+SENSOR = Sensor(dt=0.1, r_max=50.0)
 
 
 def test_mercator_round_trip_and_scale():

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 from kitti_files import label_row, write_sequence
 
-from soabench.config import MetricsConfig, SensorConfig
+from soabench.config import MetricsConfig, Sensor
 from soabench.kitti.config import KittiConfig
 from soabench.kitti.levels import id_switches, level_split
 from soabench.kitti.reader import open_dataset, read_sequence, to_scans
 
-SENSOR = SensorConfig(dt=0.1, r_max=50.0)
+SENSOR = Sensor(dt=0.1, r_max=50.0)
 #: the pedestrian's occluded and truncated level in frames 0-11, as its label rows give them
 OCCLUDED = [0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0]
 TRUNCATED = [0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 2, 0]

@@ -228,13 +228,13 @@ def test_region_from_synthetic_scans_matches_the_visible_sidewalk(runs):
     exp, _, lidar_run = runs
     cfg, kc = kitti_base_config(), KittiConfig()
     seq = read_sequence(open_dataset(exp, None, exp / "semantics"), "0000")
-    ref = to_scans(seq, kc, cfg.sensor)
+    ref = to_scans(seq, kc, cfg.sensor_at())
     sem, cached = sequence_regions(
         exp / "velodyne", exp / "point_labels", "0000", seq.n_frames, ("sidewalk", "building"), LidarParams(),
-        cfg.sensor.r_max, lidar_run / "lidar", sensor_for(seq, kc, cfg.sensor).fov_deg,
+        cfg.sensor.r_max, lidar_run / "lidar", sensor_for(seq, kc, cfg.sensor_at()).fov_deg,
     )  # fmt: skip
     assert cached  # the run built them with these parameters
-    out = to_scans(dataclasses.replace(seq, semantics=sem), kc, cfg.sensor)
+    out = to_scans(dataclasses.replace(seq, semantics=sem), kc, cfg.sensor_at())
     for radius, bound in IOU_BOUNDS.items():
         inter = union = 0.0
         for a, b in zip(ref.scans.scans, out.scans.scans, strict=True):

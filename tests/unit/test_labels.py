@@ -19,7 +19,7 @@ import pytest
 from shapely.geometry import Polygon
 
 from soabench.birth import get_birth_model
-from soabench.config import PROBABILITY_MODES, FilterConfig, SensorConfig, filter_config_for_mode
+from soabench.config import PROBABILITY_MODES, FilterConfig, Sensor, filter_config_for_mode
 from soabench.experiment.trial.guard import PluginOutputError, check_estimates
 from soabench.gmphd import GMPHDFilter, Mixture, cycle, reduction
 from soabench.gmphd.filter import _mixture_arrays
@@ -71,9 +71,9 @@ def test_t30_labels_do_not_move_a_number(recorded, model):
     assert n_labelled > 0
 
 
-def _walk_scans(n: int = 30, seed: int = 31) -> tuple[list[Scan], SensorConfig, np.ndarray]:
+def _walk_scans(n: int = 30, seed: int = 31) -> tuple[list[Scan], Sensor, np.ndarray]:
     """One target on a constant-velocity walk in front of a static sensor, detected at every scan, no clutter."""
-    sensor = SensorConfig(lambda_c=0.0, p_D=1.0)
+    sensor = Sensor(lambda_c=0.0, p_D=1.0)
     rng = np.random.default_rng(seed)
     x0 = np.array([12.0, -6.0, 0.6, 0.5])
     ego = np.zeros(3)
@@ -134,7 +134,7 @@ def _mix(w, xy, label, P_scale=1.0) -> Mixture:
 
 
 CFG = FilterConfig()
-RED = GMPHDFilter(CFG, SensorConfig(), "static")._red_pars
+RED = GMPHDFilter(CFG, Sensor(), "static")._red_pars
 
 
 def _reduce_both(mix: Mixture, next_label: int):
@@ -198,7 +198,7 @@ def test_a_conflict_winner_continues_its_track_next_scan():
 
 
 def test_birth_and_newborn_labels_come_from_one_counter_in_order():
-    filt = GMPHDFilter(FilterConfig(), SensorConfig(lambda_c=0.0), "static", fused=True)
+    filt = GMPHDFilter(FilterConfig(), Sensor(lambda_c=0.0), "static", fused=True)
     births = _start_birth(np.array([10.0, 0.0]))
     births = Births(
         np.full(3, 0.01), np.repeat(births.m, 3, 0) + [[0, 0, 0, 0], [0, 30, 0, 0], [0, -30, 0, 0]],
@@ -272,7 +272,7 @@ def test_kitti_truth_labels_are_the_track_ids_of_label_02(tmp_path):
     write_sequence(tmp_path, "0000")
     labels = tmp_path / "label_02" / "0000.txt"
     labels.write_text(labels.read_text().replace(" 0 Pedestrian ", " 17 Pedestrian "))  # track id 0 -> 17
-    ss = to_scans(read_sequence(open_dataset(tmp_path), "0000"), KittiConfig(), SensorConfig(dt=0.1, r_max=50.0))
+    ss = to_scans(read_sequence(open_dataset(tmp_path), "0000"), KittiConfig(), Sensor(dt=0.1, r_max=50.0))
     assert list(ss.scans.ped_ids) == ["17"] and ss.scans.ped_labels.tolist() == [17]
 
 

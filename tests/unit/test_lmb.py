@@ -14,7 +14,7 @@ from test_baselines import make_scan, make_scene
 
 from soabench.baselines.partially_uniform import inverse_measurement_terms
 from soabench.birth import get_birth_model
-from soabench.config import BirthConfig, FilterConfig, SensorConfig
+from soabench.config import BirthConfig, FilterConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.geometry import wrap
 from soabench.gmphd.models import cv_model, measurement_noise
@@ -222,7 +222,7 @@ def _scan(k, Z, ego=(0.0, 0.0, 0.0)):
 @pytest.mark.parametrize("clutter", [False, True])
 def test_T36_single_bernoulli_equals_closed_form(clutter):
     lam = 2.0 if clutter else 0.0
-    sensor = SensorConfig(lambda_c=lam, fov_deg=360.0, r_max=100.0)
+    sensor = Sensor(lambda_c=lam, fov_deg=360.0, r_max=100.0)
     # no merging, and pruning only of the ~1e-300 weights the clutter floor leaves: the exact mixture
     fcfg = FilterConfig(p_D=0.9, p_S=0.97, merge_U=1e-12, prune_T=1e-100)
     R = np.diag([0.8, 1.3])
@@ -277,7 +277,7 @@ def sensor_volume(sensor):
 def test_one_target_keeps_one_label(birth):
     """One target, p_D = 1, no clutter, a constant-velocity walk of 30 scans: one estimate with one label from the
     scan of initiation to the end."""
-    sensor = SensorConfig(lambda_c=0.0, p_D=1.0)
+    sensor = Sensor(lambda_c=0.0, p_D=1.0)
     fcfg = FilterConfig(p_D=1.0)
     filt = LMBFilter(fcfg, sensor, rng=np.random.default_rng(0))
     R = measurement_noise(sensor.sigma_r, sensor.sigma_b)
@@ -332,7 +332,7 @@ def test_adaptive_existence_is_reuter_eq75():
 def test_dynamic_modes_are_refused():
     for mode in ("dynamic", "dynamic+occ"):
         with pytest.raises(SoabenchError, match="not supported by the LMB filter"):
-            LMBFilter(FilterConfig(), SensorConfig(), mode)
+            LMBFilter(FilterConfig(), Sensor(), mode)
 
 
 def test_association_stream_leaves_the_other_streams_alone():
@@ -369,8 +369,8 @@ def _walk_scans(K=12):
 
 def _run(name, scene, scans, seed=0, atbm="same_scan", mapping="groups"):
     cfg = BirthConfig(atbm=atbm)
-    model = get_birth_model(name)(cfg, SensorConfig(), scene, np.random.default_rng(0))
-    filt = LMBFilter(FilterConfig(), SensorConfig(), N_hat=cfg.N_hat, rng=np.random.default_rng(seed),
+    model = get_birth_model(name)(cfg, Sensor(), scene, np.random.default_rng(0))
+    filt = LMBFilter(FilterConfig(), Sensor(), N_hat=cfg.N_hat, rng=np.random.default_rng(seed),
                      lmb_cfg=LMBConfig(birth_mapping=mapping))  # fmt: skip
     prev, out = None, []
     for scan in scans:
@@ -406,4 +406,4 @@ def test_ukf_form_agrees_with_ekf():
     np.testing.assert_allclose(ups[0].tracks.m, ups[1].tracks.m, atol=0.05)
     from soabench.gmphd.models import ukf_terms
 
-    assert LMBFilter(FilterConfig(form="ukf"), SensorConfig()).model._terms is ukf_terms
+    assert LMBFilter(FilterConfig(form="ukf"), Sensor()).model._terms is ukf_terms

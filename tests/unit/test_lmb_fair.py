@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from test_lmb import EGO, _glmb_reference, _model, _random_case, _run, _scan, _track_means, _tracks_of, _walk_scans
 
-from soabench.config import Config, FilterConfig, LMBConfig, SensorConfig
+from soabench.config import Config, FilterConfig, LMBConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.lmb import LMBFilter, label_pairs
 from soabench.lmb.birth import group_birth, intensity_existence
@@ -76,7 +76,7 @@ def test_pubm_and_atbm_rows_differ_in_the_fair_lmb_and_agree_in_the_old_one():
 def test_components_mapping_keeps_one_bernoulli_per_component():
     births = _births([0.2, 0.2], [[5.0, 1.0, 0, 0]] * 2)
     for mapping, n in (("components", 2), ("groups", 1)):
-        filt = LMBFilter(FilterConfig(), SensorConfig(), lmb_cfg=LMBConfig(birth_mapping=mapping))
+        filt = LMBFilter(FilterConfig(), Sensor(), lmb_cfg=LMBConfig(birth_mapping=mapping))
         res = filt.step(_scan(0, np.zeros((0, 2))), births)
         assert res.n_predicted == n
 

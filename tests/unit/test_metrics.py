@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon
 
-from soabench.config import MetricsConfig, SensorConfig
+from soabench.config import MetricsConfig, Sensor
 from soabench.metrics import (
     SERIES_KEYS,
     SUMMARY_KEYS,
@@ -285,7 +285,7 @@ def t26_run(K: int = 50) -> tuple[Scans, list[StepResult]]:
 
 def test_t26_through_evaluate() -> None:
     scans, results = t26_run()
-    m = evaluate(scans, results, MetricsConfig(), SensorConfig())
+    m = evaluate(scans, results, MetricsConfig(), Sensor())
     assert [(e.target, e.k0, e.k_d, e.k_t, e.censored) for e in m.episodes] == [
         (0, 10, 11, 13, False),
         (0, 25, 25, 25, False),
@@ -313,7 +313,7 @@ def test_precision_recall_and_cardinality_on_constructed_sequence() -> None:
         [[10, 0], [0, 36], [90, 0]],  # k3: TP, (0,36) outside the gate: FP + FN; (90,0) outside the FOV: ignored
     ]
     results = [make_result(k, e, sum_w=[0.4, 2.0, 2.2, 1.0][k]) for k, e in enumerate(est)]
-    m = evaluate(scans, results, MetricsConfig(), SensorConfig())
+    m = evaluate(scans, results, MetricsConfig(), Sensor())
     assert m.series["n_gt"].tolist() == [1, 1, 2, 2]
     assert m.series["n_est"].tolist() == [0, 2, 2, 2]
     assert m.series["tp"].tolist() == [0, 1, 2, 1]
@@ -331,7 +331,7 @@ def test_precision_recall_and_cardinality_on_constructed_sequence() -> None:
     # GOSPA (c = 5, p = 1): k0 miss 2.5; k1 1 + false 2.5; k2 1 + 3; k3 0 + (6 >= 5: miss + false)
     assert m.series["gospa"] == pytest.approx([2.5, 3.5, 4.0, 5.0])
     # scene: the estimate at (90, 0) counts, as an FP
-    scene = evaluate(scans, results, MetricsConfig(gt_set="scene"), SensorConfig())
+    scene = evaluate(scans, results, MetricsConfig(gt_set="scene"), Sensor())
     assert scene.series["fp"].tolist() == [0, 1, 0, 2]
     assert scene.summary["precision"] == pytest.approx(4 / 7)
 
@@ -343,8 +343,8 @@ def test_gt_sets_and_empty_steps() -> None:
     vis = np.array([[False], [False], [True]])  # occluded at k = 1
     scans = make_scans(truth, vis, vis)
     results = [make_result(k, []) for k in range(K)]
-    fov = evaluate(scans, results, MetricsConfig(), SensorConfig())
-    visible = evaluate(scans, results, MetricsConfig(gt_set="visible"), SensorConfig())
+    fov = evaluate(scans, results, MetricsConfig(), Sensor())
+    visible = evaluate(scans, results, MetricsConfig(gt_set="visible"), Sensor())
     assert fov.series["n_gt"].tolist() == [0, 1, 1]
     assert visible.series["n_gt"].tolist() == [0, 0, 1]
     # both-empty step contributes 0 to the mean OSPA
@@ -357,4 +357,4 @@ def test_gt_sets_and_empty_steps() -> None:
 def test_evaluate_rejects_length_mismatch() -> None:
     scans, results = t26_run()
     with pytest.raises(ValueError, match="filter results"):
-        evaluate(scans, results[:-1], MetricsConfig(), SensorConfig())
+        evaluate(scans, results[:-1], MetricsConfig(), Sensor())

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from soabench.config import FilterConfig, SensorConfig
+from soabench.config import FilterConfig, Sensor
 from soabench.gmphd import GMPHDFilter
 from soabench.gmphd.mixture import ORIGIN_PERSISTENT
 from soabench.metrics import SERIES_KEYS
@@ -68,7 +68,7 @@ def test_hand_built_scans_split_as_known(fused):
     FOV birth, and an occlusion birth on top of the surviving semantic component; heavier, it absorbs it, and the
     merged component is older than this scan (a group's age is its oldest member's), so it counts as surviving,
     with the source of its heaviest member (occlusion)."""
-    cfg, sensor = FilterConfig(), SensorConfig()
+    cfg, sensor = FilterConfig(), Sensor()
     filt = GMPHDFilter(cfg, sensor, "static", fused=fused)
     z = np.array([[30.0, np.pi]])  # 30 m behind the sensor: at (-30, 0)
     newborn = NewbornTerms(

@@ -18,7 +18,7 @@ from test_baselines import make_scan, make_scene
 from test_lmb import _walk_scans
 
 from soabench.birth import get_birth_model
-from soabench.config import BirthConfig, Config, FilterConfig, PMBMConfig, SensorConfig
+from soabench.config import BirthConfig, Config, FilterConfig, PMBMConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.geometry import clutter_intensity, wrap
 from soabench.gmphd.mixture import Mixture
@@ -112,7 +112,7 @@ def _gmphd_and_pmbm_first_scan(name):
     Z = np.column_stack([np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])])
     scan = make_scan(scene, ego=ego, Z=Z)
     scan.visible_region = scene.sidewalk.intersection(shapely.Point(10, 0).buffer(50))
-    sensor, cfg = SensorConfig(), FilterConfig()
+    sensor, cfg = Sensor(), FilterConfig()
     births = get_birth_model(name)(BirthConfig(), sensor, scene, np.random.default_rng(0))(BirthContext(scan, None))
     prior = Mixture.from_arrays(births.w, births.m, births.P, origin=births.source)
     p_D = cfg.p_D * detection_gate(prior.m, ego, sensor)
@@ -356,7 +356,7 @@ OPEN = np.array([35.0, 0.0, 0.0, 0.0])
 def _occlusion_filter(occlusion, family="pmbm"):
     """The family's filter as a run builds it in the static+occ (line of sight) or the static mode."""
     cfg = Config()
-    filt, _ = build_filter(family, cfg, cfg.sensor, "static+occ" if occlusion else "static")
+    filt, _ = build_filter(family, cfg, cfg.sensor_at(), "static+occ" if occlusion else "static")
     assert filt.cfg.occlusion_pd == occlusion and filt.pmb == (family == "pmb")
     return filt
 
@@ -401,7 +401,7 @@ def test_T40_hidden_track_keeps_its_existence():
 
 
 def test_T41_single_target_is_the_kalman_filter():
-    sensor = SensorConfig(lambda_c=0.0, fov_deg=360.0, r_max=200.0)
+    sensor = Sensor(lambda_c=0.0, fov_deg=360.0, r_max=200.0)
     cfg = FilterConfig(p_D=1.0)
     R = np.diag([0.5, 0.5])
     filt = PMBMFilter(cfg, sensor, model=LinearPosition(R))
@@ -436,7 +436,7 @@ def test_two_pedestrians_crossing_keep_their_labels():
     """Paths crossing in an X, 2 m apart at the closest approach (scan 11-12), default sensor with clutter."""
     scene = make_scene()
     ego = np.array([10.0, 0.0, 0.0])
-    sensor = SensorConfig()
+    sensor = Sensor()
     model = get_birth_model("pubm")(BirthConfig(), sensor, scene, np.random.default_rng(0))
     for pmb in (False, True):
         rng = np.random.default_rng(11)
@@ -479,12 +479,12 @@ def test_every_birth_model_runs_inside(name):
         runs = []
         for _ in range(2):
             if name == "plugin":
-                model = OneBirth(BirthConfig(), SensorConfig(), scene, None)
+                model = OneBirth(BirthConfig(), Sensor(), scene, None)
             else:
                 atbm = "prev_scan" if name == "atbm-prev" else "same_scan"
                 cfg = BirthConfig(atbm=atbm)
-                model = get_birth_model(name.split("-prev")[0])(cfg, SensorConfig(), scene, np.random.default_rng(0))
-            filt = PMBMFilter(FilterConfig(), SensorConfig(), pmb=pmb)
+                model = get_birth_model(name.split("-prev")[0])(cfg, Sensor(), scene, np.random.default_rng(0))
+            filt = PMBMFilter(FilterConfig(), Sensor(), pmb=pmb)
             prev, out = None, []
             for scan in scans:
                 prev = filt.step(scan, model(BirthContext(scan, prev, 0.98)))
@@ -500,7 +500,7 @@ def test_every_birth_model_runs_inside(name):
 
 def test_dynamic_mode_is_refused():
     with pytest.raises(SoabenchError, match="dynamic"):
-        PMBMFilter(FilterConfig(), SensorConfig(), mode="dynamic")
+        PMBMFilter(FilterConfig(), Sensor(), mode="dynamic")
 
 
 @pytest.mark.parametrize(

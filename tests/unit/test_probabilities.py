@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from soabench.config import FilterConfig, SensorConfig
+from soabench.config import FilterConfig, Sensor
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import measurement_noise, update
 from soabench.gmphd.probabilities import (
@@ -64,7 +64,7 @@ def test_t22_detection_multiplies_prenormalisation_weight_by_098_and_increments_
 
 def test_t22_out_of_fov_gains_no_information():
     mix = _dyn_component(500.0, 0.0, 9.8, 0.2)
-    g = detection_gate(mix.m, EGO, SensorConfig())
+    g = detection_gate(mix.m, EGO, Sensor())
     assert g[0] == 0.0
     up = update(mix, np.array([[10.0, 0.0]]), EGO, g * beta_mean(mix.sD, mix.tD), 0.01, R, g=g)
     assert len(up.mix) == 1
@@ -145,8 +145,8 @@ def test_beta_moment_match_identity_and_pooling():
 
 def test_detection_gate_fov_range_and_sector():
     m = np.array([[10.0, 0, 0, 0], [0.2, 0, 0, 0], [60.0, 0, 0, 0], [-10.0, 0, 0, 0], [0, 10.0, 0, 0]])
-    np.testing.assert_array_equal(detection_gate(m, EGO, SensorConfig()), [1, 0, 0, 1, 1])
-    sector = SensorConfig(fov_deg=120.0)
+    np.testing.assert_array_equal(detection_gate(m, EGO, Sensor()), [1, 0, 0, 1, 1])
+    sector = Sensor(fov_deg=120.0)
     np.testing.assert_array_equal(detection_gate(m, EGO, sector), [1, 0, 0, 0, 0])
     # the sector is centred on the ego heading
     np.testing.assert_array_equal(detection_gate(m, np.array([0.0, 0.0, math.pi / 2]), sector), [0, 0, 0, 0, 1])
@@ -155,6 +155,6 @@ def test_detection_gate_fov_range_and_sector():
 def test_detection_gate_line_of_sight():
     box = Polygon([(9, -1), (11, -1), (11, 1), (9, 1)])
     m = np.array([[20.0, 0, 0, 0], [5.0, 0, 0, 0], [0, 20.0, 0, 0], [80.0, 0, 0, 0]])
-    g = detection_gate(m, EGO, SensorConfig(), [box])
+    g = detection_gate(m, EGO, Sensor(), [box])
     np.testing.assert_array_equal(g, [0, 1, 1, 0])
-    np.testing.assert_array_equal(detection_gate(m, EGO, SensorConfig(), None), [1, 1, 1, 0])
+    np.testing.assert_array_equal(detection_gate(m, EGO, Sensor(), None), [1, 1, 1, 0])

@@ -8,7 +8,7 @@ import shapely
 from repo_paths import ROOT
 from shapely.geometry import Polygon, box
 
-from soabench.config import SensorConfig
+from soabench.config import Sensor
 from soabench.errors import SoabenchError
 from soabench.figures.sensor import draw_sensor_overlay
 from soabench.geometry import fov_mask, range_bearing, wrap
@@ -264,7 +264,7 @@ def test_fov_polygon_matches_fov_mask():
     rng = np.random.default_rng(0)
     ego = np.array([3.0, -4.0, 2.5])
     pts = ego[:2] + rng.uniform(-60, 60, (3000, 2))
-    for cfg in (SensorConfig(), SensorConfig(fov_deg=120.0, r_min=2.0), SensorConfig(fov_deg=90.0, r_min=0.0)):
+    for cfg in (Sensor(), Sensor(fov_deg=120.0, r_min=2.0), Sensor(fov_deg=90.0, r_min=0.0)):
         poly = fov_polygon(ego, cfg)
         inside = shapely.contains_xy(poly, pts[:, 0], pts[:, 1])
         near_edge = shapely.distance(poly.boundary, shapely.points(pts)) < 0.01
@@ -278,7 +278,7 @@ def test_visible_region_agrees_with_line_of_sight():
     scene = synthetic_scene(buildings=[], parked=occ)
     scene.sidewalk = box(-60, -60, 60, 60)
     ego = np.array([0.5, 0.5, 0.3])
-    cfg = SensorConfig(r_min=1.0)
+    cfg = Sensor(r_min=1.0)
     obs = compute_obstacles([np.asarray(p.exterior.coords)[:-1] for p in occ], ["parked"] * 4, ego[:2], cfg.r_max)
     omega = visible_region(scene, ego, obs, cfg)
     pts = np.random.default_rng(1).uniform(-55, 55, (4000, 2))
@@ -293,7 +293,7 @@ def test_visible_region_agrees_with_line_of_sight():
 def test_visible_region_is_clipped_to_the_sidewalk_and_removes_shadows():
     scene = synthetic_scene()
     ego = np.array([10.0, -1.5, 0.0])
-    cfg = SensorConfig()
+    cfg = Sensor()
     polys, kinds = [np.asarray(p.exterior.coords)[:-1] for p in scene.static_occluders], ["parked"]
     omega = visible_region(scene, ego, compute_obstacles(polys, kinds, ego[:2], cfg.r_max), cfg)
     assert omega.difference(scene.sidewalk).area < 1e-6
@@ -322,8 +322,8 @@ def test_occluders_at_lists_buildings_parked_cars_and_present_vehicles_once():
 # observe
 
 
-def _observe(rec: Recording, scene: SceneMap, cfg: SensorConfig | None = None, seed: int = 0) -> Scans:
-    return observe(rec, scene, cfg or SensorConfig(), trial_seeds(seed, 0).sensor_rngs())
+def _observe(rec: Recording, scene: SceneMap, cfg: Sensor | None = None, seed: int = 0) -> Scans:
+    return observe(rec, scene, cfg or Sensor(), trial_seeds(seed, 0).sensor_rngs())
 
 
 @pytest.fixture(scope="module")
@@ -340,13 +340,13 @@ def test_observe_samples_every_dt_from_zero(run):
     assert np.allclose(scans.scans[37].ego, rec.ego_pose[370])
     assert np.allclose(scans.truth_xy[37], rec.ped_xy[370], equal_nan=True)
     short = synthetic_recording(duration=10.0)
-    assert len(_observe(short, scene, SensorConfig(dt=0.5))) == 21
+    assert len(_observe(short, scene, Sensor(dt=0.5))) == 21
     assert len(scan_steps(np.arange(0, 99.95, 0.1), 0.1, 1.0)) == 100  # 0 .. 99.9 s -> 100 scans
 
 
 def test_observe_flags_measurements_and_sources_are_consistent(run):
     rec, scene, scans = run
-    cfg = SensorConfig()
+    cfg = Sensor()
     assert np.all(scans.in_fov <= scans.present) and np.all(scans.visible <= scans.in_fov)
     assert np.all(scans.detected <= scans.visible)
     assert np.array_equal(np.isnan(scans.truth_xy[..., 0]), ~scans.present)
@@ -393,8 +393,8 @@ def test_T28_observe_is_deterministic_for_a_seed_and_pure(run):
 
 def test_clutter_rate_does_not_change_target_measurements():
     rec, scene = synthetic_recording(duration=30.0), synthetic_scene()
-    low = _observe(rec, scene, SensorConfig(lambda_c=0.5))
-    high = _observe(rec, scene, SensorConfig(lambda_c=5.0))
+    low = _observe(rec, scene, Sensor(lambda_c=0.5))
+    high = _observe(rec, scene, Sensor(lambda_c=5.0))
     assert np.array_equal(low.detected, high.detected)
     n_low = n_high = 0
     for k in range(len(low)):
@@ -421,7 +421,7 @@ def test_clutter_rate_does_not_change_target_measurements():
 def test_observe_rejects_bad_configuration(change, message):
     rec = synthetic_recording(duration=2.0)
     with pytest.raises(SoabenchError, match=message):
-        _observe(rec, synthetic_scene(), SensorConfig(**change))
+        _observe(rec, synthetic_scene(), Sensor(**change))
 
 
 def test_observe_rejects_a_recording_without_a_sample_at_t0():
@@ -485,7 +485,7 @@ def test_sensor_overlay_draws_sight_lines_cones_and_measurements(run, tmp_path):
     _, _, scans = run
     k = 30
     fig, ax = plt.subplots()
-    draw_sensor_overlay(ax, scans, k, SensorConfig())
+    draw_sensor_overlay(ax, scans, k, Sensor())
     styles = [(line.get_color(), line.get_linestyle()) for line in ax.lines]
     n_blocked = int((scans.in_fov[k] & ~scans.visible[k]).sum())
     n_visible = int(scans.visible[k].sum())
@@ -513,7 +513,7 @@ def test_observe_on_a_real_sumo_recording():
     scene, scenario = load("intersection")
     seeds = trial_seeds(3, 0)
     rec = simulate(scene, scenario, seeds, duration=30.0)
-    scans = observe(rec, scene, SensorConfig(), seeds.sensor_rngs())
+    scans = observe(rec, scene, Sensor(), seeds.sensor_rngs())
     assert len(scans) == 30 and np.allclose(scans.scans[-1].ego, rec.ego_pose[290])
     polys, kinds = occluders_at(rec, scene, 0)
     assert kinds.count("building") == len(scene.buildings) > 0
@@ -555,7 +555,7 @@ def _ray_visible(ego_xy: np.ndarray, pts: np.ndarray, occ: list[Polygon]) -> np.
 
 def test_T19b_shadow_of_a_small_obstacle_and_of_a_building_reaching_past_r_max():
     ego = np.array([0.0, 0.0, 0.0])
-    cfg = SensorConfig()  # r_max = 50 m
+    cfg = Sensor()  # r_max = 50 m
     small = box(29.0, -1.0, 31.0, 1.0)  # 2 m square at 30 m
     building = box(10.0, 45.0, 60.0, 75.0)  # seen obliquely: near corner at 46 m, both tangent corners at ~75 m
     occ = [small, building]
@@ -609,7 +609,7 @@ def test_visible_region_matches_a_brute_force_ray_test_on_the_shipped_scenes(net
     scene, scenario = load(net)
     seeds = trial_seeds(0, 0)
     rec = simulate(scene, scenario, seeds, duration=20.0)
-    cfg = SensorConfig()
+    cfg = Sensor()
     scans = observe(rec, scene, cfg, seeds.sensor_rngs())
     rng = np.random.default_rng(0)
     checked = 0

@@ -25,14 +25,14 @@ def short_run():
     cfg = Config()
     seeds = trial_seeds(0, 0)
     rec = simulate(scene, scenario, seeds, duration=30.0)
-    return scene, scenario, cfg, observe(rec, scene, cfg.sensor, seeds.sensor_rngs())
+    return scene, scenario, cfg, observe(rec, scene, cfg.sensor_at(), seeds.sensor_rngs())
 
 
 def test_to_stonesoup_detections_and_truth(short_run) -> None:
     from stonesoup.types.detection import Clutter, TrueDetection
 
     _, _, cfg, scans = short_run
-    s = cfg.sensor
+    s = cfg.sensor_at()
     feed = ss.to_stonesoup(scans, s.sigma_r, s.sigma_b, gt_set="scene")  # every present walker
     default = ss.to_stonesoup(scans)  # the truth set of our tables (present and in the FOV), the scans' own noise
     in_fov = scans.present & scans.in_fov

@@ -1,4 +1,4 @@
-"""A trial record's compact JSON (soabench.experiment.runs.files) is written by json's C encoder, asking to_jsonable
+"""A trial record's compact JSON (soabench.atomic) is written by json's C encoder, asking to_jsonable
 only for what json cannot write: the text is the one to_jsonable's walk gives."""
 
 from __future__ import annotations
@@ -8,11 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench import atomic
 from soabench.experiment.runs import files
 
 
 def _walked(obj) -> str:
-    return json.dumps(files.to_jsonable(obj), allow_nan=True, separators=(",", ":"))
+    return json.dumps(atomic.to_jsonable(obj), allow_nan=True, separators=(",", ":"))
 
 
 def test_compact_json_is_the_walked_text():
@@ -30,13 +31,13 @@ def test_compact_json_is_the_walked_text():
         [np.float64(1e-300), 1e300, 5e-324],
     ]
     for obj in samples:
-        assert files._compact_json(obj) == _walked(obj)
+        assert atomic._compact_json(obj) == _walked(obj)
 
 
 def test_trial_records_round_trip(tmp_path):
     rec = {"trial": 0, "status": "ok", "rows": files.pack_table([{"a": np.float64(0.25), "b": "soa"}], ["a", "b"])}
     path = tmp_path / "t.json"
-    files.write_json_atomic(path, rec, compact=True)
+    atomic.write_json_atomic(path, rec, compact=True)
     assert path.read_text() == _walked(rec) + "\n"
     assert json.loads(path.read_text()) == {
         "trial": 0,

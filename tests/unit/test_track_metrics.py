@@ -11,7 +11,7 @@ import pytest
 from shapely.geometry import Polygon
 from trackeval.metrics import CLEAR, HOTA, Identity
 
-from soabench.config import MetricsConfig, SensorConfig
+from soabench.config import MetricsConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.metrics import delay_episodes
 from soabench.tracks.evaluate import ALPHA_KEYS, LABEL_KEYS, REEMERGENCE_KEYS, TRACK_KEYS, evaluate_tracks
@@ -351,7 +351,7 @@ def test_evaluate_tracks_labelled_and_unlabelled():
     X = [np.vstack([np.column_stack([scans.truth_xy[k] + 0.3, np.zeros((2, 2))]), far]) for k in range(K)]
     labels = [np.array([7 if k < 15 else 9, 8, 99]) for k in range(K)]
     X[3], labels[3] = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)  # a scan without estimates
-    cfg, sensor_cfg = MetricsConfig(), SensorConfig()
+    cfg, sensor_cfg = MetricsConfig(), Sensor()
     assoc = np.ones((K, 2), dtype=bool)
     episodes = delay_episodes(scans.visible, scans.detected, assoc, scans.dt)
     out = evaluate_tracks(scans, X, labels, episodes, cfg, sensor_cfg)

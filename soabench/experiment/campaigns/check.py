@@ -42,11 +42,12 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from soabench import plugins
-from soabench.config import Config, load_config
+from soabench.atomic import write_json_atomic, write_text_atomic
+from soabench.config import CLUTTER_RATE, Config, load_config
 from soabench.errors import SoabenchError, require
-from soabench.experiment.runs.files import read_csv, write_json_atomic, write_text_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
+from soabench.experiment.runs.files import read_csv
 from soabench.experiment.trial.guard import failure_message
+from soabench.folders import FolderLock, check_own_folder, resolve
 from soabench.tomlfile import read_toml
 
 SUITE_KEYS = {"name", "baseline", "config"}
@@ -83,7 +84,7 @@ class Scenario:
     models: tuple[str, ...] = ("soa",)
     trackers: tuple[str, ...] = ()
     probabilities: tuple[str, ...] = ("static",)
-    clutter: tuple[float, ...] = (3.0,)
+    clutter: tuple[float, ...] = (CLUTTER_RATE,)
 
 
 @dataclass
@@ -161,7 +162,7 @@ UNIT_METRICS = frozenset(
 def metric_range(metric: str) -> tuple[float, float]:
     """The values ``metric`` (a trials.csv metric or timing column) can take: a threshold outside them passes or
     fails whatever the tracker does."""
-    if metric in UNIT_METRICS:
+    if metric in UNIT_METRICS or metric.startswith(("identity_kept_", "coasted_")):  # also the occlusion metrics
         return 0.0, 1.0
     if metric == "mota":
         return -math.inf, 1.0
@@ -543,8 +544,6 @@ def run_check(
 ) -> int:
     """The ``check`` command: exit status 0 (every check passed) or 1 (a regression). ``plugin_paths``: the
     ``module:Class`` plugins the suite may name (entry-point plugins need none)."""
-    from soabench import plugins
-
     require(workers is None or workers >= 1, f"--workers {workers} must be >= 1")
     for name in plugin_paths:
         require(":" in name, f"--plugin {name!r} must be MODULE:CLASS (installed entry-point plugins need no --plugin)")

@@ -15,9 +15,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from soabench.atomic import write_text_atomic
 from soabench.birth import BASELINES
 from soabench.experiment.reports import paper
-from soabench.experiment.runs.files import write_csv, write_text_atomic
+from soabench.experiment.runs.files import write_csv
 
 #: columns of summary.csv (percentages in %, p-values two-sided)
 COLUMNS = (
@@ -46,7 +47,9 @@ COLUMNS = (
 FIGURE = "advantage_vs_occlusion.png"
 
 
-def advantage_rows(scene: str, density: Mapping[str, Any], rows: Sequence[Mapping], clutter: float = 3.0) -> list[dict]:
+def advantage_rows(
+    scene: str, density: Mapping[str, Any], rows: Sequence[Mapping], clutter: float = paper.PAPER_CLUTTER
+) -> list[dict]:
     """One summary row per (mode, baseline) of one scene's main-protocol ``rows`` (``paper.read_rows``)."""
     comps = {(c.mode, c.baseline, c.metric): c for c in paper.compare(list(rows), clutter)}
     n_trials = len({int(r["trial"]) for r in rows})
@@ -152,7 +155,9 @@ def scenes_by_density(rows: Sequence[Mapping]) -> list[str]:
     return sorted(dens, key=lambda s: (dens[s], s))
 
 
-def write_summary(out_dir: Path, scenes: Sequence[tuple[str, Mapping[str, Any], Path]], clutter: float = 3.0) -> str:
+def write_summary(
+    out_dir: Path, scenes: Sequence[tuple[str, Mapping[str, Any], Path]], clutter: float = paper.PAPER_CLUTTER
+) -> str:
     """Write summary.md, summary.csv and the figure into ``out_dir`` from (scene, density, trials.csv) triples."""
     # imported when called: matplotlib would slow every start-up
     from soabench.figures.cross_scene import cross_scene_figure

@@ -24,9 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from soabench.atomic import to_jsonable, write_json_atomic
 from soabench.config import Config
 from soabench.errors import require
-from soabench.experiment.runs.files import read_json, to_jsonable, write_json_atomic
+from soabench.experiment.runs.files import read_json
 from soabench.scenario import load, simulate
 from soabench.seeding import trial_seeds
 from soabench.sensor import fov_polygon, observe
@@ -66,7 +67,7 @@ def scene_density(
     load_fn, simulate_fn, observe_fn = load_fn or load, simulate_fn or simulate, observe_fn or observe
     scene, scenario = load_fn(net, (), None)
     exp = config.experiment
-    sensor = dataclasses.replace(config.sensor, lambda_c=float(exp.clutter[0]))
+    sensor = config.sensor_at()
     per_trial, shares, n_in, n_hidden = [], [], 0, 0
     for n in range(trials):
         seeds = trial_seeds(exp.seed, n)
@@ -113,7 +114,7 @@ def settings(config: Config, trials: int) -> dict[str, Any]:
         "trials": int(trials),
         "seed": int(exp.seed),
         "duration": float(exp.duration),
-        "sensor": {k: v for k, v in dataclasses.asdict(config.sensor).items() if k != "lambda_c"},
+        "sensor": dataclasses.asdict(config.sensor),
     }
 
 

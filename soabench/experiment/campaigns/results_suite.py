@@ -18,7 +18,7 @@ Parts, in order, under ``OUT`` (default ``results/``):
   :data:`ATLAS_AXES`: parking density x pedestrians x clutter x p_D, ``--atlas-trials`` trials per point, the six
   birth models, static, GM-PHD) on ``--atlas-scenes``: when does S-OA pay off?
 * ``kitti/<scene>/``: SUMO trials exported in the KITTI tracking layout (``export/``) and the KITTI protocol on them
-  (``run/``: k-fold N_hat, Table I; :mod:`soabench.kitti.protocol`).
+  (``run/``: k-fold N_hat, Table I; :mod:`soabench.experiment.campaigns.kitti.protocol`).
 
 An existing complete part with the same settings is kept as it is (nothing is re-run or rewritten); an unfinished
 one is resumed (its finished trials are kept); a part made with other settings is refused with one line naming the
@@ -36,15 +36,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from soabench.atomic import write_json_atomic
 from soabench.birth import CORE_MODELS
 from soabench.config import FILTER_FAMILIES, MAX_SEED, MAX_TRIALS, Config, check_time
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns.occlusion_density import write_density
 from soabench.experiment.execution.executors import MAX_WORKERS
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
-from soabench.experiment.runs.files import read_json, write_json_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
+from soabench.experiment.runs.files import read_json
 from soabench.experiment.runs.runmeta import flatten_config
+from soabench.folders import FolderLock, check_own_folder, resolve
 from soabench.kitti.config import KittiSpec, load_kitti_config
 from soabench.scenario import shipped_nets
 
@@ -281,8 +282,8 @@ def kitti_settings_check(base: Path, want: dict[str, Any]) -> dict | None:
 def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None], progress: bool) -> tuple[str, int]:
     """Export ``kitti_sequences`` SUMO trials of ``scene`` in the KITTI layout, then the KITTI protocol on them."""
     # imported when called: matplotlib, scipy would slow every start-up
+    from soabench.experiment.campaigns.kitti.protocol import run_kitti
     from soabench.kitti.export import export_kitti
-    from soabench.kitti.protocol import run_kitti
 
     export, run = base / "export", base / "run"
     cfg, kcfg = load_kitti_config(None)
@@ -524,7 +525,7 @@ def run_results(
                 ready = [n for n in scenes if run_complete(mains[n])]
                 if ready:
                     triples = [(n, densities[n], mains[n] / "trials.csv") for n in ready]
-                    outcome.summary_markdown = write_summary(root / "scenes", triples, clutter=3.0)
+                    outcome.summary_markdown = write_summary(root / "scenes", triples)
                     log(f"wrote {root / 'scenes' / 'summary.md'} ({len(ready)} of {len(scenes)} scenes)")
                 return ("done" if len(ready) == len(scenes) else "incomplete"), 0
 

@@ -52,9 +52,10 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.atomic import write_text_atomic
 from soabench.birth import BASELINES, LABEL
 from soabench.experiment.reports import paper
-from soabench.experiment.runs.files import write_csv, write_text_atomic
+from soabench.experiment.runs.files import write_csv
 
 #: settings in column order: key -> column header
 SETTINGS: dict[str, str] = {
@@ -143,7 +144,7 @@ def _mean(rows: Sequence[dict], metric: str, model: str, mode: str, clutter: flo
     return Value(float(v.mean()) if len(v) else math.nan, len(v))
 
 
-def headline_numbers(rows: Sequence[dict], clutter: float = 3.0) -> dict[tuple[str, str, str], Value]:
+def headline_numbers(rows: Sequence[dict], clutter: float = paper.PAPER_CLUTTER) -> dict[tuple[str, str, str], Value]:
     """Every headline number the rows allow: (kind, model, mode) -> Value (see :data:`KINDS`)."""
     out: dict[tuple[str, str, str], Value] = {}
     models = {r["model"] for r in rows}
@@ -208,7 +209,7 @@ def _flip(kind: str, model: str, base: Value, to: Value) -> str:
     )
 
 
-def build_rows(runs: Mapping[str, Sequence[dict]], clutter: float = 3.0) -> list[Row]:
+def build_rows(runs: Mapping[str, Sequence[dict]], clutter: float = paper.PAPER_CLUTTER) -> list[Row]:
     """The sensitivity rows from each setting's trials.csv rows (``runs["default"]`` is required)."""
     numbers = {k: headline_numbers(rows, clutter) for k, rows in runs.items()}
     settings = [k for k in SETTINGS if k in runs]
@@ -280,7 +281,9 @@ def csv_rows(rows: Sequence[Row], settings: Sequence[str]) -> tuple[list[dict], 
     return out, cols
 
 
-def write_sensitivity(out_dir: Path, main_dir: Path, variants: Mapping[str, Path], clutter: float = 3.0) -> str:
+def write_sensitivity(
+    out_dir: Path, main_dir: Path, variants: Mapping[str, Path], clutter: float = paper.PAPER_CLUTTER
+) -> str:
     """Write ``sensitivity.md`` and ``sensitivity.csv`` in ``out_dir`` from the main run and the variant runs.
 
     ``variants``: setting key (``gate_off``, ``visible``, ``gate_off_visible``) -> finished run folder. Every

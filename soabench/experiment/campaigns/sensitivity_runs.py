@@ -22,10 +22,10 @@ from soabench.experiment.execution.executors import MAX_WORKERS, open_executor
 from soabench.experiment.execution.grouped import run_group
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.runner import RunOutcome, run_experiment
-from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runs.runmeta import config_differences, validate_run_meta
 from soabench.experiment.runs.store import RunStore
 from soabench.figures.drawing import parallel
+from soabench.folders import FolderLock, check_own_folder, resolve
 
 #: the variant runs, in column order
 VARIANTS = ("gate_off", "visible")

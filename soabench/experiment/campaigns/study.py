@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from soabench import plugins
+from soabench.atomic import write_text_atomic
 from soabench.birth import CORE_MODELS
 from soabench.config import Config
 from soabench.errors import Interrupted, require
@@ -45,11 +46,10 @@ from soabench.experiment.execution.premerge import merged_on
 from soabench.experiment.execution.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.reports import paper
 from soabench.experiment.reports.report import paper_protocol_mismatch
-from soabench.experiment.runs.files import write_text_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_own_folder, resolve
 from soabench.experiment.runs.runmeta import flatten_config
 from soabench.experiment.runs.store import RunStore
 from soabench.figures.drawing import parallel
+from soabench.folders import FolderLock, check_own_folder, resolve
 from soabench.tracks.report import render_hota, track_stats
 
 #: every entry a study folder holds (a folder holding anything else is not a study's and is refused)
@@ -285,7 +285,7 @@ def key_figure(main_rows: list[dict], clutter_rows: list[dict], path: Path) -> P
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import key_figure as draw
 
-    return save_png(draw(main_rows, clutter_rows), path)
+    return save_png(draw(main_rows, clutter_rows, paper.PAPER_CLUTTER), path)
 
 
 def write_comparison(root: Path) -> str:

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.birth import CORE_MODELS, LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config, require_distinct
 from soabench.errors import Interrupted, require
@@ -56,10 +57,10 @@ from soabench.experiment.execution.runner import (
 )
 from soabench.experiment.reports.paper import read_rows
 from soabench.experiment.reports.report import fmt
-from soabench.experiment.runs.files import read_csv, read_json, write_json_atomic, write_text_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
+from soabench.experiment.runs.files import read_csv, read_json
 from soabench.experiment.runs.runmeta import check_requested, flatten_config, validate_sweep_meta
 from soabench.experiment.trial.registry import load_scene_cached
+from soabench.folders import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.tracks.report import render_hota
 
 SWEEP_FILE = "sweep.json"
@@ -371,9 +372,9 @@ def _episode_means(
     run_dir: Path, models: Sequence[str], modes: Sequence[str], clutter: float
 ) -> dict[tuple[str, str], tuple[float, float]]:
     """k̄_delay over all counted episodes of a run per (model, mode), and the half-width of its 95 % confidence
-    interval over trials (:func:`~soabench.figures.results.pooled_mean_ci`)."""
+    interval over trials (:func:`~soabench.figures.bars.pooled_mean_ci`)."""
     # imported when called: matplotlib would slow every start-up
-    from soabench.figures.results import pooled_mean_ci
+    from soabench.figures.bars import pooled_mean_ci
 
     e = read_csv(run_dir / "episodes.csv")
     out = {}

@@ -50,6 +50,7 @@ class SerialExecutor:
 
     name = "serial"
     n_workers = 1
+    local = True  #: its workers run on this machine and read its files
 
     def results(self, spec: Any, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
         for t in trials:
@@ -63,6 +64,7 @@ class PoolExecutor:
     """A ``ProcessPoolExecutor`` of one-thread processes; at most ``2 * workers`` trials in flight."""
 
     name = "process-pool"
+    local = True  #: its workers run on this machine and read its files
 
     def __init__(self, workers: int):
         self.n_workers = int(workers)
@@ -110,7 +112,7 @@ class PoolExecutor:
         return out
 
     def results(self, spec: Any, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
-        base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+        base_seed = int(spec.base_seed)
         queue = iter(trials)  # consumed lazily: a huge to-do list is never built in memory
         pending: dict = {}  # future -> (trial, pool generation)
         exhausted = False
@@ -179,6 +181,7 @@ class DaskExecutor:
     """Trials as Dask futures on a distributed cluster (existing scheduler or a LocalCluster we start)."""
 
     name = "dask"
+    local = False  #: its workers may run elsewhere and not see this machine's files
 
     def __init__(self, scheduler: str | None = None, local_workers: int | None = None):
         try:
@@ -215,7 +218,7 @@ class DaskExecutor:
         self.n_workers = max(1, len(self.client.scheduler_info().get("workers", {})))
 
     def results(self, spec: Any, trials: Sequence[int]) -> Iterator[tuple[int, dict]]:
-        base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+        base_seed = int(spec.base_seed)
         token = f"{os.getpid()}-{time.time_ns()}"
         futures = {}
         queue = iter(trials)  # submitted in a window of 4 per worker: a huge to-do list is never built in memory

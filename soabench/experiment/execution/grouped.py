@@ -32,11 +32,11 @@ from soabench.experiment.execution.runner import (
     run_trial_task,
     uses_kernels,
 )
-from soabench.experiment.runs.ownership import FolderLock
 from soabench.experiment.runs.provenance import package_versions
 from soabench.experiment.trial import registry
 from soabench.experiment.trial import trial as trial_module
 from soabench.experiment.trial.trial import TrialShare, _config_key
+from soabench.folders import FolderLock
 from soabench.kernel_warmup import ensure_compiled
 
 
@@ -48,9 +48,9 @@ class GroupSpec:
     todo: tuple[frozenset[int], ...]
 
     @property
-    def config(self) -> dict:
-        """The first folder's config (its seed names a trial lost with its worker)."""
-        return self.members[0].config
+    def base_seed(self) -> int:
+        """The first folder's base seed (it names a trial lost with its worker)."""
+        return self.members[0].base_seed
 
     @property
     def task_fn(self) -> Any:

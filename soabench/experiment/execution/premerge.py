@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import tempfile
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -53,7 +53,7 @@ class MergeBatch:
 
     folders: tuple[tuple[str, tuple[str, ...], tuple[str, ...], bool], ...]
     tmp: str
-    config: dict = field(default_factory=dict)  # read by the executors for a failure record's seed
+    base_seed: int = 0  #: the seed of a failure record (a folder merge has no trial seed of its own)
 
     @property
     def task_fn(self) -> Any:

@@ -13,19 +13,12 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-#: non-terminal output: a line at least every this many seconds (while trials finish) ...
-LINE_INTERVAL_S = 10.0
-#: ... and whenever this fraction of the trials finished since the last line
+from soabench.notice import LINE_INTERVAL_S, is_terminal
+
+#: non-terminal output: a line at least every LINE_INTERVAL_S seconds (while trials finish) and whenever this
+#: fraction of the trials finished since the last line
 LINE_STEP = 0.05
 BAR_WIDTH = 30
-
-
-def is_terminal(stream: TextIO) -> bool:
-    """Whether ``stream`` is a terminal (a redrawn bar) rather than a file or a pipe (a line now and then)."""
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):
-        return False
 
 
 def format_duration(seconds: float) -> str:

@@ -13,6 +13,7 @@ atomic file per finished trial (:mod:`soabench.experiment.runs.store`), so worke
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import socket
@@ -27,19 +28,16 @@ from pathlib import Path
 from typing import Any
 
 from soabench import plugins
+from soabench.atomic import to_jsonable, write_json_atomic
 from soabench.config import Config
 from soabench.errors import Interrupted, require
 from soabench.experiment.execution import premerge
-from soabench.experiment.execution.executors import (
-    failure_record,
-    open_executor,
-)
+from soabench.experiment.execution.executors import PoolExecutor, failure_record, open_executor
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.reports import report
-from soabench.experiment.runs.files import pack_table, to_jsonable, write_json_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_existing_folder, check_new_folder, resolve
+from soabench.experiment.runs.files import pack_table
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, package_versions, platform_info
 from soabench.experiment.runs.runmeta import check_requested, validate_run_meta
 from soabench.experiment.runs.store import (
@@ -52,7 +50,8 @@ from soabench.experiment.runs.store import (
 )
 from soabench.experiment.trial import registry
 from soabench.experiment.trial.guard import failure_message
-from soabench.figures.drawing import report_pool
+from soabench.figures.drawing import parallel, pool_open
+from soabench.folders import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.kernel_warmup import ensure_compiled
 from soabench.replay.report import refresh_report
 from soabench.scenario.derive import said_by_the_driver
@@ -100,6 +99,11 @@ class TaskSpec:
     load_fn: LoadFn | None = None
     #: import paths of plugins typed on the driver's command line (soabench.plugins: the closed list)
     plugin_paths: tuple[str, ...] = ()
+    #: ``experiment.seed`` of the config, read through :class:`~soabench.config.Config` once (a failure record's seed)
+    base_seed: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "base_seed", int(Config.from_dict(self.config).experiment.seed))
 
     @property
     def task_fn(self) -> Callable[[int, TaskSpec], dict]:
@@ -126,7 +130,7 @@ def _where() -> str:
 
 def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     """Run one trial in this process and return its record; an exception becomes a failure record."""
-    base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+    base_seed = spec.base_seed
     t0 = time.perf_counter()
     note_activity(trial, OWN_CODE)
     try:
@@ -448,7 +452,7 @@ def _run_locked(
         # a study's workers may have merged it already; the figures read the step columns the merge kept
         premerge.merge(store, *premerge.merge_args(config), step_columns=figures)
         local = not (options.scheduler or options.dask_local)
-        with report_pool(options.workers if local else None, executor):  # figures on local processes
+        with _figure_pool(options.workers if local else None, executor):  # figures on local processes
             outcome.summary_markdown = report.write_report(store.run_dir, figures=figures, store=store)
         refresh_report(store.run_dir)  # report.html: the one page to open in a run folder
         outcome.model_failures = store.model_failures()
@@ -521,3 +525,25 @@ def _print_failure(rec: dict, bar: Progress) -> None:
         f"trial {rec['trial']} failed (seed {rec['seed']}, sumo_seed {rec['sumo_seed']}): {rec['error']}",
         file=sys.stderr,
     )
+
+
+@contextlib.contextmanager
+def _figure_pool(workers: int | None, executor: Any = None) -> Iterator[None]:
+    """The figures of a report written inside the block in parallel (:func:`soabench.figures.drawing.parallel`):
+    on ``executor`` when it is a local process pool, else (unless an enclosing ``parallel`` decides already) on a
+    pool of ``workers`` processes (None: one per core) opened here and closed on the way out, terminated if the
+    block is left by an exception (Ctrl-C)."""
+    if isinstance(executor, PoolExecutor) or pool_open():
+        with parallel(executor) if isinstance(executor, PoolExecutor) else contextlib.nullcontext():
+            yield
+        return
+    n = int(workers or os.cpu_count() or 1)
+    pool = PoolExecutor(n) if n > 1 else None  # its processes start at the first figure
+    ok = False
+    try:
+        with parallel(pool):
+            yield
+        ok = True
+    finally:
+        if pool is not None:
+            pool.close(abort=not ok)

@@ -17,30 +17,18 @@ A Dask LocalCluster's worker processes are started inside :func:`sigint_ignored_
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import json
 import os
 import signal
-import sys
 import threading
 import time
 from collections.abc import Iterator
 
-PR_SET_PDEATHSIG = 1  #: from <linux/prctl.h>
+from soabench.processes import die_with_parent
+
 #: what a worker notes while no plugin runs
 OWN_CODE = "soabench's own code (no plugin was running)"
 _NOTES: list[str | None] = [None]  #: this worker's notes folder (None: not a pool worker, nothing is noted)
-
-
-def _set_pdeathsig() -> bool:
-    """Ask Linux to SIGKILL this process when its parent exits; False where that is unavailable."""
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        return libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
-    except (OSError, AttributeError):  # pragma: no cover - no libc symbol
-        return False
 
 
 def _watch_parent(parent: int, period: float = 1.0) -> None:
@@ -56,7 +44,7 @@ def init_worker(parent: int | None = None, notes: str | None = None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _NOTES[0] = notes
     parent = os.getppid() if parent is None else parent
-    armed = _set_pdeathsig()
+    armed = die_with_parent()
     if os.getppid() != parent:  # the parent died before the request took effect
         os._exit(1)
     if not armed:

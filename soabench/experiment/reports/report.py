@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.birth import BASELINES, LABEL
 from soabench.config import FAMILIES, FAMILY_MODES, FILTER_FAMILIES, Config, MetricsConfig
 from soabench.errors import SoabenchError
@@ -42,7 +43,6 @@ from soabench.experiment.reports import occlusion, paper, track_intervals
 from soabench.experiment.reports.paper import percent_reduction
 from soabench.experiment.reports.tables import RunTables, load_tables, select, tables_models  # noqa: F401 (shared)
 from soabench.experiment.runs.failures import write_model_failures
-from soabench.experiment.runs.files import write_json_atomic, write_text_atomic
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE
 from soabench.experiment.runs.store import RunStore
 from soabench.experiment.trial.observable import duration_hint
@@ -248,8 +248,9 @@ def _clutter_results(tables: RunTables, clutter: float, family: str | None) -> d
     baselines = [c["baseline"] for c in comps if c["mode"] == tables.modes[0]]
     out["tracks"] = _tracks(tables, clutter, baselines)
     bins = tuple(meta["config"].get("metrics", {}).get("gap_bins", MetricsConfig().gap_bins))
-    out["occlusion"] = occlusion.breakdown(tables, clutter, bins, baselines)
-    out["track_intervals"] = _track_intervals(tables, clutter, baselines)
+    # null, not NaN, where a number is undefined: summary.json stays strict JSON for the report page
+    out["occlusion"] = _nan_to_none(occlusion.breakdown(tables, clutter, bins, baselines))
+    out["track_intervals"] = _nan_to_none(_track_intervals(tables, clutter, baselines))
     if family is not None:
         out["filter"] = family
     return out
@@ -284,6 +285,15 @@ def _tracks(tables: RunTables, clutter: float, baselines: list[str]) -> dict:
             if ("soa", md) in by_trial and (b, md) in by_trial:
                 versus.append((md, b, tracks_vs_soa(by_trial[("soa", md)], by_trial[(b, md)])))
     return {"rows": rows, "versus": versus}
+
+
+def _nan_to_none(obj: Any) -> Any:
+    """``obj`` with every non-finite float (in nested dicts and lists) replaced by None."""
+    if isinstance(obj, dict):
+        return {k: _nan_to_none(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_nan_to_none(v) for v in obj]
+    return None if isinstance(obj, float) and not math.isfinite(obj) else obj
 
 
 def _track_intervals(tables: RunTables, clutter: float, baselines: list[str]) -> dict:
@@ -497,7 +507,7 @@ def paper_protocol_mismatch(meta: dict) -> str:
     return ""
 
 
-def paper_section(run_dir: Path, tables: RunTables, clutter: float = 3.0) -> str:
+def paper_section(run_dir: Path, tables: RunTables, clutter: float = paper.PAPER_CLUTTER) -> str:
     """The paper's headline numbers beside ours (:mod:`soabench.experiment.reports.paper`), when the run follows the
     paper's
     protocol on the shipped intersection (:func:`paper_protocol_mismatch`) and S-OA, a baseline and lambda = 3 were

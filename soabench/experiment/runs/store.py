@@ -6,7 +6,7 @@ Layout of a run folder (``results/<net>/<UTC timestamp>/``)::
                              trial count, save_estimates, trial kind and scene loader (registered names, never
                              import paths: :mod:`soabench.experiment.trial.registry`), package versions, and the
                              run's identity ``run_id`` (:func:`run_identity`)
-    .lock                    while a process works the folder (:mod:`soabench.experiment.runs.ownership`)
+    .lock                    while a process works the folder (:mod:`soabench.folders`)
     trials/trial_00042.json  one record per finished trial (status "ok"): its trial index and ``run_id``, rows,
                              episodes, steps, timing
     failed/trial_00042.json  one record per failed trial: seed, sumo_seed, error, traceback (retried by --resume)
@@ -44,17 +44,15 @@ from typing import Any
 
 import numpy as np
 
+from soabench.atomic import to_jsonable, write_bytes_atomic, write_json_atomic
 from soabench.errors import SoabenchError
 from soabench.experiment.runs.files import (
     ReadBack,
     csv_line,
     gc_paused,
     read_json,
-    to_jsonable,
     unpack_table,
-    write_bytes_atomic,
     write_csv,
-    write_json_atomic,
     write_lines,
 )
 from soabench.experiment.trial.trial import (

@@ -47,7 +47,9 @@ def first_observable(meta: dict, trials: int = PROBE_TRIALS) -> tuple[list[float
     firsts: list[float | None] = []
     for trial in range(min(trials, int(exp.trials))):
         seeds = trial_seeds(exp.seed, trial)
-        scans = observe(simulate(scene, scenario, seeds, duration=probe), scene, config.sensor, seeds.sensor_rngs())
+        scans = observe(
+            simulate(scene, scenario, seeds, duration=probe), scene, config.sensor_at(), seeds.sensor_rngs()
+        )
         seen = np.flatnonzero(np.asarray(scans.visible).any(axis=1))
         firsts.append(float(seen[0] * scans.dt) if len(seen) else None)
     return firsts, probe

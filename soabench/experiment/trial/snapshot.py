@@ -30,7 +30,7 @@ class Snapshot:
 
     def scans(self) -> Scans:
         """The sensor's scans of the recording, with the trial's sensor seeds (as a run's trial makes them)."""
-        return observe(self.recording, self.scene, self.config.sensor, self.seeds.sensor_rngs())
+        return observe(self.recording, self.scene, self.config.sensor_at(), self.seeds.sensor_rngs())
 
 
 def take_snapshot(
@@ -89,11 +89,11 @@ def births_at_end(snap: Snapshot, scans: Scans, model: str, probability: str) ->
     options = {} if builtin else cfg.plugins.get(model, {})
     plugins.check_options(plugins.BIRTH, model, cls, options)
     filter_cfg, mode, p_D_b = filter_config_for_mode(cfg.filter, probability)
-    filt = GMPHDFilter(filter_cfg, cfg.sensor, mode)
+    filt = GMPHDFilter(filter_cfg, cfg.sensor_at(), mode)
     prev = None
     births = Births.empty()
     try:
-        birth_model = cls(cfg.birth, cfg.sensor, snap.scene, snap.seeds.placement_rng(), **options)
+        birth_model = cls(cfg.birth, cfg.sensor_at(), snap.scene, snap.seeds.placement_rng(), **options)
         for scan in scans.scans:
             births = birth_model(BirthContext(scan, prev, p_D_b))
             if not builtin:

@@ -104,6 +104,38 @@ class TrialResult:
     failures: list[dict[str, Any]] = field(default_factory=list)
 
 
+@dataclass(frozen=True)
+class RunRecords:
+    """What one finished filter run added to a :class:`TrialResult`: its row, episodes, steps and estimates."""
+
+    row: dict[str, Any]
+    episodes: list[dict[str, Any]]
+    steps: list[dict[str, Any]]
+    estimates: list[dict[str, Any]] | None
+
+
+@dataclass(frozen=True)
+class TableSizes:
+    """The length of each table of a :class:`TrialResult` at one moment: a run's records are what follows."""
+
+    rows: int
+    episodes: int
+    steps: int
+    estimates: int
+    failures: int
+
+    @classmethod
+    def of(cls, out: TrialResult) -> TableSizes:
+        return cls(len(out.rows), len(out.episodes), len(out.steps), len(out.estimates or ()), len(out.failures))
+
+    def one_run_since(self, out: TrialResult) -> RunRecords | None:
+        """The records of the one run that finished since (one row, no failure), else None."""
+        if len(out.failures) != self.failures or len(out.rows) != self.rows + 1:
+            return None
+        estimates = None if out.estimates is None else out.estimates[self.estimates :]
+        return RunRecords(out.rows[self.rows], out.episodes[self.episodes :], out.steps[self.steps :], estimates)
+
+
 #: the column naming a run's filter family (docs/method.md "LMB filter"); written only by runs whose
 #: ``experiment.filters`` is not the default ``("gmphd",)``, as the last column of every table
 FILTER_COLUMN = "filter"
@@ -142,7 +174,7 @@ class TrialShare:
     #: recording key -> the sensor's lambda-independent geometry of every scan (``soabench.sensor.observe``)
     geometry: dict[tuple, dict] = field(default_factory=dict)
     #: run key -> (row, episodes, steps, estimates) of a finished built-in (model x mode) run
-    runs: dict[tuple, tuple] = field(default_factory=dict)
+    runs: dict[tuple, RunRecords] = field(default_factory=dict)
     #: keep every finished filter run (its step results) so a config that differs only in ``metrics`` scores it
     #: again instead of re-running the filter (set by a group whose folders differ only there)
     keep_filter_runs: bool = False
@@ -394,7 +426,7 @@ def run_trial(
     filter_cfg_key = _config_key(config, without=("metrics",))
     birth_key = _birth_key(config)
     for lam in exp.clutter:
-        sensor_cfg = dataclasses.replace(config.sensor, lambda_c=float(lam))
+        sensor_cfg = config.sensor_at(lam)
         scans_key = (rec_key, repr(sensor_cfg), fn_key[1])
         t0 = time.perf_counter()
         if scans_key in share.scans:
@@ -410,7 +442,7 @@ def run_trial(
             share.count("scans")
         out.timing["sensor"] += time.perf_counter() - t0
         # the sensor's geometry is the same for every lambda when the real sensor observed the scans
-        geometry_key = (rec_key, repr(dataclasses.replace(sensor_cfg, lambda_c=0.0)))
+        geometry_key = (rec_key, repr(sensor_cfg.settings))
         candidates_key = geometry_key if fn_key[1] == "default" else scans_key
         for model in exp.models:
             births = None
@@ -426,7 +458,7 @@ def run_trial(
                     _replay(cached, out)
                     share.count("runs_reused")
                     continue
-                n = (len(out.rows), len(out.episodes), len(out.steps), len(out.estimates or ()), len(out.failures))
+                before = TableSizes.of(out)
                 filter_key = (scans_key, filter_cfg_key, model, mode, family, *fn_key[2:])
                 kept = share.filter_runs.get(filter_key)
                 if kept is not None:  # the same filter run under another metrics config: score it only
@@ -437,13 +469,9 @@ def run_trial(
                     share.count("runs")
                     if share.keep_filter_runs and run is not None:
                         share.filter_runs[filter_key] = run
-                if len(out.failures) == n[4] and len(out.rows) == n[0] + 1:  # a finished built-in run: reusable
-                    share.runs[run_key] = (
-                        out.rows[n[0]],
-                        out.episodes[n[1] :],
-                        out.steps[n[2] :],
-                        None if out.estimates is None else out.estimates[n[3] :],
-                    )
+                finished = before.one_run_since(out)
+                if finished is not None:  # a finished built-in run: reusable
+                    share.runs[run_key] = finished
         for tracker in exp.trackers:
             for mode in exp.probabilities:
                 key = RunKey(trial, float(lam), tracker, mode)
@@ -496,14 +524,13 @@ def _birth_key(config: Config) -> str:
     return json.dumps(d, sort_keys=True, default=repr)
 
 
-def _replay(cached: tuple, out: TrialResult) -> None:
+def _replay(cached: RunRecords, out: TrialResult) -> None:
     """Append a finished run's row, episodes, steps (and estimates) from a :class:`TrialShare` to ``out``."""
-    row, episodes, steps, estimates = cached
-    out.rows.append(dict(row))
-    out.episodes.extend(dict(e) for e in episodes)
-    out.steps.extend(dict(s) for s in steps)
-    if out.estimates is not None and estimates is not None:
-        out.estimates.extend(dict(e) for e in estimates)
+    out.rows.append(dict(cached.row))
+    out.episodes.extend(dict(e) for e in cached.episodes)
+    out.steps.extend(dict(s) for s in cached.steps)
+    if out.estimates is not None and cached.estimates is not None:
+        out.estimates.extend(dict(e) for e in cached.estimates)
 
 
 def _run_one(

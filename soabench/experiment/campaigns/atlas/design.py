@@ -56,8 +56,6 @@ def config_axis_types() -> dict[str, type]:
     for sec in CONFIG_SECTIONS:
         obj = getattr(cfg, sec)
         for f in dataclasses.fields(obj):
-            if f"{sec}.{f.name}" == "sensor.lambda_c":
-                continue
             v = getattr(obj, f.name)
             if isinstance(v, (bool, int, float, str)):
                 out[f"{sec}.{f.name}"] = type(v)

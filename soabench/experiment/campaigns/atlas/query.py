@@ -69,12 +69,16 @@ def tables_of(root: Path) -> dict[str, str]:
     return out
 
 
-def connect(path: str | Path) -> Any:
-    """A DuckDB connection with the folder's tables as views (module docstring)."""
+def connect(path: str | Path, only: Any = None) -> Any:
+    """A DuckDB connection with the folder's tables as views (module docstring); ``only``: the names of the tables
+    to open (None: all). DuckDB reads every file's schema when it creates a view, so a query opens only the tables it
+    names."""
     import duckdb
 
     root = Path(path).resolve()
     tables = tables_of(root)
+    if only is not None:
+        tables = {k: v for k, v in tables.items() if k in set(only)}
     con = duckdb.connect()
     con.execute("SET allowed_directories = ?", [[str(root) + "/"]])
     con.execute("SET enable_external_access = false")
@@ -89,7 +93,10 @@ def run_query(path: str | Path, sql: str) -> Any:
     import duckdb
 
     require(isinstance(sql, str) and sql.strip() != "", 'the SQL is empty; give a query such as "SELECT ..."')
-    con = connect(path)
+    import re
+
+    names = {w.lower() for w in re.findall(r"[A-Za-z_]+", sql)}
+    con = connect(path, only=[t for t in (*store.TABLES, "points") if t in names])
     try:
         rel = con.sql(sql)
         if rel is None:
@@ -133,7 +140,7 @@ def write_result(table: Any, out: Path) -> None:
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
 
-    from soabench.experiment.runs.files import write_bytes_atomic
+    from soabench.atomic import write_bytes_atomic
 
     suffix = Path(out).suffix.lower()
     require(suffix in (".csv", ".parquet"), f"--out {str(out)!r}: allowed: a .csv or .parquet file")

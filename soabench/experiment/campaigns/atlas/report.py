@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from soabench.atomic import write_text_atomic
 from soabench.experiment.campaigns.atlas import stats, store
 from soabench.experiment.campaigns.atlas.stats import METRICS, NULL
-from soabench.experiment.runs.files import write_text_atomic
 
 
 def axis_label(key: str) -> str:

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from soabench import plugins
+from soabench.atomic import to_jsonable, write_json_atomic, write_text_atomic
 from soabench.config import Config
 from soabench.errors import Interrupted, require
 from soabench.experiment.campaigns.atlas import store
@@ -44,10 +45,9 @@ from soabench.experiment.campaigns.atlas.plan import (
 from soabench.experiment.execution.executors import failure_record, open_executor
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.progress import Progress
-from soabench.experiment.runs.files import to_jsonable, write_json_atomic, write_text_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_writable_target, resolve
 from soabench.experiment.runs.provenance import package_versions, platform_info
 from soabench.experiment.trial import registry
+from soabench.folders import FolderLock, check_writable_target, resolve
 
 DEFAULT_MAX_TRIALS = 20_000  #: trials (points x trials per point) an atlas runs without --force
 
@@ -63,6 +63,12 @@ class AtlasSpec:
     trial_kind: str = registry.DEFAULT_TRIAL_KIND
     scene_loader: str = registry.DEFAULT_SCENE_LOADER
     plugin_paths: tuple[str, ...] = ()
+    #: ``experiment.seed`` of the base config, read through :class:`~soabench.config.Config` once (a failure
+    #: record's seed)
+    base_seed: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "base_seed", int(Config.from_dict(self.config).experiment.seed))
 
     @property
     def task_fn(self) -> Any:
@@ -79,7 +85,7 @@ _LOCK = threading.Lock()  # libsumo is a process singleton: one chunk at a time 
 def run_chunk_task(task: int, spec: AtlasSpec) -> dict:
     """Run one chunk (module docstring) in this process; an exception becomes a failure record."""
     n, s = spec.chunk_of(task)
-    base_seed = int(spec.config.get("experiment", {}).get("seed", 0))
+    base_seed = spec.base_seed
     t0 = time.perf_counter()
     try:
         with _LOCK:
@@ -231,7 +237,7 @@ def _write_new(root: Path, meta: dict, variants: list[SceneVariant]) -> None:
         ),
         {},
     )
-    from soabench.experiment.runs.files import write_bytes_atomic
+    from soabench.atomic import write_bytes_atomic
 
     write_bytes_atomic(root / "points.parquet", store.parquet_bytes(cols))
     write_json_atomic(root / store.ATLAS_FILE, to_jsonable(meta))  # last: its presence marks a planned atlas

@@ -24,8 +24,9 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from soabench.atomic import write_bytes_atomic
 from soabench.errors import require
-from soabench.experiment.runs.files import read_json, write_bytes_atomic
+from soabench.experiment.runs.files import read_json
 
 ATLAS_FILE = "atlas.json"
 FORMAT = "soabench-atlas-1"

@@ -19,11 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.birth import LABEL
+from soabench.config import family_label
+from soabench.experiment.campaigns.kitti import trackeval_kitti
 from soabench.experiment.reports.occlusion import bin_labels
-from soabench.experiment.runs.files import write_csv, write_json_atomic, write_text_atomic
+from soabench.experiment.runs.files import write_csv
 from soabench.figures import kitti as kitti_figures
-from soabench.kitti import trackeval_kitti
 from soabench.kitti.config import KittiSpec
 from soabench.kitti.levels import LEVEL_NAMES, LEVELS
 
@@ -262,6 +264,28 @@ def _fmt(v: float, nd: int = 3) -> str:
     return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.{nd}f}"
 
 
+def family_records(records: dict, family: str) -> dict:
+    """The records of a run's other filter family ``family`` as the tables read a run's first family: its runs in
+    place of ``models`` (:func:`.protocol.run_sequence` keeps them under ``families``)."""
+    return {key: {**r, "models": r["families"][family]} for key, r in records.items()}
+
+
+def _sequence_rows(records: dict, models: list[str], frames: dict, targets: dict) -> list[dict]:
+    """One row of ``sequences.csv`` per (setting, sequence, model) of ``records``."""
+    keys = ("card_err", "ospa", "delay_mean", "delay_std", "n_episodes", "n_censored", "mean_components",
+            "precision", "recall")  # fmt: skip
+    rows = []
+    for (setting, s), r in sorted(records.items()):
+        for m in models:
+            run = r["models"][m]
+            rows.append({
+                "setting": setting, "sequence": s, "N_hat": r["N_hat"], "model": m, "frames": frames[s],
+                "targets": targets[s], **{k: run["summary"][k] for k in keys},
+                **{k: run.get("tracks", {}).get(k) for k in TRACK_COLUMNS},
+            })  # fmt: skip
+    return rows
+
+
 def write_outputs(
     out: Path, spec: KittiSpec, folds: list, records: dict, skipped: list, targets: dict, frames: dict
 ) -> str:
@@ -286,35 +310,16 @@ def write_outputs(
     if sw:
         figs.append(kitti_figures.nhat_sweep({m: sw[m] for m in models}, fig_dir / "fig8_nhat_sweep.png"))
 
+    families = list(spec.config.experiment.filters)
+    per_family = {f: family_records(records, f) for f in families[1:]}
     per_seq, ep_rows = [], []
+    for family, recs in [(families[0], records), *per_family.items()]:
+        rows = _sequence_rows(recs, models, frames, targets)
+        if len(families) > 1:  # a run of several families: each row names its family, last
+            rows = [{**row, "filter": family} for row in rows]
+        per_seq += rows
     for (setting, s), r in sorted(records.items()):
         for m in models:
-            summ = r["models"][m]["summary"]
-            per_seq.append(
-                {
-                    "setting": setting,
-                    "sequence": s,
-                    "N_hat": r["N_hat"],
-                    "model": m,
-                    "frames": frames[s],
-                    "targets": targets[s],
-                    **{
-                        k: summ[k]
-                        for k in (
-                            "card_err",
-                            "ospa",
-                            "delay_mean",
-                            "delay_std",
-                            "n_episodes",
-                            "n_censored",
-                            "mean_components",
-                            "precision",
-                            "recall",
-                        )
-                    },
-                    **{k: r["models"][m].get("tracks", {}).get(k) for k in TRACK_COLUMNS},
-                }  # fmt: skip
-            )
             for e in r["models"][m]["episodes"]:
                 ep_rows.append({"setting": setting, "sequence": s, "model": m, **e})
     seq_cols = list(per_seq[0]) if per_seq else []
@@ -343,11 +348,19 @@ def write_outputs(
         "undetected_gaps": ug,
         "trackeval_kitti": te,
     }
+    if len(families) > 1:  # every family's tables, each family's own S-OA comparison inside it
+        summary["filters"] = families
+        summary["families"] = {
+            f: {"table1": table1(r, models), "tracks": tracks_table(r, models), "pairwise": pairwise(r, models)}
+            for f, r in per_family.items()
+        }
     write_json_atomic(out / "summary.json", summary)
     md = _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, stationary, infos, out)
     levels_md = _levels_md(lv, ug, models) + _trackeval_md(te, tt, lv, models)
     if levels_md:
         md += "\n" + "\n".join(levels_md)
+    for f, tables in summary.get("families", {}).items():
+        md += "\n" + "\n".join(_family_md(f, tables, models, spec.config.metrics.ospa_c))
     write_text_atomic(out / "report.md", md)
     return md
 
@@ -389,6 +402,29 @@ def _tracks_md(tt: dict, models: list[str]) -> list[str]:
     return [*L, ""]
 
 
+def _families_note(families: tuple[str, ...]) -> str:
+    """The header's note on a run of several filter families: which family the first tables show."""
+    others = ", ".join(family_label(f) for f in families[1:])
+    return f" Filter families: the tables below are the {family_label(families[0])} filter's; {others} follow."
+
+
+def _family_md(family: str, tables: dict, models: list[str], ospa_c: float) -> list[str]:
+    """The section of another filter family: its Table I numbers, its Tracks table (identities on the sequences)
+    and S-OA's pairwise delay comparison inside it."""
+    t1, pw = tables["table1"], tables["pairwise"]
+    L = [f"## The {family_label(family)} filter", "", "| | " + " | ".join(_label(x) for x in models) + " |"]
+    L += ["|---|" + "---|" * len(models)]
+    for key, name in (("card_err", "mean abs. cardinality error"), ("ospa", f"mean OSPA (m, c = {ospa_c:g})")):
+        L.append(f"| {name} | " + " | ".join(f"{t1[x][key + '_mean']:.4f} ± {t1[x][key + '_std']:.4f}"
+                                              for x in models) + " |")  # fmt: skip
+    if pw:
+        L += ["", "S-OA matches or outperforms X in n % of target episodes (tracking delay):", ""]
+        L += ["| X | S-OA ≤ X | episodes compared |", "|---|---|---|"]
+        L += [f"| {_label(x)} | {_fmt(v['share'], 1)} % | {v['n']} |" for x, v in pw.items()]
+    tracks = _tracks_md(tables["tracks"], models)
+    return [*L, "", *(t.replace("## Tracks", f"### Tracks, {family_label(family)}", 1) for t in tracks)]
+
+
 def _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, stationary, infos, out) -> str:
     m = spec.config.metrics
     det = _shown(spec.detections, out) if spec.detections else "(root)/detections"
@@ -400,7 +436,8 @@ def _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, sta
         + ".",
         f"{len(infos)} sequences in {len(folds)} folds; probability mode `{spec.config.experiment.probabilities[0]}`; "
         f"OSPA c = {m.ospa_c:g} m, p = {m.ospa_p:g}; delay gate {m.d_gate:g} m; "
-        f"frame period {spec.config.sensor.dt:g} s.",
+        f"frame period {spec.config.sensor.dt:g} s."
+        + (_families_note(spec.config.experiment.filters) if len(spec.config.experiment.filters) > 1 else ""),
         "",
         "## Folds and N-hat (duration-weighted: training targets / training frames)",
         "",

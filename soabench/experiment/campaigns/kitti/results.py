@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.atomic import write_text_atomic
 from soabench.errors import require
-from soabench.experiment.runs.files import write_text_atomic
 from soabench.kitti.export import pedestrian_row
 
 #: folder of a tracker's result files inside a TrackEval trackers folder (``<trackers>/<name>/data/XXXX.txt``)

@@ -6,7 +6,7 @@ every pedestrian labelled ``occluded`` above 2 or ``truncated`` above 0, togethe
 them, and counts a person sitting as neither hit nor miss (its distractor rule). Our track metrics score every
 labelled pedestrian in the field of view in the ground plane. To set the two side by side, each estimate of a
 labelled model is written as the KITTI result row of a pedestrian box (the size the export uses) standing at the
-estimate, projected with the sequence's camera (:mod:`soabench.kitti.results`), and TrackEval's own
+estimate, projected with the sequence's camera (:mod:`soabench.experiment.campaigns.kitti.results`), and TrackEval's own
 ``Evaluator`` runs HOTA, CLEAR and Identity over the cross-validation sequences, its label files copied as they are.
 """
 
@@ -31,8 +31,8 @@ SEQMAP = "evaluate_tracking.seqmap.training"
 
 def write_inputs(out: Path, seq: KittiSequence, ss: SequenceScans, runs: dict[str, tuple[list, list]]) -> None:
     """Copy the sequence's label file and write each labelled model's estimates as KITTI results (``runs``: model ->
-    (X, labels) per frame; :func:`soabench.kitti.results.write_tracking_results`)."""
-    from soabench.kitti.results import write_tracking_results
+    (X, labels) per frame; :func:`soabench.experiment.campaigns.kitti.results.write_tracking_results`)."""
+    from soabench.experiment.campaigns.kitti.results import write_tracking_results
 
     base = out / TRACKEVAL_DIR
     (base / "gt" / "label_02").mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,7 @@ registered birth model on every held-out sequence, the N-hat sweep.
 
 The run folder holds ``run.json`` (everything needed to resume), one record per (setting, sequence) under
 ``records/`` (written atomically; ``--resume`` runs the missing ones), then ``summary.json``, ``report.md``,
-``sequences.csv``, ``episodes.csv`` and ``figures/`` (:mod:`soabench.kitti.report`).
+``sequences.csv``, ``episodes.csv`` and ``figures/`` (:mod:`soabench.experiment.campaigns.kitti.report`).
 """
 
 from __future__ import annotations
@@ -23,20 +23,21 @@ from pathlib import Path
 
 import numpy as np
 
+from soabench.atomic import write_json_atomic
 from soabench.birth import get_birth_model
-from soabench.config import Config, filter_config_for_mode
+from soabench.config import Config
 from soabench.errors import SoabenchError, require
-from soabench.experiment.runs.files import read_json, write_json_atomic
-from soabench.experiment.runs.ownership import FolderLock, check_new_folder, resolve
-from soabench.experiment.trial.trial import run_filter
+from soabench.experiment.campaigns.kitti.report import TRACK_COLUMNS, write_outputs
+from soabench.experiment.campaigns.kitti.trackeval_kitti import write_inputs
+from soabench.experiment.runs.files import read_json
+from soabench.folders import FolderLock, check_new_folder, resolve
 from soabench.kitti.config import KittiConfig, KittiSpec
 from soabench.kitti.formats import ReadError, UnreadableError
 from soabench.kitti.levels import level_split
 from soabench.kitti.lidar import lidar_files, lidar_semantics
 from soabench.kitti.reader import Dataset, KittiSequence, SequenceScans, open_dataset, read_sequence, to_scans
-from soabench.kitti.report import TRACK_COLUMNS, write_outputs
-from soabench.kitti.trackeval_kitti import write_inputs
 from soabench.metrics import evaluate
+from soabench.trackers import FilterTracker, build_filter, run_tracker
 from soabench.tracks.evaluate import evaluate_tracks, run_labels
 
 RUN_FILE = "run.json"
@@ -92,42 +93,56 @@ def count_targets(seq: KittiSequence, kcfg: KittiConfig) -> int:
 def run_sequence(
     ss: SequenceScans, cfg: Config, N_hat: float, seed: int, seq: str, kitti_seq: KittiSequence | None = None
 ) -> dict:
-    """Every model of ``cfg.experiment`` (first probability mode) on one sequence with N-hat; a JSON-ready record.
-    ``kitti_seq``: the parsed sequence, to add under ``"kitti_results"`` each labelled model's estimates and labels
-    per frame (for :func:`soabench.kitti.trackeval_kitti.write_inputs`; not part of the written record).
+    """Every model of ``cfg.experiment`` (first probability mode) in every filter family of
+    ``cfg.experiment.filters`` on one sequence with N-hat; a JSON-ready record. ``kitti_seq``: the parsed sequence,
+    to add under ``"kitti_results"`` each labelled model's estimates and labels per frame in the first family (for
+    :func:`.trackeval_kitti.write_inputs`; not part of the written record).
 
-    Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])``. Wall-clock
-    times go to ``record["timing"]``, so everything else is bit-identical for the same inputs and seed.
+    Each model gets a fresh filter and the same placement stream ``SeedSequence([seed, int(seq)])`` (a family that
+    draws, the LMB, its first child). The first family's runs are ``record["models"]``, every other family's
+    ``record["families"][family]`` (so a record of the GM-PHD alone is as before). Wall-clock times go to
+    ``record["timing"]``, so everything else is bit-identical for the same inputs and seed.
     """
-    # imported when called: numba would slow every start-up
-    from soabench.gmphd.filter import GMPHDFilter
-
     mode = cfg.experiment.probabilities[0]
-    filter_cfg, filter_mode, p_D_b = filter_config_for_mode(cfg.filter, mode)
     birth_cfg = dataclasses.replace(cfg.birth, N_hat=float(N_hat))
+    run_cfg = dataclasses.replace(cfg, birth=birth_cfg)
+    families = cfg.experiment.filters
     out: dict = {"models": {}, "timing": {}}
-    for model in cfg.experiment.models:
-        t0 = time.perf_counter()
-        rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(seq)]))
-        birth = get_birth_model(model)(birth_cfg, ss.sensor, ss.scene, rng)
-        run = run_filter(ss.scans, birth, GMPHDFilter(filter_cfg, ss.sensor, filter_mode), p_D_b)
-        m = evaluate(ss.scans, run.results, cfg.metrics, ss.sensor)
-        X = [r.X for r in run.results]
-        labels = run_labels(run.results, X)
-        tracks = evaluate_tracks(ss.scans, X, labels, m.episodes, cfg.metrics, ss.sensor)
-        summary = {k: (v.item() if hasattr(v, "item") else v) for k, v in m.summary.items()}
-        timing = {k: summary.pop(k) for k in list(summary) if k.startswith("t_")}  # wall clock: kept apart
-        out["models"][model] = {
-            "summary": summary,
-            "episodes": [dataclasses.asdict(e) for e in m.episodes],
-            "series": {k: m.series[k].tolist() for k in SERIES},
-            "tracks": {k: tracks[k] for k in TRACK_COLUMNS},
-            "levels": level_split(ss, X, labels, cfg.metrics),
-        }
-        if kitti_seq is not None and labels is not None:
-            out.setdefault("kitti_results", {})[model] = (X, labels)
-        out["timing"][model] = {**timing, "total": time.perf_counter() - t0}
+    for family in families:
+        runs = out["models"] if family == families[0] else out.setdefault("families", {}).setdefault(family, {})
+        for model in cfg.experiment.models:
+            t0 = time.perf_counter()
+            runs[model] = _run_model(ss, run_cfg, family, mode, model, seed, seq)
+            X, labels = runs[model].pop("estimates")
+            if family == families[0] and kitti_seq is not None and labels is not None:
+                out.setdefault("kitti_results", {})[model] = (X, labels)
+            key = model if family == families[0] else f"{model} ({family})"
+            out["timing"][key] = {**runs[model].pop("timing"), "total": time.perf_counter() - t0}
     return out
+
+
+def _run_model(ss: SequenceScans, cfg: Config, family: str, mode: str, model: str, seed: int, seq: str) -> dict:
+    """One birth model in one filter family on one sequence: its summary, episodes, series and track columns."""
+    root = np.random.SeedSequence([int(seed), int(seq)])
+    rng = np.random.default_rng(root)
+    birth = get_birth_model(model)(cfg.birth, ss.sensor, ss.scene, rng)
+    filt, p_D_b = build_filter(family, cfg, ss.sensor, mode, np.random.default_rng(root.spawn(1)[0]))
+    run = run_tracker(ss.scans, FilterTracker(birth, filt, p_D_b))
+    m = evaluate(ss.scans, run.results, cfg.metrics, ss.sensor)
+    X = [r.X for r in run.results]
+    labels = run_labels(run.results, X)
+    tracks = evaluate_tracks(ss.scans, X, labels, m.episodes, cfg.metrics, ss.sensor)
+    summary = {k: (v.item() if hasattr(v, "item") else v) for k, v in m.summary.items()}
+    timing = {k: summary.pop(k) for k in list(summary) if k.startswith("t_")}  # wall clock: kept apart
+    return {
+        "summary": summary,
+        "episodes": [dataclasses.asdict(e) for e in m.episodes],
+        "series": {k: m.series[k].tolist() for k in SERIES},
+        "tracks": {k: tracks[k] for k in TRACK_COLUMNS},
+        "levels": level_split(ss, X, labels, cfg.metrics),
+        "timing": timing,
+        "estimates": (X, labels),
+    }
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -159,7 +174,7 @@ def run_kitti(
 ) -> KittiOutcome:
     """Run (or finish, ``resume=True``) the protocol into the run folder ``out``: resolved, new or empty for a new
     run (holding this run's ``run.json`` on resume), locked while it works
-    (:mod:`soabench.experiment.runs.ownership`)."""
+    (:mod:`soabench.folders`)."""
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = resolve(out)
@@ -218,12 +233,14 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
                 f"{rec.get('sequence')!r}); move it away and resume",
             )
             require(
-                rec.get("N_hat") == nh and set(rec.get("models") or {}) == set(models),
+                rec.get("N_hat") == nh
+                and set(rec.get("models") or {}) == set(models)
+                and set(rec.get("families") or {}) == set(spec.config.experiment.filters[1:]),
                 f"{path} was made with other data or settings (N_hat {rec.get('N_hat')!r}, now {nh!r}); "
                 "start a new run folder",
             )
     cache: dict[str, SequenceScans] = {}
-    sensor = spec.config.sensor
+    sensor = spec.config.sensor_at()
     for n, (setting, s, nh) in enumerate(tasks, start=1):
         path = out / RECORDS / setting / f"{s}.json"
         if path.is_file():
@@ -238,7 +255,9 @@ def _run_locked(spec: KittiSpec, out: Path, resume: bool, log: Callable[[str], N
         rec = run_sequence(
             cache[s], spec.config, nh, spec.config.experiment.seed, s, seqs[s] if setting == CV else None
         )
-        if setting == CV:  # TrackEval's own KITTI evaluation reads these (soabench.kitti.trackeval_kitti)
+        if (
+            setting == CV
+        ):  # TrackEval's own KITTI evaluation reads these (soabench.experiment.campaigns.kitti.trackeval_kitti)
             write_inputs(out, seqs[s], cache[s], rec.pop("kitti_results", {}))
         rec.update({"setting": setting, "sequence": s, "N_hat": nh, "info": cache[s].info, "targets": targets[s]})
         write_json_atomic(path, rec)
