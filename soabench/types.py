@@ -612,7 +612,7 @@ class NewbornTerms:
     beta: Callable[[np.ndarray, np.ndarray], np.ndarray]
     #: True when beta allocates an expected number of births over the measurements (ATBM, §3.4): a labelled filter
     #: then gives the terms Reuter's adaptive birth; False (a birth intensity's terms, PUBM's §3.2) weighs each by
-    #: beta / (kappa + beta) (docs/method.md §10.7). The GM-PHD reads beta alone either way.
+    #: beta / (kappa + beta) (docs/method.md "LMB filter", birth). The GM-PHD reads beta alone either way.
     adaptive: bool = False
 
 

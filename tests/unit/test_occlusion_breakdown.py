@@ -130,6 +130,9 @@ def test_check_suites_threshold_each_gap_bin(tmp_path):
     head = '[[scenario]]\nname = "a"\nnet = "intersection"\n[[threshold]]\nmetric = "{}"\nmin = 0.5\n'
     (tmp_path / "ok.toml").write_text(head.format("identity_kept_long"))
     assert load_suite(tmp_path / "ok.toml").thresholds[0].metric == "identity_kept_long"
+    (tmp_path / "above.toml").write_text(head.format("identity_kept_long").replace("min = 0.5", "min = 1.5"))
+    with pytest.raises(SoabenchError, match="outside the metric's range"):  # a share: in [0, 1]
+        load_suite(tmp_path / "above.toml")
     (tmp_path / "bad.toml").write_text(head.format("identity_kept_gap_9-10"))
     with pytest.raises(SoabenchError, match="identity_kept_gap_9-10"):
         load_suite(tmp_path / "bad.toml")

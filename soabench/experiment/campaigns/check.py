@@ -180,7 +180,7 @@ UNIT_METRICS = frozenset(
 def metric_range(metric: str) -> tuple[float, float]:
     """The values ``metric`` (a trials.csv metric or timing column) can take: a threshold outside them passes or
     fails whatever the tracker does."""
-    if metric in UNIT_METRICS:
+    if metric in UNIT_METRICS or metric.startswith(("identity_kept_", "coasted_")):  # also the occlusion metrics
         return 0.0, 1.0
     if metric == "mota":
         return -math.inf, 1.0

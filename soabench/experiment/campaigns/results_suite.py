@@ -394,7 +394,8 @@ def _atlas_part(folder: Path, scene: str, s: Settings, exe: RunOptions, log: Cal
 
 #: the filter families of the ``filters/`` part (every family of the registry), and the modes every family runs
 FILTERS_PART = {"filters": FILTER_FAMILIES, "probabilities": ("static", "static+occ")}
-#: the ``filters-lmb-components/`` ablation: the LMB with one Bernoulli per birth component (docs/method.md §10.7)
+#: the ``filters-lmb-components/`` ablation: the LMB with one Bernoulli per birth component
+#: (docs/method.md "LMB filter", birth)
 ABLATION_PART = {"filters": ("lmb",), "probabilities": ("static",)}
 ABLATION_LMB = {"birth_mapping": "components"}
 #: the keys a stored families run must share with the requested one

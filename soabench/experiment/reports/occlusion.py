@@ -206,7 +206,7 @@ def _num(x: float, nd: int = 3) -> str:
 
 def _ci(row: dict, key: str, nd: int = 3) -> str:
     """value [lo, hi] (n)."""
-    if not math.isfinite(row[key]):
+    if row[key] is None or not math.isfinite(row[key]):
         return "n/a (0)"
     return f"{_num(row[key], nd)} [{_num(row[key + '_lo'], nd)}, {_num(row[key + '_hi'], nd)}] ({row[f'n_{key}']})"
 

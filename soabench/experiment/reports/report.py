@@ -248,8 +248,9 @@ def _clutter_results(tables: RunTables, clutter: float, family: str | None) -> d
     baselines = [c["baseline"] for c in comps if c["mode"] == tables.modes[0]]
     out["tracks"] = _tracks(tables, clutter, baselines)
     bins = tuple(meta["config"].get("metrics", {}).get("gap_bins", MetricsConfig().gap_bins))
-    out["occlusion"] = occlusion.breakdown(tables, clutter, bins, baselines)
-    out["track_intervals"] = _track_intervals(tables, clutter, baselines)
+    # null, not NaN, where a number is undefined: summary.json stays strict JSON for the report page
+    out["occlusion"] = _nan_to_none(occlusion.breakdown(tables, clutter, bins, baselines))
+    out["track_intervals"] = _nan_to_none(_track_intervals(tables, clutter, baselines))
     if family is not None:
         out["filter"] = family
     return out
@@ -284,6 +285,15 @@ def _tracks(tables: RunTables, clutter: float, baselines: list[str]) -> dict:
             if ("soa", md) in by_trial and (b, md) in by_trial:
                 versus.append((md, b, tracks_vs_soa(by_trial[("soa", md)], by_trial[(b, md)])))
     return {"rows": rows, "versus": versus}
+
+
+def _nan_to_none(obj: Any) -> Any:
+    """``obj`` with every non-finite float (in nested dicts and lists) replaced by None."""
+    if isinstance(obj, dict):
+        return {k: _nan_to_none(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_nan_to_none(v) for v in obj]
+    return None if isinstance(obj, float) and not math.isfinite(obj) else obj
 
 
 def _track_intervals(tables: RunTables, clutter: float, baselines: list[str]) -> dict:

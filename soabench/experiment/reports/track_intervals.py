@@ -85,8 +85,13 @@ def _num(x: float, nd: int = 3) -> str:
     return "n/a" if x is None or not math.isfinite(x) else f"{x:.{nd}f}"
 
 
-def _iv(s: Mapping, key: str, nd: int = 3, value: str | None = None) -> str:
-    value = value if value is not None else s[key]
+def _p(x: float | None) -> str:
+    return "n/a" if x is None else paper.format_p(x)
+
+
+def _iv(s: Mapping, key: str, nd: int = 3, value: Any = KeyError) -> str:
+    """value [lo, hi] of ``key`` (the value ``s[key]`` unless given; None reads n/a)."""
+    value = s[key] if value is KeyError else value
     return f"{_num(value, nd)} [{_num(s[f'{key}_lo'], nd)}, {_num(s[f'{key}_hi'], nd)}]"
 
 
@@ -114,6 +119,6 @@ def render(rows: Sequence[tuple[str, str, dict, dict]], versus: Sequence[tuple[s
             "|---|---|---|---|---|---|---|---|---|",
         ]
         for mode, b, c in versus:
-            cells = [f"{_iv(c, k, value=c[f'{k}_diff'])} | {paper.format_p(c[f'{k}_p'])}" for k in PAIRED_KEYS]
+            cells = [f"{_iv(c, k, value=c[f'{k}_diff'])} | {_p(c[f'{k}_p'])}" for k in PAIRED_KEYS]
             lines.append(f"| {mode} | {LABEL.get(b, b)} | " + " | ".join(cells) + f" | {c['hota_n']} |")
     return lines
