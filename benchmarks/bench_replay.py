@@ -22,7 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from soabench.replay import replay_data, replay_trial, write_replay, write_report
+from soabench.experiment.reports.html import write_report
+from soabench.replay import replay_data, replay_trial, write_replay
 from soabench.replay.animation import write_gif, write_mp4
 
 

@@ -14,7 +14,9 @@ with KIND one of
 * ``scenario-keys``: the table of every scenario TOML key, read from
   :class:`soabench.scenario.config.ScenarioConfig` (defaults, and the ``Attributes:`` section of its docstring);
 * ``kitti-keys``: the table of the ``[kitti]`` section's keys (:class:`soabench.kitti.config.KittiConfig`);
-* ``commands``: a section per command of :func:`soabench.cli.main.build_parser` with its ``--help`` text.
+* ``commands``: a section per command of :func:`soabench.cli.main.build_parser` with its ``--help`` text;
+* ``check-metrics``: the metric names a ``soabench check`` threshold may use (the columns of ``trials.csv``);
+* ``python-api``: every public name of :mod:`soabench.api` with its signature, docstring and example.
 
 ``python docs/hooks.py`` rewrites the blocks of every page from the installed code; ``python docs/hooks.py --check``
 lists the pages whose blocks are stale (``tests/repository/test_docs.py`` runs the check).
@@ -226,7 +228,94 @@ def commands_section() -> str:
     return "\n".join(parts)
 
 
+def _plain_signature(obj: object) -> str:
+    """``name(a, b=1, *, c=None)``: the parameters and defaults, without the annotations."""
+    sig = inspect.signature(obj)
+    params = [p.replace(annotation=inspect.Parameter.empty) for p in sig.parameters.values()]
+    return str(sig.replace(parameters=params, return_annotation=inspect.Signature.empty))
+
+
+_SECTION = re.compile(r"^(Args|Arguments|Returns|Raises|Example|Examples|Attributes):\s*$")
+
+
+def _docstring_markdown(obj: object) -> tuple[str, str]:
+    """(the docstring as Markdown without its example, the example's doctest lines) of a public object: the
+    ``Args:`` / ``Returns:`` / ``Attributes:`` sections become lists of their entries."""
+    doc = inspect.getdoc(obj) or ""
+    out: list[str] = []
+    example: list[str] = []
+    section = ""
+    for line in doc.splitlines():
+        m = _SECTION.match(line)
+        if m:
+            section = m.group(1)
+            if section not in ("Example", "Examples"):
+                out += ["", f"**{section}**", ""]
+            continue
+        if section in ("Example", "Examples"):
+            if line.strip():
+                example.append(line[4:] if line.startswith("    ") else line)
+            continue
+        if section and line.startswith("    ") and not line.startswith("        "):
+            name, sep, text = line.strip().partition(": ")
+            out.append(f"* `{name}`: {text}" if sep and " " not in name.strip(",") else f"* {line.strip()}")
+        elif section and line.startswith("        "):
+            out.append("  " + line.strip())
+        else:
+            out.append(line)
+    text = re.sub(
+        r":(?:class|func|meth|mod|data|attr|exc|obj):`~?([\w.]+)`", lambda m: f"`{m.group(1)}`", "\n".join(out)
+    )
+    return re.sub(r"\n{3,}", "\n\n", text).strip(), "\n".join(example)
+
+
+def python_api() -> str:
+    """Markdown: every public function of ``soabench.api`` with its signature, docstring and runnable example, then
+    every public class with its signature and docstring (``tests/repository/test_api_examples.py`` runs the
+    examples)."""
+    import soabench.api as sb
+
+    functions = [n for n in sb.__all__ if inspect.isfunction(getattr(sb, n))]
+    classes = [n for n in sb.__all__ if inspect.isclass(getattr(sb, n))]
+    parts = ["## Functions\n"]
+    for name in functions:
+        text, example = _docstring_markdown(getattr(sb, name))
+        parts.append(f"### `{name}`\n\n```python\nsb.{name}{_plain_signature(getattr(sb, name))}\n```\n\n{text}\n")
+        if example:
+            parts.append(f"Example:\n\n```python\n{example}\n```\n")
+    parts.append("## Data and extension points\n")
+    for name in classes:
+        text, _ = _docstring_markdown(getattr(sb, name))
+        try:
+            signature = f"\n```python\nsb.{name}{_plain_signature(getattr(sb, name))}\n```\n"
+        except (TypeError, ValueError):
+            signature = ""
+        parts.append(f"### `{name}`\n{signature}\n{text}\n")
+    constants = [n for n in sb.__all__ if n not in functions and n not in classes]
+    parts.append("## Constants\n\n" + "\n".join(f"* `{n}` = `{getattr(sb, n)!r}`" for n in constants) + "\n")
+    return "\n".join(parts)
+
+
+def check_metrics() -> str:
+    """Markdown: every name a ``soabench check`` threshold may give as ``metric`` (the numeric columns of
+    ``trials.csv``), grouped as the method groups them."""
+    from soabench.experiment.runs.store import METRIC_COLUMNS, TIMING_COLUMNS
+    from soabench.tracks.evaluate import TRACK_KEYS
+
+    tracks = [c for c in METRIC_COLUMNS if c in TRACK_KEYS]
+    positions = [c for c in METRIC_COLUMNS if c not in TRACK_KEYS]
+    names = lambda cols: ", ".join(f"`{c}`" for c in cols)  # noqa: E731
+    return "\n".join([
+        f"* the set and delay metrics ([method §5](../method.md#s5)): {names(positions)};",
+        f"* the track metrics of a tracker that labels its estimates ([method §9](../method.md#9-tracks)): "
+        f"{names(tracks)};",
+        f"* the wall-clock columns (never baselined): {names(TIMING_COLUMNS)}.",
+    ])  # fmt: skip
+
+
 _GENERATORS = {
+    "check-metrics": lambda: check_metrics(),
+    "python-api": lambda: python_api(),
     "parameters": lambda: parameter_table(),
     "scenario-keys": lambda: scenario_table(),
     "commands": lambda: commands_section(),

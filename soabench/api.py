@@ -12,7 +12,8 @@ Four calls cover a study from a notebook:
   writes to ``trials.csv``, ``episodes.csv`` and ``steps.csv``.
 
 :func:`to_stonesoup` and :func:`from_stonesoup` carry scans, truth and tracks to and from Stone Soup (the
-``stonesoup`` extra).
+``stonesoup`` extra); :func:`stonesoup_ospa` is Stone Soup's own OSPA on our sets, to compare with ours.
+:func:`load_scene` and :func:`draw_scene` draw a scene, a scan and a tracker's estimates on matplotlib axes.
 
 The data that flows (:mod:`soabench.types`): :class:`Recording`; :class:`Scans` / :class:`Scan`;
 :class:`Births` and :class:`NewbornTerms` from a :class:`BirthContext`; :class:`Estimates` (any tracker) and
@@ -39,6 +40,7 @@ from soabench.birth.base import FOVRule, births_from, build_components, isotropi
 from soabench.boundary import ORDER_SOABENCH, ORDER_STONESOUP
 from soabench.config import FAMILIES, Config
 from soabench.errors import require as _require
+from soabench.errors import require_type as _require_type
 from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP
 from soabench.protocols import BirthModel, Tracker, TrackerSetup
 from soabench.trackers import FilterTracker, GMPHDTracker, run_tracker
@@ -106,14 +108,17 @@ __all__ = [
     "births_from",
     "build_components",
     "evaluate",
+    "draw_scene",
     "from_stonesoup",
     "isotropic",
+    "load_scene",
     "make_tracker",
     "occlusion_gaps",
     "resolve",
     "run",
     "run_tracker",
     "simulate_trial",
+    "stonesoup_ospa",
     "to_stonesoup",
 ]
 
@@ -142,6 +147,11 @@ def resolve(kind: str, name: str) -> type:
     ``name`` is a built-in (``"soa"``, ``"stonesoup-gmphd"``, ...), an installed entry point or an import path
     ``module:Class`` (allowed here as if typed on the command line). A kind other than the two, or a name unknown for
     the kind, is one line naming what is allowed.
+
+    Example:
+        >>> import soabench.api as sb
+        >>> sb.resolve(sb.BIRTH_MODEL, "pubm").__name__
+        'PartiallyUniformBirth'
     """
     _plugins.check_kind(kind)
     _plugins.allow_import_paths([name] if isinstance(name, str) else [])
@@ -168,6 +178,12 @@ def simulate_trial(
     Returns:
         ``(recording, scans)``: the same values trial ``trial`` of a run with this configuration and its first
         clutter rate uses.
+
+    Example:
+        >>> import soabench.api as sb
+        >>> recording, scans = sb.simulate_trial("arterial", seed=0, trial=0, duration=5)
+        >>> len(scans), scans.truth_xy.shape[0]
+        (5, 5)
     """
     from soabench.experiment.execution.runner import check_against_scenario
     from soabench.experiment.trial.registry import load_scene_cached
@@ -227,6 +243,14 @@ def make_tracker(
         A :class:`FilterTracker` for a birth model (``step`` returns :class:`StepResult`, labelled), else the
         tracker (``step`` returns :class:`Estimates`). Stepping it through :func:`simulate_trial`'s scans gives the
         step results of that run of ``soabench run``.
+
+    Example:
+        >>> import soabench.api as sb
+        >>> _, scans = sb.simulate_trial("arterial", duration=5)
+        >>> tracker = sb.make_tracker("soa", "arterial")
+        >>> results = [tracker.step(scan) for scan in scans]
+        >>> type(results[0]).__name__, len(results) == len(scans)
+        ('StepResult', True)
     """
     from soabench.seeding import trial_seeds
     from soabench.trackers import build_filter
@@ -279,6 +303,14 @@ def evaluate(
         ``episodes`` and the per-scan ``series`` (the columns of ``steps.csv``). When the estimates carry labels
         (``Estimates.labels`` on every scan with estimates), ``summary`` also holds the track columns of
         docs/method.md §9.3-9.4 (``m["hota"]``, ``m["idf1"]``, ``m["idsw"]``, ... as in ``trials.csv``).
+
+    Example:
+        >>> import soabench.api as sb
+        >>> _, scans = sb.simulate_trial("arterial", duration=5)
+        >>> tracker = sb.make_tracker("soa", "arterial")
+        >>> m = sb.evaluate(scans, [tracker.step(scan) for scan in scans])
+        >>> 0.0 <= m["ospa"] <= 100.0, len(m.series["ospa"]) == len(scans)
+        (True, True)
     """
     from soabench.metrics import evaluate as _evaluate
     from soabench.tracks.evaluate import evaluate_tracks, run_labels
@@ -300,7 +332,15 @@ def occlusion_gaps(scans: Scans, d_gate: float = 5.0) -> list[dict[str, _Any]]:
     ``k_a``, ``k_b``, length in ``scans`` and ``seconds``, the ``occluder`` kind that hid it longest ("parked",
     "vehicle", "building", "other"), its ``displacement`` across the gap (m) and whether that exceeds ``d_gate``
     (``moved``), and the ego's (``ego_displacement``, ``ego_moved``). The ``gap_*`` columns of ``episodes.csv``
-    give the same for each re-emergence episode of a run, with its coasted and identity-kept outcome."""
+    give the same for each re-emergence episode of a run, with its coasted and identity-kept outcome.
+
+    Example:
+        >>> import soabench.api as sb
+        >>> _, scans = sb.simulate_trial("arterial", duration=20)
+        >>> gaps = sb.occlusion_gaps(scans)
+        >>> all(g["k_b"] >= g["k_a"] and g["occluder"] in ("parked", "vehicle", "building", "other") for g in gaps)
+        True
+    """
     import dataclasses as _dc
 
     from soabench.tracks.gaps import describe_gaps
@@ -349,6 +389,12 @@ def run(
         A :class:`RunResult`: ``trials``, ``episodes``, ``steps`` (and ``timing``) as numpy record arrays holding
         the values of the CSV files ``soabench run`` writes for the same configuration, ``.to_pandas(name)`` with
         pandas, ``.write_csv(folder)`` for the files themselves (the same bytes).
+
+    Example:
+        >>> import soabench.api as sb
+        >>> result = sb.run(net="arterial", trials=1, duration=5, models="soa,ubm", probabilities="static")
+        >>> sorted(set(result.trials["model"].tolist()))
+        ['soa', 'ubm']
     """
     from soabench.experiment.execution.memory import run_in_memory, with_experiment
 
@@ -373,21 +419,120 @@ def run(
     return from_run_folder(outcome.run_dir, cfg, str(net))
 
 
+def load_scene(net: str = "intersection") -> _Any:
+    """The map of a scene: roads, sidewalks, walking areas, crossings, buildings with their doors and parked cars
+    (a :class:`~soabench.scenario.scene.SceneMap`, the one :func:`simulate_trial` and the birth models read).
+
+    Args:
+        net: a shipped scene (``"intersection"``, ``"tjunction"``, ``"arterial"``, ``"grid_block"``), a scene
+            folder or the path of a ``.net.xml``.
+
+    Example:
+        >>> import soabench.api as sb
+        >>> scene = sb.load_scene("intersection")
+        >>> scene.bounds
+        (-50.0, -50.0, 120.0, 50.0)
+    """
+    _require(isinstance(net, (str, _Path)), f"net = {net!r} must be a scene name or a path, e.g. 'intersection'")
+    return _boundary.as_scene(net)
+
+
+def draw_scene(ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Estimates | None" = None) -> _Any:
+    """Draw a scene on a matplotlib ``ax`` as the replay and ``soabench scene`` draw it: roads, sidewalks,
+    crossings, buildings and doors, parked cars; with ``scan``, its visible sidewalk Ω_k, the sensor pose and the
+    measurements Z_k in the world frame; with ``estimates``, a tracker's positions (and track labels). Returns ``ax``
+    (metres, the legend under the map).
+
+    Args:
+        ax: a matplotlib Axes.
+        scene: a scene from :func:`load_scene`, or a network name or path.
+        scan: one :class:`Scan` (e.g. ``scans[k]`` of :func:`simulate_trial`).
+        estimates: one :class:`Estimates` (a tracker's output at that scan).
+
+    Example:
+        >>> import matplotlib.pyplot as plt
+        >>> import soabench.api as sb
+        >>> recording, scans = sb.simulate_trial("arterial", duration=5)
+        >>> fig, ax = plt.subplots(figsize=(10, 6))
+        >>> sb.draw_scene(ax, sb.load_scene("arterial"), scan=scans[4]) is ax
+        True
+        >>> fig.savefig("scan4.png")  # doctest: +SKIP
+    """
+    from matplotlib.axes import Axes
+
+    from soabench.figures.scene import plot_scene
+    from soabench.figures.sensor import draw_scan
+
+    _require_type(ax, Axes, "ax", "give a matplotlib Axes, e.g. from plt.subplots()")
+    scene = _boundary.as_scene(scene)
+    if scan is not None:
+        _require_type(scan, Scan, "scan", "give one Scan, e.g. scans[k]")
+    if estimates is not None:
+        _require_type(estimates, Estimates, "estimates", "give one Estimates, a tracker's output at that scan")
+    plot_scene(scene, ax=ax)
+    if scan is not None:
+        draw_scan(ax, scan, estimates)
+    return ax
+
+
 def to_stonesoup(scans: Scans, sigma_r: float | None = None, sigma_b: float | None = None, gt_set: str = "fov") -> _Any:
     """Scans and truth as Stone Soup detections and ground-truth paths (``pip install "soabench[stonesoup]"``).
 
     The noise defaults to the scans' own sensor settings; the paths hold the truth set of our tables
     (``gt_set``: ``"fov"``, present and in the field of view, the default; ``"visible"``; ``"scene"``, every
     present walker; docs/method.md §5.1). See :func:`soabench.bridges.stonesoup.to_stonesoup`.
+
+    Example:
+        >>> import soabench.api as sb
+        >>> _, scans = sb.simulate_trial("arterial", duration=5)
+        >>> feed = sb.to_stonesoup(scans)
+        >>> len(feed.detections) == len(scans)
+        True
     """
     from soabench.bridges.stonesoup import to_stonesoup as _to
 
     return _to(scans, sigma_r, sigma_b, gt_set=gt_set)
 
 
+def stonesoup_ospa(
+    tracks: _Any, scans: Scans, c: float | None = None, p: float | None = None, gt_set: str = "fov"
+) -> _Any:
+    """Stone Soup's own OSPA per scan, on the sets our metrics score, to compare with ``evaluate(...).series["ospa"]``
+    (``pip install "soabench[stonesoup]"``). See :func:`soabench.bridges.stonesoup.stonesoup_ospa`.
+
+    Example:
+        >>> import numpy as np
+        >>> import soabench.api as sb
+        >>> from stonesoup.types.state import State
+        >>> from stonesoup.types.track import Track
+        >>> from soabench.bridges.stonesoup import scan_time
+        >>> _, scans = sb.simulate_trial("arterial", duration=5)
+        >>> tracks = [Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scan)) for scan in scans], id="t1")]
+        >>> theirs = sb.stonesoup_ospa(tracks, scans)
+        >>> ours = sb.evaluate(scans, sb.from_stonesoup(tracks, scans).estimates).series["ospa"]
+        >>> bool(np.allclose(theirs, ours))
+        True
+    """
+    from soabench.bridges.stonesoup import stonesoup_ospa as _ospa
+
+    return _ospa(tracks, scans, c, p, gt_set)
+
+
 def from_stonesoup(tracks: _Any, scans: Scans) -> _Any:
     """Stone Soup tracks as one :class:`Estimates` per scan (states in our order) and their track ids:
-    ``estimates, labels = from_stonesoup(tracks, scans)``. See :func:`soabench.bridges.stonesoup.from_stonesoup`."""
+    ``estimates, labels = from_stonesoup(tracks, scans)``. See :func:`soabench.bridges.stonesoup.from_stonesoup`.
+
+    Example:
+        >>> import soabench.api as sb
+        >>> from stonesoup.types.state import State
+        >>> from stonesoup.types.track import Track
+        >>> from soabench.bridges.stonesoup import scan_time
+        >>> _, scans = sb.simulate_trial("arterial", duration=5)
+        >>> track = Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scans[2]))], id="t7")
+        >>> estimates, labels = sb.from_stonesoup([track], scans)
+        >>> estimates[2].X.tolist(), labels[2].tolist()
+        ([[1.0, 2.0, 0.5, -0.5]], ['t7'])
+    """
     from soabench.bridges.stonesoup import from_stonesoup as _from
 
     return _from(tracks, scans)

@@ -483,8 +483,9 @@ class LMBConfig:
     max_hypotheses: int = 1000  #: per cluster: enumerate up to this many valid hypotheses, else this many Gibbs sweeps
     max_components: int = 10  #: Gaussian components kept per track (J_h; also per birth group)
     extract_r: float = 0.5  #: estimates: the tracks with r above this, labelled
-    #: how birth components become Bernoullis: "groups" (one per merge group, r = min(sum w, r_B_max), §10.7) or
-    #: "components" (one per component, r = min(w, r_B_max), every newborn term as Reuter's adaptive birth)
+    #: how birth components become Bernoullis (docs/method.md "LMB filter"): "groups" (one per merge group,
+    #: r = min(sum w, r_B_max)) or "components" (one per component, r = min(w, r_B_max), every newborn term as
+    #: Reuter's adaptive birth)
     birth_mapping: str = "groups"
 
     def validate(self) -> LMBConfig:

@@ -43,7 +43,7 @@ from soabench.notice import LINE_INTERVAL_S, is_terminal
 from soabench.sensor import segment_meets_convex
 from soabench.types import Births, NewbornTerms, Obstacles, Scan
 
-MESSAGE = "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version) ..."
+MESSAGE = notice.MESSAGE
 
 
 def _filter(mode: str):

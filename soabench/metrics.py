@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import astuple, dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -66,6 +66,10 @@ SUMMARY_KEYS = (
     "t_update",
     "t_reduce",
 )
+
+#: the wall-clock keys of :attr:`TrialMetrics.summary` (seconds the filter stages took): they differ between two runs
+#: of the same trial, so :meth:`TrialMetrics.values` and equality leave them out
+TIMING_KEYS = ("t_predict", "t_update", "t_reduce")
 
 #: keys of :attr:`TrialMetrics.series` (one value per scan k)
 SERIES_KEYS = (
@@ -375,12 +379,45 @@ class TrialMetrics:
         """``summary[key]``: ``metrics["ospa"]``."""
         return self.summary[key]
 
+    def values(self) -> dict[str, float | int]:
+        """The summary without its wall-clock keys (:data:`TIMING_KEYS`): what the same trial gives every time.
+
+        Example:
+            >>> m = TrialMetrics({"ospa": 3.0, "t_update": 0.2})
+            >>> m.values()
+            {'ospa': 3.0}
+        """
+        return {k: v for k, v in self.summary.items() if k not in TIMING_KEYS}
+
+    def __eq__(self, other: object) -> bool:
+        """Equal metrics: the same :meth:`values` (NaN equal to NaN), episodes and per-scan series; the filter's
+        stage times are left out, so two runs of the same trial compare equal."""
+        if not isinstance(other, TrialMetrics):
+            return NotImplemented
+        a, b = self.values(), other.values()
+        episodes = [astuple(e) for e in self.episodes], [astuple(e) for e in other.episodes]
+        return (
+            a.keys() == b.keys()
+            and all(_same(a[k], b[k]) for k in a)
+            and len(episodes[0]) == len(episodes[1])
+            and all(_same(x, y) for e, f in zip(*episodes, strict=True) for x, y in zip(e, f, strict=True))
+            and self.series.keys() == other.series.keys()
+            and all(np.array_equal(self.series[k], other.series[k], equal_nan=True) for k in self.series)
+        )
+
+    __hash__ = None  # type: ignore[assignment]  # mutable: equal by value
+
     def __repr__(self) -> str:
         s = self.summary
         shown = ("ospa", "gospa", "card_err", "precision", "recall", "delay_mean", "n_episodes")
         body = ", ".join(f"{k}={s[k]:.4g}" if isinstance(s[k], float) else f"{k}={s[k]}" for k in shown if k in s)
         K = len(next(iter(self.series.values()))) if self.series else 0
         return f"TrialMetrics({body}; {len(s)} summary keys, {len(self.episodes)} episodes, {K} scans)"
+
+
+def _same(a: object, b: object) -> bool:
+    """``a == b``, NaN equal to NaN."""
+    return a == b or (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b))
 
 
 def _mean(a: np.ndarray) -> float:

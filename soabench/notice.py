@@ -19,8 +19,10 @@ from collections.abc import Callable, Hashable, Iterator
 from contextlib import contextmanager
 from typing import Any, TextIO
 
+#: the one wording of every compile notice (this first-use notice and the run's compile ahead,
+#: :mod:`soabench.kernel_warmup`)
 MESSAGE = (
-    "soabench: compiling the GM-PHD filter, metric and scan-geometry kernels with numba (once per version of the "
+    "soabench: compiling the filter, metric and scan-geometry kernels (once per machine and version of the "
     "kernels; cached afterwards) ..."
 )
 #: off a terminal, a long wait (a run's trials, the kernels' compilation) writes a line at least this often (s)

@@ -190,6 +190,13 @@ def run_tracker(
     :class:`StepResult` (without ``check``, ``step`` must return StepResults: our GM-PHD). With ``check`` given,
     any exception at scan k becomes a :class:`ScanFailure` naming k (with its traceback), so the caller can record it
     and keep the other runs of the trial.
+
+    Example:
+        >>> import soabench.api as sb
+        >>> _, scans = sb.simulate_trial("arterial", duration=5)
+        >>> run = sb.run_tracker(scans, sb.make_tracker("soa", "arterial"))
+        >>> len(run.results) == len(scans)
+        True
     """
     results: list[StepResult] = []
     t0 = time.perf_counter()

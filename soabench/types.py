@@ -122,6 +122,11 @@ class Recording:
                 d = {k: z[k] for k in z.files}
         except (OSError, ValueError) as exc:
             raise SoabenchError(f"recording file {str(p)!r} is not a readable .npz ({exc})") from None
+        require(
+            "z_offsets" not in d,
+            f"{str(p)!r} is a Scans file (written by Scans.save_npz), not a Recording; read it with "
+            "soabench.api.Scans.load_npz",
+        )
         missing = sorted(set(_RECORDING_KEYS) - set(d))
         require(not missing, f"recording file {str(p)!r} lacks arrays {missing}; it was not written by save_npz")
         xy, off = d["static_occluder_xy"], d["static_occluder_offsets"]
@@ -383,8 +388,11 @@ class Scans:
         """Read Scans written by :meth:`save_npz`."""
         p = Path(path)
         require(p.is_file(), f"scans file {str(p)!r} does not exist")
-        with np.load(p, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files}
+        try:
+            with np.load(p, allow_pickle=False) as data:
+                arrays = {name: data[name] for name in data.files}
+        except (OSError, ValueError) as exc:
+            raise SoabenchError(f"scans file {str(p)!r} is not a readable .npz ({exc})") from None
         return _scans_from_arrays(arrays, str(p))
 
 
@@ -470,10 +478,26 @@ def _scans_to_arrays(scans: Scans) -> dict[str, np.ndarray]:
     }
 
 
+#: the arrays of a Scans file (:meth:`Scans.save_npz`)
+_SCANS_KEYS = (
+    "dt", "k", "t", "ego", "z_offsets", "Z", "source", "ped_ids", "truth_xy", "present", "in_fov", "visible",
+    "detected", "obst_offsets", "obst_vertex_offsets", "obst_vertices", "occluder_offsets", "occluder_wkb",
+    "occluder_wkb_offsets", "region_wkb", "region_wkb_offsets",
+)  # fmt: skip
+
+
 def _scans_from_arrays(a: dict[str, np.ndarray], where: str) -> Scans:
     require(
-        "format_version" in a and int(a["format_version"]) == SCANS_FORMAT_VERSION,
-        f"{where} is not a soabench Scans file of format version {SCANS_FORMAT_VERSION}",
+        not set(_RECORDING_KEYS) <= set(a),
+        f"{where} is a Recording file (the truth, written by Recording.save_npz), not Scans; read it with "
+        "soabench.api.Recording.load_npz",
+    )
+    missing = sorted(set(_SCANS_KEYS) - set(a))
+    require(
+        "format_version" in a and int(a["format_version"]) == SCANS_FORMAT_VERSION and not missing,
+        f"{where} is not a soabench Scans file of format version {SCANS_FORMAT_VERSION}"
+        + (f" (it lacks {', '.join(missing[:4])}{', ...' if len(missing) > 4 else ''})" if missing else "")
+        + "; give a .npz written by Scans.save_npz or soabench export scans",
     )
     zo, oo, vo, co = a["z_offsets"], a["obst_offsets"], a["obst_vertex_offsets"], a["occluder_offsets"]
     verts = [a["obst_vertices"][p:q] for p, q in zip(vo[:-1], vo[1:], strict=True)]
@@ -588,7 +612,7 @@ class NewbornTerms:
     beta: Callable[[np.ndarray, np.ndarray], np.ndarray]
     #: True when beta allocates an expected number of births over the measurements (ATBM, §3.4): a labelled filter
     #: then gives the terms Reuter's adaptive birth; False (a birth intensity's terms, PUBM's §3.2) weighs each by
-    #: beta / (kappa + beta) (docs/method.md §10.7). The GM-PHD reads beta alone either way.
+    #: beta / (kappa + beta) (docs/method.md "LMB filter", birth). The GM-PHD reads beta alone either way.
     adaptive: bool = False
 
 
@@ -649,6 +673,30 @@ class Estimates:
     n_components: int | None = None
     cardinality: float | None = None
     labels: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        """Checked when built, so a wrong argument fails here with one line naming it, not scans later."""
+        X = np.asarray(self.X)
+        require(
+            X.ndim == 2 and X.shape[1] in (2, 4) and (X.size == 0 or np.issubdtype(X.dtype, np.number)),
+            f"Estimates: X has shape {X.shape} and dtype {X.dtype}; give (n, 2) positions or (n, 4) states "
+            "[x, y, vx, vy] as numbers (np.zeros((0, 4)) for no target)",
+        )
+        n = len(X)
+        if self.w is not None:
+            w = np.asarray(self.w)
+            require(
+                w.shape == (n,) and (n == 0 or np.issubdtype(w.dtype, np.number)),
+                f"Estimates: w has shape {w.shape}; give ({n},) numbers, one weight per row of X, or None",
+            )
+        if self.labels is not None:
+            lab = np.asarray(self.labels)
+            integer = np.issubdtype(lab.dtype, np.integer) and not np.issubdtype(lab.dtype, np.bool_)
+            require(
+                lab.shape == (n,) and (n == 0 or integer),
+                f"Estimates: labels has shape {lab.shape} and dtype {lab.dtype}; give ({n},) integer track labels "
+                "(np.int64), one per row of X, or None",
+            )
 
     @classmethod
     def empty(cls) -> Estimates:

@@ -349,8 +349,8 @@ def csv_texts() -> st.SearchStrategy[tuple[str, bytes]]:
 
 def csv_target(value: tuple[str, bytes]) -> str:
     """A table of a run folder: read into columns of one length; trials.csv also through the report's reader."""
+    from soabench.experiment.reports.html import extreme_trials
     from soabench.experiment.runs.files import read_csv
-    from soabench.replay.report import extreme_trials
 
     name, data = value
 

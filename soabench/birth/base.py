@@ -53,6 +53,13 @@ def build_components(
 
     Returns:
         ``(m, P)`` with shapes (J, 4) and (J, 4, 4).
+
+    Example:
+        >>> import numpy as np
+        >>> from soabench.api import build_components
+        >>> m, P = build_components(np.array([[1.0, 2.0]]), np.eye(2), sigma_v=0.5)
+        >>> m.tolist(), P[0].diagonal().tolist()
+        ([[1.0, 2.0, 0.0, 0.0]], [1.0, 1.0, 0.25, 0.25])
     """
     p = np.asarray(p, dtype=float).reshape(-1, 2)
     J = len(p)
@@ -69,13 +76,28 @@ def build_components(
 def births_from(
     p: np.ndarray, P_p: np.ndarray, w: np.ndarray, source: np.ndarray, sigma_v: float, v: np.ndarray | None = None
 ) -> Births:
-    """:class:`Births` of J appended components built with :func:`build_components`."""
+    """:class:`Births` of J appended components built with :func:`build_components`.
+
+    Example:
+        >>> import numpy as np
+        >>> from soabench.api import SOURCE_OCCL, births_from, isotropic
+        >>> b = births_from(np.array([[1.0, 2.0], [3.0, 4.0]]), isotropic(1.0, 2), w=[0.1, 0.1],
+        ...                 source=[SOURCE_OCCL, SOURCE_OCCL], sigma_v=0.5)
+        >>> b.m.shape, b.w.tolist()
+        ((2, 4), [0.1, 0.1])
+    """
     m, P = build_components(p, P_p, sigma_v, v)
     return Births(np.asarray(w, dtype=float).reshape(-1), m, P, np.asarray(source, dtype=np.int8).reshape(-1))
 
 
 def isotropic(sigma: float | np.ndarray, n: int) -> np.ndarray:
-    """(n, 2, 2) covariances sigma^2 I_2 (``sigma`` scalar or (n,))."""
+    """(n, 2, 2) covariances sigma^2 I_2 (``sigma`` scalar or (n,)).
+
+    Example:
+        >>> from soabench.api import isotropic
+        >>> isotropic(2.0, 3)[0].tolist()
+        [[4.0, 0.0], [0.0, 4.0]]
+    """
     s2 = np.broadcast_to(np.asarray(sigma, dtype=float) ** 2, (n,))
     return s2[:, None, None] * np.eye(2)[None]
 

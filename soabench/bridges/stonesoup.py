@@ -250,6 +250,32 @@ def estimate_set(tracks: Iterable[Any], scans: Scans, gt_set: str = "fov") -> li
     return out
 
 
+def stonesoup_ospa(
+    tracks: Iterable[Any], scans: Scans, c: float | None = None, p: float | None = None, gt_set: str = "fov"
+) -> np.ndarray:
+    """Stone Soup's own OSPA (``OSPAMetric``) per scan, on the sets our metrics score: the truth of
+    :func:`to_stonesoup` and the track states of :func:`estimate_set` (same ``gt_set``), positions only
+    (``Euclidean(mapping=(0, 2))``; Stone Soup's default measure also reads the velocities). A scan where both sets
+    are empty is 0, as ours. ``c``, ``p``: the cut-off (m) and order, default our ``[metrics]`` ospa_c and ospa_p
+    (docs/method.md §5.2). Equal to ``soabench.api.evaluate(scans, from_stonesoup(tracks, scans).estimates)
+    .series["ospa"]``."""
+    from stonesoup.measures import Euclidean
+    from stonesoup.metricgenerator.ospametric import OSPAMetric
+
+    from soabench.config import MetricsConfig
+
+    require_type(scans, Scans, "stonesoup_ospa's scans", "give the Scans the tracks were made from")
+    default = MetricsConfig()
+    metric = OSPAMetric(
+        c=default.ospa_c if c is None else c, p=default.ospa_p if p is None else p, measure=Euclidean(mapping=(0, 2))
+    )
+    estimated = estimate_set(tracks, scans, gt_set)
+    truth = [state for path in to_stonesoup(scans, gt_set=gt_set).truths for state in path]
+    value = metric.compute_over_time(estimated, [0] * len(estimated), truth, [0] * len(truth))
+    by_time = {m.timestamp: m.value for m in value.value}
+    return np.array([by_time.get(scan_time(scan), 0.0) for scan in scans.scans], dtype=float)
+
+
 class TrackLabels:
     """Stone Soup's track ids or component tags (uuid strings) as int64 labels 1, 2, ... in order of first
     appearance, for one run (docs/method.md §2.13)."""

@@ -13,6 +13,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--update-baseline", action="store_true", help="rewrite the suite's baseline JSON from this run")
     p.add_argument("--workers", type=int, default=1, help="process workers per run (default 1)")
     p.add_argument(
+        "--calibrate",
+        type=int,
+        metavar="N",
+        help="run the scenarios N times on fresh seeds and propose each threshold from the 95%% bounds of a further "
+        "run (calibration.json); checks nothing",
+    )
+    p.add_argument(
         "--plugin",
         action="append",
         default=[],
@@ -22,8 +29,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.campaigns.check import run_check
+    from soabench.errors import require
+    from soabench.experiment.campaigns.check import run_calibration, run_check
 
+    if args.calibrate is not None:
+        require(not args.update_baseline, "--calibrate and --update-baseline are alternatives: calibrate first")
+        return run_calibration(args.suite, args.out, args.calibrate, workers=args.workers, plugin_paths=args.plugin)
     return run_check(
         args.suite, args.out, update_baseline=args.update_baseline, workers=args.workers, plugin_paths=args.plugin
     )

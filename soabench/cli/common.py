@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 
 from soabench import plugins
@@ -46,14 +47,37 @@ def run_options(args: argparse.Namespace, figures: bool | None = None) -> RunOpt
     ).validate()
 
 
-def report_outcome(outcome, finish: str = "soabench run --resume {dir}") -> int:
-    """Print the summary and where the results are (0), or what is missing and how to finish (1)."""
+def run_answer(run_dir) -> list[str]:
+    """The short answer a finished run ends with: its headline as a text table (per clutter rate and family), the
+    full tables' file and the page to open."""
+    from soabench.experiment.reports.headline import render_text
+    from soabench.experiment.reports.html import REPORT_FILE, headlines
+    from soabench.experiment.reports.tables import load_tables
+
+    summary = json.loads((run_dir / "summary.json").read_text(encoding="utf-8"))
+    warned = {(float(r["clutter"]), r.get("filter")) for r in summary.get("results", []) if r.get("warning")}
+    lines = []
+    for head in headlines(load_tables(run_dir)):
+        if (head.clutter, head.family) in warned:  # nothing was observed: the warning above says why
+            lines.append(f"λ = {head.clutter:g}: no comparison (no pedestrian was observed; see the warning)")
+        else:
+            lines += render_text(head)
+    lines.append(f"every table: {run_dir / 'summary.md'}")
+    if (run_dir / REPORT_FILE).is_file():
+        lines.append(f"open {run_dir / REPORT_FILE}")
+    return lines
+
+
+def report_outcome(outcome, finish: str = "soabench run --resume {dir}", short: bool = False) -> int:
+    """Print the summary (``short``: the run's headline and the page to open; else the summary's Markdown) and
+    where the results are (0), or what is missing and how to finish (1)."""
     if getattr(outcome, "summary_markdown", None):
-        print(outcome.summary_markdown)
+        print("\n".join(run_answer(outcome.run_dir)) if short else outcome.summary_markdown)
     if outcome.complete:
         from soabench.experiment.runs.failures import failed_methods_line, outcome_model_failures
 
-        print(f"results in {outcome.run_dir}")
+        if not short:
+            print(f"results in {outcome.run_dir}")
         failed = failed_methods_line(outcome_model_failures(outcome))
         if failed:  # a requested method is missing from some tables: not a success (docs/user-guide/commands.md)
             print(f"soabench: {failed}", file=sys.stderr)

@@ -12,7 +12,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "run",
         metavar="RUN",
         help="a run folder (holds run.json), or a folder of them (a study, results/): then "
-        "each run's report.html and an index.html linking them",
+        "each run's report.html and an index.html linking them (and a study's key_figure.png, from its main/)",
     )
     p.add_argument("--out", help="HTML file to write (default RUN/report.html)")
     p.add_argument(
@@ -23,7 +23,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    from soabench.experiment.campaigns.study import key_figure
     from soabench.replay.pages import write_pages
 
+    figure = key_figure(args.run) if args.out is None and not args.replays else None  # a study folder's
+    if figure is not None:
+        print(f"wrote {figure}")
     write_pages(args.run, args.out, args.replays)
     return 0

@@ -36,4 +36,4 @@ def handle(args: argparse.Namespace) -> int:
         )
     else:
         outcome = run_experiment(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options)
-    return common.report_outcome(outcome)
+    return common.report_outcome(outcome, short=True)

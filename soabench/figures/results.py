@@ -42,6 +42,7 @@ from soabench.figures import style as ps
 from soabench.figures.bars import grouped_bars, mean_ci, offsets
 from soabench.figures.drawing import FigureJob, draw_all
 from soabench.figures.families import family_jobs, family_only, in_family, run_families
+from soabench.figures.forest import paired_figure
 from soabench.figures.gaps import identity_gaps_figure
 from soabench.figures.origins import components_origin_figure, has_origins
 from soabench.figures.tracks import has_labels, run_tracks_figure
@@ -439,6 +440,8 @@ def figure_jobs(tables: RunTables, out_dir: Path, by_family: bool = True) -> lis
     for lam in clutters:
         sfx = f"_lam{lam:g}" if len(clutters) > 1 else ""
         limits = delay_limits(tables, lam)
+        if "soa" in tables.models and len(tables.models) > 1:  # the headline's forest plot
+            jobs.append(FigureJob(out_dir / f"paired{sfx}.png", paired_figure, (lam,), weight=1.5))
         for model in sorted(tables.models, key=lambda m: LETTER.get(m, "z")):
             name = f"fig5{LETTER.get(model, 'x')}_delay_{model}{sfx}.png"
             jobs.append(FigureJob(out_dir / name, delay_figure, (model, lam, limits)))

@@ -18,7 +18,7 @@ from soabench.figures import style as ps
 from soabench.figures.scene import plot_scene, scene_figure
 from soabench.geometry import polar_to_world
 from soabench.sensor import fov_polygon, shadow_polygons
-from soabench.types import CLUTTER, Scans
+from soabench.types import CLUTTER, Estimates, Scan, Scans
 
 _VISIBLE_REGION = "#7fd37f"
 _SHADOW = "0.55"
@@ -102,6 +102,35 @@ def _legend_handles() -> list:
         Line2D([], [], color="k", marker="o", ls="none", label="sensor origin (arrow: heading)"),
         Line2D([], [], color="k", marker="o", mfc="none", ls="none", ms=7, label="present pedestrian"),
     ]
+
+
+_ESTIMATE = "tab:purple"
+
+
+def draw_scan(ax: Axes, scan: Scan, estimates: Estimates | None = None) -> None:
+    """One scan on a scene drawn by :func:`soabench.figures.scene.plot_scene` (a notebook's view, without the
+    truth a :class:`Scans` holds): Ω_k, the sensor pose, the measurements Z_k in the world frame and, given
+    ``estimates``, the estimated positions (with their track labels when labelled); adds its entries to the legend."""
+    ego = np.asarray(scan.ego, dtype=float)
+    handles: list = [Patch(facecolor=_VISIBLE_REGION, alpha=0.45, label="visible sidewalk $\\Omega_k$")]
+    ps.fill_geometry(ax, scan.visible_region, facecolor=_VISIBLE_REGION, edgecolor="none", alpha=0.45, zorder=2.5)
+    world = polar_to_world(np.asarray(scan.Z, dtype=float).reshape(-1, 2), ego)
+    ax.plot(world[:, 0], world[:, 1], ".", color=_Z_TARGET, ms=9, zorder=12)
+    handles.append(Line2D([], [], color=_Z_TARGET, marker=".", ls="none", label=f"measurement ({len(world)})"))
+    if estimates is not None:
+        X = np.asarray(estimates.X, dtype=float)
+        X = X.reshape(-1, X.shape[-1] if X.ndim == 2 else 2)
+        ax.plot(X[:, 0], X[:, 1], "+", color=_ESTIMATE, ms=9, mew=1.6, zorder=13)
+        if estimates.labels is not None:
+            for (x, y), label in zip(X[:, :2], np.asarray(estimates.labels), strict=True):
+                ax.annotate(str(label), (x, y), xytext=(4, 4), textcoords="offset points", fontsize=6,
+                            color=_ESTIMATE, zorder=13)  # fmt: skip
+        handles.append(Line2D([], [], color=_ESTIMATE, marker="+", ls="none", mew=1.6, label=f"estimate ({len(X)})"))
+    _draw_ego(ax, ego)
+    handles.append(Line2D([], [], color="k", marker="o", ls="none", label="sensor origin (arrow: heading)"))
+    ps.extend_legend(ax, handles)
+    ps.panel_title(ax, None, f"scan {scan.k}, t = {scan.t:.1f} s")
+    ax.set_aspect("equal")
 
 
 def scene_snapshot_figure(

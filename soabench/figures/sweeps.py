@@ -1,9 +1,8 @@
-"""Figures of the sweeps and the study's key figure, in the package style (:mod:`soabench.figures.style`).
+"""Figures of the sweeps, in the package style (:mod:`soabench.figures.style`).
 
 * :func:`clutter_figure`: precision vs clutter rate λ per model (colour) and mode (static solid, dynamic dashed),
   mean over trials with its 95% confidence interval (paper Fig. 5h, docs/method.md §5.5);
 * :func:`births_figure`: k̄_delay vs the expected births per run N_tot (paper §V.C), ± its 95% CI over trials;
-* :func:`key_figure`: the README's key figure: (a) mean delay, (b) cardinality error, (c) precision vs λ.
 
 Each ``*_figure`` returns the :class:`~matplotlib.figure.Figure`; :func:`soabench.figures.style.save_png` writes it.
 """
@@ -120,62 +119,4 @@ def births_figure(
         ps.panel_title(ax, None, "Average delay vs N̂ (paper §V.C)")
         title = None if half is None else "error bars: 95% CI over trials"
         ps.legend_below(fig, ps.model_handles(models) + ps.mode_handles(modes) + [line], ncol=3, title=title)
-    return fig
-
-
-def key_figure(main_rows: Sequence[Mapping], clutter_rows: Sequence[Mapping], clutter: float) -> Figure:
-    """The README's key figure from per-trial rows: (a) mean delay k̄ ± 0.5σ̄, (b) mean abs. cardinality error ±
-    σ over trials (both at λ = ``clutter``, every model, plain bars static, hatched dynamic) and (c) precision vs λ
-    (mean ± 95% CI over trials)."""
-    present = {str(r["model"]) for r in main_rows} | {str(r["model"]) for r in clutter_rows}
-    models = _ordered(present, list(ps.MODEL_STYLES))
-    modes = _ordered({str(r["mode"]) for r in main_rows}, list(ps.MODE_STYLES))
-    rows = [r for r in main_rows if float(r["clutter"]) == clutter]
-    delay, sigma, card = _by_key(rows, "delay_mean"), _by_key(rows, "delay_std"), _by_key(rows, "card_err")
-    with ps.style():
-        fig = ps.figure("double", 2.6)
-        ax_delay, ax_card, ax_prec = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1, 1.1]})
-        x = np.arange(len(models))
-        width = 0.8 / max(len(modes), 1)
-        for j, mode in enumerate(modes):
-            off = (j - (len(modes) - 1) / 2) * width
-            for ax, mean, err in (
-                (ax_delay, delay, lambda k: 0.5 * float(np.mean(sigma[k])) if k in sigma else 0.0),
-                (ax_card, card, lambda k: float(np.std(card[k]))),
-            ):
-                mu = np.array([float(np.mean(mean[(m, mode, clutter)])) if (m, mode, clutter) in mean else math.nan
-                               for m in models])  # fmt: skip
-                e = np.array([err((m, mode, clutter)) if (m, mode, clutter) in mean else 0.0 for m in models])
-                ax.bar(
-                    x + off,
-                    mu,
-                    width * 0.92,
-                    yerr=[np.minimum(e, np.nan_to_num(mu)), e],
-                    color=[ps.model_style(m).color for m in models],
-                    hatch=ps.mode_style(mode).hatch,
-                    edgecolor="k",
-                    linewidth=0.5,
-                    error_kw={"elinewidth": 0.8, "capsize": 2},
-                )
-        for ax in (ax_delay, ax_card):
-            ax.set_xticks(x, [ps.model_label(m) for m in models], rotation=30, ha="right", rotation_mode="anchor")
-            ax.grid(axis="x", visible=False)
-            ax.set_ylim(bottom=0)
-        ax_delay.set_ylabel("mean tracking delay k̄ (s)")
-        ps.panel_title(ax_delay, "a", f"tracking delay, λ = {clutter:g} (± 0.5σ̄)")
-        ax_card.set_ylabel("mean abs. cardinality error (targets)")
-        ps.panel_title(ax_card, "b", f"cardinality error, λ = {clutter:g} (± σ)")
-        if clutter_rows:
-            _precision_vs_clutter(ax_prec, clutter_rows, models, modes)
-        else:
-            ax_prec.text(0.5, 0.5, "no clutter sweep", ha="center", va="center", transform=ax_prec.transAxes)
-            ax_prec.set_xlabel(_CLUTTER_LABEL)
-            ax_prec.set_ylabel("precision (mean over trials)")
-        ps.panel_title(ax_prec, "c", "precision under clutter (± 95% CI)")
-        ps.legend_below(
-            fig,
-            ps.model_handles(models) + ps.mode_handles_combined(modes),
-            [ps.model_label(m) for m in models] + list(modes),
-            ncol=len(models) + len(modes),
-        )
     return fig

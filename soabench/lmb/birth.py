@@ -1,9 +1,9 @@
-"""Birth of the LMB filter from the GM-PHD's birth models (docs/method.md §10.7, "LMB filter").
+"""Birth of the LMB filter from the GM-PHD's birth models (docs/method.md "LMB filter", birth).
 
 Every birth model hands the filter :class:`~soabench.types.Births` through the same contract as for the GM-PHD;
 ``[lmb] birth_mapping`` says how they become Bernoullis.
 
-``"groups"`` (default, §10.7):
+``"groups"`` (default; docs/method.md "LMB filter", birth):
 
 * the scan's Gaussian birth components are grouped with the §2.9 merge test (greedy from the heaviest, d² <= U, as
   the GM-PHD's merge groups them) and each group becomes one Bernoulli with label (k, g), existence
@@ -33,7 +33,8 @@ from soabench.gmphd.reduction import merge_groups
 from soabench.lmb.tracks import Tracks, make_labels
 from soabench.types import SOURCE_MEAS, Births
 
-#: the values of ``[lmb] birth_mapping``: merge groups (§10.7, the default) or one Bernoulli per component (§9.5)
+#: the values of ``[lmb] birth_mapping`` (docs/method.md "LMB filter"): merge groups (the default) or one Bernoulli
+#: per component
 BIRTH_MAPPINGS = ("groups", "components")
 
 
@@ -93,8 +94,9 @@ def adaptive_existence(r_U: np.ndarray, lambda_B: float, r_max: float) -> np.nda
 
 
 def intensity_existence(r_U: np.ndarray, beta: np.ndarray, kappa: np.ndarray, r_max: float) -> np.ndarray:
-    """r_B(z) = min(r_max, (1 - r_U(z)) beta_z / (kappa(z) + beta_z)) (docs/method.md §10.7): the chance that z
-    was a new target under a birth intensity whose term at z is beta_z, among the measurements no track took."""
+    """r_B(z) = min(r_max, (1 - r_U(z)) beta_z / (kappa(z) + beta_z)) (docs/method.md "LMB filter", birth): the
+    chance that z was a new target under a birth intensity whose term at z is beta_z, among the measurements no
+    track took."""
     free = np.clip(1.0 - np.asarray(r_U, dtype=float), 0.0, 1.0)
     beta = np.asarray(beta, dtype=float)
     den = np.asarray(kappa, dtype=float) + beta

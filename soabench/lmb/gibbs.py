@@ -12,8 +12,8 @@ prod_i eta_i(theta_i). The kernels return the marginal association probabilities
   (connected by a measurement both may take) and each cluster is solved alone: a track with no measurement in its
   gate has the closed form marg = (eta_absent, eta_missed) / sum.
 * A cluster whose valid hypotheses (distinct measurements) number at most ``max_hyp`` is enumerated exhaustively
-  (exact; docs/method.md §10.8): a depth-first enumeration counts them and stops at ``max_hyp`` + 1, so a cluster
-  whose product of option counts is large but whose gates overlap little is still exact.
+  (exact; docs/method.md "LMB filter", association): a depth-first enumeration counts them and stops at
+  ``max_hyp`` + 1, so a cluster whose product of option counts is large but whose gates overlap little is still exact.
 * A larger cluster runs the Gibbs sampler of Vo, Vo & Hoang (2017, Algorithm 1 with the all-missed start of Vo's
   toolbox; a track whose missed option is impossible starts absent): ``max_hyp`` sweeps, each redrawing every
   theta_i from its conditional given the others (measurements held by the others locked out); the distinct

@@ -1,12 +1,14 @@
 """A replay as a video: an animated GIF (Pillow) or an MP4 (ffmpeg from the ``imageio-ffmpeg`` package, the
 ``video`` extra), drawn with matplotlib from the same frame data as the page (docs/user-guide/replay.md): one panel
-per model, one video frame per scan, in the page's colours, with the pedestrians' ids and the estimates' track
-labels."""
+per model, one video frame per scan (at least 1280 x 720), in the page's colours, with the pedestrians' ids and
+the estimates' track numbers (1, 2, ... in the order the run's tracks first appear; the page's track table gives
+each number's label); the legend sits in a strip under the panels."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -70,58 +72,86 @@ def _legend(sources: list[dict[str, str]], ncol: int, width: int, height: int, d
     items = [
         (Patch(fc="#7fd37f", alpha=0.6), "visible sidewalk Ω_k"),
         (Patch(fc=_HIDE + "2e", ec=_HIDE, hatch="////", lw=0), "occluded sidewalk in the FOV"),
-        *((mark("s" if i == 3 else "o", ms=6, mfc=c, mec="k"), f"pedestrian: {s}") for i, (c, s) in
+        *((mark("s" if i == 3 else "o", ms=8, mfc=c, mec="k"), f"pedestrian: {s}") for i, (c, s) in
           enumerate(zip(_PED_FILL, ("visible", "occluded", "outside FOV", "in building"), strict=True))),
-        (mark("o", ms=9, mfc="none", mec=_AWAIT, mew=1.6), "detected, not yet initiated"),
+        (mark("o", ms=12, mfc="none", mec=_AWAIT, mew=1.8), "detected, not yet initiated"),
         (Line2D([], [], color=_AWAIT, ls="--"), "to its nearest birth term"),
-        (mark(".", color="#1f77b4", ms=7), "measurement (target)"),
-        (mark("x", color="#ff7f0e", ms=5), "measurement (clutter)"),
-        (mark("+", color=_EST, ms=8, mew=1.8), "estimate"),
-        *((mark("o", ms=8, mfc="none", mec=s["color"]), f"birth: {s['label']}") for s in sources),
+        (mark(".", color="#1f77b4", ms=10), "measurement (target)"),
+        (mark("x", color="#ff7f0e", ms=7), "measurement (clutter)"),
+        (mark("+", color=_EST, ms=11, mew=2.0), "estimate (n: its track number)"),
+        *((mark("o", ms=10, mfc="none", mec=s["color"]), f"birth: {s['label']}") for s in sources),
     ]  # fmt: skip
-    fig.legend(*zip(*items, strict=True), loc="center", ncol=ncol, fontsize=7, frameon=False,
-               handlelength=1.6, columnspacing=1.0, borderaxespad=0.2)  # fmt: skip
+    fig.legend(*zip(*items, strict=True), loc="center", ncol=ncol, fontsize=_LEGEND_PT, frameon=False,
+               handlelength=1.6, columnspacing=1.2, borderaxespad=0.2)  # fmt: skip
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[:height, :width, :3].copy()
 
 
-def frame_size(n_models: int, n_legend: int, panel_px: int = 420) -> tuple[int, int, int, int]:
-    """(width, height, panel height, legend strip height) in pixels of a video frame: ``n_models`` panels of
-    ``panel_px`` x 3/4 ``panel_px`` over a legend of ``n_legend`` entries, under a title line; width and height
-    rounded up to multiples of 16 (what video codecs want)."""
-    panel_h = panel_px * 3 // 4
-    legend_h = 14 * -(-n_legend // _legend_columns(n_models)) + 8
-    up16 = lambda v: -(-v // 16) * 16  # noqa: E731
-    return up16(n_models * panel_px), up16(_TITLE_PX + panel_h + legend_h), panel_h, legend_h
-
-
-_TITLE_PX = 24
+#: the smallest video frame (pixels): 720p, where the ids and track numbers read at 100 %
+MIN_WIDTH, MIN_HEIGHT = 1280, 720
+_DPI = 100
+_TEXT_PT, _TITLE_PT, _LEGEND_PT = 11, 12, 11  #: ids and track numbers, panel titles, legend (points at _DPI)
+_TITLE_PX = 26  #: the title line above each row of panels
+_LEGEND_ROW_PX = 22
+_LEGEND_COL_PX = 260
 _LEGEND_FIXED = 11  #: legend entries besides the birth origins
+_PANELS_PER_ROW = 3
 
 
-def _legend_columns(n_models: int) -> int:
-    return max(2, 3 * n_models)
+@dataclass(frozen=True)
+class FrameLayout:
+    """Where a video frame's parts go (pixels): ``rows`` x ``cols`` panels of ``panel_w`` x ``panel_h``, each row
+    under its title line, over a legend strip of ``legend_h`` in ``legend_cols`` columns (outside every panel)."""
+
+    width: int
+    height: int
+    cols: int
+    rows: int
+    panel_w: int
+    panel_h: int
+    legend_h: int
+    legend_cols: int
+
+
+def frame_size(n_models: int, n_legend: int, panel_px: int = 420) -> FrameLayout:
+    """The layout of a video frame: at most :data:`_PANELS_PER_ROW` panels of at least ``panel_px`` x 3/4
+    ``panel_px`` a row, grown to fill at least :data:`MIN_WIDTH` x :data:`MIN_HEIGHT`; the legend of ``n_legend``
+    entries in a strip below; width and height rounded up to multiples of 16 (what video codecs want)."""
+    cols = max(1, min(n_models, _PANELS_PER_ROW))
+    rows = -(-n_models // cols)
+    panel_w = max(panel_px, -(-MIN_WIDTH // cols))
+    width = cols * panel_w
+    legend_cols = max(2, width // _LEGEND_COL_PX)
+    legend_h = _LEGEND_ROW_PX * -(-n_legend // legend_cols) + 10
+    panel_h = max(panel_w * 3 // 4, -(-(MIN_HEIGHT - legend_h) // rows) - _TITLE_PX)
+    up16 = lambda v: -(-v // 16) * 16  # noqa: E731
+    return FrameLayout(up16(width), up16(rows * (panel_h + _TITLE_PX) + legend_h), cols, rows, panel_w, panel_h,
+                       legend_h, legend_cols)  # fmt: skip
 
 
 def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndarray]:
     """One (H, W, 3) uint8 RGB image per scan of the replay ``data`` (:func:`soabench.replay.frames.replay_data`),
-    sized by :func:`frame_size`: each panel follows the ego, the sensor's range and a margin around it (the page's
-    "the FOV" view)."""
+    laid out by :func:`frame_size`: each panel follows the ego, the sensor's range and a margin around it (the page's
+    "the FOV" view). An estimate's track is drawn as its number in the run (1, 2, ... by first appearance, the
+    page's track table names the label)."""
+    from matplotlib import patheffects
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.collections import EllipseCollection
     from matplotlib.figure import Figure
 
     S, models = data["scene"], data["models"]
-    dpi = 80
-    width, height, panel_h, legend_h = frame_size(len(models), _LEGEND_FIXED + len(data["sources"]), panel_px)
-    fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
+    lay = frame_size(len(models), _LEGEND_FIXED + len(data["sources"]), panel_px)
+    width, height, panel_h, legend_h = lay.width, lay.height, lay.panel_h, lay.legend_h
+    fig = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI)
     canvas = FigureCanvasAgg(fig)
-    axes = [
-        fig.add_axes(((i * panel_px + 3) / width, legend_h / height, (panel_px - 6) / width, panel_h / height))
-        for i in range(len(models))
-    ]
+    axes = []
+    for i in range(len(models)):
+        row, col = divmod(i, lay.cols)
+        bottom = legend_h + (lay.rows - 1 - row) * (panel_h + _TITLE_PX)
+        axes.append(fig.add_axes(((col * lay.panel_w + 3) / width, bottom / height, (lay.panel_w - 6) / width,
+                                  panel_h / height)))  # fmt: skip
     half_h = 1.1 * data["r_max"]
-    half_w = half_h * (panel_px - 6) / panel_h
+    half_w = half_h * (lay.panel_w - 6) / panel_h
     colours = [s["color"] for s in data["sources"]]
     for ax in axes:
         ax.set_facecolor("#dde3ea")
@@ -135,8 +165,9 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
             _add(ax, S[key], lw=0.5, **style)  # fmt: skip
         ax.set_xticks([])
         ax.set_yticks([])
-    legend = _legend(data["sources"], _legend_columns(len(models)), width, legend_h, dpi)
-    text = {"fontsize": 6.5, "clip_on": True}
+    legend = _legend(data["sources"], lay.legend_cols, width, legend_h, _DPI)
+    halo = [patheffects.withStroke(linewidth=2.5, foreground="white")]
+    text = {"fontsize": _TEXT_PT, "clip_on": True, "path_effects": halo}
     drawn: list = []
     for f in data["frames"]:
         for artist in drawn:
@@ -155,29 +186,31 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
             if len(b):
                 drawn.append(ax.add_collection(EllipseCollection(
                     b[:, 2], b[:, 3], b[:, 4], units="xy", offsets=b[:, :2], offset_transform=ax.transData,
-                    facecolors="none", edgecolors=[colours[int(s)] for s in b[:, 5]], linewidths=0.6)))  # fmt: skip
+                    facecolors="none", edgecolors=[colours[int(s)] for s in b[:, 5]], linewidths=0.7)))  # fmt: skip
             for p in f["peds"]:
-                drawn += ax.plot(p[1], p[2], "s" if p[3] == 3 else "o", ms=5, mfc=_PED_FILL[p[3]], mec="k", mew=0.5)
+                drawn += ax.plot(p[1], p[2], "s" if p[3] == 3 else "o", ms=7, mfc=_PED_FILL[p[3]], mec="k", mew=0.6)
                 if p[5][i] == 1:
-                    drawn += ax.plot(p[1], p[2], "o", ms=11, mfc="none", mec=_AWAIT, mew=1.6)
-                drawn.append(ax.text(p[1] + 1.5, p[2] - 1.5, p[0], **text))
+                    drawn += ax.plot(p[1], p[2], "o", ms=14, mfc="none", mec=_AWAIT, mew=1.8)
+                # the id above left of the pedestrian, the track number below right of the estimate: apart when
+                # a track sits on its pedestrian
+                drawn.append(ax.text(p[1] - 1.0, p[2] - 1.2, p[0], ha="right", va="bottom", **text))
             z = np.asarray(f["z"], dtype=float).reshape(-1, 3)
-            drawn += ax.plot(z[z[:, 2] == 0, 0], z[z[:, 2] == 0, 1], ".", color="#1f77b4", ms=6)
-            drawn += ax.plot(z[z[:, 2] == 1, 0], z[z[:, 2] == 1, 1], "x", color="#ff7f0e", ms=4)
+            drawn += ax.plot(z[z[:, 2] == 0, 0], z[z[:, 2] == 0, 1], ".", color="#1f77b4", ms=8)
+            drawn += ax.plot(z[z[:, 2] == 1, 0], z[z[:, 2] == 1, 1], "x", color="#ff7f0e", ms=6)
             at = {p[0]: p for p in f["peds"]}
             for w in mf.get("why", ()):  # awaiting pedestrian -> its nearest birth term
                 p = at[w[0]]
-                drawn += ax.plot([p[1], w[4]], [p[2], w[5]], color=_AWAIT, lw=1.0, ls="--")
-            tracks = models[i].get("tracks") or []
+                drawn += ax.plot([p[1], w[4]], [p[2], w[5]], color=_AWAIT, lw=1.2, ls="--")
             for x, y, lab in mf["est"]:
                 colour = _EST if lab < 0 else TRACK_COLORS[lab % len(TRACK_COLORS)]
-                drawn += ax.plot(x, y, "+", color=colour, ms=9, mew=1.8)
+                drawn += ax.plot(x, y, "+", color=colour, ms=12, mew=2.2)
                 if lab >= 0:
-                    drawn.append(ax.text(x + 1.5, y + 3.0, tracks[lab], color=colour, fontweight="bold", **text))
+                    drawn.append(ax.text(x + 1.0, y + 1.2, str(lab + 1), color=colour, fontweight="bold", ha="left",
+                                         va="top", **text))  # fmt: skip
             cx, cy = f["ego"][:2]
             ax.set_xlim(cx - half_w, cx + half_w)
             ax.set_ylim(cy + half_h, cy - half_h)  # page coordinates: y grows downwards
-            ax.set_title(f"{models[i]['label']}  k = {f['k']}, t = {f['t']:.1f} s", fontsize=10)  # replaced each time
+            ax.set_title(f"{models[i]['label']}  k = {f['k']}, t = {f['t']:.1f} s", fontsize=_TITLE_PT)
         canvas.draw()
         rgb = np.asarray(canvas.buffer_rgba())[:height, :width, :3].copy()
         rgb[height - legend_h :] = legend

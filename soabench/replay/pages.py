@@ -10,12 +10,13 @@ from pathlib import Path
 from soabench import plugins
 from soabench.config import FILTER_FAMILIES
 from soabench.errors import require
+from soabench.experiment.reports.html import REPLAYS_DIR, extreme_trials, replay_file, write_index, write_report
 from soabench.experiment.runs.store import RUN_FILE
 from soabench.folders import check_out_file
+from soabench.kernel_warmup import ensure_compiled
 from soabench.replay.animation import VIDEO_SUFFIXES, require_mp4, write_video
 from soabench.replay.frames import replay_data
 from soabench.replay.page import write_replay
-from soabench.replay.report import REPLAYS_DIR, extreme_trials, replay_file, write_index, write_report
 from soabench.replay.simulate import read_run, replay_trial
 
 PAGE_SUFFIXES = (".html", ".htm")
@@ -61,6 +62,7 @@ def write_trial_replay(
     plugins.allow_import_paths(models or ())
     run_dir, _, _ = read_run(run)
     targets = _replay_outs(run_dir, trial, outs, family)
+    ensure_compiled()  # announced as a run announces it, with its progress lines
     t0 = time.perf_counter()
     rep = replay_trial(run_dir, trial, models, mode, clutter, family)
     t1 = time.perf_counter()

@@ -117,7 +117,7 @@ function draw(k){
       s+='<path d="M'+x[0]+" "+(x[1]-e1)+"v"+e2+"M"+(x[0]-e1)+" "+x[1]+"h"+e2+'" stroke="'+col+
       '" stroke-width="'+(0.45*R)+'"/>';
       if(lab!==null)s+='<text class="track" x="'+(x[0]+1.3*R)+'" y="'+(x[1]+2.2*R)+'" font-size="'+fs+'" font-weight="bold" fill="'+
-        col+'" stroke="#fff" stroke-width="'+(fs/6)+'" paint-order="stroke">'+esc(lab)+'</text>';});
+        col+'" stroke="#fff" stroke-width="'+(fs/6)+'" paint-order="stroke">'+(x[2]+1)+'</text>';});
     layers[i].innerHTML=s;nDrawn+=layers[i].childElementCount;nTracks+=layers[i].querySelectorAll("text.track").length;
     const parts=Object.keys(counts).map(c=>counts[c]+" "+D.sources[c].label);
     stats[i].textContent="births: "+(parts.length?parts.join(", "):"none")+" | estimates "+mf.est.length+
@@ -158,6 +158,14 @@ D.models.forEach(function(m){
       "</td><td>"+(r[6]?"censored":r[5].toFixed(1))+"</td>";
     tr.addEventListener("click",function(){stop();focus=r[0];const zs=document.getElementById("zoom");
       if(zs.value=="scene")zs.value="near";go(r[3]);window.scrollTo(0,0);});t.appendChild(tr);});
+  d.appendChild(t);eps.appendChild(d);});
+// each model's tracks: the number drawn beside an estimate (1, 2, ... by first appearance) and the tracker's label
+D.models.forEach(function(m){if(!m.tracks||!m.tracks.length)return;
+  const d=document.createElement("details");d.className="tracks";
+  d.innerHTML="<summary>"+esc(m.label)+": "+m.tracks.length+" tracks (the number drawn beside an estimate, and its label)</summary>";
+  const t=document.createElement("table");t.className="ep";
+  t.innerHTML="<tr><th>track</th><th>label</th></tr>"+m.tracks.map(function(lab,i){
+    return '<tr><td style="color:'+TRACK[i%TRACK.length]+';font-weight:bold">'+(i+1)+"</td><td>"+esc(lab)+"</td></tr>";}).join("");
   d.appendChild(t);eps.appendChild(d);});
 function fromHash(){const m=/frame=(\d+)/.exec(location.hash);
   const fp=/focus=([^&]+)/.exec(location.hash);focus=fp?decodeURIComponent(fp[1]):null;

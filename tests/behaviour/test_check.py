@@ -36,9 +36,20 @@ def test_example_suite_passes_then_catches_a_regression(tmp_path, capsys) -> Non
     assert main(["check", "--suite", str(suite), "--out", str(out)]) == 1
     text = capsys.readouterr().out
     assert "FAIL (1 of 10 checks)" in text and f"{key}" in text
-    cases = ET.parse(out / "junit.xml").getroot().iter("testcase")
+    root = ET.parse(out / "junit.xml").getroot()
+    cases = list(root.iter("testcase"))
     failed = [c.get("name") for c in cases if c.find("failure") is not None]
     assert failed == [key]
+    # every case says its value, bound, trials and time; the suite's compilation of the kernels is apart
+    props = {c.get("name"): {p.get("name"): p.get("value") for p in c.iter("property")} for c in cases}
+    assert set(props[key]) == {"value", "bound", "trials", "time_s"}
+    assert (
+        float(props[key]["value"]) == pytest.approx(report["values"][key], rel=1e-5)
+        and "baseline" in props[key]["bound"]
+    )
+    assert int(props[key]["trials"]) >= 1 and float(props[key]["time_s"]) > 0
+    suite_props = {p.get("name") for p in root.find("testsuite").find("properties")}
+    assert suite_props == {"compile_s", "wall_s"}
     assert not json.loads((out / "check.json").read_text())["passed"]
 
 
@@ -58,6 +69,11 @@ def test_bad_suites_are_one_line_errors(tmp_path, capsys) -> None:
         # a misspelled metric is a bad suite (exit 2, naming it and the allowed ones), not a failed check
         ('[[scenario]]\nname = "a"\nnet = "intersection"\n[[threshold]]\nmetric = "opsa"\nmax = 1\n',
          "metric 'opsa' is not a trials.csv metric (did you mean 'ospa'?); allowed: delay_mean, "),
+        # so is a misspelled model or mode: refused before the suite runs, with the closest name
+        ('[[scenario]]\nname = "a"\nnet = "intersection"\n[[threshold]]\nmetric = "ospa"\nmodel = "sao"\nmax = 1\n',
+         "model = 'sao' is not a model or tracker its scenarios run, or '*' (did you mean 'soa'?)"),
+        ('[[scenario]]\nname = "a"\nnet = "intersection"\n[[threshold]]\nmetric = "ospa"\nmode = "dynamik"\n'
+         'max = 1\n', "mode = 'dynamik' is not a probability mode its scenarios run; allowed: static"),
     ]:  # fmt: skip
         suite.write_text(text)
         assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2, text
@@ -95,3 +111,24 @@ def test_import_path_plugins_need_plugin_flag_and_a_failed_plugin_fails(
     out = capsys.readouterr().out
     assert "a/plugin_fixtures:EchoTracker/static/lambda=3/gospa" in out and "FAIL (1 of 2 checks)" in out
     assert "'plugin_fixtures:RaiseAtScan3' failed in trial 0 at scan 3" in out
+
+
+def test_calibrate_proposes_thresholds_from_repeated_runs(tmp_path, capsys) -> None:
+    suite = tmp_path / "s.toml"
+    suite.write_text(
+        '[[scenario]]\nname = "a"\nnet = "arterial"\ntrials = 1\nduration = 10\n'
+        '[[threshold]]\nmetric = "ospa"\nmodel = "soa"\nmax = 100\n'
+        '[[threshold]]\nmetric = "recall"\nmodel = "soa"\nmin = 0\n'
+    )
+    out = tmp_path / "o"
+    assert main(["check", "--suite", str(suite), "--out", str(out), "--calibrate", "3"]) == 0
+    text = capsys.readouterr().out
+    cal = json.loads((out / "calibration.json").read_text())
+    assert cal["repetitions"] == 3 and [p["key"] for p in cal["proposals"]] == [
+        "a/soa/static/lambda=3/ospa", "a/soa/static/lambda=3/recall"]  # fmt: skip
+    ospa, recall = cal["proposals"]
+    assert ospa["runs"] == 3 and ospa["low"] < ospa["mean"] < ospa["high"] and ospa["std"] > 0  # three seeds differ
+    assert ospa["threshold"] == f"max = {ospa['high']:.6g}" and recall["threshold"] == f"min = {recall['low']:.6g}"
+    assert "a/soa/static/lambda=3/ospa" in text and "95 % bounds" in text
+    assert main(["check", "--suite", str(suite), "--out", str(out), "--calibrate", "1"]) == 2
+    assert "--calibrate 1 must be an integer >= 2" in capsys.readouterr().err

@@ -44,10 +44,10 @@ def test_files_exist_and_rows_are_trials_x_models_x_modes(run_dir):
         (str(t), m, p) for t in range(2) for m in MODELS for p in MODES
     }
     figures = sorted(p.name for p in (run_dir / "figures").glob("*.png"))
-    # the paper's 13 figures, the track figure and identity kept by gap length: the labelled GM-PHD labels every
-    # model's estimates
-    assert len(figures) == 15 and "fig7b_components_origin.png" in figures and "tracks.png" in figures
-    assert "identity_gaps.png" in figures  # every model labels its estimates
+    # the paper's 13 figures, the track figure and identity kept by gap length (the labelled GM-PHD labels every
+    # model's estimates), and the forest plot of S-OA's paired differences (the report's headline)
+    assert len(figures) == 16 and "fig7b_components_origin.png" in figures and "tracks.png" in figures
+    assert "identity_gaps.png" in figures and "paired.png" in figures
     assert all(p.stat().st_size > 10_000 for p in (run_dir / "figures").glob("*.png"))
 
 

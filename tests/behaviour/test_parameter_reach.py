@@ -32,9 +32,11 @@ from soabench.config import (
     FilterConfig,
     LMBConfig,
     MetricsConfig,
+    PMBMConfig,
     Sensor,
     SensorConfig,
 )
+from soabench.errors import SoabenchError
 from soabench.experiment.execution.options import RunOptions
 from soabench.gmphd import GMPHDFilter
 from soabench.types import Births, Scan
@@ -133,7 +135,11 @@ NON_DEFAULT: dict[str, object] = {
     "lmb.max_components": 8,
     "lmb.extract_r": 0.55,
     "lmb.birth_mapping": "components",  # the old mapping: every other lmb key is still read
-    "experiment.filters": ("lmb", "gmphd"),  # both families, the LMB first
+    "pmbm.M_max": 50,
+    "pmbm.w_floor": 1e-3,
+    "pmbm.r_floor": 1e-4,
+    "pmbm.J_h": 8,
+    "experiment.filters": ("lmb", "gmphd", "pmbm"),  # three families, the LMB first
     "experiment.plugin_budget": 30.0,  # its reach: tests/hardening/test_plugin_isolation.py (a plugin past its budget)
 }
 
@@ -154,7 +160,11 @@ SPIED = {
     "metrics": MetricsConfig,
     "experiment": ExperimentConfig,
     "lmb": LMBConfig,
+    "pmbm": PMBMConfig,
 }
+#: documented keys with a single allowed value (the PMB's marginals come from the Murty hypotheses only): no
+#: non-default value exists, so the test checks that every other value is refused instead
+SINGLE_VALUED = {"pmbm.marginals": "lbp"}
 #: properties that read a key: the consumer uses the radians of a key given in degrees
 PROPERTY_KEYS = {"sigma_b": "sigma_b_deg", "fov": "fov_deg"}
 
@@ -205,7 +215,7 @@ def test_the_page_documents_every_key_and_no_other():
 
 
 def test_every_documented_key_has_a_non_default_value():
-    assert set(NON_DEFAULT) == set(DOCUMENTED)
+    assert set(NON_DEFAULT) == set(DOCUMENTED) - set(SINGLE_VALUED)
     defaults = dataclasses.asdict(Config())  # every key (to_dict leaves out the families' keys at their defaults)
     for key, value in NON_DEFAULT.items():
         sec, name = key.split(".")
@@ -228,7 +238,13 @@ def recorded_run(tmp_path_factory):
     return stored, read_csv(run / "trials.csv"), read_csv(run / "steps.csv"), summary
 
 
-@pytest.mark.parametrize("key", DOCUMENTED)
+@pytest.mark.parametrize("key", sorted(SINGLE_VALUED))
+def test_a_single_valued_key_refuses_every_other_value(key):
+    with pytest.raises(SoabenchError, match=re.escape(key)):
+        Config.from_dict(as_sections({**NON_DEFAULT, key: SINGLE_VALUED[key]})).validate()
+
+
+@pytest.mark.parametrize("key", [k for k in DOCUMENTED if k not in SINGLE_VALUED])
 def test_a_run_records_the_key(key, recorded_run):
     stored, *_ = recorded_run
     sec, name = key.split(".")
@@ -316,7 +332,7 @@ def test_the_scans_clutter_rate_is_the_experiments(reads):
     assert reads["sensor.lambda_c"] == {"5.0"}  # the scans' clutter rate is experiment.clutter's, unchanged
 
 
-@pytest.mark.parametrize("key", [k for k in DOCUMENTED if k not in SHOWN_BY_THE_RUN])
+@pytest.mark.parametrize("key", [k for k in DOCUMENTED if k not in SHOWN_BY_THE_RUN | set(SINGLE_VALUED)])
 def test_the_key_reaches_its_consumer_with_its_value(key, reads):
     value = NON_DEFAULT[key]
     want = repr(tuple(value) if isinstance(value, (tuple, list)) else value)

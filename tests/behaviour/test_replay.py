@@ -63,7 +63,7 @@ def scene_sensor_scans(monkeypatch, tmp_path: Path, time: float):
 
 def test_a_run_writes_its_report(run_dir: Path) -> None:
     """A plain `soabench run` leaves report.html in its folder: the page to open."""
-    from soabench.replay.report import REPORT_FILE
+    from soabench.experiment.reports.html import REPORT_FILE
 
     text = (run_dir / REPORT_FILE).read_text(encoding="utf-8")
     assert '<meta name="generator" content="soabench report">' in text and "Best and worst trials" in text
@@ -167,8 +167,8 @@ def test_replay_videos(run_dir: Path, tmp_path: Path) -> None:
     frames = [np.frombuffer(f, dtype=np.uint8) for f in reader]
     w, h = meta["size"]
     assert len(frames) == DURATION and meta["fps"] == 5.0  # 1 s scans at 5x real time
-    # two 420 x 315 px panels side by side, a title line above and the legend below, to multiples of 16 px
-    assert w == 848 and h % 16 == 0 and 315 + 24 + 3 * 14 <= h < 315 + 24 + 3 * 14 + 40, (w, h)
+    # two panels side by side filling 720p at least, a title line above and the legend below, to multiples of 16 px
+    assert w == 1280 and h % 16 == 0 and 720 <= h < 800, (w, h)
     assert all(f.size == w * h * 3 for f in frames)
     last = frames[-1].reshape(h, w, 3)
     assert len(np.unique(last.reshape(-1, 3) // 16, axis=0)) > 10  # a drawn frame, not a blank one
@@ -301,7 +301,7 @@ def test_replay_bad_input(run_dir: Path, tmp_path: Path, capsys) -> None:
 
 
 def test_report_page(run_dir: Path, capsys) -> None:
-    from soabench.replay.report import REPLAYS_DIR, REPORT_FILE, extreme_trials
+    from soabench.experiment.reports.html import REPLAYS_DIR, REPORT_FILE, extreme_trials
 
     assert main(["report", str(run_dir), "--replays"]) == 0
     text = (run_dir / REPORT_FILE).read_text(encoding="utf-8")
@@ -375,24 +375,24 @@ def test_replay_page_in_browser(replay_page: Path, tmp_path: Path) -> None:
 
 
 def test_report_page_in_browser(run_dir: Path, tmp_path: Path) -> None:
-    from soabench.replay.report import REPORT_FILE
+    from soabench.experiment.reports.html import REPORT_FILE
 
     assert main(["report", str(run_dir)]) == 0
     page = run_dir / REPORT_FILE
     n_figures = len(list((run_dir / "figures").glob("*.png")))
-    dom = browse(page, "#sort=0:3", tmp_path)  # the summary table sorted by its 4th column (mean delay)
+    dom = browse(page, "#sort=0:3", tmp_path)  # the models table sorted by its 4th column (mean delay)
     attrs = body_attrs(dom)
     assert attrs["status"] == "ok", attrs
     assert attrs["images"] == f"{n_figures}/{n_figures}"
     table = re.search(r'<table class="sortable">(.*?)</table>', dom, re.S).group(1)
-    delays = [float(r[3]) for r in (re.findall(r"<td>(.*?)</td>", row) for row in re.findall(r"<tr>(.*?)</tr>", table))
-              if r]  # fmt: skip
+    cells = [re.findall(r'<span class="v">(.*?)</span>', row) for row in re.findall(r"<tr>(.*?)</tr>", table)]
+    delays = [float(c[1]) for c in cells if c]  # the cells with a value and its interval: trials, delay, ...
     assert len(delays) == 2 and delays == sorted(delays) and 'class="asc"' in table
 
 
 def test_index_of_a_folder_of_runs(run_dir: Path, tmp_path: Path) -> None:
     """A folder holding run folders (a study, results/) gets each run's report and an index page linking them."""
-    from soabench.replay.report import INDEX_FILE, REPORT_FILE
+    from soabench.experiment.reports.html import INDEX_FILE, REPORT_FILE
 
     folder = run_dir.parent
     (folder / "notes.md").write_text("# Study <b>notes</b>\n\n| a | b |\n|---|---|\n| 2 | 1 |\n", encoding="utf-8")
@@ -403,3 +403,20 @@ def test_index_of_a_folder_of_runs(run_dir: Path, tmp_path: Path) -> None:
     assert "Study &lt;b&gt;notes&lt;/b&gt;" in text
     attrs = body_attrs(browse(index, "", tmp_path))
     assert attrs["status"] == "ok" and attrs["tables"] == "2"
+
+
+def test_a_run_ends_with_its_headline_and_the_page_to_open(run_dir: Path, capsys) -> None:
+    """``soabench run`` closes with a short table of S-OA's paired differences and names report.html; the full
+    Markdown stays in summary.md."""
+    from types import SimpleNamespace
+
+    from soabench.cli.common import report_outcome
+
+    outcome = SimpleNamespace(summary_markdown="# the summary", complete=True, run_dir=run_dir, n_missing=0)
+    assert report_outcome(outcome, short=True) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == f"open {run_dir / 'report.html'}" and out[-2] == f"every table: {run_dir / 'summary.md'}"
+    assert len(out) < 15 and not any(line.startswith("|") or "# the summary" in line for line in out)
+    (row,) = [line for line in out if line.startswith("  UBM (FOV)")]  # the table's row (a trade-off may name it)
+    assert "/2" in row  # S-OA − UBM with its interval and the trials S-OA wins, of the run's 2
+    assert out[0].startswith("λ = 3, static; best: ")

@@ -114,7 +114,7 @@ def test_one_command_writes_every_part(suite):
 
 def test_index_pages_link_every_part(suite):
     """Every run folder has its report.html, each study and results/ an index.html linking the parts."""
-    from soabench.replay.report import find_runs
+    from soabench.experiment.reports.html import find_runs
 
     runs = find_runs(suite.out)
     every = {p.parent for p in suite.out.rglob("run.json")}

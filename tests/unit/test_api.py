@@ -314,6 +314,7 @@ def test_stonesoup_bridge_both_ways_on_our_truth_set(trial1) -> None:
     by_time = {m.timestamp: m.value for m in value.value}
     theirs = np.array([by_time.get(scan_time(scan), 0.0) for scan in scans])
     assert np.allclose(theirs, ours.series["ospa"], rtol=0, atol=1e-9)
+    assert np.array_equal(sb.stonesoup_ospa(tracks, scans), theirs)  # the same comparison from soabench.api
     # a round trip of known tracks keeps states and ids
     track = Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scans[k])) for k in (2, 3)], id="t7")
     est, lab = sb.from_stonesoup([track], scans)
@@ -364,3 +365,61 @@ def test_failed_plugin_runs_and_failed_trials_are_listed(monkeypatch) -> None:
         failed = sb.run(net=NET, trials=2, duration=5, models="soa")
     assert not failed.complete and len(failed.trials) == 0 and [f["trial"] for f in failed.failures] == [0, 1]
     assert "2 failed trials" in repr(failed)
+
+
+def test_scene_and_a_scan_drawn_on_matplotlib_axes(trial1, tmp_path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    _, scans = trial1
+    scene = sb.load_scene(NET)
+    k = max(range(len(scans)), key=lambda k: len(scans[k].Z))
+    fig, ax = plt.subplots()
+    X = np.array([[1.0, 2.0], [3.0, 4.0]])
+    assert sb.draw_scene(ax, scene, scan=scans[k], estimates=sb.Estimates(X, labels=np.array([4, 9]))) is ax
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert {"road", "sidewalk / walking area", f"measurement ({len(scans[k].Z)})", "estimate (2)"} <= set(labels)
+    assert {"4", "9"} <= {t.get_text() for t in ax.texts}  # the track labels beside the estimates
+    fig.savefig(tmp_path / "scene.png")
+    plt.close(fig)
+    with pytest.raises(TypeError, match="^scan must be a Scan, got a Scans"):
+        sb.draw_scene(plt.subplots()[1], scene, scan=scans)
+    with pytest.raises(ValueError, match="net = 3 must be a scene name"):
+        sb.load_scene(3)
+
+
+def test_estimates_and_scan_files_fail_when_built_or_read_naming_what_is_wrong(trial1, tmp_path) -> None:
+    recording, scans = trial1
+    for bad, says in (
+        (dict(X=(3, 3)), "Estimates: X has shape (2,)"),
+        (dict(X=np.zeros((3, 3))), "Estimates: X has shape (3, 3)"),
+        (dict(X=np.zeros((2, 2)), labels=np.array([1.0, 2.0])), "Estimates: labels has shape (2,) and dtype float64"),
+        (dict(X=np.zeros((2, 2)), w=np.ones(3)), "Estimates: w has shape (3,)"),
+    ):
+        with pytest.raises(ValueError) as exc:
+            sb.Estimates(**bad)
+        assert str(exc.value).startswith(says) and "\n" not in str(exc.value)
+    recording.save_npz(tmp_path / "rec.npz")
+    with pytest.raises(ValueError, match="is a Recording file .* read it with soabench.api.Recording.load_npz"):
+        sb.Scans.load_npz(tmp_path / "rec.npz")
+    scans.save_npz(tmp_path / "scans.npz")
+    with pytest.raises(ValueError, match="is a Scans file .* read it with soabench.api.Scans.load_npz"):
+        sb.Recording.load_npz(tmp_path / "scans.npz")
+    np.savez(tmp_path / "other.npz", a=np.zeros(2))
+    with pytest.raises(ValueError, match="is not a soabench Scans file .* lacks"):
+        sb.Scans.load_npz(tmp_path / "other.npz")
+
+
+def test_metrics_of_the_same_run_compare_equal_without_their_timings(trial1) -> None:
+    _, scans = trial1
+    runs = []
+    for _ in range(2):
+        tracker = sb.make_tracker("soa", NET, seed=3, trial=1)
+        runs.append(sb.evaluate(scans, [tracker.step(scan) for scan in scans]))
+    a, b = runs
+    assert a["t_update"] != b["t_update"] or a["t_predict"] != b["t_predict"]  # wall clock: never the same twice
+    assert a == b and not set(a.values()) & {"t_predict", "t_update", "t_reduce"}
+    b.summary["ospa"] += 1e-9
+    assert a != b

@@ -21,7 +21,7 @@ from soabench.experiment.reports.tables import RunTables
 from soabench.figures import results as plots
 from soabench.figures import style as ps
 from soabench.figures.origins import components_origin_figure, fig_components_origin
-from soabench.figures.sweeps import births_figure, clutter_figure, key_figure
+from soabench.figures.sweeps import births_figure, clutter_figure
 from soabench.origins import ORIGIN_KEYS
 
 MODELS = ("soa", "atbm", "myplugin")
@@ -267,20 +267,26 @@ def test_pooled_mean_ci_is_the_trial_cluster_interval():
     assert np.isnan(pooled_mean_ci(values[:3], trials[:3]))  # one trial: no interval
 
 
-def test_key_figure_labels_units_and_full_precision_axis(tables, tmp_path):
-    rows = _rows(tables)
-    fig = key_figure(rows, rows, clutter=3.0)
-    _rendered(fig, tmp_path, "key_figure")
-    a, b, c = fig.axes
-    assert a.get_ylabel() == "mean tracking delay k̄ (s)"
-    assert b.get_ylabel() == "mean abs. cardinality error (targets)"
-    assert c.get_ylabel().startswith("precision") and c.get_ylim() == (0.0, 1.02)
-    assert [ax.get_title(loc="left")[:3] for ax in (a, b, c)] == ["(a)", "(b)", "(c)"]
-    assert {"S-OA", "ATBM", "static", "dynamic"} <= set(_legend_labels(fig))
-    lows = [
-        seg[:, 1].min() for coll in a.collections if isinstance(coll, LineCollection) for seg in coll.get_segments()
-    ]
-    assert min(lows) >= 0.0  # ATBM's 0.3 s ± 1 s bar does not reach below 0 s
+def test_forest_plot_of_paired_differences_names_the_better_side(tables, tmp_path):
+    """The key figure: one panel per metric, the models paired with S-OA as rows, x = S-OA − X with its unit and the
+    side where S-OA is better; an interval far wider than the others is cut at the axis' edge, with its numbers."""
+    from soabench.experiment.reports.headline import KEY_METRICS, headline
+    from soabench.figures.forest import _limit, forest_figure
+
+    fig = forest_figure(headline(tables, 3.0), KEY_METRICS)
+    path = ps.save_png(fig, tmp_path / "key_figure.png")
+    assert path.stat().st_size > 5_000
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_title(loc="left") for ax in axes] == [
+        "(a) tracking delay k̄", "(b) cardinality error", "(c) OSPA", "(d) precision"]  # fmt: skip
+    assert axes[0].get_xlabel() == "S-OA − X (s)\n← S-OA better"
+    assert axes[3].get_xlabel() == "S-OA − X\nS-OA better →"
+    assert [t.get_text() for t in axes[0].get_yticklabels()] == ["ATBM", "myplugin"]
+    lo, hi = axes[0].get_xlim()
+    assert lo == -hi and hi > 0.9  # symmetric about 0; ATBM's +0.9 s inside
+    assert _limit([0.10, 0.12, 0.11, 5.0]) == pytest.approx(1.15 * 0.12)  # the outlier is cut, the rest fit
+    assert _limit([0.10, 0.12, 0.11, 0.3]) == pytest.approx(1.15 * 0.3)
+    assert {"static", "dynamic"} <= set(_legend_labels(fig))
 
 
 # ---------------------------------------------------------------------------------------------------- maps

@@ -223,12 +223,18 @@ def test_plugin_labels_are_checked():
         (np.array([1.0, 2.0]), "dtype float64"),
         (np.array([1, 2, 3]), "shape (3,)"),
         (np.array([True, False]), "dtype bool"),
-        (np.array([5, 5]), "label 5 to more than one estimate"),
         (np.array(["a", "b"]), "dtype <U1"),
     ):
+        with pytest.raises(ValueError, match="Estimates: labels") as exc:  # refused when built
+            Estimates(X, labels=bad)
+        assert says in str(exc.value) and "\n" not in str(exc.value)
+        built = Estimates(X)
+        built.labels = bad  # set after building: the harness's check still refuses it
         with pytest.raises(PluginOutputError, match="Estimates.labels") as exc:
-            check_estimates(Estimates(X, labels=bad), scan, 0.0)
+            check_estimates(built, scan, 0.0)
         assert says in str(exc.value)
+    with pytest.raises(PluginOutputError, match="label 5 to more than one estimate"):
+        check_estimates(Estimates(X, labels=np.array([5, 5])), scan, 0.0)
 
 
 def test_truth_labels():

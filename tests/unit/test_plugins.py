@@ -171,14 +171,19 @@ def test_check_estimates() -> None:
     for bad, msg in [
         (None, "returned None"),
         ([1, 2], "returned list"),
-        (Estimates(np.ones(3)), r"shape \(3,\)"),
-        (Estimates(np.ones((1, 3))), r"shape \(1, 3\)"),
         (Estimates(np.full((1, 2), np.inf)), "NaN or infinite"),
         (Estimates(np.ones((1, 2)), w=np.array([-1.0])), "negative"),
         (Estimates(np.ones((1, 2)), n_components=-1), "n_components"),
     ]:
         with pytest.raises(guard.PluginOutputError, match=msg):
             guard.check_estimates(bad, _scan(), 0.0)
+    for X, msg in [(np.ones(3), r"shape \(3,\)"), (np.ones((1, 3)), r"shape \(1, 3\)")]:
+        with pytest.raises(ValueError, match=r"^Estimates: X has " + msg):  # refused when built, naming X
+            Estimates(X)
+        built = Estimates(np.ones((1, 2)))
+        built.X = X  # changed after building: the harness still refuses it
+        with pytest.raises(guard.PluginOutputError, match=msg):
+            guard.check_estimates(built, _scan(), 0.0)
 
 
 # ------------------------------------------------------------------------------------------------ real trial

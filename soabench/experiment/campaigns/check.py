@@ -22,6 +22,11 @@ A value is the mean of the metric over every trial and seed of one (scenario, mo
 NaN (no trial produced it) fails every threshold on it, and a plugin run that failed (soabench.experiment.trial.guard)
 fails the suite. Results: a table on stdout, ``check.json`` and ``junit.xml`` in ``--out``; exit status 0 when every
 check passes, 1 on a regression. ``--update-baseline`` writes every measured value to the baseline file.
+
+``--calibrate N`` runs the suite's scenarios N times on fresh seeds (repetition r: every seed plus
+r x :data:`CALIBRATION_SEED_STRIDE`) and proposes, for every value a threshold reads, the bounds a further run stays
+inside with 95 % probability: the mean of the N values ± t_{0.975, N-1} s √(1 + 1/N) (s their standard deviation),
+written to ``calibration.json`` and printed; nothing is checked.
 """
 
 from __future__ import annotations
@@ -69,7 +74,9 @@ BASELINE_FORMAT = 1
 #: a scenario's name names its folder ``--out/runs/NAME/``: a plain name, never a path
 SCENARIO_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 #: every entry of a check folder (a folder holding anything else is not a check's and is refused)
-CHECK_ENTRIES = ("check.json", "junit.xml", "runs")
+CHECK_ENTRIES = ("check.json", "junit.xml", "runs", "calibration.json")
+#: ``--calibrate``: repetition r runs every scenario's seeds plus r x this (trials no other repetition runs)
+CALIBRATION_SEED_STRIDE = 1000
 
 
 @dataclass
@@ -123,6 +130,16 @@ class CheckResult:
     message: str
     value: float = math.nan
     bound: str = ""
+    trials: int = 0  #: the trials the value is a mean over (every seed of its scenario)
+    time_s: float = 0.0  #: seconds its scenario's runs took (the kernels' compilation apart)
+
+
+@dataclass
+class ScenarioRuns:
+    """What the runs of one scenario took: trials over every seed, and seconds (the kernels' compilation apart)."""
+
+    trials: int = 0
+    time_s: float = 0.0
 
 
 @dataclass
@@ -131,6 +148,7 @@ class CheckOutcome:
     values: dict[str, float]
     results: list[CheckResult] = field(default_factory=list)
     wall_s: float = 0.0
+    compile_s: float = 0.0  #: seconds compiling the kernels before the first run (a cold machine; 0 when cached)
 
     @property
     def passed(self) -> bool:
@@ -273,10 +291,27 @@ def load_suite(path: str | Path) -> Suite:
             f"threshold on {th.metric!r} sets none of max, min, max_increase, max_decrease",
         )
         require(th.scenario is None or th.scenario in names, f"threshold scenario {th.scenario!r} is not in {names}")
+        scoped = [s for s in suite.scenarios if th.scenario is None or s.name == th.scenario]
+        where = f"{p}: [[threshold]] #{i + 1}"
+        run_names = ["*", *dict.fromkeys(m for s in scoped for m in (*s.models, *s.trackers))]
+        _check_name(th.model, run_names, f"{where}: model", "a model or tracker its scenarios run, or '*'")
+        if th.mode is not None:
+            modes = list(dict.fromkeys(m for s in scoped for m in s.probabilities))
+            _check_name(th.mode, modes, f"{where}: mode", "a probability mode its scenarios run")
         suite.thresholds.append(th)
     if any(th.relative for th in suite.thresholds):
         require(suite.baseline is not None, f'{p}: relative thresholds need [suite] baseline = "FILE.json"')
     return suite
+
+
+def _check_name(name: Any, allowed: list[str], where: str, what: str) -> None:
+    """A threshold's model or mode must be one its scenarios run (else no value would match, after the whole suite
+    ran): one line with the closest name."""
+    if name in allowed:
+        return
+    close = difflib.get_close_matches(str(name), allowed, n=1)
+    guess = f" (did you mean {close[0]!r}?)" if close else ""
+    raise SoabenchError(f"{where} = {name!r} is not {what}{guess}; allowed: {', '.join(allowed)}")
 
 
 def gap_metrics(bins: Sequence[int]) -> dict[str, tuple[str, int]]:
@@ -382,8 +417,19 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
     return cfg.validate()
 
 
-def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict[str, float], list[dict]]:
-    """Run every scenario and seed; return the mean of every trials.csv metric per key, and the plugin failures."""
+@dataclass
+class SuiteRun:
+    """One run of a suite's scenarios: the mean of every metric per key, the plugin failures, what each scenario's
+    runs took and the seconds spent compiling the kernels first."""
+
+    values: dict[str, float]
+    failures: list[dict]
+    took: dict[str, ScenarioRuns]
+    compile_s: float = 0.0
+
+
+def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: int = 0) -> SuiteRun:
+    """Run every scenario and seed (each seed plus ``seed_offset``) and collect a :class:`SuiteRun`."""
     # imported when called: scipy would slow every start-up
     from soabench.experiment.execution.options import RunOptions
     from soabench.experiment.execution.runner import run_experiment
@@ -395,13 +441,16 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
     _refuse_protocol_keys(suite.config)
     for s in suite.scenarios:  # validate every scenario before running any
         _config_for(base, s, s.seeds[0])
-    ensure_compiled([_config_for(base, s, s.seeds[0]) for s in suite.scenarios])  # once, for every scenario
+    # once, for every scenario; timed apart: a cold machine's compilation is not the suite's time
+    compile_s = ensure_compiled([_config_for(base, s, s.seeds[0]) for s in suite.scenarios])
     rows: dict[tuple, list[dict]] = {}
     gap_sums: dict[tuple, list[float]] = {}
     bins = base.metrics.gap_bins
     failures: list[dict] = []
+    took = {s.name: ScenarioRuns() for s in suite.scenarios}
     for s in suite.scenarios:
-        for seed in s.seeds:
+        for seed in (x + seed_offset for x in s.seeds):
+            t0 = time.perf_counter()
             run_dir = out / "runs" / s.name / f"seed_{seed}"
             if run_dir.exists():
                 import shutil
@@ -418,6 +467,8 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
             for i in range(n):
                 key = (s.name, str(table["model"][i]), str(table["mode"][i]), float(table["clutter"][i]))
                 rows.setdefault(key, []).append({c: table[c][i] for c in table})
+            took[s.name].trials += s.trials
+            took[s.name].time_s += time.perf_counter() - t0
     values: dict[str, float] = {}
     for (scen, model, mode, lam), rs in sorted(rows.items()):
         for col, v in rs[0].items():
@@ -430,7 +481,7 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None) -> tuple[dict
         for name in gap_metrics(bins):  # a labelled run with no gap in a bin: NaN, which fails its threshold
             kept, counted = gap_sums.get((scen, model, mode, lam, name), (0.0, 0.0))
             values[value_key(scen, model, mode, lam, name)] = kept / counted if counted else math.nan
-    return values, failures
+    return SuiteRun(values, failures, took, compile_s)
 
 
 def _matches(th: Threshold, key: str) -> bool:
@@ -507,15 +558,30 @@ def _is_time(key: str) -> bool:
 
 
 # ------------------------------------------------------------------------------------------------ reports
+def _properties(indent: str, items: dict[str, Any]) -> list[str]:
+    """A JUnit ``<properties>`` element (a CI server shows them beside the case)."""
+    props = [f"{indent}  <property name={quoteattr(k)} value={quoteattr(str(v))}/>" for k, v in items.items()]
+    return [f"{indent}<properties>", *props, f"{indent}</properties>"]
+
+
 def junit_xml(outcome: CheckOutcome) -> str:
+    """The checks as JUnit XML: one case per check with its value, bound, trials and time as properties; the
+    suite's time is its runs', its compilation of the kernels a property of its own."""
     failures = sum(not r.passed for r in outcome.results)
     lines = [
         '<?xml version="1.0" encoding="UTF-8"?>',
         f"<testsuites><testsuite name={quoteattr('soabench check: ' + outcome.suite)} "
-        f'tests="{len(outcome.results)}" failures="{failures}" errors="0" time="{outcome.wall_s:.3f}">',
+        f'tests="{len(outcome.results)}" failures="{failures}" errors="0" '
+        f'time="{outcome.wall_s - outcome.compile_s:.3f}">',
+        *_properties("  ", {"compile_s": f"{outcome.compile_s:.3f}", "wall_s": f"{outcome.wall_s:.3f}"}),
     ]
     for r in outcome.results:
-        lines.append(f"  <testcase classname={quoteattr(outcome.suite)} name={quoteattr(r.name)}>")
+        lines.append(
+            f'  <testcase classname={quoteattr(outcome.suite)} name={quoteattr(r.name)} time="{r.time_s:.3f}">'
+        )
+        lines += _properties(
+            "    ", {"value": f"{r.value:.6g}", "bound": r.bound, "trials": r.trials, "time_s": f"{r.time_s:.3f}"}
+        )
         if not r.passed:
             lines.append(f"    <failure message={quoteattr(r.message)}>{escape(r.message)}</failure>")
         lines.append("  </testcase>")
@@ -533,6 +599,97 @@ def table(outcome: CheckOutcome) -> str:
     n_fail = sum(not r.passed for r in outcome.results)
     verdict = "PASS" if not n_fail else f"FAIL ({n_fail} of {len(outcome.results)} checks)"
     return "\n".join(out) + f"\n\nsoabench check {outcome.suite}: {verdict}\n"
+
+
+@dataclass
+class Proposal:
+    """A threshold proposed from N repetitions of the suite: the values' mean, standard deviation and the 95 %
+    prediction bounds of one further run."""
+
+    key: str
+    runs: int
+    mean: float
+    std: float
+    low: float
+    high: float
+    threshold: str
+
+
+def propose(suite: Suite, repetitions: list[dict[str, float]]) -> list[Proposal]:
+    """Every value a threshold of ``suite`` reads, over ``repetitions`` (one dict of values per run of the suite):
+    its prediction bounds and the threshold they give (``min``/``max`` as the suite's threshold sets, the relative
+    ones as a fraction of the mean)."""
+    # imported when called: scipy would slow every start-up
+    from scipy.stats import t as student_t
+
+    out = []
+    n = len(repetitions)
+    for th in suite.thresholds:
+        for key in (k for k in repetitions[0] if _matches(th, k)):
+            v = np.array([r.get(key, math.nan) for r in repetitions], dtype=float)
+            v = v[np.isfinite(v)]
+            mean = float(v.mean()) if v.size else math.nan
+            std = float(v.std(ddof=1)) if v.size > 1 else math.nan
+            half = float(student_t.ppf(0.975, v.size - 1) * std * math.sqrt(1 + 1 / v.size)) if v.size > 1 else math.nan
+            lo, hi = mean - half, mean + half
+            parts = []
+            if th.min is not None:
+                parts.append(f"min = {lo:.6g}")
+            if th.max is not None:
+                parts.append(f"max = {hi:.6g}")
+            rel = half / abs(mean) if mean else math.nan
+            if th.max_increase is not None:
+                parts.append(f"max_increase = {rel:.3g}")
+            if th.max_decrease is not None:
+                parts.append(f"max_decrease = {rel:.3g}")
+            out.append(Proposal(key, n, mean, std, lo, hi, ", ".join(parts)))
+    return out
+
+
+def calibration_table(proposals: list[Proposal]) -> str:
+    rows = [("value", "runs", "mean", "std", "95 % low", "95 % high", "proposed threshold")]
+    for p in proposals:
+        nums = (f"{p.mean:.6g}", f"{p.std:.3g}", f"{p.low:.6g}", f"{p.high:.6g}")
+        rows.append((p.key, str(p.runs), *nums, p.threshold))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def run_calibration(
+    suite_path: str | Path, out: Path, n: int, workers: int | None = 1, plugin_paths: Sequence[str] = ()
+) -> int:
+    """``soabench check --calibrate N``: the suite's scenarios N times on fresh seeds, and the thresholds their
+    spread supports (:func:`propose`), printed and written to ``calibration.json``."""
+    require(isinstance(n, int) and n >= 2, f"--calibrate {n} must be an integer >= 2 (a spread needs two runs)")
+    require(workers is None or workers >= 1, f"--workers {workers} must be >= 1")
+    plugins.allow_import_paths(plugin_paths)
+    suite = load_suite(suite_path)
+    require(bool(suite.thresholds), f"{suite.path}: no [[threshold]] to calibrate")
+    out = resolve(out)
+    check_own_folder(out, "check folder", CHECK_ENTRIES)
+    with FolderLock(out, "check folder"):
+        check_own_folder(out, "check folder", CHECK_ENTRIES)
+        repetitions = []
+        for r in range(n):
+            done = run_suite(suite, out, workers, seed_offset=r * CALIBRATION_SEED_STRIDE)
+            values, failures = done.values, done.failures
+            if failures:  # a calibration of a failing plugin would propose bounds for runs that did not happen
+                raise SoabenchError(f"a plugin run failed in repetition {r + 1}: {failure_message(failures[0])}")
+            repetitions.append(values)
+        proposals = propose(suite, repetitions)
+        write_json_atomic(
+            out / "calibration.json",
+            {"suite": suite.name, "repetitions": n, "seed_stride": CALIBRATION_SEED_STRIDE,
+             "proposals": [dataclasses.asdict(p) for p in proposals]},
+        )  # fmt: skip
+    sys.stdout.write(calibration_table(proposals))
+    print(
+        f"soabench check {suite.name}: {n} runs on fresh seeds; a further run stays inside the 95 % bounds with "
+        f"probability 0.95 (the bounds narrow as 1/√trials: more trials per scenario, tighter thresholds); wrote "
+        f"{out / 'calibration.json'}"
+    )
+    return 0
 
 
 def run_check(
@@ -565,16 +722,21 @@ def _check_locked(
     suite: Suite, out: Path, baseline: dict[str, float] | None, update_baseline: bool, workers: int | None, t0: float
 ) -> int:
     """The body of :func:`run_check` once ``out`` is checked and locked."""
-    values, failures = run_suite(suite, out, workers)
+    done = run_suite(suite, out, workers)
+    values, failures, took, compile_s = done.values, done.failures, done.took, done.compile_s
     if update_baseline:
         require(suite.baseline is not None, f'{suite.path}: --update-baseline needs [suite] baseline = "FILE.json"')
         write_baseline(suite.baseline, suite, values)
         print(f"wrote baseline {suite.baseline} ({sum(not _is_time(k) for k in values)} values)")
         baseline = read_baseline(suite.baseline)
-    outcome = CheckOutcome(suite.name, values, evaluate(suite, values, baseline))
+    outcome = CheckOutcome(suite.name, values, evaluate(suite, values, baseline), compile_s=compile_s)
 
     for f in failures:
         outcome.results.append(CheckResult(f"{f['scenario']}/{f['model']}/plugin", False, failure_message(f)))
+    for r in outcome.results:  # each check carries its scenario's trials and time
+        runs = took.get(r.name.split("/", 1)[0])
+        if runs is not None:
+            r.trials, r.time_s = runs.trials, runs.time_s
     outcome.wall_s = time.perf_counter() - t0
 
     write_json_atomic(
@@ -583,6 +745,7 @@ def _check_locked(
             "suite": suite.name,
             "passed": outcome.passed,
             "wall_s": outcome.wall_s,
+            "compile_s": outcome.compile_s,
             "values": {k: (v if math.isfinite(v) else None) for k, v in values.items()},
             "checks": [
                 {**dataclasses.asdict(r), "value": r.value if math.isfinite(r.value) else None} for r in outcome.results

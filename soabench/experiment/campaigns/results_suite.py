@@ -43,6 +43,7 @@ from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns.occlusion_density import write_density
 from soabench.experiment.execution.executors import MAX_WORKERS
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
+from soabench.experiment.reports.html import write_index
 from soabench.experiment.runs.files import read_json
 from soabench.experiment.runs.runmeta import flatten_config
 from soabench.folders import FolderLock, check_own_folder, resolve
@@ -330,8 +331,6 @@ def _kitti_part(base: Path, scene: str, s: Settings, log: Callable[[str], None],
 def _index_pages(root: Path, scenes: Sequence[str], log: Callable[[str], None]) -> tuple[str, int]:
     """Every run folder's ``report.html``, each study's ``index.html`` and ``index.html`` linking every part
     (docs/user-guide/replay.md); a kept part gets its pages here too, an unchanged page is not rewritten."""
-    from soabench.replay.report import write_index
-
     for scene in scenes:
         if (root / scene).is_dir():
             write_index(root / scene)
@@ -395,7 +394,8 @@ def _atlas_part(folder: Path, scene: str, s: Settings, exe: RunOptions, log: Cal
 
 #: the filter families of the ``filters/`` part (every family of the registry), and the modes every family runs
 FILTERS_PART = {"filters": FILTER_FAMILIES, "probabilities": ("static", "static+occ")}
-#: the ``filters-lmb-components/`` ablation: the LMB with one Bernoulli per birth component (docs/method.md §10.7)
+#: the ``filters-lmb-components/`` ablation: the LMB with one Bernoulli per birth component
+#: (docs/method.md "LMB filter", birth)
 ABLATION_PART = {"filters": ("lmb",), "probabilities": ("static",)}
 ABLATION_LMB = {"birth_mapping": "components"}
 #: the keys a stored families run must share with the requested one

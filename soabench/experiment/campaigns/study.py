@@ -45,7 +45,10 @@ from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.premerge import merged_on
 from soabench.experiment.execution.runner import RunOutcome, net_name, run_experiment
 from soabench.experiment.reports import paper
-from soabench.experiment.reports.report import paper_protocol_mismatch
+from soabench.experiment.reports.headline import KEY_METRICS, headline
+from soabench.experiment.reports.html import write_index
+from soabench.experiment.reports.report import families, family_tables, paper_protocol_mismatch
+from soabench.experiment.reports.tables import load_tables
 from soabench.experiment.runs.runmeta import flatten_config
 from soabench.experiment.runs.store import RunStore
 from soabench.figures.drawing import parallel
@@ -234,8 +237,6 @@ def run_study(
                 sens.write_sensitivity(sens_dir, main_dir, variants)
                 where = sens_dir / "sensitivity.md"
                 md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
-            from soabench.replay.report import write_index
-
             index = write_index(root)[0]  # and each run's report.html (a run kept from before may have none)
             md += f"\nEvery part on one page: {index}\n"
         except KeyboardInterrupt:
@@ -279,13 +280,22 @@ def _tracks_table(rows: list[dict]) -> list[str]:
     return render_hota("λ", out)
 
 
-def key_figure(main_rows: list[dict], clutter_rows: list[dict], path: Path) -> Path:
-    """The README's key figure (:func:`soabench.figures.sweeps.key_figure`), written to ``path``."""
+def key_figure(root: Path) -> Path | None:
+    """The README's key figure, ``key_figure.png`` of a study folder: the forest plot of S-OA's paired differences
+    on the main protocol at λ = 3 (delay, cardinality error, OSPA, precision; :mod:`soabench.figures.forest`), drawn
+    from ``main/`` (its GM-PHD family). None when the folder holds no finished main run with S-OA at λ = 3."""
     # imported when called: matplotlib would slow every start-up
+    from soabench.figures.forest import forest_figure
     from soabench.figures.style import save_png
-    from soabench.figures.sweeps import key_figure as draw
 
-    return save_png(draw(main_rows, clutter_rows, paper.PAPER_CLUTTER), path)
+    main = Path(root) / "main"
+    if not (main / "trials.csv").is_file() or not (main / "run.json").is_file():
+        return None
+    tables = load_tables(main)
+    tables = family_tables(tables, families(tables)[0])
+    if "soa" not in tables.models or len(tables.models) < 2 or paper.PAPER_CLUTTER not in tables.clutters:
+        return None
+    return save_png(forest_figure(headline(tables, paper.PAPER_CLUTTER), KEY_METRICS), Path(root) / "key_figure.png")
 
 
 def write_comparison(root: Path) -> str:
@@ -319,7 +329,7 @@ def write_comparison(root: Path) -> str:
             "",
             _precision_table(clutter_rows),
         ]
-    key_figure(main_rows, clutter_rows, root / "key_figure.png")
+    key_figure(root)
     births_md = root / "births" / "sweep.md"
     if births_md.is_file():
         parts += ["", "## Sensitivity to N_hat (paper §V.C)", "", births_md.read_text(encoding="utf-8").strip()]

@@ -202,7 +202,10 @@ class DaskExecutor:
                     threads_per_worker=1,
                     processes=True,
                     dashboard_address=None,
-                    silence_logs=logging.ERROR,
+                    # the cluster's own logs stay quiet: a worker whose heartbeat meets the scheduler already closed
+                    # (after Ctrl-C, on a loaded machine) logs an error with a traceback; a trial that fails on a
+                    # worker is reported by the run itself (its failure record)
+                    silence_logs=logging.CRITICAL,
                 )
             self.address = self._cluster.scheduler_address
             self.name = f"dask-local({n})"

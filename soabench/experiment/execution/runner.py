@@ -37,6 +37,7 @@ from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.reports import report
+from soabench.experiment.reports.html import refresh_report
 from soabench.experiment.runs.files import pack_table
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, package_versions, platform_info
 from soabench.experiment.runs.runmeta import check_requested, validate_run_meta
@@ -53,7 +54,6 @@ from soabench.experiment.trial.guard import failure_message
 from soabench.figures.drawing import parallel, pool_open
 from soabench.folders import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.kernel_warmup import ensure_compiled
-from soabench.replay.report import refresh_report
 from soabench.scenario.derive import said_by_the_driver
 from soabench.seeding import trial_seeds
 

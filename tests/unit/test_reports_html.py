@@ -1,8 +1,8 @@
-"""A run's report page (soabench/replay/report.py) shows what it reads as text: HTML in a summary is escaped."""
+"""A run's report page (soabench/experiment/reports/html.py) shows what it reads as text: HTML is escaped."""
 
 from __future__ import annotations
 
-from soabench.replay.report import markdown_html
+from soabench.experiment.reports.html import markdown_html
 
 
 def test_report_escapes_what_it_reads() -> None:
