@@ -18,7 +18,10 @@ one line instead of hanging.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -156,6 +159,27 @@ def _heading(angle_deg: np.ndarray | float) -> np.ndarray:
     return wrap(np.radians(90.0 - np.asarray(angle_deg, dtype=float)))
 
 
+#: the two lines libsumo prints on import when the installed pyarrow's version differs from the libarrow SUMO was
+#: built against
+_ARROW_NOTICE = ("Warning! pyarrow is installed with version", " Try to uninstall pyarrow or install a matching")
+
+
+def import_libsumo():
+    """libsumo, imported once per process. Its import-time notice about a pyarrow version other than the libarrow
+    SUMO was built against is dropped: soabench hands SUMO no Arrow data (pyarrow only writes an atlas's Parquet
+    files, docs/user-guide/atlas.md), so on every worker the notice would alarm without cause. Every other line
+    libsumo prints passes through."""
+    if "libsumo" in sys.modules:
+        return sys.modules["libsumo"]
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        import libsumo
+    for line in printed.getvalue().splitlines():
+        if not line.startswith(_ARROW_NOTICE):
+            print(line)
+    return libsumo
+
+
 def simulate(scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, duration: float | None = None) -> Recording:
     """Run ``scenario`` on ``scene`` with libsumo and return the ground truth (module docstring).
 
@@ -165,7 +189,7 @@ def simulate(scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, durat
         seeds: trial seeds; SUMO gets ``seeds.sumo_seed``, every scenario choice uses ``seeds.scenario_rng()``.
         duration: recorded time (s), overriding ``scenario.duration``.
     """
-    import libsumo  # noqa: F401  (imported once here: every forked SUMO run inherits it)
+    import_libsumo()  # imported once here: every forked SUMO run inherits it
 
     hint = "load both with soabench.scenario.load(net), or call soabench.api.simulate_trial(net, seed, trial)"
     require_type(scene, SceneMap, "simulate's scene", hint)
@@ -189,7 +213,7 @@ def _simulate_here(
     scene: SceneMap, scenario: ScenarioConfig, seeds: TrialSeeds, n_steps: int, tmp: Path, progress: Progress
 ) -> Recording:
     """:func:`simulate` in this process (libsumo started and always closed); ``tmp`` holds SUMO's files."""
-    import libsumo
+    libsumo = import_libsumo()
 
     rng = seeds.scenario_rng()
     routes = tmp / "types.rou.xml"
