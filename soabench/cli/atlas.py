@@ -26,13 +26,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "(parking.density, pedestrians.count, vehicles.count), net, filters or birth.N_hat_offset, with its values "
         "(or LO:HI for --sample); repeatable",
     )
-    p.add_argument("--design", type=Path, metavar="FILE.toml", help="the axes (and [design] kind, points) in a file")
+    p.add_argument(
+        "--design",
+        type=Path,
+        metavar="FILE.toml",
+        help="the axes (and [design] kind, points) in a file (default: none)",
+    )
     p.add_argument(
         "--sample",
         choices=["factorial", "sobol", "lhs"],
         help="full factorial of the listed values (default), or a scrambled Sobol / Latin hypercube design",
     )
-    p.add_argument("--points", type=int, help="points of a --sample sobol or lhs design")
+    p.add_argument(
+        "--points", type=int, help="points of a --sample sobol or lhs design (default: none; needed with them)"
+    )
     p.add_argument(
         "--filters",
         type=csv_list("filter family", FILTER_FAMILIES),

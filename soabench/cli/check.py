@@ -17,7 +17,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=int,
         metavar="N",
         help="run the scenarios N times on fresh seeds and propose each threshold from the 95%% bounds of a further "
-        "run (calibration.json); checks nothing",
+        "run (calibration.json); checks nothing (default: none, check the thresholds)",
     )
     p.add_argument(
         "--plugin",

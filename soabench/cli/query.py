@@ -13,7 +13,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("path", type=Path, help="an atlas folder, a run folder, or a folder holding run folders")
     p.add_argument("sql", help='the query, e.g. "SELECT model, avg(ospa) FROM trials GROUP BY model"')
-    p.add_argument("--out", type=Path, metavar="FILE", help="write the result to FILE.csv or FILE.parquet")
+    p.add_argument(
+        "--out", type=Path, metavar="FILE", help="write the result to FILE.csv or FILE.parquet (default: print a table)"
+    )
 
 
 def handle(args: argparse.Namespace) -> int:
