@@ -95,4 +95,5 @@ def test_example_plugins_run_beside_soa(installed, tmp_path) -> None:
     steps = read_csv(out / "steps.csv")
     nn = steps["model"] == "nnkf"
     assert nn.sum() == 25 and steps["tp"][nn].sum() > 0 and np.all(steps["n_est"][nn] >= steps["tp"][nn])
-    assert "| nnkf | static | 1 |" in proc.stdout
+    assert "| nnkf | static | 1 |" in (out / "summary.md").read_text(encoding="utf-8")  # the full tables
+    assert "nnkf" in proc.stdout and f"open {out / 'report.html'}" in proc.stdout  # the printed headline
