@@ -89,7 +89,7 @@ def test_fused_equals_array_path_on_recorded_scans(recorded, model, lam):
             assert_same_mixture(fused.mixture, ref.mixture, LOOSE)
             n_steps += 1
         assert len(ref.mixture) > 0
-    assert n_steps == 3 * len(scans.scans)
+    assert n_steps == len(PROBABILITY_MODES) * len(scans.scans)
 
 
 def random_case(rng: np.random.Generator, J: int, M: int, dynamic: bool):
