@@ -72,7 +72,8 @@ def report_outcome(outcome, finish: str = "soabench run --resume {dir}", short: 
     """Print the summary (``short``: the run's headline and the page to open; else the summary's Markdown) and
     where the results are (0), or what is missing and how to finish (1)."""
     if getattr(outcome, "summary_markdown", None):
-        print("\n".join(run_answer(outcome.run_dir)) if short else outcome.summary_markdown)
+        answer = short and (outcome.run_dir / "summary.json").is_file()  # else the Markdown the run wrote
+        print("\n".join(run_answer(outcome.run_dir)) if answer else outcome.summary_markdown)
     if outcome.complete:
         from soabench.experiment.runs.failures import failed_methods_line, outcome_model_failures
 
