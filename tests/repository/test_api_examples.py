@@ -44,7 +44,8 @@ def test_the_example_of_each_public_function_runs(name: str, tmp_path, sumo_load
 
     matplotlib.use("Agg")
     test = doctest.DocTestFinder(recurse=False).find(getattr(sb, name), name, globs={})[0]
-    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    # verbose=False: doctest reads "-v" from sys.argv, and pytest -v would report every passing example as a failure
+    runner = doctest.DocTestRunner(verbose=False, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     cwd = os.getcwd()
     os.chdir(tmp_path)  # an example that saves a file saves it here
     try:
