@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
+from test_track_metrics import D_GATE, assert_equal_trackeval, random_sequence
 
 from soabench.tracks.ospa2 import ospa2
 from soabench.tracks.scores import _identity_matched, track_scores
 from soabench.tracks.sequence import TrackSequence
-from tests.unit.test_track_metrics import D_GATE, assert_equal_trackeval, random_sequence
 
 
 def square_identity(potential: np.ndarray, gt_count: np.ndarray, tr_count: np.ndarray) -> tuple[int, int]:
