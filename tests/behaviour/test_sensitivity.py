@@ -159,12 +159,10 @@ def switch_aware_trial(trial, config, scene, scenario, *, save_estimates=False):
 
 @pytest.fixture
 def fake_study(monkeypatch):
-    import soabench.cli.common as common
     import soabench.experiment.campaigns.sweep as sweep
     import soabench.experiment.reports.report as report
 
     monkeypatch.setattr(report, "write_report", lambda run_dir, figures=True, store=None: "summary")
-    monkeypatch.setattr(common, "run_answer", lambda run_dir: ["summary"])  # it reads the summary.json not written
     monkeypatch.setattr(sweep, "write_sweep_report", lambda d: "sweep")
     with ft.as_builtins(trial=switch_aware_trial):
         yield
