@@ -625,18 +625,22 @@ def propose(suite: Suite, repetitions: list[dict[str, float]]) -> list[Proposal]
     out = []
     n = len(repetitions)
     for th in suite.thresholds:
+        lo_m, hi_m = metric_range(th.metric)
         for key in (k for k in repetitions[0] if _matches(th, k)):
             v = np.array([r.get(key, math.nan) for r in repetitions], dtype=float)
             v = v[np.isfinite(v)]
             mean = float(v.mean()) if v.size else math.nan
             std = float(v.std(ddof=1)) if v.size > 1 else math.nan
             half = float(student_t.ppf(0.975, v.size - 1) * std * math.sqrt(1 + 1 / v.size)) if v.size > 1 else math.nan
-            lo, hi = mean - half, mean + half
+            # a bound past the metric's range would be refused by the suite: it stops at the range's edge, and says
+            # the value is too noisy to bound
+            lo, hi = max(mean - half, lo_m), min(mean + half, hi_m)
+            noisy = " (the band passes the metric's range: too noisy to bound, add trials)"
             parts = []
             if th.min is not None:
-                parts.append(f"min = {lo:.6g}")
+                parts.append(f"min = {lo:.6g}" + noisy * (mean - half < lo_m))
             if th.max is not None:
-                parts.append(f"max = {hi:.6g}")
+                parts.append(f"max = {hi:.6g}" + noisy * (mean + half > hi_m))
             rel = half / abs(mean) if mean else math.nan
             if th.max_increase is not None:
                 parts.append(f"max_increase = {rel:.3g}")
