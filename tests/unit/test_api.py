@@ -384,9 +384,15 @@ def test_scene_and_a_scan_drawn_on_matplotlib_axes(trial1, tmp_path) -> None:
     assert {"4", "9"} <= {t.get_text() for t in ax.texts}  # the track labels beside the estimates
     fig.savefig(tmp_path / "scene.png")
     plt.close(fig)
+    tracker = sb.make_tracker("soa", scene)
+    steps = [tracker.step(scan) for scan in scans.scans[: k + 1]]
+    fig, ax = plt.subplots()
+    sb.draw_scene(ax, scene, scan=scans[k], estimates=steps[k])  # our filter's StepResult, as make_tracker gives it
+    assert f"estimate ({len(steps[k].X)})" in [t.get_text() for t in ax.get_legend().get_texts()]
+    plt.close(fig)
     with pytest.raises(TypeError, match="^scan must be a Scan, got a Scans"):
         sb.draw_scene(plt.subplots()[1], scene, scan=scans)
-    with pytest.raises(ValueError, match="net = 3 must be a scene name"):
+    with pytest.raises(ValueError, match="^net=3 must be a scene name"):
         sb.load_scene(3)
 
 
