@@ -511,9 +511,9 @@ def stonesoup_ospa(
         >>> import soabench.api as sb
         >>> from stonesoup.types.state import State
         >>> from stonesoup.types.track import Track
-        >>> from soabench.bridges.stonesoup import scan_time
         >>> _, scans = sb.simulate_trial("arterial", duration=5)
-        >>> tracks = [Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scan)) for scan in scans], id="t1")]
+        >>> times = [t for t, _ in sb.to_stonesoup(scans)]  # the scans' timestamps, as a Stone Soup tracker sees them
+        >>> tracks = [Track([State([1.0, 0.5, 2.0, -0.5], timestamp=t) for t in times], id="t1")]
         >>> theirs = sb.stonesoup_ospa(tracks, scans)
         >>> ours = sb.evaluate(scans, sb.from_stonesoup(tracks, scans).estimates).series["ospa"]
         >>> bool(np.allclose(theirs, ours))
@@ -532,9 +532,9 @@ def from_stonesoup(tracks: _Any, scans: Scans) -> _Any:
         >>> import soabench.api as sb
         >>> from stonesoup.types.state import State
         >>> from stonesoup.types.track import Track
-        >>> from soabench.bridges.stonesoup import scan_time
         >>> _, scans = sb.simulate_trial("arterial", duration=5)
-        >>> track = Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scans[2]))], id="t7")
+        >>> t2, _ = sb.to_stonesoup(scans).detections[2]  # scan 2's timestamp
+        >>> track = Track([State([1.0, 0.5, 2.0, -0.5], timestamp=t2)], id="t7")
         >>> estimates, labels = sb.from_stonesoup([track], scans)
         >>> estimates[2].X.tolist(), labels[2].tolist()
         ([[1.0, 2.0, 0.5, -0.5]], ['t7'])
