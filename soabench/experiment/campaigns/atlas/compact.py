@@ -13,7 +13,7 @@ before its replacement exists. Only complete chunks are compacted, and a resumed
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +25,7 @@ ROW_GROUP_BYTES = 4 * 2**20  #: uncompressed bytes per row group at most (what c
 PART_ROWS = 1_048_576  #: rows per part at most (a larger table is several parts)
 
 
-def unified_schema(schemas: list[Any]) -> Any:
+def unified_schema(schemas: Iterable[Any]) -> Any:
     """One schema for chunks whose columns differ (union by name, in order of first appearance): a column of one
     type keeps it, numbers of several types (an all-missing chunk column is float64) become float64, and anything
     else mixed becomes text."""
@@ -81,7 +81,7 @@ def write_part(path: Path, files: list[tuple[tuple[int, int], Path]]) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    schema = unified_schema([pq.read_schema(f) for _, f in files])
+    schema = unified_schema(pq.read_schema(f) for _, f in files)  # one footer at a time
     schema = schema.with_metadata({store.HOLDS_KEY: store.encode_chunks(c for c, _ in files)})
     with open_atomic(path) as fh, pq.ParquetWriter(fh, schema, compression="zstd") as writer:
         held: list[Any] = []
