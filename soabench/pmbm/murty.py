@@ -152,8 +152,27 @@ def _before(cost_a: float, a: int, cost_b: float, b: int) -> bool:
 
 
 @njit(cache=True)
+def _row_min_bound(C: np.ndarray) -> float:
+    """A lower bound on the cost of every assignment of ``C``: the sum of its row minima (+inf: none exists)."""
+    total = 0.0
+    for i in range(C.shape[0]):
+        lo = np.inf
+        for j in range(C.shape[1]):
+            if C[i, j] < lo:
+                lo = C[i, j]
+        total += lo
+    return total
+
+
+@njit(cache=True)
 def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`murty` as arrays: costs (K,) increasing and columns (K, rows)."""
+    """:func:`murty` as arrays: costs (K,) increasing and columns (K, rows).
+
+    A subproblem is solved only when it reaches the top of the queue: until then it waits under a lower bound of
+    its cost (its parent's cost or the sum of its row minima, whichever is larger, less a margin far above the
+    rounding of a sum). A solved subproblem leaves the queue only when its cost is at most every waiting bound, so
+    the assignments come out in the order, and with the tie rule, of solving every subproblem as it is made; the
+    subproblems that the k-th assignment makes unnecessary are never solved."""
     n, m = C.shape
     out_cost = np.empty(k)
     out_cols = np.empty((k, n), dtype=np.int64)
@@ -162,83 +181,102 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
     if n == 0:
         out_cost[0] = 0.0
         return out_cost[:1], out_cols[:1]
-    # open subproblems (nodes): matrix, assignment, cost, first free row; node index = order found
+    # subproblems (nodes): matrix, assignment, key (cost once solved, else a lower bound), solved, first free row;
+    # node index = order made (the tie rule)
     cap = 16
     mats = np.empty((cap, n, m))
     sols = np.empty((cap, n), dtype=np.int64)
-    costs = np.empty(cap)
+    keys = np.empty(cap)
+    solved = np.zeros(cap, dtype=np.bool_)
     t0s = np.empty(cap, dtype=np.int64)
-    heap = np.empty(cap, dtype=np.int64)  # binary min-heap of node indices by (cost, index)
+    heap = np.empty(cap, dtype=np.int64)  # binary min-heap of node indices by (key, index)
     mats[0] = C
-    costs[0] = _solve(mats[0], sols[0])
-    if costs[0] == np.inf:
+    keys[0] = _solve(mats[0], sols[0])
+    if keys[0] == np.inf:
         return out_cost[:0], out_cols[:0]
-    limit = costs[0] + max_gap
+    solved[0] = True
+    limit = keys[0] + max_gap
     t0s[0] = 0
     heap[0] = 0
     n_heap, n_nodes, n_out = 1, 1, 0
     last = n - 1 if n == m else n  # square: with n - 1 rows fixed the last has no choice
-    cols = np.empty(n, dtype=np.int64)
     while n_heap > 0 and n_out < k:
-        node = heap[0]  # pop the cheapest
+        node = heap[0]  # pop the smallest key
         n_heap -= 1
         heap[0] = heap[n_heap]
         p = 0
         while True:
             c1, c2, best = 2 * p + 1, 2 * p + 2, p
-            if c1 < n_heap and _before(costs[heap[c1]], heap[c1], costs[heap[best]], heap[best]):
+            if c1 < n_heap and _before(keys[heap[c1]], heap[c1], keys[heap[best]], heap[best]):
                 best = c1
-            if c2 < n_heap and _before(costs[heap[c2]], heap[c2], costs[heap[best]], heap[best]):
+            if c2 < n_heap and _before(keys[heap[c2]], heap[c2], keys[heap[best]], heap[best]):
                 best = c2
             if best == p:
                 break
             heap[p], heap[best] = heap[best], heap[p]
             p = best
-        out_cost[n_out] = costs[node]
-        out_cols[n_out] = sols[node]
-        n_out += 1
-        if n_out == k:
-            break
-        forced = mats[node].copy()
-        for t in range(t0s[node], last):
-            c = sols[node, t]
-            keep = forced[t, c]
-            forced[t, c] = np.inf
-            cost = _solve(forced, cols)
+        if solved[node]:
+            out_cost[n_out] = keys[node]
+            out_cols[n_out] = sols[node]
+            n_out += 1
+            if n_out == k:
+                break
+            forced = mats[node].copy()
+            parent_cost = keys[node]
+            for t in range(t0s[node], last):
+                c = sols[node, t]
+                keep = forced[t, c]
+                forced[t, c] = np.inf
+                bound = max(parent_cost, _row_min_bound(forced))
+                bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
+                if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
+                    if n_nodes == cap:  # grow the node store
+                        cap *= 2
+                        mats2 = np.empty((cap, n, m))
+                        mats2[:n_nodes] = mats[:n_nodes]
+                        sols2 = np.empty((cap, n), dtype=np.int64)
+                        sols2[:n_nodes] = sols[:n_nodes]
+                        keys2 = np.empty(cap)
+                        keys2[:n_nodes] = keys[:n_nodes]
+                        solved2 = np.zeros(cap, dtype=np.bool_)
+                        solved2[:n_nodes] = solved[:n_nodes]
+                        t0s2 = np.empty(cap, dtype=np.int64)
+                        t0s2[:n_nodes] = t0s[:n_nodes]
+                        heap2 = np.empty(cap, dtype=np.int64)
+                        heap2[:n_heap] = heap[:n_heap]
+                        mats, sols, keys, solved, t0s, heap = mats2, sols2, keys2, solved2, t0s2, heap2
+                    mats[n_nodes] = forced
+                    keys[n_nodes] = bound
+                    solved[n_nodes] = False
+                    t0s[n_nodes] = t
+                    n_heap = _push(heap, n_heap, n_nodes, keys)
+                    n_nodes += 1
+                # fix the pair (t, c) for the next subproblems
+                forced[t, :] = np.inf
+                forced[:, c] = np.inf
+                forced[t, c] = keep
+        else:  # solve it and put it back under its cost
+            cost = _solve(mats[node], sols[node])
             if cost < np.inf and cost <= limit:
-                if n_nodes == cap:  # grow the node store
-                    cap *= 2
-                    mats2 = np.empty((cap, n, m))
-                    mats2[:n_nodes] = mats[:n_nodes]
-                    sols2 = np.empty((cap, n), dtype=np.int64)
-                    sols2[:n_nodes] = sols[:n_nodes]
-                    costs2 = np.empty(cap)
-                    costs2[:n_nodes] = costs[:n_nodes]
-                    t0s2 = np.empty(cap, dtype=np.int64)
-                    t0s2[:n_nodes] = t0s[:n_nodes]
-                    heap2 = np.empty(cap, dtype=np.int64)
-                    heap2[:n_heap] = heap[:n_heap]
-                    mats, sols, costs, t0s, heap = mats2, sols2, costs2, t0s2, heap2
-                mats[n_nodes] = forced
-                sols[n_nodes] = cols
-                costs[n_nodes] = cost
-                t0s[n_nodes] = t
-                q = n_heap  # push
-                heap[q] = n_nodes
-                n_heap += 1
-                while q > 0:
-                    parent = (q - 1) // 2
-                    if _before(costs[heap[q]], heap[q], costs[heap[parent]], heap[parent]):
-                        heap[q], heap[parent] = heap[parent], heap[q]
-                        q = parent
-                    else:
-                        break
-                n_nodes += 1
-            # fix the pair (t, c) for the next subproblems
-            forced[t, :] = np.inf
-            forced[:, c] = np.inf
-            forced[t, c] = keep
+                keys[node] = cost
+                solved[node] = True
+                n_heap = _push(heap, n_heap, node, keys)
     return out_cost[:n_out], out_cols[:n_out]
+
+
+@njit(cache=True)
+def _push(heap: np.ndarray, n_heap: int, node: int, keys: np.ndarray) -> int:
+    """Push ``node`` on the binary heap ``heap[:n_heap]`` ordered by (key, index); returns the new size."""
+    q = n_heap
+    heap[q] = node
+    while q > 0:
+        parent = (q - 1) // 2
+        if _before(keys[heap[q]], heap[q], keys[heap[parent]], heap[parent]):
+            heap[q], heap[parent] = heap[parent], heap[q]
+            q = parent
+        else:
+            break
+    return n_heap + 1
 
 
 def murty(C: np.ndarray, k: int, max_gap: float = np.inf) -> list[tuple[float, np.ndarray]]:
