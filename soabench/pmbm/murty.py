@@ -60,10 +60,15 @@ def array_sum(a: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def lsa(C: np.ndarray, col4row: np.ndarray) -> bool:
+def lsa(C: np.ndarray, col4row: np.ndarray, n_fixed: int = 0) -> bool:
     """The cheapest assignment of the (nr, nc) cost matrix ``C`` (nr <= nc; +inf forbidden) by shortest augmenting
     paths (module docstring): fills ``col4row`` (nr,) and returns True, or returns False when every assignment
-    uses a forbidden cell."""
+    uses a forbidden cell.
+
+    ``n_fixed``: the first rows are fixed, row i to column ``col4row[i]`` (given), which is the only finite cell of
+    its row and of its column. Solving them would give each its column and leave every dual of a free row and
+    column at 0 (no path from a free row can enter a fixed column), so they are set so and the search starts at
+    the first free row, with the same result."""
     nr, nc = C.shape
     if nr == 0:
         return True
@@ -77,11 +82,14 @@ def lsa(C: np.ndarray, col4row: np.ndarray) -> bool:
     spc = np.empty(nc)  # shortest path cost to each column
     path = np.full(nc, -1, dtype=np.int64)
     row4col = np.full(nc, -1, dtype=np.int64)
-    col4row[:] = -1
+    for i in range(n_fixed):
+        row4col[col4row[i]] = i
+        u[i] = C[i, col4row[i]] - lo
+    col4row[n_fixed:] = -1
     in_rows = np.zeros(nr, dtype=np.bool_)
     in_cols = np.zeros(nc, dtype=np.bool_)
     remaining = np.empty(nc, dtype=np.int64)
-    for cur in range(nr):
+    for cur in range(n_fixed, nr):
         for it in range(nc):
             remaining[it] = nc - it - 1
         n_rem = nc
@@ -135,9 +143,10 @@ def lsa(C: np.ndarray, col4row: np.ndarray) -> bool:
 
 
 @njit(cache=True)
-def _solve(C: np.ndarray, cols: np.ndarray) -> float:
-    """The cost of the cheapest assignment of ``C`` (its columns in ``cols``), +inf when there is none."""
-    if not lsa(C, cols):
+def _solve(C: np.ndarray, cols: np.ndarray, n_fixed: int = 0) -> float:
+    """The cost of the cheapest assignment of ``C`` (its columns in ``cols``), +inf when there is none; the first
+    ``n_fixed`` rows fixed to their columns in ``cols`` (:func:`lsa`)."""
+    if not lsa(C, cols, n_fixed):
         return np.inf
     n = C.shape[0]
     cells = np.empty(n)
@@ -246,6 +255,7 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
                         heap2[:n_heap] = heap[:n_heap]
                         mats, sols, keys, solved, t0s, heap = mats2, sols2, keys2, solved2, t0s2, heap2
                     mats[n_nodes] = forced
+                    sols[n_nodes, :t] = sols[node, :t]  # its fixed rows
                     keys[n_nodes] = bound
                     solved[n_nodes] = False
                     t0s[n_nodes] = t
@@ -256,7 +266,7 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
                 forced[:, c] = np.inf
                 forced[t, c] = keep
         else:  # solve it and put it back under its cost
-            cost = _solve(mats[node], sols[node])
+            cost = _solve(mats[node], sols[node], t0s[node])
             if cost < np.inf and cost <= limit:
                 keys[node] = cost
                 solved[node] = True
