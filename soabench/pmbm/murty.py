@@ -60,7 +60,7 @@ def array_sum(a: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def lsa(C: np.ndarray, col4row: np.ndarray, n_fixed: int = 0) -> bool:
+def lsa(C: np.ndarray, col4row: np.ndarray, n_fixed: int) -> bool:
     """The cheapest assignment of the (nr, nc) cost matrix ``C`` (nr <= nc; +inf forbidden) by shortest augmenting
     paths (module docstring): fills ``col4row`` (nr,) and returns True, or returns False when every assignment
     uses a forbidden cell.
@@ -143,7 +143,7 @@ def lsa(C: np.ndarray, col4row: np.ndarray, n_fixed: int = 0) -> bool:
 
 
 @njit(cache=True)
-def _solve(C: np.ndarray, cols: np.ndarray, n_fixed: int = 0) -> float:
+def _solve(C: np.ndarray, cols: np.ndarray, n_fixed: int) -> float:
     """The cost of the cheapest assignment of ``C`` (its columns in ``cols``), +inf when there is none; the first
     ``n_fixed`` rows fixed to their columns in ``cols`` (:func:`lsa`)."""
     if not lsa(C, cols, n_fixed):
@@ -200,7 +200,7 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
     t0s = np.empty(cap, dtype=np.int64)
     heap = np.empty(cap, dtype=np.int64)  # binary min-heap of node indices by (key, index)
     mats[0] = C
-    keys[0] = _solve(mats[0], sols[0])
+    keys[0] = _solve(mats[0], sols[0], 0)
     if keys[0] == np.inf:
         return out_cost[:0], out_cols[:0]
     solved[0] = True
