@@ -321,7 +321,7 @@ def run_experiment(
                 _, scenario_cfg = registry.load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
                 out = default_run_dir(scenario_name(net, scenario_cfg))
             run_dir = resolve(out)
-            check_new_folder(run_dir, RUN_FILE, "run", f"finish it with --resume {run_dir}")
+            check_new_folder(run_dir, RUN_FILE, "run", f"finish it with soabench run --resume {run_dir}")
             store = RunStore(run_dir)
         return _run_locked(
             store, config, net, tuple(str(p) for p in polys), scenario, resume is not None, locks, options=options,
@@ -375,7 +375,7 @@ def _run_locked(
     try:
         if not resumed:
             locks.append(FolderLock(store.run_dir).acquire())  # creates the folder; run_experiment releases it
-            check_new_folder(store.run_dir, RUN_FILE, "run", f"finish it with --resume {store.run_dir}")
+            check_new_folder(store.run_dir, RUN_FILE, "run", f"finish it with soabench run --resume {store.run_dir}")
             store.create(
                 {
                     "created": _utc_stamp(),
