@@ -44,6 +44,7 @@ KERNEL_MODULES = (
     "lmb/tracks.py",
     "lmb/cycle.py",
     "kitti/lidar_raster.py",
+    "pmbm/murty.py",
     "pmbm/association.py",
 )
 
