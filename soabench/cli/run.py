@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 
 from soabench.cli import common
-from soabench.cli.parsing import FILTERS_HELP, add_run_args, csv_list, float_list
-from soabench.config import FILTER_FAMILIES
+from soabench.cli.parsing import add_filters_arg, add_run_args, float_list
 from soabench.errors import require
 
 
@@ -15,7 +14,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
     add_run_args(p)
     p.add_argument("--clutter", type=float_list, help="clutter rate(s) lambda, e.g. 3 or 0.5,3,5 (default 3)")
-    p.add_argument("--filters", type=csv_list("filter family", FILTER_FAMILIES), help=FILTERS_HELP)
+    add_filters_arg(p)
     p.add_argument(
         "--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run (default: new run)"
     )

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 from soabench.cli import checks, common
-from soabench.cli.parsing import add_run_args
+from soabench.cli.parsing import add_filters_arg, add_run_args
 from soabench.errors import require
 
 
@@ -16,6 +16,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the paper's whole simulation study: main protocol, clutter sweep, N_hat sweep, sensitivity, comparison",
     )
     add_run_args(p)
+    add_filters_arg(p)
     p.add_argument("--sweep-trials", type=int, help="trials of the clutter sweep (default: --trials)")
     p.add_argument("--births-trials", type=int, default=30, help="trials per point of the N_hat sweep (default 30)")
     p.add_argument(

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from soabench.cli import checks, common
-from soabench.cli.parsing import add_run_args, float_list, offsets
+from soabench.cli.parsing import add_filters_arg, add_run_args, float_list, offsets
 from soabench.errors import require
 
 
@@ -14,6 +14,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sweep", help="parameter sweeps: clutter rate or expected births N_hat")
     p.add_argument("kind", choices=["clutter", "births", "occlusion"])
     add_run_args(p)
+    add_filters_arg(p)
     p.add_argument(
         "--values",
         type=float_list,
@@ -56,7 +57,7 @@ def handle(args: argparse.Namespace) -> int:
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the sweep in its folder")
         common.allow_typed_plugins(args)
-        cfg = common.config_from_args(args).gmphd_only("`soabench sweep`")
+        cfg = common.config_from_args(args)
         requested = {"kind": args.kind, **common.requested(args, cfg)}
         if args.values is not None or args.offsets is not None:
             requested["values"] = list(args.values if args.values is not None else args.offsets)

@@ -6,7 +6,9 @@ A suite file (TOML, read as data only) holds:
   configuration TOML, relative to the suite file, e.g. for ``[plugins.<name>]`` options);
 * one ``[[scenario]]`` table per short scenario: ``name``, ``net`` (a shipped network or a path relative to the
   suite file), optional ``polys`` (polygon files) and ``scenario`` (scenario TOML), ``seeds`` (base seeds),
-  ``trials`` per seed, ``duration`` (s), ``models``, ``trackers``, ``probabilities``, ``clutter``;
+  ``trials`` per seed, ``duration`` (s), ``models``, ``trackers``, ``probabilities``, ``clutter`` and ``filter`` (the
+  filter family the birth models run in, one name of the registry ``soabench.config.FAMILIES``; default ``gmphd``;
+  every probability mode of the scenario must be one the family defines);
 * one ``[[threshold]]`` table per check: ``metric`` (a metric or ``t_*`` timing column of trials.csv, e.g.
   ``ospa``, ``card_err``, ``precision``; any other name is a bad suite), ``model`` (a name or ``"*"``), optional
   ``mode``/``scenario`` filters, and any of ``max``, ``min`` (absolute), ``max_increase``, ``max_decrease``
@@ -48,7 +50,7 @@ import numpy as np
 
 from soabench import plugins
 from soabench.atomic import write_json_atomic, write_text_atomic
-from soabench.config import CLUTTER_RATE, Config, load_config
+from soabench.config import CLUTTER_RATE, FAMILIES, FAMILY_MODES, FILTER_FAMILIES, Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.files import read_csv
 from soabench.experiment.trial.guard import failure_message
@@ -68,9 +70,12 @@ SCENARIO_KEYS = {
     "trackers",
     "probabilities",
     "clutter",
+    "filter",
 }
 THRESHOLD_KEYS = {"metric", "model", "mode", "scenario", "max", "min", "max_increase", "max_decrease", "abs_tol"}
 BASELINE_FORMAT = 1
+#: the ``[[scenario]]`` key of an ``[experiment]`` key where the two names differ
+SCENARIO_KEY_OF = {"seed": "seeds", "filters": "filter"}
 #: a scenario's name names its folder ``--out/runs/NAME/``: a plain name, never a path
 SCENARIO_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 #: every entry of a check folder (a folder holding anything else is not a check's and is refused)
@@ -92,6 +97,9 @@ class Scenario:
     trackers: tuple[str, ...] = ()
     probabilities: tuple[str, ...] = ("static",)
     clutter: tuple[float, ...] = (CLUTTER_RATE,)
+    #: the filter family the scenario's birth models run in (one scenario, one family: its value keys stay those of
+    #: any other scenario, and two scenarios compare two families)
+    filter: str = FILTER_FAMILIES[0]
 
 
 @dataclass
@@ -260,13 +268,16 @@ def load_suite(path: str | Path) -> Suite:
         if "clutter" in t:
             require(isinstance(t["clutter"], list) and t["clutter"], f"{w}: clutter must be a list of rates")
             s.clutter = tuple(_number(c, f"{w}: clutter", 0.0) for c in t["clutter"])
+        if "filter" in t:
+            s.filter = _family(t["filter"], s.probabilities, f"{p}: {w}")
         suite.scenarios.append(s)
     names = [s.name for s in suite.scenarios]
     require(len(set(names)) == len(names), f"{p}: scenario names {names} repeat")
     for i, raw in enumerate(data.get("threshold", [])):
         t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
         require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
-        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", _suite_bins(suite.config))
+        bins = _suite_bins(suite.config, [sc.filter for sc in suite.scenarios])
+        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", bins)
         th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
         th.mode, th.scenario = t.get("mode"), t.get("scenario")
         lo, hi = metric_range(th.metric)
@@ -302,6 +313,22 @@ def load_suite(path: str | Path) -> Suite:
     if any(th.relative for th in suite.thresholds):
         require(suite.baseline is not None, f'{p}: relative thresholds need [suite] baseline = "FILE.json"')
     return suite
+
+
+def _family(name: Any, modes: Sequence[str], where: str) -> str:
+    """A scenario's filter family: a name of the registry whose probability modes include every mode the scenario
+    runs (a mode it lacks would leave the thresholds on it matching nothing after the whole suite ran)."""
+    require(
+        isinstance(name, str) and name in FAMILY_MODES,
+        f"{where}: filter = {name!r} is not a filter family; allowed: {', '.join(FILTER_FAMILIES)}",
+    )
+    lacking = [m for m in modes if m not in FAMILY_MODES[name]]
+    if lacking:
+        raise SoabenchError(
+            f"{where}: filter family {name!r} runs the probability modes {', '.join(FAMILY_MODES[name])} only, and "
+            f"probabilities names {lacking[0]!r}; drop it or choose another filter"
+        )
+    return name
 
 
 def _check_name(name: Any, allowed: list[str], where: str, what: str) -> None:
@@ -341,9 +368,20 @@ def _check_metric(metric: Any, where: str, bins: Sequence[int] | None = None) ->
     raise SoabenchError(f"{where}: metric {metric!r} is not a trials.csv metric{guess}; allowed: {', '.join(allowed)}")
 
 
-def _suite_bins(config: Path | None) -> tuple[int, ...]:
+def suite_config(config: Path | None, families: Sequence[str]) -> Config:
+    """A suite's ``[suite] config`` (the defaults without one), validated as read by runs of every filter family its
+    scenarios name: a family's own section (``[lmb]``, ``[pmbm]``) may be set when a scenario runs that family."""
+    if config is None:
+        return Config().validate()
+    require(config.is_file(), f"config file {str(config)!r} does not exist")
+    cfg = Config.from_dict(read_toml(config, "config file"))
+    cfg.experiment = dataclasses.replace(cfg.experiment, filters=tuple(dict.fromkeys(families)))
+    return cfg.validate()
+
+
+def _suite_bins(config: Path | None, families: Sequence[str]) -> tuple[int, ...]:
     """The gap bins of a suite's configuration (the defaults without one)."""
-    return load_config(config).metrics.gap_bins
+    return suite_config(config, families).metrics.gap_bins
 
 
 def _gap_values(run_dir: Path, scenario: str, bins: Sequence[int], sums: dict[tuple, list[float]]) -> None:
@@ -388,17 +426,12 @@ def _refuse_protocol_keys(config: Path | None) -> None:
     ``[suite] config`` file that sets an ``[experiment]`` key is refused with one line naming both keys."""
     if config is None:
         return
-    section = read_toml(config, "config file").get("experiment", {})  # load_config read it
-    if "filters" in section:  # a suite scores the GM-PHD family (docs/user-guide/outputs.md "Filter families")
-        raise SoabenchError(
-            f"{config}: [experiment] filters: a check suite runs the GM-PHD family only; compare the families with "
-            "`soabench run --filters gmphd,lmb`"
-        )
+    section = read_toml(config, "config file").get("experiment", {})  # suite_config read it
     if section:
         key = sorted(section)[0]
         raise SoabenchError(
             f"{config}: [experiment] {key} is set per scenario in a check suite ([[scenario]] "
-            f"{'seeds' if key == 'seed' else key}); remove it from the config file"
+            f"{SCENARIO_KEY_OF.get(key, key)}); remove it from the config file"
         )
 
 
@@ -413,7 +446,11 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
         probabilities=s.probabilities,
         clutter=s.clutter,
         seed=seed,
+        filters=(s.filter,),
     )
+    read = {f.section for f in FAMILIES.values() if f.name == s.filter}
+    for section in {f.section for f in FAMILIES.values() if f.section is not None} - read:  # another scenario's
+        setattr(cfg, section, type(getattr(cfg, section))())
     return cfg.validate()
 
 
@@ -437,7 +474,7 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: 
     from soabench.kernel_warmup import ensure_compiled
 
     check_import_paths(suite)
-    base = load_config(suite.config)
+    base = suite_config(suite.config, [s.filter for s in suite.scenarios])
     _refuse_protocol_keys(suite.config)
     for s in suite.scenarios:  # validate every scenario before running any
         _config_for(base, s, s.seeds[0])

@@ -38,6 +38,7 @@ from soabench.atomic import write_json_atomic, write_text_atomic
 from soabench.birth import CORE_MODELS, LABEL
 from soabench.config import BIRTH_MODEL_NAMES, Config, require_distinct
 from soabench.errors import Interrupted, require
+from soabench.experiment.campaigns.families import config_families, family_heading, first_family_note
 from soabench.experiment.campaigns.occlusion import (
     check_parking_lanes,
     occlusion_points,
@@ -180,8 +181,6 @@ def run_sweep(
     ``figures/``); None draws them for the clutter and occlusion points and not for the N̂ sweep's, whose
     ``sweep_births.png`` summarises its points (their tables and summaries are written either way).
     """
-    if config is not None:
-        config.gmphd_only("`soabench sweep`")
     if options.figures is None:
         options = dataclasses.replace(options, figures=kind != "births")
     locks: list[FolderLock] = []
@@ -369,10 +368,10 @@ def _sweep_outcome(sweep_dir: Path, points: list[dict], outcomes: list[RunOutcom
 
 # ------------------------------------------------------------------------------------------------ sweep report
 def _episode_means(
-    run_dir: Path, models: Sequence[str], modes: Sequence[str], clutter: float
+    run_dir: Path, models: Sequence[str], modes: Sequence[str], clutter: float, family: str | None = None
 ) -> dict[tuple[str, str], tuple[float, float]]:
-    """k̄_delay over all counted episodes of a run per (model, mode), and the half-width of its 95 % confidence
-    interval over trials (:func:`~soabench.figures.bars.pooled_mean_ci`)."""
+    """k̄_delay over all counted episodes of a run per (model, mode) (of filter family ``family`` when not None),
+    and the half-width of its 95 % confidence interval over trials (:func:`~soabench.figures.bars.pooled_mean_ci`)."""
     # imported when called: matplotlib would slow every start-up
     from soabench.figures.bars import pooled_mean_ci
 
@@ -384,6 +383,8 @@ def _episode_means(
                 out[(model, mode)] = (math.nan, math.nan)
                 continue
             m = (e["model"] == model) & (e["mode"] == mode) & (e["clutter"] == clutter) & (e["censored"] == 0)
+            if family is not None:
+                m &= e["filter"] == family
             d, trials = e["delay"][m], e["trial"][m]
             trials = trials[~np.isnan(d)]
             d = d[~np.isnan(d)]
@@ -391,24 +392,45 @@ def _episode_means(
     return out
 
 
-def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
-    """k̄_delay vs N_tot per model and mode, and the std of those means (paper §V.C)."""
-    points = meta["points"]
-    exp = points[0]["config"]["experiment"]
-    models, modes, clutter = [*exp["models"], *exp.get("trackers", ())], exp["probabilities"], float(exp["clutter"][0])
-    table, half = [], []  # half: 95 % CI half-widths (the figure's error bars; not in the sweep's tables)
+def _births_table(
+    sweep_dir: Path, points: list[dict], cols: tuple[Sequence[str], Sequence[str]], clutter: float, family: str | None
+) -> tuple[list[dict], list[dict], dict[str, float]]:
+    """One filter family's N̂ table: k̄_delay per N_tot point and (model, mode), the 95 % CI half-widths (the
+    figure's error bars; not in the sweep's tables) and the std of the means over N_tot."""
+    models, modes = cols
+    table, half = [], []
     for p in points:
-        means = _episode_means(sweep_dir / "points" / p["name"], models, modes, clutter)
+        means = _episode_means(sweep_dir / "points" / p["name"], models, modes, clutter, family)
         table.append(
             {"N_tot": p["value"], "N_hat": p["N_hat"], "delay": {f"{a}/{b}": v[0] for (a, b), v in means.items()}}
         )
         half.append({f"{a}/{b}": v[1] for (a, b), v in means.items()})
-    cols = [f"{a}/{b}" for a in models for b in modes]
     std = {}
-    for c in cols:
+    for c in (f"{a}/{b}" for a in models for b in modes):
         v = np.array([r["delay"][c] for r in table], dtype=float)
         v = v[~np.isnan(v)]
         std[c] = float(v.std(ddof=0)) if v.size else math.nan
+    return table, half, std
+
+
+def _births_tracks(sweep_dir: Path, points: list[dict], family: str | None) -> list[tuple]:
+    """The Tracks rows of one filter family per N_tot point (from each point's summary.json)."""
+    return [
+        (str(p["value"]), LABEL.get(mo, mo), md, st)
+        for p in points
+        if (sweep_dir / "points" / p["name"] / "summary.json").is_file()
+        for res in [r for r in read_json(sweep_dir / "points" / p["name"] / "summary.json")["results"]
+                    if r.get("filter") == family][:1]
+        for mo, md, st in res.get("tracks", {}).get("rows", [])
+    ]  # fmt: skip
+
+
+def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
+    """k̄_delay vs N_tot per model and mode, and the std of those means (paper §V.C), per filter family."""
+    points = meta["points"]
+    exp = points[0]["config"]["experiment"]
+    models, modes, clutter = [*exp["models"], *exp.get("trackers", ())], exp["probabilities"], float(exp["clutter"][0])
+    cols = [f"{a}/{b}" for a in models for b in modes]
     head = [f"{LABEL.get(a, a)} {b}" for a in models for b in modes]
     K = scans_per_run(Config.from_record(points[0]["config"]))
     lines = [
@@ -417,72 +439,84 @@ def births_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
         f"k̄_delay (s) over all counted episodes vs the expected births per run N_tot (N̂_k = N_tot / K, "
         f"K = {K} scans, N_true = {meta['n_true']}), λ = {clutter:g}, "
         f"{exp['trials']} trials per point.",
-        "",
-        "| N_tot | N̂_k | " + " | ".join(head) + " |",
-        "|---|---|" + "---|" * len(cols),
     ]
-    for r in table:
-        lines.append(f"| {r['N_tot']} | {r['N_hat']:.4g} | " + " | ".join(fmt(r["delay"][c]) for c in cols) + " |")
-    lines.append("| std over N_tot | | " + " | ".join(fmt(std[c]) for c in cols) + " |")
-    tracks = [
-        (str(p["value"]), LABEL.get(mo, mo), md, st)
-        for p in points
-        if (sweep_dir / "points" / p["name"] / "summary.json").is_file()
-        for res in read_json(sweep_dir / "points" / p["name"] / "summary.json")["results"][:1]
-        for mo, md, st in res.get("tracks", {}).get("rows", [])
-    ]
-    hota = render_hota("N_tot", tracks)
-    if hota:
-        lines += ["", "Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels.", "", *hota]
+    sections = []
+    for family in config_families(meta["points"][0]["config"]):
+        table, half, std = _births_table(sweep_dir, points, (models, modes), clutter, family)
+        lines += [*family_heading(family), "", "| N_tot | N̂_k | " + " | ".join(head) + " |"]
+        lines.append("|---|---|" + "---|" * len(cols))
+        for r in table:
+            lines.append(f"| {r['N_tot']} | {r['N_hat']:.4g} | " + " | ".join(fmt(r["delay"][c]) for c in cols) + " |")
+        lines.append("| std over N_tot | | " + " | ".join(fmt(std[c]) for c in cols) + " |")
+        tracks = _births_tracks(sweep_dir, points, family)
+        hota = render_hota("N_tot", tracks)
+        if hota:
+            lines += ["", "Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels.", ""]
+            lines += hota
+        sections.append((family, table, half, std, tracks))
     # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import births_figure
 
+    _, table, half, std, tracks = sections[0]  # the figure and the summary's table: the first family
     save_png(births_figure(table, models, modes, meta["n_true"], half), sweep_dir / "sweep_births.png")
-    lines += ["", "Figure: `sweep_births.png`"]
+    lines += ["", "Figure: `sweep_births.png`" + first_family_note([f[0] for f in sections])]
     summary = {"kind": "births", "table": table, "std_over_N_tot": std, "tracks": [list(t) for t in tracks]}
+    if len(sections) > 1:
+        summary["families"] = [
+            {"filter": f, "table": t, "std_over_N_tot": sd, "tracks": [list(x) for x in tr]}
+            for f, t, _, sd, tr in sections
+        ]
     return summary, "\n".join(lines) + "\n"
 
 
 def clutter_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
-    """Precision, recall, cardinality error, OSPA and k̄_delay per lambda, model and mode (Fig. 5h)."""
+    """Precision, recall, cardinality error, OSPA and k̄_delay per lambda, model and mode (Fig. 5h), per filter
+    family."""
     run_dir = sweep_dir / "points" / meta["points"][0]["name"]
     summary = read_json(run_dir / "summary.json")
-    rows = []
-    for res in summary["results"]:
-        for s in res["models"]:
-            rows.append({"clutter": res["clutter"], **s})
     lines = [
         f"# Clutter sweep: {meta.get('net_name')}",
         "",
         "One run with every clutter rate (trials share truth and detections across λ); per-run details in "
         f"`points/{meta['points'][0]['name']}/summary.md`.",
-        "",
-        "| λ | model | mode | precision | recall | card. error | OSPA (m) | k̄ delay (s) |",
-        "|---|---|---|---|---|---|---|---|",
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['clutter']:g} | {LABEL.get(r['model'], r['model'])} | {r['mode']} | {fmt(r['precision_mean'])} "
-            f"| {fmt(r['recall_mean'])} | {fmt(r['card_err_mean'])} | {fmt(r['ospa_mean'])} | {fmt(r['delay_mean'])} |"
-        )
-    tracks = [
-        (f"{res['clutter']:g}", LABEL.get(mo, mo), md, st)
-        for res in summary["results"]
-        for mo, md, st in res.get("tracks", {}).get("rows", [])
-    ]
-    hota = render_hota("λ", tracks)
-    if hota:
-        lines += ["", "Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels.", "", *hota]
+    rows, tracks = [], []
+    families = config_families(meta["points"][0]["config"])
+    for family in families:
+        results = [res for res in summary["results"] if res.get("filter") == family]
+        named = {} if family is None else {"filter": family}
+        fam_rows = [{"clutter": res["clutter"], **named, **s} for res in results for s in res["models"]]
+        lines += [*family_heading(family), ""]
+        lines.append("| λ | model | mode | precision | recall | card. error | OSPA (m) | k̄ delay (s) |")
+        lines.append("|---|---|---|---|---|---|---|---|")
+        for r in fam_rows:
+            lines.append(
+                f"| {r['clutter']:g} | {LABEL.get(r['model'], r['model'])} | {r['mode']} "
+                f"| {fmt(r['precision_mean'])} | {fmt(r['recall_mean'])} | {fmt(r['card_err_mean'])} "
+                f"| {fmt(r['ospa_mean'])} | {fmt(r['delay_mean'])} |"
+            )
+        fam_tracks = [
+            (f"{res['clutter']:g}", LABEL.get(mo, mo), md, st)
+            for res in results
+            for mo, md, st in res.get("tracks", {}).get("rows", [])
+        ]
+        hota = render_hota("λ", fam_tracks)
+        if hota:
+            lines += ["", "Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels.", ""]
+            lines += hota
+        rows += fam_rows
+        tracks += [list(t) if family is None else [family, *t] for t in fam_tracks]
     # imported when called: matplotlib would slow every start-up
     from soabench.figures.style import save_png
     from soabench.figures.sweeps import clutter_figure
 
     exp = meta["points"][0]["config"]["experiment"]
-    trial_rows = read_rows(run_dir / "trials.csv")
+    trial_rows = [r for r in read_rows(run_dir / "trials.csv") if r.get("filter") == families[0]]
     save_png(clutter_figure(trial_rows, exp["models"], exp["probabilities"]), sweep_dir / "sweep_clutter.png")
-    lines += ["", f"Figures: `sweep_clutter.png`, `points/{meta['points'][0]['name']}/figures/fig5h_precision.png`"]
-    return {"kind": "clutter", "table": rows, "tracks": [list(t) for t in tracks]}, "\n".join(lines) + "\n"
+    fig5h = f"points/{meta['points'][0]['name']}/figures/fig5h_precision.png"
+    lines += ["", f"Figures: `sweep_clutter.png`{first_family_note(families)}, `{fig5h}`"]
+    return {"kind": "clutter", "table": rows, "tracks": tracks}, "\n".join(lines) + "\n"
 
 
 def write_sweep_report(sweep_dir: Path) -> str:
