@@ -412,10 +412,11 @@ def run(
         return run_in_memory(cfg, str(net), workers=workers, executor=executor, progress=progress)
     from soabench.experiment.execution.memory import from_run_folder
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.execution.runner import Batch, RunRequest
+    from soabench.experiment.execution.runner import run as run_request
 
     options = RunOptions(workers=workers, progress=progress, figures=False)
-    outcome = run_experiment(cfg, str(net), out=_Path(out), options=options, executor=executor)
+    outcome = run_request(RunRequest(cfg, str(net), out=_Path(out), options=options), Batch(executor=executor))
     return from_run_folder(outcome.run_dir, cfg, str(net))
 
 

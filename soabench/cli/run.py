@@ -21,7 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.execution.runner import RunRequest, run
 
     options = common.run_options(args)
     if args.resume is not None:  # --models/--trackers re-allow the run's import-path plugins (and are compared)
@@ -30,9 +30,10 @@ def handle(args: argparse.Namespace) -> int:
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the run in its folder")
         requested = common.requested(args, cfg)
-        outcome = run_experiment(
+        request = RunRequest(
             None, args.net, tuple(args.poly), args.scenario, resume=args.resume, requested=requested, options=options
         )
     else:
-        outcome = run_experiment(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options)
+        request = RunRequest(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options)
+    outcome = run(request)
     return common.report_outcome(outcome, short=True)

@@ -50,7 +50,8 @@ def _all_figures(args: argparse.Namespace) -> bool | None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.campaigns.sweep import run_sweep, sweep_values
+    from soabench.experiment.campaigns.sweep import SweepRequest, sweep, sweep_values
+    from soabench.experiment.execution.runner import RunRequest
 
     options = common.run_options(args, _all_figures(args))
     finish = f"soabench sweep {args.kind} --resume {{dir}}"
@@ -61,12 +62,10 @@ def handle(args: argparse.Namespace) -> int:
         requested = {"kind": args.kind, **common.requested(args, cfg)}
         if args.values is not None or args.offsets is not None:
             requested["values"] = list(args.values if args.values is not None else args.offsets)
-        outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, requested=requested, options=options)
-        return common.report_outcome(outcome, finish)
+        run = RunRequest(None, args.net, resume=args.resume, requested=requested, options=options)
+        return common.report_outcome(sweep(SweepRequest(args.kind, (), run)), finish)
     given = checks.requested_keys(args, getattr(args, "explicit", set()))
     values = sweep_values(args.kind, args.values, args.offsets, given)
     cfg = common.config_from_args(args)
-    outcome = run_sweep(
-        args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options
-    )
-    return common.report_outcome(outcome, finish)
+    run = RunRequest(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options)
+    return common.report_outcome(sweep(SweepRequest(args.kind, values, run)), finish)

@@ -334,11 +334,11 @@ def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None
 
     seen = {}
 
-    def fake_run_study(cfg, net, **kw):
-        seen["cfg"] = cfg
+    def fake_study(request):
+        seen["cfg"] = request.config
         return SimpleNamespace(summary_markdown="", complete=True, run_dir="x", n_missing=0)
 
-    monkeypatch.setattr(study, "run_study", fake_run_study)
+    monkeypatch.setattr(study, "study", fake_study)
     one, echo = f"{FX}:OneBirth", f"{FX}:EchoTracker"
     assert main(["study", "--models", one, "--trackers", echo, "--trials", "1"]) == 0
     exp = seen["cfg"].experiment

@@ -469,7 +469,7 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: 
     """Run every scenario and seed (each seed plus ``seed_offset``) and collect a :class:`SuiteRun`."""
     # imported when called: scipy would slow every start-up
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.execution.runner import RunRequest, run
     from soabench.experiment.runs.store import RunStore
     from soabench.kernel_warmup import ensure_compiled
 
@@ -495,7 +495,7 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: 
                 shutil.rmtree(run_dir)
             cfg = _config_for(base, s, seed)
             options = RunOptions(workers=workers, progress=False, figures=False)
-            o = run_experiment(cfg, s.net, s.polys, s.scenario, out=run_dir, options=options)
+            o = run(RunRequest(cfg, s.net, s.polys, s.scenario, out=run_dir, options=options))
             require(o.complete, f"scenario {s.name!r} seed {seed}: {o.n_missing} trial(s) failed; see {run_dir}")
             failures += [{**f, "scenario": s.name, "seed": seed} for f in RunStore(run_dir).model_failures()]
             table = read_csv(run_dir / "trials.csv")
