@@ -413,7 +413,7 @@ def run(
     from soabench.experiment.execution.memory import from_run_folder
     from soabench.experiment.execution.options import RunOptions
     from soabench.experiment.execution.runner import Batch, RunRequest
-    from soabench.experiment.execution.runner import run as run_request
+    from soabench.experiment.reports.finished import run as run_request
 
     options = RunOptions(workers=workers, progress=progress, figures=False)
     outcome = run_request(RunRequest(cfg, str(net), out=_Path(out), options=options), Batch(executor=executor))

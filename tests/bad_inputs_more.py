@@ -294,7 +294,7 @@ def _fake_run(tmp: Path, trials: int = 3) -> Path:
     import fake_trial as ft
 
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.experiment.trial import registry
 
     cfg = Config()

@@ -21,7 +21,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.execution.runner import RunRequest, run
+    from soabench.experiment.execution.runner import RunRequest
+    from soabench.experiment.reports.finished import run
 
     options = common.run_options(args)
     if args.resume is not None:  # --models/--trackers re-allow the run's import-path plugins (and are compared)

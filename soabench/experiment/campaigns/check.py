@@ -469,7 +469,8 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: 
     """Run every scenario and seed (each seed plus ``seed_offset``) and collect a :class:`SuiteRun`."""
     # imported when called: scipy would slow every start-up
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import RunRequest, run
+    from soabench.experiment.execution.runner import RunRequest
+    from soabench.experiment.reports.finished import run
     from soabench.experiment.runs.store import RunStore
     from soabench.kernel_warmup import ensure_compiled
 

@@ -422,7 +422,7 @@ def _filters_part(
     the ablation's instead): kept when complete with these settings, else resumed (more trials: extended) or
     started."""
     # imported when called: scipy would slow every start-up
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
 
     cfg = cfg if cfg is not None else filters_config(s)
     keys = FILTERS_KEYS

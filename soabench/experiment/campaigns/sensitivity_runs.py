@@ -21,7 +21,8 @@ from soabench.experiment.campaigns import sensitivity as sens
 from soabench.experiment.execution.executors import MAX_WORKERS, open_executor
 from soabench.experiment.execution.grouped import run_group
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
-from soabench.experiment.execution.runner import ALONE, Batch, RunOutcome, RunRequest, run
+from soabench.experiment.execution.runner import ALONE, Batch, RunOutcome, RunRequest
+from soabench.experiment.reports.finished import run
 from soabench.experiment.runs.runmeta import config_differences, validate_run_meta
 from soabench.experiment.runs.store import RunStore
 from soabench.figures.drawing import parallel

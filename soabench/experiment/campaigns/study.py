@@ -45,11 +45,12 @@ from soabench.experiment.campaigns.sweep import DEFAULT_VALUES, SweepOutcome, Sw
 from soabench.experiment.execution.executors import open_executor
 from soabench.experiment.execution.grouped import run_group
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
-from soabench.experiment.execution.premerge import merged_on
-from soabench.experiment.execution.runner import ALONE, Batch, RunOutcome, RunRequest, net_name, run
+from soabench.experiment.execution.runner import ALONE, Batch, RunOutcome, RunRequest, net_name
 from soabench.experiment.reports import paper
+from soabench.experiment.reports.finished import run
 from soabench.experiment.reports.headline import KEY_METRICS, headline
 from soabench.experiment.reports.html import write_index
+from soabench.experiment.reports.premerge import merged_on
 from soabench.experiment.reports.report import families, family_tables, paper_protocol_mismatch
 from soabench.experiment.reports.tables import load_tables
 from soabench.experiment.runs.runmeta import flatten_config

@@ -47,7 +47,6 @@ from soabench.experiment.campaigns.occlusion import (
 )
 from soabench.experiment.execution.executors import open_executor
 from soabench.experiment.execution.grouped import group_trials, run_group
-from soabench.experiment.execution.premerge import merged_on
 from soabench.experiment.execution.runner import (
     ALONE,
     BATCH_FIELDS,
@@ -58,8 +57,9 @@ from soabench.experiment.execution.runner import (
     check_against_scenario,
     scenario_name,
 )
-from soabench.experiment.execution.runner import run as run_one
+from soabench.experiment.reports.finished import run as run_one
 from soabench.experiment.reports.paper import read_rows
+from soabench.experiment.reports.premerge import merged_on
 from soabench.experiment.reports.report import fmt
 from soabench.experiment.runs.files import read_csv, read_json
 from soabench.experiment.runs.runmeta import check_requested, flatten_config, validate_sweep_meta

@@ -22,7 +22,6 @@ from soabench import plugins
 from soabench.config import Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.execution.executors import open_executor
-from soabench.experiment.execution.premerge import merge_args
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.runner import TaskSpec, check_against_scenario
 from soabench.experiment.runs.files import as_lists, format_value, unpack_table, write_csv_lists
@@ -35,6 +34,7 @@ from soabench.experiment.runs.store import (
     RunStore,
     TableOrder,
     _rows_of,
+    merge_args,
     timing_rows,
 )
 from soabench.experiment.trial.registry import load_scene_cached

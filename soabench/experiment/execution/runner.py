@@ -1,6 +1,6 @@
 """The Monte Carlo harness: trials on process workers or Dask, persisted per trial, resumable (docs/method.md §5.8).
 
-``run_experiment`` runs trials ``0 .. trials-1`` of a config; trial n's seeds depend only on ``(seed, n)``
+``execute`` runs trials ``0 .. trials-1`` of a config; trial n's seeds depend only on ``(seed, n)``
 (:mod:`soabench.seeding`), never on the worker or the order, so serial, process-pool and Dask runs write
 bit-identical ``trials.csv``/``episodes.csv``/``steps.csv``. libsumo is a process singleton (docs/user-guide/sumo.md):
 every executor runs one trial at a time per process (a lock guards a worker that was started with several threads).
@@ -13,7 +13,6 @@ atomic file per finished trial (:mod:`soabench.experiment.runs.store`), so worke
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import os
 import socket
@@ -21,7 +20,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -31,13 +30,10 @@ from soabench import plugins
 from soabench.atomic import to_jsonable, write_json_atomic
 from soabench.config import Config
 from soabench.errors import Interrupted, require
-from soabench.experiment.execution import premerge
-from soabench.experiment.execution.executors import PoolExecutor, failure_record, open_executor
+from soabench.experiment.execution.executors import failure_record, open_executor
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
-from soabench.experiment.reports import report
-from soabench.experiment.reports.html import refresh_report
 from soabench.experiment.runs.files import pack_table
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, package_versions, platform_info
 from soabench.experiment.runs.runmeta import check_requested, validate_run_meta
@@ -51,7 +47,6 @@ from soabench.experiment.runs.store import (
 )
 from soabench.experiment.trial import registry
 from soabench.experiment.trial.guard import failure_message
-from soabench.figures.drawing import parallel, pool_open
 from soabench.folders import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.kernel_warmup import ensure_compiled
 from soabench.scenario.derive import said_by_the_driver
@@ -83,6 +78,22 @@ class RunOutcome:
     #: failed method runs inside finished trials (:mod:`soabench.experiment.runs.failures`), once every trial was
     #: attempted
     model_failures: list[dict] = field(default_factory=list)
+    #: the run to report, once every trial was attempted (None otherwise, and once reported): the layer above writes
+    #: its summary, figures and report.html (:func:`soabench.experiment.reports.finished.report_run`)
+    finished: FinishedRun | None = None
+
+
+@dataclass(frozen=True)
+class FinishedRun:
+    """A run folder whose every trial was attempted, with what its report needs: the folder's store, the run's
+    configuration, whether figures are drawn, and where (``workers`` local processes, None for one per core;
+    ``executor``: the campaign's open executor, whose process pool draws them when it is one)."""
+
+    store: RunStore
+    config: Config
+    figures: bool
+    workers: int | None
+    executor: Any = None
 
 
 # ------------------------------------------------------------------------------------------------ one trial
@@ -290,7 +301,7 @@ class Batch:
 
 
 ALONE = Batch()
-#: the keywords of :func:`run_experiment` that are :class:`Batch` fields
+#: the keywords of :func:`soabench.experiment.reports.finished.run_experiment` that are :class:`Batch` fields
 BATCH_FIELDS = tuple(f.name for f in dataclasses.fields(Batch))
 
 
@@ -306,19 +317,13 @@ class DeferredRun:
     figures: bool  #: whether its report draws figures
 
 
-def run_experiment(config: Config | None, net: str, polys: Sequence[str] = (), scenario: str | None = None,
-                   **fields: Any) -> RunOutcome:  # fmt: skip
-    """:func:`run` of ``RunRequest(config, net, polys, scenario, **fields)``; ``fields`` are the other
-    :class:`RunRequest` fields and the :class:`Batch` fields (``executor``, ``defer``, ``run_trials``)."""
-    batch = Batch(**{k: fields.pop(k) for k in BATCH_FIELDS if k in fields})
-    return run(RunRequest(config, net, tuple(polys), scenario, **fields), batch)
-
-
-def run(request: RunRequest, batch: Batch = ALONE) -> RunOutcome:
-    """Run (or finish, with ``request.resume``) the Monte Carlo protocol of ``request.config`` on its scene.
+def execute(request: RunRequest, batch: Batch = ALONE) -> RunOutcome:
+    """Run (or finish, with ``request.resume``) the trials of the Monte Carlo protocol of ``request.config`` on its
+    scene: the run loop.
 
     Returns:
-        A :class:`RunOutcome`. The summary (Markdown) is written and returned only once every trial was attempted.
+        A :class:`RunOutcome`; once every trial was attempted, its ``finished`` record is the run to report (the
+        layer above writes the summary, figures and report.html: :mod:`soabench.experiment.reports.finished`).
         One process at a time works a run folder (a lock; the second gets an error naming the holder).
     """
     locks: list[FolderLock] = []  # held until the report is written
@@ -379,7 +384,7 @@ def _resumed(store: RunStore, request: RunRequest) -> RunRequest:
 
 
 def _run_locked(store: RunStore, request: RunRequest, locks: list[FolderLock], batch: Batch) -> RunOutcome:
-    """The body of :func:`run` once the folder is checked (and, for a resume, locked); ``request`` is resolved
+    """The body of :func:`execute` once the folder is checked (and, for a resume, locked); ``request`` is resolved
     (its configuration validated or read from the run)."""
     config, options = request.config, request.options
     assert config is not None
@@ -407,7 +412,7 @@ def _run_locked(store: RunStore, request: RunRequest, locks: list[FolderLock], b
     interrupted = stopped = False
     try:
         if not resumed:
-            locks.append(FolderLock(store.run_dir).acquire())  # creates the folder; run releases it
+            locks.append(FolderLock(store.run_dir).acquire())  # creates the folder; execute releases it
             check_new_folder(store.run_dir, RUN_FILE, "run", f"finish it with --resume {store.run_dir}")
             store.create(_run_file(request, scenario_cfg))
         if len(todo) and batch.defer is not None:  # run later, together with other folders' trials
@@ -450,18 +455,8 @@ def _run_locked(store: RunStore, request: RunRequest, locks: list[FolderLock], b
     if unattempted or stopped or batch.defer is not None:  # deferring: the report follows the group
         return outcome
 
-    try:
-        # a study's workers may have merged it already; the figures read the step columns the merge kept
-        premerge.merge(store, *premerge.merge_args(config), step_columns=figures)
-        local = not (options.scheduler or options.dask_local)
-        with _figure_pool(options.workers if local else None, batch.executor):  # figures on local processes
-            outcome.summary_markdown = report.write_report(store.run_dir, figures=figures, store=store)
-        refresh_report(store.run_dir)  # report.html: the one page to open in a run folder
-        outcome.model_failures = store.model_failures()
-    except KeyboardInterrupt:
-        raise Interrupted(
-            f"interrupted while writing the report of {store.run_dir} (all {len(done)} trials are on disk); {hint}"
-        ) from None
+    local = not (options.scheduler or options.dask_local)  # figures on local processes
+    outcome.finished = FinishedRun(store, config, figures, options.workers if local else None, batch.executor)
     return outcome
 
 
@@ -548,25 +543,3 @@ def _print_failure(rec: dict, bar: Progress) -> None:
         f"trial {rec['trial']} failed (seed {rec['seed']}, sumo_seed {rec['sumo_seed']}): {rec['error']}",
         file=sys.stderr,
     )
-
-
-@contextlib.contextmanager
-def _figure_pool(workers: int | None, executor: Any = None) -> Iterator[None]:
-    """The figures of a report written inside the block in parallel (:func:`soabench.figures.drawing.parallel`):
-    on ``executor`` when it is a local process pool, else (unless an enclosing ``parallel`` decides already) on a
-    pool of ``workers`` processes (None: one per core) opened here and closed on the way out, terminated if the
-    block is left by an exception (Ctrl-C)."""
-    if isinstance(executor, PoolExecutor) or pool_open():
-        with parallel(executor) if isinstance(executor, PoolExecutor) else contextlib.nullcontext():
-            yield
-        return
-    n = int(workers or os.cpu_count() or 1)
-    pool = PoolExecutor(n) if n > 1 else None  # its processes start at the first figure
-    ok = False
-    try:
-        with parallel(pool):
-            yield
-        ok = True
-    finally:
-        if pool is not None:
-            pool.close(abort=not ok)
