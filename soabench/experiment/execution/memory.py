@@ -25,6 +25,7 @@ from soabench.experiment.execution.executors import open_executor
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.runner import TaskSpec, check_against_scenario
 from soabench.experiment.runs.files import as_lists, format_value, unpack_table, write_csv_lists
+from soabench.experiment.runs.runmeta import RunMeta
 from soabench.experiment.runs.store import (
     EPISODE_COLUMNS,
     STEP_COLUMNS,
@@ -37,7 +38,7 @@ from soabench.experiment.runs.store import (
     merge_args,
     timing_rows,
 )
-from soabench.experiment.trial.registry import load_scene_cached
+from soabench.experiment.trial.registry import DEFAULT_SCENE_LOADER, DEFAULT_TRIAL_KIND, load_scene_cached
 
 #: the tables of a :class:`RunResult`, as the CSV files of a run folder are named (``<name>.csv``)
 TABLES = ("trials", "episodes", "steps", "timing")
@@ -194,7 +195,8 @@ def run_in_memory(
     _, scenario_cfg = load_scene_cached(net, polys, scenario)
     check_against_scenario(config, scenario_cfg)
     n_trials = config.experiment.trials
-    spec = TaskSpec(config.to_dict(), str(net), polys, scenario, False, plugin_paths=plugins.session_import_paths())
+    meta = RunMeta(config, str(net), polys, scenario, False, n_trials, DEFAULT_TRIAL_KIND, DEFAULT_SCENE_LOADER)
+    spec = TaskSpec(meta, plugin_paths=plugins.session_import_paths())
     exe = executor if executor is not None else open_executor(workers, n_trials=n_trials)
     records: list[dict] = []
     failures: list[dict] = []

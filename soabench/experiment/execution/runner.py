@@ -14,6 +14,7 @@ atomic file per finished trial (:mod:`soabench.experiment.runs.store`), so worke
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import socket
 import sys
@@ -36,7 +37,7 @@ from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.runs.files import pack_table
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, package_versions, platform_info
-from soabench.experiment.runs.runmeta import check_requested, validate_run_meta
+from soabench.experiment.runs.runmeta import RunMeta, check_requested, validate_run_meta
 from soabench.experiment.runs.store import (
     EPISODE_COLUMNS,
     RUN_FILE,
@@ -99,22 +100,25 @@ class FinishedRun:
 # ------------------------------------------------------------------------------------------------ one trial
 @dataclass(frozen=True)
 class TaskSpec:
-    """Everything a worker needs to run any trial of a run (small and picklable)."""
+    """Everything a worker needs to run any trial of a run (small and picklable): the run's record (what its
+    ``run.json`` says, :class:`~soabench.experiment.runs.runmeta.RunMeta`) and the trial kind and scene loader it
+    names, as callables."""
 
-    config: dict
-    net: str
-    polys: tuple[str, ...]
-    scenario: str | None
-    save_estimates: bool
+    meta: RunMeta
     trial_fn: TrialFn | None = None
     load_fn: LoadFn | None = None
     #: import paths of plugins typed on the driver's command line (soabench.plugins: the closed list)
     plugin_paths: tuple[str, ...] = ()
-    #: ``experiment.seed`` of the config, read through :class:`~soabench.config.Config` once (a failure record's seed)
-    base_seed: int = field(init=False)
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "base_seed", int(Config.from_dict(self.config).experiment.seed))
+    @functools.cached_property
+    def config(self) -> dict:
+        """The run's configuration as plain data (each worker builds its :class:`Config` from it)."""
+        return self.meta.config.to_dict()
+
+    @property
+    def base_seed(self) -> int:
+        """``experiment.seed`` of the run (a failure record's seed)."""
+        return int(self.meta.config.experiment.seed)
 
     @property
     def task_fn(self) -> Callable[[int, TaskSpec], dict]:
@@ -149,9 +153,10 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
             plugins.allow_import_paths(spec.plugin_paths)
             config = Config.from_dict(spec.config)
             with said_by_the_driver():  # the driver loaded this scene and said what it derived
-                scene, scenario = registry.load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
+                scene, scenario = registry.load_scene_cached(spec.meta.net, spec.meta.polys, spec.meta.scenario,
+                                                             spec.load_fn)  # fmt: skip
             fn = spec.trial_fn or _default_trial_fn()
-            result = fn(trial, config, scene, scenario, save_estimates=spec.save_estimates)
+            result = fn(trial, config, scene, scenario, save_estimates=spec.meta.save_estimates)
     except Exception as exc:  # a failed trial must not stop the run
         rec = failure_record(trial, base_seed, f"{type(exc).__name__}: {exc}", traceback.format_exc())
         rec["worker"] = _where()
@@ -172,7 +177,7 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     if getattr(result, "failures", None):
         record["model_failures"] = to_jsonable(result.failures)
     est = getattr(result, "estimates", None)
-    if spec.save_estimates and est is not None:
+    if spec.meta.save_estimates and est is not None:
         record["estimates"] = to_jsonable(est)
     return record
 
@@ -276,10 +281,15 @@ class RunRequest:
 
     def task_spec(self) -> TaskSpec:
         """What a worker needs to run any trial of this (resolved) run."""
+        return TaskSpec(self.meta(), self.trial_fn, self.load_fn, plugins.session_import_paths())
+
+    def meta(self) -> RunMeta:
+        """The record of this (resolved) run, as its ``run.json`` holds it."""
         assert self.config is not None
-        return TaskSpec(
-            self.config.to_dict(), str(self.net), self.polys, self.scenario, bool(self.options.save_estimates),
-            self.trial_fn, self.load_fn, plugins.session_import_paths(),
+        return RunMeta(
+            self.config, str(self.net), self.polys, self.scenario, bool(self.options.save_estimates),
+            self.config.experiment.trials, registry.trial_kind_name(self.trial_fn),
+            registry.scene_loader_name(self.load_fn),
         )  # fmt: skip
 
 
@@ -462,19 +472,19 @@ def _run_locked(store: RunStore, request: RunRequest, locks: list[FolderLock], b
 
 def _run_file(request: RunRequest, scenario_cfg: Any) -> dict:
     """The ``run.json`` of a new run (:mod:`soabench.experiment.runs.runmeta` reads it back)."""
-    assert request.config is not None
+    meta = request.meta()
     return {
         "created": _utc_stamp(),
-        "net": str(request.net),
-        "net_name": scenario_name(request.net, scenario_cfg),
-        "polys": list(request.polys),
-        "scenario": request.scenario,
+        "net": meta.net,
+        "net_name": scenario_name(meta.net, scenario_cfg),
+        "polys": list(meta.polys),
+        "scenario": meta.scenario,
         "scenario_config": _scenario_info(scenario_cfg),
-        "trials": request.config.experiment.trials,
-        "save_estimates": bool(request.options.save_estimates),
-        "trial_kind": registry.trial_kind_name(request.trial_fn),
-        "scene_loader": registry.scene_loader_name(request.load_fn),
-        "config": request.config.to_dict(),
+        "trials": meta.trials,
+        "save_estimates": meta.save_estimates,
+        "trial_kind": meta.trial_kind,
+        "scene_loader": meta.scene_loader,
+        "config": meta.config.to_dict(),
         "versions": package_versions(),
         "platform": platform_info(),
         "reproduction_tolerance": REPRODUCTION_TOLERANCE,
