@@ -34,7 +34,6 @@ from soabench.errors import Interrupted, require
 from soabench.experiment.execution.executors import failure_record, open_executor
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.progress import Progress
-from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.runs.files import pack_table
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, package_versions, platform_info
 from soabench.experiment.runs.runmeta import RunMeta, check_requested, validate_run_meta
@@ -47,6 +46,7 @@ from soabench.experiment.runs.store import (
     RunStore,
 )
 from soabench.experiment.trial import registry
+from soabench.experiment.trial.activity import OWN_CODE, note_activity
 from soabench.experiment.trial.guard import failure_message
 from soabench.folders import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.kernel_warmup import ensure_compiled

@@ -36,8 +36,8 @@ import numpy as np
 from soabench import plugins
 from soabench.config import FAMILY_MODES, FILTER_FAMILIES, filter_config_for_mode
 from soabench.errors import require
-from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.trial import guard, isolate
+from soabench.experiment.trial.activity import OWN_CODE, note_activity
 from soabench.experiment.trial.isolate import PluginFailed, private_scan
 from soabench.metrics import SERIES_KEYS, SUMMARY_KEYS, TrialMetrics, evaluate
 from soabench.origins import ORIGIN_KEYS
