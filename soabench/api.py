@@ -41,6 +41,7 @@ from soabench.boundary import ORDER_SOABENCH, ORDER_STONESOUP
 from soabench.config import FAMILIES, Config
 from soabench.errors import require as _require
 from soabench.errors import require_type as _require_type
+from soabench.errors import require_value as _require_value
 from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP
 from soabench.protocols import BirthModel, Tracker, TrackerSetup
 from soabench.trackers import FilterTracker, GMPHDTracker, run_tracker
@@ -192,8 +193,8 @@ def simulate_trial(
     from soabench.sensor import observe
 
     cfg = _boundary.as_config(config)
-    _require(_is_int(seed) and seed >= 0, f"seed = {seed!r} must be an integer >= 0")
-    _require(_is_int(trial) and trial >= 0, f"trial = {trial!r} must be an integer >= 0")
+    _require_value(_is_int(seed) and seed >= 0, "seed", seed, "must be an integer >= 0")
+    _require_value(_is_int(trial) and trial >= 0, "trial", trial, "must be an integer >= 0")
     if duration is not None:
         cfg = Config.from_dict({"experiment": {"duration": duration}}, base=cfg).validate()
     scene, scenario = load_scene_cached(str(net), (), None)
@@ -434,11 +435,13 @@ def load_scene(net: str = "intersection") -> _Any:
         >>> scene.bounds
         (-50.0, -50.0, 120.0, 50.0)
     """
-    _require(isinstance(net, (str, _Path)), f"net = {net!r} must be a scene name or a path, e.g. 'intersection'")
+    _require_value(isinstance(net, (str, _Path)), "net", net, "must be a scene name or a path, e.g. 'intersection'")
     return _boundary.as_scene(net)
 
 
-def draw_scene(ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Estimates | None" = None) -> _Any:
+def draw_scene(
+    ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Estimates | StepResult | None" = None
+) -> _Any:
     """Draw a scene on a matplotlib ``ax`` as the replay and ``soabench scene`` draw it: roads, sidewalks,
     crossings, buildings and doors, parked cars; with ``scan``, its visible sidewalk Ω_k, the sensor pose and the
     measurements Z_k in the world frame; with ``estimates``, a tracker's positions (and track labels). Returns ``ax``
@@ -448,7 +451,8 @@ def draw_scene(ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Es
         ax: a matplotlib Axes.
         scene: a scene from :func:`load_scene`, or a network name or path.
         scan: one :class:`Scan` (e.g. ``scans[k]`` of :func:`simulate_trial`).
-        estimates: one :class:`Estimates` (a tracker's output at that scan).
+        estimates: a tracker's output at that scan: one :class:`Estimates`, or the :class:`StepResult` of one of
+            our filters.
 
     Example:
         >>> import matplotlib.pyplot as plt
@@ -469,7 +473,9 @@ def draw_scene(ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Es
     if scan is not None:
         _require_type(scan, Scan, "scan", "give one Scan, e.g. scans[k]")
     if estimates is not None:
-        _require_type(estimates, Estimates, "estimates", "give one Estimates, a tracker's output at that scan")
+        _require_type(
+            estimates, (Estimates, StepResult), "estimates", "give one tracker output at that scan, e.g. results[k]"
+        )
     plot_scene(scene, ax=ax)
     if scan is not None:
         draw_scan(ax, scan, estimates)
@@ -506,9 +512,9 @@ def stonesoup_ospa(
         >>> import soabench.api as sb
         >>> from stonesoup.types.state import State
         >>> from stonesoup.types.track import Track
-        >>> from soabench.bridges.stonesoup import scan_time
         >>> _, scans = sb.simulate_trial("arterial", duration=5)
-        >>> tracks = [Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scan)) for scan in scans], id="t1")]
+        >>> times = [t for t, _ in sb.to_stonesoup(scans)]  # the scans' timestamps, as a Stone Soup tracker sees them
+        >>> tracks = [Track([State([1.0, 0.5, 2.0, -0.5], timestamp=t) for t in times], id="t1")]
         >>> theirs = sb.stonesoup_ospa(tracks, scans)
         >>> ours = sb.evaluate(scans, sb.from_stonesoup(tracks, scans).estimates).series["ospa"]
         >>> bool(np.allclose(theirs, ours))
@@ -527,9 +533,9 @@ def from_stonesoup(tracks: _Any, scans: Scans) -> _Any:
         >>> import soabench.api as sb
         >>> from stonesoup.types.state import State
         >>> from stonesoup.types.track import Track
-        >>> from soabench.bridges.stonesoup import scan_time
         >>> _, scans = sb.simulate_trial("arterial", duration=5)
-        >>> track = Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scans[2]))], id="t7")
+        >>> t2, _ = sb.to_stonesoup(scans).detections[2]  # scan 2's timestamp
+        >>> track = Track([State([1.0, 0.5, 2.0, -0.5], timestamp=t2)], id="t7")
         >>> estimates, labels = sb.from_stonesoup([track], scans)
         >>> estimates[2].X.tolist(), labels[2].tolist()
         ([[1.0, 2.0, 0.5, -0.5]], ['t7'])

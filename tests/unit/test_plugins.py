@@ -55,7 +55,7 @@ def test_api_hands_out_the_classes_of_types_and_protocols() -> None:
 
 # ------------------------------------------------------------------------------------------------ the registry
 def test_closed_list_refuses_untyped_import_paths() -> None:
-    with pytest.raises(SoabenchError, match="not given on this command line"):
+    with pytest.raises(SoabenchError, match="is an import path its caller did not name"):
         plugins.check_name(plugins.BIRTH, f"{FX}:OneBirth")
     with pytest.raises(SoabenchError, match="unknown; choose one of soa, pubm"):
         plugins.check_name(plugins.BIRTH, "nosuch")
@@ -269,7 +269,7 @@ def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
     # resume: names from run.json are not imported unless typed again on this command line
     (out / "trials" / "trial_00001.json").unlink()
     plugins._TYPED.clear()
-    with pytest.raises(SoabenchError, match="not given on this command line"):
+    with pytest.raises(SoabenchError, match="is an import path its caller did not name"):
         run_experiment(None, "ignored", resume=out, options=RunOptions(workers=1, progress=False, figures=False))
     plugins.allow_import_paths([one, echo, bad])
     o2 = run_experiment(None, "ignored", resume=out, options=RunOptions(workers=1, progress=False, figures=False))

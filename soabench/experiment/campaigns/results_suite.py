@@ -41,8 +41,7 @@ from soabench.birth import CORE_MODELS
 from soabench.config import FILTER_FAMILIES, MAX_SEED, MAX_TRIALS, Config, check_time
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns.occlusion_density import write_density
-from soabench.experiment.execution.executors import MAX_WORKERS
-from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions, check_workers
 from soabench.experiment.reports.html import write_index
 from soabench.experiment.runs.files import read_json
 from soabench.experiment.runs.runmeta import flatten_config
@@ -449,10 +448,7 @@ def run_results(
     progress of every part (the others are each part's own)."""
 
     workers, progress = options.workers, options.progress
-    require(
-        workers is None or 1 <= workers <= MAX_WORKERS,
-        f"--workers {workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
-    )
+    check_workers(workers)
 
     shipped = shipped_nets()
     s = (settings or Settings()).validate(shipped)

@@ -18,9 +18,9 @@ from pathlib import Path
 from soabench.config import MAX_TRIALS, Config
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns import sensitivity as sens
-from soabench.experiment.execution.executors import MAX_WORKERS, open_executor
+from soabench.experiment.execution.executors import open_executor
 from soabench.experiment.execution.grouped import run_group
-from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions, check_workers
 from soabench.experiment.execution.runner import ALONE, Batch, RunOutcome, RunRequest
 from soabench.experiment.reports.finished import run
 from soabench.experiment.runs.runmeta import config_differences, validate_run_meta
@@ -140,10 +140,7 @@ def run_sensitivity(
         trials is None or 1 <= trials <= MAX_TRIALS,
         f"--trials {trials} is out of range; allowed: integers in [1, {MAX_TRIALS}]",
     )
-    require(
-        workers is None or 1 <= workers <= MAX_WORKERS,
-        f"--workers {workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
-    )
+    check_workers(workers)
     main_dir = resolve(Path(main_dir))
     require((main_dir / "run.json").is_file(), f"--main {main_dir}: not a run folder (no run.json)")
     meta = validate_run_meta(RunStore(main_dir).meta(), str(main_dir / "run.json"))

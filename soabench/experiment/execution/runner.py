@@ -354,7 +354,7 @@ def execute(request: RunRequest, batch: Batch = ALONE) -> RunOutcome:
                 )
                 out = default_run_dir(scenario_name(request.net, scenario_cfg))
             run_dir = resolve(out)
-            check_new_folder(run_dir, RUN_FILE, "run", f"finish it with --resume {run_dir}")
+            check_new_folder(run_dir, RUN_FILE, "run", f"finish it with soabench run --resume {run_dir}")
             store = RunStore(run_dir)
             request = dataclasses.replace(request, config=config, out=run_dir)
         return _run_locked(store, request, locks, batch)
@@ -423,7 +423,7 @@ def _run_locked(store: RunStore, request: RunRequest, locks: list[FolderLock], b
     try:
         if not resumed:
             locks.append(FolderLock(store.run_dir).acquire())  # creates the folder; execute releases it
-            check_new_folder(store.run_dir, RUN_FILE, "run", f"finish it with --resume {store.run_dir}")
+            check_new_folder(store.run_dir, RUN_FILE, "run", f"finish it with soabench run --resume {store.run_dir}")
             store.create(_run_file(request, scenario_cfg))
         if len(todo) and batch.defer is not None:  # run later, together with other folders' trials
             batch.defer.append(DeferredRun(store, request.task_spec(), frozenset(todo), n_trials, config, figures))

@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from soabench.atomic import to_jsonable, write_bytes_atomic, write_json_atomic
-from soabench.errors import SoabenchError
+from soabench.errors import BadValue, SoabenchError
 from soabench.experiment.runs.files import (
     ReadBack,
     csv_line,
@@ -147,8 +147,10 @@ class RunStore:
     def create(self, meta: dict) -> None:
         """Start a new run folder; refuses a folder that already holds a run."""
         if self.exists():
-            raise SoabenchError(
-                f"{str(self.run_dir)!r} already holds a run; use --resume {self.run_dir} or another --out"
+            raise BadValue(
+                "out",
+                str(self.run_dir),
+                f"already holds a run; finish it with soabench run --resume {self.run_dir}, or give another folder",
             )
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self._run_id = run_identity(meta)
