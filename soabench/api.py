@@ -29,6 +29,8 @@ kind), e.g. a :class:`Scans` passed to ``step``, NaN truth rows, or Stone Soup-o
 :data:`ORDER_STONESOUP`) where ours ([x, y, vx, vy], :data:`ORDER_SOABENCH`) are expected.
 """
 
+import dataclasses as _dc
+import importlib
 from collections.abc import Sequence as _Sequence
 from pathlib import Path as _Path
 from typing import TYPE_CHECKING as _TYPE_CHECKING
@@ -42,9 +44,13 @@ from soabench.config import FAMILIES, Config
 from soabench.errors import require as _require
 from soabench.errors import require_type as _require_type
 from soabench.errors import require_value as _require_value
+from soabench.experiment.trial.guard import check_births
+from soabench.experiment.trial.registry import load_scene_cached
 from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP
 from soabench.protocols import BirthModel, Tracker, TrackerSetup
-from soabench.trackers import FilterTracker, GMPHDTracker, run_tracker
+from soabench.scenario import simulate
+from soabench.seeding import trial_seeds
+from soabench.trackers import FilterTracker, GMPHDTracker, build_filter, run_tracker
 from soabench.types import (
     CLUTTER,
     SOURCE_FOV,
@@ -131,8 +137,6 @@ _LAZY = {"RunResult": "soabench.experiment.execution.memory", "TrialMetrics": "s
 
 def __getattr__(name: str) -> _Any:
     if name in _LAZY:
-        import importlib
-
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'soabench.api' has no attribute {name!r}")
 
@@ -187,9 +191,6 @@ def simulate_trial(
         (5, 5)
     """
     from soabench.experiment.execution.runner import check_against_scenario
-    from soabench.experiment.trial.registry import load_scene_cached
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
     from soabench.sensor import observe
 
     cfg = _boundary.as_config(config)
@@ -253,8 +254,6 @@ def make_tracker(
         >>> type(results[0]).__name__, len(results) == len(scans)
         ('StepResult', True)
     """
-    from soabench.seeding import trial_seeds
-    from soabench.trackers import build_filter
 
     cfg, family = _boundary.family_config(config, filter)
     kind, name, cls = _boundary.plugin(name_or_class)
@@ -276,7 +275,6 @@ def make_tracker(
 
 def _named_check(plugin: str) -> _Any:
     """The births check of a plugin birth model, its errors naming ``plugin``."""
-    from soabench.experiment.trial.guard import check_births
 
     return lambda births, scan: check_births(births, scan, plugin)
 
@@ -342,7 +340,6 @@ def occlusion_gaps(scans: Scans, d_gate: float = 5.0) -> list[dict[str, _Any]]:
         >>> all(g["k_b"] >= g["k_a"] and g["occluder"] in ("parked", "vehicle", "building", "other") for g in gaps)
         True
     """
-    import dataclasses as _dc
 
     from soabench.tracks.gaps import describe_gaps
     from soabench.tracks.reemergence import occlusion_gaps as _gaps

@@ -50,7 +50,7 @@ import numpy as np
 
 from soabench import plugins
 from soabench.atomic import write_json_atomic, write_text_atomic
-from soabench.config import CLUTTER_RATE, FAMILIES, FAMILY_MODES, FILTER_FAMILIES, Config
+from soabench.config import CLUTTER_RATE, FAMILIES, FAMILY_MODES, FILTER_FAMILIES, Config, MetricsConfig
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.files import read_csv
 from soabench.experiment.trial.guard import failure_message
@@ -365,7 +365,6 @@ def _check_metric(metric: Any, where: str, bins: Sequence[int] | None = None) ->
     """A threshold's metric must be a metric or timing column of trials.csv or an occlusion metric of the suite's
     gap bins (a typo is a bad suite, not a failed check)."""
     # imported when called: scipy would slow every start-up
-    from soabench.config import MetricsConfig
     from soabench.experiment.runs.store import METRIC_COLUMNS, TIMING_COLUMNS
 
     allowed = METRIC_COLUMNS + TIMING_COLUMNS + tuple(gap_metrics(bins or MetricsConfig().gap_bins))
