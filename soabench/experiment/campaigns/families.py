@@ -3,13 +3,14 @@
 
 from __future__ import annotations
 
-from soabench.config import FILTER_FAMILIES, family_label
+from soabench.config import FILTER_FAMILIES, Config, family_label
 
 
 def config_families(config: dict) -> list[str | None]:
-    """The filter families of a run's configuration (a dict, as stored) in its order; ``[None]`` for the GM-PHD
-    alone (the default, whose tables have no ``filter`` column and whose reports have no per-family sections)."""
-    named = tuple(config["experiment"].get("filters", FILTER_FAMILIES[:1]))
+    """The filter families of a run's configuration (as stored, read through :class:`~soabench.config.Config`) in
+    its order; ``[None]`` for the GM-PHD alone (the default, whose tables have no ``filter`` column and whose reports
+    have no per-family sections)."""
+    named = tuple(Config.from_record(config).experiment.filters)
     return [None] if named == FILTER_FAMILIES[:1] else list(named)
 
 
