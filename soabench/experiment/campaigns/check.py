@@ -239,88 +239,97 @@ def load_suite(path: str | Path) -> Suite:
     )
     scen = data.get("scenario", [])
     require(isinstance(scen, list) and len(scen) >= 1, f"{p}: give at least one [[scenario]] table")
-    for i, raw in enumerate(scen):
-        t = _table(raw, f"[[scenario]] #{i + 1}", SCENARIO_KEYS)
-        require("name" in t and "net" in t, f"[[scenario]] #{i + 1} needs a name and a net")
-        require(
-            isinstance(t["name"], str) and SCENARIO_NAME.fullmatch(t["name"]) is not None,
-            f"[[scenario]] #{i + 1}: name = {t['name']!r} is not a plain name (letters, digits, '.', '_', '-', at most "
-            "100, starting with a letter or digit): it names the folder --out/runs/NAME",
-        )
-        net = str(t["net"])
-        if "/" in net or net.endswith(".xml"):
-            net = str(here / net)
-        s = Scenario(name=str(t["name"]), net=net)
-        w = f"scenario {s.name!r}"
-        if "polys" in t:
-            s.polys = tuple(str(here / f) for f in _strs(t["polys"], f"{w}: polys"))
-        if "scenario" in t:
-            require(isinstance(t["scenario"], str), f"{w}: scenario must be a path to a scenario TOML")
-            s.scenario = str(here / t["scenario"])
-        if "seeds" in t:
-            require(
-                isinstance(t["seeds"], list)
-                and len(t["seeds"]) >= 1
-                and all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in t["seeds"]),
-                f"{w}: seeds = {t['seeds']!r} must be a non-empty list of integers >= 0",
-            )
-            s.seeds = tuple(t["seeds"])
-        if "trials" in t:
-            require(isinstance(t["trials"], int) and t["trials"] >= 1, f"{w}: trials must be an integer >= 1")
-            s.trials = int(t["trials"])
-        if "duration" in t:
-            s.duration = _number(t["duration"], f"{w}: duration", 1e-9)
-        for key in ("models", "trackers", "probabilities"):
-            if key in t:
-                setattr(s, key, _strs(t[key], f"{w}: {key}"))
-        if "clutter" in t:
-            require(isinstance(t["clutter"], list) and t["clutter"], f"{w}: clutter must be a list of rates")
-            s.clutter = tuple(_number(c, f"{w}: clutter", 0.0) for c in t["clutter"])
-        if "filter" in t:
-            s.filter = _family(t["filter"], s.probabilities, f"{p}: {w}")
-        suite.scenarios.append(s)
+    suite.scenarios = [_scenario(raw, i, p, here) for i, raw in enumerate(scen)]
     names = [s.name for s in suite.scenarios]
     require(len(set(names)) == len(names), f"{p}: scenario names {names} repeat")
-    for i, raw in enumerate(data.get("threshold", [])):
-        t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
-        require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
-        bins = _suite_bins(suite.config, [sc.filter for sc in suite.scenarios])
-        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", bins)
-        th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
-        th.mode, th.scenario = t.get("mode"), t.get("scenario")
-        lo, hi = metric_range(th.metric)
-        for key in ("max", "min"):
-            if key in t:
-                v = _number(t[key], f"threshold {th.metric}: {key}")
-                setattr(th, key, v)
-                require(
-                    lo <= v <= hi,
-                    f"{p}: [[threshold]] #{i + 1}: {th.metric} {key} = {t[key]!r} is outside the metric's range "
-                    f"[{lo:g}, {hi:g}] (such a threshold passes or fails whatever the tracker does)",
-                )
-        require(
-            th.max is None or th.min is None or th.min <= th.max,
-            f"{p}: [[threshold]] #{i + 1}: {th.metric} min = {th.min!r} is above max = {th.max!r} (no value passes)",
-        )
-        for key in ("max_increase", "max_decrease", "abs_tol"):
-            if key in t:
-                setattr(th, key, _number(t[key], f"threshold {th.metric}: {key}", 0.0))
-        require(
-            any(v is not None for v in (th.max, th.min, th.max_increase, th.max_decrease)),
-            f"threshold on {th.metric!r} sets none of max, min, max_increase, max_decrease",
-        )
-        require(th.scenario is None or th.scenario in names, f"threshold scenario {th.scenario!r} is not in {names}")
-        scoped = [s for s in suite.scenarios if th.scenario is None or s.name == th.scenario]
-        where = f"{p}: [[threshold]] #{i + 1}"
-        run_names = ["*", *dict.fromkeys(m for s in scoped for m in (*s.models, *s.trackers))]
-        _check_name(th.model, run_names, f"{where}: model", "a model or tracker its scenarios run, or '*'")
-        if th.mode is not None:
-            modes = list(dict.fromkeys(m for s in scoped for m in s.probabilities))
-            _check_name(th.mode, modes, f"{where}: mode", "a probability mode its scenarios run")
-        suite.thresholds.append(th)
+    suite.thresholds = [_threshold(raw, i, suite) for i, raw in enumerate(data.get("threshold", []))]
     if any(th.relative for th in suite.thresholds):
         require(suite.baseline is not None, f'{p}: relative thresholds need [suite] baseline = "FILE.json"')
     return suite
+
+
+def _scenario(raw: Any, i: int, p: Path, here: Path) -> Scenario:
+    """``[[scenario]]`` table ``i`` of suite file ``p`` (in folder ``here``), validated."""
+    t = _table(raw, f"[[scenario]] #{i + 1}", SCENARIO_KEYS)
+    require("name" in t and "net" in t, f"[[scenario]] #{i + 1} needs a name and a net")
+    require(
+        isinstance(t["name"], str) and SCENARIO_NAME.fullmatch(t["name"]) is not None,
+        f"[[scenario]] #{i + 1}: name = {t['name']!r} is not a plain name (letters, digits, '.', '_', '-', at most "
+        "100, starting with a letter or digit): it names the folder --out/runs/NAME",
+    )
+    net = str(t["net"])
+    if "/" in net or net.endswith(".xml"):
+        net = str(here / net)
+    s = Scenario(name=str(t["name"]), net=net)
+    w = f"scenario {s.name!r}"
+    if "polys" in t:
+        s.polys = tuple(str(here / f) for f in _strs(t["polys"], f"{w}: polys"))
+    if "scenario" in t:
+        require(isinstance(t["scenario"], str), f"{w}: scenario must be a path to a scenario TOML")
+        s.scenario = str(here / t["scenario"])
+    if "seeds" in t:
+        require(
+            isinstance(t["seeds"], list)
+            and len(t["seeds"]) >= 1
+            and all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in t["seeds"]),
+            f"{w}: seeds = {t['seeds']!r} must be a non-empty list of integers >= 0",
+        )
+        s.seeds = tuple(t["seeds"])
+    if "trials" in t:
+        require(isinstance(t["trials"], int) and t["trials"] >= 1, f"{w}: trials must be an integer >= 1")
+        s.trials = int(t["trials"])
+    if "duration" in t:
+        s.duration = _number(t["duration"], f"{w}: duration", 1e-9)
+    for key in ("models", "trackers", "probabilities"):
+        if key in t:
+            setattr(s, key, _strs(t[key], f"{w}: {key}"))
+    if "clutter" in t:
+        require(isinstance(t["clutter"], list) and t["clutter"], f"{w}: clutter must be a list of rates")
+        s.clutter = tuple(_number(c, f"{w}: clutter", 0.0) for c in t["clutter"])
+    if "filter" in t:
+        s.filter = _family(t["filter"], s.probabilities, f"{p}: {w}")
+    return s
+
+
+def _threshold(raw: Any, i: int, suite: Suite) -> Threshold:
+    """``[[threshold]]`` table ``i`` of ``suite``, validated against the suite's scenarios."""
+    p, names = suite.path, [s.name for s in suite.scenarios]
+    t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
+    require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
+    bins = _suite_bins(suite.config, [sc.filter for sc in suite.scenarios])
+    _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", bins)
+    th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
+    th.mode, th.scenario = t.get("mode"), t.get("scenario")
+    lo, hi = metric_range(th.metric)
+    for key in ("max", "min"):
+        if key in t:
+            v = _number(t[key], f"threshold {th.metric}: {key}")
+            setattr(th, key, v)
+            require(
+                lo <= v <= hi,
+                f"{p}: [[threshold]] #{i + 1}: {th.metric} {key} = {t[key]!r} is outside the metric's range "
+                f"[{lo:g}, {hi:g}] (such a threshold passes or fails whatever the tracker does)",
+            )
+    require(
+        th.max is None or th.min is None or th.min <= th.max,
+        f"{p}: [[threshold]] #{i + 1}: {th.metric} min = {th.min!r} is above max = {th.max!r} (no value passes)",
+    )
+    for key in ("max_increase", "max_decrease", "abs_tol"):
+        if key in t:
+            setattr(th, key, _number(t[key], f"threshold {th.metric}: {key}", 0.0))
+    require(
+        any(v is not None for v in (th.max, th.min, th.max_increase, th.max_decrease)),
+        f"threshold on {th.metric!r} sets none of max, min, max_increase, max_decrease",
+    )
+    require(th.scenario is None or th.scenario in names, f"threshold scenario {th.scenario!r} is not in {names}")
+    scoped = [s for s in suite.scenarios if th.scenario is None or s.name == th.scenario]
+    where = f"{p}: [[threshold]] #{i + 1}"
+    run_names = ["*", *dict.fromkeys(m for s in scoped for m in (*s.models, *s.trackers))]
+    _check_name(th.model, run_names, f"{where}: model", "a model or tracker its scenarios run, or '*'")
+    if th.mode is not None:
+        modes = list(dict.fromkeys(m for s in scoped for m in s.probabilities))
+        _check_name(th.mode, modes, f"{where}: mode", "a probability mode its scenarios run")
+    return th
 
 
 def _family(name: Any, modes: Sequence[str], where: str) -> str:

@@ -432,19 +432,10 @@ def _run_locked(store: RunStore, request: RunRequest, locks: list[FolderLock], b
             interrupted, stopped, times = _run_trials(
                 store, exe, request.task_spec(), todo, n_trials, len(done), options.fail_fast, options.progress
             )
-            store.write_session(
-                f"{_utc_stamp()}-{os.getpid()}",
-                {
-                    "executor": exe.name,
-                    "n_workers": getattr(exe, "n_workers", 1),
-                    "trials_run": len(todo),
-                    "resumed": resumed,
-                    "interrupted": interrupted,
-                    "stopped_fail_fast": stopped,
-                    "versions": package_versions(),
-                    **times,
-                },
-            )
+            session = {"executor": exe.name, "n_workers": getattr(exe, "n_workers", 1), "trials_run": len(todo),
+                       "resumed": resumed, "interrupted": interrupted, "stopped_fail_fast": stopped,
+                       "versions": package_versions(), **times}  # fmt: skip
+            store.write_session(f"{_utc_stamp()}-{os.getpid()}", session)
     except KeyboardInterrupt:
         interrupted = True
         raise Interrupted(
@@ -454,18 +445,28 @@ def _run_locked(store: RunStore, request: RunRequest, locks: list[FolderLock], b
         if own_executor:
             exe.close(abort=interrupted or stopped)
 
+    if interrupted:
+        done = store.done_trials()
+        raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
+    return _ended(store, request, batch, stopped)
+
+
+def _ended(store: RunStore, request: RunRequest, batch: Batch, stopped: bool) -> RunOutcome:
+    """What the run's folder holds once its trials ran: the finished run to report when every trial was attempted
+    (not when some were never attempted, ``--fail-fast`` ``stopped``, or the trials are deferred to a group)."""
+    config, options = request.config, request.options
+    assert config is not None
+    n_trials = config.experiment.trials
     done = set(store.done_trials())
     failures = store.failures()
     failed_set = {int(f["trial"]) for f in failures}
     n_missing = n_trials - len(done)
     unattempted = n_missing - len(failed_set - done)
     outcome = RunOutcome(store.run_dir, n_missing == 0, len(done), n_missing, failures, "")
-    if interrupted:
-        raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
     if unattempted or stopped or batch.defer is not None:  # deferring: the report follows the group
         return outcome
-
     local = not (options.scheduler or options.dask_local)  # figures on local processes
+    figures = options.figures is not False
     outcome.finished = FinishedRun(store, config, figures, options.workers if local else None, batch.executor)
     return outcome
 
