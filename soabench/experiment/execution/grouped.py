@@ -2,7 +2,7 @@
 
 A study (main run, clutter sweep, N̂ sweep) and an N̂ sweep are run folders whose trial n has the same seeds, so the
 same SUMO recording, the same scans at the same clutter rate and, for equal settings, the same filter runs. Each
-folder is first checked and created as usual (``run_experiment(..., defer=LIST)`` appends a
+folder is first checked and created as usual (a run with ``Batch(defer=LIST)`` appends a
 :class:`~soabench.experiment.execution.runner.DeferredRun`); :func:`run_group` then submits one task per trial index
 that
 runs every folder's trial n in one process with one :class:`~soabench.experiment.trial.trial.TrialShare`: SUMO once, the
