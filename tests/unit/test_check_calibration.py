@@ -1,5 +1,6 @@
 """``soabench check --calibrate N`` proposes thresholds from N runs' values: the 95 % prediction bounds of one
-further run, never past the metric's range (a suite would refuse such a bound). No scenario runs here."""
+further run, never past the metric's range (a suite would refuse such a bound); a bad scenario is refused before the
+check folder is made. No scenario runs here."""
 
 from __future__ import annotations
 
@@ -33,3 +34,17 @@ def test_a_band_past_the_metric_range_stops_at_its_edge_and_says_so() -> None:
     assert p.threshold == "min = 0 (the band passes the metric's range: too noisy to bound, add trials)"
     (q,) = propose(_suite(Threshold("precision", min=0.5)), [{KEY + "precision": v} for v in (0.9, 0.92, 0.91)])
     assert 0 < q.low < 0.9 and "too noisy" not in q.threshold
+
+
+def test_a_misspelled_model_is_refused_before_the_check_folder_is_made(tmp_path, capsys) -> None:
+    from soabench.cli.main import main
+
+    suite = tmp_path / "s.toml"
+    suite.write_text(
+        '[[scenario]]\nname = "a"\nnet = "arterial"\nmodels = ["sao"]\n[[threshold]]\nmetric = "ospa"\nmax = 100\n'
+    )
+    for extra in ([], ["--calibrate", "3"]):
+        assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "out"), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "birth model 'sao' is unknown" in err[0] and "(did you mean 'soa'?)" in err[0]
+        assert not (tmp_path / "out").exists()

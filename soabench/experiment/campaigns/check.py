@@ -481,6 +481,17 @@ class SuiteRun:
     compile_s: float = 0.0
 
 
+def check_scenarios(suite: Suite) -> Config:
+    """Every scenario of ``suite`` as a run configuration would take it (its plugins, models, trackers, modes): a
+    bad one is refused with one line before anything runs or is written. Returns the suite's base configuration."""
+    check_import_paths(suite)
+    base = suite_config(suite.config, [s.filter for s in suite.scenarios])
+    _refuse_protocol_keys(suite.config)
+    for s in suite.scenarios:
+        _config_for(base, s, s.seeds[0])
+    return base
+
+
 def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: int = 0) -> SuiteRun:
     """Run every scenario and seed (each seed plus ``seed_offset``) and collect a :class:`SuiteRun`."""
     # imported when called: scipy would slow every start-up
@@ -490,11 +501,7 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: 
     from soabench.experiment.runs.store import RunStore
     from soabench.kernel_warmup import ensure_compiled
 
-    check_import_paths(suite)
-    base = suite_config(suite.config, [s.filter for s in suite.scenarios])
-    _refuse_protocol_keys(suite.config)
-    for s in suite.scenarios:  # validate every scenario before running any
-        _config_for(base, s, s.seeds[0])
+    base = check_scenarios(suite)
     # once, for every scenario; timed apart: a cold machine's compilation is not the suite's time
     compile_s = ensure_compiled([_config_for(base, s, s.seeds[0]) for s in suite.scenarios])
     rows: dict[tuple, list[dict]] = {}
@@ -724,6 +731,7 @@ def run_calibration(
     plugins.allow_import_paths(plugin_paths)
     suite = load_suite(suite_path)
     require(bool(suite.thresholds), f"{suite.path}: no [[threshold]] to calibrate")
+    check_scenarios(suite)  # before the folder is made
     out = resolve(out)
     check_own_folder(out, "check folder", CHECK_ENTRIES)
     with FolderLock(out, "check folder"):
@@ -770,6 +778,7 @@ def run_check(
     if any(th.relative for th in suite.thresholds) and not update_baseline:
         baseline = read_baseline(suite.baseline)  # a missing baseline is a user error, before any run
 
+    check_scenarios(suite)  # before the folder is made
     out = resolve(out)
     check_own_folder(out, "check folder", CHECK_ENTRIES)
     with FolderLock(out, "check folder"):

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from soabench.birth import LABEL
-from soabench.errors import require
+from soabench.errors import SoabenchError, require
 from soabench.experiment.campaigns.families import config_families, family_heading, first_family_note
 from soabench.experiment.reports.report import fmt, fmt_pct
 from soabench.experiment.runs.files import read_json
@@ -107,16 +107,23 @@ def occlusion_points(values, base_config: dict) -> list[dict]:
     return [{"name": f"density_{v:05.2f}", "value": v, "config": base_config} for v in vals]
 
 
-def check_parking_lanes(net_file: str, values) -> None:
+def check_parking_lanes(
+    net_file: str,
+    values,
+    what: str = "sweep occlusion",
+    fix: str = "give a network with parking lanes (every shipped scene has them) or only --values 0",
+) -> None:
     """Refuse, before anything is written, densities above 0 on a network without parking lanes (parked cars stand
-    only on parking lanes: :mod:`soabench.scenario.parking`)."""
+    only on parking lanes: :mod:`soabench.scenario.parking`); ``what`` names the command or axis in the message and
+    ``fix`` says what to give instead."""
 
     above = [float(v) for v in values if float(v) > 0]
-    require(
-        not above or bool(parking_lanes(read_net(net_file))),
-        f"sweep occlusion: network {Path(net_file).name!r} has no parking lanes, so density {above[0]:g} is "
+    if not above or parking_lanes(read_net(net_file)):
+        return
+    raise SoabenchError(
+        f"{what}: network {Path(net_file).name!r} has no parking lanes, so density {above[0]:g} is "
         'impossible (parked cars stand on normal-edge lanes such as allow="custom1" that carry neither passenger '
-        "cars nor pedestrians); give a network with parking lanes (every shipped scene has them) or only --values 0",
+        f"cars nor pedestrians); {fix}"
     )
 
 

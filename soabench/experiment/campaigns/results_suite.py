@@ -373,8 +373,8 @@ def atlas_request(folder: Path, scene: str, s: Settings):
 
 
 def _atlas_part(folder: Path, scene: str, s: Settings, exe: RunOptions, log: Callable[[str], None]):
-    """The atlas of ``scene``: kept when complete with these settings, else resumed (more trials: extended) or
-    started; its report is drawn whenever trials were added."""
+    """The atlas of ``scene``: kept when complete with these settings (its chunks compacted if a part of it is not),
+    else resumed (more trials: extended) or started; its report is drawn whenever trials were added."""
     from soabench.experiment.campaigns.atlas.run import run_atlas
     from soabench.experiment.campaigns.atlas.store import done_chunks, is_atlas, read_meta
 
@@ -385,7 +385,11 @@ def _atlas_part(folder: Path, scene: str, s: Settings, exe: RunOptions, log: Cal
         same = meta["trials"] == s.atlas_trials and req.design is not None
         if same and len({c for c in done_chunks(folder) if c[0] < meta["trials"]}) == n_chunks:
             if (folder / "report" / "summary.md").is_file():
-                log(f"kept {folder} (the atlas is complete)")
+                from soabench.experiment.campaigns.atlas.compact import compact
+
+                with FolderLock(folder, "atlas folder"):
+                    n = compact(folder).get("trials", 0)  # chunks an earlier layout left: into parts, same rows
+                log(f"kept {folder} (the atlas is complete" + (f"; {n} chunks compacted)" if n else ")"))
                 return "kept", 0
     o = run_atlas(req, exe, log=log)
     return ("done" if o.complete else "incomplete"), o.n_missing

@@ -141,8 +141,13 @@ def variant_scenario(variant: SceneVariant) -> dict | None:
         scenario_from_dict(data, source=f"scene {variant.net}")
     except SoabenchError as exc:
         raise SoabenchError(f"axis value {_shown(variant.scenario)}: {exc}") from None
-    if float(variant.scenario.get("parking.density", 0)) > 0 and "net" in data.get("files", {}):
-        check_parking_lanes(data["files"]["net"], [variant.scenario["parking.density"]])
+    if "parking.density" in variant.scenario and "net" in data.get("files", {}):
+        check_parking_lanes(
+            data["files"]["net"],
+            [variant.scenario["parking.density"]],
+            what=f"axis parking.density on scene {variant.net!r}",
+            fix="drop the parking.density axis for this scene (or give it only the value 0)",
+        )
     return data
 
 

@@ -2,8 +2,8 @@
 
 :func:`connect` opens an in-memory DuckDB database whose views are the folder's tables:
 
-* an atlas (``atlas.json``): ``trials``, ``episodes``, ``steps`` (when stored) over the Parquet chunks, and
-  ``points`` (one row per design point);
+* an atlas (``atlas.json``): ``trials``, ``episodes``, ``steps`` (when stored) over its Parquet parts and the chunks
+  no part holds yet (:func:`.store.dataset_files`), and ``points`` (one row per design point);
 * a run folder (``run.json``): ``trials``, ``episodes``, ``steps`` over its CSV files;
 * a folder holding run folders (a sweep, a study, results/): the same tables over every run folder below it, with a
   ``run`` column naming the run folder (its path relative to the folder).
@@ -45,9 +45,9 @@ def tables_of(root: Path) -> dict[str, str]:
     if (root / store.ATLAS_FILE).exists():
         store.read_meta(root)  # one line if atlas.json is not an atlas's
         for table in store.TABLES:
-            files = sorted((root / table).glob("*.parquet")) if (root / table).is_dir() else []
+            files = store.dataset_files(root, table)  # its parts and the chunk files no part holds
             if files:
-                out[table] = f"read_parquet({_sql_text(str(root / table / '*.parquet'))}, union_by_name = true)"
+                out[table] = f"read_parquet({_sql_list(files)}, union_by_name = true)"
         out["points"] = f"read_parquet({_sql_text(str(root / 'points.parquet'))})"
         return out
     if (root / "run.json").is_file():
@@ -72,10 +72,11 @@ def tables_of(root: Path) -> dict[str, str]:
     return out
 
 
-def connect(path: str | Path, only: Any = None) -> Any:
+def connect(path: str | Path, only: Any = None, threads: int | None = None) -> Any:
     """A DuckDB connection with the folder's tables as views (module docstring); ``only``: the names of the tables
     to open (None: all). DuckDB reads every file's schema when it creates a view, so a query opens only the tables it
-    names."""
+    names. ``threads``: DuckDB's threads (None: its default, every core); one thread sums in the files' row order,
+    so averages are the same bit for bit from run to run."""
     import duckdb
 
     root = Path(path).resolve()
@@ -83,6 +84,8 @@ def connect(path: str | Path, only: Any = None) -> Any:
     if only is not None:
         tables = {k: v for k, v in tables.items() if k in set(only)}
     con = duckdb.connect()
+    if threads is not None:
+        con.execute(f"SET threads = {int(threads)}")
     con.execute("SET allowed_directories = ?", [[str(root) + "/"]])
     con.execute("SET enable_external_access = false")
     con.execute("SET lock_configuration = true")

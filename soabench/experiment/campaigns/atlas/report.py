@@ -125,7 +125,7 @@ def write_report(root: Path) -> str:
 
     out = root / "report"
     out.mkdir(exist_ok=True)
-    con = connect(root)
+    con = connect(root, threads=1)  # sums in row order: the same cells bit for bit, whatever the layout
     try:
         varying, col_of = analysed_axes(con, meta)
         models = {r[0] for r in con.execute("SELECT DISTINCT model FROM trials").fetchall()}

@@ -7,8 +7,9 @@ study does for its clutter rates), and returns the chunk's rows. Trial n has the
 (:mod:`soabench.seeding`): common random numbers inside a point (every model sees the same truth, detections and
 clutter) and across the points of a variant. The driver writes each chunk as its task finishes
 (:mod:`.store`; workers need no shared file system) and holds only the chunks in flight, so memory stays flat in the
-number of trials. Tasks run trial-major (trial 0 of every variant, then trial 1, ...): an interrupted atlas has about
-as many trials at every point, and a resumed one runs only the chunks without a ``trials/`` file.
+number of trials; at the end of a session it compacts the finished chunks into a few parts (:mod:`.compact`). Tasks
+run trial-major (trial 0 of every variant, then trial 1, ...): an interrupted atlas has about as many trials at every
+point, and a resumed one runs only the chunks that are not complete (:func:`.store.done_chunks`).
 """
 
 from __future__ import annotations
@@ -350,9 +351,9 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
             if registry.trial_kind(spec.trial_kind) is registry._builtin_trial:
                 from soabench.kernel_warmup import ensure_compiled
 
-                ensure_compiled()
+                ensure_compiled(point_config(spec.config, json.loads(ov)) for _, _, ov, _ in spec.points)
             exe = open_executor(options.workers, options.scheduler, options.dask_local, n_trials=todo_n)
-            bar = Progress(n_chunks, n_chunks - todo_n, options.progress, label=root.name)
+            bar = Progress(n_chunks, n_chunks - todo_n, options.progress, label=root.name, unit="chunks")
             aborted = True
             try:
                 gen = exe.results(spec, _todo(spec, n_trials, done))
@@ -384,6 +385,9 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
                 ) from None
             finally:
                 exe.close(abort=aborted)
+        from soabench.experiment.campaigns.atlas.compact import compact
+
+        compact(root)  # the session's chunks into parts: few files for the report and every query
         done = store.done_chunks(root)
         n_done_chunks = len({c for c in done if c[0] < n_trials})
         complete = n_done_chunks == n_chunks
