@@ -3,8 +3,9 @@
 
 :func:`run_in_memory` runs the trials of a config on the same executors as
 :func:`~soabench.experiment.execution.runner.execute` (trial n's seeds depend only on ``(seed, n)``) and merges
-their records with the run folder's own order (:class:`~soabench.experiment.runs.store.TableOrder`), so :class:`RunResult` holds the rows of ``trials.csv``,
-``episodes.csv`` and ``steps.csv`` value for value; :meth:`RunResult.write_csv` writes them with the run folder's
+their records with the run folder's own order (:class:`~soabench.experiment.runs.store.TableOrder`), so
+:class:`RunResult` holds the rows of ``trials.csv``, ``episodes.csv`` and ``steps.csv`` value for value;
+:meth:`RunResult.write_csv` writes them with the run folder's
 writer, byte for byte. Nothing is written to disk unless asked.
 """
 
