@@ -555,14 +555,50 @@ class _TrialSteps:
             _record(key, self.config, observed.sensor_cfg, observed.scans, self.seeds, kept, out)
             share.count("runs_rescored")
         else:
-            run = _run_one(key, self.config, observed.sensor_cfg, self.scene, observed.scans, self.seeds,
-                           self.fns.filter_cls, self.fns.birth_factory, out, births)  # fmt: skip
+            run = self.run_one(key, observed, births)
             share.count("runs")
             if share.keep_filter_runs and run is not None:
                 share.filter_runs[filter_key] = run
         finished = before.one_run_since(out)
         if finished is not None:  # a finished built-in run: reusable
             share.runs[run_key] = finished
+
+    def run_one(self, key: RunKey, observed: _Observed, births: _BirthsOnce | None = None) -> FilterRun | None:
+        """One (model x mode) filter run on the scans; appends its row, episodes, steps (and estimates) to ``out``.
+
+        ``births``: the model's births shared by every probability mode (:func:`_births_once`); None builds the
+        model. Returns the finished run of a built-in model (a study may score it again,
+        :attr:`TrialShare.filter_runs`), None for a plugin's.
+
+        A built-in birth model runs unguarded (an exception fails the trial: a bug of soabench). A plugin is checked
+        at every scan (:mod:`soabench.experiment.trial.guard`); if it fails, the run is recorded in ``out.failures``
+        and the trial goes on with the other runs.
+        """
+        config, sensor_cfg, scans, seeds, out = self.config, observed.sensor_cfg, observed.scans, self.seeds, self.out
+        birth_factory, filter_cls = self.fns.birth_factory, self.fns.filter_cls
+        if plugins.is_builtin_birth(key.model):
+            birth_model = (
+                births
+                if births is not None
+                else birth_factory(key.model)(config.birth, sensor_cfg, self.scene, seeds.placement_rng())
+            )
+            filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
+            run = run_tracker(scans, FilterTracker(birth_model, filt, p_D_b))
+            _record(key, config, sensor_cfg, scans, seeds, run, out)
+            return run
+
+        def build() -> FilterTracker:
+            cls = birth_factory(key.model)
+            options = config.plugins.get(key.model, {})
+            own_cfg, own_sensor = dataclasses.replace(config.birth), dataclasses.replace(sensor_cfg)
+            birth_model = cls(own_cfg, own_sensor, self.scene, seeds.placement_rng(), **options)
+            filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
+            return FilterTracker(_PrivateScans(birth_model), filt, p_D_b, check_births=guard.check_births)
+
+        run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out, config.experiment.plugin_budget)
+        if run is not None:
+            _record(key, config, sensor_cfg, scans, seeds, run, out)
+        return None
 
     def run_trackers(self, observed: _Observed) -> None:
         """Every whole tracker of ``experiment.trackers`` in every probability mode."""
@@ -628,54 +664,6 @@ def _replay(cached: RunRecords, out: TrialResult) -> None:
         out.estimates.extend(dict(e) for e in cached.estimates)
 
 
-def _run_one(
-    key: RunKey,
-    config: Config,
-    sensor_cfg: SensorConfig,
-    scene: SceneMap,
-    scans: Scans,
-    seeds: TrialSeeds,
-    filter_cls: type | None,
-    birth_factory: Callable[[str], type],
-    out: TrialResult,
-    births: _BirthsOnce | None = None,
-) -> FilterRun | None:
-    """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``.
-
-    ``births``: the model's births shared by every probability mode (:func:`_births_once`); None builds the model.
-    Returns the finished run of a built-in model (a study may score it again, :attr:`TrialShare.filter_runs`),
-    None for a plugin's.
-
-    A built-in birth model runs unguarded (an exception fails the trial: a bug of soabench). A plugin is checked at
-    every scan (:mod:`soabench.experiment.trial.guard`); if it fails, the run is recorded in ``out.failures`` and the
-    trial goes on with the other runs.
-    """
-
-    if plugins.is_builtin_birth(key.model):
-        birth_model = (
-            births
-            if births is not None
-            else birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
-        )
-        filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
-        run = run_tracker(scans, FilterTracker(birth_model, filt, p_D_b))
-        _record(key, config, sensor_cfg, scans, seeds, run, out)
-        return run
-
-    def build() -> FilterTracker:
-        cls = birth_factory(key.model)
-        options = config.plugins.get(key.model, {})
-        own_cfg, own_sensor = dataclasses.replace(config.birth), dataclasses.replace(sensor_cfg)
-        birth_model = cls(own_cfg, own_sensor, scene, seeds.placement_rng(), **options)
-        filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
-        return FilterTracker(_PrivateScans(birth_model), filt, p_D_b, check_births=guard.check_births)
-
-    run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out, config.experiment.plugin_budget)
-    if run is not None:
-        _record(key, config, sensor_cfg, scans, seeds, run, out)
-    return None
-
-
 def _filter(
     key: RunKey, config: Config, sensor_cfg: SensorConfig, seeds: TrialSeeds, filter_cls: type | None
 ) -> tuple[Any, float]:
@@ -730,7 +718,7 @@ def _run_one_tracker(
     seeds: TrialSeeds,
     out: TrialResult,
 ) -> None:
-    """One (tracker x mode) run on ``scans``, guarded like a plugin birth model (:func:`_run_one`)."""
+    """One (tracker x mode) run on ``scans``, guarded like a plugin birth model (:meth:`_TrialSteps.run_one`)."""
 
     def build() -> Any:
         cls = plugins.resolve(plugins.TRACKER, key.model)
