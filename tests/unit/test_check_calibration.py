@@ -48,3 +48,17 @@ def test_a_misspelled_model_is_refused_before_the_check_folder_is_made(tmp_path,
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "birth model 'sao' is unknown" in err[0] and "(did you mean 'soa'?)" in err[0]
         assert not (tmp_path / "out").exists()
+
+
+def test_a_misspelled_scene_of_a_later_scenario_is_refused_before_the_first_runs(tmp_path, capsys) -> None:
+    from soabench.cli.main import main
+
+    suite = tmp_path / "s.toml"
+    suite.write_text(
+        '[[scenario]]\nname = "a"\nnet = "arterial"\n[[scenario]]\nname = "b"\nnet = "arterail"\n'
+        '[[threshold]]\nmetric = "ospa"\nmax = 100\n'
+    )
+    assert main(["check", "--suite", str(suite), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "[[scenario]] 'b': net='arterail' is neither a shipped network" in err[0], err
+    assert "(did you mean 'arterial'?)" in err[0] and not (tmp_path / "out").exists()

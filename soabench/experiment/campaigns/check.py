@@ -482,13 +482,21 @@ class SuiteRun:
 
 
 def check_scenarios(suite: Suite) -> Config:
-    """Every scenario of ``suite`` as a run configuration would take it (its plugins, models, trackers, modes): a
-    bad one is refused with one line before anything runs or is written. Returns the suite's base configuration."""
+    """Every scenario of ``suite`` as a run would take it (its plugins, models, trackers, modes and its scene, loaded
+    once per process as the runs load it): a bad one is refused with one line naming it before any scenario runs or
+    anything is written. Returns the suite's base configuration."""
+    # imported when called: the scene loader brings SUMO's readers
+    from soabench.experiment.trial.registry import load_scene_cached
+
     check_import_paths(suite)
     base = suite_config(suite.config, [s.filter for s in suite.scenarios])
     _refuse_protocol_keys(suite.config)
     for s in suite.scenarios:
-        _config_for(base, s, s.seeds[0])
+        try:
+            _config_for(base, s, s.seeds[0])
+            load_scene_cached(s.net, tuple(str(p) for p in s.polys), s.scenario)
+        except SoabenchError as exc:
+            raise SoabenchError(f"{suite.path}: [[scenario]] {s.name!r}: {exc}") from None
     return base
 
 

@@ -2,8 +2,8 @@
 
 A scan's cost follows the number of files (each file's footer and its ninety-odd column schemas), not the rows, so
 a finished atlas keeps its rows in parts of up to :data:`PART_ROWS` rows whose row groups (what DuckDB scans in
-parallel) hold up to :data:`ROW_GROUP_ROWS` rows or :data:`ROW_GROUP_BYTES`. Compaction streams: one chunk file at a
-time is read and at most one row group is held, so its memory does not grow with the atlas.
+parallel) are written once they reach :data:`ROW_GROUP_ROWS` rows or :data:`ROW_GROUP_BYTES`. Compaction streams: one
+chunk file at a time is read and at most one row group is held, so its memory does not grow with the atlas.
 
 Safe at any moment: each part is written to a temporary name, fsynced and renamed, and its chunk files are removed
 only after that; a reader ignores a chunk file a part of its table holds (:func:`.store.table_files`). Tables are
@@ -20,8 +20,8 @@ from typing import Any
 from soabench.atomic import open_atomic
 from soabench.experiment.campaigns.atlas import store
 
-ROW_GROUP_ROWS = 65_536  #: rows per row group of a part at most
-ROW_GROUP_BYTES = 4 * 2**20  #: uncompressed bytes per row group at most (what compaction holds in memory)
+ROW_GROUP_ROWS = 65_536  #: a row group is written once it holds this many rows ...
+ROW_GROUP_BYTES = 4 * 2**20  #: ... or this many uncompressed bytes (what compaction holds in memory, plus one chunk)
 PART_ROWS = 1_048_576  #: rows per part at most (a larger table is several parts)
 
 
