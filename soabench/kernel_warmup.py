@@ -179,6 +179,23 @@ def _lmb_steps(modes: tuple[str, ...]) -> None:
     association_marginals(np.zeros((2, 4)), 10, np.uint32(0), True)
 
 
+def _pmbm_steps(modes: tuple[str, ...]) -> None:
+    """The PMBM and PMB filters (docs/method.md §10): steps with Gaussian births and newborn terms, which compile the
+    clusters, the global hypotheses and Murty's ranked assignments with their solver."""
+    import shapely
+
+    from soabench.pmbm import PMBMFilter
+
+    cfg = Config()
+    Z, ego = _scan_arrays()
+    for pmb in (False, True):
+        f = PMBMFilter(cfg.filter, cfg.sensor_at(), pmb=pmb)
+        for k in range(3):
+            b = _births()
+            b.newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0 * A)
+            f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
+
+
 def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:
     """The modes without the line-of-sight gate whose argument types ``modes`` use ("dynamic+occ": "dynamic")."""
     return tuple(dict.fromkeys("dynamic" if m == "dynamic+occ" else m for m in modes))
@@ -189,11 +206,11 @@ def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:
 #: given (those that take no mode ignore them).
 ROUNDS: tuple[tuple[Callable[[tuple[str, ...]], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_fused_steps, _newborn_steps, _lmb_steps, _track_metrics),
+    (_fused_steps, _newborn_steps, _lmb_steps, _pmbm_steps, _track_metrics),
 )
 
 #: the groups whose kernels take no probability mode (compiled once for all)
-MODELESS = (_reduction, _metrics_geometry, _lmb_steps, _track_metrics)
+MODELESS = (_reduction, _metrics_geometry, _lmb_steps, _pmbm_steps, _track_metrics)
 
 #: built-in birth models whose births carry measurement-driven newborn terms (:class:`~soabench.types.NewbornTerms`)
 NEWBORN_MODELS = frozenset({"pubm", "atbm"})
@@ -202,9 +219,9 @@ NEWBORN_MODELS = frozenset({"pubm", "atbm"})
 def needed(configs: Iterable[Config | dict]) -> dict[Callable[[tuple[str, ...]], None], tuple[str, ...]]:
     """The groups a run of ``configs`` calls and, per group, its probability modes: the GM-PHD family's modes for
     the prediction, update and fused steps; the newborn step only when a birth model may hand newborn terms (one of
-    :data:`NEWBORN_MODELS`, or a plugin); the LMB only when its family runs; the metric, geometry, reduction and
-    track kernels always (the filters' runs are labelled). A configuration given as a dict that does not load
-    asks for every group."""
+    :data:`NEWBORN_MODELS`, or a plugin); the LMB, and the PMBM/PMB, only when their family runs; the metric,
+    geometry, reduction and track kernels always (the filters' runs are labelled). A configuration given as a dict
+    that does not load asks for every group."""
     groups: dict[Callable[[tuple[str, ...]], None], tuple[str, ...]] = {}
 
     def add(group, modes):
@@ -226,6 +243,8 @@ def needed(configs: Iterable[Config | dict]) -> dict[Callable[[tuple[str, ...]],
                 add(_newborn_steps, exp.probabilities)
         if "lmb" in exp.filters:
             add(_lmb_steps, ("any",))
+        if "pmbm" in exp.filters or "pmb" in exp.filters:
+            add(_pmbm_steps, ("any",))
     return groups
 
 

@@ -188,3 +188,26 @@ def test_a_parking_axis_on_a_scene_without_parking_lanes_is_one_line(tmp_path, c
     err = capsys.readouterr().err
     assert "axis parking.density on scene 'grid_block'" in err and "drop the parking.density axis" in err
     assert len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_the_results_part_compacts_a_kept_atlas_left_as_chunks(tmp_path, monkeypatch):
+    """An atlas made before compaction (chunk files only) is kept by `soabench results` and compacted: the same
+    rows, one part per table, its report untouched."""
+    from soabench.experiment.campaigns import results_suite as rs
+
+    monkeypatch.setattr(rs, "ATLAS_AXES", {"pedestrians.count": (3, 6), "experiment.clutter": (0.5, 3.0)})
+    part, log = tmp_path / "atlas" / "intersection", []
+    exe = RunOptions(workers=1, progress=False)
+    s = rs.Settings(duration=10.0, atlas_trials=2)
+    with ft.as_builtins():
+        with monkeypatch.context() as mp:
+            mp.setattr(compaction, "compact", lambda root: {})
+            assert rs._atlas_part(part, "intersection", s, exe, log.append) == ("done", 0)
+        assert len(list((part / "trials").iterdir())) == 4  # chunk files, as before compaction existed
+        rows = _rows(part)
+        report = {p.name: p.read_bytes() for p in (part / "report").iterdir()}
+        assert rs._atlas_part(part, "intersection", s, exe, log.append) == ("kept", 0)
+    assert "4 chunks compacted" in log[-1]
+    assert [p.name for p in (part / "trials").iterdir()] == ["part-00000.parquet"]
+    assert _rows(part).equals(rows)
+    assert {p.name: p.read_bytes() for p in (part / "report").iterdir()} == report
