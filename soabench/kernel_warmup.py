@@ -182,8 +182,6 @@ def _lmb_steps(modes: tuple[str, ...]) -> None:
 def _pmbm_steps(modes: tuple[str, ...]) -> None:
     """The PMBM and PMB filters (docs/method.md §10): steps with Gaussian births and newborn terms, which compile the
     clusters, the global hypotheses and Murty's ranked assignments with their solver."""
-    import shapely
-
     from soabench.pmbm import PMBMFilter
 
     cfg = Config()
