@@ -26,7 +26,8 @@ from typing import Any
 
 from soabench.errors import SoabenchError, require
 from soabench.experiment.execution.options import check_scheduler_address, check_workers
-from soabench.experiment.execution.workers import init_worker, last_activity, sigint_ignored_by_children
+from soabench.experiment.execution.workers import init_worker, sigint_ignored_by_children
+from soabench.experiment.trial.activity import last_activity
 from soabench.seeding import trial_seeds
 
 
@@ -68,9 +69,7 @@ class PoolExecutor:
         self.n_workers = int(workers)
         self._pool: ProcessPoolExecutor | None = None
         self._generation = 0  # incremented whenever a broken pool is replaced
-        self._notes: str | None = (
-            None  # the workers' notes folder (soabench.experiment.execution.workers.note_activity)
-        )
+        self._notes: str | None = None  # the workers' notes folder (soabench.experiment.trial.activity.note_activity)
         self._procs: dict[int, Any] = {}  # pid -> process of the current pool (its exit code names a death)
         self._lost: dict[int, dict[int, str]] = {}  # pool generation -> trial -> why it was lost
 
