@@ -268,15 +268,7 @@ def _hota(
         hit = ms[None, :] >= ALPHAS[:, None] - _EPS  # (A, n_matches)
         tp = hit.sum(axis=1).astype(float)
         loc = np.array([ms[h].sum() for h in hit])
-        cell = mg * nT + me
-        assa, assre, asspr = np.zeros(A), np.zeros(A), np.zeros(A)
-        union = gt_count[:, None] + tr_count[None, :]
-        for a in range(A):
-            count = np.bincount(cell[hit[a]], minlength=len(gt_count) * nT).reshape(len(gt_count), nT).astype(float)
-            den = max(1.0, tp[a])
-            assa[a] = np.sum(count * (count / np.maximum(1, union - count))) / den
-            assre[a] = np.sum(count * (count / np.maximum(1, gt_count[:, None]))) / den
-            asspr[a] = np.sum(count * (count / np.maximum(1, tr_count[None, :]))) / den
+        assa, assre, asspr = _association(mg * nT + me, hit, gt_count, tr_count, tp)
         fn = seq.n_gt_dets - tp
         fp = seq.n_est_dets - tp
         deta = tp / np.maximum(1, tp + fn + fp)
@@ -292,6 +284,38 @@ def _hota(
         }
     means = {k: float(np.mean(out[f"{k}_alpha"])) for k in ("hota", "deta", "assa", "loca")}
     return {**means, **out}
+
+
+def _association(
+    cell: np.ndarray, hit: np.ndarray, gt_count: np.ndarray, tr_count: np.ndarray, tp: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """HOTA's AssA, AssRe and AssPr per alpha from the matches' cells (truth * nT + track) and ``hit`` (A, matches).
+
+    Per alpha, TrackEval sums ``count * (count / max(1, union - count))`` (and the recall and precision forms) over
+    the dense (nG, nT) array of match counts. The cells are sorted once for every alpha, each alpha's counts are
+    found per cell, and the sums are taken over the non-zero cells only with :func:`sparse_np_sum`, numpy's pairwise
+    sum of the dense array bit for bit (a zero cell adds nothing)."""
+    from soabench.tracks.kernels import sparse_np_sum
+
+    A, nT = len(hit), len(tr_count)
+    order = np.argsort(cell, kind="stable")
+    cells, first = np.unique(cell[order], return_index=True)
+    g, t = cells // nT, cells % nT
+    union = gt_count[g] + tr_count[t]
+    out = np.zeros((3, A))
+    for a in range(A):
+        count = np.add.reduceat(hit[a][order].astype(np.int64), first).astype(float) if len(cells) else np.zeros(0)
+        on = count > 0
+        pos, c = cells[on], count[on]
+        den = max(1.0, tp[a])
+        terms = (
+            c * (c / np.maximum(1, union[on] - c)),
+            c * (c / np.maximum(1, gt_count[g[on]])),
+            c * (c / np.maximum(1, tr_count[t[on]])),
+        )
+        for i, term in enumerate(terms):
+            out[i, a] = announced("track metrics", sparse_np_sum, pos, term, len(gt_count) * nT) / den
+    return out[0], out[1], out[2]
 
 
 def _identity(
