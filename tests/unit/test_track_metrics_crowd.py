@@ -136,3 +136,18 @@ def test_equal_rows_as_compared_pair_by_pair(seed):
     C = rng.choice([0.0, -0.0, -0.5, -1.0], size=(a, b), p=[0.6, 0.1, 0.15, 0.15])
     expected = any((C[i] == C[j]).all() and (C[i] != 0).any() for i in range(a) for j in range(i + 1, a))
     assert _equal_rows(C) == expected
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_sparse_sum_is_the_dense_arrays_sum_bit_for_bit(seed):
+    """Lengths around numpy's block sizes (8, 128 and their splits), densities from empty to full, magnitudes over
+    six decades: the sum of the non-zero entries in numpy's pairwise order is ``ndarray.sum`` of the dense array."""
+    from soabench.tracks.kernels import sparse_np_sum
+
+    rng = np.random.default_rng(seed)
+    for n in (0, 1, 7, 8, 9, 127, 128, 129, 136, 1000, 4099, 250_000):
+        a = np.where(
+            rng.random(n) < rng.choice([0.0, 0.001, 0.05, 0.5, 1.0]), rng.random(n) * 10 ** rng.uniform(-3, 3, n), 0.0
+        )
+        pos = np.flatnonzero(a)
+        assert sparse_np_sum(pos, a[pos], n) == a.sum()
