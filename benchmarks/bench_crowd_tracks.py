@@ -6,8 +6,8 @@ Each round runs, in a fresh process per side (after a 5 s warm-up trial, so that
 not counted), one ``run_trial`` of the intersection with ``[pedestrians] count = --peds`` (SUMO, sensor, the twelve
 filter runs of the paper protocol, their §5 metrics and track metrics, result rows). Printed per side and round:
 the trial's wall seconds, its SUMO seconds, their ratio, the twelve runs' filter seconds (``t_filter_total``), the
-track metrics' seconds (every :func:`soabench.tracks.evaluate.evaluate_tracks` call of the trial, timed around the
-call) and their ratio to the filter seconds.
+track metrics' seconds (every :func:`soabench.tracks.evaluate.track_evaluation` call of the trial, timed around the
+call: wall and CPU seconds) and their ratio to the filter seconds.
 
 ``--baseline DIR`` runs another checkout (``PYTHONPATH=DIR``, e.g. ``git worktree add /tmp/base main``) as the
 other side, alternating with this one round by round so that a shared machine's load falls on both alike, and
@@ -54,15 +54,17 @@ def child(peds: int, duration: float, seed: int) -> dict:
         sumo[0] += time.perf_counter() - t0
         return rec
 
-    evaluate_tracks = trial_module.evaluate_tracks
+    tracks_cpu = [0.0]
+    track_evaluation = trial_module.track_evaluation
 
     def timed_tracks(*args, **kwargs):
-        t0 = time.perf_counter()
-        out = evaluate_tracks(*args, **kwargs)
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = track_evaluation(*args, **kwargs)
         tracks[0] += time.perf_counter() - t0
+        tracks_cpu[0] += time.process_time() - c0
         return out
 
-    trial_module.evaluate_tracks = timed_tracks
+    trial_module.track_evaluation = timed_tracks
     t0 = time.perf_counter()
     res = trial_module.run_trial(0, cfg, scene, sc, simulate_fn=timed_simulate)
     wall = time.perf_counter() - t0
@@ -73,6 +75,7 @@ def child(peds: int, duration: float, seed: int) -> dict:
         sumo=sumo[0],
         filters=sum(r["t_filter_total"] for r in rows),
         tracks=tracks[0],
+        tracks_cpu=tracks_cpu[0],
         runs=len(rows),
         digest=hashlib.sha256(json.dumps(tables, default=repr).encode()).hexdigest(),
     )
@@ -105,7 +108,7 @@ def main() -> int:
     sides = [("this", None)] + ([("baseline", str(Path(args.baseline).resolve()))] if args.baseline else [])
     print(f"one {args.duration:g} s intersection trial, {args.peds} pedestrians, twelve filter runs; "
           f"load average {os.getloadavg()[0]:.1f}")  # fmt: skip
-    print("| round | side | trial s | SUMO s | trial / SUMO | filters s | track metrics s | tracks / filters |")
+    print("| round | side | trial s | SUMO s | trial / SUMO | filters s | track metrics s (CPU s) | tracks / filters |")
     print("|---:|---|---:|---:|---:|---:|---:|---:|")
     digests: dict[str, set[str]] = {name: set() for name, _ in sides}
     for r in range(args.rounds):
@@ -113,7 +116,7 @@ def main() -> int:
             m = measure(args, path)
             digests[name].add(m["digest"])
             cells = (f"{m['wall']:.1f}", f"{m['sumo']:.1f}", f"{m['wall'] / m['sumo']:.2f}x", f"{m['filters']:.2f}",
-                     f"{m['tracks']:.2f}", f"{m['tracks'] / m['filters']:.2f}x")  # fmt: skip
+                     f"{m['tracks']:.2f} ({m['tracks_cpu']:.2f})", f"{m['tracks'] / m['filters']:.2f}x")  # fmt: skip
             print(f"| {r + 1} | {name} | " + " | ".join(cells) + " |", flush=True)
     print(f"load average at end: {os.getloadavg()[0]:.1f}")
     if len(sides) == 2:

@@ -306,12 +306,11 @@ def sparse_np_sum(pos, val, n):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _popcount(x):  # pragma: no cover - compiled
-    """Number of set bits of the uint64 ``x``."""
-    n = 0
-    while x != 0:
-        x &= x - np.uint64(1)
-        n += 1
-    return n
+    """Number of set bits of the uint64 ``x`` (the bits counted in parallel: pairs, nibbles, then bytes summed)."""
+    x = x - ((x >> np.uint64(1)) & np.uint64(0x5555555555555555))
+    x = (x & np.uint64(0x3333333333333333)) + ((x >> np.uint64(2)) & np.uint64(0x3333333333333333))
+    x = (x + (x >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    return np.int64((x * np.uint64(0x0101010101010101)) >> np.uint64(56))
 
 
 @njit(cache=True)
@@ -390,6 +389,11 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     ev_d = np.empty(64)
     ev_off = np.zeros(K + 1, dtype=np.int64)
     n_ev = np.int64(0)  # not the literal 0: one specialisation of _near_events
+    slot = np.full(0, -1, dtype=np.int64)  # per (a, b) of the window's tracks: its near pair's row of terms, or -1
+    near = np.empty(0, dtype=np.int64)  # per near pair: its a * n + b
+    terms = np.empty((0, window))
+    word = np.empty(window, dtype=np.int64)  # per scan of the window: its mask word and bit
+    bits = np.empty(window, dtype=np.uint64)
     for k in range(K):
         lo = max(0, k - window + 1)
         if k >= window:  # scan k - window leaves the window
@@ -424,48 +428,49 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                 loc_e[esel[b]] = b
             Cm = np.empty((small, large))
             for a in range(m):
+                mg = mask_g[gsel[a]]
                 for b in range(n):
-                    d = far[_union_count(mask_g[gsel[a]], mask_e[esel[b]])]
+                    d = far[_union_count(mg, mask_e[esel[b]])]
                     if m <= n:
                         Cm[a, b] = d
                     else:
                         Cm[b, a] = d
-            # the pairs closer than c somewhere in the window: their scans' terms, c where not closer
-            slot = np.full((m, n), -1, dtype=np.int64)
-            terms = np.empty((ev_off[k + 1] - ev_off[lo], window))
+            # the pairs closer than c somewhere in the window (each once, in order of their first event): their
+            # scans' terms, c where the two are not closer; the slots of (a, b) are cleared again after the scan
+            if m * n > len(slot):
+                slot = np.full(m * n, -1, dtype=np.int64)
+            if ev_off[k + 1] - ev_off[lo] > len(near):
+                near = np.empty(2 * (ev_off[k + 1] - ev_off[lo]), dtype=np.int64)
+                terms = np.empty((len(near), window))
             n_near = 0
             for e in range(ev_off[lo], ev_off[k + 1]):
-                a, b = loc_g[ev_i[e]], loc_e[ev_j[e]]
-                if slot[a, b] < 0:
-                    slot[a, b] = n_near
+                x = loc_g[ev_i[e]] * n + loc_e[ev_j[e]]
+                if slot[x] < 0:
+                    slot[x] = n_near
+                    near[n_near] = x
                     terms[n_near, :] = c
                     n_near += 1
             for t in range(lo, k + 1):
+                s = t % ring
+                word[t - lo] = s // 64
+                bits[t - lo] = np.uint64(1) << np.uint64(s % 64)
                 for e in range(ev_off[t], ev_off[t + 1]):
-                    terms[slot[loc_g[ev_i[e]], loc_e[ev_j[e]]], t - lo] = ev_d[e]
-            for a in range(m):
-                for b in range(n):
-                    q = slot[a, b]
-                    if q < 0:
-                        continue
-                    i, j = gsel[a], esel[b]
-                    total, count = 0.0, 0
-                    for t in range(lo, k + 1):
-                        s = t % ring
-                        bit = np.uint64(1) << np.uint64(s % 64)
-                        on_g = (mask_g[i, s // 64] & bit) != 0
-                        on_e = (mask_e[j, s // 64] & bit) != 0
-                        if on_g and on_e:
-                            total += terms[q, t - lo]
-                            count += 1
-                        elif on_g or on_e:
-                            total += c
-                            count += 1
-                    d = min(total / count, c) ** p
-                    if m <= n:
-                        Cm[a, b] = d
-                    else:
-                        Cm[b, a] = d
+                    terms[slot[loc_g[ev_i[e]] * n + loc_e[ev_j[e]]], t - lo] = ev_d[e]
+            for q in range(n_near):
+                x = near[q]
+                slot[x] = -1
+                a, b = x // n, x % n
+                i, j = gsel[a], esel[b]
+                total, count = 0.0, 0
+                for t in range(k + 1 - lo):  # the scans where either exists (a near term only where both do)
+                    if ((mask_g[i, word[t]] | mask_e[j, word[t]]) & bits[t]) != 0:
+                        total += terms[q, t]
+                        count += 1
+                d = min(total / count, c) ** p
+                if m <= n:
+                    Cm[a, b] = d
+                else:
+                    Cm[b, a] = d
             rows, cols = assignment(Cm)
             vals = np.empty(small)
             for r in range(small):

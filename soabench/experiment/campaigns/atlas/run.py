@@ -353,7 +353,8 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
             if registry.trial_kind(spec.trial_kind) is registry._builtin_trial:
                 from soabench.kernel_warmup import ensure_compiled
 
-                ensure_compiled()
+                # the kernels of its points' configurations only (the model families and modes they run)
+                ensure_compiled(point_config(spec.config, json.loads(ov)) for _, _, ov, _ in spec.points)
             exe = open_executor(options.workers, options.scheduler, options.dask_local, n_trials=todo_n)
             bar = Progress(n_chunks, n_chunks - todo_n, options.progress, label=root.name)
             aborted = True
