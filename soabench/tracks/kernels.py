@@ -210,6 +210,61 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
 
 
 @njit(cache=True)
+def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, nT, potential, id_potential):
+    """HOTA's summed Jaccard overlaps and Identity's potential-match counts into ``potential`` and ``id_potential``
+    (nG * nT,), with the operations of the padded-array form of :func:`soabench.tracks.scores._global_counts` (its
+    runs of ``step`` scans padded to G truths x E estimates): per scan, each truth's similarity sum over the E
+    padded entries in numpy's pairwise order, each estimate's sum over the G padded truths one after another, the
+    overlap ``S / (col + row - S)`` where that exceeds machine epsilon; per run of scans, the overlaps summed per
+    cell in scan order from 0.0 and added to ``potential``. A pair of zero similarity adds 0.0 and is skipped."""
+    K = len(g_off) - 1
+    G, E = 0, 0
+    for t in range(K):
+        G = max(G, g_off[t + 1] - g_off[t])
+        E = max(E, e_off[t + 1] - e_off[t])
+    row = np.zeros(max(E, 1))
+    col = np.zeros(max(E, 1))
+    rsum = np.zeros(max(G, 1))
+    block = np.zeros(len(potential))
+    touched = np.empty(16, dtype=np.int64)
+    n_touched = 0
+    for t in range(K):
+        g0, e0 = g_off[t], e_off[t]
+        ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
+        if ng > 0 and ne > 0:
+            S = scan_similarity(gx, g0, ng, ex, e0, ne, d_gate)
+            col[:ne] = S[0, :]
+            for i in range(1, ng):
+                for j in range(ne):
+                    col[j] += S[i, j]
+            for i in range(ng):
+                row[:ne] = S[i, :]
+                row[ne:E] = 0.0
+                rsum[i] = np_sum(row, np.int64(E))
+            for i in range(ng):
+                for j in range(ne):
+                    if S[i, j] == 0.0:
+                        continue
+                    denom = (col[j] + rsum[i]) - S[i, j]
+                    iou = S[i, j] / denom if denom > _EPS else 0.0
+                    x = g_ids[g0 + i] * nT + e_ids[e0 + j]
+                    if block[x] == 0.0 and iou != 0.0:
+                        if n_touched == len(touched):
+                            touched = np.concatenate((touched, np.empty(len(touched), dtype=np.int64)))
+                        touched[n_touched] = x
+                        n_touched += 1
+                    block[x] += iou
+                    if S[i, j] >= threshold:
+                        id_potential[x] += 1.0
+        if (t + 1) % step == 0 or t == K - 1:  # the end of a run of scans: its sums join the totals
+            for q in range(n_touched):
+                x = touched[q]
+                potential[x] += block[x]
+                block[x] = 0.0
+            n_touched = 0
+
+
+@njit(cache=True)
 def _sparse_block(pos, val, lo, hi, start, n):  # pragma: no cover - compiled
     """numpy's pairwise sum of a zero array of ``n`` <= 128 elements from ``start`` with ``val[lo:hi]`` at the
     sorted positions ``pos[lo:hi]`` (all inside it): its leaf case, adding a zero being exact."""

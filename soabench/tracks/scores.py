@@ -25,7 +25,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from soabench.notice import announced
-from soabench.tracks.sequence import TrackSequence, similarity
+from soabench.tracks.sequence import BLOCK_CELLS, TrackSequence, similarity
 
 #: HOTA's localisation thresholds alpha (TrackEval's ``array_labels``)
 ALPHAS = np.arange(0.05, 0.99, 0.05)
@@ -108,18 +108,20 @@ def _global_counts(
     seq: TrackSequence, d_gate: float, gt_count: np.ndarray, tr_count: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """HOTA's global alignment score (nG, nT): the similarity-weighted Jaccard overlap of each truth-track pair
-    summed over scans; and Identity's potential-match counts (nG, nT) (pairs with S >= :data:`THRESHOLD`)."""
+    summed over scans; and Identity's potential-match counts (nG, nT) (pairs with S >= :data:`THRESHOLD`).
+
+    TrackEval's sums over padded runs of scans (:meth:`TrackSequence.blocks`), in one compiled loop over the pairs
+    of non-zero similarity (:func:`soabench.tracks.kernels.global_counts`, the same operations in the same order)."""
+    from soabench.tracks.kernels import global_counts
+
     nG, nT = len(gt_count), len(tr_count)
     potential = np.zeros(nG * nT)
     id_potential = np.zeros(nG * nT)
-    for _, S, g, e in seq.blocks(d_gate):
-        denom = S.sum(axis=1)[:, None, :] + S.sum(axis=2)[:, :, None] - S
-        iou = np.zeros_like(S)
-        np.divide(S, denom, out=iou, where=denom > _EPS)
-        valid = (g[:, :, None] >= 0) & (e[:, None, :] >= 0)
-        cell = (g[:, :, None] * nT + e[:, None, :])[valid]
-        potential += np.bincount(cell, weights=iou[valid], minlength=nG * nT)
-        id_potential += np.bincount(cell, weights=S[valid] >= THRESHOLD, minlength=nG * nT)
+    g, e = seq.gt, seq.est
+    G, E = int(np.diff(g.off).max(initial=0)), int(np.diff(e.off).max(initial=0))
+    step = max(1, BLOCK_CELLS // max(1, G * E))
+    args = (g.ids, g.off, g.xy, e.ids, e.off, e.xy, float(d_gate), THRESHOLD, step, nT, potential, id_potential)
+    announced("track metrics", global_counts, *args)
     potential = potential.reshape(nG, nT)
     with np.errstate(invalid="ignore", divide="ignore"):
         alignment = potential / (gt_count[:, None] + tr_count[None, :] - potential)
