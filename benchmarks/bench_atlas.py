@@ -35,6 +35,18 @@ MODELS = ("soa", "pubm", "ubm")
 QUERY = "SELECT point, model, avg(delay_mean) AS delay, avg(ospa) AS ospa, count(*) AS n FROM trials GROUP BY ALL"
 
 
+def peak_mb() -> float:
+    """This process's peak resident memory (MB): Linux's VmHWM, which starts afresh at exec (``ru_maxrss`` keeps the
+    peak of the process that forked it, here the throughput measurement's)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 # ------------------------------------------------------------------------------------------------ synthetic trial
 def synthetic_trial(trial, config, scene, scenario, *, save_estimates=False):
     """Rows of the real schema with numbers from the seeds, for the memory measurement (no SUMO, no filter)."""
@@ -78,6 +90,9 @@ def memory_child(n_trials: int, out: Path) -> None:
     from soabench.experiment.execution.options import RunOptions
 
     _register()
+    from soabench.experiment.trial.trial import TrialResult  # noqa: F401 - its imports, before the peak
+
+    import_mb = peak_mb()  # what the imports take
     points = 10
     cfg = Config()
     cfg.experiment = dataclasses.replace(
@@ -92,15 +107,22 @@ def memory_child(n_trials: int, out: Path) -> None:
     t0 = time.perf_counter()
     o = run_atlas(req, RunOptions(workers=1, progress=False), log=lambda m: None)
     wall = time.perf_counter() - t0
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # the trials and their chunks
+    peak = peak_mb()  # the trials, their chunks, the compaction
+    files = {t: len(list((out / t).iterdir())) for t in ("trials", "episodes")}
+    print(json.dumps({"trials": o.n_done, "complete": o.complete, "wall_s": wall, "peak_mb": peak, "files": files,
+                      "import_mb": import_mb}))  # fmt: skip
+
+
+def report_child(out: Path) -> None:
+    """Draw the report of the atlas in ``out`` in this process; print its peak RSS (MB) and time as JSON."""
     from soabench.experiment.campaigns.atlas.report import write_report
 
+    import_mb = peak_mb()
     t0 = time.perf_counter()
     write_report(out)
     report_s = time.perf_counter() - t0
-    peak_report = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # and the report (DuckDB, figures)
-    print(json.dumps({"trials": o.n_done, "complete": o.complete, "wall_s": wall, "peak_mb": peak,
-                      "report_s": report_s, "peak_with_report_mb": peak_report}))  # fmt: skip
+    peak = peak_mb()  # DuckDB's scans, the statistics, the figures
+    print(json.dumps({"report_s": report_s, "report_peak_mb": peak, "report_import_mb": import_mb}))
 
 
 # ------------------------------------------------------------------------------------------------ measurements
@@ -110,7 +132,7 @@ def throughput(trials: int, workers: int, tmp: Path) -> dict:
     from soabench.experiment.campaigns.atlas.run import AtlasRequest, run_atlas
     from soabench.experiment.campaigns.occlusion import base_scenario, dump_toml
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.kernel_warmup import ensure_compiled
 
     ensure_compiled()
@@ -157,17 +179,23 @@ def memory(sizes: list[int], tmp: Path) -> list[dict]:
     for n in sizes:
         folder = tmp / f"mem_{n}"
         env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-        res = subprocess.run(
-            [sys.executable, __file__, "--memory-child", str(n), "--out", str(folder)],
-            capture_output=True, text=True, env=env, check=True,
-        )  # fmt: skip
-        out.append({**json.loads(res.stdout.strip().splitlines()[-1]), "folder": str(folder)})
+        row = {"folder": str(folder)}
+        for child in (["--memory-child", str(n)], ["--report-child"]):  # each in a fresh process
+            res = subprocess.run(
+                [sys.executable, __file__, *child, "--out", str(folder)],
+                capture_output=True, text=True, env=env, check=True,
+            )  # fmt: skip
+            row.update(json.loads(res.stdout.strip().splitlines()[-1]))
+        out.append(row)
     return out
 
 
 def duckdb_times(atlas: Path, rows: int, tmp: Path) -> dict:
+    """The GROUP BY over the (compacted) synthetic atlas, over the committed intersection atlas as chunks and
+    compacted (a copy), and over ``rows`` generated trial rows as 100 chunk files and compacted."""
     import numpy as np
 
+    from soabench.experiment.campaigns.atlas.compact import compact
     from soabench.experiment.campaigns.atlas.query import connect, run_query
     from soabench.experiment.campaigns.atlas.store import parquet_bytes
     from soabench.experiment.runs.store import TIMING_COLUMNS, TRIAL_COLUMNS
@@ -180,10 +208,33 @@ def duckdb_times(atlas: Path, rows: int, tmp: Path) -> dict:
             times.append(time.perf_counter() - t0)
         return min(times), n
 
-    con = connect(atlas)
-    n_atlas = con.execute("SELECT count(*) FROM trials").fetchone()[0]
-    con.close()
-    t_atlas, g_atlas = best(atlas)
+    def n_rows(path: Path) -> int:
+        con = connect(path, only=["trials"])
+        try:
+            return int(con.execute("SELECT count(*) FROM trials").fetchone()[0])
+        finally:
+            con.close()
+
+    def n_files(path: Path) -> int:
+        return len(list((path / "trials").glob("*.parquet")))
+
+    def timed_compact(path: Path) -> float:
+        t0 = time.perf_counter()
+        compact(path)
+        return time.perf_counter() - t0
+
+    out: dict = {"atlas_rows": n_rows(atlas), "atlas_files": n_files(atlas)}
+    out["atlas_query_s"], _ = best(atlas)
+    committed = ROOT / "results" / "atlas" / "intersection"
+    if (committed / "atlas.json").is_file():
+        copy = tmp / "committed"
+        shutil.copytree(committed, copy, ignore=shutil.ignore_patterns("report"))
+        out.update(committed_rows=n_rows(copy), committed_files=n_files(copy))
+        out["committed_query_s"], _ = best(copy)
+        out["committed_compact_s"] = timed_compact(copy)
+        out["committed_compacted_files"] = n_files(copy)
+        out["committed_compacted_query_s"], _ = best(copy)
+        shutil.rmtree(copy)
     # a generated dataset of `rows` trial rows: 100 chunks, 10 models, 1000 points
     gen = tmp / "generated"
     shutil.copytree(atlas, gen, ignore=shutil.ignore_patterns("trials", "episodes", "report"))
@@ -202,13 +253,13 @@ def duckdb_times(atlas: Path, rows: int, tmp: Path) -> dict:
             else:
                 cols[name] = rng.random(per).tolist()
         (gen / "trials" / f"n{c:05d}-s0000.parquet").write_bytes(parquet_bytes(cols))
-    t_gen, g_gen = best(gen)
-    size = sum(f.stat().st_size for f in (gen / "trials").iterdir())
-    return {
-        "atlas_rows": n_atlas, "atlas_query_s": t_atlas, "atlas_groups": g_atlas,
-        "generated_rows": per * 100, "generated_query_s": t_gen, "generated_groups": g_gen,
-        "generated_mb": size / 2**20,
-    }  # fmt: skip
+    out["generated_rows"], out["generated_files"] = per * 100, n_files(gen)
+    out["generated_mb"] = sum(f.stat().st_size for f in (gen / "trials").iterdir()) / 2**20
+    out["generated_query_s"], out["generated_groups"] = best(gen)
+    out["generated_compact_s"] = timed_compact(gen)
+    out["generated_compacted_files"] = n_files(gen)
+    out["generated_compacted_query_s"], _ = best(gen)
+    return out
 
 
 def main() -> None:
@@ -219,10 +270,14 @@ def main() -> None:
     ap.add_argument("--rows", type=int, default=1_000_000, help="rows of the generated DuckDB dataset (0: none)")
     ap.add_argument("--skip-throughput", action="store_true")
     ap.add_argument("--memory-child", type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--report-child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.memory_child:
         memory_child(args.memory_child, args.out)
+        return
+    if args.report_child:
+        report_child(args.out)
         return
     tmp = Path(tempfile.mkdtemp(prefix="bench-atlas-"))
     try:
@@ -243,14 +298,24 @@ def main() -> None:
             )
         for m in report["memory"]:
             print(
-                f"memory: {m['trials']} trials, peak {m['peak_mb']:.0f} MB ({m['wall_s']:.1f} s); with the report "
-                f"{m['peak_with_report_mb']:.0f} MB ({m['report_s']:.1f} s)"
+                f"memory: {m['trials']} trials ({m['files']['trials']} trials file(s) after compaction): run and "
+                f"compaction peak {m['peak_mb']:.0f} MB ({m['wall_s']:.1f} s), report peak {m['report_peak_mb']:.0f} "
+                f"MB ({m['report_s']:.1f} s); imports alone {m['import_mb']:.0f} and {m['report_import_mb']:.0f} MB"
             )
         d = report.get("duckdb")
         if d:
+            print(f"duckdb: synthetic atlas, {d['atlas_rows']} rows in {d['atlas_files']} file(s): "
+                  f"{d['atlas_query_s'] * 1000:.0f} ms")  # fmt: skip
+            if "committed_rows" in d:
+                print(
+                    f"duckdb: committed atlas, {d['committed_rows']} rows: {d['committed_files']} chunk files "
+                    f"{d['committed_query_s'] * 1000:.0f} ms; compacted ({d['committed_compact_s']:.1f} s) into "
+                    f"{d['committed_compacted_files']} file(s) {d['committed_compacted_query_s'] * 1000:.0f} ms"
+                )
             print(
-                f"duckdb: {d['atlas_rows']} rows in {d['atlas_query_s'] * 1000:.0f} ms; {d['generated_rows']} "
-                f"generated rows ({d['generated_mb']:.0f} MB) in {d['generated_query_s'] * 1000:.0f} ms"
+                f"duckdb: generated, {d['generated_rows']} rows ({d['generated_mb']:.0f} MB): {d['generated_files']} "
+                f"chunk files {d['generated_query_s'] * 1000:.0f} ms; compacted ({d['generated_compact_s']:.1f} s) "
+                f"into {d['generated_compacted_files']} file(s) {d['generated_compacted_query_s'] * 1000:.0f} ms"
             )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -29,6 +29,8 @@ kind), e.g. a :class:`Scans` passed to ``step``, NaN truth rows, or Stone Soup-o
 :data:`ORDER_STONESOUP`) where ours ([x, y, vx, vy], :data:`ORDER_SOABENCH`) are expected.
 """
 
+import dataclasses as _dc
+import importlib as _importlib
 from collections.abc import Sequence as _Sequence
 from pathlib import Path as _Path
 from typing import TYPE_CHECKING as _TYPE_CHECKING
@@ -41,9 +43,15 @@ from soabench.boundary import ORDER_SOABENCH, ORDER_STONESOUP
 from soabench.config import FAMILIES, Config
 from soabench.errors import require as _require
 from soabench.errors import require_type as _require_type
+from soabench.errors import require_value as _require_value
+from soabench.experiment.trial.guard import check_births as _check_births
+from soabench.experiment.trial.registry import load_scene_cached as _load_scene_cached
 from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP
 from soabench.protocols import BirthModel, Tracker, TrackerSetup
+from soabench.scenario import simulate as _simulate
+from soabench.seeding import trial_seeds as _trial_seeds
 from soabench.trackers import FilterTracker, GMPHDTracker, run_tracker
+from soabench.trackers import build_filter as _build_filter
 from soabench.types import (
     CLUTTER,
     SOURCE_FOV,
@@ -130,9 +138,7 @@ _LAZY = {"RunResult": "soabench.experiment.execution.memory", "TrialMetrics": "s
 
 def __getattr__(name: str) -> _Any:
     if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
+        return getattr(_importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'soabench.api' has no attribute {name!r}")
 
 
@@ -186,20 +192,17 @@ def simulate_trial(
         (5, 5)
     """
     from soabench.experiment.execution.runner import check_against_scenario
-    from soabench.experiment.trial.registry import load_scene_cached
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
     from soabench.sensor import observe
 
     cfg = _boundary.as_config(config)
-    _require(_is_int(seed) and seed >= 0, f"seed = {seed!r} must be an integer >= 0")
-    _require(_is_int(trial) and trial >= 0, f"trial = {trial!r} must be an integer >= 0")
+    _require_value(_is_int(seed) and seed >= 0, "seed", seed, "must be an integer >= 0")
+    _require_value(_is_int(trial) and trial >= 0, "trial", trial, "must be an integer >= 0")
     if duration is not None:
         cfg = Config.from_dict({"experiment": {"duration": duration}}, base=cfg).validate()
-    scene, scenario = load_scene_cached(str(net), (), None)
+    scene, scenario = _load_scene_cached(str(net), (), None)
     check_against_scenario(cfg, scenario)
-    seeds = trial_seeds(seed, trial)
-    recording = simulate(scene, scenario, seeds, duration=cfg.experiment.duration)
+    seeds = _trial_seeds(seed, trial)
+    recording = _simulate(scene, scenario, seeds, duration=cfg.experiment.duration)
     return recording, observe(recording, scene, cfg.sensor_at(), seeds.sensor_rngs())
 
 
@@ -252,13 +255,11 @@ def make_tracker(
         >>> type(results[0]).__name__, len(results) == len(scans)
         ('StepResult', True)
     """
-    from soabench.seeding import trial_seeds
-    from soabench.trackers import build_filter
 
     cfg, family = _boundary.family_config(config, filter)
     kind, name, cls = _boundary.plugin(name_or_class)
     scene = _boundary.as_scene(scene_or_net)
-    seeds = trial_seeds(seed, trial)
+    seeds = _trial_seeds(seed, trial)
     rng = seeds.placement_rng()
     builtin = kind == BIRTH_MODEL and isinstance(name_or_class, str) and _plugins.is_builtin_birth(name)
     _require(
@@ -268,16 +269,15 @@ def make_tracker(
     _plugins.check_options(kind, name, cls, options)
     if kind == TRACKER:
         return cls(TrackerSetup(cfg.sensor_at(), scene, rng, mode, cfg), **options)
-    filt, p_D_b = build_filter(family, cfg, cfg.sensor_at(), mode, seeds.association_rng())
+    filt, p_D_b = _build_filter(family, cfg, cfg.sensor_at(), mode, seeds.association_rng())
     birth_model = cls(cfg.birth, cfg.sensor_at(), scene, rng, **options)
     return FilterTracker(birth_model, filt, p_D_b, check_births=None if builtin else _named_check(name))
 
 
 def _named_check(plugin: str) -> _Any:
     """The births check of a plugin birth model, its errors naming ``plugin``."""
-    from soabench.experiment.trial.guard import check_births
 
-    return lambda births, scan: check_births(births, scan, plugin)
+    return lambda births, scan: _check_births(births, scan, plugin)
 
 
 def evaluate(
@@ -341,7 +341,6 @@ def occlusion_gaps(scans: Scans, d_gate: float = 5.0) -> list[dict[str, _Any]]:
         >>> all(g["k_b"] >= g["k_a"] and g["occluder"] in ("parked", "vehicle", "building", "other") for g in gaps)
         True
     """
-    import dataclasses as _dc
 
     from soabench.tracks.gaps import describe_gaps
     from soabench.tracks.reemergence import occlusion_gaps as _gaps
@@ -412,10 +411,11 @@ def run(
         return run_in_memory(cfg, str(net), workers=workers, executor=executor, progress=progress)
     from soabench.experiment.execution.memory import from_run_folder
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.execution.runner import Batch, RunRequest
+    from soabench.experiment.reports.finished import run as run_request
 
     options = RunOptions(workers=workers, progress=progress, figures=False)
-    outcome = run_experiment(cfg, str(net), out=_Path(out), options=options, executor=executor)
+    outcome = run_request(RunRequest(cfg, str(net), out=_Path(out), options=options), Batch(executor=executor))
     return from_run_folder(outcome.run_dir, cfg, str(net))
 
 
@@ -433,11 +433,13 @@ def load_scene(net: str = "intersection") -> _Any:
         >>> scene.bounds
         (-50.0, -50.0, 120.0, 50.0)
     """
-    _require(isinstance(net, (str, _Path)), f"net = {net!r} must be a scene name or a path, e.g. 'intersection'")
+    _require_value(isinstance(net, (str, _Path)), "net", net, "must be a scene name or a path, e.g. 'intersection'")
     return _boundary.as_scene(net)
 
 
-def draw_scene(ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Estimates | None" = None) -> _Any:
+def draw_scene(
+    ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Estimates | StepResult | None" = None
+) -> _Any:
     """Draw a scene on a matplotlib ``ax`` as the replay and ``soabench scene`` draw it: roads, sidewalks,
     crossings, buildings and doors, parked cars; with ``scan``, its visible sidewalk Ω_k, the sensor pose and the
     measurements Z_k in the world frame; with ``estimates``, a tracker's positions (and track labels). Returns ``ax``
@@ -447,7 +449,8 @@ def draw_scene(ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Es
         ax: a matplotlib Axes.
         scene: a scene from :func:`load_scene`, or a network name or path.
         scan: one :class:`Scan` (e.g. ``scans[k]`` of :func:`simulate_trial`).
-        estimates: one :class:`Estimates` (a tracker's output at that scan).
+        estimates: a tracker's output at that scan: one :class:`Estimates`, or the :class:`StepResult` of one of
+            our filters.
 
     Example:
         >>> import matplotlib.pyplot as plt
@@ -468,7 +471,9 @@ def draw_scene(ax: _Any, scene: _Any, scan: "Scan | None" = None, estimates: "Es
     if scan is not None:
         _require_type(scan, Scan, "scan", "give one Scan, e.g. scans[k]")
     if estimates is not None:
-        _require_type(estimates, Estimates, "estimates", "give one Estimates, a tracker's output at that scan")
+        _require_type(
+            estimates, (Estimates, StepResult), "estimates", "give one tracker output at that scan, e.g. results[k]"
+        )
     plot_scene(scene, ax=ax)
     if scan is not None:
         draw_scan(ax, scan, estimates)
@@ -505,9 +510,9 @@ def stonesoup_ospa(
         >>> import soabench.api as sb
         >>> from stonesoup.types.state import State
         >>> from stonesoup.types.track import Track
-        >>> from soabench.bridges.stonesoup import scan_time
         >>> _, scans = sb.simulate_trial("arterial", duration=5)
-        >>> tracks = [Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scan)) for scan in scans], id="t1")]
+        >>> times = [t for t, _ in sb.to_stonesoup(scans)]  # the scans' timestamps, as a Stone Soup tracker sees them
+        >>> tracks = [Track([State([1.0, 0.5, 2.0, -0.5], timestamp=t) for t in times], id="t1")]
         >>> theirs = sb.stonesoup_ospa(tracks, scans)
         >>> ours = sb.evaluate(scans, sb.from_stonesoup(tracks, scans).estimates).series["ospa"]
         >>> bool(np.allclose(theirs, ours))
@@ -526,9 +531,9 @@ def from_stonesoup(tracks: _Any, scans: Scans) -> _Any:
         >>> import soabench.api as sb
         >>> from stonesoup.types.state import State
         >>> from stonesoup.types.track import Track
-        >>> from soabench.bridges.stonesoup import scan_time
         >>> _, scans = sb.simulate_trial("arterial", duration=5)
-        >>> track = Track([State([1.0, 0.5, 2.0, -0.5], timestamp=scan_time(scans[2]))], id="t7")
+        >>> t2, _ = sb.to_stonesoup(scans).detections[2]  # scan 2's timestamp
+        >>> track = Track([State([1.0, 0.5, 2.0, -0.5], timestamp=t2)], id="t7")
         >>> estimates, labels = sb.from_stonesoup([track], scans)
         >>> estimates[2].X.tolist(), labels[2].tolist()
         ([[1.0, 2.0, 0.5, -0.5]], ['t7'])

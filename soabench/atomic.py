@@ -7,12 +7,13 @@ floats through ``float.__repr__``, an exact round trip.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -74,6 +75,16 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
 def write_chunks_atomic(path: Path, chunks: Iterable[bytes]) -> None:
     """:func:`write_bytes_atomic` of the concatenated ``chunks``, written one after another (a large file is never
     held whole in memory)."""
+    with open_atomic(path) as fh:
+        for chunk in chunks:
+            fh.write(chunk)
+
+
+@contextlib.contextmanager
+def open_atomic(path: Path) -> Iterator[BinaryIO]:
+    """A binary file to write ``path`` through (a temporary file in the same folder, hidden and ending in ``.tmp``):
+    when the block ends it is fsynced and moved into place; if the block raises, it is removed and ``path`` is
+    untouched."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -81,8 +92,7 @@ def write_chunks_atomic(path: Path, chunks: Iterable[bytes]) -> None:
         if hasattr(os, "fchmod"):  # POSIX
             os.fchmod(fd, 0o666 & ~current_umask())
         with os.fdopen(fd, "wb") as fh:
-            for chunk in chunks:
-                fh.write(chunk)
+            yield fh
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)

@@ -43,6 +43,7 @@ KERNEL_MODULES = (
     "lmb/gibbs.py",
     "lmb/tracks.py",
     "kitti/lidar_raster.py",
+    "pmbm/murty.py",
     "pmbm/association.py",
 )
 

@@ -460,7 +460,8 @@ class ExperimentConfig:
             require(
                 bool(runs),
                 f"filter family {f!r} runs the probability modes {', '.join(FAMILY_MODES[f])} only, and probabilities "
-                f"= {list(self.probabilities)!r} names none of them; add one (e.g. --probabilities static)",
+                f"= {list(self.probabilities)!r} names none of them; add one of them to experiment.probabilities "
+                "(e.g. static)",
             )
         require(len(self.clutter) >= 1, "clutter must give at least one rate")
         for lam in self.clutter:
@@ -573,7 +574,7 @@ class Config:
             raise SoabenchError(
                 f"{section}.{changed[0]} = {getattr(values, changed[0])!r} is set but experiment.filters = "
                 f"{list(self.experiment.filters)!r} runs no {' or '.join(f.label for f in readers)} filter; add "
-                f"{names} (--filters gmphd,{readers[0].name}) or remove the key"
+                f"{names} to experiment.filters (e.g. ['gmphd', '{readers[0].name}']) or remove the key"
             )
 
     def to_dict(self) -> dict[str, dict[str, Any]]:

@@ -16,6 +16,30 @@ def require(condition: bool, message: str) -> None:
         raise SoabenchError(message)
 
 
+class BadValue(SoabenchError):
+    """A bad value of one named input. ``name`` is what Python calls it (the argument of :mod:`soabench.api`, e.g.
+    ``net``), and the message reads ``net='intersectoin' is neither ...``; a front end that names its inputs
+    otherwise formats the same parts its own way (the command line: ``--net 'intersectoin' is neither ...``,
+    :meth:`as_flag`), so one message serves both."""
+
+    def __init__(self, name: str, value: object, problem: str) -> None:
+        self.name, self.value, self.problem = name, value, problem
+        super().__init__(f"{name}={value!r} {problem}")
+
+    def __reduce__(self) -> tuple:  # rebuilt from its parts when it crosses a process boundary
+        return (type(self), (self.name, self.value, self.problem))
+
+    def as_flag(self, flag: str) -> str:
+        """The message naming the value as the command-line option ``flag`` (e.g. ``--net``) gives it."""
+        return f"{flag} {self.value!r} {self.problem}"
+
+
+def require_value(condition: bool, name: str, value: object, problem: str) -> None:
+    """Raise :class:`BadValue` (``name=value problem``) unless ``condition`` holds."""
+    if not condition:
+        raise BadValue(name, value, problem)
+
+
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C during a run: the message says what is on disk and how to finish (printed as one line by the CLI)."""
 

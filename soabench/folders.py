@@ -23,7 +23,7 @@ from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
 
-from soabench.errors import SoabenchError, require
+from soabench.errors import BadValue, SoabenchError, require
 
 try:  # POSIX (SUMO's platforms for this project: Linux, macOS)
     import fcntl
@@ -71,13 +71,15 @@ def check_new_folder(path: Path, marker: str, what: str, resume_hint: str) -> No
     is refused before the writability probe, so nothing is created in it, even for a moment."""
     if path.is_dir():
         if (path / marker).is_file():
-            raise SoabenchError(f"{str(path)!r} already holds a {what}; {resume_hint}, or give another --out")
+            raise BadValue("out", str(path), f"already holds a {what}; {resume_hint}, or give another folder")
         content = sorted(p.name for p in path.iterdir() if p.name != LOCK_FILE)
         if content:
             shown = ", ".join(content[:4]) + (", ..." if len(content) > 4 else "")
-            raise SoabenchError(
-                f"{str(path)!r} is not empty ({shown}) but holds no {marker}: a stale or foreign folder is never "
-                "adopted; give a new or empty folder with --out"
+            raise BadValue(
+                "out",
+                str(path),
+                f"is not empty ({shown}) but holds no {marker}: a stale or foreign folder is never adopted; give a "
+                "new or empty folder",
             )
     check_writable_target(path, what)
 
@@ -91,9 +93,11 @@ def check_own_folder(path: Path, what: str, own: Iterable[str]) -> None:
         foreign = sorted(p.name for p in path.iterdir() if p.name not in names)
         if foreign:
             shown = ", ".join(foreign[:4]) + (", ..." if len(foreign) > 4 else "")
-            raise SoabenchError(
-                f"{str(path)!r} is not empty ({shown}) and is not a {what}: a folder that is not ours is never "
-                "written into; give a new or empty folder with --out"
+            raise BadValue(
+                "out",
+                str(path),
+                f"is not empty ({shown}) and is not a {what}: a folder that is not ours is never written into; give "
+                "a new or empty folder",
             )
     check_writable_target(path, what)
 

@@ -33,12 +33,13 @@ from pathlib import Path
 from typing import TextIO
 
 import numpy as np
+import shapely
 
 from soabench import notice
 from soabench.birth import sampling
 from soabench.birth.soa import dedup, ego_inside
 from soabench.cache import kernel_folder
-from soabench.config import BIRTH_MODEL_NAMES, Config, MetricsConfig
+from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config, MetricsConfig
 from soabench.notice import LINE_INTERVAL_S, is_terminal
 from soabench.sensor import segment_meets_convex
 from soabench.types import Births, NewbornTerms, Obstacles, Scan
@@ -127,7 +128,6 @@ def _no_obstacles():
 def _fused_steps(modes: tuple[str, ...]) -> None:
     """The fused cycle's entry points as the filter calls them: one call per scan, and the split step of the
     line-of-sight gate (§2.11, §4.4) in the mode "dynamic+occ"."""
-    import shapely
 
     Z, ego = _scan_arrays()
     far = [shapely.box(1000.0, 1000.0, 1001.0, 1001.0)]
@@ -140,7 +140,6 @@ def _fused_steps(modes: tuple[str, ...]) -> None:
 
 def _newborn_steps(modes: tuple[str, ...]) -> None:
     """The split step of measurement-driven newborn terms (§3.4) in the probability modes."""
-    import shapely
 
     Z, ego = _scan_arrays()
     for mode in _gate_free(modes):
@@ -166,7 +165,6 @@ def _track_metrics(modes: tuple[str, ...]) -> None:
 def _lmb_steps(modes: tuple[str, ...]) -> None:
     """The LMB filter (docs/method.md "LMB filter"): steps with Gaussian births and with newborn terms (the adaptive
     birth), and the association marginals on both of their paths (enumeration and Gibbs sampling)."""
-    import shapely
 
     from soabench.lmb import LMBFilter
     from soabench.lmb.gibbs import association_marginals
@@ -181,6 +179,21 @@ def _lmb_steps(modes: tuple[str, ...]) -> None:
     association_marginals(np.zeros((2, 4)), 10, np.uint32(0), True)
 
 
+def _pmbm_steps(modes: tuple[str, ...]) -> None:
+    """The PMBM and PMB filters (docs/method.md §10): steps with Gaussian births and newborn terms, which compile the
+    clusters, the global hypotheses and Murty's ranked assignments with their solver."""
+    from soabench.pmbm import PMBMFilter
+
+    cfg = Config()
+    Z, ego = _scan_arrays()
+    for pmb in (False, True):
+        f = PMBMFilter(cfg.filter, cfg.sensor_at(), pmb=pmb)
+        for k in range(3):
+            b = _births()
+            b.newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0 * A)
+            f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
+
+
 def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:
     """The modes without the line-of-sight gate whose argument types ``modes`` use ("dynamic+occ": "dynamic")."""
     return tuple(dict.fromkeys("dynamic" if m == "dynamic+occ" else m for m in modes))
@@ -191,11 +204,11 @@ def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:
 #: given (those that take no mode ignore them).
 ROUNDS: tuple[tuple[Callable[[tuple[str, ...]], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_fused_steps, _newborn_steps, _lmb_steps, _track_metrics),
+    (_fused_steps, _newborn_steps, _lmb_steps, _pmbm_steps, _track_metrics),
 )
 
 #: the groups whose kernels take no probability mode (compiled once for all)
-MODELESS = (_reduction, _metrics_geometry, _lmb_steps, _track_metrics)
+MODELESS = (_reduction, _metrics_geometry, _lmb_steps, _pmbm_steps, _track_metrics)
 
 #: built-in birth models whose births carry measurement-driven newborn terms (:class:`~soabench.types.NewbornTerms`)
 NEWBORN_MODELS = frozenset({"pubm", "atbm"})
@@ -204,9 +217,9 @@ NEWBORN_MODELS = frozenset({"pubm", "atbm"})
 def needed(configs: Iterable[Config | dict]) -> dict[Callable[[tuple[str, ...]], None], tuple[str, ...]]:
     """The groups a run of ``configs`` calls and, per group, its probability modes: the GM-PHD family's modes for
     the prediction, update and fused steps; the newborn step only when a birth model may hand newborn terms (one of
-    :data:`NEWBORN_MODELS`, or a plugin); the LMB only when its family runs; the metric, geometry, reduction and
-    track kernels always (the filters' runs are labelled). A configuration given as a dict that does not load
-    asks for every group."""
+    :data:`NEWBORN_MODELS`, or a plugin); the LMB, and the PMBM/PMB, only when their family runs; the metric,
+    geometry, reduction and track kernels always (the filters' runs are labelled). A configuration given as a dict
+    that does not load asks for every group."""
     groups: dict[Callable[[tuple[str, ...]], None], tuple[str, ...]] = {}
 
     def add(group, modes):
@@ -228,12 +241,13 @@ def needed(configs: Iterable[Config | dict]) -> dict[Callable[[tuple[str, ...]],
                 add(_newborn_steps, exp.probabilities)
         if "lmb" in exp.filters:
             add(_lmb_steps, ("any",))
+        if "pmbm" in exp.filters or "pmb" in exp.filters:
+            add(_pmbm_steps, ("any",))
     return groups
 
 
 def everything() -> dict[Callable[[tuple[str, ...]], None], tuple[str, ...]]:
     """Every group with every probability mode."""
-    from soabench.config import PROBABILITY_MODES
 
     return {g: ("any",) if g in MODELESS else PROBABILITY_MODES for r in ROUNDS for g in r}
 

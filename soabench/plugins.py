@@ -18,6 +18,7 @@ file.
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import inspect
 import re
@@ -109,20 +110,24 @@ def check_name(kind: str, name: str) -> None:
     check_kind(kind)
     require(isinstance(name, str) and name != "", f"{kind} name {name!r} must be a non-empty string")
     if is_import_path(name):
+        flag = "--models" if kind == BIRTH else "--trackers"
         require(
             name in _TYPED,
-            f"{kind} {name!r} is an import path that was not given on this command line; soabench imports only "
-            f"built-ins, installed entry points and import paths typed with --models/--trackers "
-            f"(to resume such a run, type it again: --resume DIR --{'models' if kind == BIRTH else 'trackers'} {name})",
+            f"{kind} {name!r} is an import path its caller did not name; soabench imports only built-ins, installed "
+            f"entry points and import paths named where the run is asked for: in Python as {flag[2:]}= of "
+            f"soabench.api.run (or the class itself), on the command line as {flag} (to resume such a run, name it "
+            f"again: --resume DIR {flag} {name})",
         )
         return
     if name in (BUILTIN_BIRTH_MODELS if kind == BIRTH else BUILTIN_TRACKERS):
         return  # no entry-point scan for a built-in
     known = names(kind)
+    close = difflib.get_close_matches(name, known, n=1)
     require(
         name in known,
         f"{kind} {name!r} is unknown; choose one of {', '.join(known)}, an installed entry point of group "
-        f"{BIRTH_GROUP if kind == BIRTH else TRACKER_GROUP!r} or an import path module:Class",
+        f"{BIRTH_GROUP if kind == BIRTH else TRACKER_GROUP!r} or an import path module:Class"
+        + (f" (did you mean {close[0]!r}?)" if close else ""),
     )
 
 

@@ -347,6 +347,10 @@ class Scans:
     ped_ids: np.ndarray
     sensor: Sensor | None = None
 
+    def __post_init__(self) -> None:
+        """Checked when built, so a wrong argument fails here with one line naming it, not in the metrics later."""
+        _check_scans(self)
+
     def __len__(self) -> int:
         return len(self.scans)
 
@@ -394,6 +398,74 @@ class Scans:
         except (OSError, ValueError) as exc:
             raise SoabenchError(f"scans file {str(p)!r} is not a readable .npz ({exc})") from None
         return _scans_from_arrays(arrays, str(p))
+
+
+def _check_scans(s: Scans) -> None:
+    """One line naming the first argument of :class:`Scans` that does not fit: K scans of P pedestrians, every
+    per-scan array of length K, every source array as long as its scan's Z, finite truth wherever present."""
+    require(s.scans is not None and not isinstance(s.scans, (str, bytes)), "Scans: scans must be a list of Scan")
+    K = len(s.scans)
+    require(
+        isinstance(s.dt, (int, float, np.number)) and np.isfinite(s.dt) and s.dt > 0,
+        f"Scans: dt = {s.dt!r}; give the sensor period in seconds, a finite number > 0",
+    )
+    ids = np.asarray(s.ped_ids)
+    require(ids.ndim == 1, f"Scans: ped_ids has shape {ids.shape}; give (P,) pedestrian ids, one per truth column")
+    P = len(ids)
+    for name in ("present", "in_fov", "visible", "detected"):
+        a = np.asarray(getattr(s, name))
+        require(
+            a.shape == (K, P) and a.dtype == np.bool_,
+            f"Scans: {name} has shape {a.shape} and dtype {a.dtype}; give ({K}, {P}) booleans (K = len(scans), "
+            "P = len(ped_ids))",
+        )
+    xy = np.asarray(s.truth_xy)
+    require(
+        xy.shape == (K, P, 2) and (xy.size == 0 or np.issubdtype(xy.dtype, np.floating)),
+        f"Scans: truth_xy has shape {xy.shape} and dtype {xy.dtype}; give ({K}, {P}, 2) float positions "
+        "(K = len(scans), P = len(ped_ids))",
+    )
+    bad = ~np.isfinite(xy).all(axis=2) & np.asarray(s.present)
+    if bad.any():
+        k, j = (int(v) for v in np.argwhere(bad)[0])
+        raise SoabenchError(
+            f"Scans: truth_xy[{k}, {j}] is {xy[k, j].tolist()} where present[{k}, {j}] is True; give finite "
+            "positions wherever a pedestrian is present (NaN only while absent)"
+        )
+    require(
+        isinstance(s.source, (list, tuple)) and len(s.source) == K,
+        f"Scans: source holds {len(s.source) if isinstance(s.source, (list, tuple)) else type(s.source).__name__} "
+        f"entries; give a list of {K} arrays, one per scan",
+    )
+    for k, (scan, src) in enumerate(zip(s.scans, s.source, strict=True)):
+        Z = np.asarray(scan.Z)
+        require(
+            Z.ndim == 2 and Z.shape[1] == 2 and (Z.size == 0 or np.issubdtype(Z.dtype, np.number)),
+            f"Scans: scans[{k}].Z has shape {Z.shape} and dtype {Z.dtype}; give (M, 2) range-bearing numbers",
+        )
+        require(bool(np.isfinite(Z).all()), f"Scans: scans[{k}].Z holds NaN or infinite values; give finite numbers")
+        src = np.asarray(src)
+        require(
+            src.shape == (len(Z),) and (src.size == 0 or np.issubdtype(src.dtype, np.integer)),
+            f"Scans: source[{k}] has shape {src.shape} and dtype {src.dtype}; give ({len(Z)},) integers, one per "
+            f"measurement of scans[{k}].Z",
+        )
+        if src.size and not (int(src.min()) >= CLUTTER and int(src.max()) < P):
+            raise SoabenchError(
+                f"Scans: source[{k}] holds {int(src.min())}..{int(src.max())}; give pedestrian columns 0..{P - 1} "
+                f"or CLUTTER ({CLUTTER})"
+            )
+
+
+def _check_offsets(a: dict[str, np.ndarray], name: str, n: int, total: int, where: str) -> None:
+    """The (n+1,) offsets array ``name`` of a file: from 0 to ``total``, never decreasing."""
+    o = np.asarray(a[name])
+    ok = o.shape == (n + 1,) and np.issubdtype(o.dtype, np.integer) and o[0] == 0 and o[-1] == total
+    require(
+        bool(ok and (np.diff(o) >= 0).all()),
+        f"{where}: {name} does not match its arrays (shape {o.shape}; expected {n + 1} non-decreasing offsets from "
+        f"0 to {total}); the file is damaged or was not written by Scans.save_npz",
+    )
 
 
 def truth_labels(ped_ids: Sequence[str] | np.ndarray) -> np.ndarray:
@@ -481,8 +553,9 @@ def _scans_to_arrays(scans: Scans) -> dict[str, np.ndarray]:
 #: the arrays of a Scans file (:meth:`Scans.save_npz`)
 _SCANS_KEYS = (
     "dt", "k", "t", "ego", "z_offsets", "Z", "source", "ped_ids", "truth_xy", "present", "in_fov", "visible",
-    "detected", "obst_offsets", "obst_vertex_offsets", "obst_vertices", "occluder_offsets", "occluder_wkb",
-    "occluder_wkb_offsets", "region_wkb", "region_wkb_offsets",
+    "detected", "obst_offsets", "obst_kind", "obst_centroid_range", "obst_centroid_bearing", "obst_theta_min",
+    "obst_theta_max", "obst_r_min", "obst_r_max", "obst_vertex_offsets", "obst_vertices", "occluder_offsets",
+    "occluder_wkb", "occluder_wkb_offsets", "region_wkb", "region_wkb_offsets",
 )  # fmt: skip
 
 
@@ -498,6 +571,21 @@ def _scans_from_arrays(a: dict[str, np.ndarray], where: str) -> Scans:
         f"{where} is not a soabench Scans file of format version {SCANS_FORMAT_VERSION}"
         + (f" (it lacks {', '.join(missing[:4])}{', ...' if len(missing) > 4 else ''})" if missing else "")
         + "; give a .npz written by Scans.save_npz or soabench export scans",
+    )
+    K = len(a["k"])
+    for name, n, total in (
+        ("z_offsets", K, len(a["Z"])),
+        ("obst_offsets", K, len(a["obst_kind"])),
+        ("obst_vertex_offsets", len(a["obst_kind"]), len(a["obst_vertices"])),
+        ("occluder_offsets", K, len(a["occluder_wkb_offsets"]) - 1),
+        ("occluder_wkb_offsets", len(a["occluder_wkb_offsets"]) - 1, len(a["occluder_wkb"])),
+        ("region_wkb_offsets", K, len(a["region_wkb"])),
+    ):
+        _check_offsets(a, name, n, total, where)
+    require(
+        len(a["source"]) == len(a["Z"]) and len(a["t"]) == K and np.shape(a["ego"]) == (K, 3),
+        f"{where}: source, t or ego do not match Z and k (lengths {len(a['source'])}/{len(a['Z'])}, "
+        f"{len(a['t'])}/{K}, ego {np.shape(a['ego'])}); the file is damaged or was not written by Scans.save_npz",
     )
     zo, oo, vo, co = a["z_offsets"], a["obst_offsets"], a["obst_vertex_offsets"], a["occluder_offsets"]
     verts = [a["obst_vertices"][p:q] for p, q in zip(vo[:-1], vo[1:], strict=True)]
@@ -528,18 +616,22 @@ def _scans_from_arrays(a: dict[str, np.ndarray], where: str) -> Scans:
         )
         scans.append(scan)
         sources.append(a["source"][z_sl])
-    return Scans(
-        scans=scans,
-        dt=float(a["dt"]),
-        source=sources,
-        truth_xy=a["truth_xy"],
-        present=a["present"],
-        in_fov=a["in_fov"],
-        visible=a["visible"],
-        detected=a["detected"],
-        ped_ids=a["ped_ids"],
-        sensor=_sensor_from_arrays(a, where),
-    )
+    sensor = _sensor_from_arrays(a, where)
+    try:
+        return Scans(
+            scans=scans,
+            dt=float(a["dt"]),
+            source=sources,
+            truth_xy=a["truth_xy"],
+            present=a["present"],
+            in_fov=a["in_fov"],
+            visible=a["visible"],
+            detected=a["detected"],
+            ped_ids=a["ped_ids"],
+            sensor=sensor,
+        )
+    except SoabenchError as exc:
+        raise SoabenchError(f"{where}: {exc}") from None
 
 
 #: unit of each sensor parameter written into a scans file (docs/user-guide/outputs.md)

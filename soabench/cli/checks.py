@@ -1,6 +1,6 @@
 """What the command line asked for: the options written on it (not filled from defaults), the config keys they
-and ``--config`` set, and paths that must not be empty. Every check raises :class:`~soabench.errors.SoabenchError`
-(one line, exit status 2)."""
+and ``--config`` set, paths that must not be empty, and how an error names a value (by its flag). Every check
+raises :class:`~soabench.errors.SoabenchError` (one line, exit status 2)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
-from soabench.errors import require
+from soabench.errors import BadValue, SoabenchError, require
 
 
 def explicit_dests(parser: argparse.ArgumentParser, argv: Sequence[str]) -> set[str]:
@@ -37,6 +37,32 @@ def explicit_dests(parser: argparse.ArgumentParser, argv: Sequence[str]) -> set[
         if len(matches) == 1:
             out |= matches
     return out
+
+
+def command_options(parser: argparse.ArgumentParser, argv: Sequence[str]) -> set[str]:
+    """The option strings (``--net``, ...) of the subcommand ``argv`` chooses, nested ones included (``sweep
+    clutter``): the flags an error message may name."""
+    options: set[str] = set()
+    chosen = parser
+    while True:
+        sub = next((a for a in chosen._actions if isinstance(a, argparse._SubParsersAction)), None)
+        command = None if sub is None else next((t for t in argv if t in sub.choices), None)
+        if command is None:
+            break
+        chosen = sub.choices[command]
+    for action in chosen._actions:
+        options.update(o for o in action.option_strings if o.startswith("--"))
+    return options
+
+
+def error_message(exc: SoabenchError, options: set[str]) -> str:
+    """The one line the command line prints for ``exc``: a :class:`~soabench.errors.BadValue` names its value as
+    the flag that gave it (``--net 'intersectoin' ...``) when the command has that flag, else as Python does."""
+    if isinstance(exc, BadValue):
+        flag = "--" + exc.name.replace("_", "-")
+        if flag in options:
+            return exc.as_flag(flag)
+    return str(exc)
 
 
 #: options naming a file or folder: an empty value is refused (``Path("")`` would be the working folder)

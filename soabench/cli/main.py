@@ -34,6 +34,7 @@ from soabench.cli import (
 )
 from soabench.cli.parsing import EXIT_USAGE, DefaultsHelpFormatter, OneLineParser
 from soabench.errors import Interrupted, SoabenchError, require
+from soabench.scenario import shipped_nets
 
 #: command name -> its module (``add_parser``, ``handle``), in the order ``soabench --help`` lists them
 MODULES = {
@@ -99,9 +100,10 @@ def _join_negative_values(argv: Sequence[str]) -> list[str]:
     return out
 
 
-def run_on_all(args: argparse.Namespace, command: Callable[[argparse.Namespace], int], command_name: str) -> int:
+def run_on_all(
+    args: argparse.Namespace, command: Callable[[argparse.Namespace], int], command_name: str, options: set[str]
+) -> int:
     """Run ``command(args)`` once per shipped scene (``--net all``); outputs go per scene; report per scene."""
-    from soabench.scenario import shipped_nets
 
     require(getattr(args, "resume", None) is None, "--net all cannot --resume; resume each scene's folder")
     status: list[tuple[str, str]] = []
@@ -119,7 +121,7 @@ def run_on_all(args: argparse.Namespace, command: Callable[[argparse.Namespace],
             status.append((name, "ok" if rc == 0 else f"exit {rc}"))
         except SoabenchError as exc:
             rc = 2
-            status.append((name, f"error: {exc}"))
+            status.append((name, f"error: {checks.error_message(exc, options)}"))
         rc_all = max(rc_all, rc)
     print("\n".join(["", "| scene | result |", "|---|---|"] + [f"| {n} | {s} |" for n, s in status]))
     return rc_all
@@ -151,16 +153,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.explicit = checks.explicit_dests(parser, argv)
     _say_derived()
+    options = checks.command_options(parser, argv)
     try:
         checks.check_no_empty_paths(argv)
         if getattr(args, "net", None) == "all":
-            return run_on_all(args, COMMANDS[args.command], args.command)
+            return run_on_all(args, COMMANDS[args.command], args.command, options)
         return COMMANDS[args.command](args)
     except BrokenPipeError:  # e.g. `soabench run | head`: the reader left; say nothing more
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except SoabenchError as exc:
-        print(f"soabench: error: {exc}", file=sys.stderr)
+        print(f"soabench: error: {checks.error_message(exc, options)}", file=sys.stderr)
         return EXIT_USAGE
     except Interrupted as exc:  # the message says what is on disk and how to finish
         print(f"soabench: {exc}", file=sys.stderr)

@@ -11,6 +11,7 @@ The paper's figures of the GM-PHD family are drawn on that family's rows only (:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -52,7 +53,6 @@ def run_families(tables: RunTables) -> list[str]:
 def family_only(tables: RunTables, family: str) -> RunTables:
     """The tables of one family: its rows of trials, episodes, timing and steps, and the rows of no family (whole
     trackers, drawn beside every family)."""
-    import dataclasses
 
     def only(table):
         if FILTER_COLUMN not in table:

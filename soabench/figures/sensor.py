@@ -18,7 +18,7 @@ from soabench.figures import style as ps
 from soabench.figures.scene import plot_scene, scene_figure
 from soabench.geometry import polar_to_world
 from soabench.sensor import fov_polygon, shadow_polygons
-from soabench.types import CLUTTER, Estimates, Scan, Scans
+from soabench.types import CLUTTER, Estimates, Scan, Scans, StepResult
 
 _VISIBLE_REGION = "#7fd37f"
 _SHADOW = "0.55"
@@ -107,7 +107,7 @@ def _legend_handles() -> list:
 _ESTIMATE = "tab:purple"
 
 
-def draw_scan(ax: Axes, scan: Scan, estimates: Estimates | None = None) -> None:
+def draw_scan(ax: Axes, scan: Scan, estimates: Estimates | StepResult | None = None) -> None:
     """One scan on a scene drawn by :func:`soabench.figures.scene.plot_scene` (a notebook's view, without the
     truth a :class:`Scans` holds): Ω_k, the sensor pose, the measurements Z_k in the world frame and, given
     ``estimates``, the estimated positions (with their track labels when labelled); adds its entries to the legend."""

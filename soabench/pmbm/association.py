@@ -23,7 +23,7 @@ configure_numba_cache()
 
 from numba import njit  # noqa: E402
 
-from soabench.pmbm.murty import murty  # noqa: E402
+from soabench.pmbm.murty import array_sum, murty_arrays  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
 
@@ -73,18 +73,94 @@ def clusters(track: np.ndarray, gated: np.ndarray, n: int) -> list[tuple[np.ndar
     return out
 
 
+@njit(cache=True)
 def cluster_costs(
     hs: np.ndarray, L: np.ndarray, log_l_miss: np.ndarray, log_l_det: np.ndarray, log_new: np.ndarray
 ) -> np.ndarray:
     """The (|L|, |T| + |L|) cost matrix of one cluster (module docstring): ``hs`` the chosen hypothesis of each of
     its tracks, ``L`` its measurements; +inf marks a forbidden cell. The missed factors (floored, never 0) make the
     track costs finite wherever the detection factor is positive."""
-    nT, nL = len(hs), len(L)
+    nT, nL = hs.shape[0], L.shape[0]
     C = np.full((nL, nT + nL), np.inf)
-    C[:, :nT] = (log_l_miss[hs][:, None] - log_l_det[hs][:, L]).T
-    idx = np.arange(nL)
-    C[idx, nT + idx] = -log_new[L]
+    for ll in range(nL):
+        for i in range(nT):
+            C[ll, i] = log_l_miss[hs[i]] - log_l_det[hs[i], L[ll]]
+        C[ll, nT + ll] = -log_new[L[ll]]
     return C
+
+
+@njit(cache=True)
+def _sum_at(x: np.ndarray, idx: np.ndarray) -> float:
+    """``x[idx].sum()`` in numpy's order."""
+    return array_sum(x[idx])
+
+
+@njit(cache=True)
+def cluster_solutions(
+    hs: np.ndarray,
+    L: np.ndarray,
+    log_l_miss: np.ndarray,
+    log_l_det: np.ndarray,
+    log_new: np.ndarray,
+    k: int,
+    max_gap: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The (at most) ``k`` best solutions of a cluster with measurements ``L`` and its tracks in hypotheses ``hs``:
+    costs (K,) increasing, and the choice of each of its tracks (K, |T|): a measurement index or :data:`MISS`.
+
+    A cluster with one track or at most one measurement has few associations: they are listed and sorted (ties in
+    the order listed: missed first, then by measurement or track). Otherwise Murty's algorithm ranks the
+    assignments of :func:`cluster_costs`. Solutions costing more than ``max_gap`` above the best are left out."""
+    nT, nL = hs.shape[0], L.shape[0]
+    all_miss = -_sum_at(log_l_miss, hs)
+    if nT == 1 or nL <= 1:
+        all_new = -_sum_at(log_new, L)
+        if nT == 1:  # missed, or detected by one of L (the others to their new tracks)
+            costs = np.empty(nL + 1)
+            choice = np.full((nL + 1, 1), MISS, dtype=np.int64)
+            costs[0] = all_miss + all_new
+            n_opt = 1
+            for ll in range(nL):
+                det = log_l_det[hs[0], L[ll]]
+                if np.isfinite(det):
+                    costs[n_opt] = all_new + log_new[L[ll]] - det
+                    choice[n_opt, 0] = L[ll]
+                    n_opt += 1
+        elif nL == 0:  # every track missed
+            costs = np.full(1, all_miss)
+            choice = np.full((1, nT), MISS, dtype=np.int64)
+            n_opt = 1
+        else:  # one measurement: to its new track, or to one of the tracks
+            ell = L[0]
+            costs = np.empty(nT + 1)
+            choice = np.full((nT + 1, nT), MISS, dtype=np.int64)
+            costs[0] = all_miss + all_new
+            n_opt = 1
+            for i in range(nT):
+                det = log_l_det[hs[i], ell]
+                if np.isfinite(det):
+                    costs[n_opt] = all_miss + log_l_miss[hs[i]] - det
+                    choice[n_opt, i] = ell
+                    n_opt += 1
+        costs, choice = costs[:n_opt], choice[:n_opt]
+        order = np.argsort(costs, kind="mergesort")
+        limit = costs[order[0]] + max_gap
+        n_keep = 0
+        while n_keep < min(k, n_opt) and costs[order[n_keep]] <= limit:
+            n_keep += 1
+        order = order[:n_keep]
+        out_choice = np.empty((n_keep, choice.shape[1]), dtype=np.int64)
+        for s in range(n_keep):
+            out_choice[s] = choice[order[s]]
+        return costs[order], out_choice
+    sol_costs, cols = murty_arrays(cluster_costs(hs, L, log_l_miss, log_l_det, log_new), k, max_gap)
+    K = sol_costs.shape[0]
+    choice = np.full((K, nT), MISS, dtype=np.int64)
+    for s in range(K):
+        for row in range(nL):
+            if cols[s, row] < nT:  # measurement L[row] assigned to a track column
+                choice[s, cols[s, row]] = L[row]
+    return sol_costs - (-all_miss), choice
 
 
 def unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -103,144 +179,188 @@ def unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return xs[new], inv
 
 
-def best_sums(costs: list[np.ndarray], k: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``k`` smallest sums of one entry of each sorted cost array: (sums (K,), index of each term (K, len))."""
+@njit(cache=True)
+def best_sums(costs: list, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` smallest sums of one entry of each sorted cost array: (sums (K,), index of each term (K, len)).
+    Equal sums keep the order of the (earlier terms' rank, this term's rank) pairs."""
     total = np.zeros(1)
     idx = np.zeros((1, len(costs)), dtype=np.int64)
-    for j, c in enumerate(costs):
-        s = (total[:, None] + c[None, :]).ravel()
-        order = np.argsort(s, kind="stable")[:k]
-        a, b = np.divmod(order, len(c))
-        total = s[order]
-        idx = idx[a]
-        idx[:, j] = b
+    for j in range(len(costs)):
+        c = costs[j]
+        nc = c.shape[0]
+        s = np.empty(total.shape[0] * nc)
+        for a in range(total.shape[0]):
+            for b in range(nc):
+                s[a * nc + b] = total[a] + c[b]
+        order = np.argsort(s, kind="mergesort")[:k]
+        idx2 = np.empty((order.shape[0], len(costs)), dtype=np.int64)
+        total = np.empty(order.shape[0])
+        for r in range(order.shape[0]):
+            idx2[r] = idx[order[r] // nc]
+            idx2[r, j] = order[r] % nc
+            total[r] = s[order[r]]
+        idx = idx2
     return total, idx
 
 
-class ClusterSolver:
-    """Ranked solutions of each cluster for a given choice of its tracks' hypotheses, cached (module docstring).
-
-    ``max_gap``: solutions costing more than this above the cluster's best are not searched for. A global
-    hypothesis built on such a solution weighs at most exp(-max_gap) times its parent's best child, so with
-    max_gap = -ln(w_floor) it could never reach the weight floor."""
-
-    def __init__(
-        self,
-        groups: list[tuple[np.ndarray, np.ndarray]],
-        log_l_miss: np.ndarray,
-        log_l_det: np.ndarray,
-        log_new: np.ndarray,
-        max_gap: float = np.inf,
-    ) -> None:
-        self.groups = groups
-        self.max_gap = max_gap
-        self.log_l_miss, self.log_l_det, self.log_new = log_l_miss, log_l_det, log_new
-        self._cache: dict[tuple, tuple[int, np.ndarray, np.ndarray]] = {}
-        self.n_murty = 0  #: Murty runs so far
-
-    def _options(self, hs: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every association of a cluster with one track or one measurement (no measurement: every track missed),
-        unsorted: costs (K,) and choices (K, |T|)."""
-        lm, ld, ln = self.log_l_miss, self.log_l_det, self.log_new
-        nT = len(hs)
-        all_new, all_miss = -float(ln[L].sum()), -float(lm[hs].sum())
-        if nT == 1:  # missed, or detected by one of L (the others to their new tracks)
-            det = ld[hs[0], L]
-            ok = np.flatnonzero(np.isfinite(det))
-            costs = np.concatenate([[all_miss + all_new], all_new + ln[L[ok]] - det[ok]])
-            return costs, np.concatenate([[MISS], L[ok]])[:, None]
-        ell = L[0] if len(L) else -1  # one measurement: to its new track, or to one of the tracks
-        if ell < 0:
-            return np.array([all_miss]), np.full((1, nT), MISS, dtype=np.int64)
-        det = ld[hs, ell]
-        ok = np.flatnonzero(np.isfinite(det))
-        costs = np.concatenate([[all_miss + all_new], all_miss + lm[hs[ok]] - det[ok]])
-        choice = np.full((1 + len(ok), nT), MISS, dtype=np.int64)
-        choice[1 + np.arange(len(ok)), ok] = ell
-        return costs, choice
-
-    def solve(self, c: int, hs: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """The (at most) ``k`` best solutions of cluster ``c`` with its tracks in hypotheses ``hs``: costs (K,)
-        increasing, and the choice of each of its tracks (K, |T|): a measurement index or :data:`MISS`."""
-        T, L = self.groups[c]
-        key = (c, hs.tobytes())
-        hit = self._cache.get(key)
-        if hit is not None and (hit[0] >= k or len(hit[1]) < hit[0]):  # enough, or every solution already found
-            return hit[1][:k], hit[2][:k]
-        nT, nL = len(T), len(L)
-        lm, ld, ln = self.log_l_miss, self.log_l_det, self.log_new
-        if nT == 1 or nL <= 1:  # one track or at most one measurement: the options are few, list them
-            costs, choice = self._options(hs, L)
-            order = np.argsort(costs, kind="stable")
-            order = order[costs[order] <= costs[order[0]] + self.max_gap][:k]
-            costs, choice = costs[order], choice[order]
-        else:
-            sols = murty(cluster_costs(hs, L, lm, ld, ln), k, self.max_gap)
-            self.n_murty += 1
-            costs = np.array([s[0] for s in sols]) - float(lm[hs].sum())
-            choice = np.full((len(sols), nT), MISS, dtype=np.int64)
-            for s, (_, cols) in enumerate(sols):
-                det = cols < nT  # rows (measurements) assigned to a track column
-                choice[s, cols[det]] = L[det]
-        self._cache[key] = (k, costs, choice)
-        return costs, choice
+@njit(cache=True)
+def _global_hypotheses(
+    table: np.ndarray,
+    log_w: np.ndarray,
+    ks: np.ndarray,
+    T_flat: np.ndarray,
+    T_start: np.ndarray,
+    L_flat: np.ndarray,
+    L_start: np.ndarray,
+    base0: float,
+    log_l_miss: np.ndarray,
+    log_l_det: np.ndarray,
+    log_new: np.ndarray,
+    max_gap: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """:func:`new_global_hypotheses` on the clusters with tracks (T and L of cluster g: ``T_flat[T_start[g]:
+    T_start[g + 1]]``, likewise L); ``base0``: minus the log factors of the measurements no track gates. Also
+    returns the number of Murty runs."""
+    A, n = table.shape
+    G = T_start.shape[0] - 1
+    base = np.full(A, base0)
+    fixed = np.full((A, n), MISS, dtype=np.int64)  # the choices of the single-solution clusters
+    feasible = np.ones(A, dtype=np.bool_)
+    n_multi = np.zeros(A, dtype=np.int64)
+    multi = np.empty((A, max(G, 1)), dtype=np.int64)  # the solution sets (index into sol_*) combined per a
+    sol_costs = [np.empty(0)]
+    sol_choice = [np.empty((0, 0), dtype=np.int64)]
+    sol_T = [np.empty(0, dtype=np.int64)]
+    n_murty = 0
+    inv = np.empty(A, dtype=np.int64)
+    for g in range(G):
+        T = T_flat[T_start[g] : T_start[g + 1]]
+        L = L_flat[L_start[g] : L_start[g + 1]]
+        nT = T.shape[0]
+        # distinct choices of the cluster's tracks' hypotheses among the prior global hypotheses
+        reps = np.empty(A, dtype=np.int64)
+        n_u = 0
+        for a in range(A):
+            u = 0
+            while u < n_u:
+                same = True
+                for i in range(nT):
+                    if table[a, T[i]] != table[reps[u], T[i]]:
+                        same = False
+                        break
+                if same:
+                    break
+                u += 1
+            if u == n_u:
+                reps[n_u] = a
+                n_u += 1
+            inv[a] = u
+        k_u = np.zeros(n_u, dtype=np.int64)
+        for a in range(A):
+            k_u[inv[a]] = max(k_u[inv[a]], ks[a])
+        first_sol = len(sol_costs)
+        for u in range(n_u):
+            hs = np.empty(nT, dtype=np.int64)
+            for i in range(nT):
+                hs[i] = table[reps[u], T[i]]
+            if nT > 1 and L.shape[0] > 1:
+                n_murty += 1
+            c, ch = cluster_solutions(hs, L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
+            sol_costs.append(c)
+            sol_choice.append(ch)
+            sol_T.append(T)
+        for a in range(A):
+            s = first_sol + inv[a]
+            K = sol_costs[s].shape[0]
+            if K == 0:
+                feasible[a] = False
+                base[a] += np.inf
+            elif K == 1 or ks[a] == 1:
+                base[a] += sol_costs[s][0]
+                for i in range(nT):
+                    fixed[a, T[i]] = sol_choice[s][0, i]
+            else:
+                multi[a, n_multi[a]] = s
+                n_multi[a] += 1
+    parents = [np.empty(0, dtype=np.int64)]
+    choices = [np.empty((0, n), dtype=np.int64)]
+    logs = [np.empty(0)]
+    n_rows = 0
+    for a in range(A):
+        if not feasible[a]:
+            continue
+        x = log_w[a] - base[a]
+        if n_multi[a] == 0:
+            parents.append(np.full(1, a, dtype=np.int64))
+            choices.append(fixed[a : a + 1].copy())
+            logs.append(np.full(1, x))
+            n_rows += 1
+            continue
+        k = ks[a]
+        terms = [sol_costs[multi[a, j]][:k] for j in range(n_multi[a])]
+        sums, idx = best_sums(terms, k)
+        B = sums.shape[0]
+        ch = np.empty((B, n), dtype=np.int64)
+        for b in range(B):
+            ch[b] = fixed[a]
+            for j in range(n_multi[a]):
+                s = multi[a, j]
+                T = sol_T[s]
+                for i in range(T.shape[0]):
+                    ch[b, T[i]] = sol_choice[s][idx[b, j], i]
+        parents.append(np.full(B, a, dtype=np.int64))
+        choices.append(ch)
+        logs.append(x - sums)
+        n_rows += B
+    parent = np.empty(n_rows, dtype=np.int64)
+    choice = np.empty((n_rows, n), dtype=np.int64)
+    log_out = np.empty(n_rows)
+    r = 0
+    for j in range(1, len(parents)):
+        B = parents[j].shape[0]
+        parent[r : r + B] = parents[j]
+        choice[r : r + B] = choices[j]
+        log_out[r : r + B] = logs[j]
+        r += B
+    return parent, choice, log_out, n_murty
 
 
 def new_global_hypotheses(
     table: np.ndarray,
     log_w: np.ndarray,
     groups: list[tuple[np.ndarray, np.ndarray]],
-    solver: ClusterSolver,
+    log_l_miss: np.ndarray,
+    log_l_det: np.ndarray,
+    log_new: np.ndarray,
     M_max: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    max_gap: float = np.inf,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """For each prior global hypothesis a, its ceil(M_max w_a) best assignments (at least one when it has any).
 
     Returns (parent (B,), choice (B, n): each track's measurement or :data:`MISS`, log weight (B,) unnormalised:
-    log w_a minus the assignment cost). Measurements no track takes go to their new tracks. Each cluster is solved
-    once per distinct choice of its tracks' hypotheses among the prior global hypotheses (with the largest k that
-    any of them asks); a cluster with one solution for a global hypothesis adds its cost and choice to every one of
-    that hypothesis's assignments, and only the clusters with several solutions are combined by :func:`best_sums`.
+    log w_a minus the assignment cost, the number of Murty runs). Measurements no track takes go to their new
+    tracks. Each cluster is solved once per distinct choice of its tracks' hypotheses among the prior global
+    hypotheses (with the largest k that any of them asks); a cluster with one solution for a global hypothesis adds
+    its cost and choice to every one of that hypothesis's assignments, and only the clusters with several solutions
+    are combined by :func:`best_sums`. ``max_gap``: solutions costing more than this above their cluster's best are
+    not searched for: a global hypothesis built on one weighs at most exp(-max_gap) times its parent's best child,
+    so with max_gap = -ln(w_floor) it could never reach the weight floor.
     """
     A, n = table.shape
     lone = [L for T, L in groups if len(T) == 0]
-    base = np.full(A, -float(solver.log_new[np.concatenate(lone)].sum()) if lone else 0.0)
+    base0 = -float(log_new[np.concatenate(lone)].sum()) if lone else 0.0
     ks = np.maximum(1, np.minimum(M_max, np.ceil(M_max * np.exp(log_w) - 1e-9))).astype(np.int64)
-    fixed = np.full((A, n), MISS, dtype=np.int64)  # the choices of the single-solution clusters
-    feasible = np.ones(A, dtype=bool)
-    multi: list[list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = [[] for _ in range(A)]
-    for c, (T, _) in enumerate(groups):
-        if len(T) == 0:
-            continue
-        local = table[:, T]
-        uniq, inv = unique_rows(local)
-        k_u = np.zeros(len(uniq), dtype=np.int64)
-        np.maximum.at(k_u, inv, ks)
-        sols = [solver.solve(c, uniq[u], int(k_u[u])) for u in range(len(uniq))]
-        n_sol = np.array([len(s[0]) for s in sols])
-        costs0 = np.array([s[0][0] if len(s[0]) else np.inf for s in sols])
-        feasible &= n_sol[inv] > 0
-        single = (n_sol[inv] == 1) | (ks == 1)
-        base[single] += costs0[inv[single]]
-        first = np.stack([s[1][0] if len(s[0]) else np.full(len(T), MISS, dtype=np.int64) for s in sols])
-        rows = np.flatnonzero(single)
-        fixed[np.ix_(rows, T)] = first[inv[rows]]
-        for a in np.flatnonzero(~single):
-            multi[a].append((T, *sols[inv[a]]))
-    parents, choices, logs = [], [], []
-    for a in np.flatnonzero(feasible):
-        if not multi[a]:
-            parents.append(np.array([a]))
-            choices.append(fixed[a][None, :])
-            logs.append(np.array([log_w[a] - base[a]]))
-            continue
-        k = int(ks[a])
-        sums, idx = best_sums([m[1][:k] for m in multi[a]], k)
-        ch = np.repeat(fixed[a][None, :], len(sums), axis=0)
-        for j, (T, _, choice) in enumerate(multi[a]):
-            ch[:, T] = choice[idx[:, j]]
-        parents.append(np.full(len(sums), a, dtype=np.int64))
-        choices.append(ch)
-        logs.append(log_w[a] - base[a] - sums)
-    if not parents:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, n), dtype=np.int64), np.zeros(0)
-    return np.concatenate(parents), np.concatenate(choices), np.concatenate(logs)
+    tracked = [(T, L) for T, L in groups if len(T)]
+    T_start = _segments([len(T) for T, _ in tracked])
+    L_start = _segments([len(L) for _, L in tracked])
+    T_flat = np.concatenate([T for T, _ in tracked]).astype(np.int64) if tracked else np.zeros(0, dtype=np.int64)
+    L_flat = np.concatenate([L for _, L in tracked]).astype(np.int64) if tracked else np.zeros(0, dtype=np.int64)
+    return _global_hypotheses(
+        np.ascontiguousarray(table, dtype=np.int64), np.ascontiguousarray(log_w, dtype=float), ks, T_flat, T_start,
+        L_flat, L_start, base0, np.ascontiguousarray(log_l_miss, dtype=float),
+        np.ascontiguousarray(log_l_det, dtype=float), np.ascontiguousarray(log_new, dtype=float), float(max_gap),
+    )  # fmt: skip
+
+
+def _segments(counts: list[int]) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(counts, dtype=np.int64)]).astype(np.int64)

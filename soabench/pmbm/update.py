@@ -29,7 +29,7 @@ from soabench.gmphd.models import logsumexp0
 from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
 from soabench.lmb.update import KAPPA_FLOOR, association_costs
-from soabench.pmbm.association import MISS, ClusterSolver, clusters, new_global_hypotheses, unique_rows
+from soabench.pmbm.association import MISS, clusters, new_global_hypotheses, unique_rows
 from soabench.pmbm.density import PMBMDensity
 from soabench.types import SOURCE_MEAS, NewbornTerms
 
@@ -131,8 +131,9 @@ def update(
     # global hypotheses
     groups = clusters(pred.track, np.isfinite(log_l_det), n)
     max_gap = -np.log(hyp.w_floor) if hyp.w_floor > 0.0 else np.inf
-    solver = ClusterSolver(groups, log_l_miss, log_l_det, log_new, max_gap)
-    parent, choice, log_w = new_global_hypotheses(pred.table, pred.log_w, groups, solver, hyp.M_max)
+    parent, choice, log_w, n_murty = new_global_hypotheses(
+        pred.table, pred.log_w, groups, log_l_miss, log_l_det, log_new, hyp.M_max, max_gap
+    )
     n_global = len(log_w)
     log_w = log_w - np.logaddexp.reduce(log_w)
     order = np.argsort(-log_w, kind="stable")
@@ -246,7 +247,7 @@ def update(
     table = np.hstack([old_inv, first[None, :] + (new_code & used0[None, :])]) if n_new else old_inv
     track_of = np.concatenate([child_track, n + new_t]).astype(np.int64)
     density = _prune_tracks(PMBMDensity(ppp_missed(ppp, p_D[:J]), post_hyps, track_of, table, log_w), hyp.r_floor)
-    return UpdateResult(density, A, beta, n_pairs, n_new, solver.n_murty, n_global)
+    return UpdateResult(density, A, beta, n_pairs, n_new, n_murty, n_global)
 
 
 def ppp_missed(ppp: Mixture, p_D: np.ndarray) -> Mixture:

@@ -13,6 +13,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.collections import EllipseCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
 from soabench.errors import SoabenchError
 
@@ -59,9 +63,6 @@ def _add(ax: Any, path: str, **style: Any) -> list:
 def _legend(sources: list[dict[str, str]], ncol: int, width: int, height: int, dpi: int) -> np.ndarray:
     """The page's legend, drawn once as the (height, width, 3) strip under the panels of every frame."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
 
     fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
     canvas = FigureCanvasAgg(fig)
@@ -136,8 +137,6 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
     page's track table names the label)."""
     from matplotlib import patheffects
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.collections import EllipseCollection
-    from matplotlib.figure import Figure
 
     S, models = data["scene"], data["models"]
     lay = frame_size(len(models), _LEGEND_FIXED + len(data["sources"]), panel_px)

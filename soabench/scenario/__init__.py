@@ -6,12 +6,13 @@ Public API: :func:`load` (network + polygons + scenario TOML) and :func:`simulat
 
 from __future__ import annotations
 
+import difflib
 import os
 from collections.abc import Sequence
 from importlib.resources import files
 from pathlib import Path
 
-from soabench.errors import require
+from soabench.errors import require, require_value
 from soabench.scenario.config import ScenarioConfig, load_scenario, scenario_from_dict
 from soabench.scenario.derive import derive_defaults
 from soabench.scenario.network import read_net
@@ -55,10 +56,12 @@ def scene_folder(net: str) -> Path | None:
         return shipped_root() / net
     p = Path(net)
     if p.is_dir():
-        require(
+        require_value(
             (p / "scenario.toml").is_file(),
-            f"--net {net!r} is a folder without a scenario.toml; give a scene folder (see `soabench import osm`) "
-            "or the path of a .net.xml",
+            "net",
+            net,
+            "is a folder without a scenario.toml; give a scene folder (see `soabench import osm`) or the path of a "
+            ".net.xml",
         )
         return p
     return None
@@ -117,10 +120,13 @@ def load(
     else:
         shipped = shipped_nets()
         looks_like_path = os.sep in net or net.endswith(".xml") or Path(net).exists()
-        require(
+        close = difflib.get_close_matches(net, shipped, n=1)
+        require_value(
             looks_like_path,
-            f"--net {net!r} is neither a shipped network ({', '.join(shipped)}), a scene folder nor a path to "
-            "a .net.xml",
+            "net",
+            net,
+            f"is neither a shipped network ({', '.join(shipped)}), a scene folder nor a path to a .net.xml"
+            + (f" (did you mean {close[0]!r}?)" if close else ""),
         )
         if scenario is not None:
             cfg = load_scenario(scenario)

@@ -12,6 +12,7 @@ import pytest
 
 from soabench.cli.main import main
 from soabench.config import Config
+from soabench.experiment.campaigns.atlas import store
 from soabench.experiment.campaigns.atlas.design import make_design, parse_axis
 from soabench.experiment.campaigns.atlas.run import AtlasRequest, run_atlas
 from soabench.experiment.execution.options import RunOptions
@@ -21,12 +22,13 @@ pytestmark = pytest.mark.slow
 AXES = ("pedestrians.count=3,5", "experiment.clutter=0.5,3")
 
 
-def _request(out, trials=2) -> AtlasRequest:
+def _request(out, trials=2, explicit=()) -> AtlasRequest:
     cfg = Config()
     cfg.experiment = dataclasses.replace(
         cfg.experiment, trials=trials, duration=8.0, models=("soa", "pubm"), probabilities=("static",)
     )
-    return AtlasRequest(out=out, net="intersection", design=make_design([parse_axis(a) for a in AXES]), config=cfg)
+    design = make_design([parse_axis(a) for a in AXES])
+    return AtlasRequest(out=out, net="intersection", design=design, config=cfg, explicit=set(explicit))
 
 
 def _dataset(root, table="trials"):
@@ -48,9 +50,9 @@ def test_atlas_shares_one_sumo_run_per_trial_and_variant(pool_atlas):
     assert o.complete and o.n_done == 8 and o.n_missing == 0
     # 2 scene variants (pedestrians) x 2 trials: 4 SUMO runs; the second clutter rate of a variant reuses it
     assert o.shared["recording"] == 4 and o.shared["recording_reused"] == 4
-    assert sorted(p.name for p in (root / "trials").iterdir()) == [
-        "n00000-s0000.parquet", "n00000-s0001.parquet", "n00001-s0000.parquet", "n00001-s0001.parquet",
-    ]  # fmt: skip
+    # the session's 4 chunks (trial x scene variant), compacted into one part per table
+    assert sorted(p.name for p in (root / "trials").iterdir()) == ["part-00000.parquet"]
+    assert store.part_chunks(root / "trials" / "part-00000.parquet") == {(0, 0), (0, 1), (1, 0), (1, 1)}
     rows = _dataset(root)
     assert len(rows) == 8 * 2  # points x trials x models
     assert set(rows["pedestrians_count"]) == {3, 5} and set(rows["experiment_clutter"]) == {0.5, 3.0}
@@ -93,25 +95,26 @@ def test_dask_cluster_by_tcp_address_gives_the_same_dataset(pool_atlas, tmp_path
         assert a.equals(b), table
 
 
-def test_resume_runs_only_missing_chunks_and_query_report(pool_atlas, tmp_path, capsys):
-    import shutil
-
+def test_extending_runs_only_the_new_trials_and_query_report(pool_atlas, tmp_path, capsys):
     root, _ = pool_atlas
-    copy = tmp_path / "copy"
-    shutil.copytree(root, copy)
-    (copy / "trials" / "n00001-s0001.parquet").unlink()  # as if killed before this chunk finished
-    kept = {p.name: p.stat().st_mtime_ns for p in (copy / "trials").iterdir()}
-    o = run_atlas(AtlasRequest(out=copy, report=False), RunOptions(workers=1, progress=False))
-    assert o.complete and o.shared["recording"] == 1  # one chunk run again, nothing else
-    assert all((copy / "trials" / n).stat().st_mtime_ns == t for n, t in kept.items())
-    assert _dataset(copy).equals(_dataset(root))
+    grown = tmp_path / "grown"
+    first = _request(grown, trials=1)
+    first.report = False
+    assert run_atlas(first, RunOptions(workers=1, progress=False)).complete
+    kept = {p.name: p.stat().st_mtime_ns for p in (grown / "trials").iterdir()}
+    more = _request(grown, trials=2, explicit={"experiment.trials"})
+    more.report = False
+    o = run_atlas(more, RunOptions(workers=1, progress=False))
+    assert o.complete and o.shared["recording"] == 2  # trial 1 of each scene variant, nothing else
+    assert all((grown / "trials" / n).stat().st_mtime_ns == t for n, t in kept.items())
+    assert _dataset(grown).equals(_dataset(root))  # the same seeds: the atlas made at once
     # the report and the query read the dataset
     assert (root / "report" / "index.html").is_file() and (root / "report" / "cells.csv").is_file()
     assert any(p.suffix == ".png" for p in (root / "report").iterdir())
     sql = "SELECT count(*) AS n FROM trials t JOIN points p USING (point) WHERE p.pedestrians_count = 3"
     assert main(["query", str(root), sql]) == 0
     assert "8" in capsys.readouterr().out
-    assert not os.path.exists(tmp_path / "copy" / "failures") or not list((tmp_path / "copy" / "failures").iterdir())
+    assert not os.path.exists(grown / "failures") or not list((grown / "failures").iterdir())
 
 
 def test_the_results_part_is_kept_when_complete_and_extended_with_more_trials(tmp_path, monkeypatch):
@@ -130,6 +133,7 @@ def test_the_results_part_is_kept_when_complete_and_extended_with_more_trials(tm
         assert {p: p.stat().st_mtime_ns for p in part.rglob("*.parquet")} == files
         more = dataclasses.replace(s, atlas_trials=3)
         assert rs._atlas_part(part, "intersection", more, exe, log.append) == ("done", 0)
-    assert len(list((part / "trials").iterdir())) == 3 * 2  # trials x scene variants
+    assert len(store.done_chunks(part)) == 3 * 2  # trials x scene variants
+    assert len(list((part / "trials").iterdir())) == 2  # a part per session that ran trials
     assert all(p.stat().st_mtime_ns == t for p, t in files.items())  # the first chunks were not written again
     assert (part / "report" / "summary.md").is_file()

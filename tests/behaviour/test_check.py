@@ -130,5 +130,6 @@ def test_calibrate_proposes_thresholds_from_repeated_runs(tmp_path, capsys) -> N
     assert ospa["runs"] == 3 and ospa["low"] < ospa["mean"] < ospa["high"] and ospa["std"] > 0  # three seeds differ
     assert ospa["threshold"] == f"max = {ospa['high']:.6g}" and recall["threshold"] == f"min = {recall['low']:.6g}"
     assert "a/soa/static/lambda=3/ospa" in text and "95 % bounds" in text
+    assert "0.40 with 10" in text and "3 runs are few: calibrate with 10 or more." in text  # how many runs it needs
     assert main(["check", "--suite", str(suite), "--out", str(out), "--calibrate", "1"]) == 2
     assert "--calibrate 1 must be an integer >= 2" in capsys.readouterr().err

@@ -384,9 +384,15 @@ def test_scene_and_a_scan_drawn_on_matplotlib_axes(trial1, tmp_path) -> None:
     assert {"4", "9"} <= {t.get_text() for t in ax.texts}  # the track labels beside the estimates
     fig.savefig(tmp_path / "scene.png")
     plt.close(fig)
+    tracker = sb.make_tracker("soa", scene)
+    steps = [tracker.step(scan) for scan in scans.scans[: k + 1]]
+    fig, ax = plt.subplots()
+    sb.draw_scene(ax, scene, scan=scans[k], estimates=steps[k])  # our filter's StepResult, as make_tracker gives it
+    assert f"estimate ({len(steps[k].X)})" in [t.get_text() for t in ax.get_legend().get_texts()]
+    plt.close(fig)
     with pytest.raises(TypeError, match="^scan must be a Scan, got a Scans"):
         sb.draw_scene(plt.subplots()[1], scene, scan=scans)
-    with pytest.raises(ValueError, match="net = 3 must be a scene name"):
+    with pytest.raises(ValueError, match="^net=3 must be a scene name"):
         sb.load_scene(3)
 
 
@@ -410,6 +416,74 @@ def test_estimates_and_scan_files_fail_when_built_or_read_naming_what_is_wrong(t
     np.savez(tmp_path / "other.npz", a=np.zeros(2))
     with pytest.raises(ValueError, match="is not a soabench Scans file .* lacks"):
         sb.Scans.load_npz(tmp_path / "other.npz")
+
+
+def test_scans_are_checked_when_built_naming_the_argument(trial1, tmp_path) -> None:
+    _, scans = trial1
+    K, P = scans.present.shape
+    xy = scans.truth_xy.copy()
+    k, j = np.argwhere(scans.present)[0]
+    xy[k, j, 1] = np.nan
+    source = list(scans.source)
+    m = next(i for i, s in enumerate(source) if len(s))
+    source[m] = source[m][:-1]
+    clutter_only = list(scans.source)
+    clutter_only[m] = np.full(len(clutter_only[m]), P)
+    for bad, says in (
+        (dict(truth_xy=xy[:, :, :1]), f"Scans: truth_xy has shape ({K}, {P}, 1) and dtype float64; give ({K}, {P}, 2)"),
+        (dict(present=scans.present.astype(int)), f"Scans: present has shape ({K}, {P}) and dtype int64; give"),
+        (dict(visible=scans.visible[:-1]), f"Scans: visible has shape ({K - 1}, {P}) and dtype bool; give ({K}, {P})"),
+        (dict(truth_xy=xy), f"Scans: truth_xy[{k}, {j}] is [{xy[k, j, 0]}, nan] where present[{k}, {j}] is True"),
+        (dict(source=source), f"Scans: source[{m}] has shape ({len(source[m])},) and dtype int64; give"),
+        (dict(source=clutter_only), f"Scans: source[{m}] holds {P}..{P}; give pedestrian columns 0..{P - 1}"),
+        (dict(source=scans.source[:-1]), f"Scans: source holds {K - 1} entries; give a list of {K} arrays"),
+        (dict(dt=0.0), "Scans: dt = 0.0; give the sensor period in seconds"),
+    ):
+        with pytest.raises(ValueError) as exc:
+            dataclasses.replace(scans, **bad)
+        assert _one_line(exc).startswith(says), (says, str(exc.value))
+    scans.save_npz(tmp_path / "scans.npz")
+    with np.load(tmp_path / "scans.npz") as data:
+        arrays = dict(data)
+    np.savez(tmp_path / "offsets.npz", **{**arrays, "z_offsets": arrays["z_offsets"][::-1]})
+    with pytest.raises(ValueError) as exc:
+        sb.Scans.load_npz(tmp_path / "offsets.npz")
+    assert "offsets.npz: z_offsets does not match its arrays" in _one_line(exc)
+    np.savez(tmp_path / "flags.npz", **{**arrays, "detected": arrays["detected"][:, :-1]})
+    with pytest.raises(ValueError) as exc:
+        sb.Scans.load_npz(tmp_path / "flags.npz")
+    assert f"flags.npz: Scans: detected has shape ({K}, {P - 1})" in _one_line(exc)
+
+
+def test_a_bad_value_is_named_as_the_python_argument_or_as_the_flag(tmp_path, capsys) -> None:
+    import pickle
+
+    from soabench.cli.main import main
+    from soabench.errors import BadValue
+
+    stray = tmp_path / "stray"
+    stray.mkdir()
+    (stray / "notes.txt").write_text("mine")
+    calls = (
+        (dict(net="intersectoin"), "net='intersectoin' is neither a shipped network", "--net", "intersectoin"),
+        (
+            dict(out=str(stray)),
+            f"out={str(stray)!r} is not empty (notes.txt) but holds no run.json",
+            "--out",
+            str(stray),
+        ),
+        (dict(workers=0), "workers=0 is out of range; allowed: integers in [1, ", "--workers", "0"),
+    )
+    for kwargs, says, flag, value in calls:
+        with pytest.raises(BadValue) as exc:
+            sb.run(trials=1, duration=5, **kwargs)
+        assert _one_line(exc).startswith(says) and "--" not in str(exc.value), str(exc.value)
+        assert pickle.loads(pickle.dumps(exc.value)).args == exc.value.args  # crosses a process boundary whole
+        assert main(["run", flag, value, "--trials", "1", "--duration", "5", "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"soabench: error: {flag} {exc.value.value!r} {exc.value.problem}"], err
+    with pytest.raises(BadValue, match=r"\(did you mean 'intersection'\?\)$"):
+        sb.load_scene("intersectoin")
 
 
 def test_metrics_of_the_same_run_compare_equal_without_their_timings(trial1) -> None:

@@ -98,11 +98,14 @@ def test_a_run_compiles_only_the_kernels_it_calls():
     one = kw.needed([_config(models=("soa",), probabilities=("static",))])
     assert one[kw._fused_steps] == one[kw._predict_update] == ("static",)
     assert kw._lmb_steps not in one and kw._newborn_steps not in one  # no LMB, no newborn terms
+    assert kw._pmbm_steps not in one
     assert {kw._reduction, kw._metrics_geometry, kw._track_metrics} <= set(one)
     both = kw.needed([_config(models=("soa",), probabilities=("static",)),
                       _config(models=("pubm",), probabilities=("dynamic",), filters=("gmphd", "lmb"))])  # fmt: skip
     assert both[kw._fused_steps] == ("static", "dynamic") and both[kw._newborn_steps] == ("dynamic",)
-    assert kw._lmb_steps in both
+    assert kw._lmb_steps in both and kw._pmbm_steps not in both
+    pmb = kw.needed([_config(models=("soa",), probabilities=("static",), filters=("pmb",))])
+    assert pmb[kw._pmbm_steps] == ("any",) and kw._lmb_steps not in pmb and kw._fused_steps not in pmb
     assert set(kw.needed([{"experiment": {"models": 7}}])) == set(kw.everything())  # unreadable: everything
 
 

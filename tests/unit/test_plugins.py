@@ -55,7 +55,7 @@ def test_api_hands_out_the_classes_of_types_and_protocols() -> None:
 
 # ------------------------------------------------------------------------------------------------ the registry
 def test_closed_list_refuses_untyped_import_paths() -> None:
-    with pytest.raises(SoabenchError, match="not given on this command line"):
+    with pytest.raises(SoabenchError, match="is an import path its caller did not name"):
         plugins.check_name(plugins.BIRTH, f"{FX}:OneBirth")
     with pytest.raises(SoabenchError, match="unknown; choose one of soa, pubm"):
         plugins.check_name(plugins.BIRTH, "nosuch")
@@ -245,7 +245,7 @@ def test_bad_plugins_are_recorded_and_others_kept(intersection) -> None:
 
 
 def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.experiment.runs.files import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
@@ -269,7 +269,7 @@ def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
     # resume: names from run.json are not imported unless typed again on this command line
     (out / "trials" / "trial_00001.json").unlink()
     plugins._TYPED.clear()
-    with pytest.raises(SoabenchError, match="not given on this command line"):
+    with pytest.raises(SoabenchError, match="is an import path its caller did not name"):
         run_experiment(None, "ignored", resume=out, options=RunOptions(workers=1, progress=False, figures=False))
     plugins.allow_import_paths([one, echo, bad])
     o2 = run_experiment(None, "ignored", resume=out, options=RunOptions(workers=1, progress=False, figures=False))
@@ -299,7 +299,7 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     """Dask workers get the typed import paths from the task (not from a file) and compute the same numbers."""
 
     pytest.importorskip("distributed")
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.experiment.runs.files import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
@@ -334,11 +334,11 @@ def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None
 
     seen = {}
 
-    def fake_run_study(cfg, net, **kw):
-        seen["cfg"] = cfg
+    def fake_study(request):
+        seen["cfg"] = request.config
         return SimpleNamespace(summary_markdown="", complete=True, run_dir="x", n_missing=0)
 
-    monkeypatch.setattr(study, "run_study", fake_run_study)
+    monkeypatch.setattr(study, "study", fake_study)
     one, echo = f"{FX}:OneBirth", f"{FX}:EchoTracker"
     assert main(["study", "--models", one, "--trackers", echo, "--trials", "1"]) == 0
     exp = seen["cfg"].experiment

@@ -64,13 +64,72 @@ def test_murty_ranks_like_enumeration(seed):
     assert [g[0] for g in murty(C, k)] == [g[0] for g in got[:k]]
 
 
+def _random_costs(rng, kind, n_max=6):
+    """A small cost matrix (rows <= columns): continuous, small integers (many exact ties) or with forbidden cells
+    (sometimes no assignment at all)."""
+    n = int(rng.integers(1, n_max + 1))
+    shape = (n, n + int(rng.integers(0, min(n + 2, 3))))
+    if kind == 0:
+        return rng.normal(0, 3, shape)
+    C = rng.integers(-2, 3, shape).astype(float)
+    if kind == 2:
+        C[rng.random(shape) < 0.45] = np.inf
+    return C
+
+
+def test_assignment_solver_is_scipys():
+    """The compiled solver gives scipy's assignment, column for column (ties included), and finds the same
+    matrices infeasible."""
+    from soabench.pmbm.murty import lsa
+
+    rng = np.random.default_rng(7)
+    n_ties = n_infeasible = 0
+    for t in range(600):
+        C = _random_costs(rng, t % 3)
+        cols = np.empty(len(C), dtype=np.int64)
+        ok = lsa(C, cols, 0)
+        try:
+            want = linear_sum_assignment(C)[1]
+        except ValueError:  # scipy: "cost matrix is infeasible"
+            want = None
+        assert ok == (want is not None)
+        if ok:
+            np.testing.assert_array_equal(cols, want)
+            n_ties += t % 3 == 1
+        n_infeasible += not ok
+    assert n_ties > 100 and n_infeasible > 10  # the cases of interest were drawn
+
+
+def test_murty_with_ties_is_deterministic_and_complete():
+    """Small-integer costs (many exact ties): every assignment once with the enumeration's costs, and the k best
+    are the first k of the full ranking, assignment for assignment."""
+    rng = np.random.default_rng(3)
+    for t in range(40):
+        C = _random_costs(rng, 1 + t % 2, n_max=4)
+        got = murty(C, 10_000)
+        assert [g[0] for g in got] == _all_assignments(C)
+        assert len({tuple(g[1]) for g in got}) == len(got)
+        k = max(1, len(got) // 3)
+        head = murty(C, k)
+        assert [(c, tuple(x)) for c, x in head] == [(c, tuple(x)) for c, x in got[:k]]
+
+
+def test_compiled_sum_is_numpys():
+    from soabench.pmbm.murty import array_sum
+
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 7, 8, 9, 16, 17, 127, 128, 129, 300):
+        a = rng.normal(0, 1, n) * 10.0 ** rng.normal(0, 3, n)
+        assert array_sum(a) == a.sum()
+
+
 def test_each_association_is_listed_once():
     """Two tracks gating two measurements: each measurement to track 0, track 1 or its new track, no track twice:
     7 associations, each once, with the weights of their likelihood factors."""
-    from soabench.pmbm.association import ClusterSolver
+    from soabench.pmbm.association import cluster_solutions
 
     lm, ld, ln = np.log([0.3, 0.4]), np.log([[0.5, 0.2], [0.3, 0.6]]), np.log([0.1, 0.2])
-    costs, choice = ClusterSolver([(np.arange(2), np.arange(2))], lm, ld, ln).solve(0, np.arange(2), 100)
+    costs, choice = cluster_solutions(np.arange(2), np.arange(2), lm, ld, ln, 100, np.inf)
     assert len({tuple(c) for c in choice}) == len(choice) == 7
     want = []
     for c0, c1 in itertools.product((-1, 0, 1), repeat=2):  # the measurement each track takes (-1: missed)

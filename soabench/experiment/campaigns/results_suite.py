@@ -41,14 +41,15 @@ from soabench.birth import CORE_MODELS
 from soabench.config import FILTER_FAMILIES, MAX_SEED, MAX_TRIALS, Config, check_time
 from soabench.errors import Interrupted, SoabenchError, require
 from soabench.experiment.campaigns.occlusion_density import write_density
-from soabench.experiment.execution.executors import MAX_WORKERS
-from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
+from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions, check_workers
 from soabench.experiment.reports.html import write_index
 from soabench.experiment.runs.files import read_json
 from soabench.experiment.runs.runmeta import flatten_config
 from soabench.folders import FolderLock, check_own_folder, resolve
 from soabench.kitti.config import KittiSpec, load_kitti_config
 from soabench.scenario import shipped_nets
+from soabench.scenario.network import read_net
+from soabench.scenario.parking import parking_lanes
 
 #: the study's part folders; a study is kept only when each is complete (a part added to the study belongs here)
 STUDY_PARTS = ("main", "clutter", "births")  # and sensitivity/ (two run folders and its table; see study_kept)
@@ -352,8 +353,6 @@ def atlas_axes(scene: str) -> dict[str, tuple[float, ...]]:
     """:data:`ATLAS_AXES` on ``scene``; a scene without parking lanes (grid_block: its kerbs are sidewalks and shop
     fronts) has no parked cars to vary, so it drops the parking axis (its occluders are its buildings)."""
     from soabench.experiment.campaigns.occlusion import base_scenario
-    from soabench.scenario.network import read_net
-    from soabench.scenario.parking import parking_lanes
 
     net_file = base_scenario(scene, None).get("files", {}).get("net")
     if net_file and not parking_lanes(read_net(net_file)):
@@ -374,8 +373,8 @@ def atlas_request(folder: Path, scene: str, s: Settings):
 
 
 def _atlas_part(folder: Path, scene: str, s: Settings, exe: RunOptions, log: Callable[[str], None]):
-    """The atlas of ``scene``: kept when complete with these settings, else resumed (more trials: extended) or
-    started; its report is drawn whenever trials were added."""
+    """The atlas of ``scene``: kept when complete with these settings (its chunks compacted if a part of it is not),
+    else resumed (more trials: extended) or started; its report is drawn whenever trials were added."""
     from soabench.experiment.campaigns.atlas.run import run_atlas
     from soabench.experiment.campaigns.atlas.store import done_chunks, is_atlas, read_meta
 
@@ -386,7 +385,11 @@ def _atlas_part(folder: Path, scene: str, s: Settings, exe: RunOptions, log: Cal
         same = meta["trials"] == s.atlas_trials and req.design is not None
         if same and len({c for c in done_chunks(folder) if c[0] < meta["trials"]}) == n_chunks:
             if (folder / "report" / "summary.md").is_file():
-                log(f"kept {folder} (the atlas is complete)")
+                from soabench.experiment.campaigns.atlas.compact import compact
+
+                with FolderLock(folder, "atlas folder"):
+                    n = compact(folder).get("trials", 0)  # chunks an earlier layout left: into parts, same rows
+                log(f"kept {folder} (the atlas is complete" + (f"; {n} chunks compacted)" if n else ")"))
                 return "kept", 0
     o = run_atlas(req, exe, log=log)
     return ("done" if o.complete else "incomplete"), o.n_missing
@@ -422,7 +425,7 @@ def _filters_part(
     the ablation's instead): kept when complete with these settings, else resumed (more trials: extended) or
     started."""
     # imported when called: scipy would slow every start-up
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
 
     cfg = cfg if cfg is not None else filters_config(s)
     keys = FILTERS_KEYS
@@ -449,10 +452,7 @@ def run_results(
     progress of every part (the others are each part's own)."""
 
     workers, progress = options.workers, options.progress
-    require(
-        workers is None or 1 <= workers <= MAX_WORKERS,
-        f"--workers {workers} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
-    )
+    check_workers(workers)
 
     shipped = shipped_nets()
     s = (settings or Settings()).validate(shipped)

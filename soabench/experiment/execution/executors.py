@@ -25,11 +25,10 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from soabench.errors import SoabenchError, require
-from soabench.experiment.execution.options import check_scheduler_address
-from soabench.experiment.execution.workers import init_worker, last_activity, sigint_ignored_by_children
+from soabench.experiment.execution.options import check_scheduler_address, check_workers
+from soabench.experiment.execution.workers import init_worker, sigint_ignored_by_children
+from soabench.experiment.trial.activity import last_activity
 from soabench.seeding import trial_seeds
-
-MAX_WORKERS = 1024  #: upper bound of --workers (processes or LocalCluster workers on one machine)
 
 
 def failure_record(trial: int, base_seed: int, error: str, tb: str = "") -> dict:
@@ -70,9 +69,7 @@ class PoolExecutor:
         self.n_workers = int(workers)
         self._pool: ProcessPoolExecutor | None = None
         self._generation = 0  # incremented whenever a broken pool is replaced
-        self._notes: str | None = (
-            None  # the workers' notes folder (soabench.experiment.execution.workers.note_activity)
-        )
+        self._notes: str | None = None  # the workers' notes folder (soabench.experiment.trial.activity.note_activity)
         self._procs: dict[int, Any] = {}  # pid -> process of the current pool (its exit code names a death)
         self._lost: dict[int, dict[int, str]] = {}  # pool generation -> trial -> why it was lost
 
@@ -188,7 +185,8 @@ class DaskExecutor:
             import distributed
         except ImportError:
             raise SoabenchError(
-                "--scheduler/--dask need Dask distributed, which is not installed: pip install soabench[dask]"
+                "a Dask executor (a scheduler, or Dask local workers) needs Dask distributed, which is not "
+                "installed: pip install soabench[dask]"
             ) from None
         self._distributed = distributed
         self._cluster = None
@@ -279,10 +277,7 @@ def _probe_scheduler(address: str, timeout: float = 10.0) -> None:
 def open_executor(workers: int | None = None, scheduler: str | None = None, dask_local: bool = False, n_trials=None):
     """The executor for the given options (see the module docstring); the caller must ``close()`` it."""
     require(not (scheduler and dask_local), "--scheduler and --dask local are alternatives; give one of them")
-    require(
-        workers is None or (isinstance(workers, int) and 1 <= workers <= MAX_WORKERS),
-        f"workers = {workers!r} is out of range; allowed: integers in [1, {MAX_WORKERS}]",
-    )
+    check_workers(workers)
     check_scheduler_address(scheduler)
     if scheduler or dask_local:
         return DaskExecutor(scheduler=scheduler, local_workers=workers)

@@ -8,7 +8,7 @@ import ipaddress
 import re
 from dataclasses import dataclass
 
-from soabench.errors import require
+from soabench.errors import require, require_value
 
 #: ``[scheme://]host:port``; the schemes Dask's communication layer speaks over a network
 SCHEDULER_ADDRESS = re.compile(
@@ -28,13 +28,26 @@ def _is_host(host: str) -> bool:
     return True
 
 
+MAX_WORKERS = 1024  #: upper bound of ``workers`` (processes or LocalCluster workers on one machine)
+
+
+def check_workers(workers: int | None) -> None:
+    """``workers`` is None (every core) or a number of processes in [1, :data:`MAX_WORKERS`]."""
+    require_value(
+        workers is None or (isinstance(workers, int) and not isinstance(workers, bool) and 1 <= workers <= MAX_WORKERS),
+        "workers",
+        workers,
+        f"is out of range; allowed: integers in [1, {MAX_WORKERS}]",
+    )
+
+
 def check_scheduler_address(address: str | None) -> None:
     """Refuse a malformed ``--scheduler`` at once (instead of a connection timeout later)."""
     if address is None:
         return
     m = SCHEDULER_ADDRESS.match(address.strip())
     ok = m is not None and 1 <= int(m.group("port")) <= 65535 and _is_host(m.group("host"))
-    require(ok, f"--scheduler {address!r} is not a scheduler address; expected tcp://HOST:PORT (port 1-65535)")
+    require_value(ok, "scheduler", address, "is not a scheduler address; expected tcp://HOST:PORT (port 1-65535)")
 
 
 @dataclass(frozen=True)
@@ -54,8 +67,8 @@ class RunOptions:
     figures: bool | None = None
 
     def validate(self) -> RunOptions:
-        """One line naming the first bad option (the command line's flag names)."""
-        require(self.workers is None or self.workers >= 1, f"--workers {self.workers} must be >= 1")
+        """One line naming the first bad option (as the front end that was given it names it)."""
+        check_workers(self.workers)
         require(
             not (self.scheduler and self.dask_local),
             "--scheduler and --dask local are alternatives; give one of them, not both",

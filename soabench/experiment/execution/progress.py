@@ -37,7 +37,8 @@ class Progress:
     Args:
         total, done: trial counts.
         enabled: False: print nothing (``--no-progress``).
-        label: what is counted, e.g. the run folder's name in a sweep.
+        label: whose progress it is, e.g. the run folder's name in a sweep.
+        unit: what is counted (an atlas counts chunks: one trial of every point of a scene variant).
         stream: where to write (default ``sys.stderr``); a terminal gets the bar.
         clock: monotonic seconds (tests pass a fake one).
     """
@@ -50,13 +51,14 @@ class Progress:
         label: str = "",
         stream: TextIO | None = None,
         clock: Callable[[], float] = time.monotonic,
+        unit: str = "trials",
     ):
         self.total, self.done, self.failed = int(total), int(done), 0
         self.stream = stream if stream is not None else sys.stderr
         self.active = bool(enabled)
         #: True when the in-place bar is drawn (callers end its line before printing)
         self.enabled = self.active and is_terminal(self.stream)
-        self.label = label
+        self.label, self.unit = label, unit
         self._clock = clock
         self._start_done = self.done
         self._t0 = clock()
@@ -82,7 +84,7 @@ class Progress:
         fail = f", {self.failed} failed" if self.failed else ""
         head = f"{self.label}: " if self.label else ""
         elapsed = format_duration(self._clock() - self._t0)
-        return f"{head}{self.done}/{self.total} trials ({pct:.0f}%){fail}, {elapsed} elapsed{self._eta()}"
+        return f"{head}{self.done}/{self.total} {self.unit} ({pct:.0f}%){fail}, {elapsed} elapsed{self._eta()}"
 
     def draw(self) -> None:
         if not self.active:

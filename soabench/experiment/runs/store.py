@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from soabench.atomic import to_jsonable, write_bytes_atomic, write_json_atomic
-from soabench.errors import SoabenchError
+from soabench.errors import BadValue, SoabenchError
 from soabench.experiment.runs.files import (
     ReadBack,
     csv_line,
@@ -118,6 +118,12 @@ def run_identity(meta: dict) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
+def merge_args(config: Any) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The (models, modes) a run folder of ``config`` is merged with: its birth models then trackers, its modes."""
+    exp = config.experiment
+    return (*exp.models, *exp.trackers), tuple(exp.probabilities)
+
+
 class RunStore:
     """Reads and writes one run folder (layout in the module docstring)."""
 
@@ -141,8 +147,10 @@ class RunStore:
     def create(self, meta: dict) -> None:
         """Start a new run folder; refuses a folder that already holds a run."""
         if self.exists():
-            raise SoabenchError(
-                f"{str(self.run_dir)!r} already holds a run; use --resume {self.run_dir} or another --out"
+            raise BadValue(
+                "out",
+                str(self.run_dir),
+                f"already holds a run; finish it with soabench run --resume {self.run_dir}, or give another folder",
             )
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self._run_id = run_identity(meta)
@@ -312,7 +320,7 @@ class RunStore:
 
     # -- merge
     def adopt_merge(self, done: Sequence[int], failures: Sequence[dict]) -> None:
-        """Take over the merge another process just did of this folder (:mod:`soabench.experiment.execution.premerge`):
+        """Take over the merge another process just did of this folder (:mod:`soabench.experiment.reports.premerge`):
         the
         finished trials it merged and the model failures it read, which :meth:`model_failures` then returns."""
         self._merged_failures = (tuple(int(t) for t in done), [dict(f) for f in failures])

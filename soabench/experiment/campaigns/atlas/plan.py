@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from soabench.config import Config
+from soabench.config import FAMILY_MODES, Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.campaigns.atlas.design import Design, is_scene_axis
 
@@ -141,8 +141,13 @@ def variant_scenario(variant: SceneVariant) -> dict | None:
         scenario_from_dict(data, source=f"scene {variant.net}")
     except SoabenchError as exc:
         raise SoabenchError(f"axis value {_shown(variant.scenario)}: {exc}") from None
-    if float(variant.scenario.get("parking.density", 0)) > 0 and "net" in data.get("files", {}):
-        check_parking_lanes(data["files"]["net"], [variant.scenario["parking.density"]])
+    if "parking.density" in variant.scenario and "net" in data.get("files", {}):
+        check_parking_lanes(
+            data["files"]["net"],
+            [variant.scenario["parking.density"]],
+            what=f"axis parking.density on scene {variant.net!r}",
+            fix="drop the parking.density axis for this scene (or give it only the value 0)",
+        )
     return data
 
 
@@ -194,7 +199,6 @@ class Cost:
 
 def runs_per_trial(cfg: Config) -> int:
     """Filter runs of one trial of one point: (models x modes per family) x families x clutter rates + trackers."""
-    from soabench.config import FAMILY_MODES
 
     exp = cfg.experiment
     per_family = sum(len([m for m in exp.probabilities if m in FAMILY_MODES[f]]) for f in exp.filters)

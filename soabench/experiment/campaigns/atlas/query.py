@@ -2,8 +2,8 @@
 
 :func:`connect` opens an in-memory DuckDB database whose views are the folder's tables:
 
-* an atlas (``atlas.json``): ``trials``, ``episodes``, ``steps`` (when stored) over the Parquet chunks, and
-  ``points`` (one row per design point);
+* an atlas (``atlas.json``): ``trials``, ``episodes``, ``steps`` (when stored) over its Parquet parts and the chunks
+  no part holds yet (:func:`.store.dataset_files`), and ``points`` (one row per design point);
 * a run folder (``run.json``): ``trials``, ``episodes``, ``steps`` over its CSV files;
 * a folder holding run folders (a sweep, a study, results/): the same tables over every run folder below it, with a
   ``run`` column naming the run folder (its path relative to the folder).
@@ -14,10 +14,13 @@ configuration locked): a query cannot read or write files elsewhere or install e
 
 from __future__ import annotations
 
+import io
 import math
+import re
 from pathlib import Path
 from typing import Any
 
+from soabench.atomic import write_bytes_atomic
 from soabench.errors import SoabenchError, require
 from soabench.experiment.campaigns.atlas import store
 
@@ -42,9 +45,9 @@ def tables_of(root: Path) -> dict[str, str]:
     if (root / store.ATLAS_FILE).exists():
         store.read_meta(root)  # one line if atlas.json is not an atlas's
         for table in store.TABLES:
-            files = sorted((root / table).glob("*.parquet")) if (root / table).is_dir() else []
+            files = store.dataset_files(root, table)  # its parts and the chunk files no part holds
             if files:
-                out[table] = f"read_parquet({_sql_text(str(root / table / '*.parquet'))}, union_by_name = true)"
+                out[table] = f"read_parquet({_sql_list(files)}, union_by_name = true)"
         out["points"] = f"read_parquet({_sql_text(str(root / 'points.parquet'))})"
         return out
     if (root / "run.json").is_file():
@@ -69,10 +72,11 @@ def tables_of(root: Path) -> dict[str, str]:
     return out
 
 
-def connect(path: str | Path, only: Any = None) -> Any:
+def connect(path: str | Path, only: Any = None, threads: int | None = None) -> Any:
     """A DuckDB connection with the folder's tables as views (module docstring); ``only``: the names of the tables
     to open (None: all). DuckDB reads every file's schema when it creates a view, so a query opens only the tables it
-    names."""
+    names. ``threads``: DuckDB's threads (None: its default, every core); one thread sums in the files' row order,
+    so averages are the same bit for bit from run to run."""
     import duckdb
 
     root = Path(path).resolve()
@@ -80,6 +84,8 @@ def connect(path: str | Path, only: Any = None) -> Any:
     if only is not None:
         tables = {k: v for k, v in tables.items() if k in set(only)}
     con = duckdb.connect()
+    if threads is not None:
+        con.execute(f"SET threads = {int(threads)}")
     con.execute("SET allowed_directories = ?", [[str(root) + "/"]])
     con.execute("SET enable_external_access = false")
     con.execute("SET lock_configuration = true")
@@ -93,7 +99,6 @@ def run_query(path: str | Path, sql: str) -> Any:
     import duckdb
 
     require(isinstance(sql, str) and sql.strip() != "", 'the SQL is empty; give a query such as "SELECT ..."')
-    import re
 
     names = {w.lower() for w in re.findall(r"[A-Za-z_]+", sql)}
     con = connect(path, only=[t for t in (*store.TABLES, "points") if t in names])
@@ -135,12 +140,9 @@ def format_table(table: Any, limit: int = MAX_PRINTED) -> str:
 
 def write_result(table: Any, out: Path) -> None:
     """``out``: ``.csv`` or ``.parquet`` (by suffix), written whole or not at all."""
-    import io
 
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
-
-    from soabench.atomic import write_bytes_atomic
 
     suffix = Path(out).suffix.lower()
     require(suffix in (".csv", ".parquet"), f"--out {str(out)!r}: allowed: a .csv or .parquet file")

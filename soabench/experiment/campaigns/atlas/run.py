@@ -7,8 +7,9 @@ study does for its clutter rates), and returns the chunk's rows. Trial n has the
 (:mod:`soabench.seeding`): common random numbers inside a point (every model sees the same truth, detections and
 clutter) and across the points of a variant. The driver writes each chunk as its task finishes
 (:mod:`.store`; workers need no shared file system) and holds only the chunks in flight, so memory stays flat in the
-number of trials. Tasks run trial-major (trial 0 of every variant, then trial 1, ...): an interrupted atlas has about
-as many trials at every point, and a resumed one runs only the chunks without a ``trials/`` file.
+number of trials; at the end of a session it compacts the finished chunks into a few parts (:mod:`.compact`). Tasks
+run trial-major (trial 0 of every variant, then trial 1, ...): an interrupted atlas has about as many trials at every
+point, and a resumed one runs only the chunks that are not complete (:func:`.store.done_chunks`).
 """
 
 from __future__ import annotations
@@ -27,11 +28,11 @@ from pathlib import Path
 from typing import Any
 
 from soabench import plugins
-from soabench.atomic import to_jsonable, write_json_atomic, write_text_atomic
+from soabench.atomic import to_jsonable, write_bytes_atomic, write_json_atomic, write_text_atomic
 from soabench.config import Config
 from soabench.errors import Interrupted, require
 from soabench.experiment.campaigns.atlas import store
-from soabench.experiment.campaigns.atlas.design import Design, axis_type
+from soabench.experiment.campaigns.atlas.design import Design, axis_type, filter_families_allowed
 from soabench.experiment.campaigns.atlas.plan import (
     Cost,
     PointPlan,
@@ -237,7 +238,6 @@ def _write_new(root: Path, meta: dict, variants: list[SceneVariant]) -> None:
         ),
         {},
     )
-    from soabench.atomic import write_bytes_atomic
 
     write_bytes_atomic(root / "points.parquet", store.parquet_bytes(cols))
     write_json_atomic(root / store.ATLAS_FILE, to_jsonable(meta))  # last: its presence marks a planned atlas
@@ -289,8 +289,6 @@ def plan(req: AtlasRequest) -> tuple[dict, list[SceneVariant], list[PointPlan], 
     assert req.design is not None and req.config is not None
     for a in req.design.axes:
         if a.key == "filters":
-            from soabench.experiment.campaigns.atlas.design import filter_families_allowed
-
             bad = [v for v in a.values if v not in filter_families_allowed()]
             require(not bad, f"axis filters: {bad[0] if bad else ''!r} is unknown; allowed: "
                     f"{', '.join(filter_families_allowed())}")  # fmt: skip
@@ -353,10 +351,9 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
             if registry.trial_kind(spec.trial_kind) is registry._builtin_trial:
                 from soabench.kernel_warmup import ensure_compiled
 
-                # the kernels of its points' configurations only (the model families and modes they run)
                 ensure_compiled(point_config(spec.config, json.loads(ov)) for _, _, ov, _ in spec.points)
             exe = open_executor(options.workers, options.scheduler, options.dask_local, n_trials=todo_n)
-            bar = Progress(n_chunks, n_chunks - todo_n, options.progress, label=root.name)
+            bar = Progress(n_chunks, n_chunks - todo_n, options.progress, label=root.name, unit="chunks")
             aborted = True
             try:
                 gen = exe.results(spec, _todo(spec, n_trials, done))
@@ -388,6 +385,9 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
                 ) from None
             finally:
                 exe.close(abort=aborted)
+        from soabench.experiment.campaigns.atlas.compact import compact
+
+        compact(root)  # the session's chunks into parts: few files for the report and every query
         done = store.done_chunks(root)
         n_done_chunks = len({c for c in done if c[0] < n_trials})
         complete = n_done_chunks == n_chunks

@@ -11,7 +11,14 @@ Layout::
     failures/n00012-s0003.json  a chunk whose trial failed (retried on resume)
 
 A chunk is written to a temporary name and renamed, episodes (and steps) first and its trial rows last: a chunk whose
-``trials/`` file exists is complete, and a resumed atlas skips it (it is never written twice). Columns: ``point``,
+``trials/`` file exists is complete, and a resumed atlas skips it (it is never written twice).
+
+**Compaction** (:mod:`.compact`) gathers finished chunks into a few large *parts* per table,
+``trials/part-00000.parquet``, each with row groups sized for scans and, in its Parquet metadata, the chunks it
+holds. A part is written to a temporary name and renamed; only then are the chunk files it holds removed. A chunk is
+complete when its trial rows are a chunk file or held by a ``trials/`` part, and a chunk file that a part of its
+table holds is ignored by every reader (:func:`table_files`) and removed on the next open: a compaction killed at any
+moment leaves a valid dataset, and none of its rows counted twice. Columns: ``point``,
 ``scene``, one column per axis (the key with ``.`` as ``_``), ``family``, then every column of the run's own table
 (``trials.csv``: trial, seed, ..., the track columns; ``episodes.csv`` with whatever fields its episodes carry).
 """
@@ -19,6 +26,7 @@ A chunk is written to a temporary name and renamed, episodes (and steps) first a
 from __future__ import annotations
 
 import io
+import json
 import re
 from collections.abc import Iterable
 from pathlib import Path
@@ -34,10 +42,77 @@ TABLES = ("trials", "episodes", "steps")
 #: every entry an atlas folder holds (anything else: not an atlas's)
 ATLAS_ENTRIES = (ATLAS_FILE, "points.parquet", "scenes", *TABLES, "failures", "report", ".soabench.lock")
 CHUNK = re.compile(r"^n(\d{5,})-s(\d{4,})\.parquet$")
+PART = re.compile(r"^part-(\d{5,})\.parquet$")
+#: the key of a part's Parquet metadata that lists the chunks it holds
+HOLDS_KEY = b"soabench.chunks"
 
 
 def chunk_name(trial: int, scene: int) -> str:
     return f"n{trial:05d}-s{scene:04d}.parquet"
+
+
+def part_name(index: int) -> str:
+    return f"part-{index:05d}.parquet"
+
+
+def encode_chunks(chunks: Iterable[tuple[int, int]]) -> bytes:
+    """(trial, scene) pairs as compact JSON: per scene variant, its trials as inclusive ranges."""
+    by_scene: dict[int, list[int]] = {}
+    for n, s in chunks:
+        by_scene.setdefault(int(s), []).append(int(n))
+    out: dict[str, list[list[int]]] = {}
+    for s, trials in sorted(by_scene.items()):
+        ranges: list[list[int]] = []
+        for n in sorted(set(trials)):
+            if ranges and ranges[-1][1] == n - 1:
+                ranges[-1][1] = n
+            else:
+                ranges.append([n, n])
+        out[str(s)] = ranges
+    return json.dumps(out, separators=(",", ":")).encode()
+
+
+def decode_chunks(data: bytes) -> set[tuple[int, int]]:
+    """The pairs of :func:`encode_chunks`."""
+    out = set()
+    for s, ranges in json.loads(data).items():
+        for lo, hi in ranges:
+            out.update((n, int(s)) for n in range(int(lo), int(hi) + 1))
+    return out
+
+
+def part_chunks(path: Path) -> set[tuple[int, int]]:
+    """The chunks a part holds (its footer only is read); a part without the list is refused in one line."""
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema(path).metadata or {}
+    require(HOLDS_KEY in meta, f"{path} is not an atlas part (its metadata lists no chunks); remove it or restore it")
+    return decode_chunks(meta[HOLDS_KEY])
+
+
+def table_files(root: Path, table: str) -> tuple[dict[Path, set[tuple[int, int]]], dict[tuple[int, int], Path]]:
+    """The parts of ``table`` (path -> the chunks it holds) and its chunk files that no part holds ((trial, scene)
+    -> path): together, every row of the table exactly once."""
+    parts: dict[Path, set[tuple[int, int]]] = {}
+    loose: dict[tuple[int, int], Path] = {}
+    folder = root / table
+    if not folder.is_dir():
+        return parts, loose
+    for f in sorted(folder.iterdir()):
+        if PART.match(f.name):
+            parts[f] = part_chunks(f)
+        else:
+            m = CHUNK.match(f.name)
+            if m:
+                loose[(int(m.group(1)), int(m.group(2)))] = f
+    held = set().union(*parts.values()) if parts else set()
+    return parts, {c: f for c, f in loose.items() if c not in held}
+
+
+def dataset_files(root: Path, table: str) -> list[Path]:
+    """Every file a reader of ``table`` reads: its parts, then the chunk files no part holds."""
+    parts, loose = table_files(root, table)
+    return [*parts, *(loose[c] for c in sorted(loose))]
 
 
 def arrow_table(columns: dict[str, list]) -> Any:
@@ -80,28 +155,28 @@ def write_chunk(root: Path, trial: int, scene: int, tables: dict[str, dict[str, 
 
 
 def done_chunks(root: Path) -> set[tuple[int, int]]:
-    """(trial, scene) of every complete chunk."""
-    out = set()
-    folder = root / "trials"
-    if folder.is_dir():
-        for f in folder.iterdir():
-            m = CHUNK.match(f.name)
-            if m:
-                out.add((int(m.group(1)), int(m.group(2))))
-    return out
+    """(trial, scene) of every complete chunk: its trial rows are a chunk file or held by a part."""
+    parts, loose = table_files(root, "trials")
+    return set(loose).union(*parts.values())
 
 
 def clear_partials(root: Path) -> None:
-    """Remove temporary files a killed writer left (ours by name) and chunk tables without their trial rows."""
-    done = {chunk_name(n, s) for n, s in done_chunks(root)}
+    """Remove temporary files a killed writer left (ours by name), chunk tables without their trial rows, and chunk
+    files a part of their table already holds (a compaction killed before it removed them)."""
+    done = done_chunks(root)
     for table in TABLES:
         folder = root / table
         if not folder.is_dir():
             continue
+        parts, loose = table_files(root, table)
+        keep = set(loose.values())
         for f in folder.iterdir():
+            m = CHUNK.match(f.name)
             if f.name.startswith(".") and f.name.endswith(".tmp"):
                 f.unlink()
-            elif table != "trials" and CHUNK.match(f.name) and f.name not in done:
+            elif m and f not in keep:  # held by a part
+                f.unlink()
+            elif m and table != "trials" and (int(m.group(1)), int(m.group(2))) not in done:
                 f.unlink()
 
 
