@@ -182,7 +182,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pars, bw, bm,
     """
     dyn = beta.shape[1] == 4
     if not births_ok(bw, bm, bP):
-        return (*_new_mixture(np.int64(0), dyn), np.empty(0), False)
+        return (*_new_mixture(0, dyn), np.empty(0), False)
     p_S = pars[PRED_P_S]
     f_beta, theta_min, p_S_max = pars[PRED_BETA_FACTOR], pars[PRED_THETA_MIN], pars[PRED_P_S_MAX]
     r_min, r_max, half_fov = pars[PRED_R_MIN], pars[PRED_R_MAX], pars[PRED_HALF_FOV]
@@ -695,8 +695,7 @@ STEP_OK, STEP_BAD_BIRTHS, STEP_NOT_PD = 0, 1, 2
 def _no_reduction(dyn):
     """What :func:`reduce` returns for an empty posterior (the value :func:`step` returns when it stops early)."""
     empty_label = np.zeros(0, dtype=np.int64)
-    none = _new_mixture(np.int64(0), dyn)  # int64, not the literal 0: one specialisation of _new_mixture
-    return none, np.empty((0, 4)), np.empty(0), empty_label, empty_label, (0.0, 0, 0, False, 0)
+    return _new_mixture(0, dyn), np.empty((0, 4)), np.empty(0), empty_label, empty_label, (0.0, 0, 0, False, 0)
 
 
 @njit(cache=True)

@@ -352,8 +352,8 @@ class GMPHDFilter:
                 sup,
                 self.R,
                 beta_nb,
-                _writable(np.ascontiguousarray(newborn.m, dtype=float).reshape(-1, 4)),
-                _writable(np.ascontiguousarray(newborn.P, dtype=float).reshape(-1, 4, 4)),
+                _read_only(np.ascontiguousarray(newborn.m, dtype=float).reshape(-1, 4)),
+                _read_only(np.ascontiguousarray(newborn.P, dtype=float).reshape(-1, 4, 4)),
                 self._nb_beta,
                 SOURCE_MEAS,
                 self._red_pars,
@@ -437,11 +437,14 @@ def _birth_arrays(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     )
 
 
-def _writable(a: np.ndarray) -> np.ndarray:
-    """``a`` as a writable array (a copy when it is read-only; the compiled cycle only reads it): numba compiles one
-    specialisation per writability, and the update without newborn terms passes the posterior step writable empty
-    arrays, so the newborn terms of every birth model reach it as that same type."""
-    return a if a.flags.writeable else a.copy()
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as a read-only array (a view when ``a`` is writable): numba compiles one specialisation per
+    writability, so the newborn terms of every birth model reach the compiled cycle as the same type."""
+    if not a.flags.writeable:
+        return a
+    view = a.view()
+    view.flags.writeable = False
+    return view
 
 
 def _mixture_arrays(mix: Mixture) -> tuple[np.ndarray, ...]:
