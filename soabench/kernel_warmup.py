@@ -164,10 +164,9 @@ def _track_metrics(modes: tuple[str, ...]) -> None:
 
 def _lmb_steps(modes: tuple[str, ...]) -> None:
     """The LMB filter (docs/method.md "LMB filter"): steps with Gaussian births and with newborn terms (the adaptive
-    birth), and the association marginals on both of their paths (enumeration and Gibbs sampling)."""
-
+    birth), i.e. its two compiled calls (:mod:`soabench.lmb.cycle`), which hold the association marginals on both
+    of their paths (enumeration and Gibbs sampling)."""
     from soabench.lmb import LMBFilter
-    from soabench.lmb.gibbs import association_marginals
 
     cfg = Config()
     Z, ego = _scan_arrays()
@@ -176,7 +175,6 @@ def _lmb_steps(modes: tuple[str, ...]) -> None:
         b = _births()
         b.newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0 * A)
         f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
-    association_marginals(np.zeros((2, 4)), 10, np.uint32(0), True)
 
 
 def _pmbm_steps(modes: tuple[str, ...]) -> None:
