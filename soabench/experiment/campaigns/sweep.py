@@ -16,7 +16,13 @@ Layout (``results/<net>/sweep-<kind>-<UTC timestamp>/``)::
     sweep.md                the sweep table (Markdown)
     sweep_<kind>.png        the sweep figure
 
-``run_sweep(..., resume=SWEEP_DIR)`` resumes every unfinished point and starts the ones never started.
+A sweep of several filter families (``experiment.filters``, ``--filters``) runs every point in each; ``sweep.md``
+has one section per family (its table and Tracks table), ``sweep_summary.json`` the first family's table under
+``table`` and every family's under ``families`` (births) or a ``filter`` per row (clutter, occlusion); the sweep
+figure draws the first family. A sweep of the GM-PHD alone has no sections (docs/user-guide/outputs.md).
+
+``sweep(SweepRequest(..., run=RunRequest(..., resume=SWEEP_DIR)))`` resumes every unfinished point and starts the ones
+never started.
 
 An N̂ sweep with the built-in trial kind runs its points together (:mod:`soabench.experiment.execution.grouped`): trial n
 runs SUMO and the sensor once and every N_tot point's filters on them, then writes each point's record into its
