@@ -29,7 +29,7 @@ import numpy as np
 
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import predict as predict_mixture
-from soabench.gmphd.reduction import merge_groups
+from soabench.lmb.cycle import _birth_groups as birth_groups
 from soabench.lmb.tracks import Tracks, make_labels
 from soabench.types import SOURCE_MEAS, Births
 
@@ -58,29 +58,16 @@ def group_birth(births: Births, k: int, r_max: float, U: float, J_h: int) -> Tra
     """One Bernoulli per §2.9 merge group of the birth components of scan ``k`` (module docstring): groups in the
     merge's order (heaviest centre first), labels (k, g), origin the centre's source; components of zero weight
     join no group."""
-    w = np.asarray(births.w, dtype=float).reshape(-1)
-    keep = np.flatnonzero(w > 0.0)
-    if len(keep) == 0:
+    w = np.ascontiguousarray(births.w, dtype=float).reshape(-1)
+    if not (w > 0.0).any():
         return Tracks.empty()
-    w = w[keep]
-    m = np.asarray(births.m, dtype=float).reshape(-1, 4)[keep]
-    P = np.asarray(births.P, dtype=float).reshape(-1, 4, 4)[keep]
-    source = np.asarray(births.source, dtype=np.int8).reshape(-1)[keep]
-    group, centres = merge_groups(m, P, w, U)
-    G = len(centres)
-    order = np.lexsort((np.arange(len(w)), -w, group))  # by group, heaviest first, lowest index on ties
-    counts = np.bincount(group, minlength=G)
-    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    rank = np.arange(len(w)) - np.repeat(first, counts)
-    kept = order[rank < J_h]  # each group's J_h heaviest, grouped in order
-    n_kept = np.minimum(counts, J_h)
-    start = np.concatenate([[0], np.cumsum(n_kept)]).astype(np.int64)
-    total = np.bincount(group, weights=w, minlength=G)
-    wk = w[kept] / np.repeat(np.add.reduceat(w[kept], start[:-1]), n_kept)
-    return Tracks(
-        np.minimum(total, r_max), make_labels(k, np.arange(G)), source[centres], np.zeros(G, dtype=np.int32),
-        start, wk, m[kept], P[kept],
-    )  # fmt: skip
+    m = np.ascontiguousarray(births.m, dtype=float).reshape(-1, 4)
+    P = np.ascontiguousarray(births.P, dtype=float).reshape(-1, 4, 4)
+    source = np.ascontiguousarray(births.source, dtype=np.int8).reshape(-1)
+    r, origin, n_comp, comp, wk = birth_groups(w, m, P, source, float(r_max), float(U), int(J_h))
+    G = len(r)
+    start = np.concatenate([[0], np.cumsum(n_comp)]).astype(np.int64)
+    return Tracks(r, make_labels(k, np.arange(G)), origin, np.zeros(G, dtype=np.int32), start, wk, m[comp], P[comp])
 
 
 def adaptive_existence(r_U: np.ndarray, lambda_B: float, r_max: float) -> np.ndarray:

@@ -37,7 +37,7 @@ from soabench.lmb.birth import adaptive_existence, gm_birth, group_birth, intens
 from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict, update
-from soabench.origins import N_SOURCES, origin_counts
+from soabench.origins import N_SOURCES
 from soabench.sensor import line_of_sight
 from soabench.types import SOURCE_MEAS, Births, Scan, StepResult, scan_once
 
@@ -323,6 +323,6 @@ class LMBFilter:
             n_newborn=0 if self._newborn is None else len(Z),
             n_dropped=checked.n_dropped,
             n_dropped_births=checked.n_dropped_births,
-            origin_counts=origin_counts(self.tracks.origin, self.tracks.age),
+            origin_counts=cycle.origin_counts(self.tracks.origin, self.tracks.age, N_SOURCES),
             labels=labels,
         )
