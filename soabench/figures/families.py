@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
 from soabench.config import FAMILIES
 from soabench.experiment.reports.tables import RunTables, select
@@ -99,7 +100,6 @@ def families_figure(tables: RunTables, clutter: float) -> Figure:
             if not any(np.isfinite(values(m, f)).any() for m in models for f in fams):
                 ax.text(0.5, 0.5, "no value in any trial", transform=ax.transAxes, ha="center", color="0.4")
             ps.panel_title(ax, letter, title)
-        from matplotlib.patches import Patch
 
         handles = [
             Patch(facecolor="white", edgecolor="k", hatch=FAMILY_HATCH.get(f, "xx"), label=FAMILY_LABEL.get(f, f))

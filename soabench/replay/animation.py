@@ -16,7 +16,9 @@ import numpy as np
 from matplotlib.collections import EllipseCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from matplotlib.patches import Patch
+from matplotlib.patches import Patch, PathPatch
+from matplotlib.path import Path as MplPath
+from PIL import Image
 
 from soabench.errors import SoabenchError
 
@@ -43,8 +45,6 @@ def _rings(path: str) -> list[np.ndarray]:
 
 def _patch(path: str, **style: Any):
     """A compound patch of an SVG path of ours (holes: the rings' opposite orientations, nonzero fill)."""
-    from matplotlib.patches import PathPatch
-    from matplotlib.path import Path as MplPath
 
     rings = _rings(path)
     if not rings:
@@ -224,7 +224,6 @@ def _part(out: Path) -> Path:
 
 def write_gif(data: dict[str, Any], out: Path, speed: float = 5.0, panel_px: int = 420) -> int:
     """Write the replay ``data`` as a looping GIF played at ``speed`` times real time; returns its size in bytes."""
-    from PIL import Image
 
     frames = [
         Image.fromarray(rgb).quantize(colors=128, method=Image.Quantize.FASTOCTREE)

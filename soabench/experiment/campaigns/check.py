@@ -38,6 +38,7 @@ import difflib
 import json
 import math
 import re
+import shutil
 import sys
 import time
 from collections.abc import Sequence
@@ -522,8 +523,6 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: 
             t0 = time.perf_counter()
             run_dir = out / "runs" / s.name / f"seed_{seed}"
             if run_dir.exists():
-                import shutil
-
                 shutil.rmtree(run_dir)
             cfg = _config_for(base, s, seed)
             options = RunOptions(workers=workers, progress=False, figures=False)

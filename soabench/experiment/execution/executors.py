@@ -12,6 +12,7 @@ item (:func:`failure_record`); the run goes on.
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import signal
@@ -191,8 +192,6 @@ class DaskExecutor:
         self._distributed = distributed
         self._cluster = None
         if scheduler is None:
-            import logging
-
             n = int(local_workers or os.cpu_count() or 1)
             with sigint_ignored_by_children():  # Ctrl-C is the driver's: no worker tracebacks
                 self._cluster = distributed.LocalCluster(
