@@ -132,7 +132,7 @@ def throughput(trials: int, workers: int, tmp: Path) -> dict:
     from soabench.experiment.campaigns.atlas.run import AtlasRequest, run_atlas
     from soabench.experiment.campaigns.occlusion import base_scenario, dump_toml
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.kernel_warmup import ensure_compiled
 
     ensure_compiled()

@@ -53,7 +53,7 @@ import soabench.experiment.reports.report as report  # noqa: E402
 from soabench.cli.main import main  # noqa: E402
 from soabench.config import Config  # noqa: E402
 from soabench.experiment.execution.options import RunOptions  # noqa: E402
-from soabench.experiment.execution.runner import run_experiment  # noqa: E402
+from soabench.experiment.reports.finished import run_experiment  # noqa: E402
 
 CSV_FILES = ("trials.csv", "episodes.csv", "steps.csv")
 
@@ -185,7 +185,7 @@ import fake_trial as ft
 from pathlib import Path
 from soabench.config import Config
 from soabench.experiment.execution.options import RunOptions
-from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.finished import run_experiment
 cfg = Config.from_dict({cfg!r}).validate()
 kw = dict(options=RunOptions(workers=2, progress=False, figures=False), trial_fn=ft.slow_trial, load_fn=ft.fake_load)
 if {resume!r}:

@@ -1,6 +1,6 @@
 """Wall time of a Monte Carlo run, broken down by stage (SUMO, sensor, each filter model x mode, metrics).
 
-Runs :func:`soabench.experiment.execution.runner.run_experiment` (default: the paper's full protocol, 100 trials x 100
+Runs :func:`soabench.experiment.reports.finished.run_experiment` (default: the paper's full protocol, 100 trials x 100
 s,
 five birth models x {static, dynamic}, lambda = 3, every core) and prints, from the run's ``timing.csv`` and
 session records: the wall time, the CPU seconds summed over trials per stage and their share, and the per-trial
@@ -23,7 +23,7 @@ import numpy as np
 
 from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config
 from soabench.experiment.execution.options import RunOptions
-from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.finished import run_experiment
 from soabench.experiment.runs.files import read_csv
 from soabench.experiment.runs.store import RunStore
 

@@ -40,8 +40,8 @@ from pathlib import Path
 from soabench.config import Config
 from soabench.experiment.campaigns.study import run_study
 from soabench.experiment.execution.options import RunOptions
-from soabench.experiment.execution.runner import run_experiment
 from soabench.experiment.reports import report as report_module
+from soabench.experiment.reports.finished import run_experiment
 from soabench.experiment.trial import trial as trial_module
 
 

@@ -29,6 +29,8 @@ kind), e.g. a :class:`Scans` passed to ``step``, NaN truth rows, or Stone Soup-o
 :data:`ORDER_STONESOUP`) where ours ([x, y, vx, vy], :data:`ORDER_SOABENCH`) are expected.
 """
 
+import dataclasses as _dc
+import importlib as _importlib
 from collections.abc import Sequence as _Sequence
 from pathlib import Path as _Path
 from typing import TYPE_CHECKING as _TYPE_CHECKING
@@ -42,9 +44,14 @@ from soabench.config import FAMILIES, Config
 from soabench.errors import require as _require
 from soabench.errors import require_type as _require_type
 from soabench.errors import require_value as _require_value
+from soabench.experiment.trial.guard import check_births as _check_births
+from soabench.experiment.trial.registry import load_scene_cached as _load_scene_cached
 from soabench.plugins import BIRTH_GROUP, TRACKER_GROUP
 from soabench.protocols import BirthModel, Tracker, TrackerSetup
+from soabench.scenario import simulate as _simulate
+from soabench.seeding import trial_seeds as _trial_seeds
 from soabench.trackers import FilterTracker, GMPHDTracker, run_tracker
+from soabench.trackers import build_filter as _build_filter
 from soabench.types import (
     CLUTTER,
     SOURCE_FOV,
@@ -131,9 +138,7 @@ _LAZY = {"RunResult": "soabench.experiment.execution.memory", "TrialMetrics": "s
 
 def __getattr__(name: str) -> _Any:
     if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
+        return getattr(_importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'soabench.api' has no attribute {name!r}")
 
 
@@ -187,9 +192,6 @@ def simulate_trial(
         (5, 5)
     """
     from soabench.experiment.execution.runner import check_against_scenario
-    from soabench.experiment.trial.registry import load_scene_cached
-    from soabench.scenario import simulate
-    from soabench.seeding import trial_seeds
     from soabench.sensor import observe
 
     cfg = _boundary.as_config(config)
@@ -197,10 +199,10 @@ def simulate_trial(
     _require_value(_is_int(trial) and trial >= 0, "trial", trial, "must be an integer >= 0")
     if duration is not None:
         cfg = Config.from_dict({"experiment": {"duration": duration}}, base=cfg).validate()
-    scene, scenario = load_scene_cached(str(net), (), None)
+    scene, scenario = _load_scene_cached(str(net), (), None)
     check_against_scenario(cfg, scenario)
-    seeds = trial_seeds(seed, trial)
-    recording = simulate(scene, scenario, seeds, duration=cfg.experiment.duration)
+    seeds = _trial_seeds(seed, trial)
+    recording = _simulate(scene, scenario, seeds, duration=cfg.experiment.duration)
     return recording, observe(recording, scene, cfg.sensor_at(), seeds.sensor_rngs())
 
 
@@ -253,13 +255,11 @@ def make_tracker(
         >>> type(results[0]).__name__, len(results) == len(scans)
         ('StepResult', True)
     """
-    from soabench.seeding import trial_seeds
-    from soabench.trackers import build_filter
 
     cfg, family = _boundary.family_config(config, filter)
     kind, name, cls = _boundary.plugin(name_or_class)
     scene = _boundary.as_scene(scene_or_net)
-    seeds = trial_seeds(seed, trial)
+    seeds = _trial_seeds(seed, trial)
     rng = seeds.placement_rng()
     builtin = kind == BIRTH_MODEL and isinstance(name_or_class, str) and _plugins.is_builtin_birth(name)
     _require(
@@ -269,16 +269,15 @@ def make_tracker(
     _plugins.check_options(kind, name, cls, options)
     if kind == TRACKER:
         return cls(TrackerSetup(cfg.sensor_at(), scene, rng, mode, cfg), **options)
-    filt, p_D_b = build_filter(family, cfg, cfg.sensor_at(), mode, seeds.association_rng())
+    filt, p_D_b = _build_filter(family, cfg, cfg.sensor_at(), mode, seeds.association_rng())
     birth_model = cls(cfg.birth, cfg.sensor_at(), scene, rng, **options)
     return FilterTracker(birth_model, filt, p_D_b, check_births=None if builtin else _named_check(name))
 
 
 def _named_check(plugin: str) -> _Any:
     """The births check of a plugin birth model, its errors naming ``plugin``."""
-    from soabench.experiment.trial.guard import check_births
 
-    return lambda births, scan: check_births(births, scan, plugin)
+    return lambda births, scan: _check_births(births, scan, plugin)
 
 
 def evaluate(
@@ -342,7 +341,6 @@ def occlusion_gaps(scans: Scans, d_gate: float = 5.0) -> list[dict[str, _Any]]:
         >>> all(g["k_b"] >= g["k_a"] and g["occluder"] in ("parked", "vehicle", "building", "other") for g in gaps)
         True
     """
-    import dataclasses as _dc
 
     from soabench.tracks.gaps import describe_gaps
     from soabench.tracks.reemergence import occlusion_gaps as _gaps
@@ -413,10 +411,11 @@ def run(
         return run_in_memory(cfg, str(net), workers=workers, executor=executor, progress=progress)
     from soabench.experiment.execution.memory import from_run_folder
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.execution.runner import Batch, RunRequest
+    from soabench.experiment.reports.finished import run as run_request
 
     options = RunOptions(workers=workers, progress=progress, figures=False)
-    outcome = run_experiment(cfg, str(net), out=_Path(out), options=options, executor=executor)
+    outcome = run_request(RunRequest(cfg, str(net), out=_Path(out), options=options), Batch(executor=executor))
     return from_run_folder(outcome.run_dir, cfg, str(net))
 
 

@@ -42,6 +42,7 @@ KERNEL_MODULES = (
     "tracks/kernels.py",
     "lmb/gibbs.py",
     "lmb/tracks.py",
+    "lmb/cycle.py",
     "kitti/lidar_raster.py",
     "pmbm/murty.py",
     "pmbm/association.py",

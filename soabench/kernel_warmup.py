@@ -33,12 +33,13 @@ from pathlib import Path
 from typing import TextIO
 
 import numpy as np
+import shapely
 
 from soabench import notice
 from soabench.birth import sampling
 from soabench.birth.soa import dedup, ego_inside
 from soabench.cache import kernel_folder
-from soabench.config import BIRTH_MODEL_NAMES, Config, MetricsConfig
+from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config, MetricsConfig
 from soabench.notice import LINE_INTERVAL_S, is_terminal
 from soabench.sensor import segment_meets_convex
 from soabench.types import Births, NewbornTerms, Obstacles, Scan
@@ -127,7 +128,6 @@ def _no_obstacles():
 def _fused_steps(modes: tuple[str, ...]) -> None:
     """The fused cycle's entry points as the filter calls them: one call per scan, and the split step of the
     line-of-sight gate (§2.11, §4.4) in the mode "dynamic+occ"."""
-    import shapely
 
     Z, ego = _scan_arrays()
     far = [shapely.box(1000.0, 1000.0, 1001.0, 1001.0)]
@@ -140,7 +140,6 @@ def _fused_steps(modes: tuple[str, ...]) -> None:
 
 def _newborn_steps(modes: tuple[str, ...]) -> None:
     """The split step of measurement-driven newborn terms (§3.4) in the probability modes."""
-    import shapely
 
     Z, ego = _scan_arrays()
     for mode in _gate_free(modes):
@@ -165,11 +164,8 @@ def _track_metrics(modes: tuple[str, ...]) -> None:
 
 def _lmb_steps(modes: tuple[str, ...]) -> None:
     """The LMB filter (docs/method.md "LMB filter"): steps with Gaussian births and with newborn terms (the adaptive
-    birth), and the association marginals on both of their paths (enumeration and Gibbs sampling)."""
-    import shapely
-
+    birth), which compile the association marginals on both of their paths (enumeration and Gibbs sampling)."""
     from soabench.lmb import LMBFilter
-    from soabench.lmb.gibbs import association_marginals
 
     cfg = Config()
     Z, ego = _scan_arrays()
@@ -178,14 +174,11 @@ def _lmb_steps(modes: tuple[str, ...]) -> None:
         b = _births()
         b.newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0 * A)
         f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
-    association_marginals(np.zeros((2, 4)), 10, np.uint32(0), True)
 
 
 def _pmbm_steps(modes: tuple[str, ...]) -> None:
     """The PMBM and PMB filters (docs/method.md §10): steps with Gaussian births and newborn terms, which compile the
     clusters, the global hypotheses and Murty's ranked assignments with their solver."""
-    import shapely
-
     from soabench.pmbm import PMBMFilter
 
     cfg = Config()
@@ -252,7 +245,6 @@ def needed(configs: Iterable[Config | dict]) -> dict[Callable[[tuple[str, ...]],
 
 def everything() -> dict[Callable[[tuple[str, ...]], None], tuple[str, ...]]:
     """Every group with every probability mode."""
-    from soabench.config import PROBABILITY_MODES
 
     return {g: ("any",) if g in MODELESS else PROBABILITY_MODES for r in ROUNDS for g in r}
 

@@ -117,6 +117,10 @@ def assign_rows(C):  # pragma: no cover - compiled
     Shortest augmenting paths with dual potentials u (rows) and v (columns): row i is added by growing a tree of
     tight edges from it, lowering the reduced costs C[i, j] - u[i] - v[j] of the columns not yet in the tree by
     the smallest one, until a free column is reached; the path to it is then flipped. Finite costs only.
+
+    Each step's lowering of the columns outside the tree (``minv[j] -= delta``) is applied when the next step reads
+    that column, in the same pass, and the potentials of the tree's columns are kept in a list: one pass over the
+    columns per step, the same operations on every value as two.
     """
     a, b = C.shape
     u = np.zeros(a + 1)
@@ -125,18 +129,25 @@ def assign_rows(C):  # pragma: no cover - compiled
     way = np.zeros(b + 1, dtype=np.int64)
     minv = np.empty(b + 1)
     used = np.empty(b + 1, dtype=np.bool_)
+    tree = np.empty(b + 1, dtype=np.int64)  # the columns in the tree, in the order they joined it
     for i in range(1, a + 1):
         owner[0] = i
         j0 = 0
         minv[:] = np.inf
         used[:] = False
+        n_tree = 0
+        lowered = 0.0  # the previous step's delta, not yet taken off minv outside the tree
         while True:
             used[j0] = True
+            tree[n_tree] = j0
+            n_tree += 1
             i0 = owner[j0]
             delta = np.inf
             j1 = 0
             for j in range(1, b + 1):
                 if not used[j]:
+                    if n_tree > 1:
+                        minv[j] -= lowered
                     cur = C[i0 - 1, j - 1] - u[i0] - v[j]
                     if cur < minv[j]:
                         minv[j] = cur
@@ -144,12 +155,11 @@ def assign_rows(C):  # pragma: no cover - compiled
                     if minv[j] < delta:
                         delta = minv[j]
                         j1 = j
-            for j in range(b + 1):
-                if used[j]:
-                    u[owner[j]] += delta
-                    v[j] -= delta
-                else:
-                    minv[j] -= delta
+            for q in range(n_tree):
+                j = tree[q]
+                u[owner[j]] += delta
+                v[j] -= delta
+            lowered = delta
             j0 = j1
             if owner[j0] == 0:
                 break

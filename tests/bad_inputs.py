@@ -390,7 +390,7 @@ def _sensitivity(tmp: Path, out: str, finished: bool = True) -> list[str]:
     import fake_trial as ft
 
     from soabench.config import Config
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
 
     cfg = Config()
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=2, duration=10.0, models=("soa",))
@@ -671,7 +671,7 @@ def _atlas_run(tmp: Path) -> str:
     import fake_trial as ft
 
     from soabench.config import Config
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
 
     cfg = Config()
     cfg.experiment = dataclasses.replace(cfg.experiment, trials=2, duration=10.0, models=("soa",))

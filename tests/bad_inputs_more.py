@@ -214,6 +214,20 @@ def _suite_with_config(text: str, threshold: str = "") -> Callable[[Path], list[
     return make
 
 
+def _suite_with_scenario(lines: str) -> Callable[[Path], list[str]]:
+    """A one-scenario check suite whose scenario holds ``lines``."""
+
+    def make(tmp: Path) -> list[str]:
+        suite = tmp / "suite.toml"
+        suite.write_text(
+            f'[suite]\nname = "t"\n[[scenario]]\nname = "a"\nnet = "intersection"\nduration = 5\n{lines}'
+            '[[threshold]]\nmetric = "ospa"\nmax = 100.0\n'
+        )
+        return ["check", "--suite", str(suite), "--out", str(tmp / "chk")]
+
+    return make
+
+
 def _with_config(*argv: str) -> Callable[[Path], list[str]]:
     return lambda t: [*argv, "--config", _toml(t, FAMILIES)]
 
@@ -234,9 +248,21 @@ FAMILY_CASES: list[Case] = [
     _cfg('[experiment]\nfilters = ["pmb"]\n[pmbm]\nM_max = 0\n', "pmbm.M_max = 0 is out of range"),
     _cfg('[experiment]\nfilters = ["pmbm"]\n[pmbm]\nw_floor = nan\n', "pmbm.w_floor = nan is out of range"),
     _cfg('[experiment]\nfilters = ["pmbm"]\n[pmbm]\nmarginals = "lbp"\n', "pmbm.marginals = 'lbp' is not allowed"),
-    ("sweep clutter config filters", _with_config("sweep", "clutter", "--trials", "1", "--out", "sw"), "GM-PHD"),
-    ("sweep births config filters", _with_config("sweep", "births", "--trials", "1", "--out", "sw"), "GM-PHD"),
-    ("study config filters", _with_config("study", "--trials", "1", "--out", "st"), "`soabench study` runs the GM"),
+    (
+        "sweep --filters kalman",
+        lambda t: ["sweep", "clutter", "--filters", "kalman", "--out", str(t / "sw")],
+        "'kalman'",
+    ),
+    (
+        "sweep births --filters lmb dynamic",
+        lambda t: ["sweep", "births", "--filters", "lmb", "--probabilities", "dynamic", "--out", str(t / "sw")],
+        "filter family 'lmb' runs the probability modes static, static+occ only",
+    ),
+    (
+        "study --filters lmb",
+        lambda t: ["study", "--filters", "lmb", "--trials", "1", "--out", str(t / "st")],
+        "add gmphd",
+    ),
     ("scene config filters", _with_config("scene", "--out", "s.png"), "`soabench scene` runs the GM-PHD"),
     ("kitti --filters kalman", _kitti(None, "--filters", "kalman"), "filter family 'kalman' is unknown"),
     (
@@ -247,7 +273,13 @@ FAMILY_CASES: list[Case] = [
     _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nbirth_mapping = "pairs"\n', "lmb.birth_mapping = 'pairs'"),
     _cfg('[experiment]\nfilters = ["lmb"]\n[lmb]\nextract_r = nan\n', "lmb.extract_r = nan is out of range"),
     ("run --probabilities NaN", lambda t: _run(t, "--probabilities", "static,nan"), "probability mode 'nan'"),
-    ("check suite config filters", _suite_with_config(FAMILIES), "a check suite runs the GM-PHD family only"),
+    ("check suite config filters", _suite_with_config(FAMILIES), "[experiment] filters is set per scenario"),
+    ("check scenario filter kalman", _suite_with_scenario('filter = "kalman"\n'), "filter = 'kalman' is not a filter"),
+    (
+        "check scenario filter lmb dynamic",
+        _suite_with_scenario('filter = "lmb"\nprobabilities = ["static", "dynamic"]\n'),
+        "filter family 'lmb' runs the probability modes static, static+occ only, and probabilities names 'dynamic'",
+    ),
     ("check threshold filter", _suite_with_config("", 'filter = "lmb"\n'), "unknown key 'filter'"),
 ]
 CASES += FAMILY_CASES
@@ -262,7 +294,7 @@ def _fake_run(tmp: Path, trials: int = 3) -> Path:
     import fake_trial as ft
 
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.experiment.trial import registry
 
     cfg = Config()

@@ -218,11 +218,11 @@ def small_config(**experiment):
 
 
 def run_fake(config, out, net="intersection", **kw):
-    """:func:`soabench.experiment.execution.runner.run_experiment` of ``config`` on ``net`` with :func:`fake_trial` and
+    """:func:`soabench.experiment.reports.finished.run_experiment` of ``config`` on ``net`` with :func:`fake_trial` and
     :func:`fake_load`, serial, without progress or figures (``kw`` overrides any of these): the fake run the tests
     share. Returns the run's outcome."""
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
 
     fields = {f.name for f in dataclasses.fields(RunOptions)}
     options = dict(workers=1, progress=False, figures=False) | {k: v for k, v in kw.items() if k in fields}

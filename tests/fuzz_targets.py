@@ -242,7 +242,7 @@ def fake_run() -> Path:
 
         from soabench.config import Config
         from soabench.experiment.execution.options import RunOptions
-        from soabench.experiment.execution.runner import run_experiment
+        from soabench.experiment.reports.finished import run_experiment
 
         cfg = Config()
         cfg.experiment = dataclasses.replace(cfg.experiment, trials=3, duration=10.0, clutter=(3.0,), models=("soa",))

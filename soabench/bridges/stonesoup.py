@@ -31,6 +31,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from soabench.config import MetricsConfig
 from soabench.errors import SoabenchError, require, require_type
 from soabench.geometry import fov_mask
 from soabench.protocols import TrackerSetup
@@ -261,8 +262,6 @@ def stonesoup_ospa(
     .series["ospa"]``."""
     from stonesoup.measures import Euclidean
     from stonesoup.metricgenerator.ospametric import OSPAMetric
-
-    from soabench.config import MetricsConfig
 
     require_type(scans, Scans, "stonesoup_ospa's scans", "give the Scans the tracks were made from")
     default = MetricsConfig()

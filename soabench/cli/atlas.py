@@ -10,6 +10,7 @@ from soabench.cli import common
 from soabench.cli.parsing import add_run_args, csv_list
 from soabench.config import FILTER_FAMILIES
 from soabench.errors import require
+from soabench.tomlfile import read_toml
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -57,7 +58,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def handle(args: argparse.Namespace) -> int:
     from soabench.experiment.campaigns.atlas.design import design_from_dict, make_design, parse_axis
     from soabench.experiment.campaigns.atlas.run import AtlasRequest, run_atlas
-    from soabench.tomlfile import read_toml
 
     for flag, value in (
         ("--poly", args.poly[0] if args.poly else None),

@@ -7,6 +7,7 @@ import dataclasses
 from pathlib import Path
 
 from soabench.cli.parsing import add_net_args
+from soabench.config import MAX_SEED
 from soabench.errors import require
 
 
@@ -23,7 +24,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.config import MAX_SEED
     from soabench.kitti.config import load_kitti_config
     from soabench.kitti.export import check_export_size, export_kitti
 

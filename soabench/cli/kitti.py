@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from soabench.cli.parsing import FILTERS_HELP, csv_list, offsets
-from soabench.config import BIRTH_MODEL_NAMES, FILTER_FAMILIES, PROBABILITY_MODES
+from soabench.config import BIRTH_MODEL_NAMES, FILTER_FAMILIES, PROBABILITY_MODES, require_distinct
 from soabench.errors import require
 
 #: the options of a new run: ``--resume`` takes them from the run folder and refuses them
@@ -61,7 +61,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.config import require_distinct
     from soabench.experiment.campaigns.kitti.protocol import run_kitti
     from soabench.kitti.config import KittiSpec, kitti_run_config
     from soabench.kitti.lidar import lidar_options

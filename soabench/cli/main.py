@@ -34,6 +34,7 @@ from soabench.cli import (
 )
 from soabench.cli.parsing import EXIT_USAGE, DefaultsHelpFormatter, OneLineParser
 from soabench.errors import Interrupted, SoabenchError, require
+from soabench.scenario import shipped_nets
 
 #: command name -> its module (``add_parser``, ``handle``), in the order ``soabench --help`` lists them
 MODULES = {
@@ -103,7 +104,6 @@ def run_on_all(
     args: argparse.Namespace, command: Callable[[argparse.Namespace], int], command_name: str, options: set[str]
 ) -> int:
     """Run ``command(args)`` once per shipped scene (``--net all``); outputs go per scene; report per scene."""
-    from soabench.scenario import shipped_nets
 
     require(getattr(args, "resume", None) is None, "--net all cannot --resume; resume each scene's folder")
     status: list[tuple[str, str]] = []

@@ -115,6 +115,11 @@ def add_snapshot_args(p: argparse.ArgumentParser, need_out: bool = True) -> None
     p.add_argument("--out", required=need_out, help="output file")
 
 
+def add_filters_arg(p: argparse.ArgumentParser) -> None:
+    """``--filters``: the filter families every birth model runs in, read from the registry (run, sweep, study)."""
+    p.add_argument("--filters", type=csv_list("filter family", tuple(FAMILIES)), help=FILTERS_HELP)
+
+
 def add_run_args(p: argparse.ArgumentParser) -> None:
     """The options of the protocol commands (run, sweep, study): the protocol's size, methods and executor."""
     add_net_args(p)

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from soabench.cli.parsing import csv_list
-from soabench.experiment.campaigns.results_suite import Settings
+from soabench.experiment.campaigns.results_suite import Settings, run_results
 from soabench.experiment.execution.options import RunOptions
 
 
@@ -52,7 +52,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.campaigns.results_suite import run_results
 
     settings = Settings(
         scenes=tuple(args.scenes) if args.scenes else None,

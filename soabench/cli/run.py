@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 
 from soabench.cli import common
-from soabench.cli.parsing import FILTERS_HELP, add_run_args, csv_list, float_list
-from soabench.config import FILTER_FAMILIES
+from soabench.cli.parsing import add_filters_arg, add_run_args, float_list
 from soabench.errors import require
 
 
@@ -15,14 +14,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="the Monte Carlo protocol (default: the paper's)")
     add_run_args(p)
     p.add_argument("--clutter", type=float_list, help="clutter rate(s) lambda, e.g. 3 or 0.5,3,5 (default 3)")
-    p.add_argument("--filters", type=csv_list("filter family", FILTER_FAMILIES), help=FILTERS_HELP)
+    add_filters_arg(p)
     p.add_argument(
         "--resume", type=Path, metavar="RUN_DIR", help="finish the missing trials of an earlier run (default: new run)"
     )
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.execution.runner import RunRequest
+    from soabench.experiment.reports.finished import run
 
     options = common.run_options(args)
     if args.resume is not None:  # --models/--trackers re-allow the run's import-path plugins (and are compared)
@@ -31,9 +31,10 @@ def handle(args: argparse.Namespace) -> int:
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the run in its folder")
         requested = common.requested(args, cfg)
-        outcome = run_experiment(
+        request = RunRequest(
             None, args.net, tuple(args.poly), args.scenario, resume=args.resume, requested=requested, options=options
         )
     else:
-        outcome = run_experiment(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options)
+        request = RunRequest(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options)
+    outcome = run(request)
     return common.report_outcome(outcome, short=True)

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from soabench.cli import checks, common
-from soabench.cli.parsing import add_run_args, float_list, offsets
+from soabench.cli.parsing import add_filters_arg, add_run_args, float_list, offsets
 from soabench.errors import require
 
 
@@ -14,6 +14,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sweep", help="parameter sweeps: clutter rate or expected births N_hat")
     p.add_argument("kind", choices=["clutter", "births", "occlusion"])
     add_run_args(p)
+    add_filters_arg(p)
     p.add_argument(
         "--values",
         type=float_list,
@@ -49,23 +50,22 @@ def _all_figures(args: argparse.Namespace) -> bool | None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from soabench.experiment.campaigns.sweep import run_sweep, sweep_values
+    from soabench.experiment.campaigns.sweep import SweepRequest, sweep, sweep_values
+    from soabench.experiment.execution.runner import RunRequest
 
     options = common.run_options(args, _all_figures(args))
     finish = f"soabench sweep {args.kind} --resume {{dir}}"
     if args.resume is not None:
         require(args.out is None, "--out and --resume are alternatives: --resume continues the sweep in its folder")
         common.allow_typed_plugins(args)
-        cfg = common.config_from_args(args).gmphd_only("`soabench sweep`")
+        cfg = common.config_from_args(args)
         requested = {"kind": args.kind, **common.requested(args, cfg)}
         if args.values is not None or args.offsets is not None:
             requested["values"] = list(args.values if args.values is not None else args.offsets)
-        outcome = run_sweep(args.kind, (), None, args.net, resume=args.resume, requested=requested, options=options)
-        return common.report_outcome(outcome, finish)
+        run = RunRequest(None, args.net, resume=args.resume, requested=requested, options=options)
+        return common.report_outcome(sweep(SweepRequest(args.kind, (), run)), finish)
     given = checks.requested_keys(args, getattr(args, "explicit", set()))
     values = sweep_values(args.kind, args.values, args.offsets, given)
     cfg = common.config_from_args(args)
-    outcome = run_sweep(
-        args.kind, values, cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options
-    )
-    return common.report_outcome(outcome, finish)
+    run = RunRequest(cfg, args.net, tuple(args.poly), args.scenario, out=args.out, options=options)
+    return common.report_outcome(sweep(SweepRequest(args.kind, values, run)), finish)

@@ -85,14 +85,14 @@ def save_arrays(tables: Any, path: Path) -> bool:
     return True
 
 
-#: tables a merge worker already saved as arrays (:mod:`soabench.experiment.execution.premerge`): resolved run folder ->
+#: tables a merge worker already saved as arrays (:mod:`soabench.experiment.reports.premerge`): resolved run folder ->
 #: (:func:`~soabench.experiment.runs.store.merged_stamp` when saved, the ``.npz`` path)
 _SAVED: dict[str, tuple[tuple, str]] = {}
 
 
 def folder_key(run_dir: str | Path) -> str:
     """The key of a run folder in the registries of merged folders (here and
-    :mod:`soabench.experiment.execution.premerge`):
+    :mod:`soabench.experiment.reports.premerge`):
     its resolved path, the same however the folder was named."""
     return str(Path(run_dir).resolve())
 

@@ -11,11 +11,13 @@ The paper's figures of the GM-PHD family are drawn on that family's rows only (:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
 from soabench.config import FAMILIES
 from soabench.experiment.reports.tables import RunTables, select
@@ -52,7 +54,6 @@ def run_families(tables: RunTables) -> list[str]:
 def family_only(tables: RunTables, family: str) -> RunTables:
     """The tables of one family: its rows of trials, episodes, timing and steps, and the rows of no family (whole
     trackers, drawn beside every family)."""
-    import dataclasses
 
     def only(table):
         if FILTER_COLUMN not in table:
@@ -99,7 +100,6 @@ def families_figure(tables: RunTables, clutter: float) -> Figure:
             if not any(np.isfinite(values(m, f)).any() for m in models for f in fams):
                 ax.text(0.5, 0.5, "no value in any trial", transform=ax.transAxes, ha="center", color="0.4")
             ps.panel_title(ax, letter, title)
-        from matplotlib.patches import Patch
 
         handles = [
             Patch(facecolor="white", edgecolor="k", hatch=FAMILY_HATCH.get(f, "xx"), label=FAMILY_LABEL.get(f, f))

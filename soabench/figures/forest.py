@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from soabench.experiment.reports.headline import Headline, Metric, headline
 from soabench.experiment.reports.tables import RunTables
@@ -89,7 +90,6 @@ def forest_figure(head: Headline, metrics: Sequence[str] | None = None) -> Figur
             ax.set_visible(False)
         if not chosen or not others:
             axes[0].text(0.5, 0.5, "no model paired with S-OA", ha="center", va="center", transform=axes[0].transAxes)
-        from matplotlib.lines import Line2D
 
         handles = [Line2D([], [], color="0.2", marker=ps.mode_style(m).marker, mfc="0.2" if j == 0 else "white",
                           ls="-", label=m) for j, m in enumerate(head.modes)]  # fmt: skip

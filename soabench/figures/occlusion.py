@@ -13,13 +13,16 @@ from soabench.figures import style as ps
 from soabench.figures.bars import mean_ci
 
 
-def _trial_values(sweep_dir: Path, points: list[dict], clutter: float) -> dict[tuple, np.ndarray]:
-    """Per-trial values of the figure's metrics per (density, model, mode, column), from each point's trials.csv."""
+def _trial_values(
+    sweep_dir: Path, points: list[dict], clutter: float, family: str | None = None
+) -> dict[tuple, np.ndarray]:
+    """Per-trial values of the figure's metrics per (density, model, mode, column), from each point's trials.csv
+    (the rows of filter family ``family``; None: a run without a ``filter`` column)."""
 
     out: dict[tuple, list[float]] = {}
     for p in points:
         for r in read_rows(sweep_dir / "points" / p["name"] / "trials.csv"):
-            if float(r["clutter"]) != clutter:
+            if float(r["clutter"]) != clutter or r.get("filter") != family:
                 continue
             for col, _ in _PANELS:
                 out.setdefault((float(p["value"]), str(r["model"]), str(r["mode"]), col), []).append(float(r[col]))
@@ -34,12 +37,13 @@ _PANELS = (
 )
 
 
-def occlusion_figure(sweep_dir: Path, points: list[dict], rows: list[dict]) -> Figure:
+def occlusion_figure(sweep_dir: Path, points: list[dict], rows: list[dict], family: str | None = None) -> Figure:
     """Delay, cardinality error and OSPA per birth model and mode against the parked-car density, mean over trials
-    with its 95 % confidence interval (Student t) as error bars (one style module)."""
+    with its 95 % confidence interval (Student t) as error bars (one style module); ``family``: the filter family
+    drawn (None: a run without a ``filter`` column)."""
     models = list(dict.fromkeys(r["model"] for r in rows))
     modes = list(dict.fromkeys(r["mode"] for r in rows))
-    values = _trial_values(sweep_dir, points, float(rows[0]["clutter"])) if rows else {}
+    values = _trial_values(sweep_dir, points, float(rows[0]["clutter"]), family) if rows else {}
     densities = sorted({float(r["density"]) for r in rows})
     n_series = max(1, len(models) * len(modes))
     span = 0.012 * (densities[-1] - densities[0] if len(densities) > 1 else 1.0)  # offsets keep the bars apart

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.figures import style as ps
@@ -119,7 +120,6 @@ def components_origin_figure(tables: RunTables, clutter: float) -> Figure:
         tops = [np.max(sum(np.nan_to_num(series[c]) for c in ORIGIN_KEYS)) for k, series in data.values() if k.size]
         axes[0, 0].set_ylim(0, 1.3 * max([*tops, 1.0]))  # headroom for the mean-J note
         axes[0, 0].set_xlim(0, None)
-        from matplotlib.patches import Patch
 
         handles = [Patch(facecolor=present[lab], edgecolor="0.3", linewidth=0.4) for lab in order if lab in present]
         labels = [f"born this scan: {lab}" if lab in SOURCE_WORDS else lab for lab in order if lab in present]

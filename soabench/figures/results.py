@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.ticker import FixedLocator, FormatStrFormatter, MaxNLocator, NullLocator
 
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.figures import style as ps
@@ -121,7 +123,6 @@ def delay_figure(
                 if math.isfinite(half):
                     ax.axhspan(mean - half, mean + half, color=st.color, alpha=0.18, lw=0, zorder=1)
             ci = f" ± {half:.2f}" if math.isfinite(half) else ""
-            from matplotlib.lines import Line2D
 
             handles.append(
                 Line2D(
@@ -147,8 +148,6 @@ def delay_figure(
                 flierprops={"marker": ".", "ms": 2, "mec": st.color},
             )
         if linthresh is not None:
-            from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullLocator
-
             ax.set_yscale("symlog", linthresh=linthresh, linscale=2.0)
             step = 0.5 if linthresh <= 3 else 1.0
             ticks = list(np.arange(0.0, linthresh + 1e-9, step))
@@ -172,7 +171,6 @@ def delay_figure(
 
 
 def _integer_ticks(ax) -> None:
-    from matplotlib.ticker import MaxNLocator
 
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
 

@@ -28,7 +28,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.legend_handler import HandlerTuple
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, PathPatch, Rectangle
+from matplotlib.path import Path as MplPath
+from matplotlib.transforms import offset_copy
 
 from soabench.birth import LABEL
 
@@ -174,7 +180,6 @@ def save_png(fig: Figure, path: Path) -> Path:
 
 def model_handles(models: Sequence[str], marker: bool = True) -> list:
     """Legend handles: one coloured line (with marker) per model, labelled with its display name."""
-    from matplotlib.lines import Line2D
 
     return [
         Line2D([], [], color=s.color, marker=s.marker if marker else None, label=model_label(m))
@@ -184,8 +189,6 @@ def model_handles(models: Sequence[str], marker: bool = True) -> list:
 
 def mode_handles(modes: Sequence[str], bars: bool = False) -> list:
     """Legend handles: one black line (or hatched patch for bar charts) per probability mode."""
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
 
     if bars:
         return [Patch(facecolor="white", edgecolor="k", hatch=mode_style(m).hatch, label=m) for m in modes]
@@ -194,8 +197,6 @@ def mode_handles(modes: Sequence[str], bars: bool = False) -> list:
 
 def mode_handles_combined(modes: Sequence[str]) -> list:
     """Legend handles for figures with both bars and lines: per mode, its bar hatch and its line style together."""
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
 
     return [
         (
@@ -208,8 +209,6 @@ def mode_handles_combined(modes: Sequence[str]) -> list:
 
 def legend_below(fig: Figure, handles: Sequence, labels: Sequence[str] | None = None, ncol: int = 5, **kw):
     """One figure legend under the panels, filled row by row (matplotlib fills columns first)."""
-    from matplotlib.legend_handler import HandlerTuple
-    from matplotlib.patches import Rectangle
 
     labels = list(labels) if labels is not None else [h.get_label() for h in handles]
     handles = list(handles)
@@ -235,10 +234,7 @@ def fill_geometry(ax, geom, **style) -> list:
     """Fill every polygon of a shapely geometry on ``ax`` with its holes left open (one path per polygon, the
     interiors as inner rings), so what lies under a hole (a road inside a ring of sidewalk) stays visible.
     Returns the added patches."""
-    import numpy as np
     import shapely
-    from matplotlib.patches import PathPatch
-    from matplotlib.path import Path as MplPath
 
     if geom is None or geom.is_empty:
         return []
@@ -260,7 +256,6 @@ _LEGENDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 def extend_legend(ax, handles: Sequence, ncol: int = 4):
     """Add ``handles`` to the one legend under a map ``ax`` (scene, sensor and birth layers each add theirs);
     a handle whose label is already listed is not repeated. Returns the legend."""
-    from matplotlib.transforms import offset_copy
 
     held = _LEGENDS.setdefault(ax, [])
     labels = {h.get_label() for h in held}

@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
 from soabench.experiment.reports.tables import RunTables, select
 from soabench.figures import style as ps
@@ -128,7 +129,6 @@ def _delay_bars(ax, col: Callable[[str, str, str], np.ndarray], models: Sequence
     ax.set_ylabel("mean tracking delay (s)")
     ax.set_ylim(0, 1.25 * ax.get_ylim()[1])  # headroom for the legend above the tallest whisker
     ax.grid(axis="x", visible=False)
-    from matplotlib.patches import Patch
 
     kinds = [Patch(facecolor="0.4", alpha=a, edgecolor="k", label=f"{k.replace('reem', 're-em')} episodes")
              for k, a in KINDS]  # fmt: skip

@@ -23,7 +23,7 @@ Per frame k:
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -283,7 +283,6 @@ class SequenceScans:
 
 def sensor_for(seq: KittiSequence, kcfg: KittiConfig, sensor: SensorConfig) -> SensorConfig:
     """The sensor settings of a sequence: camera horizontal FOV (configured, or from P2) and the range limit."""
-    from dataclasses import replace
 
     fov = kcfg.fov_deg if kcfg.fov_deg > 0 else seq.calib.fov_deg(kcfg.image_width)
     return replace(sensor, fov_deg=float(fov))

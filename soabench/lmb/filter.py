@@ -28,18 +28,36 @@ from soabench import notice
 from soabench.config import FilterConfig, LMBConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
+from soabench.gmphd import cycle
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
 from soabench.gmphd.probabilities import detection_gate
+from soabench.lmb import cycle as lmb_cycle
 from soabench.lmb.birth import adaptive_existence, gm_birth, group_birth, intensity_existence, measurement_birth
 from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict, update
-from soabench.origins import origin_counts
-from soabench.types import Births, Scan, StepResult, scan_once
+from soabench.origins import N_SOURCES, origin_counts
+from soabench.sensor import line_of_sight
+from soabench.types import SOURCE_MEAS, Births, Scan, StepResult, scan_once
 
 #: the probability modes the LMB filter runs (docs/method.md §4.6): static only
 LMB_MODES = ("static",)
+
+_NO_EGO = np.zeros(3)  #: the pose passed for a dropped scan (p_D is 0 there)
+_NO_NEWBORN = (np.empty((0, 4)), np.empty((0, 4, 4)), np.empty(0))
+_NO_BIRTHS = (np.empty(0), np.empty((0, 4)), np.empty((0, 4, 4)), np.empty(0, dtype=np.int8))
+
+
+def _birth_arrays(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The birth components as :func:`soabench.lmb.cycle.predict_births` takes them: fresh contiguous w (J_b,),
+    m (J_b, 4), P (J_b, 4, 4) float and source codes int8 (one compiled specialisation whatever the model hands)."""
+    return (
+        np.array(births.w, dtype=float).reshape(-1),
+        np.array(births.m, dtype=float).reshape(-1, 4),
+        np.array(births.P, dtype=float).reshape(-1, 4, 4),
+        np.array(births.source, dtype=np.int8).reshape(-1),
+    )
 
 
 class LMBFilter:
@@ -55,6 +73,12 @@ class LMBFilter:
         rng: the generator of the Gibbs sampler's seeds (one draw per scan); the trial's association stream
             (:meth:`soabench.seeding.TrialSeeds.association_rng`) in the harness, a fixed seed if None.
         model: the measurement model; the GM-PHD's range-bearing EKF with its gate if None.
+        fused: run the cycle as compiled calls (:mod:`soabench.lmb.cycle`) when the model is the GM-PHD's
+            range-bearing sensor; the default (False) runs the array path, whose numbers the runs report. The two
+            agree to the last bits per cycle, but not over a whole run: where a track surely explains a
+            measurement, r_U = 1 on one path and 1 - 1e-16 on the other gives that measurement a birth
+            Bernoulli of r = 0 (none) or about 1e-18, and a Bernoulli more in a Gibbs cluster shifts the
+            sampler's draws from there on (benchmarks/README.md, "The LMB filter's step").
 
     Attributes:
         tracks: the posterior tracks after the last step.
@@ -72,6 +96,7 @@ class LMBFilter:
         N_hat: float = 0.06,
         rng: np.random.Generator | None = None,
         model: MeasurementModel | None = None,
+        fused: bool = False,
     ) -> None:
         require(
             mode in LMB_MODES,
@@ -87,6 +112,21 @@ class LMBFilter:
         R = measurement_noise(sensor_cfg.sigma_r, sensor_cfg.sigma_b)
         gate = gate_threshold(filter_cfg.gate, filter_cfg.gate_prob)
         self.model = model if model is not None else RangeBearingEKF(R, sensor_cfg.r_min, gate, filter_cfg.form)
+        self.fused = bool(fused) and model is None
+        self._R = np.ascontiguousarray(R, dtype=float)
+        self._ukf = filter_cfg.form == "ukf"
+        s, c, lmb = sensor_cfg, filter_cfg, self.lmb
+        pred = np.zeros(8)  # the GM-PHD's prediction scalars (soabench.gmphd.cycle.PRED_*): component weights kept
+        pred[cycle.PRED_P_S] = 1.0
+        pred[cycle.PRED_R_MIN], pred[cycle.PRED_R_MAX] = s.r_min, s.r_max
+        pred[cycle.PRED_HALF_FOV], pred[cycle.PRED_LIMITED] = 0.5 * s.fov + 1e-12, float(s.fov_deg < 360.0)
+        self._pred_pars = pred
+        up = np.zeros(9)
+        up[lmb_cycle.UP_R_MIN], up[lmb_cycle.UP_GATE], up[lmb_cycle.UP_MAX_HYP] = s.r_min, gate, lmb.max_hypotheses
+        up[lmb_cycle.UP_PRUNE_R], up[lmb_cycle.UP_MAX_TRACKS] = lmb.prune_r, lmb.max_tracks
+        up[lmb_cycle.UP_PRUNE_T], up[lmb_cycle.UP_MERGE_U] = c.prune_T, c.merge_U
+        up[lmb_cycle.UP_MAX_COMP], up[lmb_cycle.UP_EXTRACT_R] = lmb.max_components, lmb.extract_r
+        self._up_pars = up
         self.tracks = Tracks.empty()
         #: newborn terms (m, P) of the previous scan's measurements and their birth existences r_B
         self._newborn: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -116,9 +156,98 @@ class LMBFilter:
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the GM-PHD runs of the scan
         Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
         checked: StepInputs = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
+        seed = int(self.rng.integers(2**32))  # one draw per scan, used or not: the stream never depends on the data
+        if self.fused:
+            result = self._step_fused(scan, checked, seed)
+            if result is not None:
+                return result
+        return self._step_array(scan, checked, seed)
+
+    def _newborn_existence(self, births: Births, Z: np.ndarray, r_U: np.ndarray, A: np.ndarray, kappa: np.ndarray):
+        """The newborn terms (m, P) of this scan's measurements and their birth existences r_B for the next scan
+        (:mod:`soabench.lmb.birth`), or None when the model gives no newborn terms."""
+        nb = births.newborn
+        if nb is None or not len(Z):
+            return None
+        lmb = self.lmb
+        m_nb, P_nb = np.array(nb.m, dtype=float).reshape(-1, 4), np.array(nb.P, dtype=float).reshape(-1, 4, 4)
+        if nb.adaptive or lmb.birth_mapping == "components":
+            r_B = adaptive_existence(r_U, self.N_hat, lmb.r_B_max)
+        else:
+            r_B = intensity_existence(r_U, nb.beta(A, kappa), kappa, lmb.r_B_max)
+        return m_nb, P_nb, np.ascontiguousarray(r_B, dtype=float)
+
+    def _step_fused(self, scan: Scan, checked: StepInputs, seed: int) -> StepResult | None:
+        """:meth:`step` as two compiled calls (:mod:`soabench.lmb.cycle`): prediction and birth, then the update,
+        the reduction and the extraction; the line-of-sight gate (``occlusion_pd``) and the newborn terms'
+        ``beta(A, kappa)`` stay in Python between them. None (nothing changed) when a UKF covariance is not positive
+        definite: the array path's rule decides that step."""
+        Z, births, ego = checked.Z, checked.births, checked.ego
+        lmb, k, tr = self.lmb, int(scan.k), self.tracks
+        t0 = time.perf_counter()
+        if self._newborn is not None:
+            nb_m, nb_P, nb_r = self._newborn
+        else:
+            nb_m, nb_P, nb_r = _NO_NEWBORN
+        bw, bm, bP, bsrc = _birth_arrays(births) if len(births) else _NO_BIRTHS
+        pred = lmb_cycle.predict_births(
+            tr.r, tr.label, tr.origin, tr.age, tr.start, tr.w, tr.m, tr.P, self.F, self.Q, self._pred_pars,
+            float(self.cfg.p_S), bw, bm, bP, bsrc, lmb.birth_mapping != "components", float(lmb.r_B_max),
+            float(self.cfg.merge_U), int(lmb.max_components), nb_m, nb_P, nb_r, SOURCE_MEAS, k, len(births),
+            ego if ego is not None else _NO_EGO,
+        )  # fmt: skip
+        g = pred[8]
+        if ego is None:
+            p_D = np.zeros(len(g))
+        else:
+            if self.cfg.occlusion_pd and scan.occluders and g.any():  # line of sight (§4.4), as detection_gate
+                idx = np.flatnonzero(g)
+                vis = line_of_sight(np.asarray(ego[:2], dtype=float), pred[6][idx, :2], scan.occluders)
+                g[idx] = np.asarray(vis, dtype=bool).reshape(-1)
+            p_D = self.cfg.p_D * g
+        kappa = clutter_intensity(Z, self.sensor)
+        t1 = time.perf_counter()
+        ok, post, X, X_r, labels, r_U, A, sums, info, counts, times = lmb_cycle.update_reduce(
+            *pred[:8], p_D, Z, ego if ego is not None else _NO_EGO, self._R, kappa, self._ukf, self._up_pars,
+            np.uint32(seed), N_SOURCES,
+        )  # fmt: skip
+        if not ok:
+            return None
+        self.tracks = Tracks(*post)
+        self._newborn = self._newborn_existence(births, Z, r_U, A, kappa)
+        if not (np.isfinite(self.tracks.r).all() and np.isfinite(X).all()):
+            raise SoabenchError(f"scan {scan.k}: the LMB filter produced a non-finite posterior from finite inputs")
+        n_updated, n_pruned, cap_hit, n_pairs = (int(v) for v in info[:4])
+        return StepResult(
+            k=scan.k,
+            X=X,
+            X_w=X_r,
+            sum_w=float(sums[0]),
+            sum_w_reduced=float(sums[1]),
+            n_predicted=len(pred[0]),
+            n_updated=n_updated,
+            n_reduced=len(self.tracks),
+            cap_hit=bool(cap_hit),
+            t_predict=t1 - t0,
+            t_update=float(times[0]),
+            t_reduce=float(times[1]),
+            mean_pD=float(self.cfg.p_D),
+            A=A,
+            kappa=np.asarray(kappa, dtype=float),
+            n_pruned=n_pruned,
+            n_merged=len(self.tracks.w),
+            n_pairs=n_pairs,
+            n_newborn=0 if self._newborn is None else len(Z),
+            n_dropped=checked.n_dropped,
+            n_dropped_births=checked.n_dropped_births,
+            origin_counts=counts,
+            labels=labels,
+        )
+
+    def _step_array(self, scan: Scan, checked: StepInputs, seed: int) -> StepResult:
+        """:meth:`step` on the array path (numpy around the compiled kernels): the reference of the fused cycle."""
         Z, births = checked.Z, checked.births
         lmb, k = self.lmb, int(scan.k)
-        seed = int(self.rng.integers(2**32))  # one draw per scan, used or not: the stream never depends on the data
         t0 = time.perf_counter()
 
         if lmb.birth_mapping == "components":

@@ -139,6 +139,23 @@ def _enumerate_valid(options, n_opt, M, limit):
 
 
 @njit(cache=True)
+def _fixed_product(options, n_opt, limit):
+    """A lower bound of a cluster's valid hypotheses: the product over its tracks of their options without a
+    measurement (absent, missed), which combine freely; stops once past ``limit``. A cluster above ``limit`` by
+    this bound needs no depth-first count to be sent to the sampler."""
+    p = 1
+    for i in range(options.shape[0]):
+        k = 0
+        for o in range(n_opt[i]):
+            if options[i, o] < 2:
+                k += 1
+        p *= k
+        if p == 0 or p > limit:
+            return p
+    return p
+
+
+@njit(cache=True)
 def _draw(i, options, n_opt, weight, taken, state):
     """theta_i from its conditional: prop. to ``weight[i, o]`` (exp of the log cost, shifted by the row's maximum)
     over the options o of track i whose measurement is not taken by another track."""
@@ -174,6 +191,18 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             mx = max(mx, logc[i, options[i, o]])
         for o in range(n_opt[i]):
             weight[i, o] = math.exp(logc[i, options[i, o]] - mx)
+    # running sums of each track's weights in option order: the sums :func:`_draw` accumulates when no other track
+    # holds one of the track's measurements, so that case draws from them directly, the same uniform against the
+    # same sums
+    prefix = np.zeros(options.shape)
+    n_fixed = np.zeros(n, dtype=np.int64)  # absent and missed come first in a track's options
+    for i in range(n):
+        acc = 0.0
+        for o in range(n_opt[i]):
+            acc += weight[i, o]
+            prefix[i, o] = acc
+            if options[i, o] < 2:
+                n_fixed[i] += 1
     theta = np.empty(n, dtype=np.int64)
     taken = np.full(M, -1, dtype=np.int64)
     for i in range(n):
@@ -189,30 +218,72 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
     h = np.uint64(0)
     for i in range(n):
         h += zkey[i, theta[i]]
+    # the tracks that may take each measurement, and for each track how many of its measurements another track
+    # holds: while that count is 0 (the usual case) its draw needs no look at the others
+    deg = np.zeros(M + 1, dtype=np.int64)
+    for i in range(n):
+        for o in range(n_fixed[i], n_opt[i]):
+            deg[options[i, o] - 1] += 1
+    for j in range(M):
+        deg[j + 1] += deg[j]
+    takers = np.empty(deg[M], dtype=np.int64)
+    fill = deg[:M].copy()
+    for i in range(n):
+        for o in range(n_fixed[i], n_opt[i]):
+            j = options[i, o] - 2
+            takers[fill[j]] = i
+            fill[j] += 1
+    blocked = np.zeros(n, dtype=np.int64)
+    # the samples, each stored only when its sweep changed the hypothesis: a repeat of the previous sample adds no
+    # distinct hypothesis and would not change which one comes first among equal hashes
     samples = np.empty((n_sweeps, n), dtype=np.int64)
     hashes = np.empty(n_sweeps, dtype=np.uint64)
     samples[0] = theta
     hashes[0] = h
-    for s in range(1, n_sweeps):
+    n_st = 1
+    for _sweep in range(1, n_sweeps):
+        changed = False
         for i in range(n):
-            c = _draw(i, options, n_opt, weight, taken, state)
+            if blocked[i] == 0:
+                u = _uniform(state) * prefix[i, n_opt[i] - 1]
+                c = -1
+                for o in range(n_opt[i]):
+                    if weight[i, o] > 0.0:
+                        c = options[i, o]
+                        if u < prefix[i, o]:
+                            break
+            else:
+                c = _draw(i, options, n_opt, weight, taken, state)
             if c < 0:  # no option of positive weight (cannot happen: absent or missed is always open)
                 c = theta[i]
             if c == theta[i]:
                 continue
+            changed = True
             if theta[i] >= 2:
-                taken[theta[i] - 2] = -1
+                j = theta[i] - 2
+                taken[j] = -1
+                for t in range(deg[j], deg[j + 1]):
+                    if takers[t] != i:
+                        blocked[takers[t]] -= 1
             h += zkey[i, c] - zkey[i, theta[i]]
             theta[i] = c
             if c >= 2:
-                taken[c - 2] = i
-        samples[s] = theta
-        hashes[s] = h
+                j = c - 2
+                taken[j] = i
+                for t in range(deg[j], deg[j + 1]):
+                    if takers[t] != i:
+                        blocked[takers[t]] += 1
+        if changed:
+            for i in range(n):
+                samples[n_st, i] = theta[i]
+            hashes[n_st] = h
+            n_st += 1
+    hashes = hashes[:n_st]
     perm = np.argsort(hashes, kind="mergesort")
-    out = np.empty((n_sweeps, n), dtype=np.int64)
+    out = np.empty((n_st, n), dtype=np.int64)
     n_hyp = 0
     run = 0  # first output row of the current run of equal hashes
-    for k in range(n_sweeps):
+    for k in range(n_st):
         s = perm[k]
         if k == 0 or hashes[s] != hashes[perm[k - 1]]:
             run = n_hyp
@@ -291,7 +362,7 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False):
                     options[a, n_opt[a]] = c
                     n_opt[a] += 1
         n_hyp = max_hyp + 1
-        if not force_gibbs:
+        if not force_gibbs and _fixed_product(options, n_opt, max_hyp) <= max_hyp:
             hyps, n_hyp = _enumerate_valid(options, n_opt, mc, max_hyp)
         if n_hyp > max_hyp:
             hyps, n_hyp = _gibbs(sub, options, n_opt, max_hyp, state)

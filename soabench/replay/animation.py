@@ -13,6 +13,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.collections import EllipseCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, PathPatch
+from matplotlib.path import Path as MplPath
+from PIL import Image
 
 from soabench.errors import SoabenchError
 
@@ -39,8 +45,6 @@ def _rings(path: str) -> list[np.ndarray]:
 
 def _patch(path: str, **style: Any):
     """A compound patch of an SVG path of ours (holes: the rings' opposite orientations, nonzero fill)."""
-    from matplotlib.patches import PathPatch
-    from matplotlib.path import Path as MplPath
 
     rings = _rings(path)
     if not rings:
@@ -59,9 +63,6 @@ def _add(ax: Any, path: str, **style: Any) -> list:
 def _legend(sources: list[dict[str, str]], ncol: int, width: int, height: int, dpi: int) -> np.ndarray:
     """The page's legend, drawn once as the (height, width, 3) strip under the panels of every frame."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
 
     fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
     canvas = FigureCanvasAgg(fig)
@@ -136,8 +137,6 @@ def render_frames(data: dict[str, Any], panel_px: int = 420) -> Iterator[np.ndar
     page's track table names the label)."""
     from matplotlib import patheffects
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.collections import EllipseCollection
-    from matplotlib.figure import Figure
 
     S, models = data["scene"], data["models"]
     lay = frame_size(len(models), _LEGEND_FIXED + len(data["sources"]), panel_px)
@@ -225,7 +224,6 @@ def _part(out: Path) -> Path:
 
 def write_gif(data: dict[str, Any], out: Path, speed: float = 5.0, panel_px: int = 420) -> int:
     """Write the replay ``data`` as a looping GIF played at ``speed`` times real time; returns its size in bytes."""
-    from PIL import Image
 
     frames = [
         Image.fromarray(rgb).quantize(colors=128, method=Image.Quantize.FASTOCTREE)

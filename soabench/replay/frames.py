@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import shapely
 
 from soabench.config import family_label
 from soabench.figures.births import SOURCE_COLORS, SOURCE_LABELS, ellipse_params
@@ -147,7 +148,6 @@ def nearest_birth(arrays: tuple[np.ndarray, np.ndarray, np.ndarray], xy: np.ndar
 
 def _hidden(scene: Any, fov: Any, omega: Any) -> Any:
     """The complement of Omega_k on the sidewalk within the FOV: sidewalk the sensor cannot see (§3.1.4)."""
-    import shapely
 
     base = shapely.clip_by_rect(scene.sidewalk, *fov.bounds).intersection(fov)
     return base.difference(omega) if not base.is_empty else base

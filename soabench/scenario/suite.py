@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from shapely.geometry import LineString
+
 from soabench.scenario import load, shipped_nets
 from soabench.scenario.network import read_net
 
@@ -15,7 +17,6 @@ def scene_rows() -> list[dict]:
         x0, y0, x1, y1 = scene.bounds
 
         net = read_net(cfg.net_file)
-        from shapely.geometry import LineString
 
         lanes = sum(
             1

@@ -76,27 +76,55 @@ def hiding_kind(scan: Scan, xy: np.ndarray) -> str:
     """The kind of the occluder that hides the point ``xy`` from the sensor at ``scan``: the nearest to the sensor
     of the occluders whose core the sight line runs through (:func:`soabench.sensor.line_of_sight`'s rule), "other"
     when none does."""
+    return hiding_kinds(scan, np.asarray(xy, dtype=float).reshape(1, -1))[0]
+
+
+def hiding_kinds(scan: Scan, points: np.ndarray) -> list[str]:
+    """:func:`hiding_kind` of each row of ``points`` (n, 2) at ``scan``, the sight lines tested against the scan's
+    occluders together (each occluder's core eroded once for every line that crosses it)."""
+    points = np.asarray(points, dtype=float).reshape(len(points), -1)[:, :2]
+    kinds = ["other"] * len(points)
     ego = np.asarray(scan.ego, dtype=float)[:2]
     occ = np.asarray(list(scan.occluders), dtype=object).reshape(-1)
-    if not len(occ) or not np.isfinite(xy).all():
-        return "other"
+    finite = np.flatnonzero(np.isfinite(points).all(axis=1))
+    if not len(occ) or not len(finite):
+        return kinds
     ego_pt = shapely.points(ego)
     occ = occ[~shapely.contains(occ, ego_pt)]  # the sensor is never hidden by what it sits in
-    line = shapely.linestrings(np.stack([ego, np.asarray(xy, dtype=float)[:2]]))
-    occ = occ[shapely.intersects(line, occ)]
-    if len(occ):
-        occ = occ[shapely.intersects(line, shapely.buffer(occ, -SIGHT_TOL, join_style="mitre"))]
-    if not len(occ):
-        return "other"
-    return _obstacle_kind(scan, occ[int(np.argmin(shapely.distance(ego_pt, occ)))])
+    ends = points[finite]
+    lines = shapely.linestrings(np.stack([np.broadcast_to(ego, ends.shape), ends], axis=1))
+    hit = shapely.intersects(lines[:, None], occ[None, :])  # (lines, occluders)
+    crossed = np.flatnonzero(hit.any(axis=0))
+    if not len(crossed):
+        return kinds
+    core = shapely.buffer(occ[crossed], -SIGHT_TOL, join_style="mitre")
+    hit[:, crossed] &= shapely.intersects(lines[:, None], core[None, :])
+    dist = np.full(len(occ), np.inf)
+    dist[crossed] = shapely.distance(ego_pt, occ[crossed])
+    kind_of: dict[int, str] = {}
+    for q in np.flatnonzero(hit.any(axis=1)):
+        on = np.flatnonzero(hit[q])
+        j = int(on[np.argmin(dist[on])])  # the nearest; a tie goes to the first in the scan's order
+        if j not in kind_of:
+            kind_of[j] = _obstacle_kind(scan, occ[j])
+        kinds[int(finite[q])] = kind_of[j]
+    return kinds
 
 
 def describe_gaps(scans: Scans, gaps: Sequence[Gap], d_gate: float) -> list[GapDescription]:
     """:class:`GapDescription` of each gap of ``scans`` (the truth and the per-scan occluders of the sensor)."""
     xy, dt = np.asarray(scans.truth_xy, dtype=float), float(scans.dt)
+    queries: dict[int, list[int]] = {}  # scan -> the targets hidden there by some gap, in gap order
+    for g in gaps:
+        for k in range(g.k_a, g.k_b + 1):
+            queries.setdefault(k, []).append(g.target)
+    hidden_by = {}
+    for k, targets in queries.items():
+        unique = list(dict.fromkeys(targets))
+        hidden_by.update(zip(((k, i) for i in unique), hiding_kinds(scans.scans[k], xy[k, unique]), strict=True))
     out = []
     for g in gaps:
-        kinds = [hiding_kind(scans.scans[k], xy[k, g.target]) for k in range(g.k_a, g.k_b + 1)]
+        kinds = [hidden_by[(k, g.target)] for k in range(g.k_a, g.k_b + 1)]
         counts = {kd: kinds.count(kd) for kd in dict.fromkeys(kinds)}  # in order of first appearance: the tie rule
         kind = max(counts, key=counts.__getitem__)
         before, after = g.k_a - 1, g.k_b + 1

@@ -210,13 +210,162 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
 
 
 @njit(cache=True)
+def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, nT, potential, id_potential):
+    """HOTA's summed Jaccard overlaps and Identity's potential-match counts into ``potential`` and ``id_potential``
+    (nG * nT,), with the operations of the padded-array form of :func:`soabench.tracks.scores._global_counts` (its
+    runs of ``step`` scans padded to G truths x E estimates): per scan, each truth's similarity sum over the E
+    padded entries in numpy's pairwise order, each estimate's sum over the G padded truths one after another, the
+    overlap ``S / (col + row - S)`` where that exceeds machine epsilon; per run of scans, the overlaps summed per
+    cell in scan order from 0.0 and added to ``potential``. A pair of zero similarity adds 0.0 and is skipped."""
+    K = len(g_off) - 1
+    G, E = 0, 0
+    for t in range(K):
+        G = max(G, g_off[t + 1] - g_off[t])
+        E = max(E, e_off[t + 1] - e_off[t])
+    row = np.zeros(max(E, 1))
+    col = np.zeros(max(E, 1))
+    rsum = np.zeros(max(G, 1))
+    block = np.zeros(len(potential))
+    touched = np.empty(16, dtype=np.int64)
+    n_touched = 0
+    for t in range(K):
+        g0, e0 = g_off[t], e_off[t]
+        ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
+        if ng > 0 and ne > 0:
+            S = scan_similarity(gx, g0, ng, ex, e0, ne, d_gate)
+            col[:ne] = S[0, :]
+            for i in range(1, ng):
+                for j in range(ne):
+                    col[j] += S[i, j]
+            for i in range(ng):
+                row[:ne] = S[i, :]
+                row[ne:E] = 0.0
+                rsum[i] = np_sum(row, np.int64(E))
+            for i in range(ng):
+                for j in range(ne):
+                    if S[i, j] == 0.0:
+                        continue
+                    denom = (col[j] + rsum[i]) - S[i, j]
+                    iou = S[i, j] / denom if denom > _EPS else 0.0
+                    x = g_ids[g0 + i] * nT + e_ids[e0 + j]
+                    if block[x] == 0.0 and iou != 0.0:
+                        if n_touched == len(touched):
+                            touched = np.concatenate((touched, np.empty(len(touched), dtype=np.int64)))
+                        touched[n_touched] = x
+                        n_touched += 1
+                    block[x] += iou
+                    if S[i, j] >= threshold:
+                        id_potential[x] += 1.0
+        if (t + 1) % step == 0 or t == K - 1:  # the end of a run of scans: its sums join the totals
+            for q in range(n_touched):
+                x = touched[q]
+                potential[x] += block[x]
+                block[x] = 0.0
+            n_touched = 0
+
+
+@njit(cache=True)
+def _sparse_block(pos, val, lo, hi, start, n):  # pragma: no cover - compiled
+    """numpy's pairwise sum of a zero array of ``n`` <= 128 elements from ``start`` with ``val[lo:hi]`` at the
+    sorted positions ``pos[lo:hi]`` (all inside it): its leaf case, adding a zero being exact."""
+    if n < 8:
+        res = -0.0
+        for q in range(lo, hi):
+            res += val[q]
+        return res
+    r0 = r1 = r2 = r3 = r4 = r5 = r6 = r7 = 0.0
+    stop = start + n - n % 8
+    q = lo
+    while q < hi and pos[q] < stop:
+        j = (pos[q] - start) % 8
+        if j == 0:
+            r0 += val[q]
+        elif j == 1:
+            r1 += val[q]
+        elif j == 2:
+            r2 += val[q]
+        elif j == 3:
+            r3 += val[q]
+        elif j == 4:
+            r4 += val[q]
+        elif j == 5:
+            r5 += val[q]
+        elif j == 6:
+            r6 += val[q]
+        else:
+            r7 += val[q]
+        q += 1
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while q < hi:
+        res += val[q]
+        q += 1
+    return res
+
+
+@njit(cache=True)
+def _first_at_or_after(pos, lo, hi, x):  # pragma: no cover - compiled
+    """The first index q in lo..hi with ``pos[q] >= x`` (hi if none; ``pos`` sorted)."""
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if pos[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def sparse_np_sum(pos, val, n):  # pragma: no cover - compiled
+    """``a.sum()`` of the (n,) float64 array ``a`` that is zero but for ``val`` (> 0) at the sorted positions
+    ``pos``, bit for bit, in time of the non-zero entries: numpy's pairwise summation (halves split at a multiple of
+    8 above 128 elements, eight running sums below; :func:`soabench.metrics_kernels.np_sum`) with every part that
+    holds no non-zero entry known to be 0.0, which adds exactly."""
+    if n == 0 or len(pos) == 0:
+        return 0.0
+    f_start = np.empty(64, dtype=np.int64)
+    f_n = np.empty(64, dtype=np.int64)
+    f_lo = np.empty(64, dtype=np.int64)
+    f_mid = np.empty(64, dtype=np.int64)
+    f_hi = np.empty(64, dtype=np.int64)
+    f_stage = np.zeros(64, dtype=np.int64)
+    vals = np.empty(64)
+    nv = 0
+    top = 0
+    f_start[0], f_n[0], f_lo[0], f_hi[0] = 0, n, 0, len(pos)
+    while top >= 0:
+        s, m, lo, hi = f_start[top], f_n[top], f_lo[top], f_hi[top]
+        if lo == hi or m <= 128:
+            vals[nv] = 0.0 if lo == hi else _sparse_block(pos, val, lo, hi, s, m)
+            nv += 1
+            top -= 1
+            continue
+        half = m // 2
+        half -= half % 8
+        if f_stage[top] == 0:  # the left half first
+            f_stage[top] = 1
+            mid = _first_at_or_after(pos, lo, hi, s + half)
+            f_mid[top] = mid
+            top += 1
+            f_start[top], f_n[top], f_lo[top], f_hi[top], f_stage[top] = s, half, lo, mid, 0
+        elif f_stage[top] == 1:  # then the right half
+            f_stage[top] = 2
+            mid = f_mid[top]
+            top += 1
+            f_start[top], f_n[top], f_lo[top], f_hi[top], f_stage[top] = s + half, m - half, mid, hi, 0
+        else:  # both done: left + right
+            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            nv -= 1
+            top -= 1
+    return vals[0]
+
+
+@njit(cache=True)
 def _popcount(x):  # pragma: no cover - compiled
-    """Number of set bits of the uint64 ``x``."""
-    n = 0
-    while x != 0:
-        x &= x - np.uint64(1)
-        n += 1
-    return n
+    """Number of set bits of the uint64 ``x`` (the bits counted in parallel: pairs, nibbles, then bytes summed)."""
+    x = x - ((x >> np.uint64(1)) & np.uint64(0x5555555555555555))
+    x = (x & np.uint64(0x3333333333333333)) + ((x >> np.uint64(2)) & np.uint64(0x3333333333333333))
+    x = (x + (x >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    return np.int64((x * np.uint64(0x0101010101010101)) >> np.uint64(56))
 
 
 @njit(cache=True)
@@ -295,6 +444,11 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     ev_d = np.empty(64)
     ev_off = np.zeros(K + 1, dtype=np.int64)
     n_ev = np.int64(0)  # not the literal 0: one specialisation of _near_events
+    slot = np.full(0, -1, dtype=np.int64)  # per (a, b) of the window's tracks: its near pair's row of terms, or -1
+    near = np.empty(0, dtype=np.int64)  # per near pair: its a * n + b
+    terms = np.empty((0, window))
+    word = np.empty(window, dtype=np.int64)  # per scan of the window: its mask word and bit
+    bits = np.empty(window, dtype=np.uint64)
     for k in range(K):
         lo = max(0, k - window + 1)
         if k >= window:  # scan k - window leaves the window
@@ -329,48 +483,49 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                 loc_e[esel[b]] = b
             Cm = np.empty((small, large))
             for a in range(m):
+                mg = mask_g[gsel[a]]
                 for b in range(n):
-                    d = far[_union_count(mask_g[gsel[a]], mask_e[esel[b]])]
+                    d = far[_union_count(mg, mask_e[esel[b]])]
                     if m <= n:
                         Cm[a, b] = d
                     else:
                         Cm[b, a] = d
-            # the pairs closer than c somewhere in the window: their scans' terms, c where not closer
-            slot = np.full((m, n), -1, dtype=np.int64)
-            terms = np.empty((ev_off[k + 1] - ev_off[lo], window))
+            # the pairs closer than c somewhere in the window (each once, in order of their first event): their
+            # scans' terms, c where the two are not closer; the slots of (a, b) are cleared again after the scan
+            if m * n > len(slot):
+                slot = np.full(m * n, -1, dtype=np.int64)
+            if ev_off[k + 1] - ev_off[lo] > len(near):
+                near = np.empty(2 * (ev_off[k + 1] - ev_off[lo]), dtype=np.int64)
+                terms = np.empty((len(near), window))
             n_near = 0
             for e in range(ev_off[lo], ev_off[k + 1]):
-                a, b = loc_g[ev_i[e]], loc_e[ev_j[e]]
-                if slot[a, b] < 0:
-                    slot[a, b] = n_near
+                x = loc_g[ev_i[e]] * n + loc_e[ev_j[e]]
+                if slot[x] < 0:
+                    slot[x] = n_near
+                    near[n_near] = x
                     terms[n_near, :] = c
                     n_near += 1
             for t in range(lo, k + 1):
+                s = t % ring
+                word[t - lo] = s // 64
+                bits[t - lo] = np.uint64(1) << np.uint64(s % 64)
                 for e in range(ev_off[t], ev_off[t + 1]):
-                    terms[slot[loc_g[ev_i[e]], loc_e[ev_j[e]]], t - lo] = ev_d[e]
-            for a in range(m):
-                for b in range(n):
-                    q = slot[a, b]
-                    if q < 0:
-                        continue
-                    i, j = gsel[a], esel[b]
-                    total, count = 0.0, 0
-                    for t in range(lo, k + 1):
-                        s = t % ring
-                        bit = np.uint64(1) << np.uint64(s % 64)
-                        on_g = (mask_g[i, s // 64] & bit) != 0
-                        on_e = (mask_e[j, s // 64] & bit) != 0
-                        if on_g and on_e:
-                            total += terms[q, t - lo]
-                            count += 1
-                        elif on_g or on_e:
-                            total += c
-                            count += 1
-                    d = min(total / count, c) ** p
-                    if m <= n:
-                        Cm[a, b] = d
-                    else:
-                        Cm[b, a] = d
+                    terms[slot[loc_g[ev_i[e]] * n + loc_e[ev_j[e]]], t - lo] = ev_d[e]
+            for q in range(n_near):
+                x = near[q]
+                slot[x] = -1
+                a, b = x // n, x % n
+                i, j = gsel[a], esel[b]
+                total, count = 0.0, 0
+                for t in range(k + 1 - lo):  # the scans where either exists (a near term only where both do)
+                    if ((mask_g[i, word[t]] | mask_e[j, word[t]]) & bits[t]) != 0:
+                        total += terms[q, t]
+                        count += 1
+                d = min(total / count, c) ** p
+                if m <= n:
+                    Cm[a, b] = d
+                else:
+                    Cm[b, a] = d
             rows, cols = assignment(Cm)
             vals = np.empty(small)
             for r in range(small):

@@ -25,7 +25,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from soabench.notice import announced
-from soabench.tracks.sequence import TrackSequence, similarity
+from soabench.tracks.sequence import BLOCK_CELLS, TrackSequence, similarity
 
 #: HOTA's localisation thresholds alpha (TrackEval's ``array_labels``)
 ALPHAS = np.arange(0.05, 0.99, 0.05)
@@ -108,18 +108,20 @@ def _global_counts(
     seq: TrackSequence, d_gate: float, gt_count: np.ndarray, tr_count: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """HOTA's global alignment score (nG, nT): the similarity-weighted Jaccard overlap of each truth-track pair
-    summed over scans; and Identity's potential-match counts (nG, nT) (pairs with S >= :data:`THRESHOLD`)."""
+    summed over scans; and Identity's potential-match counts (nG, nT) (pairs with S >= :data:`THRESHOLD`).
+
+    TrackEval's sums over padded runs of scans (:meth:`TrackSequence.blocks`), in one compiled loop over the pairs
+    of non-zero similarity (:func:`soabench.tracks.kernels.global_counts`, the same operations in the same order)."""
+    from soabench.tracks.kernels import global_counts
+
     nG, nT = len(gt_count), len(tr_count)
     potential = np.zeros(nG * nT)
     id_potential = np.zeros(nG * nT)
-    for _, S, g, e in seq.blocks(d_gate):
-        denom = S.sum(axis=1)[:, None, :] + S.sum(axis=2)[:, :, None] - S
-        iou = np.zeros_like(S)
-        np.divide(S, denom, out=iou, where=denom > _EPS)
-        valid = (g[:, :, None] >= 0) & (e[:, None, :] >= 0)
-        cell = (g[:, :, None] * nT + e[:, None, :])[valid]
-        potential += np.bincount(cell, weights=iou[valid], minlength=nG * nT)
-        id_potential += np.bincount(cell, weights=S[valid] >= THRESHOLD, minlength=nG * nT)
+    g, e = seq.gt, seq.est
+    G, E = int(np.diff(g.off).max(initial=0)), int(np.diff(e.off).max(initial=0))
+    step = max(1, BLOCK_CELLS // max(1, G * E))
+    args = (g.ids, g.off, g.xy, e.ids, e.off, e.xy, float(d_gate), THRESHOLD, step, nT, potential, id_potential)
+    announced("track metrics", global_counts, *args)
     potential = potential.reshape(nG, nT)
     with np.errstate(invalid="ignore", divide="ignore"):
         alignment = potential / (gt_count[:, None] + tr_count[None, :] - potential)
@@ -268,15 +270,7 @@ def _hota(
         hit = ms[None, :] >= ALPHAS[:, None] - _EPS  # (A, n_matches)
         tp = hit.sum(axis=1).astype(float)
         loc = np.array([ms[h].sum() for h in hit])
-        cell = mg * nT + me
-        assa, assre, asspr = np.zeros(A), np.zeros(A), np.zeros(A)
-        union = gt_count[:, None] + tr_count[None, :]
-        for a in range(A):
-            count = np.bincount(cell[hit[a]], minlength=len(gt_count) * nT).reshape(len(gt_count), nT).astype(float)
-            den = max(1.0, tp[a])
-            assa[a] = np.sum(count * (count / np.maximum(1, union - count))) / den
-            assre[a] = np.sum(count * (count / np.maximum(1, gt_count[:, None]))) / den
-            asspr[a] = np.sum(count * (count / np.maximum(1, tr_count[None, :]))) / den
+        assa, assre, asspr = _association(mg * nT + me, hit, gt_count, tr_count, tp)
         fn = seq.n_gt_dets - tp
         fp = seq.n_est_dets - tp
         deta = tp / np.maximum(1, tp + fn + fp)
@@ -292,6 +286,38 @@ def _hota(
         }
     means = {k: float(np.mean(out[f"{k}_alpha"])) for k in ("hota", "deta", "assa", "loca")}
     return {**means, **out}
+
+
+def _association(
+    cell: np.ndarray, hit: np.ndarray, gt_count: np.ndarray, tr_count: np.ndarray, tp: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """HOTA's AssA, AssRe and AssPr per alpha from the matches' cells (truth * nT + track) and ``hit`` (A, matches).
+
+    Per alpha, TrackEval sums ``count * (count / max(1, union - count))`` (and the recall and precision forms) over
+    the dense (nG, nT) array of match counts. The cells are sorted once for every alpha, each alpha's counts are
+    found per cell, and the sums are taken over the non-zero cells only with :func:`sparse_np_sum`, numpy's pairwise
+    sum of the dense array bit for bit (a zero cell adds nothing)."""
+    from soabench.tracks.kernels import sparse_np_sum
+
+    A, nT = len(hit), len(tr_count)
+    order = np.argsort(cell, kind="stable")
+    cells, first = np.unique(cell[order], return_index=True)
+    g, t = cells // nT, cells % nT
+    union = gt_count[g] + tr_count[t]
+    out = np.zeros((3, A))
+    for a in range(A):
+        count = np.add.reduceat(hit[a][order].astype(np.int64), first).astype(float) if len(cells) else np.zeros(0)
+        on = count > 0
+        pos, c = cells[on], count[on]
+        den = max(1.0, tp[a])
+        terms = (
+            c * (c / np.maximum(1, union[on] - c)),
+            c * (c / np.maximum(1, gt_count[g[on]])),
+            c * (c / np.maximum(1, tr_count[t[on]])),
+        )
+        for i, term in enumerate(terms):
+            out[i, a] = announced("track metrics", sparse_np_sum, pos, term, len(gt_count) * nT) / den
+    return out[0], out[1], out[2]
 
 
 def _identity(

@@ -225,7 +225,7 @@ def test_every_documented_key_has_a_non_default_value():
 @pytest.fixture(scope="module")
 def recorded_run(tmp_path_factory):
     """A one-trial run of every non-default value: its stored configuration, its trial rows and its scan rows."""
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.experiment.runs.files import read_csv
 
     plugins.allow_import_paths([TRACKER])

@@ -16,7 +16,7 @@ from repo_paths import TESTS
 from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment.execution.options import RunOptions
-from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.finished import run_experiment
 
 pytestmark = pytest.mark.slow  # runs killed and resumed in subprocesses
 
@@ -29,7 +29,7 @@ from pathlib import Path
 sys.path.insert(0, {here!r})
 import fake_trial as ft
 from soabench.config import Config
-from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.finished import run_experiment
 from soabench.experiment.execution.options import RunOptions
 cfg = Config.from_dict({cfg!r}).validate()
 options = RunOptions(workers=1, progress=False, figures=False)

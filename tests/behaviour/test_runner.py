@@ -22,7 +22,7 @@ from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment.campaigns.sweep import run_sweep, sweep_points
 from soabench.experiment.execution.options import RunOptions
-from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.finished import run_experiment
 from soabench.experiment.reports.report import LABEL, fmt, fmt_pct
 from soabench.experiment.runs.files import read_csv
 

@@ -1,4 +1,4 @@
-"""Run folders merged on the workers of a process pool (:mod:`soabench.experiment.execution.premerge`).
+"""Run folders merged on the workers of a process pool (:mod:`soabench.experiment.reports.premerge`).
 
 * a grouped N̂ sweep on two workers (each point merged by a worker, its figure tables saved there) writes the files
   of the same sweep on one process, byte for byte: tables, model failures and every figure;
@@ -14,8 +14,8 @@ import pytest
 
 from soabench.config import Config, ExperimentConfig
 from soabench.experiment.campaigns.sweep import run_sweep
-from soabench.experiment.execution import premerge
 from soabench.experiment.execution.options import RunOptions
+from soabench.experiment.reports import premerge
 from soabench.experiment.reports.tables import load_tables
 from soabench.experiment.runs.store import RunStore, merged_stamp
 

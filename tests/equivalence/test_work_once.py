@@ -121,13 +121,14 @@ def test_sensitivity_variants_share_the_recording_and_rescore_the_filter_runs(in
     running the filters, with exactly the results of running it alone."""
     from soabench.experiment.execution.grouped import rescored
     from soabench.experiment.execution.runner import TaskSpec
+    from soabench.experiment.runs.runmeta import RunMeta
 
     scene, scenario = intersection
     main = config(models=("soa", "pubm"))
     gate_off = dataclasses.replace(main, filter=dataclasses.replace(main.filter, gate=False))
     visible = dataclasses.replace(main, metrics=dataclasses.replace(main.metrics, gt_set="visible"))
     configs = (main, gate_off, visible)
-    spec = lambda c: TaskSpec(c.to_dict(), "intersection", (), None, False, None, None, ())  # noqa: E731
+    spec = lambda c: TaskSpec(RunMeta(c, "intersection", (), None, False, 1, "soabench", "sumo"))  # noqa: E731
     assert rescored([spec(main), spec(visible)]) and not rescored([spec(main), spec(gate_off)])
     alone = [run_trial(1, c, scene, scenario) for c in configs]
     share = TrialShare(keep_filter_runs=True)

@@ -18,7 +18,7 @@ from soabench.cli.main import main
 from soabench.config import Config, ExperimentConfig
 from soabench.errors import Interrupted, SoabenchError
 from soabench.experiment.execution.options import RunOptions
-from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.finished import run_experiment
 from soabench.experiment.runs.files import read_csv
 from soabench.experiment.trial.trial import run_trial
 

@@ -18,7 +18,8 @@ from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment.campaigns.sweep import run_sweep
 from soabench.experiment.execution.options import RunOptions
-from soabench.experiment.execution.runner import TodoTrials, run_experiment
+from soabench.experiment.execution.runner import TodoTrials
+from soabench.experiment.reports.finished import run_experiment
 from soabench.experiment.trial import registry
 from soabench.folders import FolderLock
 
@@ -211,7 +212,7 @@ sys.path.insert(0, {here!r})
 import fake_trial as ft
 from pathlib import Path
 from soabench.experiment.execution.options import RunOptions
-from soabench.experiment.execution.runner import run_experiment
+from soabench.experiment.reports.finished import run_experiment
 options = RunOptions(workers=1, progress=False, figures=False)
 run_experiment(None, "x", resume=Path({run!r}), options=options, trial_fn=ft.slow_trial)
 """

@@ -4,7 +4,10 @@ The graph is read from the source with ``ast``: every ``import`` statement of ev
 included (they run when the function is called); imports under ``if TYPE_CHECKING:`` never run and are left out. The
 page's layer table gives each module its layer; an import from a lower layer to a higher one is "upward". The test
 fails on an import circle, on an upward import the page does not list with its reason, on a listed one that is no
-longer in the code, and on an import inside a function of a name its module already imports at the top.
+longer in the code, on an import inside a function of a name its module already imports at the top, and on an
+import inside a function that defers nothing: one whose modules the importing module's own unconditional top-level
+imports load already (followed through soabench's modules; an import inside a function is there to put off loading
+something costly, matplotlib, numba kernels, libsumo, an optional extra, or to break a circle).
 """
 
 from __future__ import annotations
@@ -99,6 +102,78 @@ def import_edges() -> tuple[list[Edge], list[str]]:
             if in_function and any((getattr(node, "module", None), a.name, a.asname) in top for a in node.names):
                 repeated.append(f"{module}:{node.lineno}")
     return edges, repeated
+
+
+@dataclass(frozen=True)
+class Loads:
+    """What each module's unconditional top-level imports name (soabench modules; other modules as
+    :func:`_other_modules` names them), and its imports inside functions: (line, soabench modules, other names)."""
+
+    top: dict[str, set[str]]
+    top_other: dict[str, set[str]]
+    inside: dict[str, list[tuple[int, tuple[str, ...], tuple[str, ...]]]]
+
+
+def _other_modules(node: ast.Import | ast.ImportFrom) -> tuple[str, ...]:
+    """What an import statement loads outside soabench: ``X`` for ``import X``, ``X:a`` for ``from X import a``
+    (``a`` may be a submodule of ``X`` that ``X`` alone does not load)."""
+    if isinstance(node, ast.Import):
+        return tuple(a.name for a in node.names if a.name.split(".")[0] != "soabench")
+    module = node.module or ""
+    if node.level or module.split(".")[0] == "soabench":
+        return ()
+    return tuple(f"{module}:{a.name}" for a in node.names)
+
+
+@cache
+def loads() -> Loads:
+    modules = module_names()
+    top: dict[str, set[str]] = defaultdict(set)
+    top_other: dict[str, set[str]] = defaultdict(set)
+    inside: dict[str, list[tuple[int, tuple[str, ...], tuple[str, ...]]]] = defaultdict(list)
+    for module, path in modules.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        body = {id(n) for n in tree.body}
+        for node, in_function in _imports(tree):
+            targets = tuple(_targets(node, module, path.name == "__init__.py", modules))
+            if in_function:
+                inside[module].append((node.lineno, targets, _other_modules(node)))
+            elif id(node) in body:  # unconditional (an import under try/if may not happen)
+                top[module].update(targets)
+                top_other[module].update(_other_modules(node))
+    return Loads(top, top_other, inside)
+
+
+def loaded_at_import(module: str, top: dict[str, set[str]]) -> set[str]:
+    """The soabench modules importing ``module`` loads through unconditional top-level imports (its packages
+    included)."""
+
+    def with_packages(name: str) -> list[str]:
+        parts = name.split(".")
+        return [".".join(parts[: i + 1]) for i in range(len(parts))]
+
+    seen: set[str] = set()
+    stack = with_packages(module)
+    while stack:
+        name = stack.pop()
+        if name not in seen:
+            seen.add(name)
+            for target in top.get(name, ()):
+                stack += with_packages(target)
+    return seen
+
+
+def deferring_nothing(graph: Loads) -> list[str]:
+    """``module:line`` of every import inside a function whose modules are loaded when its module is."""
+    out = []
+    for module, statements in graph.inside.items():
+        loaded = loaded_at_import(module, graph.top)
+        other = set().union(*(graph.top_other.get(m, set()) for m in loaded))
+        other |= {f"{name.rpartition('.')[0]}:{name.rpartition('.')[2]}" for name in other if "." in name}
+        for line, targets, others in statements:
+            if (targets or others) and set(targets) <= loaded and set(others) <= other:
+                out.append(f"{module}:{line}")
+    return sorted(out)
 
 
 def _table(heading: str) -> list[list[str]]:
@@ -208,13 +283,31 @@ def test_every_upward_import_is_listed_with_its_reason_and_every_listed_one_exis
 def test_the_page_states_the_numbers_it_lists():
     text = PAGE.read_text(encoding="utf-8")
     listed = listed_upward()
-    stated = re.search(r"(\d+) imports run back up", text)
+    stated = re.search(r"(\d+) imports? runs? back up", text)
     assert stated and int(stated.group(1)) == len(listed)
     assert "no import circle" in text
 
 
 def test_no_import_inside_a_function_repeats_one_at_the_top():
     assert import_edges()[1] == []
+
+
+def test_every_import_inside_a_function_defers_something():
+    found = deferring_nothing(loads())
+    assert not found, f"imports inside functions of what their module loads already (import at the top): {found}"
+
+
+def test_the_reading_finds_an_import_inside_a_function_that_defers_nothing():
+    """The check can fail: ``a`` loads ``b`` (and with it numpy, scipy.stats, matplotlib) at the top, so importing
+    those inside a function of ``a`` defers nothing, while a submodule nothing loads is deferred."""
+    graph = Loads(
+        top={"soabench.a": {"soabench.b"}},
+        top_other={"soabench.b": {"numpy", "scipy.stats", "matplotlib"}},
+        inside={"soabench.a": [(5, ("soabench.b",), ()), (6, (), ("numpy",)), (7, (), ("scipy:stats",)),
+                               (8, (), ("matplotlib:patheffects",)), (9, (), ("shapely",))]},
+    )  # fmt: skip
+    # matplotlib is loaded, but not its patheffects; shapely not at all
+    assert deferring_nothing(graph) == ["soabench.a:5", "soabench.a:6", "soabench.a:7"]
 
 
 def test_the_reading_finds_a_circle_and_an_upward_import():

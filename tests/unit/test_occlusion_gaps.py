@@ -13,7 +13,7 @@ from soabench.config import MetricsConfig, SensorConfig
 from soabench.metrics import delay_episodes
 from soabench.sensor import compute_obstacles, line_of_sight
 from soabench.tracks.evaluate import GAP_KEYS, track_evaluation
-from soabench.tracks.gaps import EGO_MOVED_M, describe_gaps, hiding_kind
+from soabench.tracks.gaps import EGO_MOVED_M, describe_gaps, hiding_kind, hiding_kinds
 from soabench.tracks.reemergence import Gap, occlusion_gaps
 from soabench.types import Scan, Scans
 
@@ -81,6 +81,18 @@ def test_the_nearest_occluder_hides_and_the_longest_hiding_kind_wins():
     assert describe_gaps(once, [gap], 5.0)[0].occluder == "parked"
     # a tie (one scan each) goes to the kind that hid the target first
     assert describe_gaps(once, [Gap(0, 11, 12)], 5.0)[0].occluder == "vehicle"
+
+
+def test_the_sight_lines_of_a_scan_tested_together_hide_as_one_by_one():
+    """Both targets, a vehicle between the sensor and the car at some scans, points beyond everything and a NaN:
+    each scan's points at once give the kind of each point on its own."""
+    truck = np.array([(-3.0, 1.5), (3.0, 1.5), (3.0, 2.5), (-3.0, 2.5)])
+    scans = scene(vehicle_at={11: truck, 12: truck})
+    extra = np.array([[0.0, 60.0], [25.0, 0.0], [np.nan, 1.0], [0.5, 5.0]])
+    for k in range(K):
+        points = np.vstack([scans.truth_xy[k], extra])
+        assert hiding_kinds(scans.scans[k], points) == [hiding_kind(scans.scans[k], xy) for xy in points]
+    assert {*hiding_kinds(scans.scans[11], np.vstack([scans.truth_xy[11], extra]))} >= {"vehicle", "building"}
 
 
 def test_a_runs_episode_rows_carry_the_gap_and_its_outcome():

@@ -245,7 +245,7 @@ def test_bad_plugins_are_recorded_and_others_kept(intersection) -> None:
 
 
 def test_run_workers_summary_failures_and_resume_by_name(tmp_path) -> None:
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.experiment.runs.files import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
@@ -299,7 +299,7 @@ def test_plugins_on_dask_match_a_serial_run(tmp_path) -> None:
     """Dask workers get the typed import paths from the task (not from a file) and compute the same numbers."""
 
     pytest.importorskip("distributed")
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
     from soabench.experiment.runs.files import read_csv
 
     one, echo, bad = f"{FX}:OneBirth", f"{FX}:EchoTracker", f"{FX}:RaiseAtScan3"
@@ -334,11 +334,11 @@ def test_study_takes_plugins_beside_the_papers_five(monkeypatch, capsys) -> None
 
     seen = {}
 
-    def fake_run_study(cfg, net, **kw):
-        seen["cfg"] = cfg
+    def fake_study(request):
+        seen["cfg"] = request.config
         return SimpleNamespace(summary_markdown="", complete=True, run_dir="x", n_missing=0)
 
-    monkeypatch.setattr(study, "run_study", fake_run_study)
+    monkeypatch.setattr(study, "study", fake_study)
     one, echo = f"{FX}:OneBirth", f"{FX}:EchoTracker"
     assert main(["study", "--models", one, "--trackers", echo, "--trials", "1"]) == 0
     exp = seen["cfg"].experiment

@@ -136,3 +136,55 @@ def test_equal_rows_as_compared_pair_by_pair(seed):
     C = rng.choice([0.0, -0.0, -0.5, -1.0], size=(a, b), p=[0.6, 0.1, 0.15, 0.15])
     expected = any((C[i] == C[j]).all() and (C[i] != 0).any() for i in range(a) for j in range(i + 1, a))
     assert _equal_rows(C) == expected
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_sparse_sum_is_the_dense_arrays_sum_bit_for_bit(seed):
+    """Lengths around numpy's block sizes (8, 128 and their splits), densities from empty to full, magnitudes over
+    six decades: the sum of the non-zero entries in numpy's pairwise order is ``ndarray.sum`` of the dense array."""
+    from soabench.tracks.kernels import sparse_np_sum
+
+    rng = np.random.default_rng(seed)
+    for n in (0, 1, 7, 8, 9, 127, 128, 129, 136, 1000, 4099, 250_000):
+        a = np.where(
+            rng.random(n) < rng.choice([0.0, 0.001, 0.05, 0.5, 1.0]), rng.random(n) * 10 ** rng.uniform(-3, 3, n), 0.0
+        )
+        pos = np.flatnonzero(a)
+        assert sparse_np_sum(pos, a[pos], n) == a.sum()
+
+
+def padded_global_counts(seq: TrackSequence, d_gate: float, nG: int, nT: int) -> tuple[np.ndarray, np.ndarray]:
+    """HOTA's summed overlaps and Identity's potential counts (nG * nT,) over padded runs of scans with numpy, as
+    TrackEval's arrays give them."""
+    eps = np.finfo(float).eps
+    potential, id_potential = np.zeros(nG * nT), np.zeros(nG * nT)
+    for _, S, g, e in seq.blocks(d_gate):
+        denom = S.sum(axis=1)[:, None, :] + S.sum(axis=2)[:, :, None] - S
+        iou = np.zeros_like(S)
+        np.divide(S, denom, out=iou, where=denom > eps)
+        valid = (g[:, :, None] >= 0) & (e[:, None, :] >= 0)
+        cell = (g[:, :, None] * nT + e[:, None, :])[valid]
+        potential += np.bincount(cell, weights=iou[valid], minlength=nG * nT)
+        id_potential += np.bincount(cell, weights=S[valid] >= 0.5, minlength=nG * nT)
+    return potential, id_potential
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_global_counts_are_the_padded_arrays_sums_bit_for_bit(seed, monkeypatch):
+    """Crowd groups and random walks, runs of scans shorter than the sequence (a small block size): the compiled
+    loop over the pairs of non-zero similarity gives the padded arrays' sums to the bit."""
+    import soabench.tracks.sequence as sequence
+    from soabench.tracks.kernels import global_counts
+
+    monkeypatch.setattr(sequence, "BLOCK_CELLS", 2000)
+    for seq in (TrackSequence.of(*crowd_sequence(seed, K=40)), TrackSequence.of(*random_sequence(seed, K=40))):
+        nG, nT = len(seq.gt_labels), len(seq.est_labels)
+        want = padded_global_counts(seq, D_GATE, nG, nT)
+        G, E = int(np.diff(seq.gt.off).max()), int(np.diff(seq.est.off).max())
+        got = np.zeros(nG * nT), np.zeros(nG * nT)
+        g, e = seq.gt, seq.est
+        step = max(1, 2000 // (G * E))
+        global_counts(g.ids, g.off, g.xy, e.ids, e.off, e.xy, D_GATE, 0.5, step, nT, *got)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+        assert (want[0] > 0).any()

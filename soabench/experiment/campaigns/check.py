@@ -6,7 +6,9 @@ A suite file (TOML, read as data only) holds:
   configuration TOML, relative to the suite file, e.g. for ``[plugins.<name>]`` options);
 * one ``[[scenario]]`` table per short scenario: ``name``, ``net`` (a shipped network or a path relative to the
   suite file), optional ``polys`` (polygon files) and ``scenario`` (scenario TOML), ``seeds`` (base seeds),
-  ``trials`` per seed, ``duration`` (s), ``models``, ``trackers``, ``probabilities``, ``clutter``;
+  ``trials`` per seed, ``duration`` (s), ``models``, ``trackers``, ``probabilities``, ``clutter`` and ``filter`` (the
+  filter family the birth models run in, one name of the registry ``soabench.config.FAMILIES``; default ``gmphd``;
+  every probability mode of the scenario must be one the family defines);
 * one ``[[threshold]]`` table per check: ``metric`` (a metric or ``t_*`` timing column of trials.csv, e.g.
   ``ospa``, ``card_err``, ``precision``; any other name is a bad suite), ``model`` (a name or ``"*"``), optional
   ``mode``/``scenario`` filters, and any of ``max``, ``min`` (absolute), ``max_increase``, ``max_decrease``
@@ -36,6 +38,7 @@ import difflib
 import json
 import math
 import re
+import shutil
 import sys
 import time
 from collections.abc import Sequence
@@ -48,7 +51,7 @@ import numpy as np
 
 from soabench import plugins
 from soabench.atomic import write_json_atomic, write_text_atomic
-from soabench.config import CLUTTER_RATE, Config, load_config
+from soabench.config import CLUTTER_RATE, FAMILIES, FAMILY_MODES, FILTER_FAMILIES, Config, MetricsConfig
 from soabench.errors import SoabenchError, require
 from soabench.experiment.runs.files import read_csv
 from soabench.experiment.trial.guard import failure_message
@@ -68,9 +71,12 @@ SCENARIO_KEYS = {
     "trackers",
     "probabilities",
     "clutter",
+    "filter",
 }
 THRESHOLD_KEYS = {"metric", "model", "mode", "scenario", "max", "min", "max_increase", "max_decrease", "abs_tol"}
 BASELINE_FORMAT = 1
+#: the ``[[scenario]]`` key of an ``[experiment]`` key where the two names differ
+SCENARIO_KEY_OF = {"seed": "seeds", "filters": "filter"}
 #: a scenario's name names its folder ``--out/runs/NAME/``: a plain name, never a path
 SCENARIO_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 #: every entry of a check folder (a folder holding anything else is not a check's and is refused)
@@ -100,6 +106,9 @@ class Scenario:
     trackers: tuple[str, ...] = ()
     probabilities: tuple[str, ...] = ("static",)
     clutter: tuple[float, ...] = (CLUTTER_RATE,)
+    #: the filter family the scenario's birth models run in (one scenario, one family: its value keys stay those of
+    #: any other scenario, and two scenarios compare two families)
+    filter: str = FILTER_FAMILIES[0]
 
 
 @dataclass
@@ -231,85 +240,113 @@ def load_suite(path: str | Path) -> Suite:
     )
     scen = data.get("scenario", [])
     require(isinstance(scen, list) and len(scen) >= 1, f"{p}: give at least one [[scenario]] table")
-    for i, raw in enumerate(scen):
-        t = _table(raw, f"[[scenario]] #{i + 1}", SCENARIO_KEYS)
-        require("name" in t and "net" in t, f"[[scenario]] #{i + 1} needs a name and a net")
-        require(
-            isinstance(t["name"], str) and SCENARIO_NAME.fullmatch(t["name"]) is not None,
-            f"[[scenario]] #{i + 1}: name = {t['name']!r} is not a plain name (letters, digits, '.', '_', '-', at most "
-            "100, starting with a letter or digit): it names the folder --out/runs/NAME",
-        )
-        net = str(t["net"])
-        if "/" in net or net.endswith(".xml"):
-            net = str(here / net)
-        s = Scenario(name=str(t["name"]), net=net)
-        w = f"scenario {s.name!r}"
-        if "polys" in t:
-            s.polys = tuple(str(here / f) for f in _strs(t["polys"], f"{w}: polys"))
-        if "scenario" in t:
-            require(isinstance(t["scenario"], str), f"{w}: scenario must be a path to a scenario TOML")
-            s.scenario = str(here / t["scenario"])
-        if "seeds" in t:
-            require(
-                isinstance(t["seeds"], list)
-                and len(t["seeds"]) >= 1
-                and all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in t["seeds"]),
-                f"{w}: seeds = {t['seeds']!r} must be a non-empty list of integers >= 0",
-            )
-            s.seeds = tuple(t["seeds"])
-        if "trials" in t:
-            require(isinstance(t["trials"], int) and t["trials"] >= 1, f"{w}: trials must be an integer >= 1")
-            s.trials = int(t["trials"])
-        if "duration" in t:
-            s.duration = _number(t["duration"], f"{w}: duration", 1e-9)
-        for key in ("models", "trackers", "probabilities"):
-            if key in t:
-                setattr(s, key, _strs(t[key], f"{w}: {key}"))
-        if "clutter" in t:
-            require(isinstance(t["clutter"], list) and t["clutter"], f"{w}: clutter must be a list of rates")
-            s.clutter = tuple(_number(c, f"{w}: clutter", 0.0) for c in t["clutter"])
-        suite.scenarios.append(s)
+    suite.scenarios = [_scenario(raw, i, p, here) for i, raw in enumerate(scen)]
     names = [s.name for s in suite.scenarios]
     require(len(set(names)) == len(names), f"{p}: scenario names {names} repeat")
-    for i, raw in enumerate(data.get("threshold", [])):
-        t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
-        require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
-        _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", _suite_bins(suite.config))
-        th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
-        th.mode, th.scenario = t.get("mode"), t.get("scenario")
-        lo, hi = metric_range(th.metric)
-        for key in ("max", "min"):
-            if key in t:
-                v = _number(t[key], f"threshold {th.metric}: {key}")
-                setattr(th, key, v)
-                require(
-                    lo <= v <= hi,
-                    f"{p}: [[threshold]] #{i + 1}: {th.metric} {key} = {t[key]!r} is outside the metric's range "
-                    f"[{lo:g}, {hi:g}] (such a threshold passes or fails whatever the tracker does)",
-                )
-        require(
-            th.max is None or th.min is None or th.min <= th.max,
-            f"{p}: [[threshold]] #{i + 1}: {th.metric} min = {th.min!r} is above max = {th.max!r} (no value passes)",
-        )
-        for key in ("max_increase", "max_decrease", "abs_tol"):
-            if key in t:
-                setattr(th, key, _number(t[key], f"threshold {th.metric}: {key}", 0.0))
-        require(
-            any(v is not None for v in (th.max, th.min, th.max_increase, th.max_decrease)),
-            f"threshold on {th.metric!r} sets none of max, min, max_increase, max_decrease",
-        )
-        require(th.scenario is None or th.scenario in names, f"threshold scenario {th.scenario!r} is not in {names}")
-        scoped = [s for s in suite.scenarios if th.scenario is None or s.name == th.scenario]
-        where = f"{p}: [[threshold]] #{i + 1}"
-        run_names = ["*", *dict.fromkeys(m for s in scoped for m in (*s.models, *s.trackers))]
-        _check_name(th.model, run_names, f"{where}: model", "a model or tracker its scenarios run, or '*'")
-        if th.mode is not None:
-            modes = list(dict.fromkeys(m for s in scoped for m in s.probabilities))
-            _check_name(th.mode, modes, f"{where}: mode", "a probability mode its scenarios run")
-        suite.thresholds.append(th)
+    suite.thresholds = [_threshold(raw, i, suite) for i, raw in enumerate(data.get("threshold", []))]
     if any(th.relative for th in suite.thresholds):
         require(suite.baseline is not None, f'{p}: relative thresholds need [suite] baseline = "FILE.json"')
     return suite
+
+
+def _scenario(raw: Any, i: int, p: Path, here: Path) -> Scenario:
+    """``[[scenario]]`` table ``i`` of suite file ``p`` (in folder ``here``), validated."""
+    t = _table(raw, f"[[scenario]] #{i + 1}", SCENARIO_KEYS)
+    require("name" in t and "net" in t, f"[[scenario]] #{i + 1} needs a name and a net")
+    require(
+        isinstance(t["name"], str) and SCENARIO_NAME.fullmatch(t["name"]) is not None,
+        f"[[scenario]] #{i + 1}: name = {t['name']!r} is not a plain name (letters, digits, '.', '_', '-', at most "
+        "100, starting with a letter or digit): it names the folder --out/runs/NAME",
+    )
+    net = str(t["net"])
+    if "/" in net or net.endswith(".xml"):
+        net = str(here / net)
+    s = Scenario(name=str(t["name"]), net=net)
+    w = f"scenario {s.name!r}"
+    if "polys" in t:
+        s.polys = tuple(str(here / f) for f in _strs(t["polys"], f"{w}: polys"))
+    if "scenario" in t:
+        require(isinstance(t["scenario"], str), f"{w}: scenario must be a path to a scenario TOML")
+        s.scenario = str(here / t["scenario"])
+    if "seeds" in t:
+        require(
+            isinstance(t["seeds"], list)
+            and len(t["seeds"]) >= 1
+            and all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in t["seeds"]),
+            f"{w}: seeds = {t['seeds']!r} must be a non-empty list of integers >= 0",
+        )
+        s.seeds = tuple(t["seeds"])
+    if "trials" in t:
+        require(isinstance(t["trials"], int) and t["trials"] >= 1, f"{w}: trials must be an integer >= 1")
+        s.trials = int(t["trials"])
+    if "duration" in t:
+        s.duration = _number(t["duration"], f"{w}: duration", 1e-9)
+    for key in ("models", "trackers", "probabilities"):
+        if key in t:
+            setattr(s, key, _strs(t[key], f"{w}: {key}"))
+    if "clutter" in t:
+        require(isinstance(t["clutter"], list) and t["clutter"], f"{w}: clutter must be a list of rates")
+        s.clutter = tuple(_number(c, f"{w}: clutter", 0.0) for c in t["clutter"])
+    if "filter" in t:
+        s.filter = _family(t["filter"], s.probabilities, f"{p}: {w}")
+    return s
+
+
+def _threshold(raw: Any, i: int, suite: Suite) -> Threshold:
+    """``[[threshold]]`` table ``i`` of ``suite``, validated against the suite's scenarios."""
+    p, names = suite.path, [s.name for s in suite.scenarios]
+    t = _table(raw, f"[[threshold]] #{i + 1}", THRESHOLD_KEYS)
+    require("metric" in t, f"[[threshold]] #{i + 1} needs a metric")
+    bins = _suite_bins(suite.config, [sc.filter for sc in suite.scenarios])
+    _check_metric(t["metric"], f"{p}: [[threshold]] #{i + 1}", bins)
+    th = Threshold(metric=str(t["metric"]), model=str(t.get("model", "*")))
+    th.mode, th.scenario = t.get("mode"), t.get("scenario")
+    lo, hi = metric_range(th.metric)
+    for key in ("max", "min"):
+        if key in t:
+            v = _number(t[key], f"threshold {th.metric}: {key}")
+            setattr(th, key, v)
+            require(
+                lo <= v <= hi,
+                f"{p}: [[threshold]] #{i + 1}: {th.metric} {key} = {t[key]!r} is outside the metric's range "
+                f"[{lo:g}, {hi:g}] (such a threshold passes or fails whatever the tracker does)",
+            )
+    require(
+        th.max is None or th.min is None or th.min <= th.max,
+        f"{p}: [[threshold]] #{i + 1}: {th.metric} min = {th.min!r} is above max = {th.max!r} (no value passes)",
+    )
+    for key in ("max_increase", "max_decrease", "abs_tol"):
+        if key in t:
+            setattr(th, key, _number(t[key], f"threshold {th.metric}: {key}", 0.0))
+    require(
+        any(v is not None for v in (th.max, th.min, th.max_increase, th.max_decrease)),
+        f"threshold on {th.metric!r} sets none of max, min, max_increase, max_decrease",
+    )
+    require(th.scenario is None or th.scenario in names, f"threshold scenario {th.scenario!r} is not in {names}")
+    scoped = [s for s in suite.scenarios if th.scenario is None or s.name == th.scenario]
+    where = f"{p}: [[threshold]] #{i + 1}"
+    run_names = ["*", *dict.fromkeys(m for s in scoped for m in (*s.models, *s.trackers))]
+    _check_name(th.model, run_names, f"{where}: model", "a model or tracker its scenarios run, or '*'")
+    if th.mode is not None:
+        modes = list(dict.fromkeys(m for s in scoped for m in s.probabilities))
+        _check_name(th.mode, modes, f"{where}: mode", "a probability mode its scenarios run")
+    return th
+
+
+def _family(name: Any, modes: Sequence[str], where: str) -> str:
+    """A scenario's filter family: a name of the registry whose probability modes include every mode the scenario
+    runs (a mode it lacks would leave the thresholds on it matching nothing after the whole suite ran)."""
+    require(
+        isinstance(name, str) and name in FAMILY_MODES,
+        f"{where}: filter = {name!r} is not a filter family; allowed: {', '.join(FILTER_FAMILIES)}",
+    )
+    lacking = [m for m in modes if m not in FAMILY_MODES[name]]
+    if lacking:
+        raise SoabenchError(
+            f"{where}: filter family {name!r} runs the probability modes {', '.join(FAMILY_MODES[name])} only, and "
+            f"probabilities names {lacking[0]!r}; drop it or choose another filter"
+        )
+    return name
 
 
 def _check_name(name: Any, allowed: list[str], where: str, what: str) -> None:
@@ -338,7 +375,6 @@ def _check_metric(metric: Any, where: str, bins: Sequence[int] | None = None) ->
     """A threshold's metric must be a metric or timing column of trials.csv or an occlusion metric of the suite's
     gap bins (a typo is a bad suite, not a failed check)."""
     # imported when called: scipy would slow every start-up
-    from soabench.config import MetricsConfig
     from soabench.experiment.runs.store import METRIC_COLUMNS, TIMING_COLUMNS
 
     allowed = METRIC_COLUMNS + TIMING_COLUMNS + tuple(gap_metrics(bins or MetricsConfig().gap_bins))
@@ -349,9 +385,20 @@ def _check_metric(metric: Any, where: str, bins: Sequence[int] | None = None) ->
     raise SoabenchError(f"{where}: metric {metric!r} is not a trials.csv metric{guess}; allowed: {', '.join(allowed)}")
 
 
-def _suite_bins(config: Path | None) -> tuple[int, ...]:
+def suite_config(config: Path | None, families: Sequence[str]) -> Config:
+    """A suite's ``[suite] config`` (the defaults without one), validated as read by runs of every filter family its
+    scenarios name: a family's own section (``[lmb]``, ``[pmbm]``) may be set when a scenario runs that family."""
+    if config is None:
+        return Config().validate()
+    require(config.is_file(), f"config file {str(config)!r} does not exist")
+    cfg = Config.from_dict(read_toml(config, "config file"))
+    cfg.experiment = dataclasses.replace(cfg.experiment, filters=tuple(dict.fromkeys(families)))
+    return cfg.validate()
+
+
+def _suite_bins(config: Path | None, families: Sequence[str]) -> tuple[int, ...]:
     """The gap bins of a suite's configuration (the defaults without one)."""
-    return load_config(config).metrics.gap_bins
+    return suite_config(config, families).metrics.gap_bins
 
 
 def _gap_values(run_dir: Path, scenario: str, bins: Sequence[int], sums: dict[tuple, list[float]]) -> None:
@@ -396,17 +443,12 @@ def _refuse_protocol_keys(config: Path | None) -> None:
     ``[suite] config`` file that sets an ``[experiment]`` key is refused with one line naming both keys."""
     if config is None:
         return
-    section = read_toml(config, "config file").get("experiment", {})  # load_config read it
-    if "filters" in section:  # a suite scores the GM-PHD family (docs/user-guide/outputs.md "Filter families")
-        raise SoabenchError(
-            f"{config}: [experiment] filters: a check suite runs the GM-PHD family only; compare the families with "
-            "`soabench run --filters gmphd,lmb`"
-        )
+    section = read_toml(config, "config file").get("experiment", {})  # suite_config read it
     if section:
         key = sorted(section)[0]
         raise SoabenchError(
             f"{config}: [experiment] {key} is set per scenario in a check suite ([[scenario]] "
-            f"{'seeds' if key == 'seed' else key}); remove it from the config file"
+            f"{SCENARIO_KEY_OF.get(key, key)}); remove it from the config file"
         )
 
 
@@ -421,7 +463,11 @@ def _config_for(base: Config, s: Scenario, seed: int) -> Config:
         probabilities=s.probabilities,
         clutter=s.clutter,
         seed=seed,
+        filters=(s.filter,),
     )
+    read = {f.section for f in FAMILIES.values() if f.name == s.filter}
+    for section in {f.section for f in FAMILIES.values() if f.section is not None} - read:  # another scenario's
+        setattr(cfg, section, type(getattr(cfg, section))())
     return cfg.validate()
 
 
@@ -444,7 +490,7 @@ def check_scenarios(suite: Suite) -> Config:
     from soabench.experiment.trial.registry import load_scene_cached
 
     check_import_paths(suite)
-    base = load_config(suite.config)
+    base = suite_config(suite.config, [s.filter for s in suite.scenarios])
     _refuse_protocol_keys(suite.config)
     for s in suite.scenarios:
         try:
@@ -459,7 +505,8 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: 
     """Run every scenario and seed (each seed plus ``seed_offset``) and collect a :class:`SuiteRun`."""
     # imported when called: scipy would slow every start-up
     from soabench.experiment.execution.options import RunOptions
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.execution.runner import RunRequest
+    from soabench.experiment.reports.finished import run
     from soabench.experiment.runs.store import RunStore
     from soabench.kernel_warmup import ensure_compiled
 
@@ -476,12 +523,10 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, seed_offset: 
             t0 = time.perf_counter()
             run_dir = out / "runs" / s.name / f"seed_{seed}"
             if run_dir.exists():
-                import shutil
-
                 shutil.rmtree(run_dir)
             cfg = _config_for(base, s, seed)
             options = RunOptions(workers=workers, progress=False, figures=False)
-            o = run_experiment(cfg, s.net, s.polys, s.scenario, out=run_dir, options=options)
+            o = run(RunRequest(cfg, s.net, s.polys, s.scenario, out=run_dir, options=options))
             require(o.complete, f"scenario {s.name!r} seed {seed}: {o.n_missing} trial(s) failed; see {run_dir}")
             failures += [{**f, "scenario": s.name, "seed": seed} for f in RunStore(run_dir).model_failures()]
             table = read_csv(run_dir / "trials.csv")

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from soabench.birth import LABEL
 from soabench.errors import SoabenchError, require
+from soabench.experiment.campaigns.families import config_families, family_heading, first_family_note
 from soabench.experiment.reports.report import fmt, fmt_pct
 from soabench.experiment.runs.files import read_json
 from soabench.scenario import USER_NET_DEFAULTS, load_scenario, scene_folder
@@ -127,15 +128,10 @@ def check_parking_lanes(
 
 
 def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
-    """Delay, cardinality error and OSPA per model vs density, and S-OA's paired statistics per point."""
-    rows, comps = [], []
-    for p in meta["points"]:
-        s = read_json(sweep_dir / "points" / p["name"] / "summary.json")
-        res = s["results"][0]
-        for m in res["models"]:
-            rows.append({"density": p["value"], "clutter": res["clutter"], **m})
-        for c in res["vs_soa"]:
-            comps.append({"density": p["value"], **c})
+    """Delay, cardinality error and OSPA per model vs density, and S-OA's paired statistics per point, per filter
+    family."""
+    families = config_families(meta["points"][0]["config"])
+    summaries = [read_json(sweep_dir / "points" / p["name"] / "summary.json") for p in meta["points"]]
     exp = meta["points"][0]["config"]["experiment"]
     lines = [
         f"# Occlusion sweep: {meta.get('net_name')}",
@@ -143,6 +139,36 @@ def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
         f"Parked cars per 100 m of parking lane vs tracking quality; λ = {float(exp['clutter'][0]):g}, "
         f"{exp['trials']} trials per point (same seeds at every point). "
         "Per-point details in `points/<name>/summary.md`.",
+    ]
+    rows, comps, first_rows = [], [], None
+    for family in families:
+        named = {} if family is None else {"filter": family}
+        fam_rows, fam_comps = [], []
+        for p, s in zip(meta["points"], summaries, strict=True):
+            res = [r for r in s["results"] if r.get("filter") == family][0]  # the first clutter rate
+            fam_rows += [{"density": p["value"], "clutter": res["clutter"], **named, **m} for m in res["models"]]
+            fam_comps += [{"density": p["value"], **named, **c} for c in res["vs_soa"]]
+        lines += [*family_heading(family), *_occlusion_tables(fam_rows, fam_comps)]
+        rows += fam_rows
+        comps += fam_comps
+        first_rows = fam_rows if first_rows is None else first_rows
+    # imported when called: matplotlib would slow every start-up
+    from soabench.figures.occlusion import occlusion_figure
+    from soabench.figures.style import save_png
+
+    figure = occlusion_figure(sweep_dir, meta["points"], first_rows or [], families[0])
+    save_png(figure, sweep_dir / "sweep_occlusion.png")
+    lines += [
+        "",
+        f"Figure: `sweep_occlusion.png`{first_family_note(families)} (mean over trials, error bars: 95% confidence "
+        "interval over trials)",
+    ]
+    return {"kind": "occlusion", "table": rows, "vs_soa": comps}, "\n".join(lines) + "\n"
+
+
+def _occlusion_tables(rows: list[dict], comps: list[dict]) -> list[str]:
+    """The occlusion sweep's two tables (one filter family): the metrics per point and S-OA's paired statistics."""
+    lines = [
         "",
         "| parked / 100 m | model | mode | k̄ delay (s) | card. error | OSPA (m) | precision | recall |",
         "|---|---|---|---|---|---|---|---|",
@@ -169,10 +195,4 @@ def occlusion_report(sweep_dir: Path, meta: dict) -> tuple[dict, str]:
                 f"| {c['wins']} / {c['ties']} / {c['losses']} / {c['na']} | {fmt_pct(c['card_reduction'])} "
                 f"| {fmt_pct(c['ospa_reduction'])} | {fmt_pct(100 * frac if math.isfinite(frac) else frac)} |"
             )
-    # imported when called: matplotlib would slow every start-up
-    from soabench.figures.occlusion import occlusion_figure
-    from soabench.figures.style import save_png
-
-    save_png(occlusion_figure(sweep_dir, meta["points"], rows), sweep_dir / "sweep_occlusion.png")
-    lines += ["", "Figure: `sweep_occlusion.png` (mean over trials, error bars: 95% confidence interval over trials)"]
-    return {"kind": "occlusion", "table": rows, "vs_soa": comps}, "\n".join(lines) + "\n"
+    return lines

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
 
 from soabench.atomic import to_jsonable, write_json_atomic
 from soabench.config import Config
@@ -37,7 +38,6 @@ FORMAT = "soabench-occlusion-density-1"
 
 def scan_occlusion(scans: Any, scene: Any) -> dict[str, Any]:
     """Per-scan occluded share of the sidewalk in the FOV (NaN without sidewalk in the FOV) and pedestrian counts."""
-    import shapely
 
     sensor = scans.sensor
     region = scene.sidewalk

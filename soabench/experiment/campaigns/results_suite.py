@@ -48,6 +48,8 @@ from soabench.experiment.runs.runmeta import flatten_config
 from soabench.folders import FolderLock, check_own_folder, resolve
 from soabench.kitti.config import KittiSpec, load_kitti_config
 from soabench.scenario import shipped_nets
+from soabench.scenario.network import read_net
+from soabench.scenario.parking import parking_lanes
 
 #: the study's part folders; a study is kept only when each is complete (a part added to the study belongs here)
 STUDY_PARTS = ("main", "clutter", "births")  # and sensitivity/ (two run folders and its table; see study_kept)
@@ -351,8 +353,6 @@ def atlas_axes(scene: str) -> dict[str, tuple[float, ...]]:
     """:data:`ATLAS_AXES` on ``scene``; a scene without parking lanes (grid_block: its kerbs are sidewalks and shop
     fronts) has no parked cars to vary, so it drops the parking axis (its occluders are its buildings)."""
     from soabench.experiment.campaigns.occlusion import base_scenario
-    from soabench.scenario.network import read_net
-    from soabench.scenario.parking import parking_lanes
 
     net_file = base_scenario(scene, None).get("files", {}).get("net")
     if net_file and not parking_lanes(read_net(net_file)):
@@ -425,7 +425,7 @@ def _filters_part(
     the ablation's instead): kept when complete with these settings, else resumed (more trials: extended) or
     started."""
     # imported when called: scipy would slow every start-up
-    from soabench.experiment.execution.runner import run_experiment
+    from soabench.experiment.reports.finished import run_experiment
 
     cfg = cfg if cfg is not None else filters_config(s)
     keys = FILTERS_KEYS

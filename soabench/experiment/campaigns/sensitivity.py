@@ -54,6 +54,7 @@ import numpy as np
 
 from soabench.atomic import write_text_atomic
 from soabench.birth import BASELINES, LABEL
+from soabench.experiment.campaigns.families import paper_family_rows
 from soabench.experiment.reports import paper
 from soabench.experiment.runs.files import write_csv
 
@@ -293,8 +294,9 @@ def write_sensitivity(
     if unknown:
         raise ValueError(f"unknown sensitivity setting(s) {unknown}; choose from {sorted(SETTING_PHRASE)}")
     out_dir = Path(out_dir)
-    runs = {"default": paper.read_rows(Path(main_dir) / "trials.csv")}
-    runs.update({k: paper.read_rows(Path(d) / "trials.csv") for k, d in variants.items()})
+    # a run of several filter families: the paper's headline numbers, in its family
+    runs = {"default": paper_family_rows(paper.read_rows(Path(main_dir) / "trials.csv"))}
+    runs.update({k: paper_family_rows(paper.read_rows(Path(d) / "trials.csv")) for k, d in variants.items()})
     trials, runs = common_trials(runs)
     settings = [s for s in SETTINGS if s in runs]
     rows = build_rows(runs, clutter)

@@ -21,7 +21,8 @@ from soabench.experiment.campaigns import sensitivity as sens
 from soabench.experiment.execution.executors import open_executor
 from soabench.experiment.execution.grouped import run_group
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions, check_workers
-from soabench.experiment.execution.runner import RunOutcome, run_experiment
+from soabench.experiment.execution.runner import ALONE, Batch, RunOutcome, RunRequest
+from soabench.experiment.reports.finished import run
 from soabench.experiment.runs.runmeta import config_differences, validate_run_meta
 from soabench.experiment.runs.store import RunStore
 from soabench.figures.drawing import parallel
@@ -49,7 +50,7 @@ def run_variants(
     trials: int | None = None,
     follow_main: bool = False,
     options: RunOptions = RUN_DEFAULTS,
-    **run_kw,
+    batch: Batch = ALONE,
 ) -> list[RunOutcome]:
     """Run (or finish) every variant of the run in ``main_dir`` under ``out_dir``.
 
@@ -57,17 +58,17 @@ def run_variants(
     extend it, fewer are refused. ``follow_main``: without ``trials``, extend an existing variant to the main run's
     trials when the main run has more. An existing variant made from another main protocol is refused (one line
     naming the first differing keys), so the table never pairs runs of different protocols. ``options`` and
-    ``run_kw`` (``defer``, ``run_trials``) go to each :func:`~soabench.experiment.execution.runner.run_experiment`.
+    ``batch`` (:class:`~soabench.experiment.execution.runner.Batch`) serve every variant's run.
     """
     main_dir, out_dir = Path(main_dir), Path(out_dir)
-    exe = dict(options=options, **run_kw)
     meta = validate_run_meta(RunStore(main_dir).meta(), str(main_dir / "run.json"))
     outcomes = []
     for key in VARIANTS:
         run_dir = out_dir / key
         if not (run_dir / "run.json").is_file():
             cfg = variant_config(meta.config, key, trials or meta.trials)
-            outcomes.append(run_experiment(cfg, meta.net, meta.polys, meta.scenario, out=run_dir, **exe))
+            request = RunRequest(cfg, meta.net, meta.polys, meta.scenario, out=run_dir, options=options)
+            outcomes.append(run(request, batch))
             continue
         stored = validate_run_meta(RunStore(run_dir).meta(), str(run_dir / "run.json"))
         want = variant_config(meta.config, key, stored.trials).to_dict()
@@ -85,7 +86,8 @@ def run_variants(
                 f"{run_dir} has {stored.trials} trials; {target} would drop finished ones (ask for more or as many)",
             )
             requested = {"experiment.trials": target}
-        outcomes.append(run_experiment(None, meta.net, resume=run_dir, requested=requested, **exe))
+        request = RunRequest(None, meta.net, resume=run_dir, requested=requested, options=options)
+        outcomes.append(run(request, batch))
     return outcomes
 
 
@@ -95,14 +97,14 @@ def _run_variants_grouped(root: Path, main_dir: Path, trials: int | None, option
     reports, figures drawn on the same worker processes."""
 
     deferred: list = []
-    run_variants(root, main_dir, trials=trials, defer=deferred, options=options)
+    run_variants(root, main_dir, trials=trials, options=options, batch=Batch(defer=deferred))
     pool = open_executor(options.workers, options.scheduler, options.dask_local)
     aborted = True
     try:
         if deferred:
             run_group(deferred, pool, progress=options.progress, label=root.name)
         with parallel(pool):
-            runs = run_variants(root, main_dir, trials=trials, run_trials=False, options=options)
+            runs = run_variants(root, main_dir, trials=trials, options=options, batch=Batch(run_trials=False))
         aborted = False
     finally:
         pool.close(abort=aborted)

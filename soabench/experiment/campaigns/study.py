@@ -26,27 +26,31 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from soabench import plugins
 from soabench.atomic import write_text_atomic
 from soabench.birth import CORE_MODELS
-from soabench.config import Config
+from soabench.config import FILTER_FAMILIES, Config, family_label
 from soabench.errors import Interrupted, require
 from soabench.experiment.campaigns import sensitivity as sens
+from soabench.experiment.campaigns.families import config_families, family_rows, paper_family_rows
 from soabench.experiment.campaigns.sensitivity_runs import VARIANTS, run_variants
-from soabench.experiment.campaigns.sweep import DEFAULT_VALUES, SweepOutcome, run_sweep
+from soabench.experiment.campaigns.sweep import DEFAULT_VALUES, SweepOutcome, SweepRequest, sweep
 from soabench.experiment.execution.executors import open_executor
 from soabench.experiment.execution.grouped import run_group
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
-from soabench.experiment.execution.premerge import merged_on
-from soabench.experiment.execution.runner import RunOutcome, net_name, run_experiment
+from soabench.experiment.execution.runner import ALONE, Batch, RunOutcome, RunRequest, net_name
 from soabench.experiment.reports import paper
+from soabench.experiment.reports.finished import run
 from soabench.experiment.reports.headline import KEY_METRICS, headline
 from soabench.experiment.reports.html import write_index
+from soabench.experiment.reports.premerge import merged_on
 from soabench.experiment.reports.report import families, family_tables, paper_protocol_mismatch
 from soabench.experiment.reports.tables import load_tables
 from soabench.experiment.runs.runmeta import flatten_config
@@ -106,144 +110,185 @@ def _with_experiment(cfg: Config, **changes) -> Config:
     return out.validate()
 
 
+@dataclass(frozen=True)
+class PartTrials:
+    """Trials of the study's parts beside the main protocol's (``config.experiment.trials``)."""
+
+    sweep: int | None = None  #: the clutter sweep (default: as many as the main protocol)
+    births: int = 30  #: per N_tot point of the N_hat sweep, static only (21 offsets make it the costliest part)
+    sensitivity: int | None = None  #: each sensitivity run (default: as many as the main run has)
+
+
+@dataclass(frozen=True)
+class StudyRequest:
+    """What a study is asked to do; ``config.experiment`` gives trials, duration and seed of the main protocol.
+
+    ``explicit``: the dotted config keys the user asked for (command-line flags, config file keys; ``trials`` of a
+    part only when its own flag was given: ``sweep_trials``, ``births_trials``, ``sensitivity_trials``). On a re-run
+    each part compares them with its stored configuration and refuses differences, except more trials (see
+    :mod:`~soabench.experiment.runs.runmeta`); empty compares nothing. ``grouped``: False runs the parts one after
+    another (the same results, slower; for benchmarks). ``options``: how every part runs
+    (:class:`~soabench.experiment.execution.options.RunOptions`; fail_fast and save_estimates are not the study's:
+    refused); ``options.figures`` True also draws the figures of every N̂ point and of both sensitivity runs (by
+    default ``births/sweep_births.png`` and ``sensitivity/sensitivity.md`` summarise those folders, which get tables
+    and summaries only).
+    """
+
+    config: Config
+    net: str = "intersection"
+    out: Path | None = None
+    trials: PartTrials = PartTrials()
+    options: RunOptions = RUN_DEFAULTS
+    explicit: frozenset[str] = frozenset()
+    grouped: bool = True
+
+
 def run_study(
     config: Config,
     net: str = "intersection",
     *,
-    out: Path | None = None,
     sweep_trials: int | None = None,
     births_trials: int = 30,
     sensitivity_trials: int | None = None,
-    options: RunOptions = RUN_DEFAULTS,
     explicit: set[str] | None = None,
-    grouped: bool = True,
+    **fields: Any,
 ) -> StudyOutcome:
-    """Run (or finish) the study; ``config.experiment`` gives trials, duration and seed of the main protocol.
+    """:func:`study` of a :class:`StudyRequest` (``fields``: ``out``, ``options``, ``grouped``)."""
+    trials = PartTrials(sweep_trials, births_trials, sensitivity_trials)
+    return study(StudyRequest(config, net, trials=trials, explicit=frozenset(explicit or ()), **fields))
 
-    ``sweep_trials``: trials of the clutter sweep (default: as many as the main protocol). ``births_trials``: trials
-    per N_tot point of the N_hat sweep, static probabilities only (21 offsets make it the costliest part).
-    ``sensitivity_trials``: trials of each sensitivity run (default: as many as the main run has).
-    ``explicit``: the dotted config keys the user asked for (command-line flags, config file keys; ``trials`` of
-    a part only when its own flag was given). On a re-run each part compares them with its stored configuration and
-    refuses differences, except more trials (see :mod:`~soabench.experiment.runs.runmeta`); None compares nothing.
-    ``grouped``: False runs the parts one after another (the same results, slower; for benchmarks).
-    ``options``: how every part runs (:class:`~soabench.experiment.execution.options.RunOptions`; fail_fast and
-    save_estimates are not the study's: refused); ``options.figures`` True also draws the figures of every N̂ point
-    and of both sensitivity runs (by default ``births/sweep_births.png`` and ``sensitivity/sensitivity.md``
-    summarise those folders, which get tables and summaries only).
-    """
+
+def study(request: StudyRequest) -> StudyOutcome:
+    """Run (or finish) the study: its parts, then the comparison with the paper, the sensitivity table and the
+    index page."""
+    options, config = request.options, request.config
     require(not options.save_estimates, "--save-estimates is not offered by `study`; use `run`")
     require(not options.fail_fast, "--fail-fast is not offered by `study`; use `run`")
-    config.gmphd_only("`soabench study`")
-    root = resolve(out if out is not None else Path("results") / net_name(net))
+    require(
+        FILTER_FAMILIES[0] in config.experiment.filters,
+        f"experiment.filters = {list(config.experiment.filters)!r}: `study` compares with the paper in the "
+        f"{family_label(FILTER_FAMILIES[0])} family; add {FILTER_FAMILIES[0]} (--filters "
+        f"{','.join((FILTER_FAMILIES[0], *config.experiment.filters))})",
+    )
+    root = resolve(request.out if request.out is not None else Path("results") / net_name(request.net))
     check_own_folder(root, "study folder", STUDY_ENTRIES)
-    hint = f"finish with: soabench study --out {root}"
-    explicit = set(explicit or ())
-    main_cfg = config
-    n_sweep = sweep_trials or config.experiment.trials
-    clutter_cfg = _with_experiment(config, trials=n_sweep)
-    births_cfg = _with_experiment(config, trials=births_trials, models=CORE_MODELS, probabilities=("static",))
+    parts = _Parts(request, root)
+    with FolderLock(root, "study folder"):
+        check_own_folder(root, "study folder", STUDY_ENTRIES)  # again, under the lock
+        try:
+            main, clutter, births, sensitivity = parts.run_grouped() if request.grouped else parts.run_serial()
+            md = _finish(root, main, sensitivity)
+        except KeyboardInterrupt:
+            raise Interrupted(
+                f"interrupted: the study in {root} is incomplete (finished trials are on disk); "
+                f"finish with: soabench study --out {root}"
+            ) from None
+    return StudyOutcome(root, main, clutter, births, md, tuple(sensitivity))
 
-    def requested(cfg: Config, trials_key: str | None, skip: tuple[str, ...] = ()) -> dict:
+
+class _Parts:
+    """The parts of one study in ``root``: main run, clutter sweep, N̂ sweep, sensitivity runs (each created,
+    checked and resumed as usual)."""
+
+    def __init__(self, request: StudyRequest, root: Path):
+        self.request, self.root = request, root
+        config, trials, options = request.config, request.trials, request.options
+        self.clutter_cfg = _with_experiment(config, trials=trials.sweep or config.experiment.trials)
+        self.births_cfg = _with_experiment(config, trials=trials.births, models=CORE_MODELS, probabilities=("static",))
+        all_figures = options.figures is True
+        self.options = dataclasses.replace(options, figures=None)  # main run, clutter sweep: their own defaults
+        self.births_options = dataclasses.replace(options, figures=True if all_figures else None)
+        self.sens_options = dataclasses.replace(options, figures=all_figures)
+        self.main_dir, self.clutter_dir, self.births_dir = root / "main", root / "clutter", root / "births"
+        self.sens_dir = root / "sensitivity"
+        # the sensitivity runs follow --trials like the clutter sweep
+        self.follow = trials.sensitivity is None and "experiment.trials" in request.explicit
+
+    def requested(self, cfg: Config, trials_key: str | None, skip: tuple[str, ...] = ()) -> dict:
+        """What a re-run asks of a part: the explicit keys (``trials_key`` standing for its trials) in ``cfg``."""
+        explicit = self.request.explicit
         keys = {k for k in explicit if k != "experiment.trials" and k not in skip}
         if trials_key in explicit:
             keys.add("experiment.trials")
         flat = flatten_config(cfg.to_dict())
         return {k: flat[k] for k in keys if k in flat}
 
-    all_figures = options.figures is True
-    exe = dict(options=dataclasses.replace(options, figures=None))  # main run, clutter sweep: their own defaults
-    births_exe = dict(options=dataclasses.replace(options, figures=True if all_figures else None))
-    sens_options = dataclasses.replace(options, figures=all_figures)
-    main_dir, clutter_dir, births_dir = root / "main", root / "clutter", root / "births"
-
-    def parts(**kw) -> tuple[RunOutcome, SweepOutcome, SweepOutcome]:
-        """The three parts (each created, checked and resumed as usual; ``kw``: defer or run_trials)."""
+    def main(self, batch: Batch) -> RunOutcome:
+        net, main_dir = self.request.net, self.main_dir
         if (main_dir / "run.json").is_file():
-            req = requested(main_cfg, "experiment.trials")
-            main = run_experiment(None, net, resume=main_dir, requested=req, **exe, **kw)
-        else:
-            main = run_experiment(main_cfg, net, out=main_dir, **exe, **kw)
-        if (clutter_dir / "sweep.json").is_file():
+            req = self.requested(self.request.config, "experiment.trials")
+            return run(RunRequest(None, net, resume=main_dir, requested=req, options=self.options), batch)
+        return run(RunRequest(self.request.config, net, out=main_dir, options=self.options), batch)
+
+    def clutter(self, batch: Batch) -> SweepOutcome:
+        net, folder, explicit = self.request.net, self.clutter_dir, self.request.explicit
+        if (folder / "sweep.json").is_file():
             trials_key = "experiment.trials" if "sweep_trials" in explicit else None
-            if sweep_trials is None and "experiment.trials" in explicit:
+            if self.request.trials.sweep is None and "experiment.trials" in explicit:
                 trials_key = "experiment.trials"  # the clutter sweep follows --trials by default
-            req = requested(clutter_cfg, trials_key, skip=("experiment.clutter",))
-            clutter = run_sweep("clutter", (), None, net, resume=clutter_dir, requested=req, **exe, **kw)
-        else:
-            clutter = run_sweep("clutter", DEFAULT_VALUES["clutter"], clutter_cfg, net, out=clutter_dir, **exe, **kw)
-        if (births_dir / "sweep.json").is_file():
-            trials_key = "experiment.trials" if "births_trials" in explicit else None
-            req = requested(births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
-            births = run_sweep(
-                "births", (), None, net, resume=births_dir, requested=req, grouped=grouped, **births_exe, **kw,
-            )  # fmt: skip
-        else:
-            births = run_sweep(
-                "births", DEFAULT_VALUES["births"], births_cfg, net, out=births_dir, grouped=grouped,
-                **births_exe, **kw,
-            )  # fmt: skip
-        return main, clutter, births
+            req = self.requested(self.clutter_cfg, trials_key, skip=("experiment.clutter",))
+            return sweep(SweepRequest("clutter", (), RunRequest(None, net, resume=folder, requested=req,
+                                                                options=self.options)), batch)  # fmt: skip
+        part = RunRequest(self.clutter_cfg, net, out=folder, options=self.options)
+        return sweep(SweepRequest("clutter", DEFAULT_VALUES["clutter"], part), batch)
 
-    with FolderLock(root, "study folder"):
-        check_own_folder(root, "study folder", STUDY_ENTRIES)  # again, under the lock
+    def births(self, batch: Batch) -> SweepOutcome:
+        net, folder, grouped = self.request.net, self.births_dir, self.request.grouped
+        if (folder / "sweep.json").is_file():
+            trials_key = "experiment.trials" if "births_trials" in self.request.explicit else None
+            req = self.requested(self.births_cfg, trials_key, skip=("experiment.models", "experiment.probabilities"))
+            part = RunRequest(None, net, resume=folder, requested=req, options=self.births_options)
+            return sweep(SweepRequest("births", (), part, grouped=grouped), batch)
+        part = RunRequest(self.births_cfg, net, out=folder, options=self.births_options)
+        return sweep(SweepRequest("births", DEFAULT_VALUES["births"], part, grouped=grouped), batch)
+
+    def sensitivity(self, batch: Batch) -> list[RunOutcome]:
+        return run_variants(self.sens_dir, self.main_dir, trials=self.request.trials.sensitivity,
+                            follow_main=self.follow, options=self.sens_options, batch=batch)  # fmt: skip
+
+    def all(self, batch: Batch) -> tuple[RunOutcome, SweepOutcome, SweepOutcome, list[RunOutcome]]:
+        main, clutter, births = self.main(batch), self.clutter(batch), self.births(batch)
+        return main, clutter, births, self.sensitivity(batch)
+
+    def run_serial(self) -> tuple[RunOutcome, SweepOutcome, SweepOutcome, list[RunOutcome]]:
+        """The parts one after another."""
+        return self.all(ALONE)
+
+    def run_grouped(self) -> tuple[RunOutcome, SweepOutcome, SweepOutcome, list[RunOutcome]]:
+        """The parts' trials together (:mod:`soabench.experiment.execution.grouped`) on one pool, then the reports
+        of the parts that attempted every trial, each folder merged by a worker first."""
+        deferred: list = []
+        self.all(Batch(defer=deferred))
+        options = self.request.options
+        pool = open_executor(options.workers, options.scheduler, options.dask_local)  # the trials', then the figures'
+        aborted = True
         try:
-            follow = sensitivity_trials is None and "experiment.trials" in explicit  # like the clutter sweep
-            sens_dir = root / "sensitivity"
-            if grouped:
-                deferred: list = []
-                parts(defer=deferred)
-                run_variants(
-                    sens_dir,
-                    main_dir,
-                    trials=sensitivity_trials,
-                    follow_main=follow,
-                    defer=deferred,
-                    options=sens_options,
-                )
+            if deferred:
+                run_group(deferred, pool, progress=options.progress, label=self.root.name)
+            with parallel(pool), merged_on(pool, deferred):
+                parts = self.all(Batch(run_trials=False))
+            aborted = False
+            return parts
+        finally:
+            pool.close(abort=aborted)
 
-                # the trials', then the figures' workers
-                pool = open_executor(options.workers, options.scheduler, options.dask_local)
-                aborted = True
-                try:
-                    if deferred:
-                        run_group(deferred, pool, progress=options.progress, label=root.name)
-                    # the reports of the parts that attempted every trial, each merged by a worker first
-                    with parallel(pool), merged_on(pool, deferred):
-                        main, clutter, births = parts(run_trials=False)
-                        sensitivity = run_variants(
-                            sens_dir,
-                            main_dir,
-                            trials=sensitivity_trials,
-                            follow_main=follow,
-                            run_trials=False,
-                            options=sens_options,
-                        )
-                    aborted = False
-                finally:
-                    pool.close(abort=aborted)
-            else:
-                main, clutter, births = parts()
-                sensitivity = run_variants(
-                    sens_dir, main_dir, trials=sensitivity_trials, follow_main=follow, options=sens_options
-                )
 
-            md = ""
-            if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
-                mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
-                md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
-            if main.complete and all(o.complete for o in sensitivity):
-                variants = {k: sens_dir / k for k in VARIANTS}
-                sens.write_sensitivity(sens_dir, main_dir, variants)
-                where = sens_dir / "sensitivity.md"
-                md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
-            index = write_index(root)[0]  # and each run's report.html (a run kept from before may have none)
-            md += f"\nEvery part on one page: {index}\n"
-        except KeyboardInterrupt:
-            raise Interrupted(
-                f"interrupted: the study in {root} is incomplete (finished trials are on disk); {hint}"
-            ) from None
-    return StudyOutcome(root, main, clutter, births, md, tuple(sensitivity))
+def _finish(root: Path, main: RunOutcome, sensitivity: Sequence[RunOutcome]) -> str:
+    """The comparison with the paper, the sensitivity table (once their runs are complete) and the index page;
+    the study's closing lines."""
+    main_dir, sens_dir = root / "main", root / "sensitivity"
+    md = ""
+    if main.complete:  # the paper's numbers only beside the paper's protocol on the shipped intersection
+        mismatch = paper_protocol_mismatch(RunStore(main_dir).meta())
+        md = f"No comparison with the paper: {mismatch}.\n" if mismatch else write_comparison(root)
+    if main.complete and all(o.complete for o in sensitivity):
+        variants = {k: sens_dir / k for k in VARIANTS}
+        sens.write_sensitivity(sens_dir, main_dir, variants)
+        where = sens_dir / "sensitivity.md"
+        md += f"\nSensitivity to the gate, the truth set and the probability mode: {where}\n"
+    index = write_index(root)[0]  # and each run's report.html (a run kept from before may have none)
+    md += f"\nEvery part on one page: {index}\n"
+    return md
 
 
 def _precision_table(rows: list[dict]) -> str:
@@ -299,13 +344,17 @@ def key_figure(root: Path) -> Path | None:
 
 
 def write_comparison(root: Path) -> str:
-    """``comparison.md``: the paper's headline numbers beside ours, from the committed CSV files alone."""
+    """``comparison.md``: the paper's headline numbers beside ours, from the committed CSV files alone (in the
+    GM-PHD family, the paper's filter; the Tracks tables per filter family)."""
     root = Path(root)
-    main_rows = paper.read_rows(root / "main" / "trials.csv")
+    all_rows = paper.read_rows(root / "main" / "trials.csv")
+    main_rows = paper_family_rows(all_rows)
+    families = config_families(RunStore(root / "main").meta()["config"])
     parts = [
         "# The paper's simulation study on the shipped intersection: paper vs soabench",
         "",
-        "Generated by `soabench study` from `main/trials.csv`, `clutter/points/*/trials.csv` and `births/`.",
+        "Generated by `soabench study` from `main/trials.csv`, `clutter/points/*/trials.csv` and `births/`"
+        + ("." if families == [None] else "; the paper's numbers in its filter family, the GM-PHD."),
         "",
         "## Main protocol (λ = 3)",
         "",
@@ -315,11 +364,17 @@ def write_comparison(root: Path) -> str:
         "",
         _ratio_table(main_rows),
     ]
-    hota = _tracks_table(main_rows)
-    if hota:
-        parts += ["", "### Tracks (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels", ""]
-        parts += hota
-    clutter_rows = [r for f in sorted((root / "clutter" / "points").glob("*/trials.csv")) for r in paper.read_rows(f)]
+    for family in families:
+        hota = _tracks_table(family_rows(all_rows, family))
+        if hota:
+            title = "Tracks" if family is None else f"Tracks, {family_label(family)}"
+            parts += ["", f"### {title} (docs/method.md §9.3): mean ± σ over trials; — for a tracker without labels"]
+            parts += ["", *hota]
+    clutter_rows = [
+        r
+        for f in sorted((root / "clutter" / "points").glob("*/trials.csv"))
+        for r in paper_family_rows(paper.read_rows(f))
+    ]
     if clutter_rows:
         parts += [
             "",

@@ -12,6 +12,7 @@ item (:func:`failure_record`); the run goes on.
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import signal
@@ -26,7 +27,8 @@ from typing import Any
 
 from soabench.errors import SoabenchError, require
 from soabench.experiment.execution.options import check_scheduler_address, check_workers
-from soabench.experiment.execution.workers import init_worker, last_activity, sigint_ignored_by_children
+from soabench.experiment.execution.workers import init_worker, sigint_ignored_by_children
+from soabench.experiment.trial.activity import last_activity
 from soabench.seeding import trial_seeds
 
 
@@ -68,9 +70,7 @@ class PoolExecutor:
         self.n_workers = int(workers)
         self._pool: ProcessPoolExecutor | None = None
         self._generation = 0  # incremented whenever a broken pool is replaced
-        self._notes: str | None = (
-            None  # the workers' notes folder (soabench.experiment.execution.workers.note_activity)
-        )
+        self._notes: str | None = None  # the workers' notes folder (soabench.experiment.trial.activity.note_activity)
         self._procs: dict[int, Any] = {}  # pid -> process of the current pool (its exit code names a death)
         self._lost: dict[int, dict[int, str]] = {}  # pool generation -> trial -> why it was lost
 
@@ -192,8 +192,6 @@ class DaskExecutor:
         self._distributed = distributed
         self._cluster = None
         if scheduler is None:
-            import logging
-
             n = int(local_workers or os.cpu_count() or 1)
             with sigint_ignored_by_children():  # Ctrl-C is the driver's: no worker tracebacks
                 self._cluster = distributed.LocalCluster(

@@ -2,7 +2,7 @@
 
 A study (main run, clutter sweep, N̂ sweep) and an N̂ sweep are run folders whose trial n has the same seeds, so the
 same SUMO recording, the same scans at the same clutter rate and, for equal settings, the same filter runs. Each
-folder is first checked and created as usual (``run_experiment(..., defer=LIST)`` appends a
+folder is first checked and created as usual (a run with ``Batch(defer=LIST)`` appends a
 :class:`~soabench.experiment.execution.runner.DeferredRun`); :func:`run_group` then submits one task per trial index
 that
 runs every folder's trial n in one process with one :class:`~soabench.experiment.trial.trial.TrialShare`: SUMO once, the
@@ -90,6 +90,33 @@ def group_trials(deferred: Sequence[DeferredRun]) -> list[int]:
     return sorted(set().union(*(d.todo for d in deferred))) if deferred else []
 
 
+def _write_record(d: DeferredRun, r: dict, bar: Progress, fail_fast: bool) -> bool:
+    """Write one folder's trial record (or failure) as it arrives; True when ``fail_fast`` stops the group."""
+    if r.get("status") == "ok":
+        d.store.write_trial(r)
+        bar.update(True)
+        _print_model_failures(r, bar)
+        return fail_fast and bool(r.get("model_failures"))
+    d.store.write_failure(r)
+    bar.update(False)
+    _print_failure(r, bar)
+    return fail_fast
+
+
+def _write_sessions(deferred: Sequence[DeferredRun], ran: Sequence[int], session: dict) -> None:
+    """The session record of every folder that ran trials in this group (``session``: what they share)."""
+    for d, n in zip(deferred, ran, strict=True):
+        if n:
+            own = {"trials_run": n, "resumed": d.n_trials - len(d.todo) > 0, "versions": package_versions()}
+            record = {k: {**session, **own}[k] for k in SESSION_KEYS}
+            d.store.write_session(f"{_utc_stamp()}-{os.getpid()}", record)
+
+
+#: the keys of a group's session record, in their order in the file
+SESSION_KEYS = ("executor", "n_workers", "trials_run", "resumed", "interrupted", "stopped_fail_fast", "versions",
+                "started", "wall_s")  # fmt: skip
+
+
 def run_group(
     deferred: Sequence[DeferredRun], exe: Any, *, fail_fast: bool = False, progress: bool = True, label: str = ""
 ) -> tuple[bool, dict[str, int]]:
@@ -130,38 +157,17 @@ def run_group(
                         continue
                     r = per_folder[i] if per_folder is not None else rec  # a lost worker: every folder's failure
                     ran[i] += 1
-                    if r.get("status") == "ok":
-                        d.store.write_trial(r)
-                        bar.update(True)
-                        _print_model_failures(r, bar)
-                        stopped = stopped or (fail_fast and bool(r.get("model_failures")))
-                    else:
-                        d.store.write_failure(r)
-                        bar.update(False)
-                        _print_failure(r, bar)
-                        stopped = stopped or fail_fast
+                    stopped = _write_record(d, r, bar, fail_fast) or stopped
                 if stopped:
                     break
         finally:
             gen.close()
             bar.close()
             wall = time.time() - t_start
-            for i, d in enumerate(deferred):
-                if ran[i]:
-                    d.store.write_session(
-                        f"{_utc_stamp()}-{os.getpid()}",
-                        {
-                            "executor": f"{exe.name} (grouped: {len(deferred)} folders)",
-                            "n_workers": getattr(exe, "n_workers", 1),
-                            "trials_run": ran[i],
-                            "resumed": d.n_trials - len(d.todo) > 0,
-                            "interrupted": sys.exc_info()[0] is KeyboardInterrupt,
-                            "stopped_fail_fast": stopped,
-                            "versions": package_versions(),
-                            "started": t_start,
-                            "wall_s": wall,
-                        },
-                    )
+            session = {"executor": f"{exe.name} (grouped: {len(deferred)} folders)",
+                       "n_workers": getattr(exe, "n_workers", 1), "interrupted": sys.exc_info()[0] is KeyboardInterrupt,
+                       "stopped_fail_fast": stopped, "started": t_start, "wall_s": wall}  # fmt: skip
+            _write_sessions(deferred, ran, session)
     finally:
         for lock in locks:
             lock.release()

@@ -1,10 +1,11 @@
 """A Monte Carlo run held in memory: the tables a run folder's CSV files hold, as numpy record arrays
 (docs/method.md §5.8).
 
-:func:`run_in_memory` runs the trials of a config on the same executors as :func:`~soabench.experiment.execution.runner.
-run_experiment` (trial n's seeds depend only on ``(seed, n)``) and merges their records with the run folder's own
-order (:class:`~soabench.experiment.runs.store.TableOrder`), so :class:`RunResult` holds the rows of ``trials.csv``,
-``episodes.csv`` and ``steps.csv`` value for value; :meth:`RunResult.write_csv` writes them with the run folder's
+:func:`run_in_memory` runs the trials of a config on the same executors as
+:func:`~soabench.experiment.execution.runner.execute` (trial n's seeds depend only on ``(seed, n)``) and merges
+their records with the run folder's own order (:class:`~soabench.experiment.runs.store.TableOrder`), so
+:class:`RunResult` holds the rows of ``trials.csv``, ``episodes.csv`` and ``steps.csv`` value for value;
+:meth:`RunResult.write_csv` writes them with the run folder's
 writer, byte for byte. Nothing is written to disk unless asked.
 """
 
@@ -22,10 +23,10 @@ from soabench import plugins
 from soabench.config import Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.execution.executors import open_executor
-from soabench.experiment.execution.premerge import merge_args
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.runner import TaskSpec, check_against_scenario
 from soabench.experiment.runs.files import as_lists, format_value, unpack_table, write_csv_lists
+from soabench.experiment.runs.runmeta import RunMeta
 from soabench.experiment.runs.store import (
     EPISODE_COLUMNS,
     STEP_COLUMNS,
@@ -35,9 +36,10 @@ from soabench.experiment.runs.store import (
     RunStore,
     TableOrder,
     _rows_of,
+    merge_args,
     timing_rows,
 )
-from soabench.experiment.trial.registry import load_scene_cached
+from soabench.experiment.trial.registry import DEFAULT_SCENE_LOADER, DEFAULT_TRIAL_KIND, load_scene_cached
 
 #: the tables of a :class:`RunResult`, as the CSV files of a run folder are named (``<name>.csv``)
 TABLES = ("trials", "episodes", "steps", "timing")
@@ -194,7 +196,8 @@ def run_in_memory(
     _, scenario_cfg = load_scene_cached(net, polys, scenario)
     check_against_scenario(config, scenario_cfg)
     n_trials = config.experiment.trials
-    spec = TaskSpec(config.to_dict(), str(net), polys, scenario, False, plugin_paths=plugins.session_import_paths())
+    meta = RunMeta(config, str(net), polys, scenario, False, n_trials, DEFAULT_TRIAL_KIND, DEFAULT_SCENE_LOADER)
+    spec = TaskSpec(meta, plugin_paths=plugins.session_import_paths())
     exe = executor if executor is not None else open_executor(workers, n_trials=n_trials)
     records: list[dict] = []
     failures: list[dict] = []

@@ -1,6 +1,6 @@
 """The Monte Carlo harness: trials on process workers or Dask, persisted per trial, resumable (docs/method.md §5.8).
 
-``run_experiment`` runs trials ``0 .. trials-1`` of a config; trial n's seeds depend only on ``(seed, n)``
+``execute`` runs trials ``0 .. trials-1`` of a config; trial n's seeds depend only on ``(seed, n)``
 (:mod:`soabench.seeding`), never on the worker or the order, so serial, process-pool and Dask runs write
 bit-identical ``trials.csv``/``episodes.csv``/``steps.csv``. libsumo is a process singleton (docs/user-guide/sumo.md):
 every executor runs one trial at a time per process (a lock guards a worker that was started with several threads).
@@ -13,15 +13,15 @@ atomic file per finished trial (:mod:`soabench.experiment.runs.store`), so worke
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
+import functools
 import os
 import socket
 import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -31,16 +31,12 @@ from soabench import plugins
 from soabench.atomic import to_jsonable, write_json_atomic
 from soabench.config import Config
 from soabench.errors import Interrupted, require
-from soabench.experiment.execution import premerge
-from soabench.experiment.execution.executors import PoolExecutor, failure_record, open_executor
+from soabench.experiment.execution.executors import failure_record, open_executor
 from soabench.experiment.execution.options import RUN_DEFAULTS, RunOptions
 from soabench.experiment.execution.progress import Progress
-from soabench.experiment.execution.workers import OWN_CODE, note_activity
-from soabench.experiment.reports import report
-from soabench.experiment.reports.html import refresh_report
 from soabench.experiment.runs.files import pack_table
 from soabench.experiment.runs.provenance import REPRODUCTION_TOLERANCE, package_versions, platform_info
-from soabench.experiment.runs.runmeta import check_requested, validate_run_meta
+from soabench.experiment.runs.runmeta import RunMeta, check_requested, validate_run_meta
 from soabench.experiment.runs.store import (
     EPISODE_COLUMNS,
     RUN_FILE,
@@ -50,8 +46,8 @@ from soabench.experiment.runs.store import (
     RunStore,
 )
 from soabench.experiment.trial import registry
+from soabench.experiment.trial.activity import OWN_CODE, note_activity
 from soabench.experiment.trial.guard import failure_message
-from soabench.figures.drawing import parallel, pool_open
 from soabench.folders import FolderLock, check_existing_folder, check_new_folder, resolve
 from soabench.kernel_warmup import ensure_compiled
 from soabench.scenario.derive import said_by_the_driver
@@ -83,27 +79,46 @@ class RunOutcome:
     #: failed method runs inside finished trials (:mod:`soabench.experiment.runs.failures`), once every trial was
     #: attempted
     model_failures: list[dict] = field(default_factory=list)
+    #: the run to report, once every trial was attempted (None otherwise, and once reported): the layer above writes
+    #: its summary, figures and report.html (:func:`soabench.experiment.reports.finished.report_run`)
+    finished: FinishedRun | None = None
+
+
+@dataclass(frozen=True)
+class FinishedRun:
+    """A run folder whose every trial was attempted, with what its report needs: the folder's store, the run's
+    configuration, whether figures are drawn, and where (``workers`` local processes, None for one per core;
+    ``executor``: the campaign's open executor, whose process pool draws them when it is one)."""
+
+    store: RunStore
+    config: Config
+    figures: bool
+    workers: int | None
+    executor: Any = None
 
 
 # ------------------------------------------------------------------------------------------------ one trial
 @dataclass(frozen=True)
 class TaskSpec:
-    """Everything a worker needs to run any trial of a run (small and picklable)."""
+    """Everything a worker needs to run any trial of a run (small and picklable): the run's record (what its
+    ``run.json`` says, :class:`~soabench.experiment.runs.runmeta.RunMeta`) and the trial kind and scene loader it
+    names, as callables."""
 
-    config: dict
-    net: str
-    polys: tuple[str, ...]
-    scenario: str | None
-    save_estimates: bool
+    meta: RunMeta
     trial_fn: TrialFn | None = None
     load_fn: LoadFn | None = None
     #: import paths of plugins typed on the driver's command line (soabench.plugins: the closed list)
     plugin_paths: tuple[str, ...] = ()
-    #: ``experiment.seed`` of the config, read through :class:`~soabench.config.Config` once (a failure record's seed)
-    base_seed: int = field(init=False)
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "base_seed", int(Config.from_dict(self.config).experiment.seed))
+    @functools.cached_property
+    def config(self) -> dict:
+        """The run's configuration as plain data (each worker builds its :class:`Config` from it)."""
+        return self.meta.config.to_dict()
+
+    @property
+    def base_seed(self) -> int:
+        """``experiment.seed`` of the run (a failure record's seed)."""
+        return int(self.meta.config.experiment.seed)
 
     @property
     def task_fn(self) -> Callable[[int, TaskSpec], dict]:
@@ -138,9 +153,10 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
             plugins.allow_import_paths(spec.plugin_paths)
             config = Config.from_dict(spec.config)
             with said_by_the_driver():  # the driver loaded this scene and said what it derived
-                scene, scenario = registry.load_scene_cached(spec.net, spec.polys, spec.scenario, spec.load_fn)
+                scene, scenario = registry.load_scene_cached(spec.meta.net, spec.meta.polys, spec.meta.scenario,
+                                                             spec.load_fn)  # fmt: skip
             fn = spec.trial_fn or _default_trial_fn()
-            result = fn(trial, config, scene, scenario, save_estimates=spec.save_estimates)
+            result = fn(trial, config, scene, scenario, save_estimates=spec.meta.save_estimates)
     except Exception as exc:  # a failed trial must not stop the run
         rec = failure_record(trial, base_seed, f"{type(exc).__name__}: {exc}", traceback.format_exc())
         rec["worker"] = _where()
@@ -161,7 +177,7 @@ def run_trial_task(trial: int, spec: TaskSpec) -> dict:
     if getattr(result, "failures", None):
         record["model_failures"] = to_jsonable(result.failures)
     est = getattr(result, "estimates", None)
-    if spec.save_estimates and est is not None:
+    if spec.meta.save_estimates and est is not None:
         record["estimates"] = to_jsonable(est)
     return record
 
@@ -227,38 +243,12 @@ def _scenario_info(scenario_cfg: Any) -> Any:
 
 
 # ------------------------------------------------------------------------------------------------ the run
-@dataclass
-class DeferredRun:
-    """A checked run folder whose trials ``todo`` are to be run by :mod:`soabench.experiment.execution.grouped`."""
+@dataclass(frozen=True)
+class RunRequest:
+    """What a run is asked to do: a new run of ``config`` on a scene, or the rest of an earlier run (``resume``).
 
-    store: RunStore
-    spec: TaskSpec
-    todo: frozenset[int]
-    n_trials: int
-    config: Config
-    figures: bool  #: whether its report draws figures
-
-
-def run_experiment(
-    config: Config | None,
-    net: str,
-    polys: Sequence[str] = (),
-    scenario: str | None = None,
-    *,
-    out: Path | None = None,
-    resume: Path | None = None,
-    requested: dict[str, Any] | None = None,
-    options: RunOptions = RUN_DEFAULTS,
-    trial_fn: TrialFn | None = None,
-    load_fn: LoadFn | None = None,
-    executor: Any = None,
-    defer: list | None = None,
-    run_trials: bool = True,
-) -> RunOutcome:
-    """Run (or finish, with ``resume``) the Monte Carlo protocol of ``config`` on ``net``.
-
-    Args:
-        config: the resolved configuration; ignored (may be None) with ``resume``, which reads the run's own.
+    Attributes:
+        config: the resolved configuration; None with ``resume``, which reads the run's own.
         net, polys, scenario: passed to :func:`soabench.scenario.load` (ignored with ``resume``).
         out: run folder (default ``results/<net>/<UTC timestamp>/``); resolved, and refused unless new or empty.
         resume: an earlier run folder: run only its trials without a result, with its stored config. Every value of
@@ -273,161 +263,179 @@ def run_experiment(
             worker processes (a module-level function). Default: the registered trial kind ``soabench``
             (:func:`soabench.experiment.trial.trial.run_trial`); run.json records its registered name.
         load_fn: ``load(net, polys, scenario) -> (SceneMap, ScenarioConfig)``; default: scene loader ``sumo``.
+    """
+
+    config: Config | None
+    net: str
+    polys: tuple[str, ...] = ()
+    scenario: str | None = None
+    out: Path | None = None
+    resume: Path | None = None
+    requested: Mapping[str, Any] | None = None
+    options: RunOptions = RUN_DEFAULTS
+    trial_fn: TrialFn | None = None
+    load_fn: LoadFn | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "polys", tuple(str(p) for p in self.polys))
+
+    def task_spec(self) -> TaskSpec:
+        """What a worker needs to run any trial of this (resolved) run."""
+        return TaskSpec(self.meta(), self.trial_fn, self.load_fn, plugins.session_import_paths())
+
+    def meta(self) -> RunMeta:
+        """The record of this (resolved) run, as its ``run.json`` holds it."""
+        assert self.config is not None
+        return RunMeta(
+            self.config, str(self.net), self.polys, self.scenario, bool(self.options.save_estimates),
+            self.config.experiment.trials, registry.trial_kind_name(self.trial_fn),
+            registry.scene_loader_name(self.load_fn),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Batch:
+    """How a campaign runs one of its runs among others (the default, :data:`ALONE`: a run on its own).
+
+    Attributes:
         executor: an open executor (from :func:`open_executor`) to reuse, e.g. across the points of a sweep.
         defer: a list: create (or check) the folder, append its :class:`DeferredRun` (the trials to run) instead of
             running them, and return (:mod:`soabench.experiment.execution.grouped` runs several folders' trials
             together).
-        run_trials: False: run no trial; write the report if every trial was attempted (after a grouped run).
+        run_trials: False: run no trial; report if every trial was attempted (after a grouped run).
+    """
+
+    executor: Any = None
+    defer: list | None = None
+    run_trials: bool = True
+
+
+ALONE = Batch()
+#: the keywords of :func:`soabench.experiment.reports.finished.run_experiment` that are :class:`Batch` fields
+BATCH_FIELDS = tuple(f.name for f in dataclasses.fields(Batch))
+
+
+@dataclass
+class DeferredRun:
+    """A checked run folder whose trials ``todo`` are to be run by :mod:`soabench.experiment.execution.grouped`."""
+
+    store: RunStore
+    spec: TaskSpec
+    todo: frozenset[int]
+    n_trials: int
+    config: Config
+    figures: bool  #: whether its report draws figures
+
+
+def execute(request: RunRequest, batch: Batch = ALONE) -> RunOutcome:
+    """Run (or finish, with ``request.resume``) the trials of the Monte Carlo protocol of ``request.config`` on its
+    scene: the run loop.
 
     Returns:
-        A :class:`RunOutcome`. The summary (Markdown) is written and returned only once every trial was attempted.
+        A :class:`RunOutcome`; once every trial was attempted, its ``finished`` record is the run to report (the
+        layer above writes the summary, figures and report.html: :mod:`soabench.experiment.reports.finished`).
         One process at a time works a run folder (a lock; the second gets an error naming the holder).
     """
     locks: list[FolderLock] = []  # held until the report is written
-    if resume is not None:
-        run_dir = resolve(resume)
-        check_existing_folder(run_dir, RUN_FILE, "run")
-        locks.append(FolderLock(run_dir).acquire())
     try:
-        if resume is not None:
+        if request.resume is not None:
+            run_dir = resolve(request.resume)
+            check_existing_folder(run_dir, RUN_FILE, "run")
+            locks.append(FolderLock(run_dir).acquire())
             store = RunStore(run_dir)
-            raw = store.meta()
-            meta = validate_run_meta(raw, str(store.run_file))
-            if requested:
-                stored = {"net": meta.net, "polys": list(meta.polys), "scenario": meta.scenario}
-                stored.update({f"{sec}.{k}": v for sec, d in meta.config.to_dict().items() for k, v in d.items()})
-                more = check_requested(stored, requested, f"run folder {str(run_dir)!r}")
-                if more is not None:  # safe: trial n's seeds depend only on (seed, n)
-                    raw["config"]["experiment"]["trials"] = more
-                    raw["trials"] = more
-                    write_json_atomic(store.run_file, raw)
-                    meta = validate_run_meta(raw, str(store.run_file))
-            require(
-                meta.save_estimates or not options.save_estimates,
-                f"--save-estimates does not apply to --resume of {str(run_dir)!r}: the run was started without it, "
-                "so its finished trials have no estimates; start a new run with --save-estimates --out",
-            )
-            for line in store.reject_foreign_records(meta.trials):  # copies, strays: moved aside, their trials rerun
-                print(f"soabench: {line}", file=sys.stderr)
-            config = meta.config
-            net, polys, scenario = meta.net, meta.polys, meta.scenario
-            options = dataclasses.replace(options, save_estimates=meta.save_estimates)
-            trial_fn = trial_fn or registry.trial_kind(meta.trial_kind)
-            load_fn = load_fn or registry.scene_loader(meta.scene_loader)
+            request = _resumed(store, request)
         else:
-            require(config is not None, "run_experiment needs a config (or resume=RUN_DIR)")
-            config = Config.from_dict(config.to_dict()).validate()
+            require(request.config is not None, "run_experiment needs a config (or resume=RUN_DIR)")
+            config = Config.from_dict(request.config.to_dict()).validate()
+            out = request.out
             if out is None:  # filed under the scenario's name, so the scene is loaded first
-                _, scenario_cfg = registry.load_scene_cached(net, tuple(str(p) for p in polys), scenario, load_fn)
-                out = default_run_dir(scenario_name(net, scenario_cfg))
+                _, scenario_cfg = registry.load_scene_cached(
+                    request.net, request.polys, request.scenario, request.load_fn
+                )
+                out = default_run_dir(scenario_name(request.net, scenario_cfg))
             run_dir = resolve(out)
             check_new_folder(run_dir, RUN_FILE, "run", f"finish it with soabench run --resume {run_dir}")
             store = RunStore(run_dir)
-        return _run_locked(
-            store, config, net, tuple(str(p) for p in polys), scenario, resume is not None, locks, options=options,
-            trial_fn=trial_fn, load_fn=load_fn, executor=executor, defer=defer, run_trials=run_trials,
-        )  # fmt: skip
+            request = dataclasses.replace(request, config=config, out=run_dir)
+        return _run_locked(store, request, locks, batch)
     finally:
         for lock in locks:
             lock.release()
 
 
-def _run_locked(
-    store: RunStore,
-    config: Config,
-    net: str,
-    polys: tuple[str, ...],
-    scenario: str | None,
-    resumed: bool,
-    locks: list[FolderLock],
-    *,
-    options: RunOptions,
-    trial_fn: TrialFn | None,
-    load_fn: LoadFn | None,
-    executor: Any,
-    defer: list | None = None,
-    run_trials: bool = True,
-) -> RunOutcome:
-    """The body of :func:`run_experiment` once the folder is checked (and, for a resume, locked)."""
+def _resumed(store: RunStore, request: RunRequest) -> RunRequest:
+    """The request of a resumed run: its stored configuration, scene, trial kind and scene loader, the trials it
+    is asked for (more extend the run; any other difference is refused)."""
+    run_dir = store.run_dir
+    raw = store.meta()
+    meta = validate_run_meta(raw, str(store.run_file))
+    if request.requested:
+        stored = {"net": meta.net, "polys": list(meta.polys), "scenario": meta.scenario}
+        stored.update({f"{sec}.{k}": v for sec, d in meta.config.to_dict().items() for k, v in d.items()})
+        more = check_requested(stored, dict(request.requested), f"run folder {str(run_dir)!r}")
+        if more is not None:  # safe: trial n's seeds depend only on (seed, n)
+            raw["config"]["experiment"]["trials"] = more
+            raw["trials"] = more
+            write_json_atomic(store.run_file, raw)
+            meta = validate_run_meta(raw, str(store.run_file))
+    require(
+        meta.save_estimates or not request.options.save_estimates,
+        f"--save-estimates does not apply to --resume of {str(run_dir)!r}: the run was started without it, "
+        "so its finished trials have no estimates; start a new run with --save-estimates --out",
+    )
+    for line in store.reject_foreign_records(meta.trials):  # copies, strays: moved aside, their trials rerun
+        print(f"soabench: {line}", file=sys.stderr)
+    return dataclasses.replace(
+        request, config=meta.config, net=meta.net, polys=meta.polys, scenario=meta.scenario,
+        options=dataclasses.replace(request.options, save_estimates=meta.save_estimates),
+        trial_fn=request.trial_fn or registry.trial_kind(meta.trial_kind),
+        load_fn=request.load_fn or registry.scene_loader(meta.scene_loader),
+    )  # fmt: skip
+
+
+def _run_locked(store: RunStore, request: RunRequest, locks: list[FolderLock], batch: Batch) -> RunOutcome:
+    """The body of :func:`execute` once the folder is checked (and, for a resume, locked); ``request`` is resolved
+    (its configuration validated or read from the run)."""
+    config, options = request.config, request.options
+    assert config is not None
+    resumed = request.resume is not None
     figures = options.figures is not False
-    save_estimates = options.save_estimates
     plugins.preflight(config)  # a plugin that cannot be imported or configured stops the run before any trial
     n_trials = config.experiment.trials
     hint = f"finish with: soabench run --resume {store.run_dir}"
 
     # validate the network and the config against it before starting workers (a bad path or a dt that is no
     # multiple of the SUMO step is a user error, not 100 failed trials)
-    _, scenario_cfg = registry.load_scene_cached(net, polys, scenario, load_fn)
+    _, scenario_cfg = registry.load_scene_cached(request.net, request.polys, request.scenario, request.load_fn)
     check_against_scenario(config, scenario_cfg)
-    name = scenario_name(net, scenario_cfg)
     done = set(store.done_trials()) if resumed else set()
     foreign = sorted(t for t in done if t >= n_trials)
     require(not foreign, f"{str(store.run_dir)!r} holds trial {foreign[:1]} beyond its {n_trials} trials: foreign")
-    todo = TodoTrials(n_trials, done) if run_trials else TodoTrials(0, set())
+    todo = TodoTrials(n_trials, done) if batch.run_trials else TodoTrials(0, set())
     # connect to the executor before creating the run folder (an unreachable scheduler leaves nothing behind)
-    own_executor = executor is None and len(todo) > 0 and defer is None
+    own_executor = batch.executor is None and len(todo) > 0 and batch.defer is None
     exe = (
         open_executor(options.workers, options.scheduler, options.dask_local, n_trials=len(todo))
         if own_executor
-        else executor
+        else batch.executor
     )
     interrupted = stopped = False
     try:
         if not resumed:
-            locks.append(FolderLock(store.run_dir).acquire())  # creates the folder; run_experiment releases it
+            locks.append(FolderLock(store.run_dir).acquire())  # creates the folder; execute releases it
             check_new_folder(store.run_dir, RUN_FILE, "run", f"finish it with soabench run --resume {store.run_dir}")
-            store.create(
-                {
-                    "created": _utc_stamp(),
-                    "net": str(net),
-                    "net_name": name,
-                    "polys": list(polys),
-                    "scenario": scenario,
-                    "scenario_config": _scenario_info(scenario_cfg),
-                    "trials": n_trials,
-                    "save_estimates": bool(save_estimates),
-                    "trial_kind": registry.trial_kind_name(trial_fn),
-                    "scene_loader": registry.scene_loader_name(load_fn),
-                    "config": config.to_dict(),
-                    "versions": package_versions(),
-                    "platform": platform_info(),
-                    "reproduction_tolerance": REPRODUCTION_TOLERANCE,
-                }
-            )
-        if len(todo) and defer is not None:  # run later, together with other folders' trials
-            spec = TaskSpec(
-                config.to_dict(), str(net), polys, scenario, bool(save_estimates), trial_fn, load_fn,
-                plugins.session_import_paths(),
-            )  # fmt: skip
-            defer.append(DeferredRun(store, spec, frozenset(todo), n_trials, config, figures))
+            store.create(_run_file(request, scenario_cfg))
+        if len(todo) and batch.defer is not None:  # run later, together with other folders' trials
+            batch.defer.append(DeferredRun(store, request.task_spec(), frozenset(todo), n_trials, config, figures))
             return RunOutcome(store.run_dir, False, len(done), n_trials - len(done), store.failures(), "")
         if len(todo):
-            spec = TaskSpec(
-                config.to_dict(),
-                str(net),
-                polys,
-                scenario,
-                bool(save_estimates),
-                trial_fn,
-                load_fn,
-                plugins.session_import_paths(),
-            )
             interrupted, stopped, times = _run_trials(
-                store, exe, spec, todo, n_trials, len(done), options.fail_fast, options.progress
+                store, exe, request.task_spec(), todo, n_trials, len(done), options.fail_fast, options.progress
             )
-            store.write_session(
-                f"{_utc_stamp()}-{os.getpid()}",
-                {
-                    "executor": exe.name,
-                    "n_workers": getattr(exe, "n_workers", 1),
-                    "trials_run": len(todo),
-                    "resumed": resumed,
-                    "interrupted": interrupted,
-                    "stopped_fail_fast": stopped,
-                    "versions": package_versions(),
-                    **times,
-                },
-            )
+            session = {"executor": exe.name, "n_workers": getattr(exe, "n_workers", 1), "trials_run": len(todo),
+                       "resumed": resumed, "interrupted": interrupted, "stopped_fail_fast": stopped,
+                       "versions": package_versions(), **times}  # fmt: skip
+            store.write_session(f"{_utc_stamp()}-{os.getpid()}", session)
     except KeyboardInterrupt:
         interrupted = True
         raise Interrupted(
@@ -437,30 +445,51 @@ def _run_locked(
         if own_executor:
             exe.close(abort=interrupted or stopped)
 
+    if interrupted:
+        done = store.done_trials()
+        raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
+    return _ended(store, request, batch, stopped)
+
+
+def _ended(store: RunStore, request: RunRequest, batch: Batch, stopped: bool) -> RunOutcome:
+    """What the run's folder holds once its trials ran: the finished run to report when every trial was attempted
+    (not when some were never attempted, ``--fail-fast`` ``stopped``, or the trials are deferred to a group)."""
+    config, options = request.config, request.options
+    assert config is not None
+    n_trials = config.experiment.trials
     done = set(store.done_trials())
     failures = store.failures()
     failed_set = {int(f["trial"]) for f in failures}
     n_missing = n_trials - len(done)
     unattempted = n_missing - len(failed_set - done)
     outcome = RunOutcome(store.run_dir, n_missing == 0, len(done), n_missing, failures, "")
-    if interrupted:
-        raise Interrupted(f"interrupted: {len(done)} of {n_trials} trials on disk in {store.run_dir}; {hint}")
-    if unattempted or stopped or defer is not None:  # deferring: the report follows the group (run_trials=False)
+    if unattempted or stopped or batch.defer is not None:  # deferring: the report follows the group
         return outcome
-
-    try:
-        # a study's workers may have merged it already; the figures read the step columns the merge kept
-        premerge.merge(store, *premerge.merge_args(config), step_columns=figures)
-        local = not (options.scheduler or options.dask_local)
-        with _figure_pool(options.workers if local else None, executor):  # figures on local processes
-            outcome.summary_markdown = report.write_report(store.run_dir, figures=figures, store=store)
-        refresh_report(store.run_dir)  # report.html: the one page to open in a run folder
-        outcome.model_failures = store.model_failures()
-    except KeyboardInterrupt:
-        raise Interrupted(
-            f"interrupted while writing the report of {store.run_dir} (all {len(done)} trials are on disk); {hint}"
-        ) from None
+    local = not (options.scheduler or options.dask_local)  # figures on local processes
+    figures = options.figures is not False
+    outcome.finished = FinishedRun(store, config, figures, options.workers if local else None, batch.executor)
     return outcome
+
+
+def _run_file(request: RunRequest, scenario_cfg: Any) -> dict:
+    """The ``run.json`` of a new run (:mod:`soabench.experiment.runs.runmeta` reads it back)."""
+    meta = request.meta()
+    return {
+        "created": _utc_stamp(),
+        "net": meta.net,
+        "net_name": scenario_name(meta.net, scenario_cfg),
+        "polys": list(meta.polys),
+        "scenario": meta.scenario,
+        "scenario_config": _scenario_info(scenario_cfg),
+        "trials": meta.trials,
+        "save_estimates": meta.save_estimates,
+        "trial_kind": meta.trial_kind,
+        "scene_loader": meta.scene_loader,
+        "config": meta.config.to_dict(),
+        "versions": package_versions(),
+        "platform": platform_info(),
+        "reproduction_tolerance": REPRODUCTION_TOLERANCE,
+    }
 
 
 def _run_trials(
@@ -525,25 +554,3 @@ def _print_failure(rec: dict, bar: Progress) -> None:
         f"trial {rec['trial']} failed (seed {rec['seed']}, sumo_seed {rec['sumo_seed']}): {rec['error']}",
         file=sys.stderr,
     )
-
-
-@contextlib.contextmanager
-def _figure_pool(workers: int | None, executor: Any = None) -> Iterator[None]:
-    """The figures of a report written inside the block in parallel (:func:`soabench.figures.drawing.parallel`):
-    on ``executor`` when it is a local process pool, else (unless an enclosing ``parallel`` decides already) on a
-    pool of ``workers`` processes (None: one per core) opened here and closed on the way out, terminated if the
-    block is left by an exception (Ctrl-C)."""
-    if isinstance(executor, PoolExecutor) or pool_open():
-        with parallel(executor) if isinstance(executor, PoolExecutor) else contextlib.nullcontext():
-            yield
-        return
-    n = int(workers or os.cpu_count() or 1)
-    pool = PoolExecutor(n) if n > 1 else None  # its processes start at the first figure
-    ok = False
-    try:
-        with parallel(pool):
-            yield
-        ok = True
-    finally:
-        if pool is not None:
-            pool.close(abort=not ok)

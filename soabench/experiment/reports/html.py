@@ -25,6 +25,7 @@ import re
 import shlex
 import sys
 from collections.abc import Iterable, Mapping, Sequence
+from importlib import resources
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -89,7 +90,6 @@ def replay_file(trial: int) -> str:
 
 def asset(name: str) -> str:
     """The page's stylesheet or script, shipped beside this module (package data)."""
-    from importlib import resources
 
     return resources.files("soabench.experiment.reports").joinpath(name).read_text(encoding="utf-8")
 

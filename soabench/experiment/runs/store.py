@@ -118,6 +118,12 @@ def run_identity(meta: dict) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
+def merge_args(config: Any) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The (models, modes) a run folder of ``config`` is merged with: its birth models then trackers, its modes."""
+    exp = config.experiment
+    return (*exp.models, *exp.trackers), tuple(exp.probabilities)
+
+
 class RunStore:
     """Reads and writes one run folder (layout in the module docstring)."""
 
@@ -314,7 +320,7 @@ class RunStore:
 
     # -- merge
     def adopt_merge(self, done: Sequence[int], failures: Sequence[dict]) -> None:
-        """Take over the merge another process just did of this folder (:mod:`soabench.experiment.execution.premerge`):
+        """Take over the merge another process just did of this folder (:mod:`soabench.experiment.reports.premerge`):
         the
         finished trials it merged and the model failures it read, which :meth:`model_failures` then returns."""
         self._merged_failures = (tuple(int(t) for t in done), [dict(f) for f in failures])

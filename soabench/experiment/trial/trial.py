@@ -36,8 +36,8 @@ import numpy as np
 from soabench import plugins
 from soabench.config import FAMILY_MODES, FILTER_FAMILIES, filter_config_for_mode
 from soabench.errors import require
-from soabench.experiment.execution.workers import OWN_CODE, note_activity
 from soabench.experiment.trial import guard, isolate
+from soabench.experiment.trial.activity import OWN_CODE, note_activity
 from soabench.experiment.trial.isolate import PluginFailed, private_scan
 from soabench.metrics import SERIES_KEYS, SUMMARY_KEYS, TrialMetrics, evaluate
 from soabench.origins import ORIGIN_KEYS
@@ -402,81 +402,212 @@ def run_trial(
     :class:`TrialShare` to read and fill (the runs of a study or sweep); None computes everything here.
     """
     require(isinstance(trial, int) and trial >= 0, f"trial = {trial!r} must be an integer >= 0")
-    # the injected callables are part of the share keys; the defaults are one key whatever object builds them
-    fn_key = tuple("default" if f is None else f for f in (simulate_fn, observe_fn, filter_cls, birth_factory))
-    simulate_fn = simulate_fn or _default_simulate()
-    observe_fn = observe_fn or _default_observe()
-    birth_factory = birth_factory or _default_birth_factory()
-    exp = config.experiment
-    seeds = trial_seeds(exp.seed, trial)
+    seeds = trial_seeds(config.experiment.seed, trial)
+    fns = _Pipeline.of(simulate_fn, observe_fn, filter_cls, birth_factory)
     out = TrialResult(trial, seeds.base_seed, seeds.sumo_seed, estimates=[] if save_estimates else None)
-
     share = share if share is not None else TrialShare()
-    rec_key = (seeds.base_seed, trial, float(exp.duration), id(scene), id(scenario), fn_key[0])
-    t0 = time.perf_counter()
-    if rec_key in share.recordings:
-        recording = share.recordings[rec_key]
-        share.count("recording_reused")
-    else:
-        recording = share.recordings[rec_key] = simulate_fn(scene, scenario, seeds, duration=exp.duration)
-        share.count("recording")
-    out.timing["sumo"] = time.perf_counter() - t0
-    out.timing["sensor"] = 0.0
-    cfg_key = _config_key(config)
-    filter_cfg_key = _config_key(config, without=("metrics",))
-    birth_key = _birth_key(config)
-    for lam in exp.clutter:
-        sensor_cfg = config.sensor_at(lam)
-        scans_key = (rec_key, repr(sensor_cfg), fn_key[1])
+    steps = _TrialSteps(trial, config, scene, scenario, seeds, fns, share, out, save_estimates)
+    recorded = steps.record()
+    for lam in config.experiment.clutter:
+        observed = steps.observe(recorded, lam)
+        for model in config.experiment.models:
+            steps.run_model(model, observed, births_once)
+        steps.run_trackers(observed)
+    return out
+
+
+@dataclass(frozen=True)
+class _Pipeline:
+    """The stages of a trial: the real pipeline's, or the fakes a test injects; ``key`` names them in the share
+    keys (the defaults are one key whatever object builds them)."""
+
+    simulate: Callable[..., Recording]
+    observe: Callable[..., Scans]
+    filter_cls: type | None
+    birth_factory: Callable[[str], type]
+    key: tuple
+
+    @classmethod
+    def of(cls, simulate_fn: Any, observe_fn: Any, filter_cls: Any, birth_factory: Any) -> _Pipeline:
+        key = tuple("default" if f is None else f for f in (simulate_fn, observe_fn, filter_cls, birth_factory))
+        return cls(simulate_fn or _default_simulate(), observe_fn or _default_observe(), filter_cls,
+                   birth_factory or _default_birth_factory(), key)  # fmt: skip
+
+    @property
+    def real_sensor(self) -> bool:
+        return self.key[1] == "default"
+
+
+@dataclass(frozen=True)
+class _Recorded:
+    """The SUMO recording of a trial and its key in the :class:`TrialShare`."""
+
+    recording: Recording
+    key: tuple
+
+
+@dataclass(frozen=True)
+class _Observed:
+    """The scans of one clutter rate, with the keys their filter runs and birth candidates are shared under."""
+
+    lam: float
+    sensor_cfg: Any
+    scans: Scans
+    key: tuple
+    candidates_key: tuple
+
+
+@dataclass
+class _TrialSteps:
+    """The named steps of :func:`run_trial`: the recording, the scans per clutter rate, each birth model's filter
+    runs in every probability mode and family, the whole trackers; each reads the :class:`TrialShare` first and
+    appends its rows to ``out``."""
+
+    trial: int
+    config: Config
+    scene: SceneMap
+    scenario: ScenarioConfig
+    seeds: TrialSeeds
+    fns: _Pipeline
+    share: TrialShare
+    out: TrialResult
+    save_estimates: bool
+
+    def __post_init__(self) -> None:
+        self.cfg_key = _config_key(self.config)
+        self.filter_cfg_key = _config_key(self.config, without=("metrics",))
+        self.birth_key = _birth_key(self.config)
+
+    def record(self) -> _Recorded:
+        """One SUMO run per trial (or the share's)."""
+        exp, share = self.config.experiment, self.share
+        key = (
+            self.seeds.base_seed,
+            self.trial,
+            float(exp.duration),
+            id(self.scene),
+            id(self.scenario),
+            self.fns.key[0],
+        )
         t0 = time.perf_counter()
-        if scans_key in share.scans:
-            scans = share.scans[scans_key]
+        if key in share.recordings:
+            recording = share.recordings[key]
+            share.count("recording_reused")
+        else:
+            recording = share.recordings[key] = self.fns.simulate(self.scene, self.scenario, self.seeds,
+                                                                  duration=exp.duration)  # fmt: skip
+            share.count("recording")
+        self.out.timing["sumo"] = time.perf_counter() - t0
+        self.out.timing["sensor"] = 0.0
+        return _Recorded(recording, key)
+
+    def observe(self, recorded: _Recorded, lam: float) -> _Observed:
+        """The scans at clutter rate ``lam`` (or the share's); the real sensor computes its geometry once for every
+        lambda."""
+        share, seeds = self.share, self.seeds
+        sensor_cfg = self.config.sensor_at(lam)
+        key = (recorded.key, repr(sensor_cfg), self.fns.key[1])
+        t0 = time.perf_counter()
+        if key in share.scans:
+            scans = share.scans[key]
             share.count("scans_reused")
         else:
-            if fn_key[1] == "default":  # the real sensor: its geometry is computed once for every lambda
-                geometry = share.geometry.setdefault(rec_key, {})
-                scans = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs(), geometry=geometry)
+            if self.fns.real_sensor:
+                geometry = share.geometry.setdefault(recorded.key, {})
+                scans = self.fns.observe(recorded.recording, self.scene, sensor_cfg, seeds.sensor_rngs(),
+                                         geometry=geometry)  # fmt: skip
             else:
-                scans = observe_fn(recording, scene, sensor_cfg, seeds.sensor_rngs())
-            share.scans[scans_key] = scans
+                scans = self.fns.observe(recorded.recording, self.scene, sensor_cfg, seeds.sensor_rngs())
+            share.scans[key] = scans
             share.count("scans")
-        out.timing["sensor"] += time.perf_counter() - t0
+        self.out.timing["sensor"] += time.perf_counter() - t0
         # the sensor's geometry is the same for every lambda when the real sensor observed the scans
-        geometry_key = (rec_key, repr(sensor_cfg.settings))
-        candidates_key = geometry_key if fn_key[1] == "default" else scans_key
-        for model in exp.models:
-            births = None
-            if births_once:
-                births_key = (candidates_key, birth_key, model, fn_key[3])
-                candidates = share.birth_candidates.setdefault(births_key, {})
-                births = _births_once(model, config, sensor_cfg, scene, seeds, birth_factory, candidates, share.count)
-            for mode, family in family_runs(exp.probabilities, exp.filters):
-                key = RunKey(trial, float(lam), model, mode, family)
-                run_key = (scans_key, cfg_key, model, mode, family, save_estimates, *fn_key[2:])
-                cached = share.runs.get(run_key)
-                if cached is not None:
-                    _replay(cached, out)
-                    share.count("runs_reused")
-                    continue
-                before = TableSizes.of(out)
-                filter_key = (scans_key, filter_cfg_key, model, mode, family, *fn_key[2:])
-                kept = share.filter_runs.get(filter_key)
-                if kept is not None:  # the same filter run under another metrics config: score it only
-                    _record(key, config, sensor_cfg, scans, seeds, kept, out)
-                    share.count("runs_rescored")
-                else:
-                    run = _run_one(key, config, sensor_cfg, scene, scans, seeds, filter_cls, birth_factory, out, births)
-                    share.count("runs")
-                    if share.keep_filter_runs and run is not None:
-                        share.filter_runs[filter_key] = run
-                finished = before.one_run_since(out)
-                if finished is not None:  # a finished built-in run: reusable
-                    share.runs[run_key] = finished
-        for tracker in exp.trackers:
-            for mode in exp.probabilities:
-                key = RunKey(trial, float(lam), tracker, mode)
-                _run_one_tracker(key, config, sensor_cfg, scene, scans, seeds, out)
-    return out
+        candidates_key = (recorded.key, repr(sensor_cfg.settings)) if self.fns.real_sensor else key
+        return _Observed(float(lam), sensor_cfg, scans, key, candidates_key)
+
+    def run_model(self, model: str, observed: _Observed, births_once: bool) -> None:
+        """Birth model ``model`` in every probability mode and filter family (its births once for every mode when
+        ``births_once`` and the model's births read only the scan)."""
+        births = None
+        if births_once:
+            births_key = (observed.candidates_key, self.birth_key, model, self.fns.key[3])
+            candidates = self.share.birth_candidates.setdefault(births_key, {})
+            births = _births_once(model, self.config, observed.sensor_cfg, self.scene, self.seeds,
+                                  self.fns.birth_factory, candidates, self.share.count)  # fmt: skip
+        exp = self.config.experiment
+        for mode, family in family_runs(exp.probabilities, exp.filters):
+            self.run_filter(RunKey(self.trial, observed.lam, model, mode, family), observed, births)
+
+    def run_filter(self, key: RunKey, observed: _Observed, births: _BirthsOnce | None) -> None:
+        """One (model, mode, family) filter run: replayed from the share, scored again from a kept filter run (a
+        config that differs only in ``metrics``), or run; a finished built-in run is kept for reuse."""
+        share, out, fn_key = self.share, self.out, self.fns.key
+        run_key = (observed.key, self.cfg_key, key.model, key.mode, key.family, self.save_estimates, *fn_key[2:])
+        cached = share.runs.get(run_key)
+        if cached is not None:
+            _replay(cached, out)
+            share.count("runs_reused")
+            return
+        before = TableSizes.of(out)
+        filter_key = (observed.key, self.filter_cfg_key, key.model, key.mode, key.family, *fn_key[2:])
+        kept = share.filter_runs.get(filter_key)
+        if kept is not None:  # the same filter run under another metrics config: score it only
+            _record(key, self.config, observed.sensor_cfg, observed.scans, self.seeds, kept, out)
+            share.count("runs_rescored")
+        else:
+            run = self.run_one(key, observed, births)
+            share.count("runs")
+            if share.keep_filter_runs and run is not None:
+                share.filter_runs[filter_key] = run
+        finished = before.one_run_since(out)
+        if finished is not None:  # a finished built-in run: reusable
+            share.runs[run_key] = finished
+
+    def run_one(self, key: RunKey, observed: _Observed, births: _BirthsOnce | None = None) -> FilterRun | None:
+        """One (model x mode) filter run on the scans; appends its row, episodes, steps (and estimates) to ``out``.
+
+        ``births``: the model's births shared by every probability mode (:func:`_births_once`); None builds the
+        model. Returns the finished run of a built-in model (a study may score it again,
+        :attr:`TrialShare.filter_runs`), None for a plugin's.
+
+        A built-in birth model runs unguarded (an exception fails the trial: a bug of soabench). A plugin is checked
+        at every scan (:mod:`soabench.experiment.trial.guard`); if it fails, the run is recorded in ``out.failures``
+        and the trial goes on with the other runs.
+        """
+        config, sensor_cfg, scans, seeds, out = self.config, observed.sensor_cfg, observed.scans, self.seeds, self.out
+        birth_factory, filter_cls = self.fns.birth_factory, self.fns.filter_cls
+        if plugins.is_builtin_birth(key.model):
+            birth_model = (
+                births
+                if births is not None
+                else birth_factory(key.model)(config.birth, sensor_cfg, self.scene, seeds.placement_rng())
+            )
+            filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
+            run = run_tracker(scans, FilterTracker(birth_model, filt, p_D_b))
+            _record(key, config, sensor_cfg, scans, seeds, run, out)
+            return run
+
+        def build() -> FilterTracker:
+            cls = birth_factory(key.model)
+            options = config.plugins.get(key.model, {})
+            own_cfg, own_sensor = dataclasses.replace(config.birth), dataclasses.replace(sensor_cfg)
+            birth_model = cls(own_cfg, own_sensor, self.scene, seeds.placement_rng(), **options)
+            filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
+            return FilterTracker(_PrivateScans(birth_model), filt, p_D_b, check_births=guard.check_births)
+
+        run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out, config.experiment.plugin_budget)
+        if run is not None:
+            _record(key, config, sensor_cfg, scans, seeds, run, out)
+        return None
+
+    def run_trackers(self, observed: _Observed) -> None:
+        """Every whole tracker of ``experiment.trackers`` in every probability mode."""
+        for tracker in self.config.experiment.trackers:
+            for mode in self.config.experiment.probabilities:
+                key = RunKey(self.trial, observed.lam, tracker, mode)
+                _run_one_tracker(
+                    key, self.config, observed.sensor_cfg, self.scene, observed.scans, self.seeds, self.out
+                )
 
 
 def family_runs(modes: Sequence[str], families: Sequence[str]) -> list[tuple[str, str | None]]:
@@ -533,54 +664,6 @@ def _replay(cached: RunRecords, out: TrialResult) -> None:
         out.estimates.extend(dict(e) for e in cached.estimates)
 
 
-def _run_one(
-    key: RunKey,
-    config: Config,
-    sensor_cfg: SensorConfig,
-    scene: SceneMap,
-    scans: Scans,
-    seeds: TrialSeeds,
-    filter_cls: type | None,
-    birth_factory: Callable[[str], type],
-    out: TrialResult,
-    births: _BirthsOnce | None = None,
-) -> FilterRun | None:
-    """One (model x mode) filter run on ``scans``; appends its row, episodes, steps (and estimates) to ``out``.
-
-    ``births``: the model's births shared by every probability mode (:func:`_births_once`); None builds the model.
-    Returns the finished run of a built-in model (a study may score it again, :attr:`TrialShare.filter_runs`),
-    None for a plugin's.
-
-    A built-in birth model runs unguarded (an exception fails the trial: a bug of soabench). A plugin is checked at
-    every scan (:mod:`soabench.experiment.trial.guard`); if it fails, the run is recorded in ``out.failures`` and the
-    trial goes on with the other runs.
-    """
-
-    if plugins.is_builtin_birth(key.model):
-        birth_model = (
-            births
-            if births is not None
-            else birth_factory(key.model)(config.birth, sensor_cfg, scene, seeds.placement_rng())
-        )
-        filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
-        run = run_tracker(scans, FilterTracker(birth_model, filt, p_D_b))
-        _record(key, config, sensor_cfg, scans, seeds, run, out)
-        return run
-
-    def build() -> FilterTracker:
-        cls = birth_factory(key.model)
-        options = config.plugins.get(key.model, {})
-        own_cfg, own_sensor = dataclasses.replace(config.birth), dataclasses.replace(sensor_cfg)
-        birth_model = cls(own_cfg, own_sensor, scene, seeds.placement_rng(), **options)
-        filt, p_D_b = _filter(key, config, sensor_cfg, seeds, filter_cls)
-        return FilterTracker(_PrivateScans(birth_model), filt, p_D_b, check_births=guard.check_births)
-
-    run = _guarded(key, plugins.BIRTH, build, scans, guard.check_estimates, out, config.experiment.plugin_budget)
-    if run is not None:
-        _record(key, config, sensor_cfg, scans, seeds, run, out)
-    return None
-
-
 def _filter(
     key: RunKey, config: Config, sensor_cfg: SensorConfig, seeds: TrialSeeds, filter_cls: type | None
 ) -> tuple[Any, float]:
@@ -635,7 +718,7 @@ def _run_one_tracker(
     seeds: TrialSeeds,
     out: TrialResult,
 ) -> None:
-    """One (tracker x mode) run on ``scans``, guarded like a plugin birth model (:func:`_run_one`)."""
+    """One (tracker x mode) run on ``scans``, guarded like a plugin birth model (:meth:`_TrialSteps.run_one`)."""
 
     def build() -> Any:
         cls = plugins.resolve(plugins.TRACKER, key.model)

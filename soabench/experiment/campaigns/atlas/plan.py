@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from soabench.config import Config
+from soabench.config import FAMILY_MODES, Config
 from soabench.errors import SoabenchError, require
 from soabench.experiment.campaigns.atlas.design import Design, is_scene_axis
 
@@ -199,7 +199,6 @@ class Cost:
 
 def runs_per_trial(cfg: Config) -> int:
     """Filter runs of one trial of one point: (models x modes per family) x families x clutter rates + trackers."""
-    from soabench.config import FAMILY_MODES
 
     exp = cfg.experiment
     per_family = sum(len([m for m in exp.probabilities if m in FAMILY_MODES[f]]) for f in exp.filters)

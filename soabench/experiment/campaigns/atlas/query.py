@@ -14,10 +14,13 @@ configuration locked): a query cannot read or write files elsewhere or install e
 
 from __future__ import annotations
 
+import io
 import math
+import re
 from pathlib import Path
 from typing import Any
 
+from soabench.atomic import write_bytes_atomic
 from soabench.errors import SoabenchError, require
 from soabench.experiment.campaigns.atlas import store
 
@@ -96,7 +99,6 @@ def run_query(path: str | Path, sql: str) -> Any:
     import duckdb
 
     require(isinstance(sql, str) and sql.strip() != "", 'the SQL is empty; give a query such as "SELECT ..."')
-    import re
 
     names = {w.lower() for w in re.findall(r"[A-Za-z_]+", sql)}
     con = connect(path, only=[t for t in (*store.TABLES, "points") if t in names])
@@ -138,12 +140,9 @@ def format_table(table: Any, limit: int = MAX_PRINTED) -> str:
 
 def write_result(table: Any, out: Path) -> None:
     """``out``: ``.csv`` or ``.parquet`` (by suffix), written whole or not at all."""
-    import io
 
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
-
-    from soabench.atomic import write_bytes_atomic
 
     suffix = Path(out).suffix.lower()
     require(suffix in (".csv", ".parquet"), f"--out {str(out)!r}: allowed: a .csv or .parquet file")

@@ -8,7 +8,9 @@ unfinished atlas is reported on the trials it has): ``cells.csv`` (every cell of
 
 from __future__ import annotations
 
+import csv
 import html
+import io
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -186,8 +188,6 @@ def write_report(root: Path) -> str:
 
 
 def _write_cells(path: Path, cells: Sequence[stats.Cell], col_of: dict[str, str]) -> None:
-    import csv
-    import io
 
     buf = io.StringIO()
     rows = [c.as_row() for c in cells]

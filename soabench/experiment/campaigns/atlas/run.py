@@ -28,11 +28,11 @@ from pathlib import Path
 from typing import Any
 
 from soabench import plugins
-from soabench.atomic import to_jsonable, write_json_atomic, write_text_atomic
+from soabench.atomic import to_jsonable, write_bytes_atomic, write_json_atomic, write_text_atomic
 from soabench.config import Config
 from soabench.errors import Interrupted, require
 from soabench.experiment.campaigns.atlas import store
-from soabench.experiment.campaigns.atlas.design import Design, axis_type
+from soabench.experiment.campaigns.atlas.design import Design, axis_type, filter_families_allowed
 from soabench.experiment.campaigns.atlas.plan import (
     Cost,
     PointPlan,
@@ -238,7 +238,6 @@ def _write_new(root: Path, meta: dict, variants: list[SceneVariant]) -> None:
         ),
         {},
     )
-    from soabench.atomic import write_bytes_atomic
 
     write_bytes_atomic(root / "points.parquet", store.parquet_bytes(cols))
     write_json_atomic(root / store.ATLAS_FILE, to_jsonable(meta))  # last: its presence marks a planned atlas
@@ -290,8 +289,6 @@ def plan(req: AtlasRequest) -> tuple[dict, list[SceneVariant], list[PointPlan], 
     assert req.design is not None and req.config is not None
     for a in req.design.axes:
         if a.key == "filters":
-            from soabench.experiment.campaigns.atlas.design import filter_families_allowed
-
             bad = [v for v in a.values if v not in filter_families_allowed()]
             require(not bad, f"axis filters: {bad[0] if bad else ''!r} is unknown; allowed: "
                     f"{', '.join(filter_families_allowed())}")  # fmt: skip

@@ -355,7 +355,7 @@ def write_outputs(
             for f, r in per_family.items()
         }
     write_json_atomic(out / "summary.json", summary)
-    md = _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, stationary, infos, out)
+    md = _markdown(spec, summary, records, out)
     levels_md = _levels_md(lv, ug, models) + _trackeval_md(te, tt, lv, models)
     if levels_md:
         md += "\n" + "\n".join(levels_md)
@@ -425,7 +425,10 @@ def _family_md(family: str, tables: dict, models: list[str], ospa_c: float) -> l
     return [*L, "", *(t.replace("## Tracks", f"### Tracks, {family_label(family)}", 1) for t in tracks)]
 
 
-def _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, stationary, infos, out) -> str:
+def _markdown(spec: KittiSpec, summary: dict, records: dict, out: Path) -> str:
+    """report.md's sections from the numbers of summary.json (and the per-sequence records for Fig. 7's means)."""
+    folds, t1, tt, pw, sw = (summary[k] for k in ("folds", "table1", "tracks", "pairwise", "sweep"))
+    models, infos = summary["models"], summary["sequence_info"]
     m = spec.config.metrics
     det = _shown(spec.detections, out) if spec.detections else "(root)/detections"
     L = [
@@ -471,7 +474,18 @@ def _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, sta
         for x in models:
             paper = f"{PAPER['sweep_std'][x]:.2f}" if x in PAPER["sweep_std"] else "—"
             L.append(f"| {_label(x)} | {sw[x]['std_of_means']:.3f} | {paper} |")
-    L += ["", *_tracks_md(tt, models), "## Notes", ""]
+    L += ["", *_tracks_md(tt, models), "## Notes", "", *_notes_md(spec, summary, out)]
+    L += ["", "Figures: `figures/fig6_delay_hist.png`, `figures/fig7_components.png`"
+          + (", `figures/fig8_nhat_sweep.png`" if sw else "") + "."]  # fmt: skip
+    return "\n".join(L) + "\n"
+
+
+def _notes_md(spec: KittiSpec, summary: dict, out: Path) -> list[str]:
+    """The Notes of report.md: missing semantics or oxts, nominal calibrations, skipped sequences, GMBM on KITTI,
+    dropped detections, data exported from SUMO."""
+    models, infos, skipped = summary["models"], summary["sequence_info"], summary["skipped"]
+    no_sem, stationary = summary["semantics_missing"], summary["stationary_ego"]
+    L: list[str] = []
     if no_sem:
         L.append(
             f"- No semantics for {len(no_sem)} sequence(s) ({', '.join(no_sem)}): S-OA used its occlusion and FOV "
@@ -494,6 +508,4 @@ def _markdown(spec, folds, t1, tt, pw, sw, records, models, skipped, no_sem, sta
     L.append(f"- Detections dropped: {dropped} outside the FOV, {below} below the score threshold.")
     if (Path(spec.root) / "export.json").is_file():
         L.append("- These sequences were generated from SUMO by `soabench export kitti`; they are not KITTI data.")
-    L += ["", "Figures: `figures/fig6_delay_hist.png`, `figures/fig7_components.png`"
-          + (", `figures/fig8_nhat_sweep.png`" if sw else "") + "."]  # fmt: skip
-    return "\n".join(L) + "\n"
+    return L

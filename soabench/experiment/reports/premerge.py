@@ -1,5 +1,5 @@
 """The merges of several finished run folders at once, on the workers of a process pool (the report
-phase of ``soabench study``).
+phase of ``soabench study``), and the merge a finished run's report starts with (:func:`merge`).
 
 A study ends with about twenty finished folders (main run, clutter points, N̂ points, sensitivity runs). Each one's
 report starts with :meth:`~soabench.experiment.runs.store.RunStore.merge` (every trial record read, the step rows
@@ -28,7 +28,7 @@ from typing import Any
 
 from soabench.experiment.execution.executors import PoolExecutor
 from soabench.experiment.reports.tables import load_tables
-from soabench.experiment.runs.store import RunStore, merged_stamp
+from soabench.experiment.runs.store import RunStore, merge_args, merged_stamp
 from soabench.figures.drawing import folder_key, forget_arrays, remember_arrays, save_arrays
 
 
@@ -58,12 +58,6 @@ class MergeBatch:
     @property
     def task_fn(self) -> Any:
         return merge_task
-
-
-def merge_args(config: Any) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """The (models, modes) a run folder of ``config`` is merged with: its birth models then trackers, its modes."""
-    exp = config.experiment
-    return (*exp.models, *exp.trackers), tuple(exp.probabilities)
 
 
 def merge_task(i: int, batch: MergeBatch) -> dict:
