@@ -29,7 +29,7 @@ import numpy as np
 
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import predict as predict_mixture
-from soabench.lmb.cycle import _birth_groups as birth_groups
+from soabench.lmb.cycle import birth_groups
 from soabench.lmb.tracks import Tracks, make_labels
 from soabench.types import SOURCE_MEAS, Births
 

@@ -55,7 +55,7 @@ UP_R_MIN, UP_GATE, UP_MAX_HYP, UP_PRUNE_R, UP_MAX_TRACKS, UP_PRUNE_T, UP_MERGE_U
 
 
 @njit(cache=True)
-def _birth_groups(bw, bm, bP, bsrc, r_max, U, J_h):
+def birth_groups(bw, bm, bP, bsrc, r_max, U, J_h):
     """:func:`soabench.lmb.birth.group_birth`'s tracks as (r, origin, n_comp (G,), comp (sum n_comp,), w): each
     group's components (indices into the birth arrays), heaviest first, lowest index on ties, at most J_h, with
     their normalised weights; components of zero weight join no group."""
@@ -131,7 +131,7 @@ def predict_births(r, label, origin, age, start, w, m, P, F, Q, pred_pars, p_S, 
     C0 = w.shape[0]
     # birth tracks: their components (indices into the birth arrays), weights and existences
     if groups:
-        rb, ob, nb_comp, bcomp, bwk = _birth_groups(bw, bm, bP, bsrc, r_max, U, J_h)
+        rb, ob, nb_comp, bcomp, bwk = birth_groups(bw, bm, bP, bsrc, r_max, U, J_h)
     else:
         n_pos = 0
         for j in range(bw.shape[0]):
