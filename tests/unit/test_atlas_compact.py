@@ -138,6 +138,22 @@ def test_an_extended_atlas_runs_only_the_new_trials_with_the_same_seeds(loose, t
     assert main(["atlas", "--out", str(root), "--trials", "2", "--no-progress"]) == 2  # fewer trials: refused
 
 
+def test_an_atlas_made_by_another_checkout_grows_here(loose, tmp_path, monkeypatch):
+    """Its scene files name the scene's files where the other checkout had them: every session writes them anew
+    from the scene and the variant's keys, so the new trials run on this checkout's files."""
+    src, trials, _ = loose
+    root = _copy(src, tmp_path)
+    scenes = sorted((root / "scenes").glob("*.scenario.toml"))
+    assert scenes
+    here = {p.name: p.read_text() for p in scenes}
+    for p in scenes:
+        p.write_text(p.read_text().replace('net = "/', 'net = "/gone/elsewhere/'))
+    written: list = []
+    o = _run(_request(root, trials=3, explicit={"experiment.trials"}), written, monkeypatch)
+    assert o.complete and sorted(written) == [(2, 0), (2, 1)]
+    assert {p.name: p.read_text() for p in sorted((root / "scenes").glob("*.scenario.toml"))} == here
+
+
 def test_unified_schema_promotes_numbers_and_fills_missing_columns(tmp_path):
     (tmp_path / "trials").mkdir()
     a = {"point": [0, 0], "x": [1, 2], "note": [None, None]}

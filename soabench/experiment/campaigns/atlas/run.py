@@ -218,13 +218,20 @@ def _spec(root: Path, meta: dict) -> AtlasSpec:
     )
 
 
-def _write_new(root: Path, meta: dict, variants: list[SceneVariant]) -> None:
+def _write_scenes(root: Path, variants: list[SceneVariant]) -> None:
+    """The scenario file of each scene variant, written in every session: it is derived from the scene and the
+    variant's keys, and names the scene's files where this checkout has them (an atlas made elsewhere, or by a
+    checkout since moved, resumes and grows here)."""
     from soabench.experiment.campaigns.occlusion import dump_toml
 
     for v in variants:
         data = variant_scenario(v)
         if data is not None:
             write_text_atomic(root / "scenes" / f"{v.name}.scenario.toml", dump_toml(data))
+
+
+def _write_new(root: Path, meta: dict, variants: list[SceneVariant]) -> None:
+    _write_scenes(root, variants)
     cols = store.columns_of(
         (
             {
@@ -339,8 +346,10 @@ def run_atlas(req: AtlasRequest, options: RunOptions = RUN_DEFAULTS, log: Any = 
     with FolderLock(root, "atlas folder"):
         if not resuming:
             _write_new(root, meta, variants)
-        elif meta["trials"] != store.read_meta(root)["trials"]:
-            write_json_atomic(root / store.ATLAS_FILE, to_jsonable(meta))
+        else:
+            _write_scenes(root, variants)
+            if meta["trials"] != store.read_meta(root)["trials"]:
+                write_json_atomic(root / store.ATLAS_FILE, to_jsonable(meta))
         store.clear_partials(root)
         spec = _spec(root, meta)
         todo_n = n_chunks - len({c for c in done if c[0] < n_trials})
