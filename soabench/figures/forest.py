@@ -20,6 +20,7 @@ from matplotlib.lines import Line2D
 from soabench.experiment.reports.headline import Headline, Metric, headline
 from soabench.experiment.reports.tables import RunTables
 from soabench.figures import style as ps
+from soabench.figures.families import FAMILY_LABEL, run_families
 
 #: a row is drawn off scale when its widest bound exceeds this many times the median of the rows' widest bounds
 _OFF_SCALE = 4.0
@@ -100,5 +101,8 @@ def forest_figure(head: Headline, metrics: Sequence[str] | None = None) -> Figur
 
 
 def paired_figure(tables: RunTables, clutter: float) -> Figure:
-    """A run's ``figures/paired.png``: the forest plot of every metric of its headline at ``clutter``."""
-    return forest_figure(headline(tables, clutter))
+    """A run's ``figures/paired.png``: the forest plot of every metric of its headline at ``clutter``; the title
+    names the filter family when the tables hold one family's rows (a run of several draws it on its first's)."""
+    fams = run_families(tables)
+    family = FAMILY_LABEL.get(fams[0], fams[0]) if len(fams) == 1 else None
+    return forest_figure(headline(tables, clutter, family))

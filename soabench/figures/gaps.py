@@ -1,7 +1,8 @@
 """Identity kept against the length of the occlusion gap (docs/method.md §9.4): the figure a reader looks at first.
 
 One panel per occluder kind that hid some pedestrian (all kinds together first, then parked car, moving vehicle,
-building, other obstacle), one row per probability mode (and filter family, when the run has several). In a panel,
+building, other obstacle), titled once over its column; one row per probability mode (and filter family, when the
+run has several), named once left of the row, so the figure reads at any number of rows. In a panel,
 x is the gap length bin (``metrics.gap_bins``), y the share of re-emergences re-acquired under the label held before
 the gap, pooled over the run's trials; one curve per model (colour, marker) with its 95 % bootstrap band over trials
 (:func:`soabench.experiment.reports.occlusion.identity_curves`). The number of counted re-emergences is printed
@@ -27,8 +28,10 @@ from soabench.tracks.gaps import OCCLUDER_LABEL
 
 #: points resting on fewer re-emergences than this are drawn hollow
 FEW = 5
-#: a kind's panel title
+#: a kind's column title
 TITLE = {"all": "every occluder", **OCCLUDER_LABEL}
+#: the height of one row of panels (inches): the figure grows with the families and modes
+ROW_HEIGHT = 1.45
 
 
 def _bins(tables: RunTables) -> tuple[int, ...]:
@@ -49,20 +52,19 @@ def identity_gaps_figure(tables: RunTables, clutter: float, families: Sequence[t
     ncol = max(1, len(kinds))
     offsets = (np.arange(len(models)) - (len(models) - 1) / 2) * min(0.07, 0.45 / max(1, len(models)))
     with ps.style():
-        fig = ps.figure("double", 0.5 + 1.9 * max(1, len(rows)))
+        fig = ps.figure("double", 1.0 + ROW_HEIGHT * max(1, len(rows)))
         axes = fig.subplots(max(1, len(rows)), ncol, sharey=True, squeeze=False)
-        letters = iter(ps.letters(axes.size))
         for r, (family, curves, mode) in enumerate(rows):
             for c, kind in enumerate(kinds):
                 ax = axes[r, c]
-                where = ", ".join(w for w in (family, mode) if w)
-                ps.panel_title(ax, next(letters), f"{TITLE[kind]} ({where})")
+                if r == 0:  # the occluder kind once, over its column
+                    ax.set_title(TITLE[kind], loc="center", fontsize=ps.RC["axes.titlesize"], fontweight="bold")
+                if c == 0:  # the family and mode once, left of their row
+                    ax.set_ylabel(f"{', '.join(w for w in (family, mode) if w)}\nidentity kept")
                 ax.set_xlim(-0.5, len(bins) - 0.5)
                 ax.set_ylim(0, 1.02)
                 if r == len(rows) - 1:
                     ax.set_xlabel("gap length (scans)")
-                if c == 0:
-                    ax.set_ylabel("identity kept")
                 counts = np.zeros(len(bins))
                 for i, model in enumerate(models):
                     arr = curves.get(kind, {}).get((model, mode))
@@ -91,7 +93,7 @@ def identity_gaps_figure(tables: RunTables, clutter: float, families: Sequence[t
         fig.suptitle(
             f"Identity kept through an occlusion gap, λ = {clutter:g}: the share of re-emergences re-acquired under "
             "the label held before the gap\n(band: 95 % bootstrap interval over trials; hollow: fewer than "
-            f"{FEW} re-emergences; n: the most any model counted)",
-            fontsize=6.5,
+            f"{FEW} re-emergences;\nn: the most re-emergences any model counted in the bin)",
+            fontsize=ps.RC["axes.titlesize"],
         )
     return fig

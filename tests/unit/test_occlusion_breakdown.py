@@ -110,6 +110,24 @@ def test_identity_curves_per_kind():
     assert np.isnan(curves["building"][("pubm", "static")][0, 0])  # the building hid no 1-scan gap
 
 
+def test_identity_gaps_figure_labels_columns_and_rows_once_at_any_number_of_rows():
+    """14 families x 3 kinds (42 panels, past the 26 letters): the kind once over each column, the family and mode
+    once left of each row, no panel letter; the figure grows with the rows."""
+    from soabench.figures.gaps import ROW_HEIGHT, identity_gaps_figure
+
+    t = tables()
+    fams = [(f"F{i}", t) for i in range(14)]
+    fig, one = identity_gaps_figure(t, 3.0, fams), identity_gaps_figure(t, 3.0, fams[:1])
+    axes = [ax for ax in fig.axes if ax.get_subplotspec() is not None]
+    grid = np.array(axes).reshape(14, 4)
+    assert [ax.get_title() for ax in grid[0]] == ["every occluder", "parked car", "moving vehicle", "building"]
+    assert all(ax.get_title(loc=w) == "" for ax in grid[1:].ravel() for w in ("left", "center", "right"))
+    assert all(ax.get_title(loc="left") == "" for ax in grid[0])
+    assert [ax.get_ylabel() for ax in grid[:, 0]] == [f"F{i}, static\nidentity kept" for i in range(14)]
+    assert all(ax.get_ylabel() == "" for ax in grid[:, 1:].ravel())
+    assert fig.get_figheight() - one.get_figheight() == pytest.approx(13 * ROW_HEIGHT)
+
+
 def test_track_intervals():
     mean, lo, hi, n = mean_interval(np.array([1.0, 2.0, 3.0, np.nan]))
     assert (mean, n) == (2.0, 3) and lo == pytest.approx(2.0 - 4.302653 / math.sqrt(3)) and hi > 3.0
