@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import operator
 from collections.abc import Callable, Hashable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -859,3 +860,53 @@ class StepResult:
 
     def __repr__(self) -> str:
         return f"StepResult(k={self.k}, {len(self.X)} estimates, mass {self.sum_w:.3g}, {self.n_reduced} components)"
+
+
+#: the metrics of an atlas's phase diagrams (docs/method.md §5.10), column -> label; each is oriented so that a
+#: positive advantage means S-OA is better
+ATLAS_METRICS = {
+    "delay_win": "delay win share",
+    "card_red": "cardinality-error reduction (%)",
+    "ospa_red": "OSPA reduction (%)",
+    "dhota": "ΔHOTA",
+}
+#: each metric's value at no advantage
+ATLAS_NULL = {"delay_win": 0.5, "card_red": 0.0, "ospa_red": 0.0, "dhota": 0.0}
+
+
+@dataclass
+class AtlasCell:
+    """One cell of an atlas (one value of one axis, or a value pair of two; docs/method.md §5.10) for one metric and
+    baseline: the estimate, its 95 % interval, its p-value and the FDR decision."""
+
+    metric: str
+    baseline: str
+    mode: str
+    family: str
+    axes: tuple[str, ...]
+    values: tuple
+    n: int
+    estimate: float
+    low: float
+    high: float
+    p: float
+    significant: bool = False
+    adj_low: float = math.nan
+    adj_high: float = math.nan
+
+    def as_row(self) -> dict:
+        d = {
+            "metric": self.metric,
+            "baseline": self.baseline,
+            "mode": self.mode,
+            "family": self.family,
+            "axis_x": self.axes[0],
+            "x": self.values[0],
+            "axis_y": self.axes[1] if len(self.axes) > 1 else "",
+            "y": self.values[1] if len(self.axes) > 1 else None,
+        }
+        d.update(
+            n_trials=self.n, estimate=self.estimate, ci_low=self.low, ci_high=self.high, p=self.p,
+            significant=self.significant, fcr_low=self.adj_low, fcr_high=self.adj_high,
+        )  # fmt: skip
+        return d

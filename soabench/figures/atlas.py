@@ -18,8 +18,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
-from soabench.experiment.campaigns.atlas.stats import METRICS, NULL, Cell
 from soabench.figures.style import DOUBLE, figure, letters, model_style, panel_title
+from soabench.types import ATLAS_METRICS, ATLAS_NULL, AtlasCell
 
 
 def _sorted_values(values) -> list:
@@ -31,7 +31,7 @@ def _tick(v) -> str:
 
 
 def pair_heatmaps(
-    cells: Sequence[Cell],
+    cells: Sequence[AtlasCell],
     x: str,
     y: str,
     names: dict[str, str],
@@ -43,7 +43,7 @@ def pair_heatmaps(
     bases = [b for b in baselines if any(c.baseline == b for c in cells)]
     xs = _sorted_values(c.values[0] for c in cells)
     ys = _sorted_values(c.values[1] for c in cells)
-    null = NULL[metric]
+    null = ATLAS_NULL[metric]
     finite = [abs(c.estimate - null) for c in cells if math.isfinite(c.estimate)]
     span = max(finite) if finite and max(finite) > 0 else 1.0
     norm = TwoSlopeNorm(vcenter=null, vmin=null - span, vmax=null + span)
@@ -83,9 +83,9 @@ def pair_heatmaps(
         panel_title(ax, letter, f"vs {label(b)}".replace(" (", "\n("))  # "UBM (workspace)" on two lines
     axs[0].set_ylabel(names[y])
     cb = fig.colorbar(im, ax=list(axs), fraction=0.035 / max(1, ncol / 3), pad=0.02)
-    cb.set_label(METRICS[metric], fontsize=6.5)
+    cb.set_label(ATLAS_METRICS[metric], fontsize=6.5)
     fig.suptitle(
-        f"S-OA's {METRICS[metric]} over each baseline (blue: S-OA better)\n"
+        f"S-OA's {ATLAS_METRICS[metric]} over each baseline (blue: S-OA better)\n"
         "framed: significant after BH-FDR (q = 0.05); dashed: no advantage",
         x=0.01, ha="left", fontsize=7.5,
     )  # fmt: skip
@@ -93,7 +93,7 @@ def pair_heatmaps(
 
 
 def axis_curves(
-    cells: Sequence[Cell],
+    cells: Sequence[AtlasCell],
     axes: Sequence[str],
     names: dict[str, str],
     baselines: Sequence[str],
@@ -107,7 +107,7 @@ def axis_curves(
     nrow = math.ceil(n / ncol)
     fig = figure("double", 1.9 * nrow + 0.6)
     axs = fig.subplots(nrow, ncol, squeeze=False)
-    null = NULL[metric]
+    null = ATLAS_NULL[metric]
     handles = {}
     for k, (a, letter) in enumerate(zip(shown, letters(n), strict=True)):
         ax = axs[k // ncol][k % ncol]
@@ -134,7 +134,7 @@ def axis_curves(
         ax.set_xlabel(names[a] if numeric else "")
         panel_title(ax, letter, names[a])
         if k % ncol == 0:
-            ax.set_ylabel(METRICS[metric])
+            ax.set_ylabel(ATLAS_METRICS[metric])
     for k in range(n, nrow * ncol):
         axs[k // ncol][k % ncol].set_visible(False)
     fig.legend(
@@ -142,7 +142,7 @@ def axis_curves(
         ncol=min(5, len(handles)), frameon=False,
     )  # fmt: skip
     fig.suptitle(
-        f"S-OA's {METRICS[metric]} (mean, 95 % CI over trials; filled = significant after BH-FDR; dashed = none)",
+        f"S-OA's {ATLAS_METRICS[metric]} (mean, 95 % CI over trials; filled = significant after BH-FDR; dashed = none)",
         x=0.01, ha="left", fontsize=7.5,
     )  # fmt: skip
     return fig

@@ -23,57 +23,15 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
-#: the metrics of the phase diagrams: (column, orientation, no-advantage value, kind)
-METRICS = {
-    "delay_win": "delay win share",
-    "card_red": "cardinality-error reduction (%)",
-    "ospa_red": "OSPA reduction (%)",
-    "dhota": "ΔHOTA",
-}
-NULL = {"delay_win": 0.5, "card_red": 0.0, "ospa_red": 0.0, "dhota": 0.0}
+from soabench.types import ATLAS_METRICS as METRICS
+from soabench.types import ATLAS_NULL as NULL
+from soabench.types import AtlasCell as Cell
+
 Q = 0.05  #: false-discovery rate of the markers
 REFERENCE = "soa"
-
-
-@dataclass
-class Cell:
-    """One cell of one metric and baseline: the estimate, its 95 % interval, its p-value and the FDR decision."""
-
-    metric: str
-    baseline: str
-    mode: str
-    family: str
-    axes: tuple[str, ...]
-    values: tuple
-    n: int
-    estimate: float
-    low: float
-    high: float
-    p: float
-    significant: bool = False
-    adj_low: float = math.nan
-    adj_high: float = math.nan
-
-    def as_row(self) -> dict:
-        d = {
-            "metric": self.metric,
-            "baseline": self.baseline,
-            "mode": self.mode,
-            "family": self.family,
-            "axis_x": self.axes[0],
-            "x": self.values[0],
-            "axis_y": self.axes[1] if len(self.axes) > 1 else "",
-            "y": self.values[1] if len(self.axes) > 1 else None,
-        }
-        d.update(
-            n_trials=self.n, estimate=self.estimate, ci_low=self.low, ci_high=self.high, p=self.p,
-            significant=self.significant, fcr_low=self.adj_low, fcr_high=self.adj_high,
-        )  # fmt: skip
-        return d
 
 
 def _clean(x: str) -> str:
