@@ -23,7 +23,8 @@ configure_numba_cache()
 
 from numba import njit  # noqa: E402
 
-from soabench.pmbm.murty import array_sum, murty_arrays  # noqa: E402
+from soabench.metrics_kernels import np_sum  # noqa: E402
+from soabench.pmbm.murty import murty_arrays  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
 
@@ -92,7 +93,7 @@ def cluster_costs(
 @njit(cache=True)
 def _sum_at(x: np.ndarray, idx: np.ndarray) -> float:
     """``x[idx].sum()`` in numpy's order."""
-    return array_sum(x[idx])
+    return np_sum(x[idx], idx.shape[0])
 
 
 @njit(cache=True)

@@ -10,8 +10,9 @@ Each subproblem is solved by :func:`lsa`, the shortest augmenting path algorithm
 2016, the algorithm of :func:`scipy.optimize.linear_sum_assignment`) with its deterministic choices: rows are added
 in order; among the columns at the lowest reduced path cost the scan, which runs from the last column down, keeps
 the first it meets, except that a free column (one that ends the path) beats an assigned one at equal cost. An
-assignment's cost is the sum of its cells in row order, summed as numpy sums an array (pairwise in blocks of 8).
-So the assignments and costs are those of scipy's solver, exact ties included, on every CPU.
+assignment's cost is the sum of its cells in row order, summed as numpy sums an array (pairwise in blocks of 8:
+:func:`soabench.metrics_kernels.np_sum`). So the assignments and costs are those of scipy's solver, exact ties
+included, on every CPU.
 """
 
 from __future__ import annotations
@@ -24,39 +25,7 @@ configure_numba_cache()
 
 from numba import njit  # noqa: E402
 
-
-@njit(cache=True)
-def array_sum(a: np.ndarray) -> float:
-    """``a.sum()`` of a 1-d float64 array in numpy's order: plain below 8 terms, 8 partial sums up to 128, halves
-    (multiples of 8) above, so that a compiled sum equals numpy's bit for bit."""
-    n = a.shape[0]
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += a[i]
-        return res
-    if n <= 128:
-        r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
-        i = 8
-        stop = n - n % 8
-        while i < stop:
-            r0 += a[i]
-            r1 += a[i + 1]
-            r2 += a[i + 2]
-            r3 += a[i + 3]
-            r4 += a[i + 4]
-            r5 += a[i + 5]
-            r6 += a[i + 6]
-            r7 += a[i + 7]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += a[i]
-            i += 1
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return array_sum(a[:n2]) + array_sum(a[n2:])
+from soabench.metrics_kernels import np_sum  # noqa: E402
 
 
 @njit(cache=True)
@@ -152,7 +121,7 @@ def _solve(C: np.ndarray, cols: np.ndarray, n_fixed: int) -> float:
     cells = np.empty(n)
     for r in range(n):
         cells[r] = C[r, cols[r]]
-    return array_sum(cells)
+    return np_sum(cells, n)
 
 
 @njit(cache=True)
