@@ -14,7 +14,7 @@ marginals :func:`soabench.lmb.gibbs.association_marginals`, per-track reduction
   (one Bernoulli per §2.9 merge group of the birth components, or one per component); the Bernoullis of the
   previous scan's measurements, predicted one step; and the FOV gate g at every component mean (§4.1). Only the
   line-of-sight gate of ``static+occ`` (shapely) runs between the two calls, in Python.
-* :func:`update_reduce`: association costs, marginals (enumeration or Gibbs, unchanged), the LMB approximation,
+* :func:`update_reduce`: association costs, marginals (exact or Gibbs, the array path's kernel), the LMB approximation,
   track pruning and capping, each track's prune/merge/cap, the estimates, and A_l for a model that reads the
   previous step.
 

@@ -7,9 +7,10 @@ One cycle at scan k:
    docs/method.md "LMB filter", birth): one Bernoulli per merge group of the birth model's Gaussian components (or
    one per component with ``[lmb] birth_mapping = "components"``), and Bernoullis at the previous scan's
    measurements when the model gives newborn terms;
-2. joint update with Z_k (:mod:`soabench.lmb.update`): association costs, marginals by exact enumeration where a
-   cluster has at most ``max_hypotheses`` valid hypotheses, Gibbs sampling beyond (:mod:`soabench.lmb.gibbs`,
-   docs/method.md "LMB filter", association), the LMB approximation of the GLMB posterior;
+2. joint update with Z_k (:mod:`soabench.lmb.update`): association costs, exact marginals where a cluster has at
+   most ``max_hypotheses`` valid hypotheses (maps of measurements to tracks, absent and missed summed), Gibbs
+   sampling beyond (:mod:`soabench.lmb.gibbs`, docs/method.md "LMB filter", association), the LMB approximation
+   of the GLMB posterior;
 3. per track: prune, merge and cap its Gaussian components (the GM-PHD's Vo-Ma kernels); drop tracks with
    r < ``prune_r``, keep the ``max_tracks`` most probable;
 4. estimates: the tracks with r > ``extract_r``, labelled.
