@@ -18,8 +18,8 @@ marginals :func:`soabench.lmb.gibbs.association_marginals`, per-track reduction
   track pruning and capping, each track's prune/merge/cap, the estimates, and A_l for a model that reads the
   previous step.
 
-The formulas and their order are those of the array path, which stays the default and the reference
-(``LMBFilter(..., fused=True)`` opts in; its docstring says why). Two things differ in the last bits: numpy
+The formulas and their order are those of the array path, the reference it is tested against (``LMBFilter(...,
+fused=False)``); this cycle is the default. Two things differ in the last bits: numpy
 evaluates ``exp`` and ``log`` with its own vectorised routines and the prediction's 4x4 products through BLAS, where
 the compiled loops call the C library and sum in index order, so one cycle of the two paths agrees to about 1e-13
 (``tests/equivalence/test_lmb_cycle.py``), not bit for bit. Arithmetic is IEEE (no ``fastmath``), so the fused

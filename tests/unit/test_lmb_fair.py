@@ -14,7 +14,7 @@ from test_lmb import EGO, _glmb_reference, _model, _random_case, _run, _scan, _t
 from soabench.config import Config, FilterConfig, LMBConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.lmb import LMBFilter, label_pairs
-from soabench.lmb.birth import group_birth, intensity_existence
+from soabench.lmb.birth import EXPLAINED_TOL, adaptive_existence, group_birth, intensity_existence
 from soabench.lmb.gibbs import _count_dp, _enumerate_valid, association_marginals
 from soabench.lmb.update import update
 from soabench.types import SOURCE_GM, Births, NewbornTerms
@@ -55,6 +55,19 @@ def test_intensity_existence_is_the_share_of_the_birth_term():
     got = intensity_existence(r_U, beta, kappa, 0.5)
     np.testing.assert_allclose(got, [0.5, 0.5 * 0.25, 0.0, 0.0], rtol=1e-15)
     assert intensity_existence(np.zeros(1), np.array([2.0]), np.array([0.0]), 0.9).tolist() == [0.9]
+
+
+def test_a_measurement_explained_to_the_last_bits_gives_no_birth():
+    """1 - r_U at or below EXPLAINED_TOL counts as 0: the remainder rounding leaves where a track surely took z
+    neither gives a Bernoulli of r ~ 1e-17 nor, when every measurement is explained, is normalised up by the
+    adaptive rule; just above the tolerance the formulas are unchanged."""
+    tol = EXPLAINED_TOL
+    for r_U in (np.array([1.0, 1.0]), np.array([1.0 - 2.2e-16, 1.0]), np.array([1.0 - tol, 1.0 - 1e-12])):
+        assert adaptive_existence(r_U, 0.06, 0.5).tolist() == [0.0, 0.0]
+        assert intensity_existence(r_U, np.ones(2), np.ones(2), 0.5).tolist() == [0.0, 0.0]
+    above = np.array([1.0 - 4 * tol, 1.0 - 1e-16])
+    assert adaptive_existence(above, 0.06, 0.5).tolist() == [0.06, 0.0]
+    np.testing.assert_allclose(intensity_existence(above, np.ones(2), np.ones(2), 0.5), [2 * tol, 0.0], rtol=1e-6)
 
 
 def test_birth_mapping_is_a_checked_lmb_key():
