@@ -181,26 +181,63 @@ def unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
+def _first(s: np.ndarray, a: np.ndarray, b: np.ndarray, x: int, y: int) -> bool:
+    """Entry x comes before entry y: by (sum, a, b)."""
+    if s[x] != s[y]:
+        return s[x] < s[y]
+    if a[x] != a[y]:
+        return a[x] < a[y]
+    return b[x] < b[y]
+
+
+@njit(cache=True)
 def best_sums(costs: list, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest sums of one entry of each sorted cost array: (sums (K,), index of each term (K, len)).
-    Equal sums keep the order of the (earlier terms' rank, this term's rank) pairs."""
+
+    The terms are added one array at a time: the k smallest of total[a] + c[b] (total: the sorted sums so far) by
+    a merge of the rows a, each increasing in b, through a heap of the rows' next entries. Equal sums keep the
+    order of the (earlier terms' rank, this term's rank) pairs, i.e. that of a stable sort of every sum."""
     total = np.zeros(1)
     idx = np.zeros((1, len(costs)), dtype=np.int64)
     for j in range(len(costs)):
         c = costs[j]
         nc = c.shape[0]
-        s = np.empty(total.shape[0] * nc)
-        for a in range(total.shape[0]):
-            for b in range(nc):
-                s[a * nc + b] = total[a] + c[b]
-        order = np.argsort(s, kind="mergesort")[:k]
-        idx2 = np.empty((order.shape[0], len(costs)), dtype=np.int64)
-        total = np.empty(order.shape[0])
-        for r in range(order.shape[0]):
-            idx2[r] = idx[order[r] // nc]
-            idx2[r, j] = order[r] % nc
-            total[r] = s[order[r]]
-        idx = idx2
+        nt = min(total.shape[0], k)
+        K = min(k, nt * nc)
+        hs = np.empty(nt)  # heap entries: sum, row a, column b (one per row)
+        ha = np.empty(nt, dtype=np.int64)
+        hb = np.zeros(nt, dtype=np.int64)
+        heap = np.empty(nt, dtype=np.int64)
+        for a in range(nt):  # rows in order: already a heap by (sum, a) when the sums are sorted
+            hs[a] = total[a] + c[0]
+            ha[a] = a
+            heap[a] = a
+        n_heap = nt if nc > 0 else 0
+        total2 = np.empty(K)
+        idx2 = np.empty((K, len(costs)), dtype=np.int64)
+        for r in range(K):
+            e = heap[0]
+            total2[r] = hs[e]
+            idx2[r] = idx[ha[e]]
+            idx2[r, j] = hb[e]
+            hb[e] += 1
+            if hb[e] < nc:
+                hs[e] = total[ha[e]] + c[hb[e]]
+            else:
+                n_heap -= 1
+                heap[0] = heap[n_heap]
+            p = 0  # sift down
+            while True:
+                c1, c2, best = 2 * p + 1, 2 * p + 2, p
+                if c1 < n_heap and _first(hs, ha, hb, heap[c1], heap[best]):
+                    best = c1
+                if c2 < n_heap and _first(hs, ha, hb, heap[c2], heap[best]):
+                    best = c2
+                if best == p:
+                    break
+                heap[p], heap[best] = heap[best], heap[p]
+                p = best
+        total, idx = total2, idx2
     return total, idx
 
 
@@ -238,22 +275,29 @@ def _global_hypotheses(
         T = T_flat[T_start[g] : T_start[g + 1]]
         L = L_flat[L_start[g] : L_start[g + 1]]
         nT = T.shape[0]
-        # distinct choices of the cluster's tracks' hypotheses among the prior global hypotheses
+        # distinct choices of the cluster's tracks' hypotheses among the prior global hypotheses, in order of first
+        # appearance (a row is compared in full only with the earlier ones of equal hash)
         reps = np.empty(A, dtype=np.int64)
+        hashes = np.empty(A, dtype=np.int64)
         n_u = 0
         for a in range(A):
+            h = np.int64(nT)
+            for i in range(nT):
+                h = h * np.int64(1000003) + table[a, T[i]]
             u = 0
             while u < n_u:
-                same = True
-                for i in range(nT):
-                    if table[a, T[i]] != table[reps[u], T[i]]:
-                        same = False
+                if hashes[u] == h:
+                    same = True
+                    for i in range(nT):
+                        if table[a, T[i]] != table[reps[u], T[i]]:
+                            same = False
+                            break
+                    if same:
                         break
-                if same:
-                    break
                 u += 1
             if u == n_u:
                 reps[n_u] = a
+                hashes[n_u] = h
                 n_u += 1
             inv[a] = u
         k_u = np.zeros(n_u, dtype=np.int64)

@@ -241,6 +241,10 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
     cost0 = _assignment_cost(C, col4row) if ok else np.inf
     if cost0 == np.inf:
         return out_cost[:0], out_cols[:0]
+    if k == 1:
+        out_cost[0] = cost0
+        out_cols[0] = col4row
+        return out_cost[:1], out_cols[:1]
     limit = cost0 + max_gap
     lo = np.inf
     for i in range(n):

@@ -197,6 +197,36 @@ def test_each_association_is_listed_once():
     np.testing.assert_allclose(costs, sorted(want), rtol=0, atol=1e-12)
 
 
+def test_best_sums_is_a_stable_sort_of_every_sum():
+    """The k best sums of one entry per sorted array (a heap merge) are the first k of a stable sort of every
+    sum, term indices included, also with exact ties."""
+    from numba.typed import List
+
+    from soabench.pmbm.association import best_sums
+
+    rng = np.random.default_rng(2)
+    for t in range(200):
+        costs = [
+            np.sort(
+                rng.integers(0, 4, int(rng.integers(1, 12))).astype(float)
+                if t % 2
+                else rng.normal(0, 1, int(rng.integers(1, 12)))
+            )
+            for _ in range(int(rng.integers(1, 4)))
+        ]
+        k = int(rng.integers(1, 60))
+        total, idx = np.zeros(1), np.zeros((1, len(costs)), dtype=np.int64)
+        for j, c in enumerate(costs):
+            s = (total[:, None] + c[None, :]).ravel()
+            order = np.argsort(s, kind="stable")[:k]
+            idx = idx[order // len(c)]
+            idx[:, j] = order % len(c)
+            total = s[order]
+        got_total, got_idx = best_sums(List(costs), k)
+        np.testing.assert_array_equal(got_total, total)
+        np.testing.assert_array_equal(got_idx, idx)
+
+
 @pytest.mark.parametrize("shape", [(1, 3), (7, 0), (40, 3), (25, 1)])
 def test_unique_rows_is_numpys(shape):
     from soabench.pmbm.association import unique_rows
