@@ -24,7 +24,7 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.metrics_kernels import np_sum  # noqa: E402
-from soabench.pmbm.murty import murty_arrays  # noqa: E402
+from soabench.pmbm.murty import murty_from, repaired_root, square_root  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
 
@@ -154,8 +154,30 @@ def cluster_solutions(
         for s in range(n_keep):
             out_choice[s] = choice[order[s]]
         return costs[order], out_choice
-    sol_costs, cols = murty_arrays(cluster_costs(hs, L, log_l_miss, log_l_det, log_new), k, max_gap)
+    C = cluster_costs(hs, L, log_l_miss, log_l_det, log_new)
+    m = C.shape[1]
+    sol, u, v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
+    return _ranked(C, L, nT, k, max_gap, sol, u, v, square_root(C, sol, u, v), all_miss)
+
+
+@njit(cache=True)
+def _ranked(
+    C: np.ndarray,
+    L: np.ndarray,
+    nT: int,
+    k: int,
+    max_gap: float,
+    sol: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    cost0: float,
+    all_miss: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cluster_solutions` by Murty's algorithm over the cost matrix ``C`` from its best assignment (sol, u, v)
+    of cost ``cost0`` (:func:`soabench.pmbm.murty.murty_from`)."""
+    sol_costs, cols = murty_from(C, k, max_gap, sol, u, v, cost0)
     K = sol_costs.shape[0]
+    nL = L.shape[0]
     choice = np.full((K, nT), MISS, dtype=np.int64)
     for s in range(K):
         for row in range(nL):
@@ -304,13 +326,32 @@ def _global_hypotheses(
         for a in range(A):
             k_u[inv[a]] = max(k_u[inv[a]], ks[a])
         first_sol = len(sol_costs)
+        # Murty's best assignment for a choice is repaired from the previous choice's (they differ in a few columns)
+        m = nT + L.shape[0]
+        r_sol, r_u, r_v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
+        prev = np.empty(nT, dtype=np.int64)
+        C = np.empty((0, 0))
+        warm = False
         for u in range(n_u):
             hs = np.empty(nT, dtype=np.int64)
             for i in range(nT):
                 hs[i] = table[reps[u], T[i]]
             if nT > 1 and L.shape[0] > 1:
                 n_murty += 1
-            c, ch = cluster_solutions(hs, L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
+                if warm:  # the previous choice's matrix with the changed track columns rewritten
+                    changed = np.flatnonzero(hs != prev)
+                    for i in changed:
+                        for ll in range(L.shape[0]):
+                            C[ll, i] = log_l_miss[hs[i]] - log_l_det[hs[i], L[ll]]
+                    cost0 = repaired_root(C, changed, r_sol, r_u, r_v)
+                else:
+                    C = cluster_costs(hs, L, log_l_miss, log_l_det, log_new)
+                    cost0 = square_root(C, r_sol, r_u, r_v)
+                warm = cost0 < np.inf
+                prev[:] = hs
+                c, ch = _ranked(C, L, nT, k_u[u], max_gap, r_sol, r_u, r_v, cost0, -_sum_at(log_l_miss, hs))
+            else:
+                c, ch = cluster_solutions(hs, L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
             sol_costs.append(c)
             sol_choice.append(ch)
             sol_T.append(T)
