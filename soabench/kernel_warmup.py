@@ -79,7 +79,11 @@ def _predict_update(modes: tuple[str, ...]) -> None:
         pred = cycle.predict_append(
             *_mixture_arrays(f.mixture), f.F, f.Q, f._pred_pars, *_birth_arrays(_births()), f._beta0, ego, f.next_label
         )
-        cycle.update(*pred[:9], f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
+        # the two halves that cycle.update (inlined into its callers, never compiled on its own) calls, with its types
+        w, m, P, beta, g = pred[0], pred[1], pred[2], pred[6], pred[8]
+        sup = cycle.support(w, m, P, beta, g, f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
+        no_nb, no_origin = np.empty(0), np.int64(0)
+        cycle.posterior(*pred[:8], sup, f.R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)), no_nb, no_origin, no_origin)
 
 
 def _reduction(modes: tuple[str, ...]) -> None:
