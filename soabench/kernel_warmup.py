@@ -202,10 +202,11 @@ def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:
 
 #: rounds of groups: the groups of a round are independent (no kernel in two of them) and run in parallel; a later
 #: round links the earlier rounds' cached kernels. Each group compiles the kernels of the probability modes it is
-#: given (those that take no mode ignore them).
+#: given (those that take no mode ignore them). Within a round the longest go first (the pool starts groups in this
+#: order), so that on two cores the short ones run beside the longest instead of after it.
 ROUNDS: tuple[tuple[Callable[[tuple[str, ...]], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_fused_steps, _newborn_steps, _lmb_steps, _pmbm_steps, _track_metrics),
+    (_track_metrics, _lmb_steps, _pmbm_steps, _fused_steps, _newborn_steps),
 )
 
 #: the groups whose kernels take no probability mode (compiled once for all)
