@@ -168,7 +168,7 @@ def _track_metrics(modes: tuple[str, ...]) -> None:
 
 def _lmb_steps(modes: tuple[str, ...]) -> None:
     """The LMB filter (docs/method.md "LMB filter"): steps with Gaussian births and with newborn terms (the adaptive
-    birth), which compile the association marginals on both of their paths (enumeration and Gibbs sampling)."""
+    birth), which compile the association marginals on their paths (exact and Gibbs sampling)."""
     from soabench.lmb import LMBFilter
 
     cfg = Config()
