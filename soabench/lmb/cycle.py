@@ -386,7 +386,7 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
     uP = np.empty((n_out, 4, 4))
     ustart = np.zeros(N + 1, dtype=np.int64)
     kept = np.empty(N, dtype=np.int64)
-    n_kept = 0
+    n_kept = np.int64(0)  # int64 from the start: a literal 0 compiles a second np_sum
     q = 0
     for i in range(N):
         q0 = q
@@ -424,7 +424,7 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
 
     # track pruning and cap (step 5)
     sel = np.empty(n_kept, dtype=np.int64)
-    n_sel = 0
+    n_sel = np.int64(0)
     for a in range(n_kept):
         if post_r[a] >= pars[UP_PRUNE_R]:
             sel[n_sel] = a
