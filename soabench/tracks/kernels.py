@@ -439,13 +439,46 @@ def sparse_assign_rows(n_rows, n_cols, off, col, cost, unmatched):  # pragma: no
     front = np.empty(n_all, dtype=np.int64)
     settled = np.empty(n_all, dtype=np.int64)
     visited = np.empty(n_rows, dtype=np.int64)
-    for r in range(n_rows):  # u[r]: row r's cheapest cost; it takes that column if no row before took it
-        best, u[r] = n_cols + r, unmatched
-        for q in range(off[r], off[r + 1]):
-            if cost[q] < u[r]:
-                best, u[r] = col[q], cost[q]
-        if row4col[best] < 0:
-            row4col[best], col4row[r] = r, best
+    # augmenting row reduction (Jonker & Volgenant 1987), two passes: each free row takes the column of its
+    # cheapest reduced cost c - v, whose v is lowered to tie it with the row's second cheapest; a row it displaces
+    # is free for the next pass. Only a column that stays matched has its v lowered, so the free columns keep v = 0
+    # and the potentials stay those of an optimal assignment's dual once every row is placed.
+    free = np.arange(n_rows)
+    n_free = n_rows
+    for _ in range(2):
+        n_todo, n_free = n_free, 0
+        for k in range(n_todo):
+            i = free[k]
+            h1, h2, j1, j2 = np.inf, np.inf, -1, -1
+            for q in range(off[i], off[i + 1] + 1):
+                if q < off[i + 1]:
+                    j, cst = col[q], cost[q]
+                else:
+                    j, cst = n_cols + i, unmatched
+                h = cst - v[j]
+                if h < h2:
+                    if h < h1:
+                        h2, j2, h1, j1 = h1, j1, h, j
+                    else:
+                        h2, j2 = h, j
+            i0 = row4col[j1]
+            if h1 < h2 < np.inf:
+                v[j1] -= h2 - h1
+            elif i0 >= 0 and j2 >= 0:  # a tie: the second column, free or not
+                j1, i0 = j2, row4col[j2]
+            row4col[j1], col4row[i] = i, j1
+            if i0 >= 0:
+                col4row[i0] = -1
+                free[n_free] = i0  # n_free <= k: nothing still to read is overwritten
+                n_free += 1
+    for r in range(n_rows):  # u[r]: the row's cheapest reduced cost (its own column's, where it holds one)
+        u[r] = np.inf
+        for q in range(off[r], off[r + 1] + 1):
+            if q < off[r + 1]:
+                j, cst = col[q], cost[q]
+            else:
+                j, cst = n_cols + r, unmatched
+            u[r] = min(u[r], cst - v[j])
     for i in range(n_rows):
         if col4row[i] >= 0:
             continue
