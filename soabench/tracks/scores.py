@@ -21,8 +21,6 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from soabench.notice import announced
 from soabench.tracks.sequence import BLOCK_CELLS, TrackSequence, similarity
@@ -350,26 +348,18 @@ def _identity_matched(potential: np.ndarray) -> float:
     """The largest total of ``potential`` (nG, nT) (counts of scans where a truth and a track match) over the
     one-to-one matchings of truths to tracks.
 
-    A pair without a potential match adds nothing, so the matching splits into the connected components of the
-    overlap graph (an edge where ``potential > 0``): each component is one maximum-weight assignment of its own truths
-    and tracks, and truths or tracks without an edge are left out. Every term is an integer count, so the sum is
-    exact and the same whichever optimal assignment a component returns."""
-    g, t = np.nonzero(potential)
+    A pair without a potential match adds nothing, so only the pairs with ``potential > 0`` are listed, each truth
+    free to stay unmatched at no gain: one sparse minimum-cost assignment of the negated counts
+    (:func:`soabench.tracks.kernels.sparse_assign_rows`). Every term is an integer count, so the sums are exact and
+    the total is the same whichever optimal matching is found."""
+    from soabench.tracks.kernels import sparse_assign_rows
+
+    g, t = np.nonzero(potential)  # row by row: each truth's pairs together
     if len(g) == 0:
         return 0.0
     nG, nT = potential.shape
-    graph = coo_matrix((np.ones(len(g)), (g, nG + t)), shape=(nG + nT, nG + nT))
-    _, comp = connected_components(graph, directed=False)
-    label = comp[g]
-    order = np.argsort(label, kind="stable")
-    bounds = np.flatnonzero(np.diff(label[order])) + 1
-    total = 0.0
-    for edges in np.split(order, bounds):
-        rows, cols = np.unique(g[edges]), np.unique(t[edges])
-        if len(rows) == 1 or len(cols) == 1:  # a star: the heaviest edge
-            total += float(potential[rows[:, None], cols[None, :]].max())
-            continue
-        block = potential[rows[:, None], cols[None, :]]
-        r, c = linear_sum_assignment(block, maximize=True)
-        total += float(block[r, c].sum())
-    return total
+    off = np.zeros(nG + 1, dtype=np.int64)
+    np.cumsum(np.bincount(g, minlength=nG), out=off[1:])
+    col = announced("track metrics", sparse_assign_rows, nG, nT, off, t.astype(np.int64), -potential[g, t], 0.0)
+    rows = np.flatnonzero(col >= 0)
+    return float(potential[rows, col[rows]].sum())
