@@ -666,6 +666,7 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     near = np.empty(max_ev, dtype=np.int64)  # per near pair: its a * n + b
     near_cost = np.empty(max_ev)
     terms = np.empty((max_ev, window))
+    near_bits = np.empty((max_ev, n_words), dtype=np.uint64)  # per near pair: the window's scans where it is near
     vals = np.empty(max_small)
     word = np.empty(window, dtype=np.int64)  # per scan of the window: its mask word and bit
     bits = np.empty(window, dtype=np.uint64)
@@ -696,31 +697,37 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                 loc_g[gsel[a]] = a
             for b in range(n):
                 loc_e[esel[b]] = b
-            # the pairs closer than c somewhere in the window (each once, in order of their first event): their
-            # scans' terms, c where the two are not closer; the slots of (a, b) are cleared again after the scan
+            # the pairs closer than c somewhere in the window (each once, in order of their first event), their
+            # terms at those scans and a bit per such scan; the slots of (a, b) are cleared again after the window
             n_near = 0
-            for e in range(ev_off[lo], ev_off[k + 1]):
-                x = loc_g[ev_i[e]] * n + loc_e[ev_j[e]]
-                if slot[x] < 0:
-                    slot[x] = n_near
-                    near[n_near] = x
-                    for t in range(window):
-                        terms[n_near, t] = c
-                    n_near += 1
             for t in range(lo, k + 1):
                 s = t % ring
                 word[t - lo] = s // 64
                 bits[t - lo] = np.uint64(1) << np.uint64(s % 64)
+                tw, tb = (t - lo) // 64, np.uint64(1) << np.uint64((t - lo) % 64)
                 for e in range(ev_off[t], ev_off[t + 1]):
-                    terms[slot[loc_g[ev_i[e]] * n + loc_e[ev_j[e]]], t - lo] = ev_d[e]
-            for q in range(n_near):
+                    x = loc_g[ev_i[e]] * n + loc_e[ev_j[e]]
+                    q = slot[x]
+                    if q < 0:
+                        q = n_near
+                        slot[x] = q
+                        near[q] = x
+                        for w in range(n_words):
+                            near_bits[q, w] = 0
+                        n_near += 1
+                    terms[q, t - lo] = ev_d[e]
+                    near_bits[q, tw] |= tb
+            for q in range(n_near):  # in order over the scans where either exists: its term where near, else c
                 x = near[q]
                 slot[x] = -1
                 i, j = gsel[x // n], esel[x % n]
                 total, count = 0.0, 0
-                for t in range(k + 1 - lo):  # the scans where either exists (a near term only where both do)
+                for t in range(k + 1 - lo):
                     if ((mask_g[i, word[t]] | mask_e[j, word[t]]) & bits[t]) != 0:
-                        total += terms[q, t]
+                        if (near_bits[q, t // 64] >> np.uint64(t % 64)) & np.uint64(1):
+                            total += terms[q, t]
+                        else:
+                            total += c
                         count += 1
                 d = min(total / count, c)
                 near_cost[q] = d if p == 1.0 else d**p  # x ** 1.0 is x
