@@ -145,6 +145,24 @@ def sparse_assignment(C):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def scan_costs(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignment, prev_scan):  # pragma: no cover
+    """Scan t's similarity S, HOTA's cost ``-(alignment * S)`` and CLEAR's cost ``-score`` (``score``: 1000 for the
+    previous scan's pair plus S, 0 below the threshold) with the operations of
+    :meth:`soabench.tracks.scores._MatchState.match`'s numpy form (the costs scipy matches a tied scan on)."""
+    g0, e0 = g_off[t], e_off[t]
+    ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
+    S = scan_similarity(gx, g0, ng, ex, e0, ne, d_gate)
+    C = np.empty((ng, ne))
+    Q = np.empty((ng, ne))
+    for i in range(ng):
+        for j in range(ne):
+            C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j])
+            score = (1000.0 if e_ids[e0 + j] == prev_scan[g_ids[g0 + i]] else 0.0) + S[i, j]
+            Q[i, j] = -(0.0 if S[i, j] < threshold - _EPS else score)
+    return S, C, Q
+
+
+@njit(cache=True)
 def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignment, state):  # pragma: no cover
     """Scans t, t + 1, ... of :func:`soabench.tracks.scores._scan_matches` until the end or a scan whose matching
     has several optimal answers (:func:`_tied`); returns the index of that scan (K at the end).

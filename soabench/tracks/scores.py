@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from soabench.notice import announced
-from soabench.tracks.sequence import BLOCK_CELLS, TrackSequence, similarity
+from soabench.tracks.sequence import BLOCK_CELLS, TrackSequence
 
 #: HOTA's localisation thresholds alpha (TrackEval's ``array_labels``)
 ALPHAS = np.arange(0.05, 0.99, 0.05)
@@ -161,9 +161,11 @@ class _MatchState:
         return (self.counts, self.motp, self.gt_seen, self.gt_matched, self.frag, self.prev_id, self.prev_scan,
                 self.hg, self.he, self.hs)  # fmt: skip
 
-    def match(self, g: np.ndarray, e: np.ndarray, sim: np.ndarray, alignment: np.ndarray) -> None:
-        """One scan with truths and estimates, matched with scipy (a scan the compiled loop leaves to it)."""
-        rows, cols = linear_sum_assignment(-(alignment[g[:, None], e[None, :]] * sim))
+    def match(self, g: np.ndarray, e: np.ndarray, sim: np.ndarray, cost: np.ndarray, clear_cost: np.ndarray) -> None:
+        """One scan with truths ``g`` and estimates ``e``, matched with scipy (a scan the compiled loop leaves to it):
+        ``sim`` their similarity, ``cost`` HOTA's ``-(alignment * sim)``, ``clear_cost`` CLEAR's ``-score`` (1000 for
+        the previous scan's pair plus ``sim``, 0 below the threshold)."""
+        rows, cols = linear_sum_assignment(cost)
         n = self.counts[4]
         self.hg[n : n + len(rows)], self.he[n : n + len(rows)], self.hs[n : n + len(rows)] = (
             g[rows],
@@ -171,9 +173,8 @@ class _MatchState:
             sim[rows, cols],
         )
         self.counts[4] = n + len(rows)
-        score = 1000.0 * (e[None, :] == self.prev_scan[g[:, None]]) + sim
-        score[sim < THRESHOLD - _EPS] = 0
-        rows, cols = linear_sum_assignment(-score)
+        score = -clear_cost
+        rows, cols = linear_sum_assignment(clear_cost)
         kept = score[rows, cols] > _EPS
         rows, cols = rows[kept], cols[kept]
         mg, me = g[rows], e[cols]
@@ -196,7 +197,7 @@ def _scan_matches(
     """Scan by scan: HOTA's alignment-weighted Hungarian matches (truth, estimate, S; every alpha is applied
     later) and the CLEAR MOT counts (its matching keeps the previous scan's pairs first). The compiled loop
     (:func:`soabench.tracks.kernels.match_scans`) hands a scan with two equal positions to scipy."""
-    from soabench.tracks.kernels import match_scans  # numba is imported on first use, not with the package
+    from soabench.tracks.kernels import match_scans, scan_costs  # numba: imported on first use, not with the package
 
     g, e = seq.gt, seq.est
     state = _MatchState.new(nG, int(np.minimum(np.diff(g.off), np.diff(e.off)).sum()))
@@ -206,7 +207,8 @@ def _scan_matches(
         t = announced("track metrics", match_scans, *args)
         if t < K:
             gs, es = slice(g.off[t], g.off[t + 1]), slice(e.off[t], e.off[t + 1])
-            state.match(g.ids[gs], e.ids[es], similarity(g.xy[gs], e.xy[es], d_gate), alignment)
+            costs = scan_costs(t, *args[1:10], state.prev_scan)
+            state.match(g.ids[gs], e.ids[es], *costs)
             t += 1
     n = state.counts[4]
     tp, fn, fp, idsw = (int(x) for x in state.counts[:4])
