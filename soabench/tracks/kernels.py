@@ -145,33 +145,18 @@ def sparse_assignment(C):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def scan_costs(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignment, prev_scan):  # pragma: no cover
-    """Scan t's similarity S, HOTA's cost ``-(alignment * S)`` and CLEAR's cost ``-score`` (``score``: 1000 for the
-    previous scan's pair plus S, 0 below the threshold) with the operations of
-    :meth:`soabench.tracks.scores._MatchState.match`'s numpy form (the costs scipy matches a tied scan on)."""
-    g0, e0 = g_off[t], e_off[t]
-    ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
-    S = scan_similarity(gx, g0, ng, ex, e0, ne, d_gate)
-    C = np.empty((ng, ne))
-    Q = np.empty((ng, ne))
-    for i in range(ng):
-        for j in range(ne):
-            C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j])
-            score = (1000.0 if e_ids[e0 + j] == prev_scan[g_ids[g0 + i]] else 0.0) + S[i, j]
-            Q[i, j] = -(0.0 if S[i, j] < threshold - _EPS else score)
-    return S, C, Q
-
-
-@njit(cache=True)
 def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignment, state):  # pragma: no cover
     """Scans t, t + 1, ... of :func:`soabench.tracks.scores._scan_matches` until the end or a scan whose matching
-    has several optimal answers (:func:`_tied`); returns the index of that scan (K at the end).
+    has several optimal answers (:func:`_tied`); returns the index of that scan (K at the end) and its similarity
+    S, HOTA's cost ``-(alignment * S)`` and CLEAR's cost ``-score`` (``score``: 1000 for the previous scan's pair
+    plus S, 0 below the threshold), with the operations of the numpy form scipy matches it on (empty at the end).
 
     ``state`` is :class:`soabench.tracks.scores._MatchState`'s arrays in order: counts (tp, fn, fp, idsw, n_pairs),
     motp_sum (1,), gt_seen, gt_matched, frag_count, prev_id, prev_scan_id, and HOTA's pairs hg, he, hs.
     """
     counts, motp, gt_seen, gt_matched, frag, prev_id, prev_scan, hg, he, hs = state
     K = len(g_off) - 1
+    S = C = Q = np.empty((0, 0))
     while t < K:
         g0, e0 = g_off[t], e_off[t]
         ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
@@ -189,9 +174,9 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
                 for j in range(ne):
                     C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j])
                     score = (1000.0 if e_ids[e0 + j] == prev_scan[g_ids[g0 + i]] else 0.0) + S[i, j]
-                    Q[i, j] = 0.0 if S[i, j] < threshold - _EPS else -score
+                    Q[i, j] = -(0.0 if S[i, j] < threshold - _EPS else score)
             if _tied(C) or _tied(Q):
-                return t
+                return t, S, C, Q
             rows, cols = sparse_assignment(C)  # the pairs of zero similarity are never a match
             n = counts[4]
             for r in range(len(rows)):
@@ -224,7 +209,7 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
             counts[2] += ne - matched
             motp[0] += sim_sum
         t += 1
-    return t
+    return t, S[:0, :0], C[:0, :0], Q[:0, :0]
 
 
 @njit(cache=True)

@@ -197,17 +197,16 @@ def _scan_matches(
     """Scan by scan: HOTA's alignment-weighted Hungarian matches (truth, estimate, S; every alpha is applied
     later) and the CLEAR MOT counts (its matching keeps the previous scan's pairs first). The compiled loop
     (:func:`soabench.tracks.kernels.match_scans`) hands a scan with two equal positions to scipy."""
-    from soabench.tracks.kernels import match_scans, scan_costs  # numba: imported on first use, not with the package
+    from soabench.tracks.kernels import match_scans  # numba is imported on first use, not with the package
 
     g, e = seq.gt, seq.est
     state = _MatchState.new(nG, int(np.minimum(np.diff(g.off), np.diff(e.off)).sum()))
     t, K = 0, len(seq)
     while t < K:
         args = (t, g.ids, g.off, g.xy, e.ids, e.off, e.xy, float(d_gate), THRESHOLD, alignment, state.arrays())
-        t = announced("track metrics", match_scans, *args)
+        t, *costs = announced("track metrics", match_scans, *args)
         if t < K:
             gs, es = slice(g.off[t], g.off[t + 1]), slice(e.off[t], e.off[t + 1])
-            costs = scan_costs(t, *args[1:10], state.prev_scan)
             state.match(g.ids[gs], e.ids[es], *costs)
             t += 1
     n = state.counts[4]
