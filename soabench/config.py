@@ -481,7 +481,7 @@ class LMBConfig:
     r_B_max: float = 0.5  #: largest existence probability r_B,max of a birth track
     prune_r: float = 1e-3  #: tracks with existence probability r below this are dropped
     max_tracks: int = 100  #: most probable tracks kept after each scan
-    max_hypotheses: int = 1000  #: per cluster: enumerate up to this many valid hypotheses, else this many Gibbs sweeps
+    max_hypotheses: int = 1000  #: per cluster: exact up to this many valid hypotheses, else this many Gibbs sweeps
     max_components: int = 10  #: Gaussian components kept per track (J_h; also per birth group)
     extract_r: float = 0.5  #: estimates: the tracks with r above this, labelled
     #: how birth components become Bernoullis (docs/method.md "LMB filter"): "groups" (one per merge group,

@@ -37,6 +37,17 @@ from soabench.types import SOURCE_MEAS, Births
 #: per component
 BIRTH_MAPPINGS = ("groups", "components")
 
+#: a measurement with 1 - r_U(z) at or below this counts as explained by the tracks (docs/method.md "LMB filter",
+#: numerics): where a track surely took z, 1 - r_U is 0 or a few 1e-16 depending on rounding, and no birth may
+#: hinge on that (the adaptive rule would even normalise such a remainder up to lambda_B / M)
+EXPLAINED_TOL = 1e-9
+
+
+def _unexplained(r_U: np.ndarray) -> np.ndarray:
+    """1 - r_U(z) clipped to [0, 1], set to 0 at or below :data:`EXPLAINED_TOL`."""
+    free = np.clip(1.0 - np.asarray(r_U, dtype=float), 0.0, 1.0)
+    return np.where(free > EXPLAINED_TOL, free, 0.0)
+
 
 def gm_birth(births: Births, k: int, r_max: float) -> Tracks:
     """Bernoullis r_j = min(w_j, r_max), N(m_j, P_j), labels (k, j) of the birth components of scan ``k``."""
@@ -72,8 +83,8 @@ def group_birth(births: Births, k: int, r_max: float, U: float, J_h: int) -> Tra
 
 def adaptive_existence(r_U: np.ndarray, lambda_B: float, r_max: float) -> np.ndarray:
     """r_B(z) = min(r_max, lambda_B (1 - r_U(z)) / sum_xi (1 - r_U(xi))) (Reuter et al. 2014, eq. 75); all zero
-    when every measurement was fully explained by the tracks."""
-    free = np.clip(1.0 - np.asarray(r_U, dtype=float), 0.0, 1.0)
+    when every measurement was explained by the tracks (1 - r_U at most :data:`EXPLAINED_TOL`)."""
+    free = _unexplained(r_U)
     total = free.sum()
     if not total > 0.0:
         return np.zeros_like(free)
@@ -83,8 +94,8 @@ def adaptive_existence(r_U: np.ndarray, lambda_B: float, r_max: float) -> np.nda
 def intensity_existence(r_U: np.ndarray, beta: np.ndarray, kappa: np.ndarray, r_max: float) -> np.ndarray:
     """r_B(z) = min(r_max, (1 - r_U(z)) beta_z / (kappa(z) + beta_z)) (docs/method.md "LMB filter", birth): the
     chance that z was a new target under a birth intensity whose term at z is beta_z, among the measurements no
-    track took."""
-    free = np.clip(1.0 - np.asarray(r_U, dtype=float), 0.0, 1.0)
+    track took (none where 1 - r_U is at most :data:`EXPLAINED_TOL`)."""
+    free = _unexplained(r_U)
     beta = np.asarray(beta, dtype=float)
     den = np.asarray(kappa, dtype=float) + beta
     share = np.divide(beta, den, out=np.zeros_like(beta), where=den > 0.0)

@@ -14,12 +14,12 @@ marginals :func:`soabench.lmb.gibbs.association_marginals`, per-track reduction
   (one Bernoulli per §2.9 merge group of the birth components, or one per component); the Bernoullis of the
   previous scan's measurements, predicted one step; and the FOV gate g at every component mean (§4.1). Only the
   line-of-sight gate of ``static+occ`` (shapely) runs between the two calls, in Python.
-* :func:`update_reduce`: association costs, marginals (enumeration or Gibbs, unchanged), the LMB approximation,
+* :func:`update_reduce`: association costs, marginals (exact or Gibbs, the array path's kernel), the LMB approximation,
   track pruning and capping, each track's prune/merge/cap, the estimates, and A_l for a model that reads the
   previous step.
 
-The formulas and their order are those of the array path, which stays the default and the reference
-(``LMBFilter(..., fused=True)`` opts in; its docstring says why). Two things differ in the last bits: numpy
+The formulas and their order are those of the array path, the reference it is tested against (``LMBFilter(...,
+fused=False)``); this cycle is the default. Two things differ in the last bits: numpy
 evaluates ``exp`` and ``log`` with its own vectorised routines and the prediction's 4x4 products through BLAS, where
 the compiled loops call the C library and sum in index order, so one cycle of the two paths agrees to about 1e-13
 (``tests/equivalence/test_lmb_cycle.py``), not bit for bit. Arithmetic is IEEE (no ``fastmath``), so the fused
@@ -385,7 +385,7 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
     uP = np.empty((n_out, 4, 4))
     ustart = np.zeros(N + 1, dtype=np.int64)
     kept = np.empty(N, dtype=np.int64)
-    n_kept = 0
+    n_kept = np.int64(0)  # int64 from the start: a literal 0 compiles a second np_sum
     q = 0
     for i in range(N):
         q0 = q
@@ -423,7 +423,7 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
 
     # track pruning and cap (step 5)
     sel = np.empty(n_kept, dtype=np.int64)
-    n_sel = 0
+    n_sel = np.int64(0)
     for a in range(n_kept):
         if post_r[a] >= pars[UP_PRUNE_R]:
             sel[n_sel] = a

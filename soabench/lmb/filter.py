@@ -7,9 +7,10 @@ One cycle at scan k:
    docs/method.md "LMB filter", birth): one Bernoulli per merge group of the birth model's Gaussian components (or
    one per component with ``[lmb] birth_mapping = "components"``), and Bernoullis at the previous scan's
    measurements when the model gives newborn terms;
-2. joint update with Z_k (:mod:`soabench.lmb.update`): association costs, marginals by exact enumeration where a
-   cluster has at most ``max_hypotheses`` valid hypotheses, Gibbs sampling beyond (:mod:`soabench.lmb.gibbs`,
-   docs/method.md "LMB filter", association), the LMB approximation of the GLMB posterior;
+2. joint update with Z_k (:mod:`soabench.lmb.update`): association costs, exact marginals where a cluster has at
+   most ``max_hypotheses`` valid hypotheses (maps of measurements to tracks, absent and missed summed), Gibbs
+   sampling beyond (:mod:`soabench.lmb.gibbs`, docs/method.md "LMB filter", association), the LMB approximation
+   of the GLMB posterior;
 3. per track: prune, merge and cap its Gaussian components (the GM-PHD's Vo-Ma kernels); drop tracks with
    r < ``prune_r``, keep the ``max_tracks`` most probable;
 4. estimates: the tracks with r > ``extract_r``, labelled.
@@ -73,12 +74,12 @@ class LMBFilter:
         rng: the generator of the Gibbs sampler's seeds (one draw per scan); the trial's association stream
             (:meth:`soabench.seeding.TrialSeeds.association_rng`) in the harness, a fixed seed if None.
         model: the measurement model; the GM-PHD's range-bearing EKF with its gate if None.
-        fused: run the cycle as compiled calls (:mod:`soabench.lmb.cycle`) when the model is the GM-PHD's
-            range-bearing sensor; the default (False) runs the array path, whose numbers the runs report. The two
-            agree to the last bits per cycle, but not over a whole run: where a track surely explains a
-            measurement, r_U = 1 on one path and 1 - 1e-16 on the other gives that measurement a birth
-            Bernoulli of r = 0 (none) or about 1e-18, and a Bernoulli more in a Gibbs cluster shifts the
-            sampler's draws from there on (benchmarks/README.md, "The LMB filter's step").
+        fused: run the cycle as compiled calls (:mod:`soabench.lmb.cycle`, the default) when the model is the
+            GM-PHD's range-bearing sensor; False runs the array path, the reference it is tested against. The two
+            differ in the last bits (numpy's exp/log and BLAS against the C library's and loops in index order);
+            no discrete decision of the filter rests on those bits (a measurement with 1 - r_U at most
+            :data:`soabench.lmb.birth.EXPLAINED_TOL` counts as explained), so their labels and counts agree over
+            whole runs (benchmarks/README.md, "The LMB filter's step").
 
     Attributes:
         tracks: the posterior tracks after the last step.
@@ -96,7 +97,7 @@ class LMBFilter:
         N_hat: float = 0.06,
         rng: np.random.Generator | None = None,
         model: MeasurementModel | None = None,
-        fused: bool = False,
+        fused: bool = True,
     ) -> None:
         require(
             mode in LMB_MODES,

@@ -1,23 +1,32 @@
-"""Association of tracks and measurements: exhaustive enumeration or Gibbs sampling of Vo, Vo & Hoang (2017)
-(docs/method.md "LMB filter").
+"""Association of tracks and measurements: exact marginals (enumeration or a forward-backward pass) or Gibbs
+sampling of Vo, Vo & Hoang (2017) (docs/method.md "LMB filter", association).
 
 Track i has one association variable theta_i in {absent, missed, measurement j}. Its log cost row is
 ``logc[i] = [log eta_i(absent), log eta_i(missed), log eta_i(z_1) ... log eta_i(z_M)]`` (-inf where the option is
-impossible, e.g. a measurement outside the gate), and a joint association theta (distinct measurements) has weight
+impossible, e.g. a measurement outside the gate), and a joint association (distinct measurements) has weight
 prod_i eta_i(theta_i). The kernels return the marginal association probabilities
-``marg[i, c] = sum_theta w(theta) 1[theta_i = c]`` over the hypotheses they visit, each hypothesis weighted exactly
-(not by how often it was sampled).
+``marg[i, c] = sum_theta w(theta) 1[theta_i = c]``.
 
+* Existence is marginalised in closed form. A track that takes no measurement is absent or present and missed; in
+  every joint association those two alternatives of the track add, whatever the other tracks do, so the
+  association hypotheses are the maps theta of measurements to tracks (each track one measurement or none,
+  measurements distinct) with the weight prod_i eta_i(theta_i) where eta_i(none) = eta_i(absent) + eta_i(missed),
+  and P(absent) = P(none) eta_i(absent) / eta_i(none), P(missed) = P(none) eta_i(missed) / eta_i(none) exactly.
+  A cluster's valid hypotheses are counted over theta alone (n tracks sharing one measurement: n + 1, not
+  2^n (n + 2)).
 * Tracks that share no measurement are independent (the weight factorises), so the tracks are split into clusters
   (connected by a measurement both may take) and each cluster is solved alone: a track with no measurement in its
   gate has the closed form marg = (eta_absent, eta_missed) / sum.
-* A cluster whose valid hypotheses (distinct measurements) number at most ``max_hyp`` is enumerated exhaustively
-  (exact; docs/method.md "LMB filter", association): a depth-first enumeration counts them and stops at
-  ``max_hyp`` + 1, so a cluster whose product of option counts is large but whose gates overlap little is still exact.
-* A larger cluster runs the Gibbs sampler of Vo, Vo & Hoang (2017, Algorithm 1 with the all-missed start of Vo's
-  toolbox; a track whose missed option is impossible starts absent): ``max_hyp`` sweeps, each redrawing every
-  theta_i from its conditional given the others (measurements held by the others locked out); the distinct
-  hypotheses visited are weighted exactly.
+* A cluster whose valid hypotheses number at most ``max_hyp`` gets its exact marginals (docs/method.md "LMB
+  filter", association). With at most ``DP_MAX_M`` measurements the hypotheses are counted and the marginals
+  summed by a forward-backward pass over the cluster's tracks whose state is the set of measurements already
+  taken (:func:`_count_dp`, :func:`_marginals_dp`: O(n 2^m m), no hypothesis listed); with more, a depth-first
+  enumeration lists them and stops at ``max_hyp`` + 1 (:func:`_enumerate_valid`). Both are exact; they differ only
+  in the order of the sums.
+* A larger cluster runs the Gibbs sampler of Vo, Vo & Hoang (2017, Algorithm 1 with every track starting without a
+  measurement, as in Vo's toolbox) over theta: ``max_hyp`` sweeps, each redrawing every theta_i from its
+  conditional given the others (measurements held by the others locked out); the distinct hypotheses visited are
+  weighted exactly.
 
 Randomness: a SplitMix64 stream (Steele, Lea & Flood 2014) private to each call, started from ``seed`` (drawn by
 the filter from the trial's association stream, :mod:`soabench.seeding`): no global generator state, so a run is
@@ -37,6 +46,8 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 ABSENT, MISSED = 0, 1  #: the first two columns of a cost row; measurement j is column 2 + j
+NONE = 0  #: the first column of a cluster's reduced row (absent or missed); measurement j is column 1 + j
+DP_MAX_M = 10  #: clusters with at most this many measurements are counted and solved by the forward-backward pass
 
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -81,7 +92,7 @@ def _accumulate(logc, hyps, n_hyp, marg_out, rows):
         lw[h] = _log_weight(logc, hyps[h])
         if lw[h] > mx:
             mx = lw[h]
-    if not mx > -np.inf:  # no hypothesis of positive weight (cannot happen: all-absent has weight prod (1 - r))
+    if not mx > -np.inf:  # no hypothesis of positive weight (only if r = 1 and p_D = 1 leave a track no option)
         return
     tot = 0.0
     for h in range(n_hyp):
@@ -95,9 +106,9 @@ def _accumulate(logc, hyps, n_hyp, marg_out, rows):
 
 @njit(cache=True)
 def _enumerate_valid(options, n_opt, M, limit):
-    """The valid joint associations (distinct measurements) depth first, track 0 varying fastest (the order of a
-    mixed-radix count over the options); stops once ``limit`` + 1 are found. Returns (hyps, count) with count
-    ``limit`` + 1 when there are more than ``limit``."""
+    """The valid associations theta (distinct measurements) depth first, track 0 varying fastest (the order of a
+    mixed-radix count over the options; column 0 is "none", column 1 + j measurement j); stops once ``limit`` + 1
+    are found. Returns (hyps, count) with count ``limit`` + 1 when there are more than ``limit``."""
     n = options.shape[0]
     cap = min(limit + 1, 1024)
     hyps = np.empty((cap, n), dtype=np.int64)
@@ -112,12 +123,12 @@ def _enumerate_valid(options, n_opt, M, limit):
             lvl += 1
             if lvl == n:
                 break
-            if theta[lvl] >= 2:
-                used[theta[lvl] - 2] = False
+            if theta[lvl] >= 1:
+                used[theta[lvl] - 1] = False
             digit[lvl] += 1
             continue
         c = options[lvl, digit[lvl]]
-        if c >= 2 and used[c - 2]:
+        if c >= 1 and used[c - 1]:
             digit[lvl] += 1
             continue
         theta[lvl] = c
@@ -132,27 +143,117 @@ def _enumerate_valid(options, n_opt, M, limit):
                 break
             digit[0] += 1
             continue
-        if c >= 2:
-            used[c - 2] = True
+        if c >= 1:
+            used[c - 1] = True
         lvl -= 1
     return hyps, count
 
 
 @njit(cache=True)
-def _fixed_product(options, n_opt, limit):
-    """A lower bound of a cluster's valid hypotheses: the product over its tracks of their options without a
-    measurement (absent, missed), which combine freely; stops once past ``limit``. A cluster above ``limit`` by
-    this bound needs no depth-first count to be sent to the sampler."""
-    p = 1
+def _count_dp(options, n_opt, M, limit):
+    """The number of valid associations theta of a cluster with ``M`` measurements (``M`` <= ``DP_MAX_M``),
+    counted track by track over the set S of measurements taken so far: count_{i+1}(S) = count_i(S) [none open] +
+    sum_{j in S, j open to i} count_i(S - {j}); each count saturates at ``limit`` + 1 (an exact answer up to
+    ``limit``, "more" beyond)."""
+    n_states = 1 << M
+    cap = limit + 1
+    cnt = np.zeros(n_states, dtype=np.int64)
+    new = np.empty(n_states, dtype=np.int64)
+    cnt[0] = 1
     for i in range(options.shape[0]):
-        k = 0
+        new[:] = 0
         for o in range(n_opt[i]):
-            if options[i, o] < 2:
-                k += 1
-        p *= k
-        if p == 0 or p > limit:
-            return p
-    return p
+            c = options[i, o]
+            if c == NONE:
+                for S in range(n_states):
+                    new[S] += cnt[S]
+            else:
+                b = 1 << (c - 1)
+                for S in range(n_states):
+                    if S & b:
+                        new[S] += cnt[S ^ b]
+        for S in range(n_states):
+            cnt[S] = min(new[S], cap)
+    total = 0
+    for S in range(n_states):
+        total = min(total + cnt[S], cap)
+    return total
+
+
+@njit(cache=True)
+def _marginals_dp(sub, options, n_opt, M):
+    """Exact marginals (n, 1 + M) of a cluster's reduced rows ``sub`` (log weights; column 0 none, 1 + j
+    measurement j) by a forward-backward pass over its tracks, the state being the set S of measurements taken:
+
+        B_i(S) = sum of prod_{t >= i} eta_t(theta_t) over the associations of tracks i.. that avoid S
+        F_i(S) = sum of prod_{t < i} eta_t(theta_t) over the associations of tracks ..i-1 that take exactly S
+        P(theta_i = c) prop. to sum_S F_i(S) eta_i(c) B_{i+1}(S + {c})   (c none or a measurement not in S)
+
+    Each track's weights are scaled by the largest of its row, and F_i and B_i by their largest entry: the
+    constants cancel when each track's marginals are normalised to sum to 1. Cost O(n 2^M (options per track))."""
+    n = sub.shape[0]
+    n_states = 1 << M
+    w = np.zeros((n, 1 + M))
+    for i in range(n):
+        mx = -np.inf
+        for o in range(n_opt[i]):
+            mx = max(mx, sub[i, options[i, o]])
+        if mx > -np.inf:
+            for o in range(n_opt[i]):
+                w[i, options[i, o]] = math.exp(sub[i, options[i, o]] - mx)
+    B = np.empty((n + 1, n_states))
+    B[n, :] = 1.0
+    for i in range(n - 1, -1, -1):
+        mx = 0.0
+        for S in range(n_states):
+            v = w[i, NONE] * B[i + 1, S]
+            for o in range(n_opt[i]):
+                c = options[i, o]
+                if c >= 1:
+                    b = 1 << (c - 1)
+                    if not S & b:
+                        v += w[i, c] * B[i + 1, S | b]
+            B[i, S] = v
+            mx = max(mx, v)
+        if mx > 0.0:
+            for S in range(n_states):
+                B[i, S] /= mx
+    local = np.zeros((n, 1 + M))
+    F = np.zeros(n_states)
+    Fn = np.empty(n_states)
+    F[0] = 1.0
+    for i in range(n):
+        for S in range(n_states):
+            f = F[S]
+            if f > 0.0:
+                local[i, NONE] += f * w[i, NONE] * B[i + 1, S]
+                for o in range(n_opt[i]):
+                    c = options[i, o]
+                    if c >= 1:
+                        b = 1 << (c - 1)
+                        if not S & b:
+                            local[i, c] += f * w[i, c] * B[i + 1, S | b]
+        tot = 0.0
+        for c in range(1 + M):
+            tot += local[i, c]
+        if tot > 0.0:
+            for c in range(1 + M):
+                local[i, c] /= tot
+        mx = 0.0
+        for S in range(n_states):
+            v = F[S] * w[i, NONE]
+            for o in range(n_opt[i]):
+                c = options[i, o]
+                if c >= 1:
+                    b = 1 << (c - 1)
+                    if S & b:
+                        v += F[S ^ b] * w[i, c]
+            Fn[S] = v
+            mx = max(mx, v)
+        if mx > 0.0:
+            for S in range(n_states):
+                F[S] = Fn[S] / mx
+    return local
 
 
 @njit(cache=True)
@@ -162,14 +263,14 @@ def _draw(i, options, n_opt, weight, taken, state):
     tot = 0.0
     for o in range(n_opt[i]):
         c = options[i, o]
-        if c < 2 or taken[c - 2] < 0 or taken[c - 2] == i:
+        if c < 1 or taken[c - 1] < 0 or taken[c - 1] == i:
             tot += weight[i, o]
     u = _uniform(state) * tot
     acc = 0.0
     last = -1
     for o in range(n_opt[i]):
         c = options[i, o]
-        if c < 2 or taken[c - 2] < 0 or taken[c - 2] == i:
+        if c < 1 or taken[c - 1] < 0 or taken[c - 1] == i:
             if weight[i, o] > 0.0:
                 last = c
                 acc += weight[i, o]
@@ -180,10 +281,11 @@ def _draw(i, options, n_opt, weight, taken, state):
 
 @njit(cache=True)
 def _gibbs(logc, options, n_opt, n_sweeps, state):
-    """Distinct hypotheses visited by ``n_sweeps`` Gibbs sweeps (the start included), in the order of their hashes.
-    ``options[i, :n_opt[i]]``: the columns of track i with a finite log cost."""
+    """Distinct associations visited by ``n_sweeps`` Gibbs sweeps (the start included), in the order of their
+    hashes. ``logc``: a cluster's reduced rows (column 0 none, 1 + j measurement j); ``options[i, :n_opt[i]]``: the
+    columns of track i with a finite log cost."""
     n, n_cols = logc.shape
-    M = n_cols - 2
+    M = n_cols - 1
     weight = np.zeros(options.shape)
     for i in range(n):  # exp of each row once, shifted by its maximum (the conditionals are ratios within a row)
         mx = -np.inf
@@ -195,18 +297,16 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
     # holds one of the track's measurements, so that case draws from them directly, the same uniform against the
     # same sums
     prefix = np.zeros(options.shape)
-    n_fixed = np.zeros(n, dtype=np.int64)  # absent and missed come first in a track's options
+    n_fixed = np.zeros(n, dtype=np.int64)  # "none" comes first in a track's options
     for i in range(n):
         acc = 0.0
         for o in range(n_opt[i]):
             acc += weight[i, o]
             prefix[i, o] = acc
-            if options[i, o] < 2:
+            if options[i, o] < 1:
                 n_fixed[i] += 1
-    theta = np.empty(n, dtype=np.int64)
+    theta = np.zeros(n, dtype=np.int64)  # every track without a measurement
     taken = np.full(M, -1, dtype=np.int64)
-    for i in range(n):
-        theta[i] = MISSED if logc[i, MISSED] > -np.inf else ABSENT
     # Zobrist hash of each sample (a sum of one random 64-bit key per (track, option)), kept up to date as theta
     # changes: distinct hypotheses are found by sorting the hashes and comparing rows of equal hash exactly
     zkey = np.empty((n, n_cols), dtype=np.uint64)
@@ -223,14 +323,14 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
     deg = np.zeros(M + 1, dtype=np.int64)
     for i in range(n):
         for o in range(n_fixed[i], n_opt[i]):
-            deg[options[i, o] - 1] += 1
+            deg[options[i, o]] += 1
     for j in range(M):
         deg[j + 1] += deg[j]
     takers = np.empty(deg[M], dtype=np.int64)
     fill = deg[:M].copy()
     for i in range(n):
         for o in range(n_fixed[i], n_opt[i]):
-            j = options[i, o] - 2
+            j = options[i, o] - 1
             takers[fill[j]] = i
             fill[j] += 1
     blocked = np.zeros(n, dtype=np.int64)
@@ -254,21 +354,21 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                             break
             else:
                 c = _draw(i, options, n_opt, weight, taken, state)
-            if c < 0:  # no option of positive weight (cannot happen: absent or missed is always open)
+            if c < 0:  # no option of positive weight (only when r = 1 and p_D = 1 leave the track none)
                 c = theta[i]
             if c == theta[i]:
                 continue
             changed = True
-            if theta[i] >= 2:
-                j = theta[i] - 2
+            if theta[i] >= 1:
+                j = theta[i] - 1
                 taken[j] = -1
                 for t in range(deg[j], deg[j + 1]):
                     if takers[t] != i:
                         blocked[takers[t]] -= 1
             h += zkey[i, c] - zkey[i, theta[i]]
             theta[i] = c
-            if c >= 2:
-                j = c - 2
+            if c >= 1:
+                j = c - 1
                 taken[j] = i
                 for t in range(deg[j], deg[j + 1]):
                     if takers[t] != i:
@@ -304,11 +404,23 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
 
 
 @njit(cache=True)
+def _split_none(a, b):
+    """P(absent | none) and P(missed | none) from log eta(absent) = ``a`` and log eta(missed) = ``b``, and
+    log eta(none) = log(eta(absent) + eta(missed)); (0, 1, -inf) when both are impossible."""
+    mx = max(a, b)
+    if not mx > -np.inf:
+        return 0.0, 1.0, -np.inf
+    ea, eb = math.exp(a - mx), math.exp(b - mx)
+    return ea / (ea + eb), eb / (ea + eb), mx + math.log(ea + eb)
+
+
+@njit(cache=True)
 def association_marginals(logc, max_hyp, seed, force_gibbs=False):
     """Marginal association probabilities ``marg`` (N, 2 + M) of the cost rows ``logc`` (module docstring), and
-    the number of hypotheses weighted and of clusters solved by Gibbs sampling.
+    the number of valid hypotheses weighted (summed over the clusters; a track alone counts 1) and of clusters
+    solved by Gibbs sampling.
 
-    ``force_gibbs``: sample every cluster with measurements, even one small enough to enumerate (tests).
+    ``force_gibbs``: sample every cluster with measurements, even one small enough to solve exactly (tests).
     """
     state = np.full(1, seed, dtype=np.uint64)
     N, n_cols = logc.shape
@@ -330,19 +442,16 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False):
     root = np.empty(N, dtype=np.int64)
     for i in range(N):
         root[i] = _find(parent, i)
+    p_absent = np.empty(N)
+    p_missed = np.empty(N)
+    log_none = np.empty(N)
+    for i in range(N):
+        p_absent[i], p_missed[i], log_none[i] = _split_none(logc[i, ABSENT], logc[i, MISSED])
     total_hyp = 0
     n_gibbs = 0
     for i in range(N):
         if n_meas[i] == 0:  # absent or missed: closed form
-            a, b = logc[i, ABSENT], logc[i, MISSED]
-            mx = max(a, b)
-            if not mx > -np.inf:  # r = 1 and p_D = 1 but no measurement: keep the track (weight 0 otherwise)
-                marg[i, MISSED] = 1.0
-                total_hyp += 1
-                continue
-            ea, eb = math.exp(a - mx), math.exp(b - mx)
-            marg[i, ABSENT] = ea / (ea + eb)
-            marg[i, MISSED] = eb / (ea + eb)
+            marg[i, ABSENT], marg[i, MISSED] = p_absent[i], p_missed[i]  # r = 1, p_D = 1, no measurement: kept
             total_hyp += 1
             continue
         if root[i] != i:
@@ -352,25 +461,37 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False):
         cols_l = [j for j in range(M) if first[j] >= 0 and root[first[j]] == i]
         cols = np.array(cols_l, dtype=np.int64)
         n, mc = rows.shape[0], cols.shape[0]
-        sub = np.empty((n, 2 + mc))
-        options = np.empty((n, 2 + mc), dtype=np.int64)
+        sub = np.empty((n, 1 + mc))
+        options = np.empty((n, 1 + mc), dtype=np.int64)
         n_opt = np.zeros(n, dtype=np.int64)
         for a in range(n):
-            for c in range(2 + mc):
-                sub[a, c] = logc[rows[a], c if c < 2 else 2 + cols[c - 2]]
+            sub[a, NONE] = log_none[rows[a]]
+            for j in range(mc):
+                sub[a, 1 + j] = logc[rows[a], 2 + cols[j]]
+            for c in range(1 + mc):
                 if sub[a, c] > -np.inf:
                     options[a, n_opt[a]] = c
                     n_opt[a] += 1
+        local = np.zeros((n, 1 + mc))
         n_hyp = max_hyp + 1
-        if not force_gibbs and _fixed_product(options, n_opt, max_hyp) <= max_hyp:
-            hyps, n_hyp = _enumerate_valid(options, n_opt, mc, max_hyp)
+        if not force_gibbs:
+            if mc <= DP_MAX_M:
+                n_hyp = _count_dp(options, n_opt, mc, max_hyp)
+                if n_hyp <= max_hyp:
+                    local = _marginals_dp(sub, options, n_opt, mc)
+            else:
+                hyps, n_hyp = _enumerate_valid(options, n_opt, mc, max_hyp)
+                if n_hyp <= max_hyp:
+                    _accumulate(sub, hyps, n_hyp, local, np.arange(n))
         if n_hyp > max_hyp:
             hyps, n_hyp = _gibbs(sub, options, n_opt, max_hyp, state)
             n_gibbs += 1
-        local = np.zeros((n, 2 + mc))
-        _accumulate(sub, hyps, n_hyp, local, np.arange(n))
+            _accumulate(sub, hyps, n_hyp, local, np.arange(n))
         for a in range(n):
-            for c in range(2 + mc):
-                marg[rows[a], c if c < 2 else 2 + cols[c - 2]] += local[a, c]
+            r = rows[a]
+            marg[r, ABSENT] = local[a, NONE] * p_absent[r]
+            marg[r, MISSED] = local[a, NONE] * p_missed[r]
+            for j in range(mc):
+                marg[r, 2 + cols[j]] = local[a, 1 + j]
         total_hyp += n_hyp
     return marg, total_hyp, n_gibbs

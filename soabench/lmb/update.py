@@ -14,7 +14,8 @@ matches the GLMB's first moment (Reuter et al. 2014, eqs. 46-48) has r_i' = P(tr
 
     p_i' = [ P(theta_i = missed) p_i^miss + sum_l P(theta_i = l) p_i^(l) ] / r_i'
 
-so only the marginal association probabilities are needed (:func:`soabench.lmb.gibbs.association_marginals`).
+so only the marginal association probabilities are needed (:func:`soabench.lmb.gibbs.association_marginals`, which
+sums each track's absent and missed alternatives in closed form).
 Clutter intensities below 1e-300 (no clutter) are raised to 1e-300: a hypothesis that leaves such a measurement
 unassigned then weighs ~1e-300 of the others instead of exactly 0.
 """
@@ -64,7 +65,7 @@ class UpdateResult:
     marg: np.ndarray  #: (N, 2 + M) marginal association probabilities of the predicted tracks
     logc: np.ndarray  #: (N, 2 + M) log costs of the predicted tracks
     n_hyp: int  #: hypotheses weighted
-    n_gibbs: int  #: clusters solved by Gibbs sampling (the others were enumerated)
+    n_gibbs: int  #: clusters solved by Gibbs sampling (the others exactly)
     n_pairs: int  #: detection (component, measurement) pairs built
 
 
@@ -105,9 +106,9 @@ def update(
         p_D: (C,) detection probability at each component mean (0 outside the FOV).
         kappa: (M,) clutter intensity of each measurement.
         model: the measurement model (:mod:`soabench.lmb.measurement`).
-        max_hyp: hypotheses per cluster: enumeration up to this many, else this many Gibbs sweeps.
+        max_hyp: hypotheses per cluster: exact marginals up to this many, else this many Gibbs sweeps.
         seed: seed of the Gibbs sampler.
-        force_gibbs: sample even the clusters small enough to enumerate (tests).
+        force_gibbs: sample even the clusters small enough to solve exactly (tests).
     """
     Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
     M = len(Z)

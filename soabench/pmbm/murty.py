@@ -6,13 +6,21 @@ first t pairs of the assignment, forbids its pair t, and leaves the rest free; t
 next assignment and is split the same way. Ties between assignments of equal cost are broken by the order in which
 they were found, so the ranking is deterministic.
 
-Each subproblem is solved by :func:`lsa`, the shortest augmenting path algorithm for rectangular problems (Crouse
+The best assignment comes from :func:`lsa`, the shortest augmenting path algorithm for rectangular problems (Crouse
 2016, the algorithm of :func:`scipy.optimize.linear_sum_assignment`) with its deterministic choices: rows are added
 in order; among the columns at the lowest reduced path cost the scan, which runs from the last column down, keeps
-the first it meets, except that a free column (one that ends the path) beats an assigned one at equal cost. An
-assignment's cost is the sum of its cells in row order, summed as numpy sums an array (pairwise in blocks of 8:
-:func:`soabench.metrics_kernels.np_sum`). So the assignments and costs are those of scipy's solver, exact ties
-included, on every CPU.
+the first it meets, except that a free column (one that ends the path) beats an assigned one at equal cost. So the
+best assignment is scipy's, exact ties included.
+
+Each subproblem starts from its parent's assignment and dual variables (Miller, Stone & Cox 1997): with pair t
+removed only row t is unassigned, the parent's duals stay feasible, and one shortest augmenting path from row t
+(:func:`_child`) gives the subproblem's best assignment. The rectangular problem is solved as the square one with
+``cols - rows`` dummy rows of cost 0 (they hold the columns no row takes); Murty's partition runs over the real rows
+only, so each assignment is still listed once. Among the columns at equal path cost the search takes the one that
+ends the path, then the lowest column index; so between assignments of exactly equal cost, a subproblem returns the
+one its parent's assignment leads to. An assignment's cost is the sum of its cells in row order, summed as numpy sums
+an array (pairwise in blocks of 8: :func:`soabench.metrics_kernels.np_sum`): the same bits for the same assignment
+however it was found.
 """
 
 from __future__ import annotations
@@ -29,36 +37,31 @@ from soabench.metrics_kernels import np_sum  # noqa: E402
 
 
 @njit(cache=True)
-def lsa(C: np.ndarray, col4row: np.ndarray, n_fixed: int) -> bool:
+def lsa(C: np.ndarray, col4row: np.ndarray) -> tuple[bool, np.ndarray, np.ndarray]:
     """The cheapest assignment of the (nr, nc) cost matrix ``C`` (nr <= nc; +inf forbidden) by shortest augmenting
-    paths (module docstring): fills ``col4row`` (nr,) and returns True, or returns False when every assignment
-    uses a forbidden cell.
+    paths (module docstring): fills ``col4row`` (nr,) and returns (True, u, v), or (False, u, v) when every
+    assignment uses a forbidden cell.
 
-    ``n_fixed``: the first rows are fixed, row i to column ``col4row[i]`` (given), which is the only finite cell of
-    its row and of its column. Solving them would give each its column and leave every dual of a free row and
-    column at 0 (no path from a free row can enter a fixed column), so they are set so and the search starts at
-    the first free row, with the same result."""
+    (u, v): dual variables of ``C - min(C)``: every reduced cost C_ij - min(C) - u_i - v_j is >= 0 (up to rounding),
+    0 on the assigned cells; v_j <= 0, and 0 for every column no row takes."""
     nr, nc = C.shape
+    u = np.zeros(nr)
+    v = np.zeros(nc)
     if nr == 0:
-        return True
+        return True, u, v
     lo = np.inf
     for i in range(nr):
         for j in range(nc):
             if C[i, j] < lo:
                 lo = C[i, j]
-    u = np.zeros(nr)
-    v = np.zeros(nc)
     spc = np.empty(nc)  # shortest path cost to each column
     path = np.full(nc, -1, dtype=np.int64)
     row4col = np.full(nc, -1, dtype=np.int64)
-    for i in range(n_fixed):
-        row4col[col4row[i]] = i
-        u[i] = C[i, col4row[i]] - lo
-    col4row[n_fixed:] = -1
+    col4row[:] = -1
     in_rows = np.zeros(nr, dtype=np.bool_)
     in_cols = np.zeros(nc, dtype=np.bool_)
     remaining = np.empty(nc, dtype=np.int64)
-    for cur in range(n_fixed, nr):
+    for cur in range(nr):
         for it in range(nc):
             remaining[it] = nc - it - 1
         n_rem = nc
@@ -83,7 +86,7 @@ def lsa(C: np.ndarray, col4row: np.ndarray, n_fixed: int) -> bool:
                     index = it
             min_val = lowest
             if min_val == np.inf or index < 0:
-                return False
+                return False, u, v
             j = remaining[index]
             if row4col[j] == -1:
                 sink = j
@@ -108,15 +111,12 @@ def lsa(C: np.ndarray, col4row: np.ndarray, n_fixed: int) -> bool:
             j = prev
             if i == cur:
                 break
-    return True
+    return True, u, v
 
 
 @njit(cache=True)
-def _solve(C: np.ndarray, cols: np.ndarray, n_fixed: int) -> float:
-    """The cost of the cheapest assignment of ``C`` (its columns in ``cols``), +inf when there is none; the first
-    ``n_fixed`` rows fixed to their columns in ``cols`` (:func:`lsa`)."""
-    if not lsa(C, cols, n_fixed):
-        return np.inf
+def _assignment_cost(C: np.ndarray, cols: np.ndarray) -> float:
+    """The cost of the assignment ``cols`` of ``C``'s rows: its cells summed in row order, in numpy's order."""
     n = C.shape[0]
     cells = np.empty(n)
     for r in range(n):
@@ -125,21 +125,96 @@ def _solve(C: np.ndarray, cols: np.ndarray, n_fixed: int) -> float:
 
 
 @njit(cache=True)
-def _before(cost_a: float, a: int, cost_b: float, b: int) -> bool:
-    return cost_a < cost_b or (cost_a == cost_b and a < b)
+def _child(
+    C: np.ndarray,
+    sol: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    t: int,
+    forbid: np.ndarray,
+    out_sol: np.ndarray,
+    out_u: np.ndarray,
+    out_v: np.ndarray,
+    work: np.ndarray,
+    iwork: np.ndarray,
+) -> float:
+    """The subproblem of the square assignment ``sol`` (m,) with duals (u, v) (module docstring) that keeps rows
+    0..t-1 and forbids row t the columns ``forbid``: its best assignment and duals into out_*, and its cost (+inf:
+    none). One shortest augmenting path (Dijkstra on the reduced costs, all >= 0) from row t to its freed column
+    ``sol[t]``; rows >= C.shape[0] are the dummy rows of cost 0. ``work`` (m,) and ``iwork`` (4, m): scratch."""
+    n, m = C.shape
+    out_sol[:] = sol
+    out_u[:] = u
+    out_v[:] = v
+    d = work
+    pred, row4col, seen, scanned = iwork[0], iwork[1], iwork[2], iwork[3]
+    for i in range(m):
+        row4col[sol[i]] = i
+        d[i] = np.inf
+        seen[i] = 0
+        scanned[i] = 0
+    for i in range(t):  # the fixed rows' columns are out of the subproblem
+        seen[sol[i]] = 1
+    sink = sol[t]
+    i = t
+    dist = 0.0
+    while True:
+        scanned[i] = 1
+        for j in range(m):
+            if seen[j]:
+                continue
+            c = 0.0
+            if i < n:
+                c = C[i, j]
+                if c == np.inf:
+                    continue
+                if i == t:
+                    banned = False
+                    for f in range(forbid.shape[0]):
+                        if forbid[f] == j:
+                            banned = True
+                            break
+                    if banned:
+                        continue
+            r = dist + c - u[i] - v[j]
+            if r < d[j]:
+                d[j] = r
+                pred[j] = i
+        lowest = np.inf
+        nxt = -1
+        for j in range(m):
+            if not seen[j] and (d[j] < lowest or (d[j] == lowest and j == sink)):
+                lowest = d[j]
+                nxt = j
+        if lowest == np.inf:  # row t cannot reach its freed column: no assignment
+            return np.inf
+        seen[nxt] = 1
+        if nxt == sink:
+            break
+        i = row4col[nxt]
+        dist = lowest
+    min_val = d[sink]
+    for j in range(m):  # the duals stay feasible, 0 reduced cost on the new pairs
+        if seen[j] and d[j] < np.inf:
+            out_v[j] -= min_val - d[j]
+    out_u[t] += min_val
+    for i in range(t + 1, m):
+        if scanned[i]:
+            out_u[i] += min_val - d[sol[i]]
+    j = sink
+    while True:
+        i = pred[j]
+        prev = out_sol[i]
+        out_sol[i] = j
+        j = prev
+        if i == t:
+            break
+    return _assignment_cost(C, out_sol)
 
 
 @njit(cache=True)
-def _row_min_bound(C: np.ndarray) -> float:
-    """A lower bound on the cost of every assignment of ``C``: the sum of its row minima (+inf: none exists)."""
-    total = 0.0
-    for i in range(C.shape[0]):
-        lo = np.inf
-        for j in range(C.shape[1]):
-            if C[i, j] < lo:
-                lo = C[i, j]
-        total += lo
-    return total
+def _before(cost_a: float, a: int, cost_b: float, b: int) -> bool:
+    return cost_a < cost_b or (cost_a == cost_b and a < b)
 
 
 @njit(cache=True)
@@ -147,10 +222,12 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
     """:func:`murty` as arrays: costs (K,) increasing and columns (K, rows).
 
     A subproblem is solved only when it reaches the top of the queue: until then it waits under a lower bound of
-    its cost (its parent's cost or the sum of its row minima, whichever is larger, less a margin far above the
-    rounding of a sum). A solved subproblem leaves the queue only when its cost is at most every waiting bound, so
-    the assignments come out in the order, and with the tie rule, of solving every subproblem as it is made; the
-    subproblems that the k-th assignment makes unnecessary are never solved."""
+    its cost, its parent's cost plus the least reduced cost left in its row t (every path from row t starts with
+    one such cell), less a margin far above the rounding of a sum. A solved subproblem leaves the queue only when
+    its cost is at most every waiting bound, so the assignments come out in the order, and with the tie rule, of
+    solving every subproblem as it is made; the subproblems that the k-th assignment makes unnecessary are never
+    solved. A node is its parent, its row t and the column it forbids there (its other forbidden columns are those
+    of its ancestors with the same t); a solved node keeps its square assignment and duals."""
     n, m = C.shape
     out_cost = np.empty(k)
     out_cols = np.empty((k, n), dtype=np.int64)
@@ -159,25 +236,49 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
     if n == 0:
         out_cost[0] = 0.0
         return out_cost[:1], out_cols[:1]
-    # subproblems (nodes): matrix, assignment, key (cost once solved, else a lower bound), solved, first free row;
-    # node index = order made (the tie rule)
-    cap = 16
-    mats = np.empty((cap, n, m))
-    sols = np.empty((cap, n), dtype=np.int64)
-    keys = np.empty(cap)
-    solved = np.zeros(cap, dtype=np.bool_)
-    t0s = np.empty(cap, dtype=np.int64)
-    heap = np.empty(cap, dtype=np.int64)  # binary min-heap of node indices by (key, index)
-    mats[0] = C
-    keys[0] = _solve(mats[0], sols[0], 0)
-    if keys[0] == np.inf:
+    col4row = np.empty(n, dtype=np.int64)
+    ok, u0, v0 = lsa(C, col4row)
+    cost0 = _assignment_cost(C, col4row) if ok else np.inf
+    if cost0 == np.inf:
         return out_cost[:0], out_cols[:0]
-    solved[0] = True
-    limit = keys[0] + max_gap
-    t0s[0] = 0
-    heap[0] = 0
+    limit = cost0 + max_gap
+    lo = np.inf
+    for i in range(n):
+        for j in range(m):
+            if C[i, j] < lo:
+                lo = C[i, j]
+    # solved nodes: square assignment (dummy rows on the columns no row takes, in column order) and duals of C
+    scap = 8
+    s_sol = np.empty((scap, m), dtype=np.int64)
+    s_u = np.empty((scap, m))
+    s_v = np.empty((scap, m))
+    used = np.zeros(m, dtype=np.bool_)
+    for r in range(n):
+        s_sol[0, r] = col4row[r]
+        s_u[0, r] = u0[r] + lo
+        used[col4row[r]] = True
+    q = n
+    for j in range(m):
+        s_v[0, j] = v0[j]
+        if not used[j]:
+            s_sol[0, q] = j
+            s_u[0, q] = 0.0
+            q += 1
+    n_slots = 1
+    # nodes, numbered in the order made (the tie rule): key (cost once solved, else a lower bound)
+    cap = 32
+    keys = np.empty(cap)
+    par = np.empty(cap, dtype=np.int64)
+    row = np.empty(cap, dtype=np.int64)
+    fcol = np.empty(cap, dtype=np.int64)
+    slot = np.empty(cap, dtype=np.int64)  # its solved node's index, -1 while it waits under a bound
+    heap = np.empty(cap, dtype=np.int64)  # binary min-heap of node indices by (key, index)
+    keys[0], par[0], row[0], fcol[0], slot[0], heap[0] = cost0, -1, 0, -1, 0, 0
     n_heap, n_nodes, n_out = 1, 1, 0
     last = n - 1 if n == m else n  # square: with n - 1 rows fixed the last has no choice
+    forbid = np.empty(m + 2, dtype=np.int64)  # a row has at most m forbidden columns
+    work = np.empty(m)
+    iwork = np.empty((4, m), dtype=np.int64)
     while n_heap > 0 and n_out < k:
         node = heap[0]  # pop the smallest key
         n_heap -= 1
@@ -193,54 +294,87 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
                 break
             heap[p], heap[best] = heap[best], heap[p]
             p = best
-        if solved[node]:
-            out_cost[n_out] = keys[node]
-            out_cols[n_out] = sols[node]
-            n_out += 1
-            if n_out == k:
-                break
-            forced = mats[node].copy()
-            parent_cost = keys[node]
-            for t in range(t0s[node], last):
-                c = sols[node, t]
-                keep = forced[t, c]
-                forced[t, c] = np.inf
-                bound = max(parent_cost, _row_min_bound(forced))
-                bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
-                if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
-                    if n_nodes == cap:  # grow the node store
-                        cap *= 2
-                        mats2 = np.empty((cap, n, m))
-                        mats2[:n_nodes] = mats[:n_nodes]
-                        sols2 = np.empty((cap, n), dtype=np.int64)
-                        sols2[:n_nodes] = sols[:n_nodes]
-                        keys2 = np.empty(cap)
-                        keys2[:n_nodes] = keys[:n_nodes]
-                        solved2 = np.zeros(cap, dtype=np.bool_)
-                        solved2[:n_nodes] = solved[:n_nodes]
-                        t0s2 = np.empty(cap, dtype=np.int64)
-                        t0s2[:n_nodes] = t0s[:n_nodes]
-                        heap2 = np.empty(cap, dtype=np.int64)
-                        heap2[:n_heap] = heap[:n_heap]
-                        mats, sols, keys, solved, t0s, heap = mats2, sols2, keys2, solved2, t0s2, heap2
-                    mats[n_nodes] = forced
-                    sols[n_nodes, :t] = sols[node, :t]  # its fixed rows
-                    keys[n_nodes] = bound
-                    solved[n_nodes] = False
-                    t0s[n_nodes] = t
-                    n_heap = _push(heap, n_heap, n_nodes, keys)
-                    n_nodes += 1
-                # fix the pair (t, c) for the next subproblems
-                forced[t, :] = np.inf
-                forced[:, c] = np.inf
-                forced[t, c] = keep
-        else:  # solve it and put it back under its cost
-            cost = _solve(mats[node], sols[node], t0s[node])
+        if slot[node] < 0:  # solve it from its parent's assignment and put it back under its cost
+            t = row[node]
+            nf = _forbidden(node, t, par, row, fcol, forbid)
+            if n_slots == scap:  # grow the solved store
+                scap *= 2
+                a1 = np.empty((scap, m), dtype=np.int64)
+                a1[:n_slots] = s_sol[:n_slots]
+                a2 = np.empty((scap, m))
+                a2[:n_slots] = s_u[:n_slots]
+                a3 = np.empty((scap, m))
+                a3[:n_slots] = s_v[:n_slots]
+                s_sol, s_u, s_v = a1, a2, a3
+            ps = slot[par[node]]
+            cost = _child(C, s_sol[ps], s_u[ps], s_v[ps], t, forbid[:nf], s_sol[n_slots], s_u[n_slots],
+                          s_v[n_slots], work, iwork)  # fmt: skip
             if cost < np.inf and cost <= limit:
+                slot[node] = n_slots
+                n_slots += 1
                 keys[node] = cost
-                solved[node] = True
                 n_heap = _push(heap, n_heap, node, keys)
+            continue
+        sl = slot[node]
+        out_cost[n_out] = keys[node]
+        out_cols[n_out] = s_sol[sl, :n]
+        n_out += 1
+        if n_out == k:
+            break
+        used[:] = False
+        for r in range(row[node]):
+            used[s_sol[sl, r]] = True
+        for t in range(row[node], last):
+            c_t = s_sol[sl, t]
+            forbid[0] = c_t
+            nf = 1 + (_forbidden(node, t, par, row, fcol, forbid[1:]) if t == row[node] else 0)
+            lo_r = np.inf  # the least reduced cost of row t's cells left in the subproblem
+            for j in range(m):
+                if used[j] or C[t, j] == np.inf:
+                    continue
+                banned = False
+                for f in range(nf):
+                    if forbid[f] == j:
+                        banned = True
+                        break
+                if not banned:
+                    lo_r = min(lo_r, C[t, j] - s_u[sl, t] - s_v[sl, j])
+            used[c_t] = True  # fixed for the next subproblems
+            bound = keys[node] + max(lo_r, 0.0)
+            bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
+            if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
+                if n_nodes == cap:  # grow the node store
+                    cap *= 2
+                    keys2 = np.empty(cap)
+                    keys2[:n_nodes] = keys[:n_nodes]
+                    par2 = np.empty(cap, dtype=np.int64)
+                    par2[:n_nodes] = par[:n_nodes]
+                    row2 = np.empty(cap, dtype=np.int64)
+                    row2[:n_nodes] = row[:n_nodes]
+                    fcol2 = np.empty(cap, dtype=np.int64)
+                    fcol2[:n_nodes] = fcol[:n_nodes]
+                    slot2 = np.empty(cap, dtype=np.int64)
+                    slot2[:n_nodes] = slot[:n_nodes]
+                    heap2 = np.empty(cap, dtype=np.int64)
+                    heap2[:n_heap] = heap[:n_heap]
+                    keys, par, row, fcol, slot, heap = keys2, par2, row2, fcol2, slot2, heap2
+                keys[n_nodes], par[n_nodes], row[n_nodes], fcol[n_nodes], slot[n_nodes] = bound, node, t, c_t, -1
+                n_heap = _push(heap, n_heap, n_nodes, keys)
+                n_nodes += 1
     return out_cost[:n_out], out_cols[:n_out]
+
+
+@njit(cache=True)
+def _forbidden(node: int, t: int, par: np.ndarray, row: np.ndarray, fcol: np.ndarray, out: np.ndarray) -> int:
+    """The columns forbidden to row ``t`` in ``node``: its own and those of its ancestors with the same row (the
+    root forbids none); written to ``out``, their number returned."""
+    nf = 0
+    x = node
+    while x > 0 and row[x] == t:
+        out[nf] = fcol[x]
+        nf += 1
+        x = par[x]
+    return nf
 
 
 @njit(cache=True)

@@ -1,13 +1,13 @@
 """The fused LMB cycle (soabench/lmb/cycle.py) against the array path (docs/method.md "LMB filter").
 
-The array path is the default (its numbers are the runs'); the fused cycle is opt-in (``fused=True``). Both run
+The fused cycle is the default; the array path (``fused=False``) is its reference. Both run
 side by side on recorded scans of the shipped intersection with every birth model, fed the same births
 and drawing the same Gibbs seeds. One cycle from the same prior must agree to 1e-12 (relative, or absolute below 1)
 in the tracks, estimates and diagnostics, with identical labels and counts: numpy's exp/log and BLAS products against
 the compiled loops differ in the last bits only (A_l is compared as the share A_l / (kappa_l + A_l) = r_U(z_l) that
 birth models read: near r_U = 1 the last bit of 1 - r_U sets A_l itself). Free-running filters (each from its
 own previous posterior) let those differences travel through the recursion: checked to 1e-9, every count and label
-still identical on this recording (not on every one: soabench/lmb/filter.py's ``fused`` says where they part).
+identical (no birth hinges on the last bit of 1 - r_U: soabench.lmb.birth.EXPLAINED_TOL).
 """
 
 from __future__ import annotations

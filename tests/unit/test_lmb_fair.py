@@ -14,8 +14,8 @@ from test_lmb import EGO, _glmb_reference, _model, _random_case, _run, _scan, _t
 from soabench.config import Config, FilterConfig, LMBConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.lmb import LMBFilter, label_pairs
-from soabench.lmb.birth import group_birth, intensity_existence
-from soabench.lmb.gibbs import _enumerate_valid, association_marginals
+from soabench.lmb.birth import EXPLAINED_TOL, adaptive_existence, group_birth, intensity_existence
+from soabench.lmb.gibbs import _count_dp, _enumerate_valid, association_marginals
 from soabench.lmb.update import update
 from soabench.types import SOURCE_GM, Births, NewbornTerms
 
@@ -57,6 +57,19 @@ def test_intensity_existence_is_the_share_of_the_birth_term():
     assert intensity_existence(np.zeros(1), np.array([2.0]), np.array([0.0]), 0.9).tolist() == [0.9]
 
 
+def test_a_measurement_explained_to_the_last_bits_gives_no_birth():
+    """1 - r_U at or below EXPLAINED_TOL counts as 0: the remainder rounding leaves where a track surely took z
+    neither gives a Bernoulli of r ~ 1e-17 nor, when every measurement is explained, is normalised up by the
+    adaptive rule; just above the tolerance the formulas are unchanged."""
+    tol = EXPLAINED_TOL
+    for r_U in (np.array([1.0, 1.0]), np.array([1.0 - 2.2e-16, 1.0]), np.array([1.0 - tol, 1.0 - 1e-12])):
+        assert adaptive_existence(r_U, 0.06, 0.5).tolist() == [0.0, 0.0]
+        assert intensity_existence(r_U, np.ones(2), np.ones(2), 0.5).tolist() == [0.0, 0.0]
+    above = np.array([1.0 - 4 * tol, 1.0 - 1e-16])
+    assert adaptive_existence(above, 0.06, 0.5).tolist() == [0.06, 0.0]
+    np.testing.assert_allclose(intensity_existence(above, np.ones(2), np.ones(2), 0.5), [2 * tol, 0.0], rtol=1e-6)
+
+
 def test_birth_mapping_is_a_checked_lmb_key():
     assert LMBConfig().birth_mapping == "groups"
     with pytest.raises(SoabenchError, match="lmb.birth_mapping = 'pairs' is not allowed; choose one of 'groups', "):
@@ -86,12 +99,12 @@ def test_components_mapping_keeps_one_bernoulli_per_component():
 
 
 def _valid_reference(options, n_opt):
-    """Every valid joint association by brute force, track 0 varying fastest."""
+    """Every valid association (column 0 none, 1 + j measurement j) by brute force, track 0 varying fastest."""
     rows = [options[i, : n_opt[i]].tolist() for i in range(len(n_opt))]
     out = []
     for theta in itertools.product(*reversed(rows)):
         theta = theta[::-1]
-        meas = [c for c in theta if c >= 2]
+        meas = [c for c in theta if c >= 1]
         if len(meas) == len(set(meas)):
             out.append(list(theta))
     return out
@@ -101,24 +114,25 @@ def _valid_reference(options, n_opt):
 def test_depth_first_enumeration_finds_every_valid_hypothesis_in_order(seed):
     rng = np.random.default_rng(seed)
     n, M = int(rng.integers(1, 6)), int(rng.integers(0, 5))
-    options = np.zeros((n, 2 + M), dtype=np.int64)
+    options = np.zeros((n, 1 + M), dtype=np.int64)
     n_opt = np.zeros(n, dtype=np.int64)
     for i in range(n):
-        cols = [0, 1] + [2 + j for j in range(M) if rng.uniform() < 0.6]
+        cols = [0] * (rng.uniform() < 0.8) + [1 + j for j in range(M) if rng.uniform() < 0.6]
         options[i, : len(cols)] = cols
         n_opt[i] = len(cols)
     ref = _valid_reference(options, n_opt)
     hyps, count = _enumerate_valid(options, n_opt, M, 10_000)
     assert count == len(ref) and hyps[:count].tolist() == ref
+    assert _count_dp(options, n_opt, M, 10_000) == len(ref)  # the forward pass counts the same hypotheses
     if len(ref) > 1:  # stops at limit + 1
         _, stopped = _enumerate_valid(options, n_opt, M, len(ref) - 1)
-        assert stopped == len(ref)
+        assert stopped == len(ref) and _count_dp(options, n_opt, M, len(ref) - 1) == len(ref)
 
 
 def test_a_sparse_cluster_with_a_large_option_product_is_enumerated_exactly():
     """8 tracks of r = 1 (no "absent" option) in a ring, each gating two measurements shared with its neighbours:
     the product of option counts is 3^8 = 6,561, the valid hypotheses 2,207 (the matchings of a 16-cycle); with
-    max_hypotheses = 2,500 the cluster is enumerated (no Gibbs) and its marginals are the brute-force ones."""
+    max_hypotheses = 2,500 the cluster is solved exactly (no Gibbs) and its marginals are the brute-force ones."""
     rng = np.random.default_rng(5)
     n = 8
     logc = np.full((n, 2 + n), -np.inf)

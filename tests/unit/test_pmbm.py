@@ -5,6 +5,7 @@ two pedestrians crossing keep their labels, every birth model (built-in or plugi
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import math
 
@@ -87,7 +88,7 @@ def test_assignment_solver_is_scipys():
     for t in range(600):
         C = _random_costs(rng, t % 3)
         cols = np.empty(len(C), dtype=np.int64)
-        ok = lsa(C, cols, 0)
+        ok, u, v = lsa(C, cols)
         try:
             want = linear_sum_assignment(C)[1]
         except ValueError:  # scipy: "cost matrix is infeasible"
@@ -96,6 +97,12 @@ def test_assignment_solver_is_scipys():
         if ok:
             np.testing.assert_array_equal(cols, want)
             n_ties += t % 3 == 1
+            # the duals a subproblem starts from: feasible, tight on the assignment, 0 on the free columns
+            reduced = C - C.min() - u[:, None] - v[None, :]
+            assert (reduced[np.isfinite(C)] >= -1e-9).all()
+            np.testing.assert_allclose(reduced[np.arange(len(C)), cols], 0.0, atol=1e-9)
+            free = np.setdiff1d(np.arange(C.shape[1]), cols)
+            assert (v[free] == 0.0).all() and (v <= 0.0).all()
         n_infeasible += not ok
     assert n_ties > 100 and n_infeasible > 10  # the cases of interest were drawn
 
@@ -112,6 +119,55 @@ def test_murty_with_ties_is_deterministic_and_complete():
         k = max(1, len(got) // 3)
         head = murty(C, k)
         assert [(c, tuple(x)) for c, x in head] == [(c, tuple(x)) for c, x in got[:k]]
+
+
+def _murty_from_scratch(C, k):
+    """Murty's partition with every subproblem solved from scratch by scipy (the reference)."""
+    n = len(C)
+
+    def solve(Cs):
+        try:
+            rows, cols = linear_sum_assignment(Cs)
+        except ValueError:
+            return None
+        return Cs[rows, cols].sum(), cols
+
+    best = solve(C)
+    queue = [(best[0], 0, C, best[1], 0)] if best is not None else []
+    out, made = [], 1
+    while queue and len(out) < k:
+        cost, _, Cs, cols, t0 = heapq.heappop(queue)
+        out.append((cost, cols))
+        fixed = Cs.copy()
+        for t in range(t0, n - 1 if n == C.shape[1] else n):
+            child = fixed.copy()
+            child[t, cols[t]] = np.inf
+            s = solve(child)
+            if s is not None:
+                heapq.heappush(queue, (s[0], made, child, s[1], t))
+                made += 1
+            fixed[t, :] = np.inf
+            fixed[:, cols[t]] = np.inf
+            fixed[t, cols[t]] = Cs[t, cols[t]]
+    return out
+
+
+def test_warm_started_subproblems_are_solved_exactly():
+    """Each subproblem starts from its parent's assignment and duals: on matrices without exact ties (continuous
+    costs, forbidden cells, square and rectangular) the ranking is that of solving every subproblem from scratch
+    with scipy, assignment for assignment."""
+    rng = np.random.default_rng(11)
+    for t in range(60):
+        n = int(rng.integers(2, 8))
+        C = rng.normal(0, 3, (n, n + int(rng.integers(0, 4))))
+        if t % 2:
+            C[rng.random(C.shape) < 0.3] = np.inf
+        k = int(rng.integers(1, 40))
+        got, want = murty(C, k), _murty_from_scratch(C, k)
+        assert len(got) == len(want)
+        for (c1, x1), (c2, x2) in zip(got, want, strict=True):
+            np.testing.assert_array_equal(x1, x2)
+            assert c1 == pytest.approx(c2, abs=1e-9)
 
 
 def test_compiled_sum_is_numpys():

@@ -1,0 +1,138 @@
+"""LMB association with existence summed out (docs/method.md "LMB filter", association): the marginals over the
+maps of measurements to tracks equal those over every (absent | missed | measurement) combination, the
+forward-backward pass equals explicit enumeration, and hypotheses are counted over the maps alone."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from soabench.lmb.gibbs import (
+    DP_MAX_M,
+    _accumulate,
+    _count_dp,
+    _enumerate_valid,
+    _marginals_dp,
+    association_marginals,
+)
+
+
+def _brute_force(logc):
+    """Marginals (N, 2 + M) over every combination of (absent, missed, measurement j) per track with distinct
+    measurements: the association space before existence is summed out, written apart from the kernels."""
+    marg = np.zeros_like(logc)
+    total = 0.0
+    for theta in itertools.product(*[np.flatnonzero(np.isfinite(row)) for row in logc]):
+        meas = [c for c in theta if c >= 2]
+        if len(meas) != len(set(meas)):
+            continue
+        w = math.exp(sum(logc[i, c] for i, c in enumerate(theta)))
+        total += w
+        for i, c in enumerate(theta):
+            marg[i, c] += w
+    return marg / total
+
+
+def _random_costs(rng, n, M, p_gate=0.5, p_no_absent=0.2):
+    """Random cost rows: absent impossible (r = 1) for some tracks, each measurement gated with ``p_gate``."""
+    logc = np.log(rng.uniform(0.01, 1.0, (n, 2 + M)))
+    logc[rng.uniform(size=n) < p_no_absent, 0] = -np.inf
+    logc[:, 2:][rng.uniform(size=(n, M)) >= p_gate] = -np.inf
+    return logc
+
+
+def _reduced(logc):
+    """A cluster's reduced rows (column 0 none = log(eta_absent + eta_missed), 1 + j measurement j) and options."""
+    sub = np.concatenate([np.logaddexp(logc[:, :1], logc[:, 1:2]), logc[:, 2:]], axis=1)
+    n = len(sub)
+    options = np.zeros(sub.shape, dtype=np.int64)
+    n_opt = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        cols = np.flatnonzero(np.isfinite(sub[i]))
+        options[i, : len(cols)] = cols
+        n_opt[i] = len(cols)
+    return sub, options, n_opt
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_existence_summed_out_gives_the_marginals_of_every_absent_missed_combination(seed):
+    rng = np.random.default_rng(seed)
+    logc = _random_costs(rng, int(rng.integers(1, 7)), int(rng.integers(1, 5)))
+    marg, _, n_gibbs = association_marginals(logc, 1000, np.uint32(seed), False)
+    assert n_gibbs == 0
+    np.testing.assert_allclose(marg, _brute_force(logc), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(marg.sum(axis=1), 1.0, rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_forward_backward_pass_equals_explicit_enumeration(seed):
+    rng = np.random.default_rng(100 + seed)
+    n, M = int(rng.integers(2, 12)), int(rng.integers(1, 7))
+    logc = _random_costs(rng, n, M, p_gate=0.6)
+    logc[int(rng.integers(n)), :2] = -np.inf  # one track with r = 1 and p_D = 1: it must take a measurement
+    sub, options, n_opt = _reduced(logc)
+    sub[:, 1:] += rng.uniform(-30.0, 30.0, (n, 1))  # rows of very different scale
+    hyps, count = _enumerate_valid(options, n_opt, M, 10**6)
+    assert _count_dp(options, n_opt, M, 10**6) == count
+    ref = np.zeros_like(sub)
+    _accumulate(sub, hyps, count, ref, np.arange(n))
+    got = _marginals_dp(sub, options, n_opt, M)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-14)
+
+
+def test_thirty_tracks_sharing_two_measurements_are_exact():
+    """30 tracks that all gate the same 2 measurements: 1 + 2·30 + 30·29 = 931 associations (2^30 · 931-odd before
+    existence was summed out), within max_hypotheses = 1000, so exact; their marginals equal a direct sum over the
+    931 maps. With a third shared measurement the count passes 1000 and the cluster is sampled."""
+    rng = np.random.default_rng(3)
+    n = 30
+    logc = np.log(rng.uniform(0.05, 1.0, (n, 4)))
+    marg, n_hyp, n_gibbs = association_marginals(logc, 1000, np.uint32(0), False)
+    assert (n_hyp, n_gibbs) == (931, 0)
+    eta = np.exp(logc)
+    none = eta[:, 0] + eta[:, 1]
+    ref = np.zeros((n, 4))
+    total = 0.0
+    for a, b in itertools.product(range(-1, n), repeat=2):  # track taking z_1, track taking z_2 (-1: none)
+        if a >= 0 and a == b:
+            continue
+        w = np.prod([eta[i, 2] if i == a else eta[i, 3] if i == b else none[i] for i in range(n)])
+        total += w
+        for i in range(n):
+            if i == a:
+                ref[i, 2] += w
+            elif i == b:
+                ref[i, 3] += w
+            else:
+                ref[i, :2] += w * eta[i, :2] / none[i]
+    np.testing.assert_allclose(marg, ref / total, rtol=0, atol=1e-14)
+    three = np.log(rng.uniform(0.05, 1.0, (n, 5)))
+    _, n3, g3 = association_marginals(three, 1000, np.uint32(0), False)
+    assert g3 == 1 and n3 <= 1000  # 1 + 90 + 2,610 + 24,360 associations: sampled
+
+
+def test_a_cluster_with_many_measurements_is_enumerated_depth_first():
+    """One track gating DP_MAX_M + 2 measurements, a second one gating only the last of them: too many measurements
+    for the forward-backward pass but 2 M + 1 associations (the second track without a measurement: the first has
+    1 + M options; with z_M: M), so the depth-first enumeration solves it exactly."""
+    M = DP_MAX_M + 2
+    rng = np.random.default_rng(8)
+    logc = np.log(rng.uniform(0.05, 1.0, (2, 2 + M)))
+    logc[1, 2:-1] = -np.inf
+    marg, n_hyp, n_gibbs = association_marginals(logc, 1000, np.uint32(0), False)
+    assert n_gibbs == 0 and n_hyp == 2 * M + 1
+    np.testing.assert_allclose(marg, _brute_force(logc), rtol=0, atol=1e-14)
+
+
+def test_gibbs_over_associations_starts_without_measurements_and_visits_them_all():
+    rng = np.random.default_rng(11)
+    logc = _random_costs(rng, 5, 3, p_gate=0.8)
+    exact, n_exact, _ = association_marginals(logc, 1000, np.uint32(0), False)
+    sampled, n_sampled, g = association_marginals(logc, 4000, np.uint32(0), True)
+    assert g == 1 and n_sampled == n_exact
+    np.testing.assert_allclose(sampled, exact, rtol=0, atol=1e-12)
+    _, n_one, _ = association_marginals(logc, 1, np.uint32(0), True)
+    assert n_one == 1  # one sweep: the start only, every track without a measurement
