@@ -79,7 +79,11 @@ def _predict_update(modes: tuple[str, ...]) -> None:
         pred = cycle.predict_append(
             *_mixture_arrays(f.mixture), f.F, f.Q, f._pred_pars, *_birth_arrays(_births()), f._beta0, ego, f.next_label
         )
-        cycle.update(*pred[:9], f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
+        # the two halves that cycle.update (inlined into its callers, never compiled on its own) calls, with its types
+        w, m, P, beta, g = pred[0], pred[1], pred[2], pred[6], pred[8]
+        sup = cycle.support(w, m, P, beta, g, f._p_D, Z, ego, f.R, f._r_min, f._gate, f._kappa(Z), f._ukf)
+        no_nb, no_origin = np.empty(0), np.int64(0)
+        cycle.posterior(*pred[:8], sup, f.R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)), no_nb, no_origin, no_origin)
 
 
 def _reduction(modes: tuple[str, ...]) -> None:
@@ -198,10 +202,11 @@ def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:
 
 #: rounds of groups: the groups of a round are independent (no kernel in two of them) and run in parallel; a later
 #: round links the earlier rounds' cached kernels. Each group compiles the kernels of the probability modes it is
-#: given (those that take no mode ignore them).
+#: given (those that take no mode ignore them). Within a round the longest go first (the pool starts groups in this
+#: order), so that on two cores the short ones run beside the longest instead of after it.
 ROUNDS: tuple[tuple[Callable[[tuple[str, ...]], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_fused_steps, _newborn_steps, _lmb_steps, _pmbm_steps, _track_metrics),
+    (_track_metrics, _lmb_steps, _pmbm_steps, _fused_steps, _newborn_steps),
 )
 
 #: the groups whose kernels take no probability mode (compiled once for all)

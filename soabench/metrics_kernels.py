@@ -217,7 +217,7 @@ def run_matchings(E, e_off, G, gt, d_gate, gate_cost, ospa_c, gospa_c):  # pragm
     redo = np.zeros(K, dtype=np.bool_)
     gidx = np.empty(P, dtype=np.int64)
     for k in range(K):
-        m = 0
+        m = np.int64(0)  # int64 from the start: a literal 0 would compile _repeats_gt once more
         for p in range(P):
             if gt[k, p]:
                 gidx[m] = p
@@ -274,7 +274,7 @@ def run_matchings(E, e_off, G, gt, d_gate, gate_cost, ospa_c, gospa_c):  # pragm
                 Cq[i, j] = min(D[j, i], gospa_c)
         rows, cols = assignment(Cq)
         kept = np.empty(len(rows))
-        n_kept = 0
+        n_kept = np.int64(0)  # likewise for np_sum
         for t in range(len(rows)):
             d = D[cols[t], rows[t]]
             if d < gospa_c:

@@ -59,6 +59,21 @@ def _copy_state(mo, Po, q, m, P, j):
             Po[q, a, b] = P[j, a, b]
 
 
+@njit(cache=True, inline="always")
+def _copy_row(dst, q, src, j):
+    """dst[q] = src[j] for rows of 4, element by element: a row assignment would link numba's shape-mismatch error,
+    whose message formatting (numba's string functions) compiles into every caller."""
+    for a in range(4):
+        dst[q, a] = src[j, a]
+
+
+@njit(cache=True, inline="always")
+def _set_row(dst, q, v):
+    """dst[q] = v for a row of 4, element by element (as :func:`_copy_row`)."""
+    for a in range(4):
+        dst[q, a] = v[a]
+
+
 @njit(cache=True)
 def _order_heaviest_first(w):
     """``np.argsort(-w, kind="mergesort")`` for finite weights: the indices by decreasing w, ties in index order.
@@ -182,7 +197,7 @@ def predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pars, bw, bm,
     """
     dyn = beta.shape[1] == 4
     if not births_ok(bw, bm, bP):
-        return (*_new_mixture(0, dyn), np.empty(0), False)
+        return (*_new_mixture(np.int64(0), dyn), np.empty(0), False)
     p_S = pars[PRED_P_S]
     f_beta, theta_min, p_S_max = pars[PRED_BETA_FACTOR], pars[PRED_THETA_MIN], pars[PRED_P_S_MAX]
     r_min, r_max, half_fov = pars[PRED_R_MIN], pars[PRED_R_MAX], pars[PRED_HALF_FOV]
@@ -233,14 +248,13 @@ def predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pars, bw, bm,
     for k in range(Jb):
         j = J0 + k
         w2[j] = bw[k]
-        m2[j] = bm[k]
-        P2[j] = bP[k]
+        _copy_state(m2, P2, j, bm, bP, k)
         origin2[j] = bsrc[k]
         n_det2[j] = 0
         age2[j] = 0
         label2[j] = label0 + k
         if dyn:
-            beta2[j] = beta0
+            _set_row(beta2, j, beta0)
     g = np.empty(J)
     for j in range(J):
         dx = m2[j, 0] - ego[0]
@@ -482,7 +496,7 @@ def posterior(w, m, P, origin, n_det, age, beta, label, sup, R, beta_nb, nb_m, n
         no[j] = n_det[j]
         ao[j] = age[j]
         if dyn:
-            bo[j] = beta[j]
+            _copy_row(bo, j, beta, j)
             bo[j, 1] += g[j]
     for p in range(n_pairs):
         q = J + p
@@ -494,31 +508,31 @@ def posterior(w, m, P, origin, n_det, age, beta, label, sup, R, beta_nb, nb_m, n
         no[q] = n_det[src] + 1
         ao[q] = age[src]
         if dyn:
-            bo[q] = beta[src]
+            _copy_row(bo, q, beta, src)
             bo[q, 0] += 1.0
     q = J + n_pairs
     for ll in range(w_nb.shape[0]):
         if w_nb[ll] > 0.0:
             wo[q] = w_nb[ll]
-            mo[q] = nb_m[ll]
-            Po[q] = nb_P[ll]
+            _copy_state(mo, Po, q, nb_m, nb_P, ll)
             oo[q] = nb_origin
             lo[q] = nb_label0 + ll
             no[q] = 1
             ao[q] = 0
             if dyn:
-                bo[q] = nb_beta
+                _set_row(bo, q, nb_beta)
             q += 1
     return wo, mo, Po, oo, no, ao, bo, lo, n_pairs, n_nb
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def update(w, m, P, origin, n_det, age, beta, label, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False):
     """:func:`support` then :func:`posterior` without newborn terms, in one call; returns (posterior, A, ok)."""
     sup = support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf)
     no_nb = np.empty(0)
-    # nb_origin as an int64 variable, not the literal 0: then this is the specialisation posterior_reduce compiles
-    # too (a literal argument would make numba compile posterior a second time)
+    # writable empty newborn arrays and nb_origin as an int64 variable, not the literal 0: the argument types the
+    # filter's newborn step passes to posterior_reduce, so posterior is compiled once (a literal or a read-only array
+    # would make numba compile it a second time)
     nb_origin = np.int64(0)
     out = posterior(w, m, P, origin, n_det, age, beta, label, sup, R, no_nb, np.empty((0, 4)), np.empty((0, 4, 4)),
                     no_nb, nb_origin, nb_origin)  # fmt: skip
@@ -551,7 +565,7 @@ def _select(w, m, P, origin, n_det, age, beta, label, idx):
         wo[k], oo[k], no[k], ao[k], lo[k] = w[i], origin[i], n_det[i], age[i], label[i]
         _copy_state(mo, Po, k, m, P, i)
         if dyn:
-            bo[k] = beta[i]
+            _copy_row(bo, k, beta, i)
     return wo, mo, Po, oo, no, ao, bo, lo
 
 
@@ -611,7 +625,7 @@ def reduce(w, m, P, origin, n_det, age, beta, label, pars, next_label):
             bo = np.empty((G, 4) if dyn else (0, 0))
             if dyn:
                 for g in range(G):
-                    bo[g] = beta[centres[g]]
+                    _copy_row(bo, g, beta, centres[g])
                 wmu = np.zeros((G, 2))
                 wsec = np.zeros((G, 2))
                 for i in range(n_pruned):
@@ -665,7 +679,7 @@ def reduce(w, m, P, origin, n_det, age, beta, label, pars, next_label):
     k = 0
     for e in range(n_e):
         for _ in range(reps[e]):
-            X[k] = m[idx[e]]
+            _copy_row(X, k, m, idx[e])
             X_w[k] = w[idx[e]]
             k += 1
     X_label, label, next_label = extract_labels(w, label, idx, reps, next_label)
@@ -685,6 +699,10 @@ def reduce(w, m, P, origin, n_det, age, beta, label, pars, next_label):
 # composes them here instead, so that a scan costs one call (two with measurement-driven newborn terms, whose
 # beta(A, kappa) is caller code in Python). The stage times are read inside with the clock of time.perf_counter
 # (soabench.gmphd.clock). The arithmetic is that of the separate calls, so the results are the same bit for bit.
+# The thin compositions update and update_reduce are inlined into their callers by numba (inline="always"): numba
+# compiles every compiled function into a library of its own with all its callees linked in and optimised and emitted
+# again, so each wrapper of its own would cost one more optimisation of the whole update and reduction under it.
+# Called from Python (the line-of-sight step calls update_reduce) they are still compiled on their own.
 
 #: ``status`` of :func:`step` and :func:`update_reduce`: the cycle ran; a birth component is not finite or has a
 #: negative weight (nothing computed); the UKF met a covariance that is not positive definite (nothing kept)
@@ -695,7 +713,8 @@ STEP_OK, STEP_BAD_BIRTHS, STEP_NOT_PD = 0, 1, 2
 def _no_reduction(dyn):
     """What :func:`reduce` returns for an empty posterior (the value :func:`step` returns when it stops early)."""
     empty_label = np.zeros(0, dtype=np.int64)
-    return _new_mixture(0, dyn), np.empty((0, 4)), np.empty(0), empty_label, empty_label, (0.0, 0, 0, False, 0)
+    empty = _new_mixture(np.int64(0), dyn)
+    return empty, np.empty((0, 4)), np.empty(0), empty_label, empty_label, (0.0, 0, 0, False, 0)
 
 
 @njit(cache=True)
@@ -716,14 +735,15 @@ def step(w, m, P, origin, n_det, age, beta, label, F, Q, pred_pars, bw, bm, bP, 
     times[0] = monotonic() - t0
     if not pred[9]:
         return STEP_BAD_BIRTHS, 0, 0, 0, np.empty(0), _no_reduction(beta.shape[1] == 4), times
-    status, n_updated, n_pairs, A, red, ur = update_reduce(
-        *pred[:9], p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars, next_label + bw.shape[0]
-    )
+    w1, m1, P1, origin1, n_det1, age1, beta1, label1, g1 = pred[:9]  # named: numba inlines no call with *args
+    status, n_updated, n_pairs, A, red, ur = update_reduce(w1, m1, P1, origin1, n_det1, age1, beta1, label1, g1, p_D0,
+                                                           Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars,
+                                                           next_label + bw.shape[0])  # fmt: skip
     times[1], times[2] = ur[0], ur[1]
     return status, pred[0].shape[0] if status == STEP_OK else 0, n_updated, n_pairs, A, red, times
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def update_reduce(w, m, P, origin, n_det, age, beta, label, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf, red_pars,
                   next_label):  # fmt: skip
     """:func:`update` and :func:`reduce` in one call, for a predicted mixture whose gate ``g`` the caller has

@@ -352,8 +352,8 @@ class GMPHDFilter:
                 sup,
                 self.R,
                 beta_nb,
-                _read_only(np.ascontiguousarray(newborn.m, dtype=float).reshape(-1, 4)),
-                _read_only(np.ascontiguousarray(newborn.P, dtype=float).reshape(-1, 4, 4)),
+                _writable(np.ascontiguousarray(newborn.m, dtype=float).reshape(-1, 4)),
+                _writable(np.ascontiguousarray(newborn.P, dtype=float).reshape(-1, 4, 4)),
                 self._nb_beta,
                 SOURCE_MEAS,
                 self._red_pars,
@@ -437,14 +437,13 @@ def _birth_arrays(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     )
 
 
-def _read_only(a: np.ndarray) -> np.ndarray:
-    """``a`` as a read-only array (a view when ``a`` is writable): numba compiles one specialisation per
-    writability, so the newborn terms of every birth model reach the compiled cycle as the same type."""
-    if not a.flags.writeable:
-        return a
-    view = a.view()
-    view.flags.writeable = False
-    return view
+def _writable(a: np.ndarray) -> np.ndarray:
+    """``a`` as a writable array (a copy when ``a`` is read-only, e.g. a birth model's shared scan arrays): numba
+    compiles one specialisation per writability, and :func:`soabench.gmphd.cycle.update` hands
+    :func:`~soabench.gmphd.cycle.posterior` writable (empty) newborn arrays, so with writable newborn terms the
+    newborn step links that same specialisation instead of compiling a second one. The compiled cycle only reads
+    them."""
+    return a if a.flags.writeable else a.copy()
 
 
 def _mixture_arrays(mix: Mixture) -> tuple[np.ndarray, ...]:

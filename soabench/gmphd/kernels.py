@@ -311,7 +311,7 @@ def merge_threshold(U):
     return U * (1.0 + MERGE_TIE)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # a dispatch only: inlined, its callers do not optimise both searches again
 def merge_groups(m, P, order, U):
     """Vo-Ma greedy merge groups (Table II, §2.9), literally: pass g takes j* = the next component of ``order``
     (heaviest first) still unmerged, and absorbs every unmerged i with q = (m_i - m_j*)^T P_i^-1 (m_i - m_j*) <= U,
@@ -672,7 +672,12 @@ def merge_groups_window(m, P, order, U):
         spd[i] = _cholesky4(P[i], L[i])
         if spd[i] and P[i, 0, 0] > pxx_max:
             pxx_max = P[i, 0, 0]
-    by_x = np.argsort(m[:, 0])
+    x = np.empty(J)
+    for i in range(J):
+        x[i] = m[i, 0]
+    # any order of equal x gives the same window, and so the same groups; the stable sort of a contiguous float64
+    # array is the one _order_heaviest_first compiles, so no second sort is compiled for this one
+    by_x = np.argsort(x, kind="mergesort")
     xs = m[by_x, 0]
     half = math.sqrt(U * pxx_max) * (1.0 + 1e-9) + 1e-12
     alive = np.ones(J, dtype=np.bool_)
@@ -724,8 +729,10 @@ def merge_moments(label, centres, w, m, P, n_det, age):
         ag[g] = age[c]
         if count[g] == 1:
             W[g] = w[c]
-            mt[g] = m[c]
-            Pt[g] = P[c]
+            for a in range(4):  # element by element: a row assignment links numba's string formatting
+                mt[g, a] = m[c, a]
+                for b in range(4):
+                    Pt[g, a, b] = P[c, a, b]
     for i in range(J):
         g = label[i]
         if count[g] > 1:

@@ -90,7 +90,7 @@ def _hits_misses(path: Path, cache: Path) -> tuple[int, int]:
 
 def test_the_cache_follows_the_kernel_sources_not_their_path(tmp_path):
     """The same sources at another path (pip install ., then pip install -e .) load what the first compiled; a
-    change to any kernel source, even another module's, compiles again."""
+    change to any kernel source, the kernel's own or another module's, compiles again."""
     cache = tmp_path / "cache"
     first = _copy_of_the_package(tmp_path / "installed")
     second = _copy_of_the_package(tmp_path / "editable")
@@ -100,6 +100,9 @@ def test_the_cache_follows_the_kernel_sources_not_their_path(tmp_path):
     other.write_text(other.read_text() + "\n# a changed kernel source\n")
     assert _hits_misses(second, cache) == (0, 1)  # compiled again
     assert _hits_misses(first, cache) == (1, 0)  # the unchanged sources keep their own
+    own = first / "soabench" / "gmphd" / "kernels.py"  # the module of the kernel the probe calls
+    own.write_text(own.read_text() + "\n# a changed kernel source\n")
+    assert _hits_misses(first, cache) == (0, 1)
 
 
 def test_every_module_with_kernels_keys_the_cache():

@@ -108,3 +108,30 @@ def test_bad_births_change_nothing(recorded):
         filt.R, filt._r_min, filt._gate, filt._kappa(Z), filt._ukf, filt._red_pars, filt.next_label,
     )  # fmt: skip
     assert out[0] == cycle.STEP_BAD_BIRTHS and len(out[5][0][0]) == 0
+
+
+def test_the_newborn_step_hands_posterior_the_types_the_update_does(monkeypatch):
+    """numba compiles a function once per argument types, writability included: the update without newborn terms
+    hands the compiled posterior writable (empty) newborn arrays, so the newborn step must too (a birth model's
+    read-only newborn terms are copied), or posterior and everything it calls would be compiled a second time."""
+    import numba
+    import shapely
+
+    from soabench import kernel_warmup as kw
+    from soabench.types import NewbornTerms, Scan
+
+    seen = []
+    real = cycle.posterior_reduce
+    monkeypatch.setattr(cycle, "posterior_reduce", lambda *args: seen.append(args) or real(*args))
+    cfg = Config()
+    f = GMPHDFilter(cfg.filter, cfg.sensor_at(), "static")
+    Z, ego = kw._scan_arrays()
+    nb_m, nb_P = np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0)
+    nb_m.flags.writeable = nb_P.flags.writeable = False  # as a birth model may share them
+    births = kw._births()
+    births.newborn = NewbornTerms(nb_m, nb_P, lambda A, kappa: 0.1 + 0 * A)
+    f.step(Scan(0, 0.0, ego, Z, kw._no_obstacles(), [], shapely.box(0, 0, 1, 1)), births)
+    assert len(seen) == 1
+    passed = [numba.typeof(a) for a in seen[0][11:13]]  # nb_m, nb_P
+    assert passed == [numba.typeof(np.empty((0, 4))), numba.typeof(np.empty((0, 4, 4)))]
+    assert nb_m.flags.writeable is False  # the caller's arrays are left as they were
