@@ -415,12 +415,14 @@ def _split_none(a, b):
 
 
 @njit(cache=True)
-def association_marginals(logc, max_hyp, seed, force_gibbs=False):
+def association_marginals(logc, max_hyp, seed, force_gibbs=False, exact=False):
     """Marginal association probabilities ``marg`` (N, 2 + M) of the cost rows ``logc`` (module docstring), and
-    the number of valid hypotheses weighted (summed over the clusters; a track alone counts 1) and of clusters
-    solved by Gibbs sampling.
+    the number of valid hypotheses weighted (summed over the clusters; a track alone counts 1; a cluster solved by
+    the forward-backward pass beyond ``max_hyp`` counts ``max_hyp`` + 1) and of clusters solved by Gibbs sampling.
 
     ``force_gibbs``: sample every cluster with measurements, even one small enough to solve exactly (tests).
+    ``exact``: solve every cluster of at most ``DP_MAX_M`` measurements by the forward-backward pass, however many
+    hypotheses it has (``[lmb] association = "exact"``); the others as the default.
     """
     state = np.full(1, seed, dtype=np.uint64)
     N, n_cols = logc.shape
@@ -474,16 +476,19 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False):
                     n_opt[a] += 1
         local = np.zeros((n, 1 + mc))
         n_hyp = max_hyp + 1
+        solved = False
         if not force_gibbs:
             if mc <= DP_MAX_M:
                 n_hyp = _count_dp(options, n_opt, mc, max_hyp)
-                if n_hyp <= max_hyp:
+                if n_hyp <= max_hyp or exact:
                     local = _marginals_dp(sub, options, n_opt, mc)
+                    solved = True
             else:
                 hyps, n_hyp = _enumerate_valid(options, n_opt, mc, max_hyp)
                 if n_hyp <= max_hyp:
                     _accumulate(sub, hyps, n_hyp, local, np.arange(n))
-        if n_hyp > max_hyp:
+                    solved = True
+        if not solved:
             hyps, n_hyp = _gibbs(sub, options, n_opt, max_hyp, state)
             n_gibbs += 1
             _accumulate(sub, hyps, n_hyp, local, np.arange(n))
