@@ -487,6 +487,7 @@ def sparse_assign_rows(n_rows, n_cols, off, col, cost, unmatched):  # pragma: no
             continue
         n_front = n_settled = n_visited = 0
         r, d_r = i, 0.0
+        bound = np.inf  # the distance of the nearest free column reached: nothing farther is settled before it
         while True:
             for q in range(off[r], off[r + 1] + 1):
                 if q < off[r + 1]:
@@ -496,6 +497,10 @@ def sparse_assign_rows(n_rows, n_cols, off, col, cost, unmatched):  # pragma: no
                 if state[j] == 2:
                     continue
                 d = d_r + cst - u[r] - v[j]
+                if d >= bound and (d > bound or row4col[j] >= 0):
+                    continue
+                if row4col[j] < 0:
+                    bound = d
                 if state[j] == 0:
                     state[j] = 1
                     front[n_front] = j

@@ -120,10 +120,12 @@ def _global_counts(
     step = max(1, BLOCK_CELLS // max(1, G * E))
     args = (g.ids, g.off, g.xy, e.ids, e.off, e.xy, float(d_gate), THRESHOLD, step, nT, potential, id_potential)
     announced("track metrics", global_counts, *args)
-    potential = potential.reshape(nG, nT)
+    # potential / (gt_count + tr_count - potential) per cell; a cell without overlap is 0 / (a positive count) = 0.0
+    on = np.flatnonzero(potential)
+    alignment = np.zeros(nG * nT)
     with np.errstate(invalid="ignore", divide="ignore"):
-        alignment = potential / (gt_count[:, None] + tr_count[None, :] - potential)
-    return alignment, id_potential.reshape(nG, nT)
+        alignment[on] = potential[on] / (gt_count[on // nT] + tr_count[on % nT] - potential[on])
+    return alignment.reshape(nG, nT), id_potential.reshape(nG, nT)
 
 
 @dataclass
