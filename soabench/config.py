@@ -471,6 +471,10 @@ class ExperimentConfig:
         _non_negative("plugin_budget", self.plugin_budget, hi=86400.0)
 
 
+#: the ways the LMB computes its association marginals (docs/method.md "LMB filter", register row 40)
+LMB_ASSOCIATIONS = ("bounded", "exact")
+
+
 @dataclass
 class LMBConfig:
     """The LMB filter, read by runs whose experiment.filters names lmb (docs/method.md "LMB filter").
@@ -488,6 +492,9 @@ class LMBConfig:
     #: r = min(sum w, r_B_max)) or "components" (one per component, r = min(w, r_B_max), every newborn term as
     #: Reuter's adaptive birth)
     birth_mapping: str = "groups"
+    #: association marginals (docs/method.md "LMB filter"): "bounded" (exact up to max_hypotheses valid
+    #: hypotheses, Gibbs sampling above) or "exact" (also exact for any cluster of at most 10 measurements)
+    association: str = "bounded"  #: "bounded": exact to max_hypotheses, Gibbs above; "exact": also clusters of <= 10 z
 
     def validate(self) -> LMBConfig:
         _in_range("lmb.r_B_max", self.r_B_max, 0.0, 1.0, lo_open=True, hi_open=True)
@@ -497,6 +504,7 @@ class LMBConfig:
         _int_range("lmb.max_components", self.max_components, 1, 10_000)
         _in_range("lmb.extract_r", self.extract_r, 0.0, 1.0, hi_open=True)
         _one_of("lmb.birth_mapping", self.birth_mapping, ("groups", "components"))
+        _one_of("lmb.association", self.association, LMB_ASSOCIATIONS)
         return self
 
 

@@ -52,6 +52,7 @@ _A_MAX = np.finfo(np.float64).max
 #: settings (``max_hypotheses``, ``prune_r``, ``max_tracks``, ``prune_T``, ``merge_U``, ``max_components``,
 #: ``extract_r``), packed once by the filter
 UP_R_MIN, UP_GATE, UP_MAX_HYP, UP_PRUNE_R, UP_MAX_TRACKS, UP_PRUNE_T, UP_MERGE_U, UP_MAX_COMP, UP_EXTRACT_R = range(9)
+UP_EXACT = 9  #: 1.0 with ``[lmb] association = "exact"``
 
 
 @njit(cache=True)
@@ -337,7 +338,7 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
         logc[i, MISSED] = log_r + eta_tab[i, 0]
         for ll in range(M):
             logc[i, 2 + ll] = log_r + eta_tab[i, 1 + ll] - log_kappa[ll]
-    marg, n_hyp, n_gibbs = association_marginals(logc, np.int64(pars[UP_MAX_HYP]), seed, False)
+    marg, n_hyp, n_gibbs = association_marginals(logc, np.int64(pars[UP_MAX_HYP]), seed, False, pars[UP_EXACT] > 0.0)
     # the LMB approximation (step 4): r' and the posterior components, missed first, then by measurement
     r_new = np.empty(N)
     row = np.empty(M)

@@ -122,11 +122,12 @@ class LMBFilter:
         pred[cycle.PRED_R_MIN], pred[cycle.PRED_R_MAX] = s.r_min, s.r_max
         pred[cycle.PRED_HALF_FOV], pred[cycle.PRED_LIMITED] = 0.5 * s.fov + 1e-12, float(s.fov_deg < 360.0)
         self._pred_pars = pred
-        up = np.zeros(9)
+        up = np.zeros(10)
         up[lmb_cycle.UP_R_MIN], up[lmb_cycle.UP_GATE], up[lmb_cycle.UP_MAX_HYP] = s.r_min, gate, lmb.max_hypotheses
         up[lmb_cycle.UP_PRUNE_R], up[lmb_cycle.UP_MAX_TRACKS] = lmb.prune_r, lmb.max_tracks
         up[lmb_cycle.UP_PRUNE_T], up[lmb_cycle.UP_MERGE_U] = c.prune_T, c.merge_U
         up[lmb_cycle.UP_MAX_COMP], up[lmb_cycle.UP_EXTRACT_R] = lmb.max_components, lmb.extract_r
+        up[lmb_cycle.UP_EXACT] = float(lmb.association == "exact")
         self._up_pars = up
         self.tracks = Tracks.empty()
         #: newborn terms (m, P) of the previous scan's measurements and their birth existences r_B
@@ -267,7 +268,7 @@ class LMBFilter:
         kappa = clutter_intensity(Z, self.sensor)
         up = update(
             pred, Z, ego_ok if ego_ok is not None else np.zeros(3), p_D, kappa, self.model,
-            max_hyp=lmb.max_hypotheses, seed=seed,
+            max_hyp=lmb.max_hypotheses, seed=seed, exact=lmb.association == "exact",
         )  # fmt: skip
         # A such that rho = A / (kappa + A) = r_U: what a model reading the previous step (ATBM prev_scan) needs
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -257,25 +257,30 @@ def _marginals_dp(sub, options, n_opt, M):
 
 
 @njit(cache=True)
-def _draw(i, options, n_opt, weight, taken, state):
+def _draw(i, options, n_opt, weight, taken, state, buf_w, buf_c):
     """theta_i from its conditional: prop. to ``weight[i, o]`` (exp of the log cost, shifted by the row's maximum)
-    over the options o of track i whose measurement is not taken by another track."""
+    over the options o of track i whose measurement is not taken by another track. One pass sums them and gathers
+    the open options of positive weight into ``buf_w``, ``buf_c`` (scratch of the row's length); the uniform is
+    then compared with their running sums, in option order."""
     tot = 0.0
+    k = 0
     for o in range(n_opt[i]):
         c = options[i, o]
         if c < 1 or taken[c - 1] < 0 or taken[c - 1] == i:
-            tot += weight[i, o]
+            w = weight[i, o]
+            tot += w
+            if w > 0.0:
+                buf_w[k] = w
+                buf_c[k] = c
+                k += 1
     u = _uniform(state) * tot
     acc = 0.0
     last = -1
-    for o in range(n_opt[i]):
-        c = options[i, o]
-        if c < 1 or taken[c - 1] < 0 or taken[c - 1] == i:
-            if weight[i, o] > 0.0:
-                last = c
-                acc += weight[i, o]
-                if u < acc:
-                    return c
+    for q in range(k):
+        last = buf_c[q]
+        acc += buf_w[q]
+        if u < acc:
+            return last
     return last
 
 
@@ -334,6 +339,8 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             takers[fill[j]] = i
             fill[j] += 1
     blocked = np.zeros(n, dtype=np.int64)
+    buf_w = np.empty(options.shape[1])
+    buf_c = np.empty(options.shape[1], dtype=np.int64)
     # the samples, each stored only when its sweep changed the hypothesis: a repeat of the previous sample adds no
     # distinct hypothesis and would not change which one comes first among equal hashes
     samples = np.empty((n_sweeps, n), dtype=np.int64)
@@ -353,7 +360,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                         if u < prefix[i, o]:
                             break
             else:
-                c = _draw(i, options, n_opt, weight, taken, state)
+                c = _draw(i, options, n_opt, weight, taken, state, buf_w, buf_c)
             if c < 0:  # no option of positive weight (only when r = 1 and p_D = 1 leave the track none)
                 c = theta[i]
             if c == theta[i]:
@@ -415,12 +422,14 @@ def _split_none(a, b):
 
 
 @njit(cache=True)
-def association_marginals(logc, max_hyp, seed, force_gibbs=False):
+def association_marginals(logc, max_hyp, seed, force_gibbs=False, exact=False):
     """Marginal association probabilities ``marg`` (N, 2 + M) of the cost rows ``logc`` (module docstring), and
-    the number of valid hypotheses weighted (summed over the clusters; a track alone counts 1) and of clusters
-    solved by Gibbs sampling.
+    the number of valid hypotheses weighted (summed over the clusters; a track alone counts 1; a cluster solved by
+    the forward-backward pass beyond ``max_hyp`` counts ``max_hyp`` + 1) and of clusters solved by Gibbs sampling.
 
     ``force_gibbs``: sample every cluster with measurements, even one small enough to solve exactly (tests).
+    ``exact``: solve every cluster of at most ``DP_MAX_M`` measurements by the forward-backward pass, however many
+    hypotheses it has (``[lmb] association = "exact"``); the others as the default.
     """
     state = np.full(1, seed, dtype=np.uint64)
     N, n_cols = logc.shape
@@ -474,16 +483,19 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False):
                     n_opt[a] += 1
         local = np.zeros((n, 1 + mc))
         n_hyp = max_hyp + 1
+        solved = False
         if not force_gibbs:
             if mc <= DP_MAX_M:
                 n_hyp = _count_dp(options, n_opt, mc, max_hyp)
-                if n_hyp <= max_hyp:
+                if n_hyp <= max_hyp or exact:
                     local = _marginals_dp(sub, options, n_opt, mc)
+                    solved = True
             else:
                 hyps, n_hyp = _enumerate_valid(options, n_opt, mc, max_hyp)
                 if n_hyp <= max_hyp:
                     _accumulate(sub, hyps, n_hyp, local, np.arange(n))
-        if n_hyp > max_hyp:
+                    solved = True
+        if not solved:
             hyps, n_hyp = _gibbs(sub, options, n_opt, max_hyp, state)
             n_gibbs += 1
             _accumulate(sub, hyps, n_hyp, local, np.arange(n))

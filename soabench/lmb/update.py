@@ -99,6 +99,7 @@ def update(
     max_hyp: int = 1000,
     seed: int = 0,
     force_gibbs: bool = False,
+    exact: bool = False,
 ) -> UpdateResult:
     """LMB update of the predicted ``tracks`` with ``Z`` (M, 2) (module docstring).
 
@@ -109,6 +110,8 @@ def update(
         max_hyp: hypotheses per cluster: exact marginals up to this many, else this many Gibbs sweeps.
         seed: seed of the Gibbs sampler.
         force_gibbs: sample even the clusters small enough to solve exactly (tests).
+        exact: solve every cluster of at most :data:`soabench.lmb.gibbs.DP_MAX_M` measurements exactly, however
+            many hypotheses it has (``[lmb] association = "exact"``).
     """
     Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
     M = len(Z)
@@ -126,7 +129,7 @@ def update(
         terms = model.terms(tracks.m, tracks.P, ego)
         p_D[~terms.valid] = 0.0
     logc, log_miss, log_det, log_eta_miss, log_eta_det = association_costs(tracks, p_D, logq, kappa)
-    marg, n_hyp, n_gibbs = association_marginals(logc, int(max_hyp), np.uint32(seed), bool(force_gibbs))
+    marg, n_hyp, n_gibbs = association_marginals(logc, int(max_hyp), np.uint32(seed), bool(force_gibbs), bool(exact))
     r_new = marg[:, MISSED] + marg[:, 2:].sum(axis=1)
     r_U = marg[:, 2:].sum(axis=0)
     alive = r_new > 0.0

@@ -24,7 +24,7 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.metrics_kernels import np_sum  # noqa: E402
-from soabench.pmbm.murty import murty_arrays  # noqa: E402
+from soabench.pmbm.murty import murty_from, repaired_root, square_root  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
 
@@ -154,8 +154,30 @@ def cluster_solutions(
         for s in range(n_keep):
             out_choice[s] = choice[order[s]]
         return costs[order], out_choice
-    sol_costs, cols = murty_arrays(cluster_costs(hs, L, log_l_miss, log_l_det, log_new), k, max_gap)
+    C = cluster_costs(hs, L, log_l_miss, log_l_det, log_new)
+    m = C.shape[1]
+    sol, u, v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
+    return _ranked(C, L, nT, k, max_gap, sol, u, v, square_root(C, sol, u, v), all_miss)
+
+
+@njit(cache=True)
+def _ranked(
+    C: np.ndarray,
+    L: np.ndarray,
+    nT: int,
+    k: int,
+    max_gap: float,
+    sol: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    cost0: float,
+    all_miss: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cluster_solutions` by Murty's algorithm over the cost matrix ``C`` from its best assignment (sol, u, v)
+    of cost ``cost0`` (:func:`soabench.pmbm.murty.murty_from`)."""
+    sol_costs, cols = murty_from(C, k, max_gap, sol, u, v, cost0)
     K = sol_costs.shape[0]
+    nL = L.shape[0]
     choice = np.full((K, nT), MISS, dtype=np.int64)
     for s in range(K):
         for row in range(nL):
@@ -181,26 +203,63 @@ def unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
+def _first(s: np.ndarray, a: np.ndarray, b: np.ndarray, x: int, y: int) -> bool:
+    """Entry x comes before entry y: by (sum, a, b)."""
+    if s[x] != s[y]:
+        return s[x] < s[y]
+    if a[x] != a[y]:
+        return a[x] < a[y]
+    return b[x] < b[y]
+
+
+@njit(cache=True)
 def best_sums(costs: list, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest sums of one entry of each sorted cost array: (sums (K,), index of each term (K, len)).
-    Equal sums keep the order of the (earlier terms' rank, this term's rank) pairs."""
+
+    The terms are added one array at a time: the k smallest of total[a] + c[b] (total: the sorted sums so far) by
+    a merge of the rows a, each increasing in b, through a heap of the rows' next entries. Equal sums keep the
+    order of the (earlier terms' rank, this term's rank) pairs, i.e. that of a stable sort of every sum."""
     total = np.zeros(1)
     idx = np.zeros((1, len(costs)), dtype=np.int64)
     for j in range(len(costs)):
         c = costs[j]
         nc = c.shape[0]
-        s = np.empty(total.shape[0] * nc)
-        for a in range(total.shape[0]):
-            for b in range(nc):
-                s[a * nc + b] = total[a] + c[b]
-        order = np.argsort(s, kind="mergesort")[:k]
-        idx2 = np.empty((order.shape[0], len(costs)), dtype=np.int64)
-        total = np.empty(order.shape[0])
-        for r in range(order.shape[0]):
-            idx2[r] = idx[order[r] // nc]
-            idx2[r, j] = order[r] % nc
-            total[r] = s[order[r]]
-        idx = idx2
+        nt = min(total.shape[0], k)
+        K = min(k, nt * nc)
+        hs = np.empty(nt)  # heap entries: sum, row a, column b (one per row)
+        ha = np.empty(nt, dtype=np.int64)
+        hb = np.zeros(nt, dtype=np.int64)
+        heap = np.empty(nt, dtype=np.int64)
+        for a in range(nt):  # rows in order: already a heap by (sum, a) when the sums are sorted
+            hs[a] = total[a] + c[0]
+            ha[a] = a
+            heap[a] = a
+        n_heap = nt if nc > 0 else 0
+        total2 = np.empty(K)
+        idx2 = np.empty((K, len(costs)), dtype=np.int64)
+        for r in range(K):
+            e = heap[0]
+            total2[r] = hs[e]
+            idx2[r] = idx[ha[e]]
+            idx2[r, j] = hb[e]
+            hb[e] += 1
+            if hb[e] < nc:
+                hs[e] = total[ha[e]] + c[hb[e]]
+            else:
+                n_heap -= 1
+                heap[0] = heap[n_heap]
+            p = 0  # sift down
+            while True:
+                c1, c2, best = 2 * p + 1, 2 * p + 2, p
+                if c1 < n_heap and _first(hs, ha, hb, heap[c1], heap[best]):
+                    best = c1
+                if c2 < n_heap and _first(hs, ha, hb, heap[c2], heap[best]):
+                    best = c2
+                if best == p:
+                    break
+                heap[p], heap[best] = heap[best], heap[p]
+                p = best
+        total, idx = total2, idx2
     return total, idx
 
 
@@ -238,35 +297,61 @@ def _global_hypotheses(
         T = T_flat[T_start[g] : T_start[g + 1]]
         L = L_flat[L_start[g] : L_start[g + 1]]
         nT = T.shape[0]
-        # distinct choices of the cluster's tracks' hypotheses among the prior global hypotheses
+        # distinct choices of the cluster's tracks' hypotheses among the prior global hypotheses, in order of first
+        # appearance (a row is compared in full only with the earlier ones of equal hash)
         reps = np.empty(A, dtype=np.int64)
+        hashes = np.empty(A, dtype=np.int64)
         n_u = 0
         for a in range(A):
+            h = np.int64(nT)
+            for i in range(nT):
+                h = h * np.int64(1000003) + table[a, T[i]]
             u = 0
             while u < n_u:
-                same = True
-                for i in range(nT):
-                    if table[a, T[i]] != table[reps[u], T[i]]:
-                        same = False
+                if hashes[u] == h:
+                    same = True
+                    for i in range(nT):
+                        if table[a, T[i]] != table[reps[u], T[i]]:
+                            same = False
+                            break
+                    if same:
                         break
-                if same:
-                    break
                 u += 1
             if u == n_u:
                 reps[n_u] = a
+                hashes[n_u] = h
                 n_u += 1
             inv[a] = u
         k_u = np.zeros(n_u, dtype=np.int64)
         for a in range(A):
             k_u[inv[a]] = max(k_u[inv[a]], ks[a])
         first_sol = len(sol_costs)
+        # Murty's best assignment for a choice is repaired from the previous choice's (they differ in a few columns)
+        m = nT + L.shape[0]
+        r_sol, r_u, r_v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
+        prev = np.empty(nT, dtype=np.int64)
+        C = np.empty((0, 0))
+        warm = False
         for u in range(n_u):
             hs = np.empty(nT, dtype=np.int64)
             for i in range(nT):
                 hs[i] = table[reps[u], T[i]]
             if nT > 1 and L.shape[0] > 1:
                 n_murty += 1
-            c, ch = cluster_solutions(hs, L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
+                if warm:  # the previous choice's matrix with the changed track columns rewritten
+                    changed = np.flatnonzero(hs != prev)
+                    for i in changed:
+                        for ll in range(L.shape[0]):
+                            C[ll, i] = log_l_miss[hs[i]] - log_l_det[hs[i], L[ll]]
+                    cost0 = repaired_root(C, changed, r_sol, r_u, r_v)
+                else:
+                    C = cluster_costs(hs, L, log_l_miss, log_l_det, log_new)
+                    cost0 = square_root(C, r_sol, r_u, r_v)
+                warm = cost0 < np.inf
+                prev[:] = hs
+                c, ch = _ranked(C, L, nT, k_u[u], max_gap, r_sol, r_u, r_v, cost0, -_sum_at(log_l_miss, hs))
+            else:
+                c, ch = cluster_solutions(hs, L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
             sol_costs.append(c)
             sol_choice.append(ch)
             sol_T.append(T)

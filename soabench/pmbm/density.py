@@ -52,11 +52,11 @@ class PMBMDensity:
     def hypothesis_probabilities(self) -> np.ndarray:
         """(H,) the marginal probability of each single-target hypothesis: the sum of the weights of the global
         hypotheses that pick it."""
-        p = np.zeros(len(self.hyps))
-        if self.table.size:
-            w = np.exp(self.log_w)
-            np.add.at(p, self.table, w[:, None])
-        return p
+        if not self.table.size:
+            return np.zeros(len(self.hyps))
+        n = self.table.shape[1]
+        # summed in the table's row order (as np.add.at(p, table, w[:, None]) would)
+        return np.bincount(self.table.ravel(), weights=np.repeat(np.exp(self.log_w), n), minlength=len(self.hyps))
 
     def phd_mass(self) -> float:
         """The expected number of targets: the intensity's mass plus sum_a w_a sum_i r_i."""

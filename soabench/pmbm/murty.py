@@ -10,7 +10,9 @@ The best assignment comes from :func:`lsa`, the shortest augmenting path algorit
 2016, the algorithm of :func:`scipy.optimize.linear_sum_assignment`) with its deterministic choices: rows are added
 in order; among the columns at the lowest reduced path cost the scan, which runs from the last column down, keeps
 the first it meets, except that a free column (one that ends the path) beats an assigned one at equal cost. So the
-best assignment is scipy's, exact ties included.
+best assignment is scipy's, exact ties included (:func:`square_root`). A matrix that differs from a solved one in a
+few columns (a cluster under another choice of its tracks' hypotheses) has its best assignment repaired from the
+solved one's instead (:func:`repaired_root`).
 
 Each subproblem starts from its parent's assignment and dual variables (Miller, Stone & Cox 1997): with pair t
 removed only row t is unassigned, the parent's duals stay feasible, and one shortest augmenting path from row t
@@ -218,8 +220,145 @@ def _before(cost_a: float, a: int, cost_b: float, b: int) -> bool:
 
 
 @njit(cache=True)
+def square_root(C: np.ndarray, sol: np.ndarray, u: np.ndarray, v: np.ndarray) -> float:
+    """The cheapest assignment of ``C`` (n, m) by :func:`lsa`, as the square problem with m - n dummy rows of cost
+    0 (on the columns no row takes, in column order): ``sol`` (m,) each row's column, (u, v) (m,) duals of ``C``
+    (reduced costs C_ij - u_i - v_j >= 0, 0 on the assignment; a dummy row's cells cost 0). Returns its cost, +inf
+    when there is none."""
+    n, m = C.shape
+    col4row = np.empty(n, dtype=np.int64)
+    ok, u0, v0 = lsa(C, col4row)
+    if not ok:
+        return np.inf
+    lo = np.inf
+    for i in range(n):
+        for j in range(m):
+            if C[i, j] < lo:
+                lo = C[i, j]
+    used = np.zeros(m, dtype=np.bool_)
+    for r in range(n):
+        sol[r] = col4row[r]
+        u[r] = u0[r] + lo
+        used[col4row[r]] = True
+    q = n
+    for j in range(m):
+        v[j] = v0[j]
+        if not used[j]:
+            sol[q] = j
+            u[q] = 0.0
+            q += 1
+    return _assignment_cost(C, col4row)
+
+
+@njit(cache=True)
+def repaired_root(C: np.ndarray, changed: np.ndarray, sol: np.ndarray, u: np.ndarray, v: np.ndarray) -> float:
+    """The cheapest assignment of ``C`` from the square assignment and duals (sol, u, v) of a matrix that differed
+    from ``C`` only in the columns ``changed``, updated in place (as :func:`square_root`); returns its cost, +inf
+    when there is none. Each changed column's dual becomes its least C_ij - u_i, which makes every reduced cost
+    >= 0 again; a row whose cell in a changed column is no longer tight gives its column up, and each such row,
+    in increasing order, takes one shortest augmenting path to a free column (the first reached; at equal path cost
+    the lowest column index)."""
+    n, m = C.shape
+    row4col = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        row4col[sol[i]] = i
+    free_row = np.zeros(m, dtype=np.bool_)
+    free_col = np.zeros(m, dtype=np.bool_)
+    for q in range(changed.shape[0]):
+        j = changed[q]
+        lo = np.inf
+        for i in range(m):
+            c = C[i, j] - u[i] if i < n else -u[i]
+            if c < lo:
+                lo = c
+        if lo == np.inf:  # no row can take column j (square: every column is taken)
+            return np.inf
+        v[j] = lo
+        h = row4col[j]
+        c = C[h, j] if h < n else 0.0
+        if not (c - u[h] - v[j] <= 0.0):
+            free_row[h] = True
+            free_col[j] = True
+            row4col[j] = -1
+            sol[h] = -1
+    d = np.empty(m)
+    pred = np.empty(m, dtype=np.int64)
+    seen = np.zeros(m, dtype=np.bool_)
+    scanned = np.zeros(m, dtype=np.bool_)
+    for start in range(m):
+        if not free_row[start]:
+            continue
+        d[:] = np.inf
+        seen[:] = False
+        scanned[:] = False
+        i, dist, sink = start, 0.0, -1
+        while sink < 0:
+            scanned[i] = True
+            for j in range(m):
+                if seen[j]:
+                    continue
+                c = C[i, j] if i < n else 0.0
+                if c == np.inf:
+                    continue
+                r = dist + c - u[i] - v[j]
+                if r < d[j]:
+                    d[j] = r
+                    pred[j] = i
+            lowest = np.inf
+            nxt = -1
+            for j in range(m):
+                if seen[j] or d[j] == np.inf:
+                    continue
+                if d[j] < lowest or (d[j] == lowest and free_col[j] and not free_col[nxt]):
+                    lowest = d[j]
+                    nxt = j
+            if nxt < 0:
+                return np.inf
+            seen[nxt] = True
+            if free_col[nxt]:
+                sink = nxt
+            else:
+                i = row4col[nxt]
+                dist = lowest
+        min_val = d[sink]
+        for j in range(m):
+            if seen[j]:
+                v[j] -= min_val - d[j]
+        u[start] += min_val
+        for i in range(m):
+            if scanned[i] and i != start:
+                u[i] += min_val - d[sol[i]]
+        free_col[sink] = False
+        free_row[start] = False
+        j = sink
+        while True:
+            i = pred[j]
+            row4col[j] = i
+            prev = sol[i]
+            sol[i] = j
+            j = prev
+            if i == start:
+                break
+    return _assignment_cost(C, sol)
+
+
+@njit(cache=True)
 def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`murty` as arrays: costs (K,) increasing and columns (K, rows).
+    """:func:`murty` as arrays: costs (K,) increasing and columns (K, rows), from :func:`square_root`."""
+    n, m = C.shape
+    sol = np.empty(m, dtype=np.int64)
+    u = np.empty(m)
+    v = np.empty(m)
+    cost0 = square_root(C, sol, u, v) if n else 0.0
+    return murty_from(C, k, max_gap, sol, u, v, cost0)
+
+
+@njit(cache=True)
+def murty_from(
+    C: np.ndarray, k: int, max_gap: float, sol: np.ndarray, u: np.ndarray, v: np.ndarray, cost0: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` best assignments of ``C`` (costs (K,) increasing, columns (K, rows)) from its best one: the square
+    assignment ``sol`` with duals (u, v) and cost ``cost0`` (+inf: there is none), as :func:`square_root` gives them.
 
     A subproblem is solved only when it reaches the top of the queue: until then it waits under a lower bound of
     its cost, its parent's cost plus the least reduced cost left in its row t (every path from row t starts with
@@ -236,34 +375,22 @@ def murty_arrays(C: np.ndarray, k: int, max_gap: float) -> tuple[np.ndarray, np.
     if n == 0:
         out_cost[0] = 0.0
         return out_cost[:1], out_cols[:1]
-    col4row = np.empty(n, dtype=np.int64)
-    ok, u0, v0 = lsa(C, col4row)
-    cost0 = _assignment_cost(C, col4row) if ok else np.inf
     if cost0 == np.inf:
         return out_cost[:0], out_cols[:0]
+    if k == 1:
+        out_cost[0] = cost0
+        out_cols[0] = sol[:n]
+        return out_cost[:1], out_cols[:1]
     limit = cost0 + max_gap
-    lo = np.inf
-    for i in range(n):
-        for j in range(m):
-            if C[i, j] < lo:
-                lo = C[i, j]
-    # solved nodes: square assignment (dummy rows on the columns no row takes, in column order) and duals of C
+    # solved nodes: square assignment and duals
     scap = 8
     s_sol = np.empty((scap, m), dtype=np.int64)
     s_u = np.empty((scap, m))
     s_v = np.empty((scap, m))
+    s_sol[0] = sol
+    s_u[0] = u
+    s_v[0] = v
     used = np.zeros(m, dtype=np.bool_)
-    for r in range(n):
-        s_sol[0, r] = col4row[r]
-        s_u[0, r] = u0[r] + lo
-        used[col4row[r]] = True
-    q = n
-    for j in range(m):
-        s_v[0, j] = v0[j]
-        if not used[j]:
-            s_sol[0, q] = j
-            s_u[0, q] = 0.0
-            q += 1
     n_slots = 1
     # nodes, numbered in the order made (the tie rule): key (cost once solved, else a lower bound)
     cap = 32

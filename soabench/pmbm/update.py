@@ -259,8 +259,7 @@ def _prune_tracks(d: PMBMDensity, r_floor: float) -> PMBMDensity:
     """Drop the tracks whose every hypothesis has r < ``r_floor``; merge the global hypotheses that became equal
     (their weights add); drop the single-target hypotheses no global hypothesis uses; renumber."""
     n = d.n_tracks
-    alive = np.zeros(n, dtype=bool)
-    np.logical_or.at(alive, d.track, d.hyps.r >= r_floor)
+    alive = np.bincount(d.track, weights=d.hyps.r >= r_floor, minlength=n) > 0.0
     cols = np.flatnonzero(alive)
     table = d.table[:, cols]
     log_w = d.log_w

@@ -16,6 +16,7 @@ For a gap k_a..k_b of target i (:class:`~soabench.tracks.reemergence.Gap`):
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -41,6 +42,11 @@ OCCLUDER_LABEL = {
 EGO_MOVED_M = 0.5
 #: an occluder is the obstacle of O_k whose hull centroid lies this close to its own (m)
 _SAME_CENTROID_M = 1e-6
+
+#: the hiding kinds found for the last :class:`~soabench.types.Scans` described, per (scan, target): the runs of one
+#: trial share its truth and occluders (a Scans is not changed once built), so each hidden scan of a target is
+#: tested once per trial, not once per run
+_hidden_memo: list = [None, None, {}]  # [weak reference to the Scans, its truth array, {(k, target): kind}]
 
 
 @dataclass(frozen=True)
@@ -111,14 +117,25 @@ def hiding_kinds(scan: Scan, points: np.ndarray) -> list[str]:
     return kinds
 
 
+def _hidden_by(scans: Scans) -> dict[tuple[int, int], str]:
+    """The hiding kinds (:func:`hiding_kinds`) already found for ``scans``, per (scan, target); a new, empty memo
+    when ``scans`` (or its truth) is not the one described last."""
+    ref, truth, memo = _hidden_memo
+    if ref is None or ref() is not scans or truth is not scans.truth_xy:
+        memo = {}
+        _hidden_memo[:] = [weakref.ref(scans), scans.truth_xy, memo]
+    return memo
+
+
 def describe_gaps(scans: Scans, gaps: Sequence[Gap], d_gate: float) -> list[GapDescription]:
     """:class:`GapDescription` of each gap of ``scans`` (the truth and the per-scan occluders of the sensor)."""
     xy, dt = np.asarray(scans.truth_xy, dtype=float), float(scans.dt)
-    queries: dict[int, list[int]] = {}  # scan -> the targets hidden there by some gap, in gap order
+    hidden_by = _hidden_by(scans)
+    queries: dict[int, list[int]] = {}  # scan -> the targets hidden there by some gap not yet tested, in gap order
     for g in gaps:
         for k in range(g.k_a, g.k_b + 1):
-            queries.setdefault(k, []).append(g.target)
-    hidden_by = {}
+            if (k, g.target) not in hidden_by:
+                queries.setdefault(k, []).append(g.target)
     for k, targets in queries.items():
         unique = list(dict.fromkeys(targets))
         hidden_by.update(zip(((k, i) for i in unique), hiding_kinds(scans.scans[k], xy[k, unique]), strict=True))

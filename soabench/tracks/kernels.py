@@ -147,13 +147,16 @@ def sparse_assignment(C):  # pragma: no cover - compiled
 @njit(cache=True)
 def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignment, state):  # pragma: no cover
     """Scans t, t + 1, ... of :func:`soabench.tracks.scores._scan_matches` until the end or a scan whose matching
-    has several optimal answers (:func:`_tied`); returns the index of that scan (K at the end).
+    has several optimal answers (:func:`_tied`); returns the index of that scan (K at the end) and its similarity
+    S, HOTA's cost ``-(alignment * S)`` and CLEAR's cost ``-score`` (``score``: 1000 for the previous scan's pair
+    plus S, 0 below the threshold), with the operations of the numpy form scipy matches it on (empty at the end).
 
     ``state`` is :class:`soabench.tracks.scores._MatchState`'s arrays in order: counts (tp, fn, fp, idsw, n_pairs),
     motp_sum (1,), gt_seen, gt_matched, frag_count, prev_id, prev_scan_id, and HOTA's pairs hg, he, hs.
     """
     counts, motp, gt_seen, gt_matched, frag, prev_id, prev_scan, hg, he, hs = state
     K = len(g_off) - 1
+    S = C = Q = np.empty((0, 0))
     while t < K:
         g0, e0 = g_off[t], e_off[t]
         ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
@@ -171,9 +174,9 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
                 for j in range(ne):
                     C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j])
                     score = (1000.0 if e_ids[e0 + j] == prev_scan[g_ids[g0 + i]] else 0.0) + S[i, j]
-                    Q[i, j] = 0.0 if S[i, j] < threshold - _EPS else -score
+                    Q[i, j] = -(0.0 if S[i, j] < threshold - _EPS else score)
             if _tied(C) or _tied(Q):
-                return t
+                return t, S, C, Q
             rows, cols = sparse_assignment(C)  # the pairs of zero similarity are never a match
             n = counts[4]
             for r in range(len(rows)):
@@ -206,7 +209,7 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
             counts[2] += ne - matched
             motp[0] += sim_sum
         t += 1
-    return t
+    return t, S[:0, :0], C[:0, :0], Q[:0, :0]
 
 
 @njit(cache=True)
@@ -232,6 +235,8 @@ def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, n
         g0, e0 = g_off[t], e_off[t]
         ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
         if ng > 0 and ne > 0:
+            if n_touched + ng * ne > len(touched):  # grown here, not inside the pair loop (reference counts)
+                touched = np.concatenate((touched[:n_touched], np.empty(n_touched + 2 * ng * ne, dtype=np.int64)))
             S = scan_similarity(gx, g0, ng, ex, e0, ne, d_gate)
             col[:ne] = S[0, :]
             for i in range(1, ng):
@@ -249,8 +254,6 @@ def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, n
                     iou = S[i, j] / denom if denom > _EPS else 0.0
                     x = g_ids[g0 + i] * nT + e_ids[e0 + j]
                     if block[x] == 0.0 and iou != 0.0:
-                        if n_touched == len(touched):
-                            touched = np.concatenate((touched, np.empty(len(touched), dtype=np.int64)))
                         touched[n_touched] = x
                         n_touched += 1
                     block[x] += iou
@@ -380,17 +383,23 @@ def _union_count(mg, me):  # pragma: no cover - compiled
 @njit(cache=True)
 def _near_events(g_ids, g0, ng, gx, e_ids, e0, ne, ex, c, ev_i, ev_j, ev_d, n_ev):  # pragma: no cover - compiled
     """Append the pairs of one scan closer than ``c`` (truth id, estimate id, ``min(c, d)``) to the event arrays
-    from ``n_ev`` on, growing them as needed; returns the arrays and the new count."""
+    from ``n_ev`` on, growing them first to hold every pair of the scan (an array replaced inside the pair loop
+    would be reference-counted at every pair); returns the arrays and the new count."""
+    if n_ev + ng * ne > len(ev_i):
+        size = max(2 * len(ev_i), n_ev + ng * ne)
+        ev_i = np.concatenate((ev_i[:n_ev], np.empty(size - n_ev, dtype=np.int64)))
+        ev_j = np.concatenate((ev_j[:n_ev], np.empty(size - n_ev, dtype=np.int64)))
+        ev_d = np.concatenate((ev_d[:n_ev], np.empty(size - n_ev)))
+    far2 = c * c * (1.0 + 4.0 * _EPS)  # above c ** 2 by more than its rounding: sqrt(dd) >= c from dd > far2 on
     for a in range(ng):
         for b in range(ne):
             dx = gx[g0 + a, 0] - ex[e0 + b, 0]
             dy = gx[g0 + a, 1] - ex[e0 + b, 1]
-            d = min(c, math.sqrt(dx * dx + dy * dy))
+            dd = dx * dx + dy * dy
+            if dd > far2:
+                continue
+            d = min(c, math.sqrt(dd))
             if d < c:
-                if n_ev == len(ev_i):
-                    ev_i = np.concatenate((ev_i, np.empty(len(ev_i), dtype=np.int64)))
-                    ev_j = np.concatenate((ev_j, np.empty(len(ev_j), dtype=np.int64)))
-                    ev_d = np.concatenate((ev_d, np.empty(len(ev_d))))
                 ev_i[n_ev], ev_j[n_ev], ev_d[n_ev] = g_ids[g0 + a], e_ids[e0 + b], d
                 n_ev += 1
     return ev_i, ev_j, ev_d, n_ev
@@ -413,6 +422,213 @@ def _window_tracks(ids, off, lo, k, stamp, sel):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def sparse_assign_rows(n_rows, n_cols, off, col, cost, unmatched):  # pragma: no cover - compiled
+    """Minimum-cost assignment of rows to columns where row r may take column ``col[q]`` at ``cost[q]`` (q in
+    ``off[r]:off[r + 1]``) or stay unmatched at ``unmatched`` (>= every cost): the column of each row, -1 unmatched.
+
+    The dense method of :func:`soabench.metrics_kernels.assign_rows` on the listed pairs only: each row has a
+    column of its own that stands for staying unmatched, and row i is added by Dijkstra's shortest path from it over
+    the reduced costs ``cost - u[r] - v[j]`` of the listed pairs (the dual potentials u, v kept non-negative on
+    them), to the nearest free column; the path is then flipped and the potentials of the columns it settled moved.
+    A column settled first wins a tie of distances unless another is free."""
+    n_all = n_cols + n_rows  # column n_cols + r: row r unmatched
+    u = np.zeros(n_rows)
+    v = np.zeros(n_all)
+    row4col = np.full(n_all, -1, dtype=np.int64)
+    col4row = np.full(n_rows, -1, dtype=np.int64)
+    dist = np.empty(n_all)
+    pred = np.empty(n_all, dtype=np.int64)
+    state = np.zeros(n_all, dtype=np.int8)  # 0: not reached, 1: reached, 2: settled
+    front = np.empty(n_all, dtype=np.int64)
+    settled = np.empty(n_all, dtype=np.int64)
+    visited = np.empty(n_rows, dtype=np.int64)
+    # augmenting row reduction (Jonker & Volgenant 1987), two passes: each free row takes the column of its
+    # cheapest reduced cost c - v, whose v is lowered to tie it with the row's second cheapest; a row it displaces
+    # is free for the next pass. Only a column that stays matched has its v lowered, so the free columns keep v = 0
+    # and the potentials stay those of an optimal assignment's dual once every row is placed.
+    free = np.arange(n_rows)
+    n_free = n_rows
+    for _ in range(2):
+        n_todo, n_free = n_free, 0
+        for k in range(n_todo):
+            i = free[k]
+            h1, h2, j1, j2 = np.inf, np.inf, -1, -1
+            for q in range(off[i], off[i + 1] + 1):
+                if q < off[i + 1]:
+                    j, cst = col[q], cost[q]
+                else:
+                    j, cst = n_cols + i, unmatched
+                h = cst - v[j]
+                if h < h2:
+                    if h < h1:
+                        h2, j2, h1, j1 = h1, j1, h, j
+                    else:
+                        h2, j2 = h, j
+            i0 = row4col[j1]
+            if h1 < h2 < np.inf:
+                v[j1] -= h2 - h1
+            elif i0 >= 0 and j2 >= 0:  # a tie: the second column, free or not
+                j1, i0 = j2, row4col[j2]
+            row4col[j1], col4row[i] = i, j1
+            if i0 >= 0:
+                col4row[i0] = -1
+                free[n_free] = i0  # n_free <= k: nothing still to read is overwritten
+                n_free += 1
+    for r in range(n_rows):  # u[r]: the row's cheapest reduced cost (its own column's, where it holds one)
+        u[r] = np.inf
+        for q in range(off[r], off[r + 1] + 1):
+            if q < off[r + 1]:
+                j, cst = col[q], cost[q]
+            else:
+                j, cst = n_cols + r, unmatched
+            u[r] = min(u[r], cst - v[j])
+    for i in range(n_rows):
+        if col4row[i] >= 0:
+            continue
+        n_front = n_settled = n_visited = 0
+        r, d_r = i, 0.0
+        bound = np.inf  # the distance of the nearest free column reached: nothing farther is settled before it
+        while True:
+            for q in range(off[r], off[r + 1] + 1):
+                if q < off[r + 1]:
+                    j, cst = col[q], cost[q]
+                else:
+                    j, cst = n_cols + r, unmatched
+                if state[j] == 2:
+                    continue
+                d = d_r + cst - u[r] - v[j]
+                if d >= bound and (d > bound or row4col[j] >= 0):
+                    continue
+                if row4col[j] < 0:
+                    bound = d
+                if state[j] == 0:
+                    state[j] = 1
+                    front[n_front] = j
+                    n_front += 1
+                    dist[j], pred[j] = d, r
+                elif d < dist[j]:
+                    dist[j], pred[j] = d, r
+            best = 0
+            for t in range(1, n_front):
+                j, b = front[t], front[best]
+                if dist[j] < dist[b] or (dist[j] == dist[b] and row4col[j] < 0 and row4col[b] >= 0):
+                    best = t
+            sink = front[best]
+            n_front -= 1
+            front[best] = front[n_front]
+            state[sink] = 2
+            settled[n_settled] = sink
+            n_settled += 1
+            if row4col[sink] < 0:
+                break
+            r, d_r = row4col[sink], dist[sink]
+            visited[n_visited] = r
+            n_visited += 1
+        low = dist[sink]
+        u[i] += low
+        for t in range(n_visited):
+            r = visited[t]
+            u[r] += low - dist[col4row[r]]
+        for t in range(n_settled):
+            j = settled[t]
+            v[j] -= low - dist[j]
+            state[j] = 0
+        for t in range(n_front):
+            state[front[t]] = 0
+        j = sink
+        while True:  # flip the path back to row i
+            r = pred[j]
+            row4col[j] = r
+            j, col4row[r] = col4row[r], j
+            if r == i:
+                break
+    for r in range(n_rows):
+        if col4row[r] >= n_cols:
+            col4row[r] = -1
+    return col4row
+
+
+@njit(cache=True)
+def _near_assignment(near, cost, n_near, m, n, cp, vals):  # pragma: no cover - compiled
+    """``vals[r]``: the cost of row r of the smaller side in a minimum-cost assignment of the window's (m, n) cost
+    matrix whose every pair but the ``near`` ones (``a * n + b``, cost ``cost``) costs ``cp``, the largest cost;
+    ``cp`` for a row assigned to such a pair.
+
+    An assignment of the rows costs the sum of its near pairs plus ``cp`` per other row, whichever pairs those are,
+    and a set of near pairs without a shared row or column can always be completed by pairs that cost at most
+    ``cp``: so the minimum is that of the near pairs alone, each row free to stay unmatched at ``cp``
+    (:func:`sparse_assign_rows`). Where the optimum is unique the rows' costs are those of the dense matrix's."""
+    rows_are_g = m <= n
+    n_rows, n_cols = (m, n) if rows_are_g else (n, m)
+    off = np.zeros(n_rows + 1, dtype=np.int64)
+    for q in range(n_near):
+        r = near[q] // n if rows_are_g else near[q] % n
+        off[r + 1] += 1
+    for r in range(n_rows):
+        off[r + 1] += off[r]
+    fill = off[:-1].copy()
+    col = np.empty(n_near, dtype=np.int64)
+    cst = np.empty(n_near)
+    for q in range(n_near):  # each row's pairs in the order of their first event
+        a, b = near[q] // n, near[q] % n
+        r, j = (a, b) if rows_are_g else (b, a)
+        col[fill[r]], cst[fill[r]] = j, cost[q]
+        fill[r] += 1
+    col_of = sparse_assign_rows(n_rows, n_cols, off, col, cst, cp)
+    for r in range(n_rows):
+        vals[r] = cp
+        if col_of[r] >= 0:
+            for q in range(off[r], off[r + 1]):
+                if col[q] == col_of[r]:
+                    vals[r] = cst[q]
+                    break
+
+
+@njit(cache=True)
+def _dense_assignment(near, cost, n_near, m, n, gsel, esel, mask_g, mask_e, far, vals):  # pragma: no cover
+    """``vals[r]``: the cost of row r of the smaller side in a minimum-cost assignment of the window's (m, n) cost
+    matrix (:func:`soabench.metrics_kernels.assignment`): ``far`` of the count of scans where either exists for a
+    pair never closer than c, ``cost`` for the ``near`` ones."""
+    rows_are_g = m <= n
+    Cm = np.empty((m, n) if rows_are_g else (n, m))
+    for a in range(m):
+        mg = mask_g[gsel[a]]
+        for b in range(n):
+            d = far[_union_count(mg, mask_e[esel[b]])]
+            if rows_are_g:
+                Cm[a, b] = d
+            else:
+                Cm[b, a] = d
+    for q in range(n_near):
+        a, b = near[q] // n, near[q] % n
+        if rows_are_g:
+            Cm[a, b] = cost[q]
+        else:
+            Cm[b, a] = cost[q]
+    rows, cols = assignment(Cm)
+    for r in range(len(rows)):
+        vals[r] = Cm[rows[r], cols[r]]
+
+
+@njit(cache=True)
+def _scan_events(g_ids, g_off, gx, e_ids, e_off, ex, c):  # pragma: no cover - compiled
+    """The pairs closer than ``c`` of every scan (:func:`_near_events`), scan k's from ``ev_off[k]`` on."""
+    K = len(g_off) - 1
+    ev_i = np.empty(64, dtype=np.int64)
+    ev_j = np.empty(64, dtype=np.int64)
+    ev_d = np.empty(64)
+    ev_off = np.zeros(K + 1, dtype=np.int64)
+    n_ev = np.int64(0)  # not the literal 0: one specialisation of _near_events
+    for k in range(K):
+        ev_i, ev_j, ev_d, n_ev = _near_events(
+            g_ids, g_off[k], g_off[k + 1] - g_off[k], gx, e_ids, e_off[k], e_off[k + 1] - e_off[k], ex, c,
+            ev_i, ev_j, ev_d, n_ev,
+        )  # fmt: skip
+        ev_off[k + 1] = n_ev
+    return ev_i, ev_j, ev_d, ev_off
+
+
+@njit(cache=True)
 def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # pragma: no cover - compiled
     """(K, 3) OSPA(2) per scan (total, localisation, cardinality) of stacked truth and estimate rows (ids 0..n_g - 1
     and 0..n_e - 1, scan k's rows ``off[k]:off[k + 1]``; :func:`soabench.tracks.ospa2.ospa2_of`).
@@ -421,7 +637,10 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     where either track exists of ``min(c, |x(t) - y(t)|)`` (both exist) or ``c``. A pair never closer than c in the
     window adds c at each such scan, so its total is c added ``count`` times, with ``count`` the set bits of the two
     tracks' presence masks over the window; only the pairs closer than c at some scan of the window (kept per scan
-    as they enter it) are summed scan by scan. The cost matrix is the same, entry for entry, as summing every pair."""
+    as they enter it) are summed scan by scan. Where c added n times and divided by n is c for every n <= window
+    (c = 10), every other pair costs ``c ** p``, the largest cost, and the assignment needs only the near pairs
+    (:func:`_near_assignment`); otherwise the dense cost matrix, entry for entry the one of summing every pair, is
+    assigned (:func:`_dense_assignment`)."""
     K = len(g_off) - 1
     out = np.zeros((K, 3))
     n_words = (window + 63) // 64
@@ -433,20 +652,30 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     for n in range(1, window + 1):
         total += c
         far[n] = min(total / n, c) ** p
+    far_is_cp = np.all(far[1:] == far[1])
     stamp_g = np.full(n_g, -1, dtype=np.int64)
     stamp_e = np.full(n_e, -1, dtype=np.int64)
     gsel = np.empty(n_g, dtype=np.int64)
     esel = np.empty(n_e, dtype=np.int64)
     loc_g = np.zeros(n_g, dtype=np.int64)
     loc_e = np.zeros(n_e, dtype=np.int64)
-    ev_i = np.empty(64, dtype=np.int64)
-    ev_j = np.empty(64, dtype=np.int64)
-    ev_d = np.empty(64)
-    ev_off = np.zeros(K + 1, dtype=np.int64)
-    n_ev = np.int64(0)  # not the literal 0: one specialisation of _near_events
-    slot = np.full(0, -1, dtype=np.int64)  # per (a, b) of the window's tracks: its near pair's row of terms, or -1
-    near = np.empty(0, dtype=np.int64)  # per near pair: its a * n + b
-    terms = np.empty((0, window))
+    ev_i, ev_j, ev_d, ev_off = _scan_events(g_ids, g_off, gx, e_ids, e_off, ex, c)
+    # every buffer of the window loop at its largest size first (none replaced inside the loop)
+    max_mn, max_small, max_ev = 0, 0, 0
+    for k in range(K):
+        lo = max(0, k - window + 1)
+        m = _window_tracks(g_ids, g_off, lo, k, stamp_g, gsel)
+        n = _window_tracks(e_ids, e_off, lo, k, stamp_e, esel)
+        max_mn, max_small = max(max_mn, m * n), max(max_small, min(m, n))
+        max_ev = max(max_ev, ev_off[k + 1] - ev_off[lo])
+    stamp_g[:] = -1
+    stamp_e[:] = -1
+    slot = np.full(max_mn, -1, dtype=np.int64)  # per (a, b) of the window's tracks: its near pair's row, or -1
+    near = np.empty(max_ev, dtype=np.int64)  # per near pair: its a * n + b
+    near_cost = np.empty(max_ev)
+    terms = np.empty((max_ev, window))
+    near_bits = np.empty((max_ev, n_words), dtype=np.uint64)  # per near pair: the window's scans where it is near
+    vals = np.empty(max_small)
     word = np.empty(window, dtype=np.int64)  # per scan of the window: its mask word and bit
     bits = np.empty(window, dtype=np.uint64)
     for k in range(K):
@@ -464,11 +693,6 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
             mask_g[g_ids[r], s // 64] |= bit
         for r in range(e_off[k], e_off[k + 1]):
             mask_e[e_ids[r], s // 64] |= bit
-        ev_i, ev_j, ev_d, n_ev = _near_events(
-            g_ids, g_off[k], g_off[k + 1] - g_off[k], gx, e_ids, e_off[k], e_off[k + 1] - e_off[k], ex, c,
-            ev_i, ev_j, ev_d, n_ev,
-        )  # fmt: skip
-        ev_off[k + 1] = n_ev
         m = _window_tracks(g_ids, g_off, lo, k, stamp_g, gsel)
         n = _window_tracks(e_ids, e_off, lo, k, stamp_e, esel)
         small, large = min(m, n), max(m, n)
@@ -481,55 +705,44 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                 loc_g[gsel[a]] = a
             for b in range(n):
                 loc_e[esel[b]] = b
-            Cm = np.empty((small, large))
-            for a in range(m):
-                mg = mask_g[gsel[a]]
-                for b in range(n):
-                    d = far[_union_count(mg, mask_e[esel[b]])]
-                    if m <= n:
-                        Cm[a, b] = d
-                    else:
-                        Cm[b, a] = d
-            # the pairs closer than c somewhere in the window (each once, in order of their first event): their
-            # scans' terms, c where the two are not closer; the slots of (a, b) are cleared again after the scan
-            if m * n > len(slot):
-                slot = np.full(m * n, -1, dtype=np.int64)
-            if ev_off[k + 1] - ev_off[lo] > len(near):
-                near = np.empty(2 * (ev_off[k + 1] - ev_off[lo]), dtype=np.int64)
-                terms = np.empty((len(near), window))
+            # the pairs closer than c somewhere in the window (each once, in order of their first event), their
+            # terms at those scans and a bit per such scan; the slots of (a, b) are cleared again after the window
             n_near = 0
-            for e in range(ev_off[lo], ev_off[k + 1]):
-                x = loc_g[ev_i[e]] * n + loc_e[ev_j[e]]
-                if slot[x] < 0:
-                    slot[x] = n_near
-                    near[n_near] = x
-                    terms[n_near, :] = c
-                    n_near += 1
             for t in range(lo, k + 1):
                 s = t % ring
                 word[t - lo] = s // 64
                 bits[t - lo] = np.uint64(1) << np.uint64(s % 64)
+                tw, tb = (t - lo) // 64, np.uint64(1) << np.uint64((t - lo) % 64)
                 for e in range(ev_off[t], ev_off[t + 1]):
-                    terms[slot[loc_g[ev_i[e]] * n + loc_e[ev_j[e]]], t - lo] = ev_d[e]
-            for q in range(n_near):
+                    x = loc_g[ev_i[e]] * n + loc_e[ev_j[e]]
+                    q = slot[x]
+                    if q < 0:
+                        q = n_near
+                        slot[x] = q
+                        near[q] = x
+                        for w in range(n_words):
+                            near_bits[q, w] = 0
+                        n_near += 1
+                    terms[q, t - lo] = ev_d[e]
+                    near_bits[q, tw] |= tb
+            for q in range(n_near):  # in order over the scans where either exists: its term where near, else c
                 x = near[q]
                 slot[x] = -1
-                a, b = x // n, x % n
-                i, j = gsel[a], esel[b]
+                i, j = gsel[x // n], esel[x % n]
                 total, count = 0.0, 0
-                for t in range(k + 1 - lo):  # the scans where either exists (a near term only where both do)
+                for t in range(k + 1 - lo):
                     if ((mask_g[i, word[t]] | mask_e[j, word[t]]) & bits[t]) != 0:
-                        total += terms[q, t]
+                        if (near_bits[q, t // 64] >> np.uint64(t % 64)) & np.uint64(1):
+                            total += terms[q, t]
+                        else:
+                            total += c
                         count += 1
-                d = min(total / count, c) ** p
-                if m <= n:
-                    Cm[a, b] = d
-                else:
-                    Cm[b, a] = d
-            rows, cols = assignment(Cm)
-            vals = np.empty(small)
-            for r in range(small):
-                vals[r] = Cm[rows[r], cols[r]]
+                d = min(total / count, c)
+                near_cost[q] = d if p == 1.0 else d**p  # x ** 1.0 is x
+            if far_is_cp:
+                _near_assignment(near, near_cost, n_near, m, n, far[1], vals)
+            else:
+                _dense_assignment(near, near_cost, n_near, m, n, gsel, esel, mask_g, mask_e, far, vals)
             loc_p = np_sum(vals, small) / large
         out[k, 0] = (loc_p + card_p) ** (1.0 / p)
         out[k, 1] = loc_p ** (1.0 / p)

@@ -21,11 +21,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from soabench.notice import announced
-from soabench.tracks.sequence import BLOCK_CELLS, TrackSequence, similarity
+from soabench.tracks.sequence import BLOCK_CELLS, TrackSequence
 
 #: HOTA's localisation thresholds alpha (TrackEval's ``array_labels``)
 ALPHAS = np.arange(0.05, 0.99, 0.05)
@@ -122,10 +120,12 @@ def _global_counts(
     step = max(1, BLOCK_CELLS // max(1, G * E))
     args = (g.ids, g.off, g.xy, e.ids, e.off, e.xy, float(d_gate), THRESHOLD, step, nT, potential, id_potential)
     announced("track metrics", global_counts, *args)
-    potential = potential.reshape(nG, nT)
+    # potential / (gt_count + tr_count - potential) per cell; a cell without overlap is 0 / (a positive count) = 0.0
+    on = np.flatnonzero(potential)
+    alignment = np.zeros(nG * nT)
     with np.errstate(invalid="ignore", divide="ignore"):
-        alignment = potential / (gt_count[:, None] + tr_count[None, :] - potential)
-    return alignment, id_potential.reshape(nG, nT)
+        alignment[on] = potential[on] / (gt_count[on // nT] + tr_count[on % nT] - potential[on])
+    return alignment.reshape(nG, nT), id_potential.reshape(nG, nT)
 
 
 @dataclass
@@ -163,9 +163,11 @@ class _MatchState:
         return (self.counts, self.motp, self.gt_seen, self.gt_matched, self.frag, self.prev_id, self.prev_scan,
                 self.hg, self.he, self.hs)  # fmt: skip
 
-    def match(self, g: np.ndarray, e: np.ndarray, sim: np.ndarray, alignment: np.ndarray) -> None:
-        """One scan with truths and estimates, matched with scipy (a scan the compiled loop leaves to it)."""
-        rows, cols = linear_sum_assignment(-(alignment[g[:, None], e[None, :]] * sim))
+    def match(self, g: np.ndarray, e: np.ndarray, sim: np.ndarray, cost: np.ndarray, clear_cost: np.ndarray) -> None:
+        """One scan with truths ``g`` and estimates ``e``, matched with scipy (a scan the compiled loop leaves to it):
+        ``sim`` their similarity, ``cost`` HOTA's ``-(alignment * sim)``, ``clear_cost`` CLEAR's ``-score`` (1000 for
+        the previous scan's pair plus ``sim``, 0 below the threshold)."""
+        rows, cols = linear_sum_assignment(cost)
         n = self.counts[4]
         self.hg[n : n + len(rows)], self.he[n : n + len(rows)], self.hs[n : n + len(rows)] = (
             g[rows],
@@ -173,9 +175,8 @@ class _MatchState:
             sim[rows, cols],
         )
         self.counts[4] = n + len(rows)
-        score = 1000.0 * (e[None, :] == self.prev_scan[g[:, None]]) + sim
-        score[sim < THRESHOLD - _EPS] = 0
-        rows, cols = linear_sum_assignment(-score)
+        score = -clear_cost
+        rows, cols = linear_sum_assignment(clear_cost)
         kept = score[rows, cols] > _EPS
         rows, cols = rows[kept], cols[kept]
         mg, me = g[rows], e[cols]
@@ -205,10 +206,10 @@ def _scan_matches(
     t, K = 0, len(seq)
     while t < K:
         args = (t, g.ids, g.off, g.xy, e.ids, e.off, e.xy, float(d_gate), THRESHOLD, alignment, state.arrays())
-        t = announced("track metrics", match_scans, *args)
+        t, *costs = announced("track metrics", match_scans, *args)
         if t < K:
             gs, es = slice(g.off[t], g.off[t + 1]), slice(e.off[t], e.off[t + 1])
-            state.match(g.ids[gs], e.ids[es], similarity(g.xy[gs], e.xy[es], d_gate), alignment)
+            state.match(g.ids[gs], e.ids[es], *costs)
             t += 1
     n = state.counts[4]
     tp, fn, fp, idsw = (int(x) for x in state.counts[:4])
@@ -350,26 +351,18 @@ def _identity_matched(potential: np.ndarray) -> float:
     """The largest total of ``potential`` (nG, nT) (counts of scans where a truth and a track match) over the
     one-to-one matchings of truths to tracks.
 
-    A pair without a potential match adds nothing, so the matching splits into the connected components of the
-    overlap graph (an edge where ``potential > 0``): each component is one maximum-weight assignment of its own truths
-    and tracks, and truths or tracks without an edge are left out. Every term is an integer count, so the sum is
-    exact and the same whichever optimal assignment a component returns."""
-    g, t = np.nonzero(potential)
+    A pair without a potential match adds nothing, so only the pairs with ``potential > 0`` are listed, each truth
+    free to stay unmatched at no gain: one sparse minimum-cost assignment of the negated counts
+    (:func:`soabench.tracks.kernels.sparse_assign_rows`). Every term is an integer count, so the sums are exact and
+    the total is the same whichever optimal matching is found."""
+    from soabench.tracks.kernels import sparse_assign_rows
+
+    g, t = np.nonzero(potential)  # row by row: each truth's pairs together
     if len(g) == 0:
         return 0.0
     nG, nT = potential.shape
-    graph = coo_matrix((np.ones(len(g)), (g, nG + t)), shape=(nG + nT, nG + nT))
-    _, comp = connected_components(graph, directed=False)
-    label = comp[g]
-    order = np.argsort(label, kind="stable")
-    bounds = np.flatnonzero(np.diff(label[order])) + 1
-    total = 0.0
-    for edges in np.split(order, bounds):
-        rows, cols = np.unique(g[edges]), np.unique(t[edges])
-        if len(rows) == 1 or len(cols) == 1:  # a star: the heaviest edge
-            total += float(potential[rows[:, None], cols[None, :]].max())
-            continue
-        block = potential[rows[:, None], cols[None, :]]
-        r, c = linear_sum_assignment(block, maximize=True)
-        total += float(block[r, c].sum())
-    return total
+    off = np.zeros(nG + 1, dtype=np.int64)
+    np.cumsum(np.bincount(g, minlength=nG), out=off[1:])
+    col = announced("track metrics", sparse_assign_rows, nG, nT, off, t.astype(np.int64), -potential[g, t], 0.0)
+    rows = np.flatnonzero(col >= 0)
+    return float(potential[rows, col[rows]].sum())

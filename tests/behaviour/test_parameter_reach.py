@@ -135,6 +135,7 @@ NON_DEFAULT: dict[str, object] = {
     "lmb.max_components": 8,
     "lmb.extract_r": 0.55,
     "lmb.birth_mapping": "components",  # the old mapping: every other lmb key is still read
+    "lmb.association": "exact",
     "pmbm.M_max": 50,
     "pmbm.w_floor": 1e-3,
     "pmbm.r_floor": 1e-4,

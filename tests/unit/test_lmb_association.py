@@ -10,6 +10,8 @@ import math
 import numpy as np
 import pytest
 
+from soabench.config import Config
+from soabench.errors import SoabenchError
 from soabench.lmb.gibbs import (
     DP_MAX_M,
     _accumulate,
@@ -136,3 +138,29 @@ def test_gibbs_over_associations_starts_without_measurements_and_visits_them_all
     np.testing.assert_allclose(sampled, exact, rtol=0, atol=1e-12)
     _, n_one, _ = association_marginals(logc, 1, np.uint32(0), True)
     assert n_one == 1  # one sweep: the start only, every track without a measurement
+
+
+def test_exact_association_solves_a_cluster_beyond_max_hypotheses():
+    """``[lmb] association = "exact"``: 30 tracks sharing 3 measurements (27,061 associations, far above
+    max_hypotheses = 1000) are solved by the forward-backward pass, equal to listing every association."""
+    rng = np.random.default_rng(4)
+    logc = np.log(rng.uniform(0.05, 1.0, (30, 5)))
+    marg, n_hyp, n_gibbs = association_marginals(logc, 1000, np.uint32(0), False, True)
+    assert n_gibbs == 0 and n_hyp == 1001  # counted up to max_hypotheses + 1, solved exactly all the same
+    sub, options, n_opt = _reduced(logc)
+    hyps, count = _enumerate_valid(options, n_opt, 3, 10**6)
+    assert count == 1 + 3 * 30 + 3 * 30 * 29 + 30 * 29 * 28  # none, one, two or three measurements taken
+    local = np.zeros_like(sub)
+    _accumulate(sub, hyps, count, local, np.arange(30))
+    split = np.exp(logc[:, :2] - np.logaddexp(logc[:, :1], logc[:, 1:2]))
+    ref = np.concatenate([local[:, :1] * split, local[:, 1:]], axis=1)
+    np.testing.assert_allclose(marg, ref, rtol=0, atol=1e-14)
+    _, _, sampled = association_marginals(logc, 1000, np.uint32(0), False, False)
+    assert sampled == 1  # the default samples it
+
+
+def test_association_is_a_checked_lmb_key():
+    experiment = {"filters": ["lmb"], "probabilities": ["static"]}
+    assert Config.from_dict({"lmb": {"association": "exact"}, "experiment": experiment}).validate()
+    with pytest.raises(SoabenchError, match="lmb.association = 'sampled' is not allowed; choose one of 'bounded', "):
+        Config.from_dict({"lmb": {"association": "sampled"}, "experiment": experiment}).validate()

@@ -197,6 +197,71 @@ def test_each_association_is_listed_once():
     np.testing.assert_allclose(costs, sorted(want), rtol=0, atol=1e-12)
 
 
+def test_repaired_best_assignment_is_the_best():
+    """The best assignment repaired from that of a matrix differing in a few columns (a cluster under another
+    choice of its tracks' hypotheses) is the best of the new matrix: scipy's on continuous costs, with forbidden
+    cells and infeasible cases."""
+    from soabench.pmbm.murty import repaired_root, square_root
+
+    rng = np.random.default_rng(4)
+    n_infeasible = 0
+    for _ in range(300):
+        n = int(rng.integers(2, 8))
+        C = rng.normal(0, 3, (n, n + int(rng.integers(0, 5))))
+        C[rng.random(C.shape) < 0.25] = np.inf
+        m = C.shape[1]
+        sol, u, v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
+        if square_root(C, sol, u, v) == np.inf:
+            continue
+        changed = np.flatnonzero(rng.random(m) < 0.3)
+        C2 = C.copy()
+        C2[:, changed] = rng.normal(0, 3, (n, len(changed)))
+        C2[:, changed] = np.where(rng.random((n, len(changed))) < 0.7, np.inf, C2[:, changed])
+        cost = repaired_root(C2, changed, sol, u, v)
+        try:
+            rows, want = linear_sum_assignment(C2)
+        except ValueError:
+            want = None
+        if want is None:
+            assert cost == np.inf
+            n_infeasible += 1
+            continue
+        np.testing.assert_array_equal(sol[:n], want)
+        assert cost == C2[rows, want].sum()
+        assert sorted(sol) == list(range(m))  # the square assignment: every column once
+    assert n_infeasible > 3
+
+
+def test_best_sums_is_a_stable_sort_of_every_sum():
+    """The k best sums of one entry per sorted array (a heap merge) are the first k of a stable sort of every
+    sum, term indices included, also with exact ties."""
+    from numba.typed import List
+
+    from soabench.pmbm.association import best_sums
+
+    rng = np.random.default_rng(2)
+    for t in range(200):
+        costs = [
+            np.sort(
+                rng.integers(0, 4, int(rng.integers(1, 12))).astype(float)
+                if t % 2
+                else rng.normal(0, 1, int(rng.integers(1, 12)))
+            )
+            for _ in range(int(rng.integers(1, 4)))
+        ]
+        k = int(rng.integers(1, 60))
+        total, idx = np.zeros(1), np.zeros((1, len(costs)), dtype=np.int64)
+        for j, c in enumerate(costs):
+            s = (total[:, None] + c[None, :]).ravel()
+            order = np.argsort(s, kind="stable")[:k]
+            idx = idx[order // len(c)]
+            idx[:, j] = order % len(c)
+            total = s[order]
+        got_total, got_idx = best_sums(List(costs), k)
+        np.testing.assert_array_equal(got_total, total)
+        np.testing.assert_array_equal(got_idx, idx)
+
+
 @pytest.mark.parametrize("shape", [(1, 3), (7, 0), (40, 3), (25, 1)])
 def test_unique_rows_is_numpys(shape):
     from soabench.pmbm.association import unique_rows

@@ -188,3 +188,41 @@ def test_global_counts_are_the_padded_arrays_sums_bit_for_bit(seed, monkeypatch)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
         assert (want[0] > 0).any()
+
+
+def near_pairs_case(seed: int) -> tuple[np.ndarray, int, int]:
+    """(m, n) base distances in [0, c] with c = 10: a random share of near pairs (continuous costs, so one optimum),
+    every other pair exactly c; from a few sparse pairs to a crowd's dense block, either side the larger."""
+    rng = np.random.default_rng(seed)
+    m, n = int(rng.integers(1, 60)), int(rng.integers(1, 60))
+    if seed % 4 == 0:  # a crowd: most pairs near, far more estimate tracks than truths (or the other way round)
+        m, n = (int(rng.integers(40, 80)), int(rng.integers(100, 200)))[:: 1 if seed % 8 == 0 else -1]
+    near = rng.random((m, n)) < rng.uniform(0.02, 0.6)
+    D = np.where(near, 10.0 * rng.random((m, n)) ** 0.3, 10.0)
+    return D, m, n
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_near_pairs_assignment_equals_the_dense_one(seed):
+    """Each row's cost in an assignment over the near pairs only (a row free to stay unmatched at c) is its cost in
+    the dense matrix's minimum-cost assignment (scipy), so OSPA(2)'s sum over the rows is the same bit for bit."""
+    from soabench.metrics_kernels import np_sum
+    from soabench.tracks.kernels import _near_assignment
+
+    D, m, n = near_pairs_case(seed)
+    a, b = np.nonzero(D < 10.0)
+    vals = np.empty(min(m, n))
+    _near_assignment(a * n + b, D[a, b].copy(), len(a), m, n, 10.0, vals)
+    Cm = D if m <= n else D.T.copy()
+    rows, cols = linear_sum_assignment(Cm)
+    np.testing.assert_array_equal(vals, Cm[rows, cols])
+    assert np_sum(vals, len(vals)) == np_sum(Cm[rows, cols].copy(), len(vals))
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_ospa2_with_a_cutoff_whose_sums_are_not_exact_equals_every_pair(seed):
+    """c = 0.7: 0.7 added three times and divided by 3 is below 0.7, so a far pair's cost depends on its count and
+    the dense cost matrix is assigned."""
+    seq = TrackSequence.of(*crowd_sequence(seed, K=40))
+    got = ospa2(*crowd_sequence(seed, K=40), c=0.7, p=1.0, window=10).series[:, 0]
+    np.testing.assert_array_equal(got, ospa2_every_pair(seq, 0.7, 1.0, 10))
