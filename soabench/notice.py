@@ -7,11 +7,13 @@ the metric and scan-geometry kernels (:mod:`soabench.metrics_kernels`, :mod:`soa
 The first filter step of each kind (fused or array path, with or without newborn terms) and the first call of each
 of the others in a process run inside :func:`first_use_notice` (:func:`announced`): if it has not returned after
 ``delay`` seconds, one line says what is happening (once per process), and a second one the seconds it took when it
-ends. A call that loads cached code in time prints nothing.
+ends. A call that loads cached code in time prints nothing: the delay grows with the machine's load (loading takes
+about a second of CPU, so many seconds of wall time on a machine shared many times over).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -27,7 +29,7 @@ MESSAGE = (
 )
 #: off a terminal, a long wait (a run's trials, the kernels' compilation) writes a line at least this often (s)
 LINE_INTERVAL_S = 10.0
-DELAY = 3.0  #: seconds of silence before the notice (longer than loading cached kernels takes)
+DELAY = 3.0  #: seconds of silence before the notice on an idle machine (longer than loading cached kernels takes)
 _done: set[Hashable] = set()
 _printed = threading.Event()  #: the notice is printed at most once per process
 
@@ -38,6 +40,16 @@ def is_terminal(stream: TextIO) -> bool:
         return bool(stream.isatty())
     except (AttributeError, ValueError):
         return False
+
+
+def load_delay() -> float:
+    """:data:`DELAY` times the machine's load per core (1-minute load average / cores) when that exceeds 1: the
+    wall time that loading the cached kernels can take while other work shares the cores."""
+    try:
+        per_core = os.getloadavg()[0] / (os.cpu_count() or 1)
+    except (AttributeError, OSError):  # no load average (Windows)
+        per_core = 1.0
+    return DELAY * max(1.0, per_core)
 
 
 def _print_once() -> None:
@@ -59,8 +71,8 @@ def ready(key: Hashable) -> bool:
 
 @contextmanager
 def first_use_notice(key: Hashable, delay: float | None = None) -> Iterator[None]:
-    """Run the block; print :data:`MESSAGE` to stderr if it is still running after ``delay`` seconds (at most
-    once per process), and then, when the block ends, the seconds it took."""
+    """Run the block; print :data:`MESSAGE` to stderr if it is still running after ``delay`` seconds (default:
+    :func:`load_delay`; at most once per process), and then, when the block ends, the seconds it took."""
     t0 = time.monotonic()
     fired = threading.Event()
 
@@ -69,7 +81,7 @@ def first_use_notice(key: Hashable, delay: float | None = None) -> Iterator[None
             fired.set()
             _print_once()
 
-    timer = threading.Timer(DELAY if delay is None else delay, fire)
+    timer = threading.Timer(load_delay() if delay is None else delay, fire)
     timer.daemon = True
     timer.start()
     try:

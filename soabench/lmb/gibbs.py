@@ -13,7 +13,7 @@ prod_i eta_i(theta_i). The kernels return the marginal association probabilities
   measurements distinct) with the weight prod_i eta_i(theta_i) where eta_i(none) = eta_i(absent) + eta_i(missed),
   and P(absent) = P(none) eta_i(absent) / eta_i(none), P(missed) = P(none) eta_i(missed) / eta_i(none) exactly.
   A cluster's valid hypotheses are counted over theta alone (n tracks sharing one measurement: n + 1, not
-  2^n (n + 2)).
+  2^(n - 1) (n + 2)).
 * Tracks that share no measurement are independent (the weight factorises), so the tracks are split into clusters
   (connected by a measurement both may take) and each cluster is solved alone: a track with no measurement in its
   gate has the closed form marg = (eta_absent, eta_missed) / sum.
@@ -257,25 +257,30 @@ def _marginals_dp(sub, options, n_opt, M):
 
 
 @njit(cache=True)
-def _draw(i, options, n_opt, weight, taken, state):
+def _draw(i, options, n_opt, weight, taken, state, buf_w, buf_c):
     """theta_i from its conditional: prop. to ``weight[i, o]`` (exp of the log cost, shifted by the row's maximum)
-    over the options o of track i whose measurement is not taken by another track."""
+    over the options o of track i whose measurement is not taken by another track. One pass sums them and gathers
+    the open options of positive weight into ``buf_w``, ``buf_c`` (scratch of the row's length); the uniform is
+    then compared with their running sums, in option order."""
     tot = 0.0
+    k = 0
     for o in range(n_opt[i]):
         c = options[i, o]
         if c < 1 or taken[c - 1] < 0 or taken[c - 1] == i:
-            tot += weight[i, o]
+            w = weight[i, o]
+            tot += w
+            if w > 0.0:
+                buf_w[k] = w
+                buf_c[k] = c
+                k += 1
     u = _uniform(state) * tot
     acc = 0.0
     last = -1
-    for o in range(n_opt[i]):
-        c = options[i, o]
-        if c < 1 or taken[c - 1] < 0 or taken[c - 1] == i:
-            if weight[i, o] > 0.0:
-                last = c
-                acc += weight[i, o]
-                if u < acc:
-                    return c
+    for q in range(k):
+        last = buf_c[q]
+        acc += buf_w[q]
+        if u < acc:
+            return last
     return last
 
 
@@ -334,6 +339,8 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             takers[fill[j]] = i
             fill[j] += 1
     blocked = np.zeros(n, dtype=np.int64)
+    buf_w = np.empty(options.shape[1])
+    buf_c = np.empty(options.shape[1], dtype=np.int64)
     # the samples, each stored only when its sweep changed the hypothesis: a repeat of the previous sample adds no
     # distinct hypothesis and would not change which one comes first among equal hashes
     samples = np.empty((n_sweeps, n), dtype=np.int64)
@@ -353,7 +360,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                         if u < prefix[i, o]:
                             break
             else:
-                c = _draw(i, options, n_opt, weight, taken, state)
+                c = _draw(i, options, n_opt, weight, taken, state, buf_w, buf_c)
             if c < 0:  # no option of positive weight (only when r = 1 and p_D = 1 leave the track none)
                 c = theta[i]
             if c == theta[i]:

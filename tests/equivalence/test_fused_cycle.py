@@ -212,3 +212,17 @@ def test_first_use_notice_is_one_line_once(capsys):
     first, done = err.splitlines()  # the notice, then the time it took; nothing for the second pause
     assert first == notice.MESSAGE and done.startswith("soabench: compiled in ") and notice.ready("test-slow")
     assert notice.ready("test-fast") and not notice.ready("never-run")
+
+
+def test_the_notice_waits_longer_on_a_loaded_machine(monkeypatch):
+    """Loading cached kernels takes about a second of CPU: on a machine shared many times over that is many seconds
+    of wall time, which must not be announced as compiling."""
+    import os
+
+    from soabench import notice
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(os, "getloadavg", lambda: (1.0, 1.0, 1.0))
+    assert notice.load_delay() == notice.DELAY  # idle: the plain delay
+    monkeypatch.setattr(os, "getloadavg", lambda: (20.0, 20.0, 20.0))
+    assert notice.load_delay() == 10 * notice.DELAY
