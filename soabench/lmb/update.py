@@ -26,8 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from soabench.gmphd.mixture import Mixture
-from soabench.gmphd.models import predict as predict_mixture
+from soabench.gmphd.models import predict_moments
 from soabench.lmb.gibbs import ABSENT, MISSED, association_marginals
 from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
@@ -40,8 +39,10 @@ def predict(tracks: Tracks, F: np.ndarray, Q: np.ndarray, p_S: float) -> Tracks:
     :func:`soabench.gmphd.models.predict`); age += 1."""
     if len(tracks) == 0:
         return tracks
-    mix = predict_mixture(Mixture.from_arrays(tracks.w, tracks.m, tracks.P), F, Q, 1.0)
-    return Tracks(tracks.r * p_S, tracks.label, tracks.origin, tracks.age + 1, tracks.start, tracks.w, mix.m, mix.P)
+    m, P = predict_moments(
+        np.asarray(tracks.m, dtype=float).reshape(-1, 4), np.asarray(tracks.P, dtype=float).reshape(-1, 4, 4), F, Q
+    )
+    return Tracks(tracks.r * p_S, tracks.label, tracks.origin, tracks.age + 1, tracks.start, tracks.w, m, P)
 
 
 def _segment_logsumexp(x: np.ndarray, start: np.ndarray) -> np.ndarray:

@@ -231,8 +231,9 @@ def update(
     n_child = n_old_u + int(n_hyp_new.sum())
     counts = np.bincount(rec_child, minlength=n_child)
     new_t = np.repeat(np.arange(n_new), n_hyp_new)
-    is_code = np.concatenate([[c for c in (0, 1) if (used0[t] if c == 0 else used1[t])] for t in range(n_new)] or [[]])
-    r_new = np.where(is_code == 1, np.exp(log_e[new_l] - log_new[new_l])[new_t], 0.0)
+    # each new track's hypotheses in order: "went to a track" (when used0), then "is its own" (when used1)
+    is_own = np.tile([False, True], n_new)[np.column_stack([used0, used1]).ravel()]
+    r_new = np.where(is_own, np.exp(log_e[new_l] - log_new[new_l])[new_t], 0.0)
     post_hyps = Tracks(
         np.concatenate([r_old, r_new]),
         np.concatenate([hyps.label[h_par], label0 + new_l[new_t]]).astype(np.int64),
@@ -271,7 +272,7 @@ def _prune_tracks(d: PMBMDensity, r_floor: float) -> PMBMDensity:
             order = np.argsort(-merged, kind="stable")
             table, log_w = uniq[order], merged[order]
     log_w = log_w - np.logaddexp.reduce(log_w)
-    used = np.unique(table)
+    used = np.flatnonzero(np.bincount(table.ravel(), minlength=len(d.hyps)))  # sorted, as np.unique(table)
     hyps = d.hyps.select(used)
     remap = np.full(len(d.hyps), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
