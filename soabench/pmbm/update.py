@@ -68,6 +68,17 @@ def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return np.repeat(starts - (ends - counts), counts) + np.arange(ends[-1] if len(ends) else 0)
 
 
+def _unique_codes(code: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(code, return_inverse=True)`` for codes in 0 .. size - 1, the inverse shaped like ``code``: by a
+    table of the codes present when it is small against ``code``, with numpy's sort otherwise."""
+    if size > 4 * code.size + 4096:
+        u, inv = np.unique(code, return_inverse=True)
+        return u, inv.reshape(code.shape)
+    present = np.zeros(size, dtype=bool)
+    present[code] = True
+    return np.flatnonzero(present), (np.cumsum(present) - 1)[code]
+
+
 def update(
     pred: PMBMDensity,
     Z: np.ndarray,
@@ -151,8 +162,7 @@ def update(
     taken[rows, choice[rows, cols]] = True
     new_code = (~taken[:, new_l]).astype(np.int64)  # (B, n_new): 1 = z_l is its own, 0 = it went to a track
 
-    old_u, old_inv = np.unique(old_code, return_inverse=True)
-    old_inv = old_inv.reshape(B, n)
+    old_u, old_inv = _unique_codes(old_code, len(hyps) * (M + 1))
     h_par, h_choice = np.divmod(old_u, M + 1)
     h_choice = h_choice - 1
     # a track's kept children: the old codes are grouped by parent hypothesis, hence by track (pred.track sorted)
@@ -230,9 +240,9 @@ def update(
 
     n_child = n_old_u + int(n_hyp_new.sum())
     counts = np.bincount(rec_child, minlength=n_child)
-    new_t = np.repeat(np.arange(n_new), n_hyp_new)
     # each new track's hypotheses in order: "went to a track" (when used0), then "is its own" (when used1)
-    is_own = np.tile([False, True], n_new)[np.column_stack([used0, used1]).ravel()]
+    hyp_new = np.flatnonzero(np.column_stack([used0, used1]))  # 2 t + code
+    new_t, is_own = hyp_new // 2, hyp_new % 2 == 1
     r_new = np.where(is_own, np.exp(log_e[new_l] - log_new[new_l])[new_t], 0.0)
     post_hyps = Tracks(
         np.concatenate([r_old, r_new]),
@@ -273,7 +283,7 @@ def _prune_tracks(d: PMBMDensity, r_floor: float) -> PMBMDensity:
             table, log_w = uniq[order], merged[order]
     log_w = log_w - np.logaddexp.reduce(log_w)
     used = np.flatnonzero(np.bincount(table.ravel(), minlength=len(d.hyps)))  # sorted, as np.unique(table)
-    hyps = d.hyps.select(used)
+    hyps = d.hyps if len(used) == len(d.hyps) else d.hyps.select(used)
     remap = np.full(len(d.hyps), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     track_remap = np.full(n, -1, dtype=np.int64)
