@@ -28,7 +28,7 @@ from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import logsumexp0
 from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
-from soabench.lmb.update import KAPPA_FLOOR, association_costs
+from soabench.lmb.update import KAPPA_FLOOR, association_terms
 from soabench.pmbm.association import MISS, clusters, new_global_hypotheses, unique_rows
 from soabench.pmbm.density import PMBMDensity
 from soabench.types import SOURCE_MEAS, NewbornTerms
@@ -122,7 +122,7 @@ def update(
         log_t = np.log(p_D[:J] * ppp.w)[:, None] + logq[:J]  # (J, M) log p_D w q
         log_e_ppp = logsumexp0(log_t)
         # tracks: the LMB's per-hypothesis sums (eta without r and kappa)
-        _, log_miss, log_det, log_eta_miss, log_eta_det = association_costs(hyps, p_D[J:], logq[J:], kappa)
+        log_miss, log_det, log_eta_miss, log_eta_det = association_terms(hyps, p_D[J:], logq[J:])
         log_r = np.log(hyps.r)
         log_l_miss_exact = np.logaddexp(np.log1p(-hyps.r), log_r + log_eta_miss)
         log_l_miss = np.maximum(log_l_miss_exact, LOG_FLOOR)
