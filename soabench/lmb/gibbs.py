@@ -13,7 +13,7 @@ prod_i eta_i(theta_i). The kernels return the marginal association probabilities
   measurements distinct) with the weight prod_i eta_i(theta_i) where eta_i(none) = eta_i(absent) + eta_i(missed),
   and P(absent) = P(none) eta_i(absent) / eta_i(none), P(missed) = P(none) eta_i(missed) / eta_i(none) exactly.
   A cluster's valid hypotheses are counted over theta alone (n tracks sharing one measurement: n + 1, not
-  2^n (n + 2)).
+  2^(n - 1) (n + 2)).
 * Tracks that share no measurement are independent (the weight factorises), so the tracks are split into clusters
   (connected by a measurement both may take) and each cluster is solved alone: a track with no measurement in its
   gate has the closed form marg = (eta_absent, eta_missed) / sum.

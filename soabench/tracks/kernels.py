@@ -549,10 +549,10 @@ def sparse_assign_rows(n_rows, n_cols, off, col, cost, unmatched):  # pragma: no
 
 
 @njit(cache=True)
-def _near_assignment(near, cost, n_near, m, n, cp, vals):  # pragma: no cover - compiled
+def _near_assignment(near_a, near_b, cost, n_near, m, n, cp, vals):  # pragma: no cover - compiled
     """``vals[r]``: the cost of row r of the smaller side in a minimum-cost assignment of the window's (m, n) cost
-    matrix whose every pair but the ``near`` ones (``a * n + b``, cost ``cost``) costs ``cp``, the largest cost;
-    ``cp`` for a row assigned to such a pair.
+    matrix whose every pair but the near ones (``near_a[q]``, ``near_b[q]``; cost ``cost[q]``) costs ``cp``, the
+    largest cost; ``cp`` for a row assigned to such a pair.
 
     An assignment of the rows costs the sum of its near pairs plus ``cp`` per other row, whichever pairs those are,
     and a set of near pairs without a shared row or column can always be completed by pairs that cost at most
@@ -562,7 +562,7 @@ def _near_assignment(near, cost, n_near, m, n, cp, vals):  # pragma: no cover - 
     n_rows, n_cols = (m, n) if rows_are_g else (n, m)
     off = np.zeros(n_rows + 1, dtype=np.int64)
     for q in range(n_near):
-        r = near[q] // n if rows_are_g else near[q] % n
+        r = near_a[q] if rows_are_g else near_b[q]
         off[r + 1] += 1
     for r in range(n_rows):
         off[r + 1] += off[r]
@@ -570,7 +570,7 @@ def _near_assignment(near, cost, n_near, m, n, cp, vals):  # pragma: no cover - 
     col = np.empty(n_near, dtype=np.int64)
     cst = np.empty(n_near)
     for q in range(n_near):  # each row's pairs in the order of their first event
-        a, b = near[q] // n, near[q] % n
+        a, b = near_a[q], near_b[q]
         r, j = (a, b) if rows_are_g else (b, a)
         col[fill[r]], cst[fill[r]] = j, cost[q]
         fill[r] += 1
@@ -585,10 +585,10 @@ def _near_assignment(near, cost, n_near, m, n, cp, vals):  # pragma: no cover - 
 
 
 @njit(cache=True)
-def _dense_assignment(near, cost, n_near, m, n, gsel, esel, mask_g, mask_e, far, vals):  # pragma: no cover
+def _dense_assignment(near_a, near_b, cost, n_near, m, n, gsel, esel, mask_g, mask_e, far, vals):  # pragma: no cover
     """``vals[r]``: the cost of row r of the smaller side in a minimum-cost assignment of the window's (m, n) cost
     matrix (:func:`soabench.metrics_kernels.assignment`): ``far`` of the count of scans where either exists for a
-    pair never closer than c, ``cost`` for the ``near`` ones."""
+    pair never closer than c, ``cost`` for the near ones (``near_a``, ``near_b``)."""
     rows_are_g = m <= n
     Cm = np.empty((m, n) if rows_are_g else (n, m))
     for a in range(m):
@@ -600,7 +600,7 @@ def _dense_assignment(near, cost, n_near, m, n, gsel, esel, mask_g, mask_e, far,
             else:
                 Cm[b, a] = d
     for q in range(n_near):
-        a, b = near[q] // n, near[q] % n
+        a, b = near_a[q], near_b[q]
         if rows_are_g:
             Cm[a, b] = cost[q]
         else:
@@ -671,7 +671,9 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     stamp_g[:] = -1
     stamp_e[:] = -1
     slot = np.full(max_mn, -1, dtype=np.int64)  # per (a, b) of the window's tracks: its near pair's row, or -1
-    near = np.empty(max_ev, dtype=np.int64)  # per near pair: its a * n + b
+    near = np.empty(max_ev, dtype=np.int64)  # per near pair: its slot a * n + b, and a and b
+    near_a = np.empty(max_ev, dtype=np.int64)
+    near_b = np.empty(max_ev, dtype=np.int64)
     near_cost = np.empty(max_ev)
     terms = np.empty((max_ev, window))
     near_bits = np.empty((max_ev, n_words), dtype=np.uint64)  # per near pair: the window's scans where it is near
@@ -719,7 +721,7 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                     if q < 0:
                         q = n_near
                         slot[x] = q
-                        near[q] = x
+                        near[q], near_a[q], near_b[q] = x, loc_g[ev_i[e]], loc_e[ev_j[e]]
                         for w in range(n_words):
                             near_bits[q, w] = 0
                         n_near += 1
@@ -728,7 +730,7 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
             for q in range(n_near):  # in order over the scans where either exists: its term where near, else c
                 x = near[q]
                 slot[x] = -1
-                i, j = gsel[x // n], esel[x % n]
+                i, j = gsel[near_a[q]], esel[near_b[q]]
                 total, count = 0.0, 0
                 for t in range(k + 1 - lo):
                     if ((mask_g[i, word[t]] | mask_e[j, word[t]]) & bits[t]) != 0:
@@ -740,9 +742,9 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                 d = min(total / count, c)
                 near_cost[q] = d if p == 1.0 else d**p  # x ** 1.0 is x
             if far_is_cp:
-                _near_assignment(near, near_cost, n_near, m, n, far[1], vals)
+                _near_assignment(near_a, near_b, near_cost, n_near, m, n, far[1], vals)
             else:
-                _dense_assignment(near, near_cost, n_near, m, n, gsel, esel, mask_g, mask_e, far, vals)
+                _dense_assignment(near_a, near_b, near_cost, n_near, m, n, gsel, esel, mask_g, mask_e, far, vals)
             loc_p = np_sum(vals, small) / large
         out[k, 0] = (loc_p + card_p) ** (1.0 / p)
         out[k, 1] = loc_p ** (1.0 / p)

@@ -86,8 +86,8 @@ def test_forward_backward_pass_equals_explicit_enumeration(seed):
 
 
 def test_thirty_tracks_sharing_two_measurements_are_exact():
-    """30 tracks that all gate the same 2 measurements: 1 + 2·30 + 30·29 = 931 associations (2^30 · 931-odd before
-    existence was summed out), within max_hypotheses = 1000, so exact; their marginals equal a direct sum over the
+    """30 tracks that all gate the same 2 measurements: 1 + 2·30 + 30·29 = 931 associations (2.7e11 counted with
+    absent and missed apart), within max_hypotheses = 1000, so exact; their marginals equal a direct sum over the
     931 maps. With a third shared measurement the count passes 1000 and the cluster is sampled."""
     rng = np.random.default_rng(3)
     n = 30

@@ -212,7 +212,7 @@ def test_near_pairs_assignment_equals_the_dense_one(seed):
     D, m, n = near_pairs_case(seed)
     a, b = np.nonzero(D < 10.0)
     vals = np.empty(min(m, n))
-    _near_assignment(a * n + b, D[a, b].copy(), len(a), m, n, 10.0, vals)
+    _near_assignment(a, b, D[a, b].copy(), len(a), m, n, 10.0, vals)
     Cm = D if m <= n else D.T.copy()
     rows, cols = linear_sum_assignment(Cm)
     np.testing.assert_array_equal(vals, Cm[rows, cols])
