@@ -51,10 +51,13 @@ def predict(mix: Mixture, F: np.ndarray, Q: np.ndarray, p_S: float | np.ndarray)
     """
     if len(mix) == 0:
         return mix.copy()
-    P = symmetrise(F @ mix.P @ F.T + Q)
-    return Mixture(
-        mix.w * p_S, mix.m @ F.T, P, mix.origin.copy(), mix.n_det.copy(), mix.age + 1, mix.beta, mix.label.copy()
-    )
+    m, P = predict_moments(mix.m, mix.P, F, Q)
+    return Mixture(mix.w * p_S, m, P, mix.origin.copy(), mix.n_det.copy(), mix.age + 1, mix.beta, mix.label.copy())
+
+
+def predict_moments(m: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The moments of :func:`predict` (§2.5): m <- F m, P <- F P F^T + Q (symmetrised), for (J, 4) and (J, 4, 4)."""
+    return m @ F.T, symmetrise(F @ P @ F.T + Q)
 
 
 # ----------------------------------------------------------------------------------------------------------------

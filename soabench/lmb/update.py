@@ -26,8 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from soabench.gmphd.mixture import Mixture
-from soabench.gmphd.models import predict as predict_mixture
+from soabench.gmphd.models import predict_moments
 from soabench.lmb.gibbs import ABSENT, MISSED, association_marginals
 from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
@@ -40,18 +39,22 @@ def predict(tracks: Tracks, F: np.ndarray, Q: np.ndarray, p_S: float) -> Tracks:
     :func:`soabench.gmphd.models.predict`); age += 1."""
     if len(tracks) == 0:
         return tracks
-    mix = predict_mixture(Mixture.from_arrays(tracks.w, tracks.m, tracks.P), F, Q, 1.0)
-    return Tracks(tracks.r * p_S, tracks.label, tracks.origin, tracks.age + 1, tracks.start, tracks.w, mix.m, mix.P)
+    m, P = predict_moments(
+        np.asarray(tracks.m, dtype=float).reshape(-1, 4), np.asarray(tracks.P, dtype=float).reshape(-1, 4, 4), F, Q
+    )
+    return Tracks(tracks.r * p_S, tracks.label, tracks.origin, tracks.age + 1, tracks.start, tracks.w, m, P)
 
 
-def _segment_logsumexp(x: np.ndarray, start: np.ndarray) -> np.ndarray:
-    """log sum exp of the rows of ``x`` (C, ...) within each segment start[i]:start[i + 1] (all non-empty)."""
+def _segment_logsumexp(x: np.ndarray, start: np.ndarray, owner: np.ndarray | None = None) -> np.ndarray:
+    """log sum exp of the rows of ``x`` (C, ...) within each segment start[i]:start[i + 1] (all non-empty);
+    ``owner``: the segment of each row, if known."""
     if x.shape[0] == 0:
         return np.zeros((0, *x.shape[1:]))
     seg = start[:-1]
     mx = np.maximum.reduceat(x, seg, axis=0)
     shift = np.where(np.isfinite(mx), mx, 0.0)
-    owner = np.repeat(np.arange(len(seg)), np.diff(start))
+    if owner is None:
+        owner = np.repeat(np.arange(len(seg)), np.diff(start))
     with np.errstate(divide="ignore"):
         return np.log(np.add.reduceat(np.exp(x - shift[owner]), seg, axis=0)) + shift
 
@@ -69,17 +72,28 @@ class UpdateResult:
     n_pairs: int  #: detection (component, measurement) pairs built
 
 
+def association_terms(
+    tracks: Tracks, p_D: np.ndarray, logq: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The per-component terms of the costs and their sums per track: ``(log_miss (C,), log_det (C, M),
+    log_eta_miss (N,), log_eta_det (N, M))`` (eta without r and kappa)."""
+    with np.errstate(divide="ignore"):
+        log_w = np.log(tracks.w)
+        log_miss = log_w + np.log1p(-p_D)
+        log_det = (log_w + np.log(p_D))[:, None] + logq
+        owner = tracks.owner()
+        log_eta_miss = _segment_logsumexp(log_miss, tracks.start, owner)
+        log_eta_det = _segment_logsumexp(log_det, tracks.start, owner)
+    return log_miss, log_det, log_eta_miss, log_eta_det
+
+
 def association_costs(
     tracks: Tracks, p_D: np.ndarray, logq: np.ndarray, kappa: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The log costs (N, 2 + M) of the module docstring, with the per-component terms they sum:
     ``(logc, log_miss (C,), log_det (C, M), log_eta_miss (N,), log_eta_det (N, M))`` (eta without r and kappa)."""
+    log_miss, log_det, log_eta_miss, log_eta_det = association_terms(tracks, p_D, logq)
     with np.errstate(divide="ignore"):
-        log_w = np.log(tracks.w)
-        log_miss = log_w + np.log1p(-p_D)
-        log_det = (log_w + np.log(p_D))[:, None] + logq
-        log_eta_miss = _segment_logsumexp(log_miss, tracks.start)
-        log_eta_det = _segment_logsumexp(log_det, tracks.start)
         log_r = np.log(tracks.r)
         logc = np.empty((len(tracks), 2 + logq.shape[1]))
         logc[:, ABSENT] = np.log1p(-tracks.r)

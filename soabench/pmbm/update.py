@@ -28,7 +28,7 @@ from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import logsumexp0
 from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
-from soabench.lmb.update import KAPPA_FLOOR, association_costs
+from soabench.lmb.update import KAPPA_FLOOR, association_terms
 from soabench.pmbm.association import MISS, clusters, new_global_hypotheses, unique_rows
 from soabench.pmbm.density import PMBMDensity
 from soabench.types import SOURCE_MEAS, NewbornTerms
@@ -66,6 +66,17 @@ def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """The concatenated ranges starts[i] .. starts[i] + counts[i] - 1."""
     ends = np.cumsum(counts)
     return np.repeat(starts - (ends - counts), counts) + np.arange(ends[-1] if len(ends) else 0)
+
+
+def _unique_codes(code: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(code, return_inverse=True)`` for codes in 0 .. size - 1, the inverse shaped like ``code``: by a
+    table of the codes present when it is small against ``code``, with numpy's sort otherwise."""
+    if size > 4 * code.size + 4096:
+        u, inv = np.unique(code, return_inverse=True)
+        return u, inv.reshape(code.shape)
+    present = np.zeros(size, dtype=bool)
+    present[code] = True
+    return np.flatnonzero(present), (np.cumsum(present) - 1)[code]
 
 
 def update(
@@ -111,7 +122,7 @@ def update(
         log_t = np.log(p_D[:J] * ppp.w)[:, None] + logq[:J]  # (J, M) log p_D w q
         log_e_ppp = logsumexp0(log_t)
         # tracks: the LMB's per-hypothesis sums (eta without r and kappa)
-        _, log_miss, log_det, log_eta_miss, log_eta_det = association_costs(hyps, p_D[J:], logq[J:], kappa)
+        log_miss, log_det, log_eta_miss, log_eta_det = association_terms(hyps, p_D[J:], logq[J:])
         log_r = np.log(hyps.r)
         log_l_miss_exact = np.logaddexp(np.log1p(-hyps.r), log_r + log_eta_miss)
         log_l_miss = np.maximum(log_l_miss_exact, LOG_FLOOR)
@@ -151,8 +162,7 @@ def update(
     taken[rows, choice[rows, cols]] = True
     new_code = (~taken[:, new_l]).astype(np.int64)  # (B, n_new): 1 = z_l is its own, 0 = it went to a track
 
-    old_u, old_inv = np.unique(old_code, return_inverse=True)
-    old_inv = old_inv.reshape(B, n)
+    old_u, old_inv = _unique_codes(old_code, len(hyps) * (M + 1))
     h_par, h_choice = np.divmod(old_u, M + 1)
     h_choice = h_choice - 1
     # a track's kept children: the old codes are grouped by parent hypothesis, hence by track (pred.track sorted)
@@ -230,9 +240,10 @@ def update(
 
     n_child = n_old_u + int(n_hyp_new.sum())
     counts = np.bincount(rec_child, minlength=n_child)
-    new_t = np.repeat(np.arange(n_new), n_hyp_new)
-    is_code = np.concatenate([[c for c in (0, 1) if (used0[t] if c == 0 else used1[t])] for t in range(n_new)] or [[]])
-    r_new = np.where(is_code == 1, np.exp(log_e[new_l] - log_new[new_l])[new_t], 0.0)
+    # each new track's hypotheses in order: "went to a track" (when used0), then "is its own" (when used1)
+    hyp_new = np.flatnonzero(np.column_stack([used0, used1]))  # 2 t + code
+    new_t, is_own = hyp_new // 2, hyp_new % 2 == 1
+    r_new = np.where(is_own, np.exp(log_e[new_l] - log_new[new_l])[new_t], 0.0)
     post_hyps = Tracks(
         np.concatenate([r_old, r_new]),
         np.concatenate([hyps.label[h_par], label0 + new_l[new_t]]).astype(np.int64),
@@ -271,8 +282,8 @@ def _prune_tracks(d: PMBMDensity, r_floor: float) -> PMBMDensity:
             order = np.argsort(-merged, kind="stable")
             table, log_w = uniq[order], merged[order]
     log_w = log_w - np.logaddexp.reduce(log_w)
-    used = np.unique(table)
-    hyps = d.hyps.select(used)
+    used = np.flatnonzero(np.bincount(table.ravel(), minlength=len(d.hyps)))  # sorted, as np.unique(table)
+    hyps = d.hyps if len(used) == len(d.hyps) else d.hyps.select(used)
     remap = np.full(len(d.hyps), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     track_remap = np.full(n, -1, dtype=np.int64)

@@ -275,6 +275,22 @@ def test_unique_rows_is_numpys(shape):
     np.testing.assert_array_equal(u[inv], x)
 
 
+@pytest.mark.parametrize("size", [1, 12, 300, 100_000])
+def test_unique_codes_is_numpys(size):
+    """Both ways (a table of the codes present, numpy's sort for sparse codes) give np.unique's values, dtypes and
+    inverse, shaped like the codes."""
+    from soabench.pmbm.update import _unique_codes
+
+    rng = np.random.default_rng(size)
+    for shape in [(1, 0), (1, 4), (9, 3), (40, 12)]:
+        x = rng.integers(0, size, shape)
+        u, inv = _unique_codes(x, size)
+        want_u, want_inv = np.unique(x, return_inverse=True)
+        assert u.dtype == want_u.dtype and inv.dtype == want_inv.dtype and inv.shape == x.shape
+        np.testing.assert_array_equal(u, want_u)
+        np.testing.assert_array_equal(inv, want_inv.reshape(x.shape))
+
+
 def test_murty_infeasible_gives_nothing():
     C = np.array([[1.0, np.inf], [2.0, np.inf]])
     assert murty(C, 5) == []
