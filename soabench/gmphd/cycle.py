@@ -33,12 +33,15 @@ from numba import njit
 from soabench.gmphd.clock import monotonic
 from soabench.gmphd.kernels import (
     _cholesky4,
+    copy_row,
+    copy_state,
     ekf_terms,
     extract_labels,
     inv2_sym,
     merge_groups,
     merge_moments,
     posterior_pairs,
+    set_row,
     wrap,
 )
 
@@ -48,30 +51,6 @@ _LOG2 = math.log(2.0)
 #: worst: R keeps S well conditioned)
 _RANGE_SLACK = 1.0 + 1e-4
 _RADIX_MIN = 1500  #: from this many weights on, the radix sort is faster than numba's mergesort
-
-
-@njit(cache=True, inline="always")
-def _copy_state(mo, Po, q, m, P, j):
-    """mo[q] = m[j], Po[q] = P[j] element by element (cheaper than numba's row slice assignment)."""
-    for a in range(4):
-        mo[q, a] = m[j, a]
-        for b in range(4):
-            Po[q, a, b] = P[j, a, b]
-
-
-@njit(cache=True, inline="always")
-def _copy_row(dst, q, src, j):
-    """dst[q] = src[j] for rows of 4, element by element: a row assignment would link numba's shape-mismatch error,
-    whose message formatting (numba's string functions) compiles into every caller."""
-    for a in range(4):
-        dst[q, a] = src[j, a]
-
-
-@njit(cache=True, inline="always")
-def _set_row(dst, q, v):
-    """dst[q] = v for a row of 4, element by element (as :func:`_copy_row`)."""
-    for a in range(4):
-        dst[q, a] = v[a]
 
 
 @njit(cache=True)
@@ -248,13 +227,13 @@ def predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pars, bw, bm,
     for k in range(Jb):
         j = J0 + k
         w2[j] = bw[k]
-        _copy_state(m2, P2, j, bm, bP, k)
+        copy_state(m2, P2, j, bm, bP, k)
         origin2[j] = bsrc[k]
         n_det2[j] = 0
         age2[j] = 0
         label2[j] = label0 + k
         if dyn:
-            _set_row(beta2, j, beta0)
+            set_row(beta2, j, beta0)
     g = np.empty(J)
     for j in range(J):
         dx = m2[j, 0] - ego[0]
@@ -373,7 +352,7 @@ def support(w, m, P, beta, g, p_D0, Z, ego, R, r_min, gate_thr, kappa, ukf=False
     m_d = np.empty((n_d, 4))
     P_d = np.empty((n_d, 4, 4))
     for k in range(n_d):
-        _copy_state(m_d, P_d, k, m, P, det_idx[k])
+        copy_state(m_d, P_d, k, m, P, det_idx[k])
     if ukf:
         eta, S, Sinv, logdet, C, H, valid, ok = ukf_terms(m_d, P_d, ego, R, r_min)
     else:
@@ -478,7 +457,7 @@ def posterior(w, m, P, origin, n_det, age, beta, label, sup, R, beta_nb, nb_m, n
     m_d = np.empty((n_det_rows, 4))
     P_d = np.empty((n_det_rows, 4, 4))
     for k in range(n_det_rows):
-        _copy_state(m_d, P_d, k, m, P, det_idx[k])
+        copy_state(m_d, P_d, k, m, P, det_idx[k])
     m_new, P_new = posterior_pairs(m_d, P_d, C, Sinv, S, H, R, jj, lj, nu_r, nu_b)
     w_nb = np.empty(M if has_nb else 0)
     n_nb = 0
@@ -490,37 +469,37 @@ def posterior(w, m, P, origin, n_det, age, beta, label, sup, R, beta_nb, nb_m, n
     wo, mo, Po, oo, no, ao, bo, lo = _new_mixture(n, dyn)
     for j in range(J):
         wo[j] = w[j] * (1.0 - p_D[j])
-        _copy_state(mo, Po, j, m, P, j)
+        copy_state(mo, Po, j, m, P, j)
         oo[j] = origin[j]
         lo[j] = label[j]
         no[j] = n_det[j]
         ao[j] = age[j]
         if dyn:
-            _copy_row(bo, j, beta, j)
+            copy_row(bo, j, beta, j)
             bo[j, 1] += g[j]
     for p in range(n_pairs):
         q = J + p
         src = det_idx[jj[p]]
         wo[q] = w_det[jj[p], lj[p]]
-        _copy_state(mo, Po, q, m_new, P_new, p)
+        copy_state(mo, Po, q, m_new, P_new, p)
         oo[q] = origin[src]
         lo[q] = label[src]
         no[q] = n_det[src] + 1
         ao[q] = age[src]
         if dyn:
-            _copy_row(bo, q, beta, src)
+            copy_row(bo, q, beta, src)
             bo[q, 0] += 1.0
     q = J + n_pairs
     for ll in range(w_nb.shape[0]):
         if w_nb[ll] > 0.0:
             wo[q] = w_nb[ll]
-            _copy_state(mo, Po, q, nb_m, nb_P, ll)
+            copy_state(mo, Po, q, nb_m, nb_P, ll)
             oo[q] = nb_origin
             lo[q] = nb_label0 + ll
             no[q] = 1
             ao[q] = 0
             if dyn:
-                _set_row(bo, q, nb_beta)
+                set_row(bo, q, nb_beta)
             q += 1
     return wo, mo, Po, oo, no, ao, bo, lo, n_pairs, n_nb
 
@@ -563,9 +542,9 @@ def _select(w, m, P, origin, n_det, age, beta, label, idx):
     for k in range(n):
         i = idx[k]
         wo[k], oo[k], no[k], ao[k], lo[k] = w[i], origin[i], n_det[i], age[i], label[i]
-        _copy_state(mo, Po, k, m, P, i)
+        copy_state(mo, Po, k, m, P, i)
         if dyn:
-            _copy_row(bo, k, beta, i)
+            copy_row(bo, k, beta, i)
     return wo, mo, Po, oo, no, ao, bo, lo
 
 
@@ -625,7 +604,7 @@ def reduce(w, m, P, origin, n_det, age, beta, label, pars, next_label):
             bo = np.empty((G, 4) if dyn else (0, 0))
             if dyn:
                 for g in range(G):
-                    _copy_row(bo, g, beta, centres[g])
+                    copy_row(bo, g, beta, centres[g])
                 wmu = np.zeros((G, 2))
                 wsec = np.zeros((G, 2))
                 for i in range(n_pruned):
@@ -679,7 +658,7 @@ def reduce(w, m, P, origin, n_det, age, beta, label, pars, next_label):
     k = 0
     for e in range(n_e):
         for _ in range(reps[e]):
-            _copy_row(X, k, m, idx[e])
+            copy_row(X, k, m, idx[e])
             X_w[k] = w[idx[e]]
             k += 1
     X_label, label, next_label = extract_labels(w, label, idx, reps, next_label)

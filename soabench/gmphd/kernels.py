@@ -708,6 +708,31 @@ def merge_groups_window(m, P, order, U):
     return label, centres[:G]
 
 
+@njit(cache=True, inline="always")
+def copy_state(mo, Po, q, m, P, j):
+    """mo[q] = m[j], Po[q] = P[j] element by element: cheaper than numba's row slice assignment, and links no
+    shape-mismatch error (see :func:`copy_row`)."""
+    for a in range(4):
+        mo[q, a] = m[j, a]
+        for b in range(4):
+            Po[q, a, b] = P[j, a, b]
+
+
+@njit(cache=True, inline="always")
+def copy_row(dst, q, src, j):
+    """dst[q] = src[j] for rows of 4, element by element: a row assignment would link numba's shape-mismatch error,
+    whose message formatting (numba's string functions) compiles into every caller."""
+    for a in range(4):
+        dst[q, a] = src[j, a]
+
+
+@njit(cache=True, inline="always")
+def set_row(dst, q, v):
+    """dst[q] = v for a row of 4, element by element (as :func:`copy_row`)."""
+    for a in range(4):
+        dst[q, a] = v[a]
+
+
 @njit(cache=True)
 def merge_moments(label, centres, w, m, P, n_det, age):
     """Moment-matched group Gaussians (§2.9): W = sum w_i, m~ = sum w_i m_i / W,
@@ -729,10 +754,7 @@ def merge_moments(label, centres, w, m, P, n_det, age):
         ag[g] = age[c]
         if count[g] == 1:
             W[g] = w[c]
-            for a in range(4):  # element by element: a row assignment links numba's string formatting
-                mt[g, a] = m[c, a]
-                for b in range(4):
-                    Pt[g, a, b] = P[c, a, b]
+            copy_state(mt, Pt, g, m, P, c)
     for i in range(J):
         g = label[i]
         if count[g] > 1:
