@@ -226,3 +226,47 @@ def test_ospa2_with_a_cutoff_whose_sums_are_not_exact_equals_every_pair(seed):
     seq = TrackSequence.of(*crowd_sequence(seed, K=40))
     got = ospa2(*crowd_sequence(seed, K=40), c=0.7, p=1.0, window=10).series[:, 0]
     np.testing.assert_array_equal(got, ospa2_every_pair(seq, 0.7, 1.0, 10))
+
+
+def test_track_measures_read_the_gated_matching_of_the_metrics():
+    """The §5.4 matching the re-emergence measures read (associated estimates and their labels) taken from the run's
+    metrics (``TrialMetrics.partner``) gives the columns and gap cells of matching again: estimates extracted twice
+    (scipy's choice of the compiled path's left-over scans), labels that switch, gaps with and without an estimate."""
+    import dataclasses
+
+    from soabench.config import MetricsConfig, Sensor
+    from soabench.metrics import evaluate
+    from soabench.tracks.evaluate import track_evaluation
+    from soabench.types import Obstacles, Scan, Scans, StepResult
+
+    rng = np.random.default_rng(5)
+    K, P = 80, 8
+    sensor, mcfg = dataclasses.replace(Sensor(), fov_deg=360.0), MetricsConfig()
+    truth = np.cumsum(rng.normal(0.0, 0.5, (K, P, 2)), axis=0) + rng.uniform(-25, 25, (1, P, 2))
+    visible = np.ones((K, P), dtype=bool)
+    for p in range(P):  # two occlusion gaps per target
+        for k0 in rng.choice(np.arange(3, K - 8), 2, replace=False):
+            visible[k0 : k0 + int(rng.integers(1, 5)), p] = False
+    X, labels, results = [], [], []
+    for k in range(K):
+        shown = visible[k] | (rng.random(P) < 0.5)  # coasted through part of the gaps
+        est = truth[k, shown] + rng.normal(0.0, 0.8, (int(shown.sum()), 2))
+        lab = np.flatnonzero(shown) + 100 * (k // 20)  # every target's label changes every 20 scans
+        if len(est) > 2 and k % 2:
+            est[1] = est[2] = 0.5 * (est[1] + est[2])  # one estimate, extracted twice, between two truths
+        x = np.zeros((len(est), 4))
+        x[:, :2] = est
+        X.append(x)
+        labels.append(lab.astype(np.int64))
+        n, none = len(x), np.zeros(0)
+        results.append(StepResult(k, x, np.ones(n), 1.0 * n, 1.0 * n, n, n, n, False, 0.0, 0.0, 0.0, 0.98, none, none))
+    ones = np.ones((K, P), dtype=bool)
+    scans = Scans([Scan(k, float(k), np.zeros(3), np.zeros((0, 2)), Obstacles.empty(), [], None) for k in range(K)],
+                  1.0, [np.zeros(0, dtype=np.int64)] * K, truth, ones, ones.copy(), visible, visible.copy(),
+                  np.array([str(p) for p in range(P)]))  # fmt: skip
+    metrics = evaluate(scans, results, mcfg, sensor)
+    for lab in (labels, None):
+        again = track_evaluation(scans, X, lab, metrics.episodes, mcfg, sensor)
+        read = track_evaluation(scans, X, lab, metrics.episodes, mcfg, sensor, metrics.partner)
+        assert str(read) == str(again)  # every value and its type (NaN as NaN)
+    assert again[0]["n_gaps"] > 5 and 0 < read[0]["coasted"] < 1 and read[0]["n_reemergence"] > 5
