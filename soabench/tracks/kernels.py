@@ -222,7 +222,9 @@ def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, n
     runs of ``step`` scans padded to G truths x E estimates): per scan, each truth's similarity sum over the E
     padded entries in numpy's pairwise order, each estimate's sum over the G padded truths one after another, the
     overlap ``S / (col + row - S)`` where that exceeds machine epsilon; per run of scans, the overlaps summed per
-    cell in scan order from 0.0 and added to ``potential``. A pair of zero similarity adds 0.0 and is skipped."""
+    cell in scan order from 0.0 and added to ``potential``. A pair of zero similarity adds 0.0 and is skipped.
+    Returns the cells that ``potential`` and ``id_potential`` hold a non-zero value in (each once, unsorted), so that
+    the (nG * nT,) arrays need not be searched for them."""
     K = len(g_off) - 1
     G, E = 0, 0
     for t in range(K):
@@ -234,12 +236,17 @@ def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, n
     block = np.zeros(len(potential))
     touched = np.empty(16, dtype=np.int64)
     n_touched = 0
+    cells = np.empty(16, dtype=np.int64)
+    id_cells = np.empty(16, dtype=np.int64)
+    n_cells = n_id = 0
     for t in range(K):
         g0, e0 = g_off[t], e_off[t]
         ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
         if ng > 0 and ne > 0:
             if n_touched + ng * ne > len(touched):  # grown here, not inside the pair loop (reference counts)
                 touched = np.concatenate((touched[:n_touched], np.empty(n_touched + 2 * ng * ne, dtype=np.int64)))
+            if n_id + ng * ne > len(id_cells):
+                id_cells = np.concatenate((id_cells[:n_id], np.empty(n_id + 2 * ng * ne, dtype=np.int64)))
             S = scan_similarity(gx, g0, ng, ex, e0, ne, d_gate)
             for j in range(ne):  # element loops: no slice assignment (and its shape-mismatch message) compiled
                 col[j] = S[0, j]
@@ -264,51 +271,54 @@ def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, n
                         n_touched += 1
                     block[x] += iou
                     if S[i, j] >= threshold:
+                        if id_potential[x] == 0.0:
+                            id_cells[n_id] = x
+                            n_id += 1
                         id_potential[x] += 1.0
         if (t + 1) % step == 0 or t == K - 1:  # the end of a run of scans: its sums join the totals
+            if n_cells + n_touched > len(cells):
+                cells = np.concatenate((cells[:n_cells], np.empty(n_cells + 2 * n_touched, dtype=np.int64)))
             for q in range(n_touched):
                 x = touched[q]
+                if potential[x] == 0.0:  # a sum of positive overlaps: non-zero from its first one on
+                    cells[n_cells] = x
+                    n_cells += 1
                 potential[x] += block[x]
                 block[x] = 0.0
             n_touched = 0
+    return cells[:n_cells], id_cells[:n_id]
 
 
 @njit(cache=True)
-def _sparse_block(pos, val, lo, hi, start, n):  # pragma: no cover - compiled
-    """numpy's pairwise sum of a zero array of ``n`` <= 128 elements from ``start`` with ``val[lo:hi]`` at the
-    sorted positions ``pos[lo:hi]`` (all inside it): its leaf case, adding a zero being exact."""
+def _sparse_block(pos, val, lo, hi, start, n, out, acc):  # pragma: no cover - compiled
+    """``out[i]``: numpy's pairwise sum of a zero array of ``n`` <= 128 elements from ``start`` with ``val[lo:hi, i]``
+    at the sorted positions ``pos[lo:hi]`` (all inside it), for every column i of ``val``: its leaf case (eight running
+    sums ``acc``), adding a zero being exact."""
+    R = val.shape[1]
     if n < 8:
-        res = -0.0
+        for i in range(R):
+            out[i] = -0.0
         for q in range(lo, hi):
-            res += val[q]
-        return res
-    r0 = r1 = r2 = r3 = r4 = r5 = r6 = r7 = 0.0
+            for i in range(R):
+                out[i] += val[q, i]
+        return
+    for j in range(8):
+        for i in range(R):
+            acc[j, i] = 0.0
     stop = start + n - n % 8
     q = lo
     while q < hi and pos[q] < stop:
         j = (pos[q] - start) % 8
-        if j == 0:
-            r0 += val[q]
-        elif j == 1:
-            r1 += val[q]
-        elif j == 2:
-            r2 += val[q]
-        elif j == 3:
-            r3 += val[q]
-        elif j == 4:
-            r4 += val[q]
-        elif j == 5:
-            r5 += val[q]
-        elif j == 6:
-            r6 += val[q]
-        else:
-            r7 += val[q]
+        for i in range(R):
+            acc[j, i] += val[q, i]
         q += 1
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for i in range(R):
+        left = (acc[0, i] + acc[1, i]) + (acc[2, i] + acc[3, i])
+        out[i] = left + ((acc[4, i] + acc[5, i]) + (acc[6, i] + acc[7, i]))
     while q < hi:
-        res += val[q]
+        for i in range(R):
+            out[i] += val[q, i]
         q += 1
-    return res
 
 
 @njit(cache=True)
@@ -325,26 +335,33 @@ def _first_at_or_after(pos, lo, hi, x):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def sparse_np_sum(pos, val, n):  # pragma: no cover - compiled
-    """``a.sum()`` of the (n,) float64 array ``a`` that is zero but for ``val`` (> 0) at the sorted positions
-    ``pos``, bit for bit, in time of the non-zero entries: numpy's pairwise summation (halves split at a multiple of
-    8 above 128 elements, eight running sums below; :func:`soabench.metrics_kernels.np_sum`) with every part that
-    holds no non-zero entry known to be 0.0, which adds exactly."""
+    """``a.sum()`` of each column of ``val`` (m, R) as an (n,) float64 array ``a`` that is zero but for that column's
+    values (>= 0) at the sorted positions ``pos`` (m,): (R,) sums, bit for bit, in time of the listed entries. numpy's
+    pairwise summation (halves split at a multiple of 8 above 128 elements, eight running sums below;
+    :func:`soabench.metrics_kernels.np_sum`) with every part that holds no listed entry known to be 0.0, which adds
+    exactly, as does a listed 0.0; the R sums share one walk over the positions."""
+    R = val.shape[1]
     if n == 0 or len(pos) == 0:
-        return 0.0
+        return np.zeros(R)
     f_start = np.empty(64, dtype=np.int64)
     f_n = np.empty(64, dtype=np.int64)
     f_lo = np.empty(64, dtype=np.int64)
     f_mid = np.empty(64, dtype=np.int64)
     f_hi = np.empty(64, dtype=np.int64)
     f_stage = np.zeros(64, dtype=np.int64)
-    vals = np.empty(64)
+    vals = np.empty((64, R))
+    acc = np.empty((8, R))
     nv = 0
     top = 0
     f_start[0], f_n[0], f_lo[0], f_hi[0] = 0, n, 0, len(pos)
     while top >= 0:
         s, m, lo, hi = f_start[top], f_n[top], f_lo[top], f_hi[top]
         if lo == hi or m <= 128:
-            vals[nv] = 0.0 if lo == hi else _sparse_block(pos, val, lo, hi, s, m)
+            if lo == hi:
+                for i in range(R):
+                    vals[nv, i] = 0.0
+            else:
+                _sparse_block(pos, val, lo, hi, s, m, vals[nv], acc)
             nv += 1
             top -= 1
             continue
@@ -362,10 +379,14 @@ def sparse_np_sum(pos, val, n):  # pragma: no cover - compiled
             top += 1
             f_start[top], f_n[top], f_lo[top], f_hi[top], f_stage[top] = s + half, m - half, mid, hi, 0
         else:  # both done: left + right
-            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            for i in range(R):
+                vals[nv - 2, i] = vals[nv - 2, i] + vals[nv - 1, i]
             nv -= 1
             top -= 1
-    return vals[0]
+    out = np.empty(R)
+    for i in range(R):
+        out[i] = vals[0, i]
+    return out
 
 
 @njit(cache=True)

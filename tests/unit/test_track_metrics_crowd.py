@@ -141,7 +141,8 @@ def test_equal_rows_as_compared_pair_by_pair(seed):
 @pytest.mark.parametrize("seed", range(12))
 def test_sparse_sum_is_the_dense_arrays_sum_bit_for_bit(seed):
     """Lengths around numpy's block sizes (8, 128 and their splits), densities from empty to full, magnitudes over
-    six decades: the sum of the non-zero entries in numpy's pairwise order is ``ndarray.sum`` of the dense array."""
+    six decades: the sum of the listed entries in numpy's pairwise order is ``ndarray.sum`` of the dense array, for
+    each of several arrays listed at the same positions (a listed zero included)."""
     from soabench.tracks.kernels import sparse_np_sum
 
     rng = np.random.default_rng(seed)
@@ -149,8 +150,10 @@ def test_sparse_sum_is_the_dense_arrays_sum_bit_for_bit(seed):
         a = np.where(
             rng.random(n) < rng.choice([0.0, 0.001, 0.05, 0.5, 1.0]), rng.random(n) * 10 ** rng.uniform(-3, 3, n), 0.0
         )
-        pos = np.flatnonzero(a)
-        assert sparse_np_sum(pos, a[pos], n) == a.sum()
+        b = np.where(rng.random(n) < 0.5, 0.0, a[::-1])
+        pos = np.flatnonzero(a + b)
+        sums = sparse_np_sum(pos, np.column_stack([a[pos], b[pos], 0.0 * a[pos]]), n)
+        assert sums.tolist() == [a.sum(), b.sum(), 0.0]
 
 
 def padded_global_counts(seq: TrackSequence, d_gate: float, nG: int, nT: int) -> tuple[np.ndarray, np.ndarray]:
@@ -184,9 +187,11 @@ def test_global_counts_are_the_padded_arrays_sums_bit_for_bit(seed, monkeypatch)
         got = np.zeros(nG * nT), np.zeros(nG * nT)
         g, e = seq.gt, seq.est
         step = max(1, 2000 // (G * E))
-        global_counts(g.ids, g.off, g.xy, e.ids, e.off, e.xy, D_GATE, 0.5, step, nT, *got)
+        cells = global_counts(g.ids, g.off, g.xy, e.ids, e.off, e.xy, D_GATE, 0.5, step, nT, *got)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
+        for c, a in zip(cells, got, strict=True):  # each non-zero cell listed once
+            np.testing.assert_array_equal(np.sort(c), np.flatnonzero(a))
         assert (want[0] > 0).any()
 
 
