@@ -175,7 +175,8 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
             Q = np.empty((ng, ne))  # CLEAR: the previous scan's pairs first, then similarity, 0 below the threshold
             for i in range(ng):
                 for j in range(ne):
-                    C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j])
+                    # -(alignment * 0.0) is -0.0 for the finite, non-negative alignment: not read where S is 0.0
+                    C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j]) if S[i, j] != 0.0 else -0.0
                     score = (1000.0 if e_ids[e0 + j] == prev_scan[g_ids[g0 + i]] else 0.0) + S[i, j]
                     Q[i, j] = -(0.0 if S[i, j] < threshold - _EPS else score)
             if _tied(C) or _tied(Q):
