@@ -60,6 +60,8 @@ class PMBMFilter:
         pmbm_cfg: :class:`PMBMConfig` (defaults if None).
         pmb: collapse to one multi-Bernoulli after every update (§10.5).
         model: the measurement model; the GM-PHD's range-bearing EKF/UKF with its gate if None.
+        fused: the update's bookkeeping after the global hypotheses in one compiled call (the default); False: the
+            array path, the reference it is tested against (:func:`soabench.pmbm.update.update`).
 
     Attributes:
         density: the posterior PMBM after the last step.
@@ -75,6 +77,7 @@ class PMBMFilter:
         pmbm_cfg: PMBMConfig | None = None,
         pmb: bool = False,
         model: MeasurementModel | None = None,
+        fused: bool = True,
     ) -> None:
         require(
             mode in PMBM_MODES,
@@ -86,6 +89,7 @@ class PMBMFilter:
         self.cfg, self.sensor, self.mode = filter_cfg, sensor_cfg, mode
         self.pmbm = (pmbm_cfg or PMBMConfig()).validate()
         self.pmb = bool(pmb)
+        self.fused = bool(fused)
         self.name = "pmb" if self.pmb else "pmbm"
         self.hyp = Hypotheses(self.pmbm.M_max, self.pmbm.w_floor, self.pmbm.r_floor)
         self.F, self.Q = cv_model(sensor_cfg.dt, filter_cfg.sigma_a)
@@ -140,7 +144,7 @@ class PMBMFilter:
         up = update(
             pred, Z, ego_ok if ego_ok is not None else np.zeros(3), self._p_D(pred.ppp.m, ego_ok, scan),
             self._p_D(pred.hyps.m, ego_ok, scan), kappa, self.model, newborn=births.newborn, label0=self.next_label,
-            hyp=self.hyp,
+            hyp=self.hyp, fused=self.fused,
         )  # fmt: skip
         self.next_label += len(Z)
         post = up.density
