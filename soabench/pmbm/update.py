@@ -30,7 +30,14 @@ from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
 from soabench.lmb.update import KAPPA_FLOOR, association_terms
 from soabench.pmbm import kernels
-from soabench.pmbm.association import MISS, clusters, new_global_hypotheses, unique_rows
+from soabench.pmbm.association import (
+    MISS,
+    assignments_asked,
+    clusters,
+    global_hypotheses_flat,
+    new_global_hypotheses,
+    unique_rows,
+)
 from soabench.pmbm.density import PMBMDensity
 from soabench.types import SOURCE_MEAS, NewbornTerms
 
@@ -151,11 +158,18 @@ def update(
         log_new = np.logaddexp(np.log(np.maximum(kappa, KAPPA_FLOOR)), log_e)
 
     # global hypotheses
-    groups = clusters(pred.track, np.isfinite(log_l_det), n)
     max_gap = -np.log(hyp.w_floor) if hyp.w_floor > 0.0 else np.inf
-    parent, choice, log_w, n_murty = new_global_hypotheses(
-        pred.table, pred.log_w, groups, log_l_miss, log_l_det, log_new, hyp.M_max, max_gap
-    )
+    if fused:  # the clusters as flat arrays and the global hypotheses in one compiled call
+        parent, choice, log_w, n_murty = global_hypotheses_flat(
+            np.ascontiguousarray(pred.table, dtype=np.int64), np.ascontiguousarray(pred.log_w, dtype=float),
+            assignments_asked(pred.log_w, hyp.M_max), np.ascontiguousarray(pred.track, dtype=np.int64), log_l_miss,
+            log_l_det, log_new, float(max_gap),
+        )  # fmt: skip
+    else:
+        groups = clusters(pred.track, np.isfinite(log_l_det), n)
+        parent, choice, log_w, n_murty = new_global_hypotheses(
+            pred.table, pred.log_w, groups, log_l_miss, log_l_det, log_new, hyp.M_max, max_gap
+        )
     n_global = len(log_w)
     log_w = log_w - np.logaddexp.reduce(log_w)
     order = np.argsort(-log_w, kind="stable")
