@@ -24,7 +24,8 @@ configure_numba_cache()
 
 from numba import njit  # noqa: E402
 
-from soabench.gmphd.kernels import copy_state, posterior_pairs  # noqa: E402
+from soabench.gmphd.kernels import copy_row, copy_state, posterior_pairs  # noqa: E402
+from soabench.lmb.tracks import reduce_components  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it (as :data:`soabench.pmbm.association.MISS`)
 
@@ -319,3 +320,111 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
                 out_table[b, track_remap[n + t]] = child_remap[first[t] + (own & np.int64(used0[t]))]
     return (o_r, o_label, o_origin, o_age, out_start, out_w, out_m, out_P, o_track, out_table, n_pairs, n_new,
             n_alive < n_tr)  # fmt: skip
+
+
+@njit(cache=True)
+def collapse(track, table, ew, r, label, origin, age, start, w, m, P):
+    """The track-oriented PMB (docs/method.md §10.5) of the hypotheses with global table ``table`` (A, n) and
+    weights ``ew`` (A,) (exponentiated by the caller), as :func:`soabench.pmbm.pmb.collapse` computes it (the same
+    sums in the same order): (r, label, origin, age, start, w, m, P) of one Bernoulli per track with r > 0."""
+    A, n = table.shape
+    n_hyp = r.shape[0]
+    p = np.zeros(n_hyp)  # P(h): the weights of the global hypotheses that pick h, in the table's row order
+    for a in range(A):
+        for i in range(n):
+            p[table[a, i]] += ew[a]
+    pr = np.empty(n_hyp)
+    rt = np.zeros(n)
+    for h in range(n_hyp):
+        pr[h] = p[h] * r[h]
+        rt[track[h]] += pr[h]
+    best = np.full(n, -1, dtype=np.int64)  # the most probable hypothesis of each track (lowest index on ties)
+    for h in range(n_hyp):
+        i = track[h]
+        if best[i] < 0 or pr[h] > pr[best[i]]:
+            best[i] = h
+    N = 0
+    for i in range(n):
+        if rt[i] > 0.0:
+            N += 1
+    count = np.zeros(n, dtype=np.int64)
+    n_c = 0
+    for h in range(n_hyp):
+        i = track[h]
+        if rt[i] > 0.0:
+            for c in range(start[h], start[h + 1]):
+                if pr[h] * w[c] > 0.0:
+                    count[i] += 1
+                    n_c += 1
+    o_r = np.empty(N)
+    o_label = np.empty(N, dtype=np.int64)
+    o_origin = np.empty(N, dtype=np.int8)
+    o_age = np.empty(N, dtype=np.int32)
+    o_start = np.zeros(N + 1, dtype=np.int64)
+    k = 0
+    for i in range(n):
+        if rt[i] > 0.0:
+            b = best[i]
+            o_r[k] = rt[i]
+            o_label[k] = label[b]
+            o_origin[k] = origin[b]
+            o_age[k] = age[b]
+            o_start[k + 1] = o_start[k] + count[i]
+            k += 1
+    o_w = np.empty(n_c)
+    o_m = np.empty((n_c, 4))
+    o_P = np.empty((n_c, 4, 4))
+    q = 0
+    for h in range(n_hyp):  # components grouped by track: the hypotheses of a track are contiguous
+        i = track[h]
+        if rt[i] > 0.0:
+            for c in range(start[h], start[h + 1]):
+                v = pr[h] * w[c]
+                if v > 0.0:
+                    o_w[q] = v / rt[i]
+                    copy_state(o_m, o_P, q, m, P, c)
+                    q += 1
+    return o_r, o_label, o_origin, o_age, o_start, o_w, o_m, o_P
+
+
+@njit(cache=True)
+def reduce_extract(track, table, ew, r, label, origin, age, start, w, m, P, T, U, J_h, pmb, best, thr):
+    """Step 3's per-hypothesis reduction (each density pruned, merged and capped at ``J_h`` components,
+    :func:`soabench.lmb.tracks.reduce_components`), with ``pmb`` the collapse (:func:`collapse`) and a second
+    reduction, then step 4's estimates: in global hypothesis ``best``, every track whose hypothesis has r > ``thr``,
+    at the mean of its heaviest component (lowest index on ties), labelled.
+
+    Returns ((r, label, origin, age, start, w, m, P) of the hypotheses, X, X_r, labels)."""
+    start, w, m, P = reduce_components(start, w, m, P, T, U, J_h)
+    if pmb:
+        r, label, origin, age, start, w, m, P = collapse(track, table, ew, r, label, origin, age, start, w, m, P)
+        start, w, m, P = reduce_components(start, w, m, P, T, U, J_h)
+        N = r.shape[0]
+        track = np.arange(N)
+        table = np.empty((1, N), dtype=np.int64)
+        for i in range(N):
+            table[0, i] = i
+        best = 0
+    n = table.shape[1]
+    n_x = 0
+    for i in range(n):
+        if r[table[best, i]] > thr:
+            n_x += 1
+    X = np.empty((n_x, 4))
+    X_r = np.empty(n_x)
+    labels = np.empty(n_x, dtype=np.int64)
+    q = 0
+    for i in range(n):
+        h = table[best, i]
+        if r[h] > thr:
+            if start[h + 1] == start[h]:
+                raise ValueError("a reported track has no component")
+            c_best = start[h]
+            for c in range(start[h], start[h + 1]):
+                if w[c] > w[c_best]:
+                    c_best = c
+            copy_row(X, q, m, c_best)
+            X_r[q] = r[h]
+            labels[q] = label[h]
+            q += 1
+    return (r, label, origin, age, start, w, m, P), X, X_r, labels
