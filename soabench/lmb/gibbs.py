@@ -135,9 +135,12 @@ def _enumerate_valid(options, n_opt, M, limit):
         if lvl == 0:
             if count == cap:
                 grown = np.empty((min(2 * cap, limit + 1), n), dtype=np.int64)
-                grown[:cap] = hyps
+                for h in range(cap):
+                    for t in range(n):
+                        grown[h, t] = hyps[h, t]
                 hyps, cap = grown, grown.shape[0]
-            hyps[count] = theta
+            for t in range(n):
+                hyps[count, t] = theta[t]
             count += 1
             if count > limit:
                 break
@@ -345,7 +348,8 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
     # distinct hypothesis and would not change which one comes first among equal hashes
     samples = np.empty((n_sweeps, n), dtype=np.int64)
     hashes = np.empty(n_sweeps, dtype=np.uint64)
-    samples[0] = theta
+    for i in range(n):
+        samples[0, i] = theta[i]
     hashes[0] = h
     n_st = 1
     for _sweep in range(1, n_sweeps):
@@ -405,7 +409,8 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                 new = False
                 break
         if new:
-            out[n_hyp] = samples[s]
+            for i in range(n):
+                out[n_hyp, i] = samples[s, i]
             n_hyp += 1
     return out, n_hyp
 
