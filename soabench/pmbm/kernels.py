@@ -69,6 +69,60 @@ def unique_codes(code, size):
 
 
 @njit(cache=True)
+def _row_less(t, x, y):
+    """Row x of ``t`` comes before row y in lexicographic order."""
+    for i in range(t.shape[1]):
+        if t[x, i] != t[y, i]:
+            return t[x, i] < t[y, i]
+    return False
+
+
+@njit(cache=True)
+def unique_rows(t):
+    """The distinct rows of the int64 table ``t`` (B, n) in lexicographic order and the index of each row among
+    them, as :func:`soabench.pmbm.association.unique_rows` (a bottom-up merge sort of the rows)."""
+    B, n = t.shape
+    order = np.arange(B)
+    tmp = np.empty(B, dtype=np.int64)
+    width = 1
+    while width < B:
+        for lo in range(0, B, 2 * width):
+            mid, hi = min(lo + width, B), min(lo + 2 * width, B)
+            i, j, k = lo, mid, lo
+            while i < mid and j < hi:
+                if _row_less(t, order[j], order[i]):
+                    tmp[k] = order[j]
+                    j += 1
+                else:
+                    tmp[k] = order[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                tmp[k] = order[i]
+                i += 1
+                k += 1
+            while j < hi:
+                tmp[k] = order[j]
+                j += 1
+                k += 1
+        order, tmp = tmp, order
+        width *= 2
+    inv = np.empty(B, dtype=np.int64)
+    first = np.empty(B, dtype=np.int64)
+    n_u = 0
+    for q in range(B):
+        if q == 0 or _row_less(t, order[q - 1], order[q]):
+            first[n_u] = order[q]
+            n_u += 1
+        inv[order[q]] = n_u - 1
+    uniq = np.empty((n_u, n), dtype=np.int64)
+    for u in range(n_u):
+        for i in range(n):
+            uniq[u, i] = t[first[u], i]
+    return uniq, inv
+
+
+@njit(cache=True)
 def children(table, parent, choice, track, start, w, label, origin, age, r_miss, degenerate, E_miss, E_det,
              has_new, W_all, w_nb, r_own, ppp_origin, m_all, P_all, Cx, Sinv, S, H, R, nu_r, nu_b, nb_m, nb_P,
              label0, r_floor, source_meas):  # fmt: skip
@@ -88,9 +142,10 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
         nb_m, nb_P: the newborn components (one per measurement, or none).
         label0: the new track of z_l gets label label0 + l; source_meas: the origin of a measurement-driven birth.
 
-    Returns (r, label, origin, age, start, w, m, P, track, table, n_pairs, n_new, pruned): the kept hypotheses, the
-    track of each, the table (B, kept tracks) indexing them, the Kalman pairs built (kept or not), the new tracks,
-    and whether a track was dropped.
+    Returns (r, label, origin, age, start, w, m, P, track, table, uniq, inv, n_pairs, n_new): the kept hypotheses,
+    the track of each, the table (B, kept tracks) indexing them, its distinct rows in lexicographic order with the
+    index of each row among them (when a track was dropped; else the table itself), the Kalman pairs built (kept or
+    not) and the new tracks.
     """
     B, n = choice.shape
     M = has_new.shape[0]
@@ -318,8 +373,13 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
             if alive[n + t]:
                 own = 0 if taken[b, new_l[t]] else 1
                 out_table[b, track_remap[n + t]] = child_remap[first[t] + (own & np.int64(used0[t]))]
-    return (o_r, o_label, o_origin, o_age, out_start, out_w, out_m, out_P, o_track, out_table, n_pairs, n_new,
-            n_alive < n_tr)  # fmt: skip
+    # global hypotheses that became equal when a track was dropped: the caller adds their weights
+    if n_alive < n_tr and B > 1:
+        uniq, inv = unique_rows(out_table)
+    else:
+        uniq, inv = out_table, np.arange(B)
+    return (o_r, o_label, o_origin, o_age, out_start, out_w, out_m, out_P, o_track, out_table, uniq, inv, n_pairs,
+            n_new)  # fmt: skip
 
 
 @njit(cache=True)

@@ -205,8 +205,10 @@ def update(
             ppp.origin, m_all, P_all, Cx, Sinv, S, Hj, np.asarray(model.R, dtype=float), nu_r, nu_b, nb_m, nb_P,
             int(label0), float(hyp.r_floor), int(SOURCE_MEAS),
         )  # fmt: skip
-        r, label, origin, age, start, w, m, P, track_of, table, n_pairs, n_new, pruned = out
-        table, log_w = merge_equal_rows(table, log_w, bool(pruned))
+        r, label, origin, age, start, w, m, P, track_of, table, uniq, inv, n_pairs, n_new = out
+        if len(uniq) < len(table):
+            table, log_w = _merged(uniq, inv, log_w)
+        log_w = log_w - np.logaddexp.reduce(log_w)
         density = PMBMDensity(ppp_missed(ppp, p_D[:J]), Tracks(r, label, origin, age, start, w, m, P), track_of,
                               table, log_w)  # fmt: skip
         return UpdateResult(density, A, beta, int(n_pairs), int(n_new), n_murty, n_global)
@@ -325,17 +327,13 @@ def ppp_missed(ppp: Mixture, p_D: np.ndarray) -> Mixture:
     return Mixture(ppp.w * (1.0 - p_D), ppp.m, ppp.P, ppp.origin, ppp.n_det, ppp.age, None, ppp.label)
 
 
-def merge_equal_rows(table: np.ndarray, log_w: np.ndarray, dropped: bool) -> tuple[np.ndarray, np.ndarray]:
-    """After tracks were dropped (``dropped``), the global hypotheses that became equal rows of ``table`` are merged
-    (their weights add; rows in lexicographic order, then by decreasing weight); the log weights are normalised."""
-    if dropped and table.shape[0] > 1:
-        uniq, inv = unique_rows(table)
-        if len(uniq) < table.shape[0]:
-            merged = np.full(len(uniq), -np.inf)
-            np.logaddexp.at(merged, inv, log_w)
-            order = np.argsort(-merged, kind="stable")
-            table, log_w = uniq[order], merged[order]
-    return table, log_w - np.logaddexp.reduce(log_w)
+def _merged(uniq: np.ndarray, inv: np.ndarray, log_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The global hypotheses ``uniq`` (distinct rows, lexicographic order) with the weights of the rows ``inv`` maps
+    to each added, by decreasing weight (stable)."""
+    merged = np.full(len(uniq), -np.inf)
+    np.logaddexp.at(merged, inv, log_w)
+    order = np.argsort(-merged, kind="stable")
+    return uniq[order], merged[order]
 
 
 def _prune_tracks(d: PMBMDensity, r_floor: float) -> PMBMDensity:
@@ -344,7 +342,12 @@ def _prune_tracks(d: PMBMDensity, r_floor: float) -> PMBMDensity:
     n = d.n_tracks
     alive = np.bincount(d.track, weights=d.hyps.r >= r_floor, minlength=n) > 0.0
     cols = np.flatnonzero(alive)
-    table, log_w = merge_equal_rows(d.table[:, cols], d.log_w, len(cols) < n)
+    table, log_w = d.table[:, cols], d.log_w
+    if len(cols) < n and table.shape[0] > 1:
+        uniq, inv = unique_rows(table)
+        if len(uniq) < table.shape[0]:
+            table, log_w = _merged(uniq, inv, log_w)
+    log_w = log_w - np.logaddexp.reduce(log_w)
     used = np.flatnonzero(np.bincount(table.ravel(), minlength=len(d.hyps)))  # sorted, as np.unique(table)
     hyps = d.hyps if len(used) == len(d.hyps) else d.hyps.select(used)
     remap = np.full(len(d.hyps), -1, dtype=np.int64)

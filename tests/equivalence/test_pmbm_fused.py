@@ -59,3 +59,27 @@ def test_compiled_update_equals_array_path(recorded_intersection, pmb, model, va
         n_global = max(n_global, len(ref.density.log_w))
     assert n_tracks > 5 and len(prev.labels) > 0  # the run had tracks and reported some
     assert pmb or n_global > 1  # the PMBM kept several global hypotheses at some scan
+
+
+def test_compiled_unique_rows_and_codes_are_numpys():
+    """The compiled call's distinct table rows (lexicographic, with the inverse) and distinct codes (both the table
+    and the sort branch) are numpy's."""
+    from soabench.pmbm.kernels import unique_codes, unique_rows
+
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        B, n = int(rng.integers(1, 30)), int(rng.integers(0, 6))
+        t = rng.integers(0, 3, (B, n)).astype(np.int64)
+        uniq, inv = unique_rows(t)
+        if n:
+            u_np, inv_np = np.unique(t, axis=0, return_inverse=True)
+            np.testing.assert_array_equal(uniq, u_np)
+            np.testing.assert_array_equal(inv, inv_np.reshape(B))
+        else:
+            assert uniq.shape == (1, 0) and not inv.any()
+        size = int(rng.choice([10, 100_000]))  # a table of codes present, or (sparse codes) a sort
+        code = rng.integers(0, size, (B, max(n, 1))).astype(np.int64)
+        u, inv = unique_codes(code, size)
+        u_np, inv_np = np.unique(code, return_inverse=True)
+        np.testing.assert_array_equal(u, u_np)
+        np.testing.assert_array_equal(inv, inv_np.reshape(code.shape))
