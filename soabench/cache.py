@@ -46,6 +46,7 @@ KERNEL_MODULES = (
     "kitti/lidar_raster.py",
     "pmbm/murty.py",
     "pmbm/association.py",
+    "pmbm/kernels.py",
 )
 
 PACKAGE_DIR = Path(__file__).resolve().parent

@@ -40,7 +40,14 @@ from numba import njit  # noqa: E402
 
 from soabench.gmphd.clock import monotonic  # noqa: E402
 from soabench.gmphd.cycle import origin_counts, predict_append, ukf_terms  # noqa: E402
-from soabench.gmphd.kernels import ekf_terms, log_likelihood, merge_groups, posterior_pairs  # noqa: E402
+from soabench.gmphd.kernels import (  # noqa: E402
+    copy_row,
+    copy_state,
+    ekf_terms,
+    log_likelihood,
+    merge_groups,
+    posterior_pairs,
+)
 from soabench.lmb.gibbs import MISSED, association_marginals  # noqa: E402
 from soabench.lmb.tracks import LABEL_SHIFT, reduce_components  # noqa: E402
 from soabench.metrics_kernels import np_sum  # noqa: E402
@@ -75,8 +82,7 @@ def birth_groups(bw, bm, bP, bsrc, r_max, U, J_h):
     P = np.empty((n_pos, 4, 4))
     for q in range(n_pos):
         w[q] = bw[keep[q]]
-        m[q] = bm[keep[q]]
-        P[q] = bP[keep[q]]
+        copy_state(m, P, q, bm, bP, keep[q])
     order = np.argsort(-w, kind="mergesort")
     group, centres = merge_groups(m, P, order, U)
     G = centres.shape[0]
@@ -98,12 +104,22 @@ def birth_groups(bw, bm, bP, bsrc, r_max, U, J_h):
     n_comp = np.empty(G, dtype=np.int64)
     comp = np.empty(n_pos, dtype=np.int64)
     wk = np.empty(n_pos)
+    by_w = np.empty(n_pos, dtype=np.int64)  # scratch: one group's members, heaviest first
+    rest = np.empty(n_pos)
     n_out = 0
     for g in range(G):
-        mem = members[first[g] : first[g + 1]]
-        by_w = mem[np.argsort(-w[mem], kind="mergesort")]  # heaviest first, index order on ties
-        n = min(by_w.shape[0], J_h)
-        rest = np.empty(n - 1)
+        # insertion in index order, each member placed after every heavier or equal one: heaviest first, index
+        # order on ties (a stable sort by -w)
+        size = np.int64(0)
+        for t in range(first[g], first[g + 1]):
+            q = members[t]
+            a = size
+            while a > 0 and w[by_w[a - 1]] < w[q]:
+                by_w[a] = by_w[a - 1]
+                a -= 1
+            by_w[a] = q
+            size += 1
+        n = min(size, J_h)
         for a in range(1, n):
             rest[a - 1] = w[by_w[a]]
         s = w[by_w[0]] + np_sum(rest, n - 1)  # numpy's add.reduceat: the first term, then the rest's pairwise sum
@@ -164,16 +180,14 @@ def predict_births(r, label, origin, age, start, w, m, P, F, Q, pred_pars, p_S, 
     Pp = np.empty((Cp, 4, 4))
     for c in range(C0):
         wp[c] = w[c]
-        mp[c] = m[c]
-        Pp[c] = P[c]
+        copy_state(mp, Pp, c, m, P, c)
     nb_idx = np.empty(n_nb, dtype=np.int64)
     q = 0
     for l in range(nb_r.shape[0]):
         if nb_r[l] > 0.0:
             nb_idx[q] = l
             wp[C0 + q] = 1.0
-            mp[C0 + q] = nb_m[l]
-            Pp[C0 + q] = nb_P[l]
+            copy_state(mp, Pp, C0 + q, nb_m, nb_P, l)
             q += 1
     bw2 = np.empty(Cb)
     bm2 = np.empty((Cb, 4))
@@ -181,8 +195,7 @@ def predict_births(r, label, origin, age, start, w, m, P, F, Q, pred_pars, p_S, 
     bs2 = np.zeros(Cb, dtype=np.int8)
     for c in range(Cb):
         bw2[c] = bwk[c]
-        bm2[c] = bm[bcomp[c]]
-        bP2[c] = bP[bcomp[c]]
+        copy_state(bm2, bP2, c, bm, bP, bcomp[c])
     zi8 = np.zeros(Cp, dtype=np.int8)
     zi32 = np.zeros(Cp, dtype=np.int32)
     zi64 = np.zeros(Cp, dtype=np.int64)
@@ -393,16 +406,14 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
         for c in range(start[i], start[i + 1]):
             if wm[c] > 0.0:
                 uw[q] = wm[c]
-                um[q] = m[c]
-                uP[q] = P[c]
+                copy_state(um, uP, q, m, P, c)
                 q += 1
         for ll in range(M):
             for c in range(start[i], start[i + 1]):
                 p = pair_of[c, ll]
                 if p >= 0:
                     uw[q] = wd[c, ll]
-                    um[q] = m_det[p]
-                    uP[q] = P_det[p]
+                    copy_state(um, uP, q, m_det, P_det, p)
                     q += 1
         if r_new[i] > 0.0 and q > q0:
             kept[n_kept] = i
@@ -458,8 +469,7 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
         d = s_start[a] - ustart[sel[a]]
         for c in range(ustart[sel[a]], ustart[sel[a] + 1]):
             sw[c + d] = uw[c]
-            sm[c + d] = um[c]
-            sP[c + d] = uP[c]
+            copy_state(sm, sP, c + d, um, uP, c)
     fstart, fw, fm, fP = reduce_components(s_start, sw, sm, sP, pars[UP_PRUNE_T], pars[UP_MERGE_U],
                                            np.int64(pars[UP_MAX_COMP]))  # fmt: skip
     # estimates (step 6): r > extract_r, at the mean of the heaviest component (lowest index on ties)
@@ -477,7 +487,7 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
             for c in range(fstart[a], fstart[a + 1]):
                 if fw[c] > fw[best]:
                     best = c
-            X[q] = fm[best]
+            copy_row(X, q, fm, best)
             X_r[q] = fr[a]
             labels[q] = fl[a]
             q += 1

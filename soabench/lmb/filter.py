@@ -30,7 +30,7 @@ from soabench.config import FilterConfig, LMBConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle
-from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
 from soabench.gmphd.probabilities import detection_gate
 from soabench.lmb import cycle as lmb_cycle
@@ -155,8 +155,22 @@ class LMBFilter:
         return self._step(scan, births)
 
     def _step(self, scan: Scan, births: Births) -> StepResult:
+        """Check the inputs (:mod:`soabench.gmphd.inputs`) and run the cycle on the fused or the array path.
+
+        On the fused path with a finite scan, the birth components are checked by the compiled
+        :func:`soabench.gmphd.cycle.births_ok` (finite, weights >= 0: the test of
+        :func:`~soabench.gmphd.inputs.births_finite`) and the newborn terms here; inputs that fail it take
+        :func:`~soabench.gmphd.inputs.check_step_inputs`, which raises or drops as it does for the array path."""
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the GM-PHD runs of the scan
         Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
+        if self.fused and finite and newborn_finite(births.newborn):
+            arrays = _birth_arrays(births) if len(births) else _NO_BIRTHS
+            if cycle.births_ok(*arrays[:3]):
+                seed = int(self.rng.integers(2**32))  # one draw per scan, used or not (as below)
+                result = self._step_fused(scan, StepInputs(Z, ego, births, 0, 0), seed, arrays)
+                if result is not None:
+                    return result
+                return self._step_array(scan, StepInputs(Z, ego, births, 0, 0), seed)
         checked: StepInputs = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
         seed = int(self.rng.integers(2**32))  # one draw per scan, used or not: the stream never depends on the data
         if self.fused:
@@ -179,11 +193,14 @@ class LMBFilter:
             r_B = intensity_existence(r_U, nb.beta(A, kappa), kappa, lmb.r_B_max)
         return m_nb, P_nb, np.ascontiguousarray(r_B, dtype=float)
 
-    def _step_fused(self, scan: Scan, checked: StepInputs, seed: int) -> StepResult | None:
+    def _step_fused(
+        self, scan: Scan, checked: StepInputs, seed: int, arrays: tuple[np.ndarray, ...] | None = None
+    ) -> StepResult | None:
         """:meth:`step` as two compiled calls (:mod:`soabench.lmb.cycle`): prediction and birth, then the update,
         the reduction and the extraction; the line-of-sight gate (``occlusion_pd``) and the newborn terms'
         ``beta(A, kappa)`` stay in Python between them. None (nothing changed) when a UKF covariance is not positive
-        definite: the array path's rule decides that step."""
+        definite: the array path's rule decides that step. ``arrays``: the checked births' :func:`_birth_arrays`,
+        when the caller has them."""
         Z, births, ego = checked.Z, checked.births, checked.ego
         lmb, k, tr = self.lmb, int(scan.k), self.tracks
         t0 = time.perf_counter()
@@ -191,7 +208,9 @@ class LMBFilter:
             nb_m, nb_P, nb_r = self._newborn
         else:
             nb_m, nb_P, nb_r = _NO_NEWBORN
-        bw, bm, bP, bsrc = _birth_arrays(births) if len(births) else _NO_BIRTHS
+        if arrays is None:
+            arrays = _birth_arrays(births) if len(births) else _NO_BIRTHS
+        bw, bm, bP, bsrc = arrays
         pred = lmb_cycle.predict_births(
             tr.r, tr.label, tr.origin, tr.age, tr.start, tr.w, tr.m, tr.P, self.F, self.Q, self._pred_pars,
             float(self.cfg.p_S), bw, bm, bP, bsrc, lmb.birth_mapping != "components", float(lmb.r_B_max),

@@ -135,9 +135,12 @@ def _enumerate_valid(options, n_opt, M, limit):
         if lvl == 0:
             if count == cap:
                 grown = np.empty((min(2 * cap, limit + 1), n), dtype=np.int64)
-                grown[:cap] = hyps
+                for h in range(cap):
+                    for t in range(n):
+                        grown[h, t] = hyps[h, t]
                 hyps, cap = grown, grown.shape[0]
-            hyps[count] = theta
+            for t in range(n):
+                hyps[count, t] = theta[t]
             count += 1
             if count > limit:
                 break
@@ -311,6 +314,10 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             if options[i, o] < 1:
                 n_fixed[i] += 1
     theta = np.zeros(n, dtype=np.int64)  # every track without a measurement
+    pos = np.zeros((n, n_cols), dtype=np.int64)  # the option index of each column of a track
+    for i in range(n):
+        for o in range(n_opt[i]):
+            pos[i, options[i, o]] = o
     taken = np.full(M, -1, dtype=np.int64)
     # Zobrist hash of each sample (a sum of one random 64-bit key per (track, option)), kept up to date as theta
     # changes: distinct hypotheses are found by sorting the hashes and comparing rows of equal hash exactly
@@ -345,7 +352,8 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
     # distinct hypothesis and would not change which one comes first among equal hashes
     samples = np.empty((n_sweeps, n), dtype=np.int64)
     hashes = np.empty(n_sweeps, dtype=np.uint64)
-    samples[0] = theta
+    for i in range(n):
+        samples[0, i] = theta[i]
     hashes[0] = h
     n_st = 1
     for _sweep in range(1, n_sweeps):
@@ -360,7 +368,23 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                         if u < prefix[i, o]:
                             break
             else:
-                c = _draw(i, options, n_opt, weight, taken, state, buf_w, buf_c)
+                own = 1 if theta[i] >= 1 else 0
+                if n_fixed[i] == 1 and n_opt[i] - 1 - blocked[i] - own == 0:
+                    # every measurement in the track's gate but the one it holds is held by another track: its open
+                    # options are "none" and that measurement, if any. The same uniform, the same sums, the same
+                    # comparisons as :func:`_draw`, without the pass over the others
+                    if own == 0:
+                        state[0] += _GOLDEN  # the uniform is drawn; with one option open it decides nothing
+                        c = NONE if weight[i, 0] > 0.0 else -1
+                    else:
+                        w0 = weight[i, 0]
+                        w1 = weight[i, pos[i, theta[i]]]
+                        u = _uniform(state) * (w0 + w1)
+                        c = NONE if w0 > 0.0 else -1
+                        if not (w0 > 0.0 and u < w0) and w1 > 0.0:
+                            c = theta[i]
+                else:
+                    c = _draw(i, options, n_opt, weight, taken, state, buf_w, buf_c)
             if c < 0:  # no option of positive weight (only when r = 1 and p_D = 1 leave the track none)
                 c = theta[i]
             if c == theta[i]:
@@ -405,7 +429,8 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                 new = False
                 break
         if new:
-            out[n_hyp] = samples[s]
+            for i in range(n):
+                out[n_hyp, i] = samples[s, i]
             n_hyp += 1
     return out, n_hyp
 

@@ -152,6 +152,14 @@ def reduce_components(start, w, m, P, T, U, L_max):
     for i in range(N):
         a, b = start[i], start[i + 1]
         n = b - a
+        if n == 1 and L_max >= 1:  # one component: kept, its own group, weight w / (0 + w) as below
+            total = 0.0
+            total += w[a]
+            out_w[n_out] = w[a] / total
+            kernels.copy_state(out_m, out_P, n_out, m, P, a)
+            n_out += 1
+            out_start[i + 1] = n_out
+            continue
         keep = np.empty(n, dtype=np.int64)
         nk = 0
         best = a

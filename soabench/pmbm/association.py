@@ -75,6 +75,79 @@ def clusters(track: np.ndarray, gated: np.ndarray, n: int) -> list[tuple[np.ndar
 
 
 @njit(cache=True)
+def flat_clusters(track, log_l_det, n, log_new):
+    """:func:`clusters` as flat arrays, with the gated pairs those of a finite ``log_l_det`` (H, M): the tracked
+    clusters' tracks ``T_flat[T_start[g]:T_start[g + 1]]`` and measurements (likewise ``L_*``), in increasing order
+    of their smallest member, and ``base0``: minus the summed ``log_new`` of the measurements no track gates (in
+    increasing order, numpy's summation). A cluster has tracks iff its smallest member is a track (< n)."""
+    H, M = log_l_det.shape
+    n_e = 0
+    for h in range(H):
+        for ll in range(M):
+            if np.isfinite(log_l_det[h, ll]):
+                n_e += 1
+    hh = np.empty(n_e, dtype=np.int64)
+    le = np.empty(n_e, dtype=np.int64)
+    e = 0
+    for h in range(H):  # row-major, as np.nonzero lists them
+        for ll in range(M):
+            if np.isfinite(log_l_det[h, ll]):
+                hh[e] = h
+                le[e] = ll
+                e += 1
+    comp = _components(track, hh, le, n, M)
+    slot = np.full(n + M, -1, dtype=np.int64)  # cluster index of each root with tracks
+    G = 0
+    for x in range(n):
+        if comp[x] == x:
+            slot[x] = G
+            G += 1
+    n_T = np.zeros(G, dtype=np.int64)
+    n_L = np.zeros(G, dtype=np.int64)
+    n_lone = 0
+    for x in range(n + M):
+        g = slot[comp[x]]
+        if g < 0:
+            n_lone += 1
+        elif x < n:
+            n_T[g] += 1
+        else:
+            n_L[g] += 1
+    T_start = np.zeros(G + 1, dtype=np.int64)
+    L_start = np.zeros(G + 1, dtype=np.int64)
+    for g in range(G):
+        T_start[g + 1] = T_start[g] + n_T[g]
+        L_start[g + 1] = L_start[g] + n_L[g]
+    T_flat = np.empty(T_start[G], dtype=np.int64)
+    L_flat = np.empty(L_start[G], dtype=np.int64)
+    lone = np.empty(n_lone)
+    fill_T = T_start[:G].copy()
+    fill_L = L_start[:G].copy()
+    q = 0
+    for x in range(n + M):  # members in increasing order
+        g = slot[comp[x]]
+        if g < 0:
+            lone[q] = log_new[x - n]
+            q += 1
+        elif x < n:
+            T_flat[fill_T[g]] = x
+            fill_T[g] += 1
+        else:
+            L_flat[fill_L[g]] = x - n
+            fill_L[g] += 1
+    return T_flat, T_start, L_flat, L_start, (-np_sum(lone, n_lone) if n_lone else 0.0)
+
+
+@njit(cache=True)
+def global_hypotheses_flat(table, log_w, ks, track, log_l_miss, log_l_det, log_new, max_gap):
+    """:func:`new_global_hypotheses` with the clusters of :func:`flat_clusters`, in one compiled call; ``ks`` (A,):
+    the assignments each prior global hypothesis asks for."""
+    T_flat, T_start, L_flat, L_start, base0 = flat_clusters(track, log_l_det, table.shape[1], log_new)
+    return _global_hypotheses(table, log_w, ks, T_flat, T_start, L_flat, L_start, base0, log_l_miss, log_l_det,
+                              log_new, max_gap)  # fmt: skip
+
+
+@njit(cache=True)
 def cluster_costs(
     hs: np.ndarray, L: np.ndarray, log_l_miss: np.ndarray, log_l_det: np.ndarray, log_new: np.ndarray
 ) -> np.ndarray:
@@ -435,7 +508,7 @@ def new_global_hypotheses(
     A, n = table.shape
     lone = [L for T, L in groups if len(T) == 0]
     base0 = -float(log_new[np.concatenate(lone)].sum()) if lone else 0.0
-    ks = np.maximum(1, np.minimum(M_max, np.ceil(M_max * np.exp(log_w) - 1e-9))).astype(np.int64)
+    ks = assignments_asked(log_w, M_max)
     tracked = [(T, L) for T, L in groups if len(T)]
     T_start = _segments([len(T) for T, _ in tracked])
     L_start = _segments([len(L) for _, L in tracked])
@@ -446,6 +519,11 @@ def new_global_hypotheses(
         L_flat, L_start, base0, np.ascontiguousarray(log_l_miss, dtype=float),
         np.ascontiguousarray(log_l_det, dtype=float), np.ascontiguousarray(log_new, dtype=float), float(max_gap),
     )  # fmt: skip
+
+
+def assignments_asked(log_w: np.ndarray, M_max: int) -> np.ndarray:
+    """(A,) int64: ceil(M_max w_a) for each prior global hypothesis, at least 1, at most M_max."""
+    return np.maximum(1, np.minimum(M_max, np.ceil(M_max * np.exp(log_w) - 1e-9))).astype(np.int64)
 
 
 def _segments(counts: list[int]) -> np.ndarray:

@@ -39,6 +39,7 @@ from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict as predict_tracks
 from soabench.origins import origin_counts
+from soabench.pmbm import kernels
 from soabench.pmbm.density import PMBMDensity
 from soabench.pmbm.pmb import collapse
 from soabench.pmbm.update import Hypotheses, update
@@ -47,6 +48,7 @@ from soabench.types import Births, Scan, StepResult, scan_once
 #: the probability modes the PMBM family runs (docs/method.md §10.6): static, with or without ``occlusion_pd``
 PMBM_MODES = ("static",)
 EXTRACT_R = 0.5  #: estimator 1 (§10.4): a track is reported when its hypothesis has r above this
+_NO_WEIGHTS = np.zeros(0)  #: the global weights the PMBM's reduction does not read
 
 
 class PMBMFilter:
@@ -60,6 +62,8 @@ class PMBMFilter:
         pmbm_cfg: :class:`PMBMConfig` (defaults if None).
         pmb: collapse to one multi-Bernoulli after every update (§10.5).
         model: the measurement model; the GM-PHD's range-bearing EKF/UKF with its gate if None.
+        fused: the update's bookkeeping after the global hypotheses in one compiled call (the default); False: the
+            array path, the reference it is tested against (:func:`soabench.pmbm.update.update`).
 
     Attributes:
         density: the posterior PMBM after the last step.
@@ -75,6 +79,7 @@ class PMBMFilter:
         pmbm_cfg: PMBMConfig | None = None,
         pmb: bool = False,
         model: MeasurementModel | None = None,
+        fused: bool = True,
     ) -> None:
         require(
             mode in PMBM_MODES,
@@ -86,6 +91,7 @@ class PMBMFilter:
         self.cfg, self.sensor, self.mode = filter_cfg, sensor_cfg, mode
         self.pmbm = (pmbm_cfg or PMBMConfig()).validate()
         self.pmb = bool(pmb)
+        self.fused = bool(fused)
         self.name = "pmb" if self.pmb else "pmbm"
         self.hyp = Hypotheses(self.pmbm.M_max, self.pmbm.w_floor, self.pmbm.r_floor)
         self.F, self.Q = cv_model(sensor_cfg.dt, filter_cfg.sigma_a)
@@ -117,6 +123,44 @@ class PMBMFilter:
         hyps = predict_tracks(d.hyps, self.F, self.Q, cfg.p_S)
         return PMBMDensity(ppp, hyps, d.track, d.table, d.log_w)
 
+    def _reduce_extract(
+        self, post: PMBMDensity, ppp: Mixture
+    ) -> tuple[PMBMDensity, np.ndarray, np.ndarray, np.ndarray]:
+        """Step 3's reduction of every hypothesis's density (with ``pmb``: the collapse and a second reduction) and
+        step 4's estimates, in one compiled call (:func:`soabench.pmbm.kernels.reduce_extract`); the intensity
+        ``ppp`` is already reduced. Returns (posterior, X, X_r, labels)."""
+        cfg, h = self.cfg, post.hyps
+        best = int(np.argmax(post.log_w)) if len(post.log_w) else 0
+        ew = np.exp(post.log_w) if self.pmb else _NO_WEIGHTS
+        hyps, X, X_r, labels = kernels.reduce_extract(
+            post.track, post.table, ew, h.r, h.label, h.origin, h.age, h.start, h.w, h.m, h.P, float(cfg.prune_T),
+            float(cfg.merge_U), int(self.pmbm.J_h), self.pmb, best, EXTRACT_R,
+        )  # fmt: skip
+        if self.pmb:
+            track = np.arange(len(hyps[0]), dtype=np.int64)
+            return PMBMDensity(ppp, Tracks(*hyps), track, track[None, :], np.zeros(1)), X, X_r, labels
+        return PMBMDensity(ppp, Tracks(*hyps), post.track, post.table, post.log_w), X, X_r, labels
+
+    def _reduce_extract_arrays(
+        self, post: PMBMDensity, ppp: Mixture
+    ) -> tuple[PMBMDensity, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_reduce_extract` by the array path (``fused=False``), its reference."""
+        cfg, h = self.cfg, post.hyps
+        start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, float(cfg.prune_T), float(cfg.merge_U),
+                                           int(self.pmbm.J_h))  # fmt: skip
+        post = PMBMDensity(ppp, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track, post.table,
+                           post.log_w)  # fmt: skip
+        if self.pmb:
+            post = collapse(post)
+            h = post.hyps
+            start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, float(cfg.prune_T), float(cfg.merge_U),
+                                               int(self.pmbm.J_h))  # fmt: skip
+            post = PMBMDensity(post.ppp, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track,
+                               post.table, post.log_w)  # fmt: skip
+        best = int(np.argmax(post.log_w)) if len(post.log_w) else 0
+        chosen = post.hyps.select(post.table[best]) if post.n_tracks else Tracks.empty()
+        return (post, *chosen.estimates(EXTRACT_R))
+
     def step(self, scan: Scan, births: Births) -> StepResult:
         """One cycle (module docstring) with the births of ``scan``; returns the labelled estimates
         (``StepResult.labels``) and the cost figures (components of the intensity and of every hypothesis)."""
@@ -140,7 +184,7 @@ class PMBMFilter:
         up = update(
             pred, Z, ego_ok if ego_ok is not None else np.zeros(3), self._p_D(pred.ppp.m, ego_ok, scan),
             self._p_D(pred.hyps.m, ego_ok, scan), kappa, self.model, newborn=births.newborn, label0=self.next_label,
-            hyp=self.hyp,
+            hyp=self.hyp, fused=self.fused,
         )  # fmt: skip
         self.next_label += len(Z)
         post = up.density
@@ -153,22 +197,11 @@ class PMBMFilter:
             if not keep.all():
                 ppp = ppp.select(keep)
         red = prune_merge_cap(ppp, cfg.prune_T, cfg.merge_U, cfg.J_max, cfg.theta_min)
-        h = post.hyps
-        start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, float(cfg.prune_T), float(cfg.merge_U),
-                                           int(self.pmbm.J_h))  # fmt: skip
-        post = PMBMDensity(red.mix, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track, post.table,
-                           post.log_w)  # fmt: skip
-        if self.pmb:
-            post = collapse(post)
-            h = post.hyps
-            start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, float(cfg.prune_T), float(cfg.merge_U),
-                                               int(self.pmbm.J_h))  # fmt: skip
-            post = PMBMDensity(post.ppp, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track,
-                               post.table, post.log_w)  # fmt: skip
+        if self.fused:
+            post, X, X_r, labels = self._reduce_extract(post, red.mix)
+        else:
+            post, X, X_r, labels = self._reduce_extract_arrays(post, red.mix)
         self.density = post
-        best = int(np.argmax(post.log_w)) if len(post.log_w) else 0
-        chosen = post.hyps.select(post.table[best]) if post.n_tracks else Tracks.empty()
-        X, X_r, labels = chosen.estimates(EXTRACT_R)
         t3 = time.perf_counter()
         if not (np.isfinite(post.hyps.r).all() and np.isfinite(X).all() and np.isfinite(post.ppp.w).all()):
             raise SoabenchError(f"scan {scan.k}: the {self.name.upper()} filter produced a non-finite posterior from "

@@ -20,7 +20,7 @@ def collapse(d: PMBMDensity) -> PMBMDensity:
     n = d.n_tracks
     p = d.hypothesis_probabilities()
     pr = p * hyps.r  # (H,) P(h) r_h
-    r = np.bincount(d.track, weights=pr, minlength=n)
+    r = np.bincount(d.track, weights=pr, minlength=n).astype(float, copy=False)  # float also with no track
     alive = r > 0.0
     owner = hyps.owner()
     track_c = d.track[owner]

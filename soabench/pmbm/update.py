@@ -29,7 +29,15 @@ from soabench.gmphd.models import logsumexp0
 from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
 from soabench.lmb.update import KAPPA_FLOOR, association_terms
-from soabench.pmbm.association import MISS, clusters, new_global_hypotheses, unique_rows
+from soabench.pmbm import kernels
+from soabench.pmbm.association import (
+    MISS,
+    assignments_asked,
+    clusters,
+    global_hypotheses_flat,
+    new_global_hypotheses,
+    unique_rows,
+)
 from soabench.pmbm.density import PMBMDensity
 from soabench.types import SOURCE_MEAS, NewbornTerms
 
@@ -56,6 +64,12 @@ class UpdateResult:
     n_newborn: int  #: new tracks built
     n_murty: int  #: Murty runs
     n_global: int  #: global hypotheses before pruning
+
+
+_NO_NEWBORN = (np.zeros((0, 4)), np.zeros((0, 4, 4)))
+_NO_JACOBIAN = np.zeros((0, 2, 4))  #: the UKF form has no H: ``posterior_pairs`` then uses P - K S K^T
+_NO_TERMS = (np.zeros((0, 4, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), _NO_JACOBIAN)
+_NO_INNOVATIONS = np.zeros((0, 0))
 
 
 def _segments(counts: np.ndarray) -> np.ndarray:
@@ -91,6 +105,7 @@ def update(
     newborn: NewbornTerms | None = None,
     label0: int = 1,
     hyp: Hypotheses = Hypotheses(),
+    fused: bool = True,
 ) -> UpdateResult:
     """PMBM update of the predicted density ``pred`` with Z (M, 2) (module docstring).
 
@@ -99,6 +114,9 @@ def update(
         kappa: (M,) clutter intensity of each measurement.
         newborn: the birth model's measurement-driven terms (PUBM, ATBM), or None.
         label0: the new track of z_l gets label label0 + l.
+        fused: build the posterior hypotheses, table and track pruning in one compiled call
+            (:func:`soabench.pmbm.kernels.children`); False: the array path, the reference it is tested against
+            (the same bits).
     """
     Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
     M = len(Z)
@@ -140,17 +158,60 @@ def update(
         log_new = np.logaddexp(np.log(np.maximum(kappa, KAPPA_FLOOR)), log_e)
 
     # global hypotheses
-    groups = clusters(pred.track, np.isfinite(log_l_det), n)
     max_gap = -np.log(hyp.w_floor) if hyp.w_floor > 0.0 else np.inf
-    parent, choice, log_w, n_murty = new_global_hypotheses(
-        pred.table, pred.log_w, groups, log_l_miss, log_l_det, log_new, hyp.M_max, max_gap
-    )
+    if fused:  # the clusters as flat arrays and the global hypotheses in one compiled call
+        parent, choice, log_w, n_murty = global_hypotheses_flat(
+            np.ascontiguousarray(pred.table, dtype=np.int64), np.ascontiguousarray(pred.log_w, dtype=float),
+            assignments_asked(pred.log_w, hyp.M_max), np.ascontiguousarray(pred.track, dtype=np.int64), log_l_miss,
+            log_l_det, log_new, float(max_gap),
+        )  # fmt: skip
+    else:
+        groups = clusters(pred.track, np.isfinite(log_l_det), n)
+        parent, choice, log_w, n_murty = new_global_hypotheses(
+            pred.table, pred.log_w, groups, log_l_miss, log_l_det, log_new, hyp.M_max, max_gap
+        )
     n_global = len(log_w)
     log_w = log_w - np.logaddexp.reduce(log_w)
     order = np.argsort(-log_w, kind="stable")
     keep = order[np.exp(log_w[order]) >= hyp.w_floor]
     keep = (keep if len(keep) else order[:1])[: hyp.M_max]
     parent, choice, log_w = parent[keep], choice[keep], log_w[keep]
+    if fused:
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            owner = hyps.owner()
+            lr = log_r + log_eta_miss - log_l_miss_exact
+            E_miss = np.exp(log_miss - log_eta_miss[owner])
+            E_det = np.exp(log_det - log_eta_det[owner])
+            W_all = np.exp(log_t - log_e)
+            w_nb = np.where(beta > 0.0, np.exp(log_beta - log_e), 0.0)
+            r_own = np.exp(log_e - log_new)
+            r_miss = np.where(np.isfinite(lr), np.exp(lr), 0.0)
+        if newborn is not None and M:
+            nb_m = np.ascontiguousarray(np.asarray(newborn.m, dtype=float).reshape(-1, 4))
+            nb_P = np.ascontiguousarray(np.asarray(newborn.P, dtype=float).reshape(-1, 4, 4))
+        else:
+            nb_m, nb_P = _NO_NEWBORN
+        if terms is not None:
+            Cx, Sinv, S = terms.C, terms.Sinv, terms.S
+            Hj = terms.H if terms.H is not None else _NO_JACOBIAN
+        else:
+            Cx, Sinv, S, Hj = _NO_TERMS
+        if nu_r is None:
+            nu_r = nu_b = _NO_INNOVATIONS
+        out = kernels.children(
+            np.ascontiguousarray(pred.table, dtype=np.int64), parent, np.ascontiguousarray(choice, dtype=np.int64),
+            np.ascontiguousarray(pred.track, dtype=np.int64), hyps.start, hyps.w, hyps.label, hyps.origin, hyps.age,
+            r_miss, ~np.isfinite(log_eta_miss), E_miss, E_det, np.isfinite(log_e), W_all, w_nb, r_own,
+            ppp.origin, m_all, P_all, Cx, Sinv, S, Hj, np.asarray(model.R, dtype=float), nu_r, nu_b, nb_m, nb_P,
+            int(label0), float(hyp.r_floor), int(SOURCE_MEAS),
+        )  # fmt: skip
+        r, label, origin, age, start, w, m, P, track_of, table, uniq, inv, n_pairs, n_new = out
+        if len(uniq) < len(table):
+            table, log_w = _merged(uniq, inv, log_w)
+        log_w = log_w - np.logaddexp.reduce(log_w)
+        density = PMBMDensity(ppp_missed(ppp, p_D[:J]), Tracks(r, label, origin, age, start, w, m, P), track_of,
+                              table, log_w)  # fmt: skip
+        return UpdateResult(density, A, beta, int(n_pairs), int(n_new), n_murty, n_global)
 
     # single-target hypotheses used: (old hypothesis, choice) for the old tracks, (l, is-its-own) for the new ones
     B = len(log_w)
@@ -266,21 +327,26 @@ def ppp_missed(ppp: Mixture, p_D: np.ndarray) -> Mixture:
     return Mixture(ppp.w * (1.0 - p_D), ppp.m, ppp.P, ppp.origin, ppp.n_det, ppp.age, None, ppp.label)
 
 
+def _merged(uniq: np.ndarray, inv: np.ndarray, log_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The global hypotheses ``uniq`` (distinct rows, lexicographic order) with the weights of the rows ``inv`` maps
+    to each added, by decreasing weight (stable)."""
+    merged = np.full(len(uniq), -np.inf)
+    np.logaddexp.at(merged, inv, log_w)
+    order = np.argsort(-merged, kind="stable")
+    return uniq[order], merged[order]
+
+
 def _prune_tracks(d: PMBMDensity, r_floor: float) -> PMBMDensity:
     """Drop the tracks whose every hypothesis has r < ``r_floor``; merge the global hypotheses that became equal
     (their weights add); drop the single-target hypotheses no global hypothesis uses; renumber."""
     n = d.n_tracks
     alive = np.bincount(d.track, weights=d.hyps.r >= r_floor, minlength=n) > 0.0
     cols = np.flatnonzero(alive)
-    table = d.table[:, cols]
-    log_w = d.log_w
+    table, log_w = d.table[:, cols], d.log_w
     if len(cols) < n and table.shape[0] > 1:
         uniq, inv = unique_rows(table)
         if len(uniq) < table.shape[0]:
-            merged = np.full(len(uniq), -np.inf)
-            np.logaddexp.at(merged, inv, log_w)
-            order = np.argsort(-merged, kind="stable")
-            table, log_w = uniq[order], merged[order]
+            table, log_w = _merged(uniq, inv, log_w)
     log_w = log_w - np.logaddexp.reduce(log_w)
     used = np.flatnonzero(np.bincount(table.ravel(), minlength=len(d.hyps)))  # sorted, as np.unique(table)
     hyps = d.hyps if len(used) == len(d.hyps) else d.hyps.select(used)

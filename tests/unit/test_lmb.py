@@ -338,6 +338,39 @@ def test_dynamic_modes_are_refused():
             LMBFilter(FilterConfig(), Sensor(), mode)
 
 
+@pytest.mark.parametrize("bad", ["nan_w", "neg_w", "inf_m", "nan_P"])
+def test_bad_birth_components_raise_or_drop_as_the_array_path(bad):
+    """A birth component that is not finite or has a negative weight: the fused step raises with the scan's message
+    (``filter.nonfinite = "raise"``), or with "drop" gives what the step gives without that component, counted;
+    the array path does the same."""
+    w = np.array([0.05, 0.02, 0.03])
+    m = np.array([[8.0, -6.0, 0.0, 0.0], [30.0, 4.0, 0.0, 0.0], [-12.0, 9.0, 0.0, 0.0]])
+    P = np.stack([np.diag([9.0, 9.0, 1.0, 1.0])] * 3)
+    src = np.full(3, SOURCE_GM, dtype=np.int8)
+    w_bad, m_bad, P_bad = w.copy(), m.copy(), P.copy()
+    if bad == "nan_w":
+        w_bad[1] = np.nan
+    elif bad == "neg_w":
+        w_bad[1] = -0.01
+    elif bad == "inf_m":
+        m_bad[1, 2] = np.inf
+    else:
+        P_bad[1, 3, 3] = np.nan
+    keep = [0, 2]
+    scan = _scan(0, [[10.0, -0.6], [33.0, 0.2]])
+    for fused in (True, False):
+        filt = LMBFilter(FilterConfig(), Sensor(), rng=np.random.default_rng(0), fused=fused)
+        with pytest.raises(SoabenchError, match="scan 0: 1 of 3 birth components"):
+            filt.step(scan, Births(w_bad, m_bad, P_bad, src))
+        dropped = LMBFilter(FilterConfig(nonfinite="drop"), Sensor(), rng=np.random.default_rng(0), fused=fused)
+        ref = LMBFilter(FilterConfig(), Sensor(), rng=np.random.default_rng(0), fused=fused)
+        got = dropped.step(scan, Births(w_bad, m_bad, P_bad, src))
+        want = ref.step(scan, Births(w[keep], m[keep], P[keep], src[keep]))
+        assert got.n_dropped_births == 1 and want.n_dropped_births == 0
+        assert np.array_equal(dropped.tracks.r, ref.tracks.r) and np.array_equal(dropped.tracks.m, ref.tracks.m)
+        assert np.array_equal(got.X, want.X) and np.array_equal(got.labels, want.labels)
+
+
 def test_association_stream_leaves_the_other_streams_alone():
     s = trial_seeds(42, 3)
     a = s.association_rng().integers(2**32, size=4)
