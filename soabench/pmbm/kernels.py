@@ -1,17 +1,21 @@
-"""The PMBM update's bookkeeping after the global hypotheses (docs/method.md §10.3), as one compiled call.
+"""The PMBM cycle's bookkeeping as compiled loops (docs/method.md §10.3-10.5).
 
-Given the kept new global hypotheses (parent and each track's choice), :func:`children` builds the posterior's
-single-target hypotheses (the old tracks' children, the new tracks' "went to a track" and "is its own"), their
-Gaussian-mixture densities (missed components, Kalman-updated pairs through the GM-PHD's
-:func:`soabench.gmphd.kernels.posterior_pairs`, newborn components), the new global table, and the track pruning of
-the update (a track whose every hypothesis has r < ``r_floor`` is dropped with the hypotheses no global hypothesis
-uses any more).
+* :func:`children`: given the kept new global hypotheses (parent and each track's choice), the posterior's
+  single-target hypotheses (the old tracks' children, the new tracks' "went to a track" and "is its own"), their
+  Gaussian-mixture densities (missed components and newborn components; the Kalman-updated components are marked
+  for the caller, which fills them with the GM-PHD's Joseph-form kernel), the new global table, and the track
+  pruning of the update (a track whose every hypothesis has r < ``r_floor`` is dropped with the hypotheses no global
+  hypothesis uses any more);
+* :func:`collapse`: the PMB's track-oriented collapse (§10.5);
+* :func:`estimates`: the estimates of one global hypothesis (§10.4).
 
-Why: at a trial's sizes this is about sixty small numpy calls per step, each costing microseconds of fixed overhead.
-The arithmetic is the array path's (:func:`soabench.pmbm.update.update` with ``fused=False``) in the same order; the
-exponentials are taken by the caller with numpy, whose vectorised ``exp`` differs from the C library's in the last
-bit, so that both paths give the same bits. The merge of global hypotheses that became equal, and the normalisation
-of their log weights, stay with the caller (numpy's ``logaddexp``).
+Why: at a trial's sizes the array path of these steps is about eighty small numpy calls per scan, each costing
+microseconds of fixed overhead. The arithmetic is the array path's (:func:`soabench.pmbm.update.update` and
+:class:`soabench.pmbm.filter.PMBMFilter` with ``fused=False``) in the same order; the exponentials are taken by the
+caller with numpy, whose vectorised ``exp`` differs from the C library's in the last bit, so that both paths give
+the same bits. The merge of global hypotheses that became equal, and the normalisation of their log weights, stay
+with the caller (numpy's ``logaddexp``). These kernels call no other large compiled function (numba would compile it
+again inside each caller): the caller chains them with the GM-PHD's and the LMB's kernels.
 """
 
 from __future__ import annotations
