@@ -43,7 +43,9 @@ from soabench.cache import configure_numba_cache
 
 configure_numba_cache()
 
-from numba import njit  # noqa: E402
+from llvmlite import ir  # noqa: E402
+from numba import njit, types  # noqa: E402
+from numba.extending import intrinsic  # noqa: E402
 
 ABSENT, MISSED = 0, 1  #: the first two columns of a cost row; measurement j is column 2 + j
 NONE = 0  #: the first column of a cluster's reduced row (absent or missed); measurement j is column 1 + j
@@ -64,6 +66,18 @@ def _uniform(state):
     z = (z ^ (z >> np.uint64(27))) * _MIX2
     z = z ^ (z >> np.uint64(31))
     return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@intrinsic
+def _trailing_zeros(typingctx, x):  # pragma: no cover - compiled
+    """The index of the lowest set bit of the uint64 ``x`` (``x`` != 0), LLVM's ``cttz``: how the sampler walks a
+    bit mask of measurements."""
+    sig = types.int64(types.uint64)
+
+    def codegen(context, builder, signature, args):
+        return builder.cttz(args[0], ir.Constant(ir.IntType(1), 1))
+
+    return sig, codegen
 
 
 @njit(cache=True)
@@ -150,6 +164,29 @@ def _enumerate_valid(options, n_opt, M, limit):
             used[c - 1] = True
         lvl -= 1
     return hyps, count
+
+
+@njit(cache=True)
+def _count_up_to_two(options, n_opt, M):
+    """The number of valid associations theta in which at most two tracks take a measurement: 1 + sum_i a_i +
+    sum_{i<k} (a_i a_k - |S_i & S_k|), with S_i the a_i measurements track i may take; sum_{i<k} |S_i & S_k| is
+    sum_j d_j (d_j - 1) / 2 over the d_j tracks that may take z_j. A lower bound of the count, in O(n + M): when it
+    exceeds ``max_hyp`` the enumeration need not run."""
+    deg = np.zeros(M, dtype=np.int64)
+    A = 0
+    A2 = 0
+    for i in range(options.shape[0]):
+        a = 0
+        for o in range(n_opt[i]):
+            if options[i, o] >= 1:
+                a += 1
+                deg[options[i, o] - 1] += 1
+        A += a
+        A2 += a * a
+    shared = 0
+    for j in range(M):
+        shared += deg[j] * (deg[j] - 1) // 2
+    return 1 + A + (A * A - A2) // 2 - shared
 
 
 @njit(cache=True)
@@ -260,38 +297,17 @@ def _marginals_dp(sub, options, n_opt, M):
 
 
 @njit(cache=True)
-def _draw(i, options, n_opt, weight, taken, state, buf_w, buf_c):
-    """theta_i from its conditional: prop. to ``weight[i, o]`` (exp of the log cost, shifted by the row's maximum)
-    over the options o of track i whose measurement is not taken by another track. One pass sums them and gathers
-    the open options of positive weight into ``buf_w``, ``buf_c`` (scratch of the row's length); the uniform is
-    then compared with their running sums, in option order."""
-    tot = 0.0
-    k = 0
-    for o in range(n_opt[i]):
-        c = options[i, o]
-        if c < 1 or taken[c - 1] < 0 or taken[c - 1] == i:
-            w = weight[i, o]
-            tot += w
-            if w > 0.0:
-                buf_w[k] = w
-                buf_c[k] = c
-                k += 1
-    u = _uniform(state) * tot
-    acc = 0.0
-    last = -1
-    for q in range(k):
-        last = buf_c[q]
-        acc += buf_w[q]
-        if u < acc:
-            return last
-    return last
-
-
-@njit(cache=True)
 def _gibbs(logc, options, n_opt, n_sweeps, state):
     """Distinct associations visited by ``n_sweeps`` Gibbs sweeps (the start included), in the order of their
     hashes. ``logc``: a cluster's reduced rows (column 0 none, 1 + j measurement j); ``options[i, :n_opt[i]]``: the
-    columns of track i with a finite log cost."""
+    columns of track i with a finite log cost.
+
+    Each draw of theta_i takes one uniform u of the stream and compares u times the sum of the weights of the track's
+    open options (those whose measurement no other track holds) with their running sums, in option order, taking the
+    first option whose running sum exceeds it (the last open one if none does). How the open options are found
+    depends on what the other tracks hold: none of the track's measurements (its precomputed running sums); all but
+    the one it holds ("none" and that one); else the measurements no track holds, read off bit masks. Every case
+    adds the same weights in the same order, so the draws are those of one pass over the options, bit for bit."""
     n, n_cols = logc.shape
     M = n_cols - 1
     weight = np.zeros(options.shape)
@@ -301,9 +317,8 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             mx = max(mx, logc[i, options[i, o]])
         for o in range(n_opt[i]):
             weight[i, o] = math.exp(logc[i, options[i, o]] - mx)
-    # running sums of each track's weights in option order: the sums :func:`_draw` accumulates when no other track
-    # holds one of the track's measurements, so that case draws from them directly, the same uniform against the
-    # same sums
+    # running sums of each track's weights in option order: the draw's sums when no other track holds one of the
+    # track's measurements
     prefix = np.zeros(options.shape)
     n_fixed = np.zeros(n, dtype=np.int64)  # "none" comes first in a track's options
     for i in range(n):
@@ -318,7 +333,6 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
     for i in range(n):
         for o in range(n_opt[i]):
             pos[i, options[i, o]] = o
-    taken = np.full(M, -1, dtype=np.int64)
     # Zobrist hash of each sample (a sum of one random 64-bit key per (track, option)), kept up to date as theta
     # changes: distinct hypotheses are found by sorting the hashes and comparing rows of equal hash exactly
     zkey = np.empty((n, n_cols), dtype=np.uint64)
@@ -346,6 +360,13 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             takers[fill[j]] = i
             fill[j] += 1
     blocked = np.zeros(n, dtype=np.int64)
+    W = (M + 63) >> 6
+    gate = np.zeros((n, W), dtype=np.uint64)  # each track's gated measurements, as bits
+    for i in range(n):
+        for o in range(n_fixed[i], n_opt[i]):
+            j = options[i, o] - 1
+            gate[i, j >> 6] |= np.uint64(1) << np.uint64(j & 63)
+    held = np.zeros(W, dtype=np.uint64)  # the measurements some track holds
     buf_w = np.empty(options.shape[1])
     buf_c = np.empty(options.shape[1], dtype=np.int64)
     # the samples, each stored only when its sweep changed the hypothesis: a repeat of the previous sample adds no
@@ -371,8 +392,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                 own = 1 if theta[i] >= 1 else 0
                 if n_fixed[i] == 1 and n_opt[i] - 1 - blocked[i] - own == 0:
                     # every measurement in the track's gate but the one it holds is held by another track: its open
-                    # options are "none" and that measurement, if any. The same uniform, the same sums, the same
-                    # comparisons as :func:`_draw`, without the pass over the others
+                    # options are "none" and that measurement, if any
                     if own == 0:
                         state[0] += _GOLDEN  # the uniform is drawn; with one option open it decides nothing
                         c = NONE if weight[i, 0] > 0.0 else -1
@@ -384,7 +404,38 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                         if not (w0 > 0.0 and u < w0) and w1 > 0.0:
                             c = theta[i]
                 else:
-                    c = _draw(i, options, n_opt, weight, taken, state, buf_w, buf_c)
+                    # the open options: "none", the measurement it holds, and the gated measurements no track
+                    # holds, in column order (the order of its options), read off the bit masks
+                    tot = 0.0
+                    k = 0
+                    if n_fixed[i] == 1:
+                        w = weight[i, 0]
+                        tot += w
+                        if w > 0.0:
+                            buf_w[k] = w
+                            buf_c[k] = NONE
+                            k += 1
+                    for a in range(W):
+                        x = gate[i, a] & ~held[a]
+                        if own == 1 and ((theta[i] - 1) >> 6) == a:
+                            x |= np.uint64(1) << np.uint64((theta[i] - 1) & 63)
+                        while x != 0:
+                            c = 1 + (a << 6) + _trailing_zeros(x)
+                            x &= x - np.uint64(1)
+                            w = weight[i, pos[i, c]]
+                            tot += w
+                            if w > 0.0:
+                                buf_w[k] = w
+                                buf_c[k] = c
+                                k += 1
+                    u = _uniform(state) * tot
+                    acc = 0.0
+                    c = -1
+                    for q in range(k):
+                        c = buf_c[q]
+                        acc += buf_w[q]
+                        if u < acc:
+                            break
             if c < 0:  # no option of positive weight (only when r = 1 and p_D = 1 leave the track none)
                 c = theta[i]
             if c == theta[i]:
@@ -392,7 +443,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             changed = True
             if theta[i] >= 1:
                 j = theta[i] - 1
-                taken[j] = -1
+                held[j >> 6] &= ~(np.uint64(1) << np.uint64(j & 63))
                 for t in range(deg[j], deg[j + 1]):
                     if takers[t] != i:
                         blocked[takers[t]] -= 1
@@ -400,7 +451,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             theta[i] = c
             if c >= 1:
                 j = c - 1
-                taken[j] = i
+                held[j >> 6] |= np.uint64(1) << np.uint64(j & 63)
                 for t in range(deg[j], deg[j + 1]):
                     if takers[t] != i:
                         blocked[takers[t]] += 1
@@ -515,7 +566,7 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False, exact=False):
                 if n_hyp <= max_hyp or exact:
                     local = _marginals_dp(sub, options, n_opt, mc)
                     solved = True
-            else:
+            elif _count_up_to_two(options, n_opt, mc) <= max_hyp:  # else certainly more than max_hyp
                 hyps, n_hyp = _enumerate_valid(options, n_opt, mc, max_hyp)
                 if n_hyp <= max_hyp:
                     _accumulate(sub, hyps, n_hyp, local, np.arange(n))

@@ -79,7 +79,9 @@ def flat_clusters(track, log_l_det, n, log_new):
     """:func:`clusters` as flat arrays, with the gated pairs those of a finite ``log_l_det`` (H, M): the tracked
     clusters' tracks ``T_flat[T_start[g]:T_start[g + 1]]`` and measurements (likewise ``L_*``), in increasing order
     of their smallest member, and ``base0``: minus the summed ``log_new`` of the measurements no track gates (in
-    increasing order, numpy's summation). A cluster has tracks iff its smallest member is a track (< n)."""
+    increasing order, numpy's summation); the arguments of :func:`global_hypotheses` that
+    :func:`new_global_hypotheses` builds from :func:`clusters`. A cluster has tracks iff its smallest member is a
+    track (< n)."""
     H, M = log_l_det.shape
     n_e = 0
     for h in range(H):
@@ -136,15 +138,6 @@ def flat_clusters(track, log_l_det, n, log_new):
             L_flat[fill_L[g]] = x - n
             fill_L[g] += 1
     return T_flat, T_start, L_flat, L_start, (-np_sum(lone, n_lone) if n_lone else 0.0)
-
-
-@njit(cache=True)
-def global_hypotheses_flat(table, log_w, ks, track, log_l_miss, log_l_det, log_new, max_gap):
-    """:func:`new_global_hypotheses` with the clusters of :func:`flat_clusters`, in one compiled call; ``ks`` (A,):
-    the assignments each prior global hypothesis asks for."""
-    T_flat, T_start, L_flat, L_start, base0 = flat_clusters(track, log_l_det, table.shape[1], log_new)
-    return _global_hypotheses(table, log_w, ks, T_flat, T_start, L_flat, L_start, base0, log_l_miss, log_l_det,
-                              log_new, max_gap)  # fmt: skip
 
 
 @njit(cache=True)
@@ -337,7 +330,7 @@ def best_sums(costs: list, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
-def _global_hypotheses(
+def global_hypotheses(
     table: np.ndarray,
     log_w: np.ndarray,
     ks: np.ndarray,
@@ -514,7 +507,7 @@ def new_global_hypotheses(
     L_start = _segments([len(L) for _, L in tracked])
     T_flat = np.concatenate([T for T, _ in tracked]).astype(np.int64) if tracked else np.zeros(0, dtype=np.int64)
     L_flat = np.concatenate([L for _, L in tracked]).astype(np.int64) if tracked else np.zeros(0, dtype=np.int64)
-    return _global_hypotheses(
+    return global_hypotheses(
         np.ascontiguousarray(table, dtype=np.int64), np.ascontiguousarray(log_w, dtype=float), ks, T_flat, T_start,
         L_flat, L_start, base0, np.ascontiguousarray(log_l_miss, dtype=float),
         np.ascontiguousarray(log_l_det, dtype=float), np.ascontiguousarray(log_new, dtype=float), float(max_gap),

@@ -48,7 +48,6 @@ from soabench.types import Births, Scan, StepResult, scan_once
 #: the probability modes the PMBM family runs (docs/method.md §10.6): static, with or without ``occlusion_pd``
 PMBM_MODES = ("static",)
 EXTRACT_R = 0.5  #: estimator 1 (§10.4): a track is reported when its hypothesis has r above this
-_NO_WEIGHTS = np.zeros(0)  #: the global weights the PMBM's reduction does not read
 
 
 class PMBMFilter:
@@ -126,20 +125,26 @@ class PMBMFilter:
     def _reduce_extract(
         self, post: PMBMDensity, ppp: Mixture
     ) -> tuple[PMBMDensity, np.ndarray, np.ndarray, np.ndarray]:
-        """Step 3's reduction of every hypothesis's density (with ``pmb``: the collapse and a second reduction) and
-        step 4's estimates, in one compiled call (:func:`soabench.pmbm.kernels.reduce_extract`); the intensity
-        ``ppp`` is already reduced. Returns (posterior, X, X_r, labels)."""
+        """Step 3's reduction of every hypothesis's density (with ``pmb``: the collapse, compiled, and a second
+        reduction) and step 4's estimates (compiled: :func:`soabench.pmbm.kernels.estimates`); the intensity ``ppp``
+        is already reduced. Returns (posterior, X, X_r, labels)."""
         cfg, h = self.cfg, post.hyps
-        best = int(np.argmax(post.log_w)) if len(post.log_w) else 0
-        ew = np.exp(post.log_w) if self.pmb else _NO_WEIGHTS
-        hyps, X, X_r, labels = kernels.reduce_extract(
-            post.track, post.table, ew, h.r, h.label, h.origin, h.age, h.start, h.w, h.m, h.P, float(cfg.prune_T),
-            float(cfg.merge_U), int(self.pmbm.J_h), self.pmb, best, EXTRACT_R,
-        )  # fmt: skip
+        T, U, J_h = float(cfg.prune_T), float(cfg.merge_U), int(self.pmbm.J_h)
+        start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, T, U, J_h)
         if self.pmb:
-            track = np.arange(len(hyps[0]), dtype=np.int64)
-            return PMBMDensity(ppp, Tracks(*hyps), track, track[None, :], np.zeros(1)), X, X_r, labels
-        return PMBMDensity(ppp, Tracks(*hyps), post.track, post.table, post.log_w), X, X_r, labels
+            parts = kernels.collapse(post.track, post.table, np.exp(post.log_w), h.r, h.label, h.origin, h.age, start,
+                                     w, m, P)  # fmt: skip
+            r, label, origin, age = parts[:4]
+            start, w, m, P = reduce_components(*parts[4:], T, U, J_h)
+            track = np.arange(len(r), dtype=np.int64)
+            post = PMBMDensity(ppp, Tracks(r, label, origin, age, start, w, m, P), track, track[None, :], np.zeros(1))
+            row = track
+        else:
+            post = PMBMDensity(ppp, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track, post.table,
+                               post.log_w)  # fmt: skip
+            row = post.table[int(np.argmax(post.log_w))]
+        hyps = post.hyps
+        return (post, *kernels.estimates(row, hyps.r, hyps.label, hyps.start, hyps.w, hyps.m, EXTRACT_R))
 
     def _reduce_extract_arrays(
         self, post: PMBMDensity, ppp: Mixture

@@ -1,17 +1,21 @@
-"""The PMBM update's bookkeeping after the global hypotheses (docs/method.md §10.3), as one compiled call.
+"""The PMBM cycle's bookkeeping as compiled loops (docs/method.md §10.3-10.5).
 
-Given the kept new global hypotheses (parent and each track's choice), :func:`children` builds the posterior's
-single-target hypotheses (the old tracks' children, the new tracks' "went to a track" and "is its own"), their
-Gaussian-mixture densities (missed components, Kalman-updated pairs through the GM-PHD's
-:func:`soabench.gmphd.kernels.posterior_pairs`, newborn components), the new global table, and the track pruning of
-the update (a track whose every hypothesis has r < ``r_floor`` is dropped with the hypotheses no global hypothesis
-uses any more).
+* :func:`children`: given the kept new global hypotheses (parent and each track's choice), the posterior's
+  single-target hypotheses (the old tracks' children, the new tracks' "went to a track" and "is its own"), their
+  Gaussian-mixture densities (missed components and newborn components; the Kalman-updated components are marked
+  for the caller, which fills them with the GM-PHD's Joseph-form kernel), the new global table, and the track
+  pruning of the update (a track whose every hypothesis has r < ``r_floor`` is dropped with the hypotheses no global
+  hypothesis uses any more);
+* :func:`collapse`: the PMB's track-oriented collapse (§10.5);
+* :func:`estimates`: the estimates of one global hypothesis (§10.4).
 
-Why: at a trial's sizes this is about sixty small numpy calls per step, each costing microseconds of fixed overhead.
-The arithmetic is the array path's (:func:`soabench.pmbm.update.update` with ``fused=False``) in the same order; the
-exponentials are taken by the caller with numpy, whose vectorised ``exp`` differs from the C library's in the last
-bit, so that both paths give the same bits. The merge of global hypotheses that became equal, and the normalisation
-of their log weights, stay with the caller (numpy's ``logaddexp``).
+Why: at a trial's sizes the array path of these steps is about eighty small numpy calls per scan, each costing
+microseconds of fixed overhead. The arithmetic is the array path's (:func:`soabench.pmbm.update.update` and
+:class:`soabench.pmbm.filter.PMBMFilter` with ``fused=False``) in the same order; the exponentials are taken by the
+caller with numpy, whose vectorised ``exp`` differs from the C library's in the last bit, so that both paths give
+the same bits. The merge of global hypotheses that became equal, and the normalisation of their log weights, stay
+with the caller (numpy's ``logaddexp``). These kernels call no other large compiled function (numba would compile it
+again inside each caller): the caller chains them with the GM-PHD's and the LMB's kernels.
 """
 
 from __future__ import annotations
@@ -24,8 +28,7 @@ configure_numba_cache()
 
 from numba import njit  # noqa: E402
 
-from soabench.gmphd.kernels import copy_row, copy_state, posterior_pairs  # noqa: E402
-from soabench.lmb.tracks import reduce_components  # noqa: E402
+from soabench.gmphd.kernels import copy_row, copy_state  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it (as :data:`soabench.pmbm.association.MISS`)
 
@@ -124,8 +127,8 @@ def unique_rows(t):
 
 @njit(cache=True)
 def children(table, parent, choice, track, start, w, label, origin, age, r_miss, degenerate, E_miss, E_det,
-             has_new, W_all, w_nb, r_own, ppp_origin, m_all, P_all, Cx, Sinv, S, H, R, nu_r, nu_b, nb_m, nb_P,
-             label0, r_floor, source_meas):  # fmt: skip
+             has_new, W_all, w_nb, r_own, ppp_origin, m_all, P_all, nb_m, nb_P, label0, r_floor,
+             source_meas):  # fmt: skip
     """The posterior hypotheses, table and pruning of the update (module docstring).
 
     Args:
@@ -137,15 +140,16 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
         has_new: (M,) e_l > 0 (z_l has a new track); W_all (J, M): the new tracks' intensity weights
             p_D w q / e_l; w_nb (M,): the newborn component's weight beta_l / e_l (0 without one); r_own (M,):
             e_l / (kappa_l + e_l); ppp_origin: (J,) the intensity's origins.
-        m_all, P_all: the intensity's components then the hypotheses' (J + C rows), with their measurement terms
-            Cx, Sinv, S, H, R and innovations nu_r, nu_b for :func:`~soabench.gmphd.kernels.posterior_pairs`.
+        m_all, P_all: the intensity's components then the hypotheses' (J + C rows).
         nb_m, nb_P: the newborn components (one per measurement, or none).
         label0: the new track of z_l gets label label0 + l; source_meas: the origin of a measurement-driven birth.
 
-    Returns (r, label, origin, age, start, w, m, P, track, table, uniq, inv, n_pairs, n_new): the kept hypotheses,
-    the track of each, the table (B, kept tracks) indexing them, its distinct rows in lexicographic order with the
-    index of each row among them (when a track was dropped; else the table itself), the Kalman pairs built (kept or
-    not) and the new tracks.
+    Returns (r, label, origin, age, start, w, m, P, track, table, uniq, inv, kal, rows, ells, n_pairs, n_new): the
+    kept hypotheses, the track of each, the table (B, kept tracks) indexing them, its distinct rows in lexicographic
+    order with the index of each row among them (when a track was dropped; else the table itself), the components
+    ``kal`` whose m and P the caller fills with the Kalman update of row ``rows`` of m_all by measurement ``ells``
+    (:func:`soabench.lmb.measurement.kalman_pairs`, which a compiled caller would have to compile again), the
+    Kalman pairs built (kept or not) and the new tracks.
     """
     B, n = choice.shape
     M = has_new.shape[0]
@@ -332,24 +336,12 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
             copy_state(out_m, out_P, q, nb_m, nb_P, rec_nb[q])
         else:
             copy_state(out_m, out_P, q, m_all, P_all, rec_row[q])
-    kal = np.empty(n_kal, dtype=np.int64)
+    kal = np.empty(n_kal, dtype=np.int64)  # the Kalman-updated records, left to the caller
     p = 0
     for q in range(n_rec):
         if rec_ell[q] != MISS:
             kal[p] = q
             p += 1
-    kal_rows = np.empty(n_kal, dtype=np.int64)
-    for p in range(n_kal):
-        kal_rows[p] = rec_row[kal[p]]
-    kal = kal[np.argsort(kal_rows, kind="mergesort")]  # pairs by source row, as posterior_pairs computes K once
-    jj = np.empty(n_kal, dtype=np.int64)
-    lj = np.empty(n_kal, dtype=np.int64)
-    for p in range(n_kal):
-        jj[p] = rec_row[kal[p]]
-        lj[p] = rec_ell[kal[p]]
-    mk, Pk = posterior_pairs(m_all, P_all, Cx, Sinv, S, H, R, jj, lj, nu_r, nu_b)
-    for p in range(n_kal):
-        copy_state(out_m, out_P, kal[p], mk, Pk, p)
     # the kept children's attributes and the table over the kept tracks
     o_r = np.empty(n_kept)
     o_label = np.empty(n_kept, dtype=np.int64)
@@ -378,8 +370,8 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
         uniq, inv = unique_rows(out_table)
     else:
         uniq, inv = out_table, np.arange(B)
-    return (o_r, o_label, o_origin, o_age, out_start, out_w, out_m, out_P, o_track, out_table, uniq, inv, n_pairs,
-            n_new)  # fmt: skip
+    return (o_r, o_label, o_origin, o_age, out_start, out_w, out_m, out_P, o_track, out_table, uniq, inv, kal,
+            rec_row[kal], rec_ell[kal], n_pairs, n_new)  # fmt: skip
 
 
 @njit(cache=True)
@@ -448,34 +440,21 @@ def collapse(track, table, ew, r, label, origin, age, start, w, m, P):
 
 
 @njit(cache=True)
-def reduce_extract(track, table, ew, r, label, origin, age, start, w, m, P, T, U, J_h, pmb, best, thr):
-    """Step 3's per-hypothesis reduction (each density pruned, merged and capped at ``J_h`` components,
-    :func:`soabench.lmb.tracks.reduce_components`), with ``pmb`` the collapse (:func:`collapse`) and a second
-    reduction, then step 4's estimates: in global hypothesis ``best``, every track whose hypothesis has r > ``thr``,
-    at the mean of its heaviest component (lowest index on ties), labelled.
-
-    Returns ((r, label, origin, age, start, w, m, P) of the hypotheses, X, X_r, labels)."""
-    start, w, m, P = reduce_components(start, w, m, P, T, U, J_h)
-    if pmb:
-        r, label, origin, age, start, w, m, P = collapse(track, table, ew, r, label, origin, age, start, w, m, P)
-        start, w, m, P = reduce_components(start, w, m, P, T, U, J_h)
-        N = r.shape[0]
-        track = np.arange(N)
-        table = np.empty((1, N), dtype=np.int64)
-        for i in range(N):
-            table[0, i] = i
-        best = 0
-    n = table.shape[1]
+def estimates(row, r, label, start, w, m, thr):
+    """Step 4's estimates (docs/method.md §10.4) in the global hypothesis that picks hypothesis ``row[i]`` of each
+    track i: every track whose hypothesis has r > ``thr``, at the mean of its heaviest component (lowest index on
+    ties), labelled, as :meth:`soabench.lmb.tracks.Tracks.estimates` of those hypotheses. Returns (X, X_r, labels)."""
+    n = row.shape[0]
     n_x = 0
     for i in range(n):
-        if r[table[best, i]] > thr:
+        if r[row[i]] > thr:
             n_x += 1
     X = np.empty((n_x, 4))
     X_r = np.empty(n_x)
     labels = np.empty(n_x, dtype=np.int64)
     q = 0
     for i in range(n):
-        h = table[best, i]
+        h = row[i]
         if r[h] > thr:
             if start[h + 1] == start[h]:
                 raise ValueError("a reported track has no component")
@@ -487,4 +466,4 @@ def reduce_extract(track, table, ew, r, label, origin, age, start, w, m, P, T, U
             X_r[q] = r[h]
             labels[q] = label[h]
             q += 1
-    return (r, label, origin, age, start, w, m, P), X, X_r, labels
+    return X, X_r, labels

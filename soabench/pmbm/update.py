@@ -34,7 +34,8 @@ from soabench.pmbm.association import (
     MISS,
     assignments_asked,
     clusters,
-    global_hypotheses_flat,
+    flat_clusters,
+    global_hypotheses,
     new_global_hypotheses,
     unique_rows,
 )
@@ -67,9 +68,6 @@ class UpdateResult:
 
 
 _NO_NEWBORN = (np.zeros((0, 4)), np.zeros((0, 4, 4)))
-_NO_JACOBIAN = np.zeros((0, 2, 4))  #: the UKF form has no H: ``posterior_pairs`` then uses P - K S K^T
-_NO_TERMS = (np.zeros((0, 4, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), _NO_JACOBIAN)
-_NO_INNOVATIONS = np.zeros((0, 0))
 
 
 def _segments(counts: np.ndarray) -> np.ndarray:
@@ -159,11 +157,14 @@ def update(
 
     # global hypotheses
     max_gap = -np.log(hyp.w_floor) if hyp.w_floor > 0.0 else np.inf
-    if fused:  # the clusters as flat arrays and the global hypotheses in one compiled call
-        parent, choice, log_w, n_murty = global_hypotheses_flat(
+    if fused:  # the clusters as flat arrays straight from the compiled union-find
+        T_flat, T_start, L_flat, L_start, base0 = flat_clusters(
+            np.ascontiguousarray(pred.track, dtype=np.int64), log_l_det, n, log_new
+        )
+        parent, choice, log_w, n_murty = global_hypotheses(
             np.ascontiguousarray(pred.table, dtype=np.int64), np.ascontiguousarray(pred.log_w, dtype=float),
-            assignments_asked(pred.log_w, hyp.M_max), np.ascontiguousarray(pred.track, dtype=np.int64), log_l_miss,
-            log_l_det, log_new, float(max_gap),
+            assignments_asked(pred.log_w, hyp.M_max), T_flat, T_start, L_flat, L_start, base0, log_l_miss, log_l_det,
+            log_new, float(max_gap),
         )  # fmt: skip
     else:
         groups = clusters(pred.track, np.isfinite(log_l_det), n)
@@ -191,21 +192,17 @@ def update(
             nb_P = np.ascontiguousarray(np.asarray(newborn.P, dtype=float).reshape(-1, 4, 4))
         else:
             nb_m, nb_P = _NO_NEWBORN
-        if terms is not None:
-            Cx, Sinv, S = terms.C, terms.Sinv, terms.S
-            Hj = terms.H if terms.H is not None else _NO_JACOBIAN
-        else:
-            Cx, Sinv, S, Hj = _NO_TERMS
-        if nu_r is None:
-            nu_r = nu_b = _NO_INNOVATIONS
         out = kernels.children(
             np.ascontiguousarray(pred.table, dtype=np.int64), parent, np.ascontiguousarray(choice, dtype=np.int64),
             np.ascontiguousarray(pred.track, dtype=np.int64), hyps.start, hyps.w, hyps.label, hyps.origin, hyps.age,
             r_miss, ~np.isfinite(log_eta_miss), E_miss, E_det, np.isfinite(log_e), W_all, w_nb, r_own,
-            ppp.origin, m_all, P_all, Cx, Sinv, S, Hj, np.asarray(model.R, dtype=float), nu_r, nu_b, nb_m, nb_P,
-            int(label0), float(hyp.r_floor), int(SOURCE_MEAS),
+            ppp.origin, m_all, P_all, nb_m, nb_P, int(label0), float(hyp.r_floor), int(SOURCE_MEAS),
         )  # fmt: skip
-        r, label, origin, age, start, w, m, P, track_of, table, uniq, inv, n_pairs, n_new = out
+        r, label, origin, age, start, w, m, P, track_of, table, uniq, inv, kal, rows, ells, n_pairs, n_new = out
+        if len(kal):
+            order_p = np.argsort(rows, kind="stable")
+            kal = kal[order_p]
+            m[kal], P[kal] = kalman_pairs(m_all, P_all, terms, model.R, rows[order_p], ells[order_p], nu_r, nu_b)
         if len(uniq) < len(table):
             table, log_w = _merged(uniq, inv, log_w)
         log_w = log_w - np.logaddexp.reduce(log_w)

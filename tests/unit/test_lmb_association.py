@@ -16,8 +16,11 @@ from soabench.lmb.gibbs import (
     DP_MAX_M,
     _accumulate,
     _count_dp,
+    _count_up_to_two,
     _enumerate_valid,
+    _gibbs,
     _marginals_dp,
+    _uniform,
     association_marginals,
 )
 
@@ -116,6 +119,25 @@ def test_thirty_tracks_sharing_two_measurements_are_exact():
     assert g3 == 1 and n3 <= 1000  # 1 + 90 + 2,610 + 24,360 associations: sampled
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_count_up_to_two_assignments_is_a_lower_bound_of_the_count(seed):
+    """The closed-form count of the maps with at most two tracks taking a measurement equals a listing of them, and
+    is at most the count of every map (what lets a cluster skip the enumeration when it already exceeds the limit)."""
+    rng = np.random.default_rng(seed)
+    n, M = 6, 5
+    gated = rng.uniform(size=(n, M)) < 0.5
+    options = np.zeros((n, 1 + M), dtype=np.int64)
+    n_opt = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        cols = [0, *(1 + np.flatnonzero(gated[i]))]
+        options[i, : len(cols)] = cols
+        n_opt[i] = len(cols)
+    maps = [t for t in itertools.product(*[options[i, : n_opt[i]] for i in range(n)])
+            if len([c for c in t if c]) == len({c for c in t if c})]  # fmt: skip
+    assert _count_up_to_two(options, n_opt, M) == sum(1 for t in maps if sum(c > 0 for c in t) <= 2)
+    assert _count_up_to_two(options, n_opt, M) <= len(maps) == _count_dp(options, n_opt, M, 10**6)
+
+
 def test_a_cluster_with_many_measurements_is_enumerated_depth_first():
     """One track gating DP_MAX_M + 2 measurements, a second one gating only the last of them: too many measurements
     for the forward-backward pass but 2 M + 1 associations (the second track without a measurement: the first has
@@ -138,6 +160,56 @@ def test_gibbs_over_associations_starts_without_measurements_and_visits_them_all
     np.testing.assert_allclose(sampled, exact, rtol=0, atol=1e-12)
     _, n_one, _ = association_marginals(logc, 1, np.uint32(0), True)
     assert n_one == 1  # one sweep: the start only, every track without a measurement
+
+
+def _gibbs_one_pass(sub, options, n_opt, n_sweeps, state):
+    """The sampler written plainly, apart from the kernel: each draw passes over all the track's options, sums those
+    whose measurement no other track holds, and compares one uniform of the same stream with the running sums.
+    Returns the distinct hypotheses visited (as a set of tuples); ``state`` is advanced as the kernel advances it."""
+    n = sub.shape[0]
+    weight = [[math.exp(sub[i, options[i, o]] - max(sub[i, options[i, :n_opt[i]]])) for o in range(n_opt[i])]
+              for i in range(n)]  # fmt: skip
+    theta = [0] * n
+    seen = {tuple(theta)}
+    for _ in range(1, n_sweeps):
+        for i in range(n):
+            held = {theta[t] for t in range(n) if t != i and theta[t] >= 1}
+            opened = [(options[i, o], weight[i][o]) for o in range(n_opt[i]) if options[i, o] not in held]
+            u = _uniform(state) * sum(w for _, w in opened)  # the sum in option order, as float additions
+            c, acc = -1, 0.0
+            for col, w in opened:
+                if w > 0.0:
+                    c, acc = col, acc + w
+                    if u < acc:
+                        break
+            theta[i] = theta[i] if c < 0 else c
+        seen.add(tuple(theta))
+    return seen
+
+
+@pytest.mark.parametrize(("n", "M", "lo", "seed"), [(14, 6, 0, 0), (30, 12, 0, 1), (16, 70, 56, 2)])
+def test_gibbs_draws_are_those_of_one_pass_over_the_options(n, M, lo, seed):
+    """The kernel finds a track's open options by its running sums, by "none and its own measurement", or by bit
+    masks of the measurements held (two 64-bit words when M = 70, the gated ones z_56..z_69 on both): each way must
+    give the draws of the plain pass, the same hypotheses visited and the same number of uniforms drawn."""
+    rng = np.random.default_rng(seed)
+    sub = np.full((n, 1 + M), -np.inf)
+    sub[:, 0] = np.log(rng.uniform(0.05, 1.0, n))
+    for i in range(n):  # a few gated measurements each, many shared, weights across several orders of magnitude
+        cols = lo + rng.choice(M - lo, size=int(rng.integers(1, 6)), replace=False)
+        sub[i, 1 + cols] = rng.normal(0.0, 3.0, len(cols))
+    options = np.zeros(sub.shape, dtype=np.int64)
+    n_opt = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        cols = np.flatnonzero(np.isfinite(sub[i]))
+        options[i, : len(cols)] = cols
+        n_opt[i] = len(cols)
+    s_kernel = np.full(1, np.uint64(seed + 7), dtype=np.uint64)
+    s_plain = s_kernel.copy()
+    hyps, n_hyp = _gibbs(sub, options, n_opt, 200, s_kernel)
+    plain = _gibbs_one_pass(sub, options, n_opt, 200, s_plain)
+    assert s_kernel[0] == s_plain[0]
+    assert {tuple(int(c) for c in row) for row in hyps[:n_hyp]} == plain and n_hyp == len(plain) > 20
 
 
 def test_exact_association_solves_a_cluster_beyond_max_hypotheses():
