@@ -501,11 +501,17 @@ def merge_groups_grid(m, P, order, U):
             if reach2[i] >= 0.0:
                 rs[k] = math.sqrt(reach2[i])
                 k += 1
-        # the median of the reaches, as np.median gives it (the middle one, or the mean (a + b) / 2 of the middle
-        # two), from the float64 mergesort the weights' ordering already compiles rather than a quickselect
-        by_r = np.argsort(rs, kind="mergesort")
+        # the median of the reaches as np.median gives it (the middle one, or (a + b) / 2 of the middle two a <= b),
+        # with this module's quickselect: rs[perm[half]] is the half-th smallest, every one before it at most that
+        perm = np.arange(n_idx)
         half = n_idx // 2
-        mid = rs[by_r[half]] if n_idx % 2 == 1 else (rs[by_r[half - 1]] + rs[by_r[half]]) / 2
+        _select(perm, rs, 0, n_idx, half)
+        mid = rs[perm[half]]
+        if n_idx % 2 == 0:
+            below = rs[perm[0]]
+            for q in range(1, half):
+                below = max(below, rs[perm[q]])
+            mid = (below + mid) / 2
         h0 = _GRID_H0 * mid
         if not (h0 > 0.0 and math.isfinite(h0)):
             h0 = 1.0
