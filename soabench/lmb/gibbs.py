@@ -167,6 +167,29 @@ def _enumerate_valid(options, n_opt, M, limit):
 
 
 @njit(cache=True)
+def _count_up_to_two(options, n_opt, M):
+    """The number of valid associations theta in which at most two tracks take a measurement: 1 + sum_i a_i +
+    sum_{i<k} (a_i a_k - |S_i & S_k|), with S_i the a_i measurements track i may take; sum_{i<k} |S_i & S_k| is
+    sum_j d_j (d_j - 1) / 2 over the d_j tracks that may take z_j. A lower bound of the count, in O(n + M): when it
+    exceeds ``max_hyp`` the enumeration need not run."""
+    deg = np.zeros(M, dtype=np.int64)
+    A = 0
+    A2 = 0
+    for i in range(options.shape[0]):
+        a = 0
+        for o in range(n_opt[i]):
+            if options[i, o] >= 1:
+                a += 1
+                deg[options[i, o] - 1] += 1
+        A += a
+        A2 += a * a
+    shared = 0
+    for j in range(M):
+        shared += deg[j] * (deg[j] - 1) // 2
+    return 1 + A + (A * A - A2) // 2 - shared
+
+
+@njit(cache=True)
 def _count_dp(options, n_opt, M, limit):
     """The number of valid associations theta of a cluster with ``M`` measurements (``M`` <= ``DP_MAX_M``),
     counted track by track over the set S of measurements taken so far: count_{i+1}(S) = count_i(S) [none open] +
@@ -543,7 +566,7 @@ def association_marginals(logc, max_hyp, seed, force_gibbs=False, exact=False):
                 if n_hyp <= max_hyp or exact:
                     local = _marginals_dp(sub, options, n_opt, mc)
                     solved = True
-            else:
+            elif _count_up_to_two(options, n_opt, mc) <= max_hyp:  # else certainly more than max_hyp
                 hyps, n_hyp = _enumerate_valid(options, n_opt, mc, max_hyp)
                 if n_hyp <= max_hyp:
                     _accumulate(sub, hyps, n_hyp, local, np.arange(n))

@@ -16,6 +16,7 @@ from soabench.lmb.gibbs import (
     DP_MAX_M,
     _accumulate,
     _count_dp,
+    _count_up_to_two,
     _enumerate_valid,
     _gibbs,
     _marginals_dp,
@@ -116,6 +117,25 @@ def test_thirty_tracks_sharing_two_measurements_are_exact():
     three = np.log(rng.uniform(0.05, 1.0, (n, 5)))
     _, n3, g3 = association_marginals(three, 1000, np.uint32(0), False)
     assert g3 == 1 and n3 <= 1000  # 1 + 90 + 2,610 + 24,360 associations: sampled
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_count_up_to_two_assignments_is_a_lower_bound_of_the_count(seed):
+    """The closed-form count of the maps with at most two tracks taking a measurement equals a listing of them, and
+    is at most the count of every map (what lets a cluster skip the enumeration when it already exceeds the limit)."""
+    rng = np.random.default_rng(seed)
+    n, M = 6, 5
+    gated = rng.uniform(size=(n, M)) < 0.5
+    options = np.zeros((n, 1 + M), dtype=np.int64)
+    n_opt = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        cols = [0, *(1 + np.flatnonzero(gated[i]))]
+        options[i, : len(cols)] = cols
+        n_opt[i] = len(cols)
+    maps = [t for t in itertools.product(*[options[i, : n_opt[i]] for i in range(n)])
+            if len([c for c in t if c]) == len({c for c in t if c})]  # fmt: skip
+    assert _count_up_to_two(options, n_opt, M) == sum(1 for t in maps if sum(c > 0 for c in t) <= 2)
+    assert _count_up_to_two(options, n_opt, M) <= len(maps) == _count_dp(options, n_opt, M, 10**6)
 
 
 def test_a_cluster_with_many_measurements_is_enumerated_depth_first():
