@@ -369,11 +369,14 @@ class TrialMetrics:
         summary: per-trial scalars, keys :data:`SUMMARY_KEYS` (Python floats/ints; NaN where undefined).
         episodes: the delay episodes (§5.4).
         series: per-step arrays, keys :data:`SERIES_KEYS`, each of length K.
+        partner: (K, P) per scan and target, the index in Est_k of the estimate the gated matching (§5.4 step 1)
+            pairs with the target, -1 for none (None: not kept); what the track measures read the labels from.
     """
 
     summary: dict[str, float | int]
     episodes: list[Episode] = field(default_factory=list)
     series: dict[str, np.ndarray] = field(default_factory=dict)
+    partner: np.ndarray | None = None
 
     def __getitem__(self, key: str) -> float | int:
         """``summary[key]``: ``metrics["ospa"]``."""
@@ -469,9 +472,10 @@ def evaluate(
     gt = gt_mask(scans, cfg.gt_set)
     s = {key: np.zeros(K) for key in SERIES_KEYS}
     if compiled and cfg.ospa_p == 1.0 and cfg.gospa_p == 1.0:
-        assoc, ospa_parts, gospa_parts = _matchings_compiled(scans, results, gt, cfg, sensor_cfg, s)
+        partner, ospa_parts, gospa_parts = _matchings_compiled(scans, results, gt, cfg, sensor_cfg, s)
     else:
-        assoc, ospa_parts, gospa_parts = _matchings(scans, results, gt, cfg, sensor_cfg, s)
+        partner, ospa_parts, gospa_parts = _matchings(scans, results, gt, cfg, sensor_cfg, s)
+    assoc = partner >= 0
     origins = np.zeros((K, len(ORIGIN_KEYS)), dtype=np.int64)
     for k, res in enumerate(results):
         s["sum_w"][k], s["n_components"][k] = res.sum_w, res.n_reduced
@@ -502,7 +506,7 @@ def evaluate(
         **_step_costs(results),
     }
     series = {key: s[key].astype(float if key in ("ospa", "gospa", "sum_w") else int) for key in SERIES_KEYS}
-    return TrialMetrics({key: summary[key] for key in SUMMARY_KEYS}, episodes, series)
+    return TrialMetrics({key: summary[key] for key in SUMMARY_KEYS}, episodes, series, partner)
 
 
 def _matchings(
@@ -514,16 +518,16 @@ def _matchings(
     s: dict[str, np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Scan by scan: GT_k, Est_k, the gated matching, OSPA and GOSPA; fills ``s`` (n_gt, n_est, tp) and returns
-    ``(assoc (K, P), ospa parts (K, 3), gospa parts (K, 4))``."""
+    ``(partner (K, P), ospa parts (K, 3), gospa parts (K, 4))`` (:attr:`TrialMetrics.partner`)."""
     K = len(results)
-    assoc = np.zeros_like(gt)
+    partner = np.full(gt.shape, -1, dtype=np.int64)
     ospa_parts = np.zeros((K, 3))
     gospa_parts = np.zeros((K, 4))
     for k, (scan, res) in enumerate(zip(scans.scans, results, strict=True)):
         E = estimate_positions(res.X, scan.ego, sensor_cfg, cfg.gt_set)
-        s["tp"][k] = _score_scan(k, E, scans.truth_xy, gt, cfg, assoc, ospa_parts, gospa_parts)
+        s["tp"][k] = _score_scan(k, E, scans.truth_xy, gt, cfg, partner, ospa_parts, gospa_parts)
         s["n_gt"][k], s["n_est"][k] = gt[k].sum(), len(E)
-    return assoc, ospa_parts, gospa_parts
+    return partner, ospa_parts, gospa_parts
 
 
 def _score_scan(
@@ -532,17 +536,17 @@ def _score_scan(
     truth_xy: np.ndarray,
     gt: np.ndarray,
     cfg: MetricsConfig,
-    assoc: np.ndarray,
+    partner: np.ndarray,
     ospa_parts: np.ndarray,
     gospa_parts: np.ndarray,
 ) -> int:
-    """Scan k's gated matching, OSPA and GOSPA with numpy and scipy: fills row k of ``assoc``, ``ospa_parts`` and
-    ``gospa_parts``; returns the number of gated pairs (TP)."""
+    """Scan k's gated matching, OSPA and GOSPA with numpy and scipy: fills row k of ``partner`` (each target's
+    gated estimate, its index in ``E``), ``ospa_parts`` and ``gospa_parts``; returns the number of gated pairs (TP)."""
     gt_idx = np.flatnonzero(gt[k])
     G = truth_xy[k, gt_idx]
     D = pairwise_distances(_points(E), _points(G))  # once for the three matchings of the step
     pairs = gated_assignment(E, G, cfg.d_gate, D)
-    assoc[k, gt_idx[pairs[:, 1]]] = True
+    partner[k, gt_idx[pairs[:, 1]]] = pairs[:, 0]
     ospa_parts[k] = ospa(E, G, cfg.ospa_c, cfg.ospa_p, D)
     gospa_parts[k] = gospa(G, E, cfg.gospa_c, cfg.gospa_p, D.T)
     return len(pairs)
@@ -575,10 +579,10 @@ def _matchings_compiled(
     E = np.ascontiguousarray(E, dtype=float)
     args = (float(cfg.d_gate), float(GATE_COST), float(cfg.ospa_c), float(cfg.gospa_c))
     gt_c = np.ascontiguousarray(gt, dtype=bool)
-    tp, assoc, ospa_parts, gospa_parts, redo = announced("metrics", run_matchings, E, e_off, G, gt_c, *args)
+    tp, partner, ospa_parts, gospa_parts, redo = announced("metrics", run_matchings, E, e_off, G, gt_c, *args)
     for k in np.flatnonzero(redo):  # coinciding points: scipy's choice among the optimal assignments (_matchings)
-        tp[k] = _score_scan(k, E[e_off[k] : e_off[k + 1]], G, gt, cfg, assoc, ospa_parts, gospa_parts)
+        tp[k] = _score_scan(k, E[e_off[k] : e_off[k + 1]], G, gt, cfg, partner, ospa_parts, gospa_parts)
     s["n_gt"][:] = gt.sum(axis=1)
     s["n_est"][:] = counts
     s["tp"][:] = tp
-    return assoc, ospa_parts, gospa_parts
+    return partner, ospa_parts, gospa_parts

@@ -202,16 +202,17 @@ def run_matchings(E, e_off, G, gt, d_gate, gate_cost, ospa_c, gospa_c):  # pragm
         G: (K, P, 2) true positions; gt: (K, P) GT_k membership.
 
     Returns:
-        ``(tp (K,), assoc (K, P), ospa (K, 3), gospa (K, 4), redo (K,))``: the gated pairs' count and matched truths
-        (:func:`soabench.metrics.gated_assignment`), OSPA (total, loc, card) and GOSPA (total, loc, missed, false)
-        as :func:`soabench.metrics.ospa` and :func:`soabench.metrics.gospa` give them; ``redo``: scans left
+        ``(tp (K,), partner (K, P), ospa (K, 3), gospa (K, 4), redo (K,))``: the gated pairs' count and, per target,
+        the index in Est_k of its gated partner, -1 for none (:func:`soabench.metrics.gated_assignment`), OSPA
+        (total, loc, card) and GOSPA (total, loc, missed, false) as :func:`soabench.metrics.ospa` and
+        :func:`soabench.metrics.gospa` give them; ``redo``: scans left
         unscored because two estimates (or two truths) coincide. Equal points make equal rows (columns) of every
         cost matrix, so several assignments are optimal, and which one is taken decides the order of a sum's terms
         (its last bit): the caller scores those scans with scipy's choice (:func:`soabench.metrics.evaluate`).
     """
     K, P = gt.shape
     tp = np.zeros(K, dtype=np.int64)
-    assoc = np.zeros((K, P), dtype=np.bool_)
+    partner = np.full((K, P), -1, dtype=np.int64)
     ospa = np.zeros((K, 3))
     gospa = np.zeros((K, 4))
     redo = np.zeros(K, dtype=np.bool_)
@@ -250,7 +251,7 @@ def run_matchings(E, e_off, G, gt, d_gate, gate_cost, ospa_c, gospa_c):  # pragm
         for t in range(len(rows)):
             if D[rows[t], cols[t]] <= d_gate:
                 tp[k] += 1
-                assoc[k, gidx[cols[t]]] = True
+                partner[k, gidx[cols[t]]] = rows[t]
         # OSPA (§5.2): the smaller set as rows
         lo, hi = min(n, m), max(n, m)
         Co = np.empty((lo, hi))
@@ -285,7 +286,7 @@ def run_matchings(E, e_off, G, gt, d_gate, gate_cost, ospa_c, gospa_c):  # pragm
         gospa[k, 2] = half * (m - n_kept)
         gospa[k, 3] = half * (n - n_kept)
         gospa[k, 0] = (loc + gospa[k, 2]) + gospa[k, 3]
-    return tp, assoc, ospa, gospa, redo
+    return tp, partner, ospa, gospa, redo
 
 
 @njit(cache=True)

@@ -501,7 +501,12 @@ def merge_groups_grid(m, P, order, U):
             if reach2[i] >= 0.0:
                 rs[k] = math.sqrt(reach2[i])
                 k += 1
-        h0 = _GRID_H0 * np.median(rs)
+        # the median of the reaches, as np.median gives it (the middle one, or the mean (a + b) / 2 of the middle
+        # two), from the float64 mergesort the weights' ordering already compiles rather than a quickselect
+        by_r = np.argsort(rs, kind="mergesort")
+        half = n_idx // 2
+        mid = rs[by_r[half]] if n_idx % 2 == 1 else (rs[by_r[half - 1]] + rs[by_r[half]]) / 2
+        h0 = _GRID_H0 * mid
         if not (h0 > 0.0 and math.isfinite(h0)):
             h0 = 1.0
         for i in range(J):

@@ -20,7 +20,7 @@ from soabench.errors import SoabenchError
 from soabench.metrics import Episode, estimate_mask, gt_mask
 from soabench.tracks.gaps import describe_gaps
 from soabench.tracks.ospa2 import ospa2_of
-from soabench.tracks.reemergence import associated_labels, gap_outcomes, occlusion_gaps, reemergence
+from soabench.tracks.reemergence import NO_LABEL, associated_labels, gap_outcomes, occlusion_gaps, reemergence
 from soabench.tracks.scores import ALPHAS, scores_of
 from soabench.tracks.sequence import ScanRows, TrackSequence, checked
 
@@ -132,8 +132,11 @@ def track_evaluation(
     episodes: Sequence[Episode],
     cfg: MetricsConfig,
     sensor_cfg: SensorConfig,
+    partner: np.ndarray | None = None,
 ) -> tuple[dict[str, float | int | None], list[dict[str, float | int | str | None]]]:
-    """:func:`evaluate_tracks` and, per episode of ``episodes`` in order, its :data:`GAP_KEYS` cells."""
+    """:func:`evaluate_tracks` and, per episode of ``episodes`` in order, its :data:`GAP_KEYS` cells. ``partner``:
+    the run's gated matching (:attr:`soabench.metrics.TrialMetrics.partner`, the §5.4 matching these measures read),
+    so that it is not done again; None: matched here."""
     gt = gt_mask(scans, cfg.gt_set)
     est = _estimate_rows(scans, X, labels, cfg.gt_set, sensor_cfg)
     est_xy = np.split(est.xy, est.off[1:-1])
@@ -143,7 +146,10 @@ def track_evaluation(
     needed = {k for g in gaps for k in range(g.k_a - 1, g.k_b + 1)}
     after_gap = {(g.target, g.k_b + 1) for g in gaps}
     needed |= {e.k_t for e in episodes if not e.censored and (e.target, e.k0) in after_gap}
-    assoc, assoc_labels = associated_labels(est_xy, est_labels, scans.truth_xy, gt, cfg.d_gate, sorted(needed))
+    if partner is None:
+        assoc, assoc_labels = associated_labels(est_xy, est_labels, scans.truth_xy, gt, cfg.d_gate, sorted(needed))
+    else:
+        assoc, assoc_labels = _partner_labels(partner, est, sorted(needed), labels is not None)
     out: dict[str, float | int | None] = dict.fromkeys(LABEL_KEYS + ALPHA_KEYS)
     if est_labels is not None:
         k, p = np.nonzero(gt)  # GT_k of every scan stacked, in column order (finite positions: gt_mask)
@@ -156,6 +162,21 @@ def track_evaluation(
         out.update(ospa2=o.ospa2, ospa2_loc=o.loc, ospa2_card=o.card)
     out.update(reemergence(episodes, gaps, assoc, assoc_labels, cfg.ddof, cfg.censored).summary())
     return {key: out[key] for key in TRACK_KEYS}, episode_gaps(scans, episodes, gaps, assoc, assoc_labels, cfg.d_gate)
+
+
+def _partner_labels(
+    partner: np.ndarray, est: ScanRows, scans: list[int], labelled: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`~soabench.tracks.reemergence.associated_labels` of ``scans`` from the gated matching's ``partner``
+    (K, P) (the index in Est_k of each target's partner, -1 for none) and the estimates' rows ``est``."""
+    assoc = np.zeros(partner.shape, dtype=bool)
+    assoc[scans] = partner[scans] >= 0
+    if not labelled:
+        return assoc, None
+    out = np.full(partner.shape, NO_LABEL, dtype=np.int64)
+    k, p = np.nonzero(assoc)
+    out[k, p] = est.ids[est.off[k] + partner[k, p]]
+    return assoc, out
 
 
 def episode_gaps(

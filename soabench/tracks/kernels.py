@@ -33,13 +33,16 @@ _EPS = np.finfo(np.float64).eps
 @njit(cache=True)
 def scan_similarity(gx, g0, ng, ex, e0, ne, d_gate):  # pragma: no cover - compiled
     """(ng, ne) similarity max(0, 1 - d / (2 d_gate)) of rows ``gx[g0:g0 + ng]`` and ``ex[e0:e0 + ne]``, with the
-    operations of :func:`soabench.tracks.sequence.similarity`."""
+    operations of :func:`soabench.tracks.sequence.similarity`. A pair whose squared distance exceeds (2 d_gate) ** 2
+    by more than its rounding has d >= 2 d_gate, so 0.0 (the value of the formula) without a square root."""
     S = np.empty((ng, ne))
+    far2 = (2.0 * d_gate) * (2.0 * d_gate) * (1.0 + 4.0 * _EPS)
     for i in range(ng):
         for j in range(ne):
             dx = gx[g0 + i, 0] - ex[e0 + j, 0]
             dy = gx[g0 + i, 1] - ex[e0 + j, 1]
-            S[i, j] = max(0.0, 1.0 - math.sqrt(dx * dx + dy * dy) / (2.0 * d_gate))
+            dd = dx * dx + dy * dy
+            S[i, j] = 0.0 if dd > far2 else max(0.0, 1.0 - math.sqrt(dd) / (2.0 * d_gate))
     return S
 
 
@@ -172,7 +175,8 @@ def match_scans(t, g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, alignm
             Q = np.empty((ng, ne))  # CLEAR: the previous scan's pairs first, then similarity, 0 below the threshold
             for i in range(ng):
                 for j in range(ne):
-                    C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j])
+                    # -(alignment * 0.0) is -0.0 for the finite, non-negative alignment: not read where S is 0.0
+                    C[i, j] = -(alignment[g_ids[g0 + i], e_ids[e0 + j]] * S[i, j]) if S[i, j] != 0.0 else -0.0
                     score = (1000.0 if e_ids[e0 + j] == prev_scan[g_ids[g0 + i]] else 0.0) + S[i, j]
                     Q[i, j] = -(0.0 if S[i, j] < threshold - _EPS else score)
             if _tied(C) or _tied(Q):
@@ -219,7 +223,9 @@ def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, n
     runs of ``step`` scans padded to G truths x E estimates): per scan, each truth's similarity sum over the E
     padded entries in numpy's pairwise order, each estimate's sum over the G padded truths one after another, the
     overlap ``S / (col + row - S)`` where that exceeds machine epsilon; per run of scans, the overlaps summed per
-    cell in scan order from 0.0 and added to ``potential``. A pair of zero similarity adds 0.0 and is skipped."""
+    cell in scan order from 0.0 and added to ``potential``. A pair of zero similarity adds 0.0 and is skipped.
+    Returns the cells that ``potential`` and ``id_potential`` hold a non-zero value in (each once, unsorted), so that
+    the (nG * nT,) arrays need not be searched for them."""
     K = len(g_off) - 1
     G, E = 0, 0
     for t in range(K):
@@ -231,20 +237,28 @@ def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, n
     block = np.zeros(len(potential))
     touched = np.empty(16, dtype=np.int64)
     n_touched = 0
+    cells = np.empty(16, dtype=np.int64)
+    id_cells = np.empty(16, dtype=np.int64)
+    n_cells = n_id = 0
     for t in range(K):
         g0, e0 = g_off[t], e_off[t]
         ng, ne = g_off[t + 1] - g0, e_off[t + 1] - e0
         if ng > 0 and ne > 0:
             if n_touched + ng * ne > len(touched):  # grown here, not inside the pair loop (reference counts)
                 touched = np.concatenate((touched[:n_touched], np.empty(n_touched + 2 * ng * ne, dtype=np.int64)))
+            if n_id + ng * ne > len(id_cells):
+                id_cells = np.concatenate((id_cells[:n_id], np.empty(n_id + 2 * ng * ne, dtype=np.int64)))
             S = scan_similarity(gx, g0, ng, ex, e0, ne, d_gate)
-            col[:ne] = S[0, :]
+            for j in range(ne):  # element loops: no slice assignment (and its shape-mismatch message) compiled
+                col[j] = S[0, j]
             for i in range(1, ng):
                 for j in range(ne):
                     col[j] += S[i, j]
             for i in range(ng):
-                row[:ne] = S[i, :]
-                row[ne:E] = 0.0
+                for j in range(ne):
+                    row[j] = S[i, j]
+                for j in range(ne, E):
+                    row[j] = 0.0
                 rsum[i] = np_sum(row, np.int64(E))
             for i in range(ng):
                 for j in range(ne):
@@ -258,51 +272,54 @@ def global_counts(g_ids, g_off, gx, e_ids, e_off, ex, d_gate, threshold, step, n
                         n_touched += 1
                     block[x] += iou
                     if S[i, j] >= threshold:
+                        if id_potential[x] == 0.0:
+                            id_cells[n_id] = x
+                            n_id += 1
                         id_potential[x] += 1.0
         if (t + 1) % step == 0 or t == K - 1:  # the end of a run of scans: its sums join the totals
+            if n_cells + n_touched > len(cells):
+                cells = np.concatenate((cells[:n_cells], np.empty(n_cells + 2 * n_touched, dtype=np.int64)))
             for q in range(n_touched):
                 x = touched[q]
+                if potential[x] == 0.0:  # a sum of positive overlaps: non-zero from its first one on
+                    cells[n_cells] = x
+                    n_cells += 1
                 potential[x] += block[x]
                 block[x] = 0.0
             n_touched = 0
+    return cells[:n_cells], id_cells[:n_id]
 
 
 @njit(cache=True)
-def _sparse_block(pos, val, lo, hi, start, n):  # pragma: no cover - compiled
-    """numpy's pairwise sum of a zero array of ``n`` <= 128 elements from ``start`` with ``val[lo:hi]`` at the
-    sorted positions ``pos[lo:hi]`` (all inside it): its leaf case, adding a zero being exact."""
+def _sparse_block(pos, val, lo, hi, start, n, out, acc):  # pragma: no cover - compiled
+    """``out[i]``: numpy's pairwise sum of a zero array of ``n`` <= 128 elements from ``start`` with ``val[lo:hi, i]``
+    at the sorted positions ``pos[lo:hi]`` (all inside it), for every column i of ``val``: its leaf case (eight running
+    sums ``acc``), adding a zero being exact."""
+    R = val.shape[1]
     if n < 8:
-        res = -0.0
+        for i in range(R):
+            out[i] = -0.0
         for q in range(lo, hi):
-            res += val[q]
-        return res
-    r0 = r1 = r2 = r3 = r4 = r5 = r6 = r7 = 0.0
+            for i in range(R):
+                out[i] += val[q, i]
+        return
+    for j in range(8):
+        for i in range(R):
+            acc[j, i] = 0.0
     stop = start + n - n % 8
     q = lo
     while q < hi and pos[q] < stop:
         j = (pos[q] - start) % 8
-        if j == 0:
-            r0 += val[q]
-        elif j == 1:
-            r1 += val[q]
-        elif j == 2:
-            r2 += val[q]
-        elif j == 3:
-            r3 += val[q]
-        elif j == 4:
-            r4 += val[q]
-        elif j == 5:
-            r5 += val[q]
-        elif j == 6:
-            r6 += val[q]
-        else:
-            r7 += val[q]
+        for i in range(R):
+            acc[j, i] += val[q, i]
         q += 1
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for i in range(R):
+        left = (acc[0, i] + acc[1, i]) + (acc[2, i] + acc[3, i])
+        out[i] = left + ((acc[4, i] + acc[5, i]) + (acc[6, i] + acc[7, i]))
     while q < hi:
-        res += val[q]
+        for i in range(R):
+            out[i] += val[q, i]
         q += 1
-    return res
 
 
 @njit(cache=True)
@@ -319,26 +336,33 @@ def _first_at_or_after(pos, lo, hi, x):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def sparse_np_sum(pos, val, n):  # pragma: no cover - compiled
-    """``a.sum()`` of the (n,) float64 array ``a`` that is zero but for ``val`` (> 0) at the sorted positions
-    ``pos``, bit for bit, in time of the non-zero entries: numpy's pairwise summation (halves split at a multiple of
-    8 above 128 elements, eight running sums below; :func:`soabench.metrics_kernels.np_sum`) with every part that
-    holds no non-zero entry known to be 0.0, which adds exactly."""
+    """``a.sum()`` of each column of ``val`` (m, R) as an (n,) float64 array ``a`` that is zero but for that column's
+    values (>= 0) at the sorted positions ``pos`` (m,): (R,) sums, bit for bit, in time of the listed entries. numpy's
+    pairwise summation (halves split at a multiple of 8 above 128 elements, eight running sums below;
+    :func:`soabench.metrics_kernels.np_sum`) with every part that holds no listed entry known to be 0.0, which adds
+    exactly, as does a listed 0.0; the R sums share one walk over the positions."""
+    R = val.shape[1]
     if n == 0 or len(pos) == 0:
-        return 0.0
+        return np.zeros(R)
     f_start = np.empty(64, dtype=np.int64)
     f_n = np.empty(64, dtype=np.int64)
     f_lo = np.empty(64, dtype=np.int64)
     f_mid = np.empty(64, dtype=np.int64)
     f_hi = np.empty(64, dtype=np.int64)
     f_stage = np.zeros(64, dtype=np.int64)
-    vals = np.empty(64)
+    vals = np.empty((64, R))
+    acc = np.empty((8, R))
     nv = 0
     top = 0
     f_start[0], f_n[0], f_lo[0], f_hi[0] = 0, n, 0, len(pos)
     while top >= 0:
         s, m, lo, hi = f_start[top], f_n[top], f_lo[top], f_hi[top]
         if lo == hi or m <= 128:
-            vals[nv] = 0.0 if lo == hi else _sparse_block(pos, val, lo, hi, s, m)
+            if lo == hi:
+                for i in range(R):
+                    vals[nv, i] = 0.0
+            else:
+                _sparse_block(pos, val, lo, hi, s, m, vals[nv], acc)
             nv += 1
             top -= 1
             continue
@@ -356,10 +380,14 @@ def sparse_np_sum(pos, val, n):  # pragma: no cover - compiled
             top += 1
             f_start[top], f_n[top], f_lo[top], f_hi[top], f_stage[top] = s + half, m - half, mid, hi, 0
         else:  # both done: left + right
-            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            for i in range(R):
+                vals[nv - 2, i] = vals[nv - 2, i] + vals[nv - 1, i]
             nv -= 1
             top -= 1
-    return vals[0]
+    out = np.empty(R)
+    for i in range(R):
+        out[i] = vals[0, i]
+    return out
 
 
 @njit(cache=True)
@@ -417,7 +445,7 @@ def _window_tracks(ids, off, lo, k, stamp, sel):  # pragma: no cover - compiled
                 stamp[i] = k
                 sel[m] = i
                 m += 1
-    sel[:m] = np.sort(sel[:m])
+    sel[:m].sort()
     return m
 
 
@@ -629,6 +657,42 @@ def _scan_events(g_ids, g_off, gx, e_ids, e_off, ex, c):  # pragma: no cover - c
 
 
 @njit(cache=True)
+def _event_links(ev_i, ev_j, ev_off, n_g, n_e):  # pragma: no cover - compiled
+    """Per near event (:func:`_scan_events`): its scan, and the previous and the next event of the same pair
+    (truth id, estimate id), -1 where there is none. The events are grouped by estimate id in event order (a stable
+    counting sort), so each pair's events meet in scan order with one mark per truth id."""
+    n_ev = ev_off[-1]
+    ev_t = np.empty(n_ev, dtype=np.int64)
+    for k in range(len(ev_off) - 1):
+        for e in range(ev_off[k], ev_off[k + 1]):
+            ev_t[e] = k
+    start = np.zeros(n_e + 1, dtype=np.int64)
+    for e in range(n_ev):
+        start[ev_j[e] + 1] += 1
+    for j in range(n_e):
+        start[j + 1] += start[j]
+    fill = start[:-1].copy()
+    by_j = np.empty(n_ev, dtype=np.int64)
+    for e in range(n_ev):
+        by_j[fill[ev_j[e]]] = e
+        fill[ev_j[e]] += 1
+    prev = np.full(n_ev, -1, dtype=np.int64)
+    nxt = np.full(n_ev, -1, dtype=np.int64)
+    last = np.empty(n_g, dtype=np.int64)  # per truth id: its latest event with the estimate id at hand
+    mark = np.full(n_g, -1, dtype=np.int64)  # per truth id: the estimate id ``last`` belongs to
+    for j in range(n_e):
+        for q in range(start[j], start[j + 1]):
+            e = by_j[q]
+            i = ev_i[e]
+            if mark[i] == j:
+                prev[e] = last[i]
+                nxt[last[i]] = e
+            mark[i] = j
+            last[i] = e
+    return ev_t, prev, nxt
+
+
+@njit(cache=True)
 def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # pragma: no cover - compiled
     """(K, 3) OSPA(2) per scan (total, localisation, cardinality) of stacked truth and estimate rows (ids 0..n_g - 1
     and 0..n_e - 1, scan k's rows ``off[k]:off[k + 1]``; :func:`soabench.tracks.ospa2.ospa2_of`).
@@ -636,11 +700,15 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     The base distance of a pair is ``min(c, total / count)`` with total the in-order sum over the window's scans
     where either track exists of ``min(c, |x(t) - y(t)|)`` (both exist) or ``c``. A pair never closer than c in the
     window adds c at each such scan, so its total is c added ``count`` times, with ``count`` the set bits of the two
-    tracks' presence masks over the window; only the pairs closer than c at some scan of the window (kept per scan
-    as they enter it) are summed scan by scan. Where c added n times and divided by n is c for every n <= window
-    (c = 10), every other pair costs ``c ** p``, the largest cost, and the assignment needs only the near pairs
-    (:func:`_near_assignment`); otherwise the dense cost matrix, entry for entry the one of summing every pair, is
-    assigned (:func:`_dense_assignment`)."""
+    tracks' presence masks over the window; only the pairs closer than c at some scan of the window are summed. The
+    pairs closer than c are listed once per run as events (scan, truth, estimate, distance) linked to the same
+    pair's previous and next events (:func:`_event_links`): a window's pairs are its events that have no earlier one
+    in the window, in event order, and each pair's sum follows its links. Before its first near scan a pair adds
+    only c, so that part of the sum is read from a table of c added n times (n: the set bits of its presence masks
+    before that scan; a window of at most 64 scans fits one mask word). Where c added n times and divided by n
+    is c for every n <= window (c = 10), every other pair costs ``c ** p``, the largest cost, and the assignment
+    needs only the near pairs (:func:`_near_assignment`); otherwise the dense cost matrix, entry for entry the one
+    of summing every pair, is assigned (:func:`_dense_assignment`)."""
     K = len(g_off) - 1
     out = np.zeros((K, 3))
     n_words = (window + 63) // 64
@@ -648,9 +716,11 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     mask_g = np.zeros((n_g, n_words), dtype=np.uint64)
     mask_e = np.zeros((n_e, n_words), dtype=np.uint64)
     far = np.zeros(window + 1)  # far[n]: the base distance ** p of a pair that adds c at n scans
+    c_times = np.zeros(window + 1)  # c_times[n]: c added n times from 0.0
     total = 0.0
     for n in range(1, window + 1):
         total += c
+        c_times[n] = total
         far[n] = min(total / n, c) ** p
     far_is_cp = np.all(far[1:] == far[1])
     stamp_g = np.full(n_g, -1, dtype=np.int64)
@@ -660,23 +730,22 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
     loc_g = np.zeros(n_g, dtype=np.int64)
     loc_e = np.zeros(n_e, dtype=np.int64)
     ev_i, ev_j, ev_d, ev_off = _scan_events(g_ids, g_off, gx, e_ids, e_off, ex, c)
+    ev_t, prev, nxt = _event_links(ev_i, ev_j, ev_off, n_g, n_e)
     # every buffer of the window loop at its largest size first (none replaced inside the loop)
-    max_mn, max_small, max_ev = 0, 0, 0
+    max_small, max_ev = 0, 0
     for k in range(K):
         lo = max(0, k - window + 1)
         m = _window_tracks(g_ids, g_off, lo, k, stamp_g, gsel)
         n = _window_tracks(e_ids, e_off, lo, k, stamp_e, esel)
-        max_mn, max_small = max(max_mn, m * n), max(max_small, min(m, n))
+        max_small = max(max_small, min(m, n))
         max_ev = max(max_ev, ev_off[k + 1] - ev_off[lo])
-    stamp_g[:] = -1
-    stamp_e[:] = -1
-    slot = np.full(max_mn, -1, dtype=np.int64)  # per (a, b) of the window's tracks: its near pair's row, or -1
-    near = np.empty(max_ev, dtype=np.int64)  # per near pair: its slot a * n + b, and a and b
+    for i in range(n_g):
+        stamp_g[i] = -1
+    for j in range(n_e):
+        stamp_e[j] = -1
     near_a = np.empty(max_ev, dtype=np.int64)
     near_b = np.empty(max_ev, dtype=np.int64)
     near_cost = np.empty(max_ev)
-    terms = np.empty((max_ev, window))
-    near_bits = np.empty((max_ev, n_words), dtype=np.uint64)  # per near pair: the window's scans where it is near
     vals = np.empty(max_small)
     word = np.empty(window, dtype=np.int64)  # per scan of the window: its mask word and bit
     bits = np.empty(window, dtype=np.uint64)
@@ -707,40 +776,51 @@ def ospa2_scans(g_ids, g_off, gx, n_g, e_ids, e_off, ex, n_e, c, p, window):  # 
                 loc_g[gsel[a]] = a
             for b in range(n):
                 loc_e[esel[b]] = b
-            # the pairs closer than c somewhere in the window (each once, in order of their first event), their
-            # terms at those scans and a bit per such scan; the slots of (a, b) are cleared again after the window
-            n_near = 0
             for t in range(lo, k + 1):
                 s = t % ring
                 word[t - lo] = s // 64
                 bits[t - lo] = np.uint64(1) << np.uint64(s % 64)
-                tw, tb = (t - lo) // 64, np.uint64(1) << np.uint64((t - lo) % 64)
-                for e in range(ev_off[t], ev_off[t + 1]):
-                    x = loc_g[ev_i[e]] * n + loc_e[ev_j[e]]
-                    q = slot[x]
-                    if q < 0:
-                        q = n_near
-                        slot[x] = q
-                        near[q], near_a[q], near_b[q] = x, loc_g[ev_i[e]], loc_e[ev_j[e]]
-                        for w in range(n_words):
-                            near_bits[q, w] = 0
-                        n_near += 1
-                    terms[q, t - lo] = ev_d[e]
-                    near_bits[q, tw] |= tb
-            for q in range(n_near):  # in order over the scans where either exists: its term where near, else c
-                x = near[q]
-                slot[x] = -1
-                i, j = gsel[near_a[q]], esel[near_b[q]]
-                total, count = 0.0, 0
-                for t in range(k + 1 - lo):
-                    if ((mask_g[i, word[t]] | mask_e[j, word[t]]) & bits[t]) != 0:
-                        if (near_bits[q, t // 64] >> np.uint64(t % 64)) & np.uint64(1):
-                            total += terms[q, t]
-                        else:
-                            total += c
-                        count += 1
+            # each pair closer than c somewhere in the window, at its first event there (in event order): in order
+            # over the scans where either exists, its distance where near (its next events), else c
+            first = ev_off[lo]
+            rot = np.uint64(lo % 64)
+            in_window = (np.uint64(1) << np.uint64(k + 1 - lo)) - np.uint64(1) if k + 1 - lo < 64 else ~np.uint64(0)
+            n_near = 0
+            for e in range(first, ev_off[k + 1]):
+                if prev[e] >= first:
+                    continue
+                i, j = ev_i[e], ev_j[e]
+                near_a[n_near], near_b[n_near] = loc_g[i], loc_e[j]
+                t0 = ev_t[e] - lo
+                f, t_near = e, t0
+                if n_words == 1:  # the window's presence bits rotated to bit t = scan lo + t
+                    u = mask_g[i, 0] | mask_e[j, 0]
+                    u = ((u >> rot) | (u << (np.uint64(64) - rot))) & in_window if rot else u & in_window
+                    count = _popcount(u & ((np.uint64(1) << np.uint64(t0)) - np.uint64(1)))
+                    total = c_times[count]
+                    for t in range(t0, k + 1 - lo):
+                        if (u >> np.uint64(t)) & np.uint64(1):
+                            if t == t_near:
+                                total += ev_d[f]
+                                f = nxt[f]
+                                t_near = ev_t[f] - lo if f >= 0 else -1
+                            else:
+                                total += c
+                            count += 1
+                else:
+                    total, count = 0.0, 0
+                    for t in range(k + 1 - lo):
+                        if ((mask_g[i, word[t]] | mask_e[j, word[t]]) & bits[t]) != 0:
+                            if t == t_near:
+                                total += ev_d[f]
+                                f = nxt[f]
+                                t_near = ev_t[f] - lo if f >= 0 else -1
+                            else:
+                                total += c
+                            count += 1
                 d = min(total / count, c)
-                near_cost[q] = d if p == 1.0 else d**p  # x ** 1.0 is x
+                near_cost[n_near] = d if p == 1.0 else d**p  # x ** 1.0 is x
+                n_near += 1
             if far_is_cp:
                 _near_assignment(near_a, near_b, near_cost, n_near, m, n, far[1], vals)
             else:

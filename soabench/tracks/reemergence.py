@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from soabench.errors import require
-from soabench.metrics import Episode, delay_summary, gated_assignment, visibility_runs
+from soabench.metrics import Episode, delay_summary, gated_assignment
 
 #: label of "no estimate associated" in the (K, P) label array of :func:`associated_labels`
 NO_LABEL = -1
@@ -45,13 +45,20 @@ def occlusion_gaps(in_view: np.ndarray, visible: np.ndarray) -> list[Gap]:
     the FOV and line-of-sight visible (``Scans.present & Scans.in_fov`` and ``Scans.visible``)."""
     in_view, visible = np.asarray(in_view, dtype=bool), np.asarray(visible, dtype=bool)
     require(in_view.shape == visible.shape, "in_view and visible must have the same (K, P) shape")
+    if visible.ndim != 2 or not visible.size:
+        return []
     K = len(visible)
-    gaps = []
-    for i in range(visible.shape[1] if visible.ndim == 2 else 0):
-        for k_a, k_b in visibility_runs(in_view[:, i] & ~visible[:, i]):
-            if k_a >= 1 and k_b + 1 < K and visible[k_a - 1, i] and visible[k_b + 1, i]:
-                gaps.append(Gap(i, k_a, k_b))
-    return gaps
+    # every target's hidden runs at once (the runs of visibility_runs): a run starts where the padded flags step up
+    # and ends before they step down; both lists come out target by target in scan order, so they pair up
+    hidden = np.zeros((visible.shape[1], K + 2), dtype=np.int8)
+    hidden[:, 1:-1] = (in_view & ~visible).T
+    step = np.diff(hidden, axis=1)
+    target, k_a = np.nonzero(step == 1)
+    k_b = np.nonzero(step == -1)[1] - 1
+    inner = (k_a >= 1) & (k_b + 1 < K)
+    target, k_a, k_b = target[inner], k_a[inner], k_b[inner]
+    seen = visible[k_a - 1, target] & visible[k_b + 1, target]
+    return [Gap(i, a, b) for i, a, b in zip(target[seen].tolist(), k_a[seen].tolist(), k_b[seen].tolist(), strict=True)]
 
 
 def associated_labels(

@@ -93,20 +93,21 @@ def scores_of(seq: TrackSequence, d_gate: float) -> TrackScores:
     nG, nT = len(seq.gt_labels), len(seq.est_labels)
     gt_count = np.bincount(seq.gt.ids, minlength=nG).astype(float)
     tr_count = np.bincount(seq.est.ids, minlength=nT).astype(float)
-    alignment, id_potential = _global_counts(seq, d_gate, gt_count, tr_count)
+    alignment, id_potential, id_cells = _global_counts(seq, d_gate, gt_count, tr_count)
     hota_pairs, clear = _scan_matches(seq, d_gate, alignment, nG)
     return TrackScores(
         **_hota(seq, hota_pairs, gt_count, tr_count),
         **clear,
-        **_identity(seq, id_potential, gt_count, tr_count),
+        **_identity(seq, id_potential, id_cells, gt_count, tr_count),
     )
 
 
 def _global_counts(
     seq: TrackSequence, d_gate: float, gt_count: np.ndarray, tr_count: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """HOTA's global alignment score (nG, nT): the similarity-weighted Jaccard overlap of each truth-track pair
-    summed over scans; and Identity's potential-match counts (nG, nT) (pairs with S >= :data:`THRESHOLD`).
+    summed over scans; Identity's potential-match counts (nG, nT) (pairs with S >= :data:`THRESHOLD`) and their
+    non-zero cells (truth * nT + track, sorted).
 
     TrackEval's sums over padded runs of scans (:meth:`TrackSequence.blocks`), in one compiled loop over the pairs
     of non-zero similarity (:func:`soabench.tracks.kernels.global_counts`, the same operations in the same order)."""
@@ -119,13 +120,13 @@ def _global_counts(
     G, E = int(np.diff(g.off).max(initial=0)), int(np.diff(e.off).max(initial=0))
     step = max(1, BLOCK_CELLS // max(1, G * E))
     args = (g.ids, g.off, g.xy, e.ids, e.off, e.xy, float(d_gate), THRESHOLD, step, nT, potential, id_potential)
-    announced("track metrics", global_counts, *args)
+    on, id_cells = announced("track metrics", global_counts, *args)
     # potential / (gt_count + tr_count - potential) per cell; a cell without overlap is 0 / (a positive count) = 0.0
-    on = np.flatnonzero(potential)
+    on = np.sort(on)
     alignment = np.zeros(nG * nT)
     with np.errstate(invalid="ignore", divide="ignore"):
         alignment[on] = potential[on] / (gt_count[on // nT] + tr_count[on % nT] - potential[on])
-    return alignment.reshape(nG, nT), id_potential.reshape(nG, nT)
+    return alignment.reshape(nG, nT), id_potential.reshape(nG, nT), np.sort(id_cells)
 
 
 @dataclass
@@ -295,9 +296,10 @@ def _association(
     """HOTA's AssA, AssRe and AssPr per alpha from the matches' cells (truth * nT + track) and ``hit`` (A, matches).
 
     Per alpha, TrackEval sums ``count * (count / max(1, union - count))`` (and the recall and precision forms) over
-    the dense (nG, nT) array of match counts. The cells are sorted once for every alpha, each alpha's counts are
-    found per cell, and the sums are taken over the non-zero cells only with :func:`sparse_np_sum`, numpy's pairwise
-    sum of the dense array bit for bit (a zero cell adds nothing)."""
+    the dense (nG, nT) array of match counts. The cells with a match at some alpha are sorted once, each alpha's
+    counts are found per cell (0 where it has none there, whose terms are 0.0), and the 3 x 19 sums are taken over
+    those cells only, in one call of :func:`sparse_np_sum`: numpy's pairwise sum of each dense array bit for bit (a
+    zero cell adds nothing)."""
     from soabench.tracks.kernels import sparse_np_sum
 
     A, nT = len(hit), len(tr_count)
@@ -305,24 +307,19 @@ def _association(
     cells, first = np.unique(cell[order], return_index=True)
     g, t = cells // nT, cells % nT
     union = gt_count[g] + tr_count[t]
-    out = np.zeros((3, A))
+    terms = np.zeros((len(cells), 3, A))
     for a in range(A):
-        count = np.add.reduceat(hit[a][order].astype(np.int64), first).astype(float) if len(cells) else np.zeros(0)
-        on = count > 0
-        pos, c = cells[on], count[on]
-        den = max(1.0, tp[a])
-        terms = (
-            c * (c / np.maximum(1, union[on] - c)),
-            c * (c / np.maximum(1, gt_count[g[on]])),
-            c * (c / np.maximum(1, tr_count[t[on]])),
-        )
-        for i, term in enumerate(terms):
-            out[i, a] = announced("track metrics", sparse_np_sum, pos, term, len(gt_count) * nT) / den
+        c = np.add.reduceat(hit[a][order].astype(np.int64), first).astype(float) if len(cells) else np.zeros(0)
+        terms[:, 0, a] = c * (c / np.maximum(1, union - c))
+        terms[:, 1, a] = c * (c / np.maximum(1, gt_count[g]))
+        terms[:, 2, a] = c * (c / np.maximum(1, tr_count[t]))
+    sums = announced("track metrics", sparse_np_sum, cells, terms.reshape(len(cells), 3 * A), len(gt_count) * nT)
+    out = sums.reshape(3, A) / np.maximum(1.0, tp)
     return out[0], out[1], out[2]
 
 
 def _identity(
-    seq: TrackSequence, potential: np.ndarray, gt_count: np.ndarray, tr_count: np.ndarray
+    seq: TrackSequence, potential: np.ndarray, cells: np.ndarray, gt_count: np.ndarray, tr_count: np.ndarray
 ) -> dict[str, float | int]:
     """IDF1, IDP, IDR: the one-to-one truth-to-track assignment that minimises IDFN + IDFP (Ristani et al. 2016).
 
@@ -333,7 +330,7 @@ def _identity(
     ``sum(gt_count) - M``, IDFP = ``sum(tr_count) - M``: integer counts, equal for every optimal assignment."""
     if seq.n_est_dets == 0 or seq.n_gt_dets == 0:
         return {"idf1": 0.0, "idp": 0.0, "idr": 0.0, "idtp": 0, "idfn": seq.n_gt_dets, "idfp": seq.n_est_dets}
-    matched = _identity_matched(potential)
+    matched = _identity_matched(potential, cells)
     idfn = int(gt_count.sum() - matched)
     idfp = int(tr_count.sum() - matched)
     idtp = int(gt_count.sum()) - idfn
@@ -347,9 +344,9 @@ def _identity(
     }
 
 
-def _identity_matched(potential: np.ndarray) -> float:
+def _identity_matched(potential: np.ndarray, cells: np.ndarray | None = None) -> float:
     """The largest total of ``potential`` (nG, nT) (counts of scans where a truth and a track match) over the
-    one-to-one matchings of truths to tracks.
+    one-to-one matchings of truths to tracks; ``cells``: its non-zero cells (truth * nT + track, sorted) if known.
 
     A pair without a potential match adds nothing, so only the pairs with ``potential > 0`` are listed, each truth
     free to stay unmatched at no gain: one sparse minimum-cost assignment of the negated counts
@@ -357,10 +354,12 @@ def _identity_matched(potential: np.ndarray) -> float:
     the total is the same whichever optimal matching is found."""
     from soabench.tracks.kernels import sparse_assign_rows
 
-    g, t = np.nonzero(potential)  # row by row: each truth's pairs together
+    nG, nT = potential.shape
+    if cells is None:
+        cells = np.flatnonzero(potential)
+    g, t = cells // nT, cells % nT  # row by row: each truth's pairs together
     if len(g) == 0:
         return 0.0
-    nG, nT = potential.shape
     off = np.zeros(nG + 1, dtype=np.int64)
     np.cumsum(np.bincount(g, minlength=nG), out=off[1:])
     col = announced("track metrics", sparse_assign_rows, nG, nT, off, t.astype(np.int64), -potential[g, t], 0.0)

@@ -69,6 +69,7 @@ def _same(a, b) -> None:
     for key in a.series:
         assert a.series[key].dtype == b.series[key].dtype and np.array_equal(a.series[key], b.series[key]), key
     assert a.episodes == b.episodes
+    assert a.partner.dtype == b.partner.dtype and np.array_equal(a.partner, b.partner)
 
 
 def _scans(truth: np.ndarray, ego: np.ndarray, cfg: Sensor) -> Scans:

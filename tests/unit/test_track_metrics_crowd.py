@@ -141,7 +141,8 @@ def test_equal_rows_as_compared_pair_by_pair(seed):
 @pytest.mark.parametrize("seed", range(12))
 def test_sparse_sum_is_the_dense_arrays_sum_bit_for_bit(seed):
     """Lengths around numpy's block sizes (8, 128 and their splits), densities from empty to full, magnitudes over
-    six decades: the sum of the non-zero entries in numpy's pairwise order is ``ndarray.sum`` of the dense array."""
+    six decades: the sum of the listed entries in numpy's pairwise order is ``ndarray.sum`` of the dense array, for
+    each of several arrays listed at the same positions (a listed zero included)."""
     from soabench.tracks.kernels import sparse_np_sum
 
     rng = np.random.default_rng(seed)
@@ -149,8 +150,10 @@ def test_sparse_sum_is_the_dense_arrays_sum_bit_for_bit(seed):
         a = np.where(
             rng.random(n) < rng.choice([0.0, 0.001, 0.05, 0.5, 1.0]), rng.random(n) * 10 ** rng.uniform(-3, 3, n), 0.0
         )
-        pos = np.flatnonzero(a)
-        assert sparse_np_sum(pos, a[pos], n) == a.sum()
+        b = np.where(rng.random(n) < 0.5, 0.0, a[::-1])
+        pos = np.flatnonzero(a + b)
+        sums = sparse_np_sum(pos, np.column_stack([a[pos], b[pos], 0.0 * a[pos]]), n)
+        assert sums.tolist() == [a.sum(), b.sum(), 0.0]
 
 
 def padded_global_counts(seq: TrackSequence, d_gate: float, nG: int, nT: int) -> tuple[np.ndarray, np.ndarray]:
@@ -184,9 +187,11 @@ def test_global_counts_are_the_padded_arrays_sums_bit_for_bit(seed, monkeypatch)
         got = np.zeros(nG * nT), np.zeros(nG * nT)
         g, e = seq.gt, seq.est
         step = max(1, 2000 // (G * E))
-        global_counts(g.ids, g.off, g.xy, e.ids, e.off, e.xy, D_GATE, 0.5, step, nT, *got)
+        cells = global_counts(g.ids, g.off, g.xy, e.ids, e.off, e.xy, D_GATE, 0.5, step, nT, *got)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
+        for c, a in zip(cells, got, strict=True):  # each non-zero cell listed once
+            np.testing.assert_array_equal(np.sort(c), np.flatnonzero(a))
         assert (want[0] > 0).any()
 
 
@@ -226,3 +231,47 @@ def test_ospa2_with_a_cutoff_whose_sums_are_not_exact_equals_every_pair(seed):
     seq = TrackSequence.of(*crowd_sequence(seed, K=40))
     got = ospa2(*crowd_sequence(seed, K=40), c=0.7, p=1.0, window=10).series[:, 0]
     np.testing.assert_array_equal(got, ospa2_every_pair(seq, 0.7, 1.0, 10))
+
+
+def test_track_measures_read_the_gated_matching_of_the_metrics():
+    """The §5.4 matching the re-emergence measures read (associated estimates and their labels) taken from the run's
+    metrics (``TrialMetrics.partner``) gives the columns and gap cells of matching again: estimates extracted twice
+    (scipy's choice of the compiled path's left-over scans), labels that switch, gaps with and without an estimate."""
+    import dataclasses
+
+    from soabench.config import MetricsConfig, Sensor
+    from soabench.metrics import evaluate
+    from soabench.tracks.evaluate import track_evaluation
+    from soabench.types import Obstacles, Scan, Scans, StepResult
+
+    rng = np.random.default_rng(5)
+    K, P = 80, 8
+    sensor, mcfg = dataclasses.replace(Sensor(), fov_deg=360.0), MetricsConfig()
+    truth = np.cumsum(rng.normal(0.0, 0.5, (K, P, 2)), axis=0) + rng.uniform(-25, 25, (1, P, 2))
+    visible = np.ones((K, P), dtype=bool)
+    for p in range(P):  # two occlusion gaps per target
+        for k0 in rng.choice(np.arange(3, K - 8), 2, replace=False):
+            visible[k0 : k0 + int(rng.integers(1, 5)), p] = False
+    X, labels, results = [], [], []
+    for k in range(K):
+        shown = visible[k] | (rng.random(P) < 0.5)  # coasted through part of the gaps
+        est = truth[k, shown] + rng.normal(0.0, 0.8, (int(shown.sum()), 2))
+        lab = np.flatnonzero(shown) + 100 * (k // 20)  # every target's label changes every 20 scans
+        if len(est) > 2 and k % 2:
+            est[1] = est[2] = 0.5 * (est[1] + est[2])  # one estimate, extracted twice, between two truths
+        x = np.zeros((len(est), 4))
+        x[:, :2] = est
+        X.append(x)
+        labels.append(lab.astype(np.int64))
+        n, none = len(x), np.zeros(0)
+        results.append(StepResult(k, x, np.ones(n), 1.0 * n, 1.0 * n, n, n, n, False, 0.0, 0.0, 0.0, 0.98, none, none))
+    ones = np.ones((K, P), dtype=bool)
+    scans = Scans([Scan(k, float(k), np.zeros(3), np.zeros((0, 2)), Obstacles.empty(), [], None) for k in range(K)],
+                  1.0, [np.zeros(0, dtype=np.int64)] * K, truth, ones, ones.copy(), visible, visible.copy(),
+                  np.array([str(p) for p in range(P)]))  # fmt: skip
+    metrics = evaluate(scans, results, mcfg, sensor)
+    for lab in (labels, None):
+        again = track_evaluation(scans, X, lab, metrics.episodes, mcfg, sensor)
+        read = track_evaluation(scans, X, lab, metrics.episodes, mcfg, sensor, metrics.partner)
+        assert str(read) == str(again)  # every value and its type (NaN as NaN)
+    assert again[0]["n_gaps"] > 5 and 0 < read[0]["coasted"] < 1 and read[0]["n_reemergence"] > 5

@@ -776,7 +776,8 @@ def _record(
     metrics = evaluate(scans, run.results, config.metrics, sensor_cfg)
     t_metrics = time.perf_counter() - t0
     X = [r.X for r in run.results]
-    tracks, gaps = track_evaluation(scans, X, run_labels(run.results, X), metrics.episodes, config.metrics, sensor_cfg)
+    labels = run_labels(run.results, X)
+    tracks, gaps = track_evaluation(scans, X, labels, metrics.episodes, config.metrics, sensor_cfg, metrics.partner)
     out.rows.append(make_row(key, seeds, config.birth.N_hat, metrics, run, t_metrics, tracks))
     out.episodes.extend(episode_rows(key, metrics, gaps))
     out.steps.extend(step_rows(key, metrics))
