@@ -37,12 +37,17 @@ def _same_bits(a, b, what: str) -> None:
 
 
 @pytest.mark.parametrize(
-    "pmb,model,variant", [(False, "soa", "ekf"), (False, "pubm", "ekf"), (True, "atbm", "ekf"), (True, "soa", "ukf")]
+    "pmb,model,variant",
+    [(False, "soa", "ekf"), (False, "pubm", "ekf"), (True, "atbm", "ekf"), (True, "soa", "ukf"), (False, "ubm", "occ")],
 )  # fmt: skip
 def test_compiled_update_equals_array_path(recorded_intersection, pmb, model, variant):
     cfg, scene, scans_by_lam, seeds = recorded_intersection
     sensor, scans = scans_by_lam[3.0]
-    filter_cfg = dataclasses.replace(cfg.filter, form=variant)
+    if variant == "occ":  # static+occ: the line-of-sight detection probability
+        filter_cfg = dataclasses.replace(cfg.filter, occlusion_pd=True)
+        assert any(s.occluders for s in scans.scans)
+    else:
+        filter_cfg = dataclasses.replace(cfg.filter, form=variant)
     fused = PMBMFilter(filter_cfg, sensor, pmbm_cfg=cfg.pmbm, pmb=pmb)
     ref = PMBMFilter(filter_cfg, sensor, pmbm_cfg=cfg.pmbm, pmb=pmb, fused=False)
     assert fused.fused and not ref.fused
