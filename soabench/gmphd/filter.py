@@ -33,10 +33,9 @@ from soabench.gmphd import cycle, reduction
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
-from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate
+from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate, scan_line_of_sight
 from soabench.gmphd.reduction import extract_labelled, prune_merge_cap
 from soabench.origins import origin_counts
-from soabench.sensor import line_of_sight_past, sight_blockers
 from soabench.types import (
     SOURCE_MEAS,
     SOURCE_NAMES,
@@ -206,7 +205,7 @@ class GMPHDFilter:
         if checked.ego is None:  # a dropped scan: no detection geometry, prediction only
             g = np.zeros(len(mix))
         else:
-            g = detection_gate(mix.m, ego, self.sensor, scan.occluders if self.occlusion else None)
+            g = detection_gate(mix.m, ego, self.sensor, scan.occluders if self.occlusion else None, scan)
         p_D = g * beta_mean(mix.sD, mix.tD) if self.dynamic else g * cfg.p_D
         kappa = clutter_intensity(Z, self.sensor)
         up = update(
@@ -319,11 +318,7 @@ class GMPHDFilter:
         n_predicted = len(g) + (len(Z) if newborn is not None else 0)
         if self.occlusion and scan.occluders and g.any():  # line-of-sight gate (§4.4), as detection_gate
             idx = np.flatnonzero(g)
-            make = lambda: (sight_blockers(ego[:2], scan.occluders), scan.occluders)  # noqa: E731
-            key = ("filter.sight_blockers", id(scan.occluders), len(scan.occluders), ego[0], ego[1])
-            blockers = scan_once(scan, key, make)[0]
-            vis = np.asarray(line_of_sight_past(ego[:2], pred[1][idx, :2], blockers), dtype=bool)
-            g[idx] = vis.reshape(-1)
+            g[idx] = scan_line_of_sight(scan, ego, pred[1][idx, :2]).reshape(-1)
         t1 = time.perf_counter()
 
         if newborn is None:

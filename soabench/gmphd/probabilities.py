@@ -1,7 +1,8 @@
 """Detection and survival probabilities: the static mode and the Beta "dynamic" mode (docs/method.md §4).
 
 * :func:`detection_gate` is g(x) of §4.1/§4.4 at the component means: the FOV indicator, times the line-of-sight
-  indicator when ``occlusion_pd`` is on.
+  indicator when ``occlusion_pd`` is on (:func:`scan_line_of_sight`: the scan's sight blockers built once for
+  every run over it).
 * :func:`beta_inflate`, :func:`beta_survival_predict` are the Beta prediction of §4.2 (p_D) and §4.3 (p_S).
 * :func:`beta_moment_match` is the Beta merge of §4.5.
 
@@ -11,31 +12,50 @@ The Beta detection update itself (missed: t <- t + g; detected: s <- s + 1) is a
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from soabench.config import FilterConfig, SensorConfig
 from soabench.geometry import fov_mask
-from soabench.sensor import line_of_sight
+from soabench.sensor import line_of_sight, line_of_sight_past, sight_blockers
+from soabench.types import scan_once
 
 _TINY = 1e-300
 
 
 def detection_gate(
-    m: np.ndarray, ego: np.ndarray, sensor_cfg: SensorConfig, occluders: list | None = None
+    m: np.ndarray, ego: np.ndarray, sensor_cfg: SensorConfig, occluders: list | None = None, scan: Any = None
 ) -> np.ndarray:
     """g(m_j) (J,) in {0, 1}: 1[m_j in FOV_k] (§4.1; includes r >= r_min), times line of sight (§4.4) if given.
 
     ``occluders`` (shapely polygons) switches on the ``occlusion_pd`` gate: a mean whose segment from the sensor
     runs through an occluder (more than 1e-9 m inside it; grazing is visible) gets g = 0
-    (:func:`soabench.sensor.line_of_sight`).
+    (:func:`soabench.sensor.line_of_sight`). With the ``scan`` they are that scan's occluders, tested through
+    :func:`scan_line_of_sight` (the same result).
     """
     m = np.asarray(m, dtype=float).reshape(-1, 4)
     g = fov_mask(m[:, :2], ego, sensor_cfg)
     if occluders and g.any():
         idx = np.flatnonzero(g)
-        vis = np.asarray(line_of_sight(np.asarray(ego[:2], dtype=float), m[idx, :2], occluders), dtype=bool)
+        if scan is not None:
+            vis = scan_line_of_sight(scan, ego, m[idx, :2])
+        else:
+            vis = np.asarray(line_of_sight(np.asarray(ego[:2], dtype=float), m[idx, :2], occluders), dtype=bool)
         g[idx] = vis.reshape(-1)
     return g.astype(float)
+
+
+def scan_line_of_sight(scan: Any, ego: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) bool: :func:`soabench.sensor.line_of_sight` of ``points`` from the pose ``ego`` against
+    ``scan.occluders``, with the occluders that can hide a point from that pose (:func:`soabench.sensor.sight_blockers`)
+    prepared once per scan and pose and shared by every run over the scan (docs/method.md §5.8): the same result as
+    testing them afresh, without rebuilding them in every filter of every birth model."""
+    ego = np.asarray(ego, dtype=float)
+    make = lambda: (sight_blockers(ego[:2], scan.occluders), scan.occluders)  # noqa: E731
+    key = ("filter.sight_blockers", id(scan.occluders), len(scan.occluders), ego[0], ego[1])
+    blockers = scan_once(scan, key, make)[0]
+    return np.asarray(line_of_sight_past(ego[:2], points, blockers), dtype=bool)
 
 
 def beta_mean(s: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -32,14 +32,13 @@ from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
-from soabench.gmphd.probabilities import detection_gate
+from soabench.gmphd.probabilities import detection_gate, scan_line_of_sight
 from soabench.lmb import cycle as lmb_cycle
 from soabench.lmb.birth import adaptive_existence, gm_birth, group_birth, intensity_existence, measurement_birth
 from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict, update
 from soabench.origins import N_SOURCES
-from soabench.sensor import line_of_sight
 from soabench.types import SOURCE_MEAS, Births, Scan, StepResult, scan_once
 
 #: the probability modes the LMB filter runs (docs/method.md §4.6): static only
@@ -143,7 +142,7 @@ class LMBFilter:
         if ego is None:
             return np.zeros(len(m))
         occ = scan.occluders if self.cfg.occlusion_pd else None
-        return self.cfg.p_D * detection_gate(m, ego, self.sensor, occ)
+        return self.cfg.p_D * detection_gate(m, ego, self.sensor, occ, scan)
 
     def step(self, scan: Scan, births: Births) -> StepResult:
         """One cycle (module docstring) with the births of ``scan``; returns the labelled estimates
@@ -223,8 +222,7 @@ class LMBFilter:
         else:
             if self.cfg.occlusion_pd and scan.occluders and g.any():  # line of sight (§4.4), as detection_gate
                 idx = np.flatnonzero(g)
-                vis = line_of_sight(np.asarray(ego[:2], dtype=float), pred[6][idx, :2], scan.occluders)
-                g[idx] = np.asarray(vis, dtype=bool).reshape(-1)
+                g[idx] = scan_line_of_sight(scan, ego, pred[6][idx, :2]).reshape(-1)
             p_D = self.cfg.p_D * g
         kappa = clutter_intensity(Z, self.sensor)
         t1 = time.perf_counter()

@@ -110,7 +110,7 @@ class PMBMFilter:
         if ego is None:
             return np.zeros(len(m))
         occ = scan.occluders if self.cfg.occlusion_pd else None
-        return self.cfg.p_D * detection_gate(m, ego, self.sensor, occ)
+        return self.cfg.p_D * detection_gate(m, ego, self.sensor, occ, scan)
 
     def predict(self, births: Births) -> PMBMDensity:
         """§10.2: the predicted density with the birth components appended to the intensity."""

@@ -20,6 +20,7 @@ from soabench.experiment.runs.files import format_value, pack_table, unpack_tabl
 from soabench.experiment.runs.store import _rows_of
 from soabench.gmphd.filter import GMPHDFilter
 from soabench.gmphd.inputs import births_finite
+from soabench.gmphd.probabilities import detection_gate
 from soabench.sensor import _padded, line_of_sight, line_of_sight_past, sight_blockers
 from soabench.types import Births, Obstacles, Scan
 
@@ -77,6 +78,26 @@ def test_line_of_sight_past_blockers_equals_line_of_sight():
     np.testing.assert_array_equal(line_of_sight_past(ego[:2], pts, blockers), line_of_sight(ego, pts, occ))
     assert line_of_sight_past(ego[:2], pts[:0], blockers).shape == (0,)
     assert line_of_sight_past(ego[:2], pts, sight_blockers(ego[:2], [])).all()
+
+
+def test_detection_gate_shares_the_scans_sight_blockers_with_the_same_result():
+    rng = np.random.default_rng(6)
+    occ = [box(x, y, x + 4, y + 3) for x, y in rng.uniform(-40, 40, (30, 2))]
+    ego = np.array([0.0, 0.0, 0.3])
+    scan = _scan(occ, ego=ego)
+    m = np.column_stack([rng.uniform(-50, 50, (300, 2)), np.zeros((300, 2))])
+    sensor = Sensor()
+    alone = detection_gate(m, ego, sensor, occ)
+    assert 0 < alone.sum() < len(m)  # some means hidden, some seen: the line of sight decides
+    shared = detection_gate(m, ego, sensor, occ, scan)
+    np.testing.assert_array_equal(shared, alone)
+    (key,) = [k for k in scan.__dict__["_once"] if k[0] == "filter.sight_blockers"]
+    blockers = scan.__dict__["_once"][key][0]
+    np.testing.assert_array_equal(detection_gate(m[::-1], ego, sensor, occ, scan), alone[::-1])
+    assert scan.__dict__["_once"][key][0] is blockers  # built once for the scan and pose
+    moved = ego + np.array([5.0, 0.0, 0.0])  # another pose keeps its own blockers
+    np.testing.assert_array_equal(detection_gate(m, moved, sensor, occ, scan), detection_gate(m, moved, sensor, occ))
+    assert len([k for k in scan.__dict__["_once"] if k[0] == "filter.sight_blockers"]) == 2
 
 
 def test_padded_shadow_vertices_repeat_the_first_vertex():
