@@ -689,11 +689,13 @@ def filter_config_for_mode(cfg: FilterConfig, mode: str) -> tuple[FilterConfig, 
     return cfg, "dynamic", cfg.mu_D0
 
 
-def load_config(path: str | Path | None, base: Config | None = None) -> Config:
-    """Read a TOML configuration file over ``base`` (defaults if None) and validate the result."""
+def load_config(path: str | Path | None, base: Config | None = None, validate: bool = True) -> Config:
+    """Read a TOML configuration file over ``base`` (defaults if None) and validate the result (``validate``: False
+    for a caller that overlays more values, e.g. the command-line flags, and validates the whole)."""
     if path is None:
-        return (base or Config()).validate()
-
-    p = Path(path)
-    require(p.is_file(), f"config file {str(p)!r} does not exist")
-    return Config.from_dict(read_toml(p, "config file"), base).validate()
+        cfg = base or Config()
+    else:
+        p = Path(path)
+        require(p.is_file(), f"config file {str(p)!r} does not exist")
+        cfg = Config.from_dict(read_toml(p, "config file"), base)
+    return cfg.validate() if validate else cfg

@@ -20,11 +20,15 @@ def allow_typed_plugins(args: argparse.Namespace) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> Config:
-    """The config file (if any) overlaid by the command-line flags, validated."""
+    """The config file (if any) overlaid by the command-line flags, validated together (a family's section in the
+    file is read when a flag names the family)."""
     allow_typed_plugins(args)
-    cfg = load_config(getattr(args, "config", None))
+    cfg = load_config(getattr(args, "config", None), validate=False)
     overrides = {dest: getattr(args, dest, None) for dest in checks.FLAG_KEYS}
-    cfg.experiment = dataclasses.replace(cfg.experiment, **{k: v for k, v in overrides.items() if v is not None})
+    flagged = dataclasses.replace(cfg.experiment, **{k: v for k, v in overrides.items() if v is not None})
+    # the file's own values are checked as written, with the filter families the flags name
+    dataclasses.replace(cfg, experiment=dataclasses.replace(cfg.experiment, filters=flagged.filters)).validate()
+    cfg.experiment = flagged
     return cfg.validate()
 
 

@@ -4,6 +4,7 @@ neutral tracker and gives one label per estimate; the trial builds its filters f
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import re
 
@@ -11,6 +12,7 @@ import numpy as np
 import pytest
 
 import soabench.api as sb
+from soabench.cli.common import config_from_args
 from soabench.config import FAMILIES, FILTER_FAMILIES, PROBABILITY_MODES, Config
 from soabench.errors import SoabenchError
 from soabench.plugins import BUILTIN_BIRTH_MODELS
@@ -83,6 +85,17 @@ def test_a_family_section_is_refused_unless_the_family_runs() -> None:
         ).validate()
         assert cfg.to_dict()[fam.section][key.name] == changed
         assert fam.section not in Config().to_dict()  # a run without the family records no section
+
+
+def test_a_family_section_in_the_config_file_is_read_when_a_flag_names_the_family(tmp_path) -> None:
+    path = tmp_path / "ablation.toml"
+    path.write_text('[lmb]\nbirth_mapping = "components"\n', encoding="utf-8")
+    cfg = config_from_args(argparse.Namespace(config=str(path), filters=("lmb",), probabilities=("static",)))
+    assert cfg.experiment.filters == ("lmb",) and cfg.lmb.birth_mapping == "components"
+    with pytest.raises(SoabenchError, match=r"lmb.birth_mapping = 'components' is set .* runs no LMB filter"):
+        config_from_args(argparse.Namespace(config=str(path), filters=("gmphd",)))
+    with pytest.raises(SoabenchError, match="runs no LMB filter"):  # neither the file nor a flag names it
+        config_from_args(argparse.Namespace(config=str(path)))
 
 
 @pytest.mark.parametrize("family", FILTER_FAMILIES)
