@@ -21,6 +21,7 @@ with ``filter.occlusion_pd``); the dynamic (Beta) modes are refused.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -28,7 +29,7 @@ import numpy as np
 from soabench import notice
 from soabench.config import FilterConfig, LMBConfig, Sensor
 from soabench.errors import SoabenchError, require
-from soabench.geometry import clutter_intensity
+from soabench.geometry import clutter_intensity, measurement_volume
 from soabench.gmphd import cycle
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
@@ -128,6 +129,8 @@ class LMBFilter:
         up[lmb_cycle.UP_MAX_COMP], up[lmb_cycle.UP_EXTRACT_R] = lmb.max_components, lmb.extract_r
         up[lmb_cycle.UP_EXACT] = float(lmb.association == "exact")
         self._up_pars = up
+        #: kappa of every measurement in polar clutter (soabench.geometry.clutter_intensity), None in cartesian
+        self._kappa_polar = s.lambda_c / measurement_volume(s) if s.clutter_space == "polar" else None
         self.tracks = Tracks.empty()
         #: newborn terms (m, P) of the previous scan's measurements and their birth existences r_B
         self._newborn: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -224,7 +227,7 @@ class LMBFilter:
                 idx = np.flatnonzero(g)
                 g[idx] = scan_line_of_sight(scan, ego, pred[6][idx, :2]).reshape(-1)
             p_D = self.cfg.p_D * g
-        kappa = clutter_intensity(Z, self.sensor)
+        kappa = clutter_intensity(Z, self.sensor) if self._kappa_polar is None else np.full(len(Z), self._kappa_polar)
         t1 = time.perf_counter()
         ok, post, X, X_r, labels, r_U, A, sums, info, counts, times = lmb_cycle.update_reduce(
             *pred[:8], p_D, Z, ego if ego is not None else _NO_EGO, self._R, kappa, self._ukf, self._up_pars,
@@ -234,22 +237,26 @@ class LMBFilter:
             return None
         self.tracks = Tracks(*post)
         self._newborn = self._newborn_existence(births, Z, r_U, A, kappa)
-        if not (np.isfinite(self.tracks.r).all() and np.isfinite(X).all()):
+        sum_r, sum_kept = sums.tolist()
+        # sum_kept sums the posterior's r: a NaN or an infinity among them makes it non-finite, so only a non-finite
+        # sum needs the elementwise test
+        if not ((math.isfinite(sum_kept) or np.isfinite(self.tracks.r).all()) and np.isfinite(X).all()):
             raise SoabenchError(f"scan {scan.k}: the LMB filter produced a non-finite posterior from finite inputs")
-        n_updated, n_pruned, cap_hit, n_pairs = (int(v) for v in info[:4])
+        n_updated, n_pruned, cap_hit, n_pairs = info.tolist()[:4]
+        t_update, t_reduce = times.tolist()
         return StepResult(
             k=scan.k,
             X=X,
             X_w=X_r,
-            sum_w=float(sums[0]),
-            sum_w_reduced=float(sums[1]),
+            sum_w=sum_r,
+            sum_w_reduced=sum_kept,
             n_predicted=len(pred[0]),
             n_updated=n_updated,
             n_reduced=len(self.tracks),
             cap_hit=bool(cap_hit),
             t_predict=t1 - t0,
-            t_update=float(times[0]),
-            t_reduce=float(times[1]),
+            t_update=t_update,
+            t_reduce=t_reduce,
             mean_pD=float(self.cfg.p_D),
             A=A,
             kappa=np.asarray(kappa, dtype=float),

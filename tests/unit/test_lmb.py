@@ -371,6 +371,39 @@ def test_bad_birth_components_raise_or_drop_as_the_array_path(bad):
         assert np.array_equal(got.X, want.X) and np.array_equal(got.labels, want.labels)
 
 
+@pytest.mark.parametrize("bad", ["nan_r", "inf_x", "inf_sum", None])
+def test_fused_step_raises_on_a_non_finite_posterior_only(bad, monkeypatch):
+    """The fused step's posterior check: a NaN existence or an infinite estimate raises with the scan's message; a
+    non-finite sum of finite existences (the elementwise test decides then) and a plain step do not."""
+    from soabench.lmb import filter as lmb_filter
+
+    compiled = lmb_filter.lmb_cycle.update_reduce
+
+    def spoiled(*args):
+        out = compiled(*args)
+        post, X, sums = out[1], out[2], out[7]
+        if bad == "nan_r":
+            post[0][0] = np.nan
+            sums[1] = np.nan
+        elif bad == "inf_x":
+            X[0, 0] = np.inf
+        elif bad == "inf_sum":
+            sums[1] = np.inf
+        return out
+
+    monkeypatch.setattr(lmb_filter.lmb_cycle, "update_reduce", spoiled)
+    filt = LMBFilter(FilterConfig(), Sensor(), rng=np.random.default_rng(0))
+    filt.tracks = Tracks.single([0.9], [[10.0, 0.0, 0.0, 0.0]], [np.diag([1.0, 1.0, 0.5, 0.5])], make_labels(0, [0]))
+    scan = _scan(1, [[10.0, 0.0]])
+    if bad in ("nan_r", "inf_x"):
+        with pytest.raises(SoabenchError, match="scan 1: the LMB filter produced a non-finite posterior"):
+            filt.step(scan, Births.empty())
+    else:
+        res = filt.step(scan, Births.empty())
+        assert len(res.X) == 1 and np.isfinite(filt.tracks.r).all()
+        assert res.sum_w_reduced == (math.inf if bad == "inf_sum" else filt.tracks.r.sum())
+
+
 def test_association_stream_leaves_the_other_streams_alone():
     s = trial_seeds(42, 3)
     a = s.association_rng().integers(2**32, size=4)
