@@ -60,6 +60,17 @@ class SerialExecutor:
         pass
 
 
+def _exit_code(proc: Any, timeout: float = 5.0, settle: float = 1.0) -> int | None:
+    """The exit code of a pool's worker process once it ended (None: still running after ``timeout`` s). The pool's
+    own thread may reap the process first: its status then reaches the shared process object a moment after the
+    join returns, so a dead worker's code is read again for up to ``settle`` s rather than reported as running."""
+    proc.join(timeout=timeout)
+    until = time.monotonic() + settle
+    while proc.exitcode is None and time.monotonic() < until:
+        time.sleep(0.01)
+    return proc.exitcode
+
+
 class PoolExecutor:
     """A ``ProcessPoolExecutor`` of one-thread processes; at most ``2 * workers`` trials in flight."""
 
@@ -93,10 +104,10 @@ class PoolExecutor:
         and what it was running, from the workers' notes; a trial whose worker the pool stopped afterwards says so."""
         notes = {}
         for pid, proc in self._procs.items():
-            proc.join(timeout=5)
+            code = _exit_code(proc)
             note = last_activity(self._notes, pid) if self._notes else None
             if note is not None:
-                notes[pid] = (proc.exitcode, note)
+                notes[pid] = (code, note)
         stopped = -signal.SIGTERM  # what the pool does to the other workers once one died
         died = [f"trial {n['trial']} ({n['doing']})" for code, n in notes.values() if code != stopped]
         out = {}
