@@ -738,6 +738,17 @@ def copy_row(dst, q, src, j):
 
 
 @njit(cache=True, inline="always")
+def heaviest(w, lo, hi):
+    """The index of the largest of w[lo:hi] (the first at a tie): the component a track is reported at (estimator of
+    docs/method.md §10.4 and the LMB's extraction)."""
+    best = lo
+    for c in range(lo, hi):
+        if w[c] > w[best]:
+            best = c
+    return best
+
+
+@njit(cache=True, inline="always")
 def set_row(dst, q, v):
     """dst[q] = v for a row of 4, element by element (as :func:`copy_row`)."""
     for a in range(4):

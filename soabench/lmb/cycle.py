@@ -44,6 +44,7 @@ from soabench.gmphd.kernels import (  # noqa: E402
     copy_row,
     copy_state,
     ekf_terms,
+    heaviest,
     log_likelihood,
     merge_groups,
     posterior_pairs,
@@ -483,11 +484,7 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
     q = 0
     for a in range(n_sel):
         if fr[a] > pars[UP_EXTRACT_R]:
-            best = fstart[a]
-            for c in range(fstart[a], fstart[a + 1]):
-                if fw[c] > fw[best]:
-                    best = c
-            copy_row(X, q, fm, best)
+            copy_row(X, q, fm, heaviest(fw, fstart[a], fstart[a + 1]))
             X_r[q] = fr[a]
             labels[q] = fl[a]
             q += 1

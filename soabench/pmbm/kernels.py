@@ -28,7 +28,7 @@ configure_numba_cache()
 
 from numba import njit  # noqa: E402
 
-from soabench.gmphd.kernels import copy_row, copy_state  # noqa: E402
+from soabench.gmphd.kernels import copy_row, copy_state, heaviest  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it (as :data:`soabench.pmbm.association.MISS`)
 
@@ -458,11 +458,7 @@ def estimates(row, r, label, start, w, m, thr):
         if r[h] > thr:
             if start[h + 1] == start[h]:
                 raise ValueError("a reported track has no component")
-            c_best = start[h]
-            for c in range(start[h], start[h + 1]):
-                if w[c] > w[c_best]:
-                    c_best = c
-            copy_row(X, q, m, c_best)
+            copy_row(X, q, m, heaviest(w, start[h], start[h + 1]))
             X_r[q] = r[h]
             labels[q] = label[h]
             q += 1

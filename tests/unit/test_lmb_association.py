@@ -52,14 +52,18 @@ def _random_costs(rng, n, M, p_gate=0.5, p_no_absent=0.2):
 def _reduced(logc):
     """A cluster's reduced rows (column 0 none = log(eta_absent + eta_missed), 1 + j measurement j) and options."""
     sub = np.concatenate([np.logaddexp(logc[:, :1], logc[:, 1:2]), logc[:, 2:]], axis=1)
-    n = len(sub)
+    return (sub, *_options(sub))
+
+
+def _options(sub):
+    """Each row's finite columns, left-packed (options), and their count (n_opt)."""
     options = np.zeros(sub.shape, dtype=np.int64)
-    n_opt = np.zeros(n, dtype=np.int64)
-    for i in range(n):
+    n_opt = np.zeros(len(sub), dtype=np.int64)
+    for i in range(len(sub)):
         cols = np.flatnonzero(np.isfinite(sub[i]))
         options[i, : len(cols)] = cols
         n_opt[i] = len(cols)
-    return sub, options, n_opt
+    return options, n_opt
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -198,12 +202,7 @@ def test_gibbs_draws_are_those_of_one_pass_over_the_options(n, M, lo, seed):
     for i in range(n):  # a few gated measurements each, many shared, weights across several orders of magnitude
         cols = lo + rng.choice(M - lo, size=int(rng.integers(1, 6)), replace=False)
         sub[i, 1 + cols] = rng.normal(0.0, 3.0, len(cols))
-    options = np.zeros(sub.shape, dtype=np.int64)
-    n_opt = np.zeros(n, dtype=np.int64)
-    for i in range(n):
-        cols = np.flatnonzero(np.isfinite(sub[i]))
-        options[i, : len(cols)] = cols
-        n_opt[i] = len(cols)
+    options, n_opt = _options(sub)
     s_kernel = np.full(1, np.uint64(seed + 7), dtype=np.uint64)
     s_plain = s_kernel.copy()
     hyps, n_hyp = _gibbs(sub, options, n_opt, 200, s_kernel)
