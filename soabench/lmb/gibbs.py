@@ -452,7 +452,6 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                             buf_w[k] = tot
                             buf_c[k] = NONE
                             k += np.uint64(1)
-                    wrow = wcol[i]
                     for a in range(W):
                         x = gate[i, a] & ~held[a]
                         if own == 1 and ((theta[i] - 1) >> 6) == a:
@@ -461,7 +460,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                             # an unsigned column: no negative-index wraparound in the innermost loop
                             cu = np.uint64(1 + (a << 6)) + np.uint64(_trailing_zeros(x))
                             x &= x - np.uint64(1)
-                            w = wrow[cu]
+                            w = wcol[i, cu]
                             c = np.int64(cu)
                             tot += w
                             if w > 0.0:
