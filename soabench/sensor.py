@@ -162,7 +162,9 @@ def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[B
     Blocked only where the segment passes through an occluder's core, the polygon eroded by :data:`SIGHT_TOL`:
     a segment that touches an occluder, grazes a vertex or runs along an edge is visible, also when rounding puts it
     a few ulps inside (S-OA's births on tangent rays, §3.1.2). Occluders that contain the sensor in their interior
-    are ignored (the sensor cannot be occluded by what it sits in).
+    are ignored (the sensor cannot be occluded by what it sits in). The cores are GEOS's (``shapely.buffer``); the
+    segments are tested against their rings in compiled code with certified signs, and GEOS decides the pairs those
+    signs leave open (:class:`SightBlockers`): the same decisions as GEOS's ``intersects``, bit for bit.
     """
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     targets = np.asarray(targets, dtype=float).reshape(-1, 2)
