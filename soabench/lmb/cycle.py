@@ -148,8 +148,18 @@ def predict_births(r, label, origin, age, start, w, m, P, F, Q, pred_pars, p_S, 
     N0 = r.shape[0]
     C0 = w.shape[0]
     # birth tracks: their components (indices into the birth arrays), weights and existences
-    if groups:
+    n_pos = 0
+    for j in range(bw.shape[0]):
+        if bw[j] > 0.0:
+            n_pos += 1
+    if groups and n_pos > 0:
         rb, ob, nb_comp, bcomp, bwk = birth_groups(bw, bm, bP, bsrc, r_max, U, J_h)
+    elif groups:  # no component of positive weight: no group
+        rb = np.empty(0)
+        ob = np.empty(0, dtype=np.int8)
+        nb_comp = np.empty(0, dtype=np.int64)
+        bcomp = np.empty(0, dtype=np.int64)
+        bwk = np.empty(0)
     else:
         n_pos = 0
         for j in range(bw.shape[0]):
@@ -256,6 +266,32 @@ def predict_births(r, label, origin, age, start, w, m, P, F, Q, pred_pars, p_S, 
 
 
 @njit(cache=True)
+def newborn_existence(r_U, beta, kappa, lambda_B, r_max, tol, adaptive):
+    """The birth existences r_B of this scan's newborn terms (docs/method.md "LMB filter", birth) from the
+    measurements' r_U: :func:`soabench.lmb.birth.adaptive_existence` (``adaptive``; ``beta`` and ``kappa`` unread)
+    or :func:`soabench.lmb.birth.intensity_existence`, the same operations in the same order as those numpy
+    expressions (``tol``: their :data:`~soabench.lmb.birth.EXPLAINED_TOL`; the sum is numpy's pairwise one)."""
+    M = r_U.shape[0]
+    free = np.empty(M)
+    for ll in range(M):
+        f = 1.0 - r_U[ll]  # clipped to [0, 1], and 0 at or below tol (a NaN too)
+        free[ll] = (f if f <= 1.0 else 1.0) if f > tol else 0.0
+    r_B = np.zeros(M)
+    if adaptive:
+        total = np_sum(free, M)
+        if total > 0.0:
+            for ll in range(M):
+                x = lambda_B * free[ll] / total
+                r_B[ll] = r_max if r_max < x else x  # np.minimum(r_max, x): x when x is NaN
+    else:
+        for ll in range(M):
+            den = kappa[ll] + beta[ll]
+            x = free[ll] * (beta[ll] / den if den > 0.0 else 0.0)
+            r_B[ll] = r_max if r_max < x else x
+    return r_B
+
+
+@njit(cache=True)
 def _segment_logsumexp(x, start, out, col):
     """out[i, col] = log sum exp of x[start[i]:start[i + 1]] (every segment non-empty), shifted by each segment's
     maximum (0 when that is not finite), as :func:`soabench.lmb.update._segment_logsumexp`."""
@@ -266,7 +302,8 @@ def _segment_logsumexp(x, start, out, col):
         shift = mx if math.isfinite(mx) else 0.0
         s = 0.0
         for c in range(start[i], start[i + 1]):
-            s += math.exp(x[c] - shift)
+            if x[c] != -np.inf:  # exp(-inf - shift) adds +0.0: nothing
+                s += math.exp(x[c] - shift)
         out[i, col] = (math.log(s) if s > 0.0 else -np.inf) + shift
 
 
@@ -309,23 +346,46 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
     r_min, gate_thr = pars[UP_R_MIN], pars[UP_GATE]
     p_D = p_D0.copy()
     logq = np.full((C, M), -np.inf)
-    nu_r = np.empty((C, M))
-    nu_b = np.empty((C, M))
+    # the measurement terms of the components that may be detected: every one with the UKF (a covariance that is
+    # not positive definite decides the step wherever it is), else those with p_D != 0. A component with p_D = 0
+    # takes no measurement whatever its terms, and each component's terms are its own, so the others' are the same
+    # numbers either way. det[q] is the q-th such component, det_row[c] its row among them (-1 for none)
+    det = np.arange(C)
+    if not ukf:
+        n_det = 0
+        for c in range(C):
+            if p_D0[c] != 0.0:
+                det[n_det] = c
+                n_det += 1
+        det = det[:n_det]
+    D = det.shape[0]
+    det_row = np.full(C, -1, dtype=np.int64)
+    for q in range(D):
+        det_row[det[q]] = q
+    if D == C:
+        dm, dP = m, P
+    else:
+        dm = np.empty((D, 4))
+        dP = np.empty((D, 4, 4))
+        for q in range(D):
+            copy_state(dm, dP, q, m, P, det[q])
+    nu_r = np.empty((D, M))
+    nu_b = np.empty((D, M))
     if ukf:
-        eta, S, Sinv, logdet, Cx, H, valid, ok = ukf_terms(m, P, ego, R, r_min)
+        eta, S, Sinv, logdet, Cx, H, valid, ok = ukf_terms(dm, dP, ego, R, r_min)
         if not ok:
             return _not_pd(n_sources)
     else:
-        eta, S, Sinv, logdet, Cx, H, valid = ekf_terms(m, P, ego, R, r_min)
-    for c in range(C):
-        if not valid[c]:
-            p_D[c] = 0.0  # r -> 0 or det S <= 0: undetectable this step (§2.12)
-    if C > 0 and M > 0:
-        logq, nu_r, nu_b = log_likelihood(eta, Sinv, logdet, Z, gate_thr)
-        for c in range(C):
-            if not p_D[c] > 0.0:
+        eta, S, Sinv, logdet, Cx, H, valid = ekf_terms(dm, dP, ego, R, r_min)
+    for q in range(D):
+        if not valid[q]:
+            p_D[det[q]] = 0.0  # r -> 0 or det S <= 0: undetectable this step (§2.12)
+    if D > 0 and M > 0:
+        logq_d, nu_r, nu_b = log_likelihood(eta, Sinv, logdet, Z, gate_thr)
+        for q in range(D):
+            if p_D[det[q]] > 0.0:
                 for ll in range(M):
-                    logq[c, ll] = -np.inf
+                    logq[det[q], ll] = logq_d[q, ll]
     # association costs (docs/method.md "LMB filter", step 2), in the log domain
     log_miss = np.empty(C)
     log_det = np.empty((C, M))
@@ -376,6 +436,8 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
                 wm[c] = v
                 n_miss += 1
             for ll in range(M):
+                if marg[i, 2 + ll] == 0.0 or log_det[c, ll] == -np.inf:  # v would be 0 or NaN: not a pair
+                    continue
                 v = marg[i, 2 + ll] * math.exp(log_det[c, ll] - eta_tab[i, 1 + ll]) / r_safe
                 if math.isfinite(v) and v > 0.0:
                     wd[c, ll] = v
@@ -389,7 +451,10 @@ def update_reduce(r, label, origin, age, start, w, m, P, p_D0, Z, ego, R, kappa,
                 jj[q] = c
                 lj[q] = ll
                 q += 1
-    m_det, P_det = posterior_pairs(m, P, Cx, Sinv, S, H, R, jj, lj, nu_r, nu_b)
+    jd = np.empty(n_pair, dtype=np.int64)  # each pair's component among the detectable ones
+    for p in range(n_pair):
+        jd[p] = det_row[jj[p]]
+    m_det, P_det = posterior_pairs(dm, dP, Cx, Sinv, S, H, R, jd, lj, nu_r, nu_b)
     pair_of = np.full((C, M), -1, dtype=np.int64)
     for p in range(n_pair):
         pair_of[jj[p], lj[p]] = p

@@ -35,7 +35,14 @@ from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite,
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
 from soabench.gmphd.probabilities import detection_gate, scan_line_of_sight
 from soabench.lmb import cycle as lmb_cycle
-from soabench.lmb.birth import adaptive_existence, gm_birth, group_birth, intensity_existence, measurement_birth
+from soabench.lmb.birth import (
+    EXPLAINED_TOL,
+    adaptive_existence,
+    gm_birth,
+    group_birth,
+    intensity_existence,
+    measurement_birth,
+)
 from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict, update
@@ -47,6 +54,7 @@ LMB_MODES = ("static",)
 
 _NO_EGO = np.zeros(3)  #: the pose passed for a dropped scan (p_D is 0 there)
 _NO_NEWBORN = (np.empty((0, 4)), np.empty((0, 4, 4)), np.empty(0))
+_NO_BETA = np.empty(0)  #: the beta argument of an adaptive birth's newborn existences (unread)
 _NO_BIRTHS = (np.empty(0), np.empty((0, 4)), np.empty((0, 4, 4)), np.empty(0, dtype=np.int8))
 
 
@@ -189,11 +197,16 @@ class LMBFilter:
             return None
         lmb = self.lmb
         m_nb, P_nb = np.array(nb.m, dtype=float).reshape(-1, 4), np.array(nb.P, dtype=float).reshape(-1, 4, 4)
+        r_max = float(lmb.r_B_max)
         if nb.adaptive or lmb.birth_mapping == "components":
-            r_B = adaptive_existence(r_U, self.N_hat, lmb.r_B_max)
+            r_B = lmb_cycle.newborn_existence(r_U, _NO_BETA, kappa, self.N_hat, r_max, EXPLAINED_TOL, True)
         else:
-            r_B = intensity_existence(r_U, nb.beta(A, kappa), kappa, lmb.r_B_max)
-        return m_nb, P_nb, np.ascontiguousarray(r_B, dtype=float)
+            beta = np.ascontiguousarray(nb.beta(A, kappa), dtype=float)
+            if beta.shape == r_U.shape:  # one term per measurement, as the newborn terms' contract says
+                r_B = lmb_cycle.newborn_existence(r_U, beta, kappa, self.N_hat, r_max, EXPLAINED_TOL, False)
+            else:  # anything numpy broadcasts
+                r_B = np.ascontiguousarray(intensity_existence(r_U, beta, kappa, r_max), dtype=float)
+        return m_nb, P_nb, r_B
 
     def _step_fused(
         self, scan: Scan, checked: StepInputs, seed: int, arrays: tuple[np.ndarray, ...] | None = None

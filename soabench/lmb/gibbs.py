@@ -370,11 +370,24 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
     buf_w = np.empty(options.shape[1])
     buf_c = np.empty(options.shape[1], dtype=np.int64)
     # the samples, each stored only when its sweep changed the hypothesis: a repeat of the previous sample adds no
-    # distinct hypothesis and would not change which one comes first among equal hashes
-    samples = np.empty((n_sweeps, n), dtype=np.int64)
-    hashes = np.empty(n_sweeps, dtype=np.uint64)
+    # distinct hypothesis and would not change which one comes first among equal hashes. A sample is stored packed,
+    # ``bits`` per track (theta_i < n_cols), ``per`` tracks a word: two samples are equal exactly when their words are
+    # equal, and comparing the samples of equal hash takes a few words each instead of a row of n int64
+    bits = 1
+    while (1 << bits) < n_cols:
+        bits += 1
+    per = 64 // bits
+    W2 = (n + per - 1) // per
+    key = np.zeros(W2, dtype=np.uint64)  # the current theta, packed (every track without a measurement: all zero)
+    word = np.empty(n, dtype=np.int64)  # track i's word and shift in a packed sample
+    shift = np.empty(n, dtype=np.uint64)
     for i in range(n):
-        samples[0, i] = theta[i]
+        word[i] = i // per
+        shift[i] = np.uint64((i % per) * bits)
+    samples = np.empty((n_sweeps, W2), dtype=np.uint64)
+    hashes = np.empty(n_sweeps, dtype=np.uint64)
+    for a in range(W2):
+        samples[0, a] = key[a]
     hashes[0] = h
     n_st = 1
     for _sweep in range(1, n_sweeps):
@@ -448,6 +461,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                     if takers[t] != i:
                         blocked[takers[t]] -= 1
             h += zkey[i, c] - zkey[i, theta[i]]
+            key[word[i]] ^= np.uint64(theta[i] ^ c) << shift[i]
             theta[i] = c
             if c >= 1:
                 j = c - 1
@@ -456,15 +470,15 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                     if takers[t] != i:
                         blocked[takers[t]] += 1
         if changed:
-            for i in range(n):
-                samples[n_st, i] = theta[i]
+            for a in range(W2):
+                samples[n_st, a] = key[a]
             hashes[n_st] = h
             n_st += 1
     hashes = hashes[:n_st]
     perm = np.argsort(hashes, kind="mergesort")
-    out = np.empty((n_st, n), dtype=np.int64)
+    first = np.empty(n_st, dtype=np.int64)  # the stored sample of each distinct hypothesis
     n_hyp = 0
-    run = 0  # first output row of the current run of equal hashes
+    run = 0  # first distinct hypothesis of the current run of equal hashes
     for k in range(n_st):
         s = perm[k]
         if k == 0 or hashes[s] != hashes[perm[k - 1]]:
@@ -472,17 +486,23 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
         new = True
         for u in range(run, n_hyp):  # rows of equal hash: compared exactly
             same = True
-            for i in range(n):
-                if out[u, i] != samples[s, i]:
+            f = first[u]
+            for a in range(W2):
+                if samples[f, a] != samples[s, a]:
                     same = False
                     break
             if same:
                 new = False
                 break
         if new:
-            for i in range(n):
-                out[n_hyp, i] = samples[s, i]
+            first[n_hyp] = s
             n_hyp += 1
+    out = np.empty((n_hyp, n), dtype=np.int64)
+    mask = np.uint64((1 << bits) - 1)
+    for u in range(n_hyp):
+        f = first[u]
+        for i in range(n):
+            out[u, i] = np.int64((samples[f, word[i]] >> shift[i]) & mask)
     return out, n_hyp
 
 

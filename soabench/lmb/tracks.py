@@ -12,6 +12,7 @@ A label is the pair (k, j): scan of birth and index of the birth term in that sc
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -136,11 +137,124 @@ class Tracks:
 
 
 @njit(cache=True)
+def _finite_components(keep, nk, w, m, P):
+    """Every weight, mean and covariance of the components ``keep[:nk]`` finite."""
+    for t in range(nk):
+        c = keep[t]
+        if not math.isfinite(w[c]):
+            return False
+        for a in range(4):
+            if not math.isfinite(m[c, a]):
+                return False
+            for b in range(4):
+                if not math.isfinite(P[c, a, b]):
+                    return False
+    return True
+
+
+@njit(cache=True)
+def _merge_track(keep, nk, w, m, P, U, L, flags, idx, W, mt, Pt):
+    """The merge groups of one track's components ``keep[:nk]`` (finite) into W (G,), mt (G, 4), Pt (G, 4, 4);
+    returns G. The same groups and moments, bit for bit, as ``kernels.merge_groups_window`` followed by
+    ``kernels.merge_moments`` on the gathered components: the same Cholesky factors, window bound, x-marginal
+    test and quadratic form against each centre in order of weight (heaviest first, lowest index on ties; which
+    candidate is tested first does not change the groups), then each group's sums over its members in index order.
+    ``L``, ``flags`` (spd, alive), ``idx`` (order, label, centres, count) and ``y`` are scratch of at least nk rows.
+    """
+    spd, alive = flags[0], flags[1]
+    order, label, centres, count = idx[0], idx[1], idx[2], idx[3]
+    Uq = kernels.merge_threshold(U)
+    pxx_max = 0.0
+    for t in range(nk):
+        c = keep[t]
+        spd[t] = kernels._cholesky4(P[c], L[t])
+        if spd[t] and P[c, 0, 0] > pxx_max:
+            pxx_max = P[c, 0, 0]
+        alive[t] = True
+        # insertion in index order after every heavier or equal weight: a stable sort by -w
+        a = t
+        while a > 0 and w[keep[order[a - 1]]] < w[c]:
+            order[a] = order[a - 1]
+            a -= 1
+        order[a] = t
+    half = math.sqrt(Uq * pxx_max) * (1.0 + 1e-9) + 1e-12
+    y = np.empty(4)
+    G = 0
+    for s in range(nk):
+        j = order[s]
+        if not alive[j]:
+            continue
+        alive[j] = False
+        label[j] = G
+        centres[G] = j
+        cj = keep[j]
+        x_lo = m[cj, 0] - half
+        x_hi = m[cj, 0] + half
+        for t in range(nk):
+            c = keep[t]
+            if not alive[t] or not spd[t] or not (m[c, 0] >= x_lo and m[c, 0] <= x_hi):  # in the x window
+                continue
+            d0 = m[c, 0] - m[cj, 0]
+            if d0 * d0 > Uq * P[c, 0, 0] * (1.0 + 1e-9):  # the x marginal alone already exceeds U
+                continue
+            if kernels._merge_q(m[c], m[cj], L[t], y) <= Uq:
+                alive[t] = False
+                label[t] = G
+        G += 1
+    for g in range(G):
+        count[g] = 0
+    for t in range(nk):
+        count[label[t]] += 1
+    for g in range(G):
+        j = centres[g]
+        if count[g] == 1:
+            W[g] = w[keep[j]]
+            kernels.copy_state(mt, Pt, g, m, P, keep[j])
+        else:
+            W[g] = 0.0
+            for a in range(4):
+                mt[g, a] = 0.0
+                for b in range(4):
+                    Pt[g, a, b] = 0.0
+    for t in range(nk):
+        g = label[t]
+        if count[g] > 1:
+            c = keep[t]
+            W[g] += w[c]
+            for a in range(4):
+                mt[g, a] += w[c] * m[c, a]
+    for g in range(G):
+        if count[g] > 1:
+            for a in range(4):
+                mt[g, a] /= W[g]
+    for t in range(nk):
+        g = label[t]
+        if count[g] > 1:
+            c = keep[t]
+            for a in range(4):
+                da = mt[g, a] - m[c, a]
+                for b in range(4):
+                    Pt[g, a, b] += w[c] * (P[c, a, b] + da * (mt[g, b] - m[c, b]))
+    for g in range(G):
+        if count[g] > 1:
+            for a in range(4):
+                for b in range(a, 4):
+                    v = 0.5 * (Pt[g, a, b] + Pt[g, b, a]) / W[g]
+                    Pt[g, a, b] = v
+                    Pt[g, b, a] = v
+    return G
+
+
+@njit(cache=True)
 def reduce_components(start, w, m, P, T, U, L_max):
     """Per track: prune components with w <= T, merge (Vo-Ma Table II with U, the GM-PHD's kernels), keep the
     L_max heaviest and renormalise to 1 (docs/method.md §2.9 applied to each track's density).
 
     A track whose components are all pruned keeps its heaviest one. Returns (start, w, m, P) of the result.
+
+    A track of one component is copied. A track of finite components is merged in scratch buffers sized once for
+    the largest track (:func:`_merge_track`: the arithmetic of ``merge_groups_window`` and ``merge_moments``, in
+    their order, without their per-call arrays); any other track goes through those kernels.
     """
     N = start.shape[0] - 1
     C = w.shape[0]
@@ -148,6 +262,17 @@ def reduce_components(start, w, m, P, T, U, L_max):
     out_w = np.empty(C)
     out_m = np.empty((C, 4))
     out_P = np.empty((C, 4, 4))
+    n_max = 0
+    for i in range(N):
+        n_max = max(n_max, start[i + 1] - start[i])
+    keep = np.empty(n_max, dtype=np.int64)
+    # scratch of _merge_track, for the largest track
+    L = np.zeros((n_max, 4, 4))
+    flags = np.empty((2, n_max), dtype=np.bool_)
+    idx = np.empty((4, n_max), dtype=np.int64)
+    W = np.empty(n_max)
+    mt = np.empty((n_max, 4))
+    Pt = np.empty((n_max, 4, 4))
     n_out = 0
     for i in range(N):
         a, b = start[i], start[i + 1]
@@ -160,7 +285,6 @@ def reduce_components(start, w, m, P, T, U, L_max):
             n_out += 1
             out_start[i + 1] = n_out
             continue
-        keep = np.empty(n, dtype=np.int64)
         nk = 0
         best = a
         for c in range(a, b):
@@ -172,24 +296,39 @@ def reduce_components(start, w, m, P, T, U, L_max):
         if nk == 0 and n > 0:
             keep[0] = best
             nk = 1
-        keep = keep[:nk]
-        wk = w[keep].copy()
-        mk = np.ascontiguousarray(m[keep])
-        Pk = np.ascontiguousarray(P[keep])
-        order = np.argsort(-wk, kind="mergesort")
-        label, centres = kernels.merge_groups_window(mk, Pk, order, U)
-        dummy = np.zeros(nk, dtype=np.int32)
-        W, mt, Pt, _, _, _ = kernels.merge_moments(label, centres, wk, mk, Pk, dummy, dummy)
-        G = W.shape[0]
-        sel = np.argsort(-W, kind="mergesort")[: min(G, L_max)]
-        sel = np.sort(sel)
+        if nk > 0 and _finite_components(keep, nk, w, m, P):
+            G = _merge_track(keep, nk, w, m, P, U, L, flags, idx, W, mt, Pt)
+            if G <= L_max:  # every group kept, in creation order
+                total = 0.0
+                for g in range(G):
+                    total += W[g]
+                for g in range(G):
+                    out_w[n_out] = W[g] / total
+                    kernels.copy_state(out_m, out_P, n_out, mt, Pt, g)
+                    n_out += 1
+                out_start[i + 1] = n_out
+                continue
+            sel = np.sort(np.argsort(-W[:G], kind="mergesort")[:L_max])
+        else:
+            kk = keep[:nk]
+            wk = w[kk].copy()
+            mk = np.ascontiguousarray(m[kk])
+            Pk = np.ascontiguousarray(P[kk])
+            order = np.argsort(-wk, kind="mergesort")
+            label, centres = kernels.merge_groups_window(mk, Pk, order, U)
+            dummy = np.zeros(nk, dtype=np.int32)
+            Wg, mg, Pg, _, _, _ = kernels.merge_moments(label, centres, wk, mk, Pk, dummy, dummy)
+            G = Wg.shape[0]
+            sel = np.sort(np.argsort(-Wg, kind="mergesort")[: min(G, L_max)])
+            for g in range(G):
+                W[g] = Wg[g]
+                kernels.copy_state(mt, Pt, g, mg, Pg, g)
         total = 0.0
         for g in sel:
             total += W[g]
         for g in sel:
             out_w[n_out] = W[g] / total
-            out_m[n_out] = mt[g]
-            out_P[n_out] = Pt[g]
+            kernels.copy_state(out_m, out_P, n_out, mt, Pt, g)
             n_out += 1
         out_start[i + 1] = n_out
     return out_start, out_w[:n_out], out_m[:n_out], out_P[:n_out]
