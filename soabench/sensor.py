@@ -162,7 +162,9 @@ def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[B
     Blocked only where the segment passes through an occluder's core, the polygon eroded by :data:`SIGHT_TOL`:
     a segment that touches an occluder, grazes a vertex or runs along an edge is visible, also when rounding puts it
     a few ulps inside (S-OA's births on tangent rays, §3.1.2). Occluders that contain the sensor in their interior
-    are ignored (the sensor cannot be occluded by what it sits in).
+    are ignored (the sensor cannot be occluded by what it sits in). The cores are GEOS's (``shapely.buffer``); the
+    segments are tested against their rings in compiled code with certified signs, and GEOS decides the pairs those
+    signs leave open (:class:`SightBlockers`): the same decisions as GEOS's ``intersects``, bit for bit.
     """
     ego_xy = np.asarray(ego_xy, dtype=float)[:2]
     targets = np.asarray(targets, dtype=float).reshape(-1, 2)
@@ -174,12 +176,19 @@ def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[B
 class SightBlockers:
     """The occluders that can hide a point from one pose (those not containing the sensor in their interior),
     prepared, and their cores (each eroded by :data:`SIGHT_TOL`), built on first use for the occluders some sight
-    line meets and kept for the next point set tested from the same pose (:func:`line_of_sight_past`)."""
+    line meets and kept for the next point set tested from the same pose (:func:`line_of_sight_past`).
+
+    The sight lines are decided by compiled orientation tests against the rings of the occluders and of their cores
+    (:func:`soabench.geometry_kernels.sight_blocked`); a (line, occluder) pair whose signs the floating-point test
+    cannot certify goes to GEOS, as the whole test did before (``fallback_pairs`` counts them)."""
 
     def __init__(self, occ: np.ndarray) -> None:
         self.occ = occ
-        self._core = np.empty(len(occ), dtype=object)
+        self._core = np.full(len(occ), None, dtype=object)
         self._built = np.zeros(len(occ), dtype=bool)
+        self._n_built = 0
+        self._posed: dict[tuple[float, float], tuple] = {}  # per pose: the rings of the occluders and built cores
+        self.fallback_pairs = 0
 
     def __len__(self) -> int:
         return len(self.occ)
@@ -190,7 +199,76 @@ class SightBlockers:
         if len(todo):
             self._core[todo] = shapely.buffer(self.occ[todo], -SIGHT_TOL, join_style="mitre")
             self._built[todo] = True
+            self._n_built += len(todo)
         return self._core[j]
+
+    def blocked(self, ego_xy: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """(N,) bool: the segment ``ego_xy`` -> target runs through some occluder's core (:func:`line_of_sight`)."""
+        # imported when called: numba would slow every start-up
+        from soabench.geometry_kernels import BLOCKED, NEEDS_CORE
+
+        ex, ey = float(ego_xy[0]), float(ego_xy[1])
+        px, py = targets[:, 0].copy(), targets[:, 1].copy()
+        status, pairs, need = self._decide(ex, ey, px, py)
+        while need.any():  # the first lines that meet an occluder: build its core, decide those lines again
+            self.cores(np.flatnonzero(need))
+            redo = np.flatnonzero(status == NEEDS_CORE)
+            again, more, need = self._decide(ex, ey, px[redo], py[redo])
+            status[redo] = again
+            pairs = np.concatenate([pairs, np.column_stack([redo[more[:, 0]], more[:, 1]])])
+        out = status == BLOCKED
+        if len(pairs):
+            self.fallback_pairs += len(pairs)
+            ii, jj = pairs[:, 0], pairs[:, 1]
+            lines = shapely.linestrings(np.stack([np.broadcast_to(ego_xy, (len(ii), 2)), targets[ii]], axis=1))
+            out[ii[_blocked_pair(lines, jj, self)]] = True
+        return out
+
+    def _decide(self, ex: float, ey: float, px: np.ndarray, py: np.ndarray) -> tuple:
+        from soabench.geometry_kernels import sight_blocked
+
+        posed = self._posed.get((ex, ey))
+        if posed is None or posed[0] != self._n_built:  # the occluders, then the cores built so far
+            rings = _ring_arrays(np.concatenate([self.occ, self._core]))
+            posed = self._posed[(ex, ey)] = (self._n_built, _posed_rings(ex, ey, rings))
+        return announced("geometry.sight", sight_blocked, ex, ey, px, py, *posed[1], self._built)
+
+
+def _ring_arrays(geoms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rings of ``geoms`` (polygons, multipolygons, empty or None) as :func:`soabench.geometry_kernels.
+    sight_polygons` takes them: vertex x and y, each geometry's first ring, each ring's first vertex; and the
+    geometries with a part that is not a polygon (never decided by the rings: every line goes to GEOS)."""
+    odd = np.zeros(len(geoms), dtype=bool)
+    kind = shapely.get_type_id(geoms)
+    if ((kind == 3) | (kind == -1)).all() and not (shapely.get_num_interior_rings(geoms) > 0).any():
+        xy, vertex_of = shapely.get_coordinates(geoms, return_index=True)  # polygons without holes: one ring each
+        counts = np.bincount(vertex_of, minlength=len(geoms))
+        rstart = np.zeros(len(geoms) + 1, dtype=np.int64)
+        np.cumsum(counts > 0, out=rstart[1:])
+        vstart = np.zeros(rstart[-1] + 1, dtype=np.int64)
+        np.cumsum(counts[counts > 0], out=vstart[1:])
+        return xy[:, 0].copy(), xy[:, 1].copy(), rstart, vstart, odd
+    parts, part_of = shapely.get_parts(geoms, return_index=True)
+    odd[part_of[shapely.get_type_id(parts) != 3]] = True
+    rings, ring_of = shapely.get_rings(parts, return_index=True)
+    xy, vertex_of = shapely.get_coordinates(rings, return_index=True)
+    rstart = np.zeros(len(geoms) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(part_of[ring_of], minlength=len(geoms)), out=rstart[1:])
+    vstart = np.zeros(len(rings) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(vertex_of, minlength=len(rings)), out=vstart[1:])
+    return xy[:, 0].copy(), xy[:, 1].copy(), rstart, vstart, odd
+
+
+def _posed_rings(ex: float, ey: float, rings: tuple) -> tuple:
+    """A ring set with what depends on the sensor's position (:func:`soabench.geometry_kernels.sight_polygons`)."""
+    from soabench.geometry_kernels import UNSURE, sight_polygons
+
+    vx, vy, rstart, vstart, odd = rings
+    bb, side, inside = sight_polygons(ex, ey, vx, vy, rstart, vstart)
+    if odd.any():
+        bb[odd] = (-np.inf, -np.inf, np.inf, np.inf)
+        inside[odd] = UNSURE
+    return bb, rstart, vstart, vx, vy, side, inside
 
 
 def sight_blockers(ego_xy: np.ndarray, occluders: Sequence[BaseGeometry]) -> SightBlockers:
@@ -210,6 +288,16 @@ def line_of_sight_past(ego_xy: np.ndarray, targets: np.ndarray, blockers: SightB
     targets = np.asarray(targets, dtype=float).reshape(-1, 2)
     if len(targets) == 0 or len(blockers) == 0:
         return np.ones(len(targets), dtype=bool)
+    return ~blockers.blocked(ego_xy, targets)
+
+
+def _line_of_sight_reference(ego_xy: np.ndarray, targets: np.ndarray, blockers: SightBlockers) -> np.ndarray:
+    """:func:`line_of_sight_past` decided by GEOS alone, every line against every occluder: what the compiled test
+    must equal in every case (the equivalence tests)."""
+    ego_xy = np.asarray(ego_xy, dtype=float)[:2]
+    targets = np.asarray(targets, dtype=float).reshape(-1, 2)
+    if len(targets) == 0 or len(blockers) == 0:
+        return np.ones(len(targets), dtype=bool)
     lines = shapely.linestrings(np.stack([np.broadcast_to(ego_xy, targets.shape), targets], axis=1))
     return ~_blocked_pairs(lines, blockers).any(axis=1)
 
@@ -221,6 +309,15 @@ def _blocked_pairs(lines: np.ndarray, blockers: SightBlockers) -> np.ndarray:
     ii, jj = np.nonzero(hit)
     if len(ii):
         hit[ii, jj] = shapely.intersects(lines[ii], blockers.cores(jj))
+    return hit
+
+
+def _blocked_pair(lines: np.ndarray, jj: np.ndarray, blockers: SightBlockers) -> np.ndarray:
+    """(m,) bool: line k runs through the core of occluder jj[k], decided by GEOS as :func:`_blocked_pairs` does."""
+    hit = shapely.intersects(lines, blockers.occ[jj])
+    (k,) = np.nonzero(hit)
+    if len(k):
+        hit[k] = shapely.intersects(lines[k], blockers.cores(jj[k]))
     return hit
 
 
