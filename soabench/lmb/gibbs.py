@@ -67,7 +67,7 @@ def _uniform(state):
 @njit(cache=True)
 def _unit(z):
     """The uniform in [0, 1) of the SplitMix64 state ``z``, already advanced: :func:`_uniform` on a state the sampler
-    keeps in a local variable during its sweeps."""
+    computes itself (the start of a sweep plus one step per draw before it)."""
     z = (z ^ (z >> np.uint64(30))) * _MIX1
     z = (z ^ (z >> np.uint64(27))) * _MIX2
     z = z ^ (z >> np.uint64(31))
@@ -408,13 +408,17 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
         samples[0, a] = key[a]
     hashes[0] = h
     n_st = 1
-    st = state[0]  # the stream's state during the sweeps (stored back after them): each draw advances it by _GOLDEN
+    st = state[0]  # the stream's state at the start of a sweep (stored back after the sweeps)
+    # every draw takes one uniform, so track i's draw in a sweep is the stream's (i + 1)-th after the sweep's start:
+    # its state is st + step[i], with no chain of updates through the draws
+    step = np.empty(n, dtype=np.uint64)
+    for i in range(n):
+        step[i] = np.uint64(i + 1) * _GOLDEN
     for _sweep in range(1, n_sweeps):
         changed = False
         for i in range(n):
             if blocked[i] == 0:
-                st += _GOLDEN
-                u = _unit(st) * prefix[i, n_opt[i] - 1]
+                u = _unit(st + step[i]) * prefix[i, n_opt[i] - 1]
                 c = -1
                 for o in range(n_opt[i]):
                     if weight[i, o] > 0.0:
@@ -426,14 +430,12 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                 if n_fixed[i] == 1 and n_opt[i] - 1 - blocked[i] - own == 0:
                     # every measurement in the track's gate but the one it holds is held by another track: its open
                     # options are "none" and that measurement, if any
-                    if own == 0:
-                        st += _GOLDEN  # the uniform is drawn; with one option open it decides nothing
+                    if own == 0:  # one option open: the track's uniform decides nothing
                         c = NONE if weight[i, 0] > 0.0 else -1
                     else:
                         w0 = weight[i, 0]
                         w1 = wcol[i, theta[i]]
-                        st += _GOLDEN
-                        u = _unit(st) * (w0 + w1)
+                        u = _unit(st + step[i]) * (w0 + w1)
                         c = NONE if w0 > 0.0 else -1
                         if not (w0 > 0.0 and u < w0) and w1 > 0.0:
                             c = theta[i]
@@ -467,8 +469,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                                 buf_w[k] = tot
                                 buf_c[k] = c
                                 k += np.uint64(1)
-                    st += _GOLDEN
-                    u = _unit(st) * tot
+                    u = _unit(st + step[i]) * tot
                     c = -1
                     q = np.uint64(0)
                     while q < k:
@@ -502,6 +503,7 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                     blocked[takers[tu]] += 1
                     tu += np.uint64(1)
                 blocked[i] -= 1
+        st += np.uint64(n) * _GOLDEN  # the n draws of the sweep
         if changed:
             for a in range(W2):
                 samples[n_st, a] = key[a]
