@@ -15,6 +15,7 @@ from soabench.config import Config, FilterConfig, LMBConfig, Sensor
 from soabench.errors import SoabenchError
 from soabench.lmb import LMBFilter, label_pairs
 from soabench.lmb.birth import EXPLAINED_TOL, adaptive_existence, group_birth, intensity_existence
+from soabench.lmb.cycle import newborn_existence
 from soabench.lmb.gibbs import _count_dp, _enumerate_valid, association_marginals
 from soabench.lmb.update import update
 from soabench.types import SOURCE_GM, Births, NewbornTerms
@@ -175,3 +176,21 @@ def test_T42_exact_up_to_max_hypotheses_valid_hypotheses_equals_the_delta_glmb(k
 def test_newborn_terms_carry_their_kind():
     nb = NewbornTerms(np.zeros((1, 4)), np.eye(4)[None], lambda A, kappa: np.ones(1))
     assert nb.adaptive is False
+
+
+def test_compiled_newborn_existences_equal_the_numpy_rules_bit_for_bit():
+    """The fused cycle's newborn existences (one compiled call) against adaptive_existence and intensity_existence:
+    r_U outside [0, 1], at and around 1 - EXPLAINED_TOL, NaN; beta = 0 with kappa = 0 (no share); all explained."""
+    rng = np.random.default_rng(3)
+    edge = np.array([-0.5, 0.0, 1.0, 1.5, 1.0 - EXPLAINED_TOL, 1.0 - 2 * EXPLAINED_TOL, np.nan, 0.999, 1e-300])
+    for r_U in (edge, rng.uniform(0.0, 1.0, 23), np.ones(4), rng.uniform(0.9, 1.0, 200)):
+        M = len(r_U)
+        kappa = rng.uniform(0.0, 2.0, M)
+        beta = rng.uniform(0.0, 3.0, M)
+        kappa[::3] = 0.0
+        beta[::3] = 0.0
+        for lam, r_max in ((0.06, 0.5), (5.0, 0.3)):
+            got = newborn_existence(r_U, beta, kappa, lam, r_max, EXPLAINED_TOL, True)
+            assert got.tobytes() == adaptive_existence(r_U, lam, r_max).tobytes()
+            got = newborn_existence(r_U, beta, kappa, lam, r_max, EXPLAINED_TOL, False)
+            assert got.tobytes() == intensity_existence(r_U, beta, kappa, r_max).tobytes()
