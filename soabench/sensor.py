@@ -188,6 +188,7 @@ class SightBlockers:
         self._built = np.zeros(len(occ), dtype=bool)
         self._n_built = 0
         self._posed: dict[tuple[float, float], tuple] = {}  # per pose: the rings of the occluders and built cores
+        self._invalid: np.ndarray | None = None  # occluders, then cores: not valid polygons (always decided by GEOS)
         self.fallback_pairs = 0
 
     def __len__(self) -> int:
@@ -200,6 +201,8 @@ class SightBlockers:
             self._core[todo] = shapely.buffer(self.occ[todo], -SIGHT_TOL, join_style="mitre")
             self._built[todo] = True
             self._n_built += len(todo)
+            if self._invalid is not None:
+                self._invalid[len(self.occ) + todo] = ~shapely.is_valid(self._core[todo])
         return self._core[j]
 
     def blocked(self, ego_xy: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -229,8 +232,15 @@ class SightBlockers:
 
         posed = self._posed.get((ex, ey))
         if posed is None or posed[0] != self._n_built:  # the occluders, then the cores built so far
+            if self._invalid is None:
+                # GEOS's predicates on an invalid polygon (a buffer at large coordinates can return one) follow its
+                # own rules, not the exact sets the signs decide: every line goes to GEOS there
+                core = self._core[self._built]
+                self._invalid = np.zeros(2 * len(self.occ), dtype=bool)
+                self._invalid[: len(self.occ)] = ~shapely.is_valid(self.occ)
+                self._invalid[len(self.occ) + np.flatnonzero(self._built)] = ~shapely.is_valid(core)
             rings = _ring_arrays(np.concatenate([self.occ, self._core]))
-            posed = self._posed[(ex, ey)] = (self._n_built, _posed_rings(ex, ey, rings))
+            posed = self._posed[(ex, ey)] = (self._n_built, _posed_rings(ex, ey, rings, self._invalid))
         return announced("geometry.sight", sight_blocked, ex, ey, px, py, *posed[1], self._built)
 
 
@@ -259,15 +269,17 @@ def _ring_arrays(geoms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return xy[:, 0].copy(), xy[:, 1].copy(), rstart, vstart, odd
 
 
-def _posed_rings(ex: float, ey: float, rings: tuple) -> tuple:
-    """A ring set with what depends on the sensor's position (:func:`soabench.geometry_kernels.sight_polygons`)."""
-    from soabench.geometry_kernels import UNSURE, sight_polygons
+def _posed_rings(ex: float, ey: float, rings: tuple, invalid: np.ndarray) -> tuple:
+    """A ring set with what depends on the sensor's position (:func:`soabench.geometry_kernels.sight_polygons`); the
+    polygons flagged ``invalid`` (or with a part that is not a polygon) are never decided by their rings."""
+    from soabench.geometry_kernels import ODD, sight_polygons
 
     vx, vy, rstart, vstart, odd = rings
+    odd = odd | invalid
     bb, side, inside = sight_polygons(ex, ey, vx, vy, rstart, vstart)
     if odd.any():
         bb[odd] = (-np.inf, -np.inf, np.inf, np.inf)
-        inside[odd] = UNSURE
+        inside[odd] = ODD
     return bb, rstart, vstart, vx, vy, side, inside
 
 
