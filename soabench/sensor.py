@@ -173,6 +173,11 @@ def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[B
     return line_of_sight_past(ego_xy, targets, sight_blockers(ego_xy, occluders))
 
 
+#: below this many sight lines from a pose whose rings are not listed yet, GEOS alone decides them (listing the rings
+#: and building the cores costs more than the few tests: the sensor's scans of a small crowd, benchmarks/README.md)
+FEW_SIGHT_LINES = 16
+
+
 class SightBlockers:
     """The occluders that can hide a point from one pose (those not containing the sensor in their interior),
     prepared, and their cores (each eroded by :data:`SIGHT_TOL`), built on first use for the occluders some sight
@@ -180,7 +185,8 @@ class SightBlockers:
 
     The sight lines are decided by compiled orientation tests against the rings of the occluders and of their cores
     (:func:`soabench.geometry_kernels.sight_blocked`); a (line, occluder) pair whose signs the floating-point test
-    cannot certify goes to GEOS, as the whole test did before (``fallback_pairs`` counts them)."""
+    cannot certify, or whose occluder or core is not a valid polygon, goes to GEOS, as the whole test did before
+    (``fallback_pairs`` counts them)."""
 
     def __init__(self, occ: np.ndarray) -> None:
         self.occ = occ
@@ -211,6 +217,9 @@ class SightBlockers:
         from soabench.geometry_kernels import BLOCKED, NEEDS_CORE
 
         ex, ey = float(ego_xy[0]), float(ego_xy[1])
+        if len(targets) < FEW_SIGHT_LINES and (ex, ey) not in self._posed:  # GEOS alone costs less than the rings
+            lines = shapely.linestrings(np.stack([np.broadcast_to(ego_xy, targets.shape), targets], axis=1))
+            return _blocked_pairs(lines, self).any(axis=1)
         px, py = targets[:, 0].copy(), targets[:, 1].copy()
         status, pairs, need = self._decide(ex, ey, px, py)
         while need.any():  # the first lines that meet an occluder: build its core, decide those lines again

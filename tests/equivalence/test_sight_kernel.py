@@ -13,8 +13,15 @@ import pytest
 import shapely
 from shapely import affinity
 
+from soabench import sensor
 from soabench.geometry_kernels import UNSURE, _orient, sight_blocked, sight_polygons
 from soabench.sensor import SIGHT_TOL, _line_of_sight_reference, line_of_sight, line_of_sight_past, sight_blockers
+
+
+@pytest.fixture(autouse=True)
+def _always_compiled(monkeypatch):
+    """Every line through the compiled test, however few (a pose's first few lines otherwise go to GEOS alone)."""
+    monkeypatch.setattr(sensor, "FEW_SIGHT_LINES", 0)
 
 
 def _compare(ego, pts, occ) -> int:
@@ -177,6 +184,20 @@ def test_one_compiled_specialisation_each():
         line_of_sight(np.zeros(2), rng.uniform(-30, 30, (20, 2)), occ)
         line_of_sight(np.zeros(2), np.array([[0.0, 0.0]]), occ)
     assert len(sight_blocked.signatures) == 1 and len(sight_polygons.signatures) == 1
+
+
+def test_a_poses_first_few_lines_go_to_geos_alone_with_the_same_decisions(monkeypatch):
+    monkeypatch.setattr(sensor, "FEW_SIGHT_LINES", 16)
+    rng = np.random.default_rng(8)
+    occ = [_random_polygon(rng) for _ in range(15)]
+    ego = rng.uniform(-5.0, 5.0, 2)
+    few, many = rng.uniform(-50, 50, (5, 2)), rng.uniform(-50, 50, (40, 2))
+    blockers, ref = sight_blockers(ego, occ), sight_blockers(ego, occ)
+    np.testing.assert_array_equal(line_of_sight_past(ego, few, blockers), _line_of_sight_reference(ego, few, ref))
+    assert not blockers._posed  # decided by GEOS: no rings listed
+    np.testing.assert_array_equal(line_of_sight_past(ego, many, blockers), _line_of_sight_reference(ego, many, ref))
+    np.testing.assert_array_equal(line_of_sight_past(ego, few, blockers), _line_of_sight_reference(ego, few, ref))
+    assert blockers._posed  # listed by the many: the next few go through the compiled test
 
 
 @pytest.mark.parametrize("n", [0, 1])
