@@ -46,7 +46,7 @@ from soabench.gmphd.kernels import (  # noqa: E402
     ekf_terms,
     heaviest,
     log_likelihood,
-    merge_groups,
+    merge_threshold,
     posterior_pairs,
 )
 from soabench.lmb.gibbs import MISSED, association_marginals  # noqa: E402
@@ -61,6 +61,82 @@ _A_MAX = np.finfo(np.float64).max
 #: ``extract_r``), packed once by the filter
 UP_R_MIN, UP_GATE, UP_MAX_HYP, UP_PRUNE_R, UP_MAX_TRACKS, UP_PRUNE_T, UP_MERGE_U, UP_MAX_COMP, UP_EXTRACT_R = range(9)
 UP_EXACT = 9  #: 1.0 with ``[lmb] association = "exact"``
+
+
+@njit(cache=True)
+def _merge_groups_at(m, P, idx, order, U):
+    """:func:`soabench.gmphd.kernels.merge_groups` of the components ``m[idx]``, ``P[idx]`` (finite) without gathering
+    them: the x-sorted window of ``merge_groups_window``, its Cholesky factors, bounds, x-marginal test and
+    quadratic form, written out on the whole arrays (a row view passed to a function costs two atomic
+    reference-count updates). Every search structure of ``merge_groups`` gives the same groups (its docstring), so
+    this one does for any number of components. Returns (label (J,), centres (G,)) over the positions of ``idx``."""
+    U = merge_threshold(U)
+    J = idx.shape[0]
+    L = np.zeros((J, 4, 4))
+    spd = np.empty(J, dtype=np.bool_)
+    pxx_max = 0.0
+    for i in range(J):
+        c = idx[i]
+        ok = True  # kernels._cholesky4(P[c], L[i])
+        for a in range(4):
+            for b in range(a + 1):
+                v = P[c, a, b]
+                for e in range(b):
+                    v -= L[i, a, e] * L[i, b, e]
+                if a == b:
+                    if not v > 0.0:
+                        ok = False
+                        break
+                    L[i, a, a] = math.sqrt(v)
+                else:
+                    L[i, a, b] = v / L[i, b, b]
+            if not ok:
+                break
+        spd[i] = ok
+        if ok and P[c, 0, 0] > pxx_max:
+            pxx_max = P[c, 0, 0]
+    x = np.empty(J)
+    for i in range(J):
+        x[i] = m[idx[i], 0]
+    by_x = np.argsort(x, kind="mergesort")
+    xs = np.empty(J)
+    for k in range(J):
+        xs[k] = x[by_x[k]]
+    half = math.sqrt(U * pxx_max) * (1.0 + 1e-9) + 1e-12
+    alive = np.ones(J, dtype=np.bool_)
+    label = np.empty(J, dtype=np.int64)
+    centres = np.empty(J, dtype=np.int64)
+    y = np.empty(4)
+    G = 0
+    for c in order:
+        if not alive[c]:
+            continue
+        alive[c] = False
+        label[c] = G
+        centres[G] = c
+        mc = idx[c]
+        lo = np.searchsorted(xs, m[mc, 0] - half)
+        hi = np.searchsorted(xs, m[mc, 0] + half, side="right")
+        for k in range(lo, hi):
+            i = by_x[k]
+            if not alive[i] or not spd[i]:
+                continue
+            mi = idx[i]
+            d0 = m[mi, 0] - m[mc, 0]
+            if d0 * d0 > U * P[mi, 0, 0] * (1.0 + 1e-9):  # the x marginal alone already exceeds U
+                continue
+            q = 0.0  # kernels._merge_q(m[mi], m[mc], L[i], y)
+            for a in range(4):
+                v = m[mi, a] - m[mc, a]
+                for b in range(a):
+                    v -= L[i, a, b] * y[b]
+                y[a] = v / L[i, a, a]
+                q += y[a] * y[a]
+            if q <= U:
+                alive[i] = False
+                label[i] = G
+        G += 1
+    return label, centres[:G]
 
 
 @njit(cache=True)
@@ -79,13 +155,10 @@ def birth_groups(bw, bm, bP, bsrc, r_max, U, J_h):
             keep[q] = j
             q += 1
     w = np.empty(n_pos)
-    m = np.empty((n_pos, 4))
-    P = np.empty((n_pos, 4, 4))
     for q in range(n_pos):
         w[q] = bw[keep[q]]
-        copy_state(m, P, q, bm, bP, keep[q])
     order = np.argsort(-w, kind="mergesort")
-    group, centres = merge_groups(m, P, order, U)
+    group, centres = _merge_groups_at(bm, bP, keep, order, U)
     G = centres.shape[0]
     total = np.zeros(G)
     count = np.zeros(G, dtype=np.int64)

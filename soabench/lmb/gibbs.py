@@ -61,7 +61,13 @@ _MIX2 = np.uint64(0x94D049BB133111EB)
 def _uniform(state):
     """The next uniform in [0, 1) of the SplitMix64 stream ``state`` (a (1,) uint64 array, advanced in place)."""
     state[0] += _GOLDEN
-    z = state[0]
+    return _unit(state[0])
+
+
+@njit(cache=True)
+def _unit(z):
+    """The uniform in [0, 1) of the SplitMix64 state ``z``, already advanced: :func:`_uniform` on a state the sampler
+    keeps in a local variable during its sweeps."""
     z = (z ^ (z >> np.uint64(30))) * _MIX1
     z = (z ^ (z >> np.uint64(27))) * _MIX2
     z = z ^ (z >> np.uint64(31))
@@ -101,9 +107,20 @@ def _accumulate(logc, hyps, n_hyp, marg_out, rows):
     """Add the normalised weights of hypotheses ``hyps[:n_hyp]`` to the marginals of ``rows``."""
     n = logc.shape[0]
     lw = np.empty(n_hyp)
+    h = 0
+    while h + 4 <= n_hyp:  # four hypotheses at a time, each summed over its tracks in order as _log_weight sums
+        s0 = s1 = s2 = s3 = 0.0
+        for i in range(n):
+            s0 += logc[i, hyps[h, i]]
+            s1 += logc[i, hyps[h + 1, i]]
+            s2 += logc[i, hyps[h + 2, i]]
+            s3 += logc[i, hyps[h + 3, i]]
+        lw[h], lw[h + 1], lw[h + 2], lw[h + 3] = s0, s1, s2, s3
+        h += 4
+    for g in range(h, n_hyp):
+        lw[g] = _log_weight(logc, hyps[g])
     mx = -np.inf
     for h in range(n_hyp):
-        lw[h] = _log_weight(logc, hyps[h])
         if lw[h] > mx:
             mx = lw[h]
     if not mx > -np.inf:  # no hypothesis of positive weight (only if r = 1 and p_D = 1 leave a track no option)
@@ -329,10 +346,11 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             if options[i, o] < 1:
                 n_fixed[i] += 1
     theta = np.zeros(n, dtype=np.int64)  # every track without a measurement
-    pos = np.zeros((n, n_cols), dtype=np.int64)  # the option index of each column of a track
+    wcol = np.zeros((n, n_cols))  # the weight of each column of a track (0 where it is no option): a mask draw reads
+    # a measurement's weight straight from its bit
     for i in range(n):
         for o in range(n_opt[i]):
-            pos[i, options[i, o]] = o
+            wcol[i, options[i, o]] = weight[i, o]
     # Zobrist hash of each sample (a sum of one random 64-bit key per (track, option)), kept up to date as theta
     # changes: distinct hypotheses are found by sorting the hashes and comparing rows of equal hash exactly
     zkey = np.empty((n, n_cols), dtype=np.uint64)
@@ -352,12 +370,12 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             deg[options[i, o]] += 1
     for j in range(M):
         deg[j + 1] += deg[j]
-    takers = np.empty(deg[M], dtype=np.int64)
+    takers = np.empty(deg[M], dtype=np.uint64)  # unsigned, as the loops over them: no negative-index wraparound
     fill = deg[:M].copy()
     for i in range(n):
         for o in range(n_fixed[i], n_opt[i]):
             j = options[i, o] - 1
-            takers[fill[j]] = i
+            takers[fill[j]] = np.uint64(i)
             fill[j] += 1
     blocked = np.zeros(n, dtype=np.int64)
     W = (M + 63) >> 6
@@ -390,11 +408,13 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
         samples[0, a] = key[a]
     hashes[0] = h
     n_st = 1
+    st = state[0]  # the stream's state during the sweeps (stored back after them): each draw advances it by _GOLDEN
     for _sweep in range(1, n_sweeps):
         changed = False
         for i in range(n):
             if blocked[i] == 0:
-                u = _uniform(state) * prefix[i, n_opt[i] - 1]
+                st += _GOLDEN
+                u = _unit(st) * prefix[i, n_opt[i] - 1]
                 c = -1
                 for o in range(n_opt[i]):
                     if weight[i, o] > 0.0:
@@ -407,48 +427,55 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
                     # every measurement in the track's gate but the one it holds is held by another track: its open
                     # options are "none" and that measurement, if any
                     if own == 0:
-                        state[0] += _GOLDEN  # the uniform is drawn; with one option open it decides nothing
+                        st += _GOLDEN  # the uniform is drawn; with one option open it decides nothing
                         c = NONE if weight[i, 0] > 0.0 else -1
                     else:
                         w0 = weight[i, 0]
-                        w1 = weight[i, pos[i, theta[i]]]
-                        u = _uniform(state) * (w0 + w1)
+                        w1 = wcol[i, theta[i]]
+                        st += _GOLDEN
+                        u = _unit(st) * (w0 + w1)
                         c = NONE if w0 > 0.0 else -1
                         if not (w0 > 0.0 and u < w0) and w1 > 0.0:
                             c = theta[i]
                 else:
                     # the open options: "none", the measurement it holds, and the gated measurements no track
-                    # holds, in column order (the order of its options), read off the bit masks
+                    # holds, in column order (the order of its options), read off the bit masks. buf_w keeps the
+                    # running sum at each open option of positive weight: weights are >= 0, so adding a zero one
+                    # leaves the sum as it was, and these are the sums a second pass over buf would reach (a NaN
+                    # weight makes tot and u NaN, and every comparison below false, either way)
                     tot = 0.0
-                    k = 0
+                    k = np.uint64(0)  # unsigned: no negative-index wraparound on buf
                     if n_fixed[i] == 1:
                         w = weight[i, 0]
                         tot += w
                         if w > 0.0:
-                            buf_w[k] = w
+                            buf_w[k] = tot
                             buf_c[k] = NONE
-                            k += 1
+                            k += np.uint64(1)
                     for a in range(W):
                         x = gate[i, a] & ~held[a]
                         if own == 1 and ((theta[i] - 1) >> 6) == a:
                             x |= np.uint64(1) << np.uint64((theta[i] - 1) & 63)
                         while x != 0:
-                            c = 1 + (a << 6) + _trailing_zeros(x)
+                            # an unsigned column: no negative-index wraparound in the innermost loop
+                            cu = np.uint64(1 + (a << 6)) + np.uint64(_trailing_zeros(x))
                             x &= x - np.uint64(1)
-                            w = weight[i, pos[i, c]]
+                            w = wcol[i, cu]
+                            c = np.int64(cu)
                             tot += w
                             if w > 0.0:
-                                buf_w[k] = w
+                                buf_w[k] = tot
                                 buf_c[k] = c
-                                k += 1
-                    u = _uniform(state) * tot
-                    acc = 0.0
+                                k += np.uint64(1)
+                    st += _GOLDEN
+                    u = _unit(st) * tot
                     c = -1
-                    for q in range(k):
+                    q = np.uint64(0)
+                    while q < k:
                         c = buf_c[q]
-                        acc += buf_w[q]
-                        if u < acc:
+                        if u < buf_w[q]:
                             break
+                        q += np.uint64(1)
             if c < 0:  # no option of positive weight (only when r = 1 and p_D = 1 leave the track none)
                 c = theta[i]
             if c == theta[i]:
@@ -457,50 +484,74 @@ def _gibbs(logc, options, n_opt, n_sweeps, state):
             if theta[i] >= 1:
                 j = theta[i] - 1
                 held[j >> 6] &= ~(np.uint64(1) << np.uint64(j & 63))
-                for t in range(deg[j], deg[j + 1]):
-                    if takers[t] != i:
-                        blocked[takers[t]] -= 1
+                tu = np.uint64(deg[j])
+                te = np.uint64(deg[j + 1])
+                while tu < te:  # every taker of z_j, i among them (i's own measurement does not block i: undone)
+                    blocked[takers[tu]] -= 1
+                    tu += np.uint64(1)
+                blocked[i] += 1
             h += zkey[i, c] - zkey[i, theta[i]]
             key[word[i]] ^= np.uint64(theta[i] ^ c) << shift[i]
             theta[i] = c
             if c >= 1:
                 j = c - 1
                 held[j >> 6] |= np.uint64(1) << np.uint64(j & 63)
-                for t in range(deg[j], deg[j + 1]):
-                    if takers[t] != i:
-                        blocked[takers[t]] += 1
+                tu = np.uint64(deg[j])
+                te = np.uint64(deg[j + 1])
+                while tu < te:
+                    blocked[takers[tu]] += 1
+                    tu += np.uint64(1)
+                blocked[i] -= 1
         if changed:
             for a in range(W2):
                 samples[n_st, a] = key[a]
             hashes[n_st] = h
             n_st += 1
-    hashes = hashes[:n_st]
-    perm = np.argsort(hashes, kind="mergesort")
+    state[0] = st
+    # the distinct samples in the order of their first visit, found with a table keyed by a hash of their words
+    # (equal words, equal key; a hit is confirmed word by word), then ordered by their hashes h (a stable sort: the
+    # first visited first among equal h). That is the order of a stable sort of every sample by h keeping the first
+    # of each distinct one: the order in which the marginals add them up
+    size = 1
+    while size < 2 * n_st:
+        size <<= 1
+    table = np.full(size, -1, dtype=np.int64)
     first = np.empty(n_st, dtype=np.int64)  # the stored sample of each distinct hypothesis
+    tag = np.empty(n_st, dtype=np.uint64)
     n_hyp = 0
-    run = 0  # first distinct hypothesis of the current run of equal hashes
-    for k in range(n_st):
-        s = perm[k]
-        if k == 0 or hashes[s] != hashes[perm[k - 1]]:
-            run = n_hyp
+    for s in range(n_st):
+        g = np.uint64(0)
+        for a in range(W2):
+            g = (g ^ samples[s, a]) * _MIX1
+            g ^= g >> np.uint64(29)
+        slot = np.int64(g & np.uint64(size - 1))
         new = True
-        for u in range(run, n_hyp):  # rows of equal hash: compared exactly
-            same = True
-            f = first[u]
-            for a in range(W2):
-                if samples[f, a] != samples[s, a]:
-                    same = False
+        while table[slot] >= 0:
+            d = table[slot]
+            if tag[d] == g:
+                same = True
+                f = first[d]
+                for a in range(W2):
+                    if samples[f, a] != samples[s, a]:
+                        same = False
+                        break
+                if same:
+                    new = False
                     break
-            if same:
-                new = False
-                break
+            slot = (slot + 1) & (size - 1)
         if new:
+            table[slot] = n_hyp
             first[n_hyp] = s
+            tag[n_hyp] = g
             n_hyp += 1
+    h_first = np.empty(n_hyp, dtype=np.uint64)
+    for d in range(n_hyp):
+        h_first[d] = hashes[first[d]]
+    order = np.argsort(h_first, kind="mergesort")
     out = np.empty((n_hyp, n), dtype=np.int64)
     mask = np.uint64((1 << bits) - 1)
     for u in range(n_hyp):
-        f = first[u]
+        f = first[order[u]]
         for i in range(n):
             out[u, i] = np.int64((samples[f, word[i]] >> shift[i]) & mask)
     return out, n_hyp

@@ -153,21 +153,36 @@ def _finite_components(keep, nk, w, m, P):
 
 
 @njit(cache=True)
-def _merge_track(keep, nk, w, m, P, U, L, flags, idx, W, mt, Pt):
+def _merge_track(keep, nk, w, m, P, U, L, spd, alive, order, label, centres, count, W, mt, Pt):
     """The merge groups of one track's components ``keep[:nk]`` (finite) into W (G,), mt (G, 4), Pt (G, 4, 4);
     returns G. The same groups and moments, bit for bit, as ``kernels.merge_groups_window`` followed by
     ``kernels.merge_moments`` on the gathered components: the same Cholesky factors, window bound, x-marginal
     test and quadratic form against each centre in order of weight (heaviest first, lowest index on ties; which
     candidate is tested first does not change the groups), then each group's sums over its members in index order.
-    ``L``, ``flags`` (spd, alive), ``idx`` (order, label, centres, count) and ``y`` are scratch of at least nk rows.
+    ``L``, ``spd``, ``alive``, ``order``, ``label``, ``centres`` and ``count`` are scratch of at least nk rows. The
+    Cholesky factor and the quadratic form are those of ``kernels._cholesky4`` and ``kernels._merge_q`` written out
+    on the whole arrays: a row view passed to a function costs two atomic reference-count updates.
     """
-    spd, alive = flags[0], flags[1]
-    order, label, centres, count = idx[0], idx[1], idx[2], idx[3]
     Uq = kernels.merge_threshold(U)
     pxx_max = 0.0
     for t in range(nk):
         c = keep[t]
-        spd[t] = kernels._cholesky4(P[c], L[t])
+        ok = True  # kernels._cholesky4(P[c], L[t])
+        for a in range(4):
+            for b in range(a + 1):
+                v = P[c, a, b]
+                for e in range(b):
+                    v -= L[t, a, e] * L[t, b, e]
+                if a == b:
+                    if not v > 0.0:
+                        ok = False
+                        break
+                    L[t, a, a] = math.sqrt(v)
+                else:
+                    L[t, a, b] = v / L[t, b, b]
+            if not ok:
+                break
+        spd[t] = ok
         if spd[t] and P[c, 0, 0] > pxx_max:
             pxx_max = P[c, 0, 0]
         alive[t] = True
@@ -197,7 +212,14 @@ def _merge_track(keep, nk, w, m, P, U, L, flags, idx, W, mt, Pt):
             d0 = m[c, 0] - m[cj, 0]
             if d0 * d0 > Uq * P[c, 0, 0] * (1.0 + 1e-9):  # the x marginal alone already exceeds U
                 continue
-            if kernels._merge_q(m[c], m[cj], L[t], y) <= Uq:
+            q = 0.0  # kernels._merge_q(m[c], m[cj], L[t], y)
+            for a in range(4):
+                v = m[c, a] - m[cj, a]
+                for b in range(a):
+                    v -= L[t, a, b] * y[b]
+                y[a] = v / L[t, a, a]
+                q += y[a] * y[a]
+            if q <= Uq:
                 alive[t] = False
                 label[t] = G
         G += 1
@@ -268,8 +290,12 @@ def reduce_components(start, w, m, P, T, U, L_max):
     keep = np.empty(n_max, dtype=np.int64)
     # scratch of _merge_track, for the largest track
     L = np.zeros((n_max, 4, 4))
-    flags = np.empty((2, n_max), dtype=np.bool_)
-    idx = np.empty((4, n_max), dtype=np.int64)
+    spd = np.empty(n_max, dtype=np.bool_)
+    alive = np.empty(n_max, dtype=np.bool_)
+    order = np.empty(n_max, dtype=np.int64)
+    label = np.empty(n_max, dtype=np.int64)
+    centres = np.empty(n_max, dtype=np.int64)
+    count = np.empty(n_max, dtype=np.int64)
     W = np.empty(n_max)
     mt = np.empty((n_max, 4))
     Pt = np.empty((n_max, 4, 4))
@@ -297,38 +323,43 @@ def reduce_components(start, w, m, P, T, U, L_max):
             keep[0] = best
             nk = 1
         if nk > 0 and _finite_components(keep, nk, w, m, P):
-            G = _merge_track(keep, nk, w, m, P, U, L, flags, idx, W, mt, Pt)
-            if G <= L_max:  # every group kept, in creation order
-                total = 0.0
-                for g in range(G):
+            G = _merge_track(keep, nk, w, m, P, U, L, spd, alive, order, label, centres, count, W, mt, Pt)
+            # the L_max heaviest groups (a stable sort by -W: the lower index first among equal weights; no W is NaN
+            # here), in creation order: group g is kept when fewer than L_max groups come before it in that sort
+            chosen = alive  # scratch again
+            for g in range(G):
+                rank = 0
+                if G > L_max:
+                    for e in range(G):
+                        if W[e] > W[g] or (W[e] == W[g] and e < g):
+                            rank += 1
+                chosen[g] = rank < L_max
+            total = 0.0
+            for g in range(G):
+                if chosen[g]:
                     total += W[g]
-                for g in range(G):
+            for g in range(G):
+                if chosen[g]:
                     out_w[n_out] = W[g] / total
                     kernels.copy_state(out_m, out_P, n_out, mt, Pt, g)
                     n_out += 1
-                out_start[i + 1] = n_out
-                continue
-            sel = np.sort(np.argsort(-W[:G], kind="mergesort")[:L_max])
-        else:
-            kk = keep[:nk]
-            wk = w[kk].copy()
-            mk = np.ascontiguousarray(m[kk])
-            Pk = np.ascontiguousarray(P[kk])
-            order = np.argsort(-wk, kind="mergesort")
-            label, centres = kernels.merge_groups_window(mk, Pk, order, U)
-            dummy = np.zeros(nk, dtype=np.int32)
-            Wg, mg, Pg, _, _, _ = kernels.merge_moments(label, centres, wk, mk, Pk, dummy, dummy)
-            G = Wg.shape[0]
-            sel = np.sort(np.argsort(-Wg, kind="mergesort")[: min(G, L_max)])
-            for g in range(G):
-                W[g] = Wg[g]
-                kernels.copy_state(mt, Pt, g, mg, Pg, g)
+            out_start[i + 1] = n_out
+            continue
+        kk = keep[:nk]
+        wk = w[kk].copy()
+        mk = np.ascontiguousarray(m[kk])
+        Pk = np.ascontiguousarray(P[kk])
+        by_w = np.argsort(-wk, kind="mergesort")
+        group, centre = kernels.merge_groups_window(mk, Pk, by_w, U)
+        dummy = np.zeros(nk, dtype=np.int32)
+        Wg, mg, Pg, _, _, _ = kernels.merge_moments(group, centre, wk, mk, Pk, dummy, dummy)
+        sel = np.sort(np.argsort(-Wg, kind="mergesort")[: min(Wg.shape[0], L_max)])
         total = 0.0
         for g in sel:
-            total += W[g]
+            total += Wg[g]
         for g in sel:
-            out_w[n_out] = W[g] / total
-            kernels.copy_state(out_m, out_P, n_out, mt, Pt, g)
+            out_w[n_out] = Wg[g] / total
+            kernels.copy_state(out_m, out_P, n_out, mg, Pg, g)
             n_out += 1
         out_start[i + 1] = n_out
     return out_start, out_w[:n_out], out_m[:n_out], out_P[:n_out]
