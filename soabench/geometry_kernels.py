@@ -210,6 +210,8 @@ def convex_contains(vx, vy, starts, counts, ex, ey, tol):  # pragma: no cover - 
 SIGN_BOUND = (3.0 + 16.0 * 2.0**-53) * 2.0**-53
 #: a sign that the floating-point determinant does not certify
 UNSURE = 2
+#: ``inside`` of a polygon its rings do not decide (not a valid polygon): every segment that reaches its box is UNSURE
+ODD = 3
 #: line_of_sight status of a sight line: visible, blocked, some occluder undecided, a core still to build
 VISIBLE, BLOCKED, UNDECIDED, NEEDS_CORE = 0, 1, 2, 3
 #: below this sum of the determinant's two products, underflow could void the error bound: no sign is certified
@@ -284,7 +286,8 @@ def sight_polygons(ex, ey, vx, vy, rstart, vstart):  # pragma: no cover - compil
 @njit(cache=True)
 def sight_blocked(ex, ey, px, py, bb, rstart, vstart, vx, vy, side, inside, built):  # pragma: no cover - compiled
     """The line-of-sight status of each segment sensor (ex, ey) -> (px[i], py[i]) against J occluders: polygon j
-    of the ring set (:func:`sight_polygons`) is occluder j, polygon J + j its core once ``built[j]``.
+    of the ring set (:func:`sight_polygons`) is occluder j, polygon J + j its core once ``built[j]``; a polygon
+    whose ``inside`` is ODD is never decided here.
 
     Occluder j blocks the segment where the segment meets the occluder and its core (the rule of method §2.3). A
     closed segment meets a closed polygon where it touches or crosses a ring edge, or else where the sensor lies
@@ -321,8 +324,8 @@ def sight_blocked(ex, ey, px, py, bb, rstart, vstart, vx, vy, side, inside, buil
                 if bb[g, 0] > sx1 or bb[g, 2] < sx0 or bb[g, 1] > sy1 or bb[g, 3] < sy0:
                     verdict = 0
                     break
-                meets = 1 if inside[g] == 1 else (UNSURE if inside[g] == UNSURE else 0)
-                r = rstart[g]
+                meets = 1 if inside[g] == 1 else (0 if inside[g] == 0 else UNSURE)
+                r = rstart[g] if inside[g] != ODD else rstart[g + 1]
                 while meets != 1 and r < rstart[g + 1]:
                     for v in range(vstart[r], vstart[r + 1] - 1):
                         ax, ay, bx, by = vx[v], vy[v], vx[v + 1], vy[v + 1]

@@ -41,7 +41,7 @@ from soabench.birth.soa import dedup, ego_inside
 from soabench.cache import kernel_folder
 from soabench.config import BIRTH_MODEL_NAMES, PROBABILITY_MODES, Config, MetricsConfig
 from soabench.notice import LINE_INTERVAL_S, is_terminal
-from soabench.sensor import line_of_sight, segment_meets_convex
+from soabench.sensor import FEW_SIGHT_LINES, line_of_sight, segment_meets_convex
 from soabench.types import Births, NewbornTerms, Obstacles, Scan
 
 MESSAGE = notice.MESSAGE
@@ -117,7 +117,8 @@ def _metrics_geometry(modes: tuple[str, ...]) -> None:
     run_matchings(E, np.array([0, 2], dtype=np.int64), G, np.ones((1, 2), dtype=bool), *args)
     square = np.array([[1.0, 1.0], [2.0, 1.0], [2.0, 2.0], [1.0, 2.0]])
     segment_meets_convex(np.zeros(2), np.array([[3.0, 3.0]]), [square])
-    line_of_sight(np.zeros(2), np.array([[3.0, 3.0]]), [shapely.Polygon(square)])  # the sensor's sight-line test
+    sight = np.full((FEW_SIGHT_LINES, 2), 3.0)  # enough lines for the compiled sight-line test
+    line_of_sight(np.zeros(2), sight, [shapely.Polygon(square)])
     ego_inside([square], np.zeros(3))
     dedup(np.array([[0.0, 0.0], [0.1, 0.0]]), 1.0)
     t = np.zeros((1, 2))

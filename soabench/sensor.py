@@ -173,6 +173,11 @@ def line_of_sight(ego_xy: np.ndarray, targets: np.ndarray, occluders: Sequence[B
     return line_of_sight_past(ego_xy, targets, sight_blockers(ego_xy, occluders))
 
 
+#: below this many sight lines from a pose whose rings are not listed yet, GEOS alone decides them (listing the rings
+#: and building the cores costs more than the few tests: the sensor's scans of a small crowd, benchmarks/README.md)
+FEW_SIGHT_LINES = 16
+
+
 class SightBlockers:
     """The occluders that can hide a point from one pose (those not containing the sensor in their interior),
     prepared, and their cores (each eroded by :data:`SIGHT_TOL`), built on first use for the occluders some sight
@@ -180,7 +185,8 @@ class SightBlockers:
 
     The sight lines are decided by compiled orientation tests against the rings of the occluders and of their cores
     (:func:`soabench.geometry_kernels.sight_blocked`); a (line, occluder) pair whose signs the floating-point test
-    cannot certify goes to GEOS, as the whole test did before (``fallback_pairs`` counts them)."""
+    cannot certify, or whose occluder or core is not a valid polygon, goes to GEOS, as the whole test did before
+    (``fallback_pairs`` counts them)."""
 
     def __init__(self, occ: np.ndarray) -> None:
         self.occ = occ
@@ -188,6 +194,7 @@ class SightBlockers:
         self._built = np.zeros(len(occ), dtype=bool)
         self._n_built = 0
         self._posed: dict[tuple[float, float], tuple] = {}  # per pose: the rings of the occluders and built cores
+        self._invalid: np.ndarray | None = None  # occluders, then cores: not valid polygons (always decided by GEOS)
         self.fallback_pairs = 0
 
     def __len__(self) -> int:
@@ -200,6 +207,8 @@ class SightBlockers:
             self._core[todo] = shapely.buffer(self.occ[todo], -SIGHT_TOL, join_style="mitre")
             self._built[todo] = True
             self._n_built += len(todo)
+            if self._invalid is not None:
+                self._invalid[len(self.occ) + todo] = ~shapely.is_valid(self._core[todo])
         return self._core[j]
 
     def blocked(self, ego_xy: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -208,6 +217,9 @@ class SightBlockers:
         from soabench.geometry_kernels import BLOCKED, NEEDS_CORE
 
         ex, ey = float(ego_xy[0]), float(ego_xy[1])
+        if len(targets) < FEW_SIGHT_LINES and (ex, ey) not in self._posed:  # GEOS alone costs less than the rings
+            lines = shapely.linestrings(np.stack([np.broadcast_to(ego_xy, targets.shape), targets], axis=1))
+            return _blocked_pairs(lines, self).any(axis=1)
         px, py = targets[:, 0].copy(), targets[:, 1].copy()
         status, pairs, need = self._decide(ex, ey, px, py)
         while need.any():  # the first lines that meet an occluder: build its core, decide those lines again
@@ -229,8 +241,15 @@ class SightBlockers:
 
         posed = self._posed.get((ex, ey))
         if posed is None or posed[0] != self._n_built:  # the occluders, then the cores built so far
+            if self._invalid is None:
+                # GEOS's predicates on an invalid polygon (a buffer at large coordinates can return one) follow its
+                # own rules, not the exact sets the signs decide: every line goes to GEOS there
+                core = self._core[self._built]
+                self._invalid = np.zeros(2 * len(self.occ), dtype=bool)
+                self._invalid[: len(self.occ)] = ~shapely.is_valid(self.occ)
+                self._invalid[len(self.occ) + np.flatnonzero(self._built)] = ~shapely.is_valid(core)
             rings = _ring_arrays(np.concatenate([self.occ, self._core]))
-            posed = self._posed[(ex, ey)] = (self._n_built, _posed_rings(ex, ey, rings))
+            posed = self._posed[(ex, ey)] = (self._n_built, _posed_rings(ex, ey, rings, self._invalid))
         return announced("geometry.sight", sight_blocked, ex, ey, px, py, *posed[1], self._built)
 
 
@@ -259,15 +278,17 @@ def _ring_arrays(geoms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return xy[:, 0].copy(), xy[:, 1].copy(), rstart, vstart, odd
 
 
-def _posed_rings(ex: float, ey: float, rings: tuple) -> tuple:
-    """A ring set with what depends on the sensor's position (:func:`soabench.geometry_kernels.sight_polygons`)."""
-    from soabench.geometry_kernels import UNSURE, sight_polygons
+def _posed_rings(ex: float, ey: float, rings: tuple, invalid: np.ndarray) -> tuple:
+    """A ring set with what depends on the sensor's position (:func:`soabench.geometry_kernels.sight_polygons`); the
+    polygons flagged ``invalid`` (or with a part that is not a polygon) are never decided by their rings."""
+    from soabench.geometry_kernels import ODD, sight_polygons
 
     vx, vy, rstart, vstart, odd = rings
+    odd = odd | invalid
     bb, side, inside = sight_polygons(ex, ey, vx, vy, rstart, vstart)
     if odd.any():
         bb[odd] = (-np.inf, -np.inf, np.inf, np.inf)
-        inside[odd] = UNSURE
+        inside[odd] = ODD
     return bb, rstart, vstart, vx, vy, side, inside
 
 
