@@ -339,6 +339,19 @@ def predict_births(r, label, origin, age, start, w, m, P, F, Q, pred_pars, p_S, 
 
 
 @njit(cache=True)
+def all_finite(m, P):
+    """Every entry of ``m`` and ``P`` finite (the newborn terms' check of
+    :func:`soabench.gmphd.inputs.newborn_finite`)."""
+    for x in m.flat:
+        if not math.isfinite(x):
+            return False
+    for x in P.flat:
+        if not math.isfinite(x):
+            return False
+    return True
+
+
+@njit(cache=True)
 def newborn_existence(r_U, beta, kappa, lambda_B, r_max, tol, adaptive):
     """The birth existences r_B of this scan's newborn terms (docs/method.md "LMB filter", birth) from the
     measurements' r_U: :func:`soabench.lmb.birth.adaptive_existence` (``adaptive``; ``beta`` and ``kappa`` unread)

@@ -59,14 +59,47 @@ _NO_BIRTHS = (np.empty(0), np.empty((0, 4)), np.empty((0, 4, 4)), np.empty(0, dt
 
 
 def _birth_arrays(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The birth components as :func:`soabench.lmb.cycle.predict_births` takes them: fresh contiguous w (J_b,),
-    m (J_b, 4), P (J_b, 4, 4) float and source codes int8 (one compiled specialisation whatever the model hands)."""
+    """The birth components as :func:`soabench.lmb.cycle.predict_births` takes them: contiguous writeable w (J_b,),
+    m (J_b, 4), P (J_b, 4, 4) float and source codes int8 (one compiled specialisation whatever the model hands).
+    The model's own arrays when they already are that (the cycle only reads them, within the step), else copies."""
     return (
-        np.array(births.w, dtype=float).reshape(-1),
-        np.array(births.m, dtype=float).reshape(-1, 4),
-        np.array(births.P, dtype=float).reshape(-1, 4, 4),
-        np.array(births.source, dtype=np.int8).reshape(-1),
+        _plain(births.w, _F64, ()),
+        _plain(births.m, _F64, (4,)),
+        _plain(births.P, _F64, (4, 4)),
+        _plain(births.source, _I8, ()),
     )
+
+
+_F64, _I8 = np.dtype(np.float64), np.dtype(np.int8)
+
+
+def _plain(a, dtype: np.dtype, tail: tuple[int, ...]) -> np.ndarray:
+    """``a`` as a C-contiguous, writeable, aligned array of ``dtype`` and shape (-1, *tail) (the type the cycle is
+    compiled for): itself when it is one, else a copy reshaped."""
+    if type(a) is np.ndarray and a.dtype == dtype and a.shape[1:] == tail and a.ndim == 1 + len(tail):
+        flags = a.flags
+        if flags.c_contiguous and flags.writeable and flags.aligned:
+            return a
+    return np.array(a, dtype=dtype).reshape(-1, *tail)
+
+
+def _newborn_finite(nb) -> bool:
+    """:func:`~soabench.gmphd.inputs.newborn_finite`, by one compiled call (:func:`soabench.lmb.cycle.all_finite`)
+    when the newborn means and covariances are contiguous float arrays of shapes (M, 4) and (M, 4, 4)."""
+    if nb is None:
+        return True
+    m, P = nb.m, nb.P
+    if _contiguous(m, (4,)) and _contiguous(P, (4, 4)) and m.flags.writeable == P.flags.writeable:
+        return lmb_cycle.all_finite(m, P)
+    return newborn_finite(nb)
+
+
+def _contiguous(a, tail: tuple[int, ...]) -> bool:
+    """``a`` is a C-contiguous aligned float64 array of shape (-1, *tail)."""
+    return (
+        type(a) is np.ndarray and a.dtype == _F64 and a.ndim == 1 + len(tail) and a.shape[1:] == tail
+        and a.flags.c_contiguous and a.flags.aligned
+    )  # fmt: skip
 
 
 class LMBFilter:
@@ -173,7 +206,7 @@ class LMBFilter:
         :func:`~soabench.gmphd.inputs.check_step_inputs`, which raises or drops as it does for the array path."""
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the GM-PHD runs of the scan
         Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
-        if self.fused and finite and newborn_finite(births.newborn):
+        if self.fused and finite and _newborn_finite(births.newborn):
             arrays = _birth_arrays(births) if len(births) else _NO_BIRTHS
             if cycle.births_ok(*arrays[:3]):
                 seed = int(self.rng.integers(2**32))  # one draw per scan, used or not (as below)

@@ -476,3 +476,31 @@ def test_ukf_form_agrees_with_ekf():
     from soabench.gmphd.models import ukf_terms
 
     assert LMBFilter(FilterConfig(form="ukf"), Sensor()).model._terms is ukf_terms
+
+
+@pytest.mark.parametrize("bad", ["nan_m", "inf_P", "none", "read_only"])
+def test_newborn_terms_are_checked_on_the_fused_path_as_on_the_array_path(bad):
+    """Newborn terms with a non-finite mean or covariance: the fused step (its compiled check of contiguous float
+    arrays) raises as the array path does; finite ones, writeable or read-only, pass on both and give the same
+    labels and counts."""
+    m = np.array([[10.0, -6.0, 0.0, 0.0], [33.0, 7.0, 0.0, 0.0]])
+    P = np.stack([np.diag([1.0, 1.0, 4.0, 4.0])] * 2)
+    if bad == "nan_m":
+        m[1, 0] = np.nan
+    elif bad == "inf_P":
+        P[0, 2, 2] = np.inf
+    elif bad == "read_only":
+        m.flags.writeable = P.flags.writeable = False
+    scan = _scan(0, [[12.0, -0.5], [34.0, 0.2]])
+    outcomes = []
+    for fused in (True, False):
+        filt = LMBFilter(FilterConfig(), Sensor(), rng=np.random.default_rng(0), fused=fused)
+        births = Births(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int8))
+        births.newborn = NewbornTerms(m, P, lambda A, kappa: np.full(len(kappa), 0.5), adaptive=True)
+        try:
+            got = filt.step(scan, births)
+            outcomes.append(("ok", got.n_newborn, tuple(got.labels), tuple(filt._newborn[2])))
+        except SoabenchError as err:
+            outcomes.append(("raised", str(err)))
+    assert outcomes[0] == outcomes[1]
+    assert (outcomes[0][0] == "raised") == (bad in ("nan_m", "inf_P"))
