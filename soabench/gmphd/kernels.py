@@ -188,6 +188,25 @@ def _cholesky4(P, L):
     return True
 
 
+@njit(cache=True, inline="always")
+def cholesky4_at(P, c, L, t):
+    """:func:`_cholesky4` of ``P[c]`` into ``L[t]``, indexed on the whole arrays: inlined, it takes no row view (a
+    view passed to a function costs two atomic reference-count updates), for the merges that run once per
+    component in hot loops."""
+    for a in range(4):
+        for b in range(a + 1):
+            s = P[c, a, b]
+            for e in range(b):
+                s -= L[t, a, e] * L[t, b, e]
+            if a == b:
+                if not s > 0.0:
+                    return False
+                L[t, a, a] = math.sqrt(s)
+            else:
+                L[t, a, b] = s / L[t, b, b]
+    return True
+
+
 _LEAF = 32  #: components per k-d tree leaf
 _SLACK = 1.0 + 1e-8  #: relative slack of the reach radius (rounding of Cholesky and substitution is ~1e-15)
 
@@ -223,6 +242,20 @@ def _merge_q(x, c, L, y):
         for b in range(a):
             s -= L[a, b] * y[b]
         y[a] = s / L[a, a]
+        q += y[a] * y[a]
+    return q
+
+
+@njit(cache=True, inline="always")
+def merge_q_at(m, i, j, L, t, y):
+    """:func:`_merge_q` of ``m[i]`` against the centre ``m[j]`` with the factor ``L[t]``, indexed on the whole arrays
+    (no row views, as :func:`cholesky4_at`)."""
+    q = 0.0
+    for a in range(4):
+        s = m[i, a] - m[j, a]
+        for b in range(a):
+            s -= L[t, a, b] * y[b]
+        y[a] = s / L[t, a, a]
         q += y[a] * y[a]
     return q
 

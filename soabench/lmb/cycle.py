@@ -41,11 +41,13 @@ from numba import njit  # noqa: E402
 from soabench.gmphd.clock import monotonic  # noqa: E402
 from soabench.gmphd.cycle import origin_counts, predict_append, ukf_terms  # noqa: E402
 from soabench.gmphd.kernels import (  # noqa: E402
+    cholesky4_at,
     copy_row,
     copy_state,
     ekf_terms,
     heaviest,
     log_likelihood,
+    merge_q_at,
     merge_threshold,
     posterior_pairs,
 )
@@ -67,9 +69,10 @@ UP_EXACT = 9  #: 1.0 with ``[lmb] association = "exact"``
 def _merge_groups_at(m, P, idx, order, U):
     """:func:`soabench.gmphd.kernels.merge_groups` of the components ``m[idx]``, ``P[idx]`` (finite) without gathering
     them: the x-sorted window of ``merge_groups_window``, its Cholesky factors, bounds, x-marginal test and
-    quadratic form, written out on the whole arrays (a row view passed to a function costs two atomic
-    reference-count updates). Every search structure of ``merge_groups`` gives the same groups (its docstring), so
-    this one does for any number of components. Returns (label (J,), centres (G,)) over the positions of ``idx``."""
+    quadratic form, indexed on the whole arrays (``cholesky4_at``, ``merge_q_at``: a row view passed to a function
+    costs two atomic reference-count updates). Every search structure of ``merge_groups`` gives the same groups (its
+    docstring), so this one does for any number of components. Returns (label (J,), centres (G,)) over the
+    positions of ``idx``."""
     U = merge_threshold(U)
     J = idx.shape[0]
     L = np.zeros((J, 4, 4))
@@ -77,21 +80,7 @@ def _merge_groups_at(m, P, idx, order, U):
     pxx_max = 0.0
     for i in range(J):
         c = idx[i]
-        ok = True  # kernels._cholesky4(P[c], L[i])
-        for a in range(4):
-            for b in range(a + 1):
-                v = P[c, a, b]
-                for e in range(b):
-                    v -= L[i, a, e] * L[i, b, e]
-                if a == b:
-                    if not v > 0.0:
-                        ok = False
-                        break
-                    L[i, a, a] = math.sqrt(v)
-                else:
-                    L[i, a, b] = v / L[i, b, b]
-            if not ok:
-                break
+        ok = cholesky4_at(P, c, L, i)
         spd[i] = ok
         if ok and P[c, 0, 0] > pxx_max:
             pxx_max = P[c, 0, 0]
@@ -125,14 +114,7 @@ def _merge_groups_at(m, P, idx, order, U):
             d0 = m[mi, 0] - m[mc, 0]
             if d0 * d0 > U * P[mi, 0, 0] * (1.0 + 1e-9):  # the x marginal alone already exceeds U
                 continue
-            q = 0.0  # kernels._merge_q(m[mi], m[mc], L[i], y)
-            for a in range(4):
-                v = m[mi, a] - m[mc, a]
-                for b in range(a):
-                    v -= L[i, a, b] * y[b]
-                y[a] = v / L[i, a, a]
-                q += y[a] * y[a]
-            if q <= U:
+            if merge_q_at(m, mi, mc, L, i, y) <= U:
                 alive[i] = False
                 label[i] = G
         G += 1

@@ -160,29 +160,14 @@ def _merge_track(keep, nk, w, m, P, U, L, spd, alive, order, label, centres, cou
     test and quadratic form against each centre in order of weight (heaviest first, lowest index on ties; which
     candidate is tested first does not change the groups), then each group's sums over its members in index order.
     ``L``, ``spd``, ``alive``, ``order``, ``label``, ``centres`` and ``count`` are scratch of at least nk rows. The
-    Cholesky factor and the quadratic form are those of ``kernels._cholesky4`` and ``kernels._merge_q`` written out
-    on the whole arrays: a row view passed to a function costs two atomic reference-count updates.
+    Cholesky factor and the quadratic form are ``kernels.cholesky4_at`` and ``kernels.merge_q_at``, indexed on the
+    whole arrays: a row view passed to a function costs two atomic reference-count updates.
     """
     Uq = kernels.merge_threshold(U)
     pxx_max = 0.0
     for t in range(nk):
         c = keep[t]
-        ok = True  # kernels._cholesky4(P[c], L[t])
-        for a in range(4):
-            for b in range(a + 1):
-                v = P[c, a, b]
-                for e in range(b):
-                    v -= L[t, a, e] * L[t, b, e]
-                if a == b:
-                    if not v > 0.0:
-                        ok = False
-                        break
-                    L[t, a, a] = math.sqrt(v)
-                else:
-                    L[t, a, b] = v / L[t, b, b]
-            if not ok:
-                break
-        spd[t] = ok
+        spd[t] = kernels.cholesky4_at(P, c, L, t)
         if spd[t] and P[c, 0, 0] > pxx_max:
             pxx_max = P[c, 0, 0]
         alive[t] = True
@@ -212,14 +197,7 @@ def _merge_track(keep, nk, w, m, P, U, L, spd, alive, order, label, centres, cou
             d0 = m[c, 0] - m[cj, 0]
             if d0 * d0 > Uq * P[c, 0, 0] * (1.0 + 1e-9):  # the x marginal alone already exceeds U
                 continue
-            q = 0.0  # kernels._merge_q(m[c], m[cj], L[t], y)
-            for a in range(4):
-                v = m[c, a] - m[cj, a]
-                for b in range(a):
-                    v -= L[t, a, b] * y[b]
-                y[a] = v / L[t, a, a]
-                q += y[a] * y[a]
-            if q <= Uq:
+            if kernels.merge_q_at(m, c, cj, L, t, y) <= Uq:
                 alive[t] = False
                 label[t] = G
         G += 1
