@@ -29,7 +29,8 @@ from soabench import notice
 from soabench.config import FilterConfig, PMBMConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
-from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
+from soabench.gmphd import cycle
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
 from soabench.gmphd.mixture import UNLABELLED, Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict_moments
 from soabench.gmphd.probabilities import detection_gate
@@ -37,7 +38,7 @@ from soabench.gmphd.reduction import prune_merge_cap
 from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict as predict_tracks
-from soabench.origins import origin_counts
+from soabench.origins import N_SOURCES, origin_counts
 from soabench.pmbm import kernels
 from soabench.pmbm.density import PMBMDensity
 from soabench.pmbm.pmb import collapse
@@ -47,6 +48,43 @@ from soabench.types import Births, Scan, StepResult, scan_once
 #: the probability modes the PMBM family runs (docs/method.md §10.6): static, with or without ``occlusion_pd``
 PMBM_MODES = ("static",)
 EXTRACT_R = 0.5  #: estimator 1 (§10.4): a track is reported when its hypothesis has r above this
+_F64, _I8, _I32 = np.dtype(np.float64), np.dtype(np.int8), np.dtype(np.int32)
+
+
+def _plain(a, dtype: np.dtype, shape: tuple[int, ...]) -> bool:
+    """``a`` is a C-contiguous, aligned, writeable array of ``dtype`` and ``shape``: the one type the compiled
+    checks and counts below are specialised for (the GM-PHD's and the LMB's calls compile them for it too)."""
+    if type(a) is not np.ndarray or a.dtype != dtype or a.shape != shape:
+        return False
+    flags = a.flags
+    return flags.c_contiguous and flags.aligned and flags.writeable
+
+
+def _births_finite(births: Births) -> bool:
+    """:func:`soabench.gmphd.inputs.births_finite` (every birth weight, mean and covariance finite, every weight
+    >= 0, every newborn term finite), the birth components by one compiled call
+    (:func:`soabench.gmphd.cycle.births_ok`, the same test) when they are plain arrays (:func:`_plain`). False also
+    when they are not: :func:`~soabench.gmphd.inputs.check_step_inputs` then decides."""
+    if not newborn_finite(births.newborn):
+        return False
+    J = len(births)
+    if J == 0:
+        return True
+    w, m, P = births.w, births.m, births.P
+    if _plain(w, _F64, (J,)) and _plain(m, _F64, (J, 4)) and _plain(P, _F64, (J, 4, 4)):
+        return cycle.births_ok(w, m, P)
+    return False
+
+
+def _origin_counts(ppp: Mixture, hyps: Tracks) -> np.ndarray:
+    """:func:`soabench.origins.origin_counts` of the intensity's and the hypotheses' components together: the
+    compiled count (:func:`soabench.gmphd.cycle.origin_counts`, the same bins) of each part, added, when the parts
+    are plain int8 origins and int32 ages (:func:`_plain`)."""
+    parts = ((ppp.origin, ppp.age), (hyps.origin, hyps.age))
+    if all(_plain(o, _I8, o.shape[:1]) and _plain(a, _I32, o.shape[:1]) for o, a in parts):
+        return cycle.origin_counts(ppp.origin, ppp.age, N_SOURCES) + cycle.origin_counts(hyps.origin, hyps.age,
+                                                                                           N_SOURCES)  # fmt: skip
+    return origin_counts(np.concatenate([ppp.origin, hyps.origin]), np.concatenate([ppp.age, hyps.age]))
 
 
 class PMBMFilter:
@@ -203,7 +241,10 @@ class PMBMFilter:
     def _step(self, scan: Scan, births: Births) -> StepResult:
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the other filters of the scan
         Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
-        checked: StepInputs = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
+        if finite and _births_finite(births):  # what check_step_inputs returns for finite inputs
+            checked = StepInputs(Z, ego, births, 0, 0)
+        else:
+            checked = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
         Z, births, cfg = checked.Z, checked.births, self.cfg
         t0 = time.perf_counter()
         prior = self.density
@@ -271,8 +312,6 @@ class PMBMFilter:
             n_newborn=up.n_newborn,
             n_dropped=checked.n_dropped,
             n_dropped_births=checked.n_dropped_births,
-            origin_counts=origin_counts(
-                np.concatenate([post.ppp.origin, post.hyps.origin]), np.concatenate([post.ppp.age, post.hyps.age])
-            ),
+            origin_counts=_origin_counts(post.ppp, post.hyps),
             labels=labels,
         )

@@ -20,6 +20,7 @@ LMB does): every measurement can then be clutter and every track missed, so an a
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,6 +90,12 @@ def _unique_codes(code: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     present = np.zeros(size, dtype=bool)
     present[code] = True
     return np.flatnonzero(present), (np.cumsum(present) - 1)[code]
+
+
+@functools.cache
+def _max_gap(w_floor: float) -> float:
+    """-ln w_floor (inf for 0): solutions costing more than this above a cluster's best are not searched for."""
+    return float(-np.log(w_floor)) if w_floor > 0.0 else np.inf
 
 
 def update(
@@ -167,7 +174,7 @@ def update(
         log_new = np.logaddexp(np.log(np.maximum(kappa, KAPPA_FLOOR)), log_e)
 
     # global hypotheses
-    max_gap = -np.log(hyp.w_floor) if hyp.w_floor > 0.0 else np.inf
+    max_gap = _max_gap(hyp.w_floor)
     if fused:  # the clusters as flat arrays straight from the compiled union-find
         track = np.ascontiguousarray(pred.track, dtype=np.int64)
         table = np.ascontiguousarray(pred.table, dtype=np.int64)
