@@ -137,3 +137,55 @@ def test_segment_logsumexp_of_one_row_segments_is_the_reduceats():
                 start = np.concatenate([[0, 2], np.arange(3, n + 1)]).astype(np.int64)
                 with np.errstate(invalid="ignore"):
                     _same_bits(_segment_logsumexp(x, start), _segment_logsumexp_reduceat(x, start), f"{shape} mixed")
+
+
+def test_births_check_and_origin_counts_fall_back_to_the_array_functions(recorded_intersection):
+    """Birth arrays the compiled check is not specialised for (read-only, Fortran-ordered) give the same steps as plain
+    ones; a non-finite or negative birth still raises (or is dropped) as check_step_inputs does; the compiled origin
+    counts of the two parts equal the array function's on the concatenation, unknown source codes included."""
+    from soabench.errors import SoabenchError
+    from soabench.gmphd.inputs import check_step_inputs
+    from soabench.lmb.tracks import Tracks
+    from soabench.origins import origin_counts
+    from soabench.pmbm.filter import _origin_counts
+
+    cfg, scene, scans_by_lam, seeds = recorded_intersection
+    sensor, scans = scans_by_lam[3.0]
+    plain = PMBMFilter(cfg.filter, sensor, pmbm_cfg=cfg.pmbm)
+    other = PMBMFilter(cfg.filter, sensor, pmbm_cfg=cfg.pmbm)
+    birth = get_birth_model("soa")(cfg.birth, sensor, scene, seeds.placement_rng())
+    prev = None
+    for scan in scans.scans[:12]:
+        births = birth(BirthContext(scan, prev, cfg.filter.p_D))
+        w, m, P = births.w.copy(), np.asfortranarray(births.m), births.P.copy()  # read-only, not C-ordered
+        w.flags.writeable = P.flags.writeable = False
+        a, prev = plain.step(scan, births), other.step(scan, Births(w, m, P, births.source))
+        for name in STEP_FIELDS:
+            _same_bits(getattr(a, name), getattr(prev, name), f"scan {scan.k}: {name}")
+    assert len(births) > 0
+    scan = scans.scans[12]
+    for bad in (np.nan, -1.0):
+        w = births.w.copy()
+        w[0] = bad
+        wrong = Births(w, births.m, births.P, births.source)
+        with pytest.raises(SoabenchError) as got:
+            plain.step(scan, wrong)
+        with pytest.raises(SoabenchError) as want:
+            check_step_inputs(scan.k, np.asarray(scan.Z, float).reshape(-1, 2), np.asarray(scan.ego, float), wrong,
+                              "raise")  # fmt: skip
+        assert str(got.value) == str(want.value)
+    drop = PMBMFilter(dataclasses.replace(cfg.filter, nonfinite="drop"), sensor, pmbm_cfg=cfg.pmbm)
+    assert drop.step(scan, wrong).n_dropped_births == 1
+
+    rng = np.random.default_rng(2)
+    codes = np.array([-1, 0, 1, 2, 3, 4, 5, 6, 7, 100], dtype=np.int8)
+    for n_a, n_b in ((0, 0), (0, 4), (9, 0), (30, 17)):
+        ppp = Mixture.from_arrays(np.ones(n_a), np.zeros((n_a, 4)), np.tile(np.eye(4), (n_a, 1, 1)),
+                                  origin=rng.choice(codes, n_a), age=rng.integers(0, 3, n_a))  # fmt: skip
+        hyps = Tracks.single(np.full(n_b, 0.5), np.zeros((n_b, 4)), np.tile(np.eye(4), (n_b, 1, 1)),
+                             np.arange(n_b), rng.choice(codes, n_b))  # fmt: skip
+        hyps.age[:] = rng.integers(0, 3, n_b)
+        want = origin_counts(np.concatenate([ppp.origin, hyps.origin]), np.concatenate([ppp.age, hyps.age]))
+        _same_bits(_origin_counts(ppp, hyps), want, f"{n_a} + {n_b} components")
+        ppp.age = ppp.age.astype(np.int64)  # not the compiled count's type: the array function
+        _same_bits(_origin_counts(ppp, hyps), want, f"{n_a} + {n_b} components, int64 ages")
