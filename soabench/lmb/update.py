@@ -51,6 +51,11 @@ def _segment_logsumexp(x: np.ndarray, start: np.ndarray, owner: np.ndarray | Non
     if x.shape[0] == 0:
         return np.zeros((0, *x.shape[1:]))
     seg = start[:-1]
+    if len(seg) == x.shape[0] and (seg == np.arange(len(seg))).all():
+        # every segment is one row, and a reduceat over one row returns that row: the same operations without them
+        shift = np.where(np.isfinite(x), x, 0.0)
+        with np.errstate(divide="ignore"):
+            return np.log(np.exp(x - shift)) + shift
     mx = np.maximum.reduceat(x, seg, axis=0)
     shift = np.where(np.isfinite(mx), mx, 0.0)
     if owner is None:
@@ -73,15 +78,16 @@ class UpdateResult:
 
 
 def association_terms(
-    tracks: Tracks, p_D: np.ndarray, logq: np.ndarray
+    tracks: Tracks, p_D: np.ndarray, logq: np.ndarray, owner: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The per-component terms of the costs and their sums per track: ``(log_miss (C,), log_det (C, M),
-    log_eta_miss (N,), log_eta_det (N, M))`` (eta without r and kappa)."""
+    log_eta_miss (N,), log_eta_det (N, M))`` (eta without r and kappa); ``owner``: ``tracks.owner()`` if known."""
     with np.errstate(divide="ignore"):
         log_w = np.log(tracks.w)
         log_miss = log_w + np.log1p(-p_D)
         log_det = (log_w + np.log(p_D))[:, None] + logq
-        owner = tracks.owner()
+        if owner is None:
+            owner = tracks.owner()
         log_eta_miss = _segment_logsumexp(log_miss, tracks.start, owner)
         log_eta_det = _segment_logsumexp(log_det, tracks.start, owner)
     return log_miss, log_det, log_eta_miss, log_eta_det

@@ -58,9 +58,12 @@ class PMBMDensity:
         # summed in the table's row order (as np.add.at(p, table, w[:, None]) would)
         return np.bincount(self.table.ravel(), weights=np.repeat(np.exp(self.log_w), n), minlength=len(self.hyps))
 
-    def phd_mass(self) -> float:
-        """The expected number of targets: the intensity's mass plus sum_a w_a sum_i r_i."""
-        return float(self.ppp.w.sum() + self.hypothesis_probabilities() @ self.hyps.r)
+    def phd_mass(self, p_hyp: np.ndarray | None = None) -> float:
+        """The expected number of targets: the intensity's mass plus sum_a w_a sum_i r_i (``p_hyp``: the
+        :meth:`hypothesis_probabilities`, if known)."""
+        if p_hyp is None:
+            p_hyp = self.hypothesis_probabilities()
+        return float(self.ppp.w.sum() + p_hyp @ self.hyps.r)
 
     def phd(self) -> Mixture:
         """The first moment: the intensity plus sum_a w_a sum_i r_i p_i (weights r_h P(h) omega_c per component)."""

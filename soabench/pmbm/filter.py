@@ -30,9 +30,8 @@ from soabench.config import FilterConfig, PMBMConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, scan_inputs
-from soabench.gmphd.mixture import Mixture
-from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise
-from soabench.gmphd.models import predict as predict_mixture
+from soabench.gmphd.mixture import UNLABELLED, Mixture
+from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict_moments
 from soabench.gmphd.probabilities import detection_gate
 from soabench.gmphd.reduction import prune_merge_cap
 from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
@@ -99,6 +98,7 @@ class PMBMFilter:
         self.model = model if model is not None else RangeBearingEKF(R, sensor_cfg.r_min, gate, filter_cfg.form)
         self.density = PMBMDensity.empty()
         self.next_label = 1
+        self._p_hyp: tuple[PMBMDensity, np.ndarray] | None = None  # the density and its hypothesis probabilities
 
     def reset(self) -> None:
         """Forget the posterior and restart the label counter (next step is k = 0 again)."""
@@ -114,13 +114,38 @@ class PMBMFilter:
 
     def predict(self, births: Births) -> PMBMDensity:
         """§10.2: the predicted density with the birth components appended to the intensity."""
+        return self._predict(births)[0]
+
+    def _predict(self, births: Births) -> tuple[PMBMDensity, np.ndarray, np.ndarray]:
+        """:meth:`predict`, and the means and covariances of the predicted intensity's components followed by the
+        hypotheses' in one array each (the intensity's are views of them): the GM-PHD's prediction of the
+        intensity, then the birth components as :meth:`Mixture.from_arrays` takes them."""
         d, cfg = self.density, self.cfg
-        ppp = predict_mixture(d.ppp, self.F, self.Q, cfg.p_S)
-        if len(births):
-            born = Mixture.from_arrays(births.w, births.m, births.P, origin=births.source)
-            ppp = Mixture.concatenate([ppp, born]) if len(ppp) else born
         hyps = predict_tracks(d.hyps, self.F, self.Q, cfg.p_S)
-        return PMBMDensity(ppp, hyps, d.track, d.table, d.log_w)
+        parts = []  # (w, m, P, origin, n_det, age, label) of the predicted intensity, then of the births
+        if len(d.ppp):
+            m, P = predict_moments(d.ppp.m, d.ppp.P, self.F, self.Q)
+            parts.append((d.ppp.w * cfg.p_S, m, P, d.ppp.origin, d.ppp.n_det, d.ppp.age + 1, d.ppp.label))
+        nb = len(births)
+        if nb:
+            parts.append((
+                np.asarray(births.w, dtype=float).reshape(-1), np.asarray(births.m, dtype=float).reshape(nb, 4),
+                np.asarray(births.P, dtype=float).reshape(nb, 4, 4),
+                np.broadcast_to(np.asarray(births.source, dtype=np.int8), (nb,)), np.zeros(nb, dtype=np.int32),
+                np.zeros(nb, dtype=np.int32), np.full(nb, UNLABELLED, dtype=np.int64),
+            ))  # fmt: skip
+        m_all = np.concatenate([*(x[1] for x in parts), hyps.m])
+        P_all = np.concatenate([*(x[2] for x in parts), hyps.P])
+        J = len(m_all) - len(hyps.m)
+        if not parts:
+            ppp = Mixture.empty()
+        elif len(parts) == 1:  # its own arrays, as the GM-PHD's prediction and Mixture.from_arrays give them
+            w, _, _, origin, n_det, age, label = parts[0]
+            ppp = Mixture(w, m_all[:J], P_all[:J], origin.copy(), n_det.copy(), age, None, label.copy())
+        else:
+            w, _, _, origin, n_det, age, label = (np.concatenate(x) for x in zip(*parts, strict=True))
+            ppp = Mixture(w, m_all[:J], P_all[:J], origin, n_det, age, None, label)
+        return PMBMDensity(ppp, hyps, d.track, d.table, d.log_w), m_all, P_all
 
     def _reduce_extract(
         self, post: PMBMDensity, ppp: Mixture
@@ -181,21 +206,30 @@ class PMBMFilter:
         checked: StepInputs = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
         Z, births, cfg = checked.Z, checked.births, self.cfg
         t0 = time.perf_counter()
-        pred = self.predict(births)
+        prior = self.density
+        pred, m_all, P_all = self._predict(births)
         t1 = time.perf_counter()
 
         ego_ok = checked.ego
         kappa = clutter_intensity(Z, self.sensor)
+        J = len(pred.ppp)
+        if self.cfg.occlusion_pd:
+            p_D = np.concatenate([self._p_D(pred.ppp.m, ego_ok, scan), self._p_D(pred.hyps.m, ego_ok, scan)])
+        else:  # the FOV gate is decided per mean: one call on all of them
+            p_D = self._p_D(m_all, ego_ok, scan)
+        # the prior's hypothesis probabilities are those of the last posterior (the prediction keeps the table)
+        p_hyp = self._p_hyp[1] if self._p_hyp is not None and self._p_hyp[0] is prior else None
         up = update(
-            pred, Z, ego_ok if ego_ok is not None else np.zeros(3), self._p_D(pred.ppp.m, ego_ok, scan),
-            self._p_D(pred.hyps.m, ego_ok, scan), kappa, self.model, newborn=births.newborn, label0=self.next_label,
-            hyp=self.hyp, fused=self.fused,
+            pred, Z, ego_ok if ego_ok is not None else np.zeros(3), p_D[:J], p_D[J:], kappa, self.model,
+            newborn=births.newborn, label0=self.next_label, hyp=self.hyp, fused=self.fused, stacked=(m_all, P_all),
+            p_hyp=p_hyp,
         )  # fmt: skip
         self.next_label += len(Z)
         post = up.density
         t2 = time.perf_counter()
 
-        sum_w = post.phd_mass()
+        p_post = post.hypothesis_probabilities()
+        sum_w = post.phd_mass(p_post)
         ppp = post.ppp
         if cfg.max_undetected_birth_age is not None and len(ppp):
             keep = ~((ppp.n_det == 0) & (ppp.age > cfg.max_undetected_birth_age))
@@ -203,10 +237,13 @@ class PMBMFilter:
                 ppp = ppp.select(keep)
         red = prune_merge_cap(ppp, cfg.prune_T, cfg.merge_U, cfg.J_max, cfg.theta_min)
         if self.fused:
-            post, X, X_r, labels = self._reduce_extract(post, red.mix)
+            reduced, X, X_r, labels = self._reduce_extract(post, red.mix)
         else:
-            post, X, X_r, labels = self._reduce_extract_arrays(post, red.mix)
-        self.density = post
+            reduced, X, X_r, labels = self._reduce_extract_arrays(post, red.mix)
+        same_table = reduced.table is post.table and reduced.log_w is post.log_w and len(reduced.hyps) == len(post.hyps)
+        p_reduced = p_post if same_table else reduced.hypothesis_probabilities()
+        post = self.density = reduced
+        self._p_hyp = (post, p_reduced)
         t3 = time.perf_counter()
         if not (np.isfinite(post.hyps.r).all() and np.isfinite(X).all() and np.isfinite(post.ppp.w).all()):
             raise SoabenchError(f"scan {scan.k}: the {self.name.upper()} filter produced a non-finite posterior from "
@@ -217,7 +254,7 @@ class PMBMFilter:
             X=X,
             X_w=X_r,
             sum_w=sum_w,
-            sum_w_reduced=post.phd_mass(),
+            sum_w_reduced=post.phd_mass(p_reduced),
             n_predicted=len(pred.ppp) + len(pred.hyps.w),
             n_updated=len(up.density.ppp) + len(up.density.hyps.w),
             n_reduced=n_comp,

@@ -104,6 +104,8 @@ def update(
     label0: int = 1,
     hyp: Hypotheses = Hypotheses(),
     fused: bool = True,
+    stacked: tuple[np.ndarray, np.ndarray] | None = None,
+    p_hyp: np.ndarray | None = None,
 ) -> UpdateResult:
     """PMBM update of the predicted density ``pred`` with Z (M, 2) (module docstring).
 
@@ -115,22 +117,28 @@ def update(
         fused: build the posterior hypotheses, table and track pruning in one compiled call
             (:func:`soabench.pmbm.kernels.children`); False: the array path, the reference it is tested against
             (the same bits).
+        stacked: the means (J + C, 4) and covariances (J + C, 4, 4) of the intensity's components followed by the
+            hypotheses', when the caller has them stacked; None stacks them here.
+        p_hyp: ``pred.hypothesis_probabilities()`` when the caller has them; None computes them here.
     """
     Z = np.ascontiguousarray(Z, dtype=float).reshape(-1, 2)
     M = len(Z)
     ppp, hyps = pred.ppp, pred.hyps
     J, C, H, n = len(ppp), len(hyps.w), len(hyps), pred.n_tracks
-    m_all = np.concatenate([ppp.m, hyps.m])
-    P_all = np.concatenate([ppp.P, hyps.P])
+    if stacked is None:
+        m_all, P_all = np.concatenate([ppp.m, hyps.m]), np.concatenate([ppp.P, hyps.P])
+    else:
+        m_all, P_all = stacked
     p_D = np.concatenate([np.asarray(p_D_ppp, dtype=float).reshape(J), np.asarray(p_D_hyp, dtype=float).reshape(C)])
-    logq = np.full((J + C, M), -np.inf)
     terms = nu_r = nu_b = None
     if J + C:
         terms = model.terms(m_all, P_all, ego)
         p_D[~terms.valid] = 0.0  # r -> 0 or det S <= 0: undetectable this step (§2.12)
-        if M:
-            logq, nu_r, nu_b = model.log_likelihood(terms, Z)
-            logq = np.where(p_D[:, None] > 0.0, logq, -np.inf)
+    if J + C and M:
+        logq, nu_r, nu_b = model.log_likelihood(terms, Z)
+        logq = np.where(p_D[:, None] > 0.0, logq, -np.inf)
+    else:
+        logq = np.full((J + C, M), -np.inf)
     kappa = np.asarray(kappa, dtype=float).reshape(M)
 
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -138,7 +146,8 @@ def update(
         log_t = np.log(p_D[:J] * ppp.w)[:, None] + logq[:J]  # (J, M) log p_D w q
         log_e_ppp = logsumexp0(log_t)
         # tracks: the LMB's per-hypothesis sums (eta without r and kappa)
-        log_miss, log_det, log_eta_miss, log_eta_det = association_terms(hyps, p_D[J:], logq[J:])
+        owner = hyps.owner()
+        log_miss, log_det, log_eta_miss, log_eta_det = association_terms(hyps, p_D[J:], logq[J:], owner)
         log_r = np.log(hyps.r)
         log_l_miss_exact = np.logaddexp(np.log1p(-hyps.r), log_r + log_eta_miss)
         log_l_miss = np.maximum(log_l_miss_exact, LOG_FLOOR)
@@ -146,7 +155,9 @@ def update(
         # support of each measurement by the predicted PHD (what ATBM's "unexplained" allocation reads)
         A = np.exp(log_e_ppp)
         if H and M:
-            A = A + (pred.hypothesis_probabilities() * hyps.r) @ np.exp(log_eta_det)
+            if p_hyp is None:
+                p_hyp = pred.hypothesis_probabilities()
+            A = A + (p_hyp * hyps.r) @ np.exp(log_eta_det)
         beta = np.zeros(M)
         if newborn is not None and M:
             beta = np.asarray(newborn.beta(A, kappa.copy()), dtype=float).reshape(M)
@@ -158,11 +169,11 @@ def update(
     # global hypotheses
     max_gap = -np.log(hyp.w_floor) if hyp.w_floor > 0.0 else np.inf
     if fused:  # the clusters as flat arrays straight from the compiled union-find
-        T_flat, T_start, L_flat, L_start, base0 = flat_clusters(
-            np.ascontiguousarray(pred.track, dtype=np.int64), log_l_det, n, log_new
-        )
+        track = np.ascontiguousarray(pred.track, dtype=np.int64)
+        table = np.ascontiguousarray(pred.table, dtype=np.int64)
+        T_flat, T_start, L_flat, L_start, base0 = flat_clusters(track, log_l_det, n, log_new)
         parent, choice, log_w, n_murty = global_hypotheses(
-            np.ascontiguousarray(pred.table, dtype=np.int64), np.ascontiguousarray(pred.log_w, dtype=float),
+            table, np.ascontiguousarray(pred.log_w, dtype=float),
             assignments_asked(pred.log_w, hyp.M_max), T_flat, T_start, L_flat, L_start, base0, log_l_miss, log_l_det,
             log_new, float(max_gap),
         )  # fmt: skip
@@ -179,7 +190,6 @@ def update(
     parent, choice, log_w = parent[keep], choice[keep], log_w[keep]
     if fused:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            owner = hyps.owner()
             lr = log_r + log_eta_miss - log_l_miss_exact
             E_miss = np.exp(log_miss - log_eta_miss[owner])
             E_det = np.exp(log_det - log_eta_det[owner])
@@ -193,8 +203,8 @@ def update(
         else:
             nb_m, nb_P = _NO_NEWBORN
         out = kernels.children(
-            np.ascontiguousarray(pred.table, dtype=np.int64), parent, np.ascontiguousarray(choice, dtype=np.int64),
-            np.ascontiguousarray(pred.track, dtype=np.int64), hyps.start, hyps.w, hyps.label, hyps.origin, hyps.age,
+            table, parent, np.ascontiguousarray(choice, dtype=np.int64), track, hyps.start, hyps.w, hyps.label,
+            hyps.origin, hyps.age,
             r_miss, ~np.isfinite(log_eta_miss), E_miss, E_det, np.isfinite(log_e), W_all, w_nb, r_own,
             ppp.origin, m_all, P_all, nb_m, nb_P, int(label0), float(hyp.r_floor), int(SOURCE_MEAS),
         )  # fmt: skip
