@@ -69,7 +69,9 @@ def handle(args: argparse.Namespace) -> int:
         atlas_trials=args.atlas_trials,
     )
     o = run_results(args.out, settings, options=RunOptions(workers=args.workers, progress=not args.no_progress))
-    rows = [f"| {k} | {v} | {o.seconds.get(k, 0.0):.0f} |" for k, v in o.parts.items()]
+    rows = [
+        f"| {k} | {v} | {f'{o.seconds[k]:.0f}' if k in o.seconds else 'in the study'} |" for k, v in o.parts.items()
+    ]
     print("\n".join(["| part | result | wall time (s) |", "|---|---|---:|", *rows]))
     if o.complete:
         print(f"results in {o.run_dir}")

@@ -330,3 +330,42 @@ def test_the_filters_part_is_kept_extended_or_refused(suite, tmp_path):
     want = r"experiment.filters: stored \['gmphd'\], requested \['gmphd', 'lmb', 'pmbm'"
     with pytest.raises(SoabenchError, match=want):
         _filters_part(part, Settings(trials=3, duration=10.0), exe, log)
+
+
+def test_study_companions_run_in_its_trials_and_resume(tmp_path, fake_builtins, monkeypatch):
+    """A study with a companion folder (how ``soabench results`` runs its families folders): the companion holds
+    what running it alone gives, its session says it ran in the study's group, and a companion that lost a trial
+    is resumed by the next study call. (That a shared trial equals one run alone is tests/equivalence/
+    test_work_once.py's.)"""
+    import soabench.figures.results as plots
+    from soabench.config import Config, ExperimentConfig
+    from soabench.experiment.campaigns.study import Companion, run_study
+    from soabench.experiment.execution.options import RunOptions
+    from soabench.experiment.reports.finished import run_experiment
+
+    monkeypatch.setattr(plots, "make_figures", lambda tables, folder: [])
+
+    def config(**exp) -> Config:
+        base = dict(trials=2, duration=5.0, models=("soa", "pubm"), probabilities=("static",), seed=4)
+        return Config(experiment=ExperimentConfig(**{**base, **exp})).validate()
+
+    options = RunOptions(workers=1, progress=False, figures=False)
+    families = config(filters=("gmphd", "pmbm"))
+    companion = Companion(tmp_path / "filters", families, ("experiment.trials", "experiment.filters"))
+    study = dict(births_trials=1, options=options, companions=(companion,))
+    o = run_study(config(probabilities=("static", "dynamic")), "intersection", out=tmp_path / "study", **study)
+    assert o.complete and len(o.companions) == 1 and o.companions[0].complete
+    run_experiment(families, "intersection", out=tmp_path / "alone", options=options)
+    tables = ("trials.csv", "episodes.csv", "steps.csv")
+    ref = {t: (tmp_path / "alone" / t).read_text() for t in tables}
+    assert {t: (companion.folder / t).read_text() for t in tables} == ref
+    (session,) = (companion.folder / "sessions").iterdir()
+    assert "grouped" in read_json(session)["executor"]
+
+    (companion.folder / "trials" / "trial_00001.json").unlink()
+    for t in (*tables, "summary.json"):
+        (companion.folder / t).unlink()
+    o = run_study(config(probabilities=("static", "dynamic")), "intersection", out=tmp_path / "study", **study)
+    assert o.companions[0].complete and o.companions[0].n_done == 2
+    assert len(list((companion.folder / "sessions").iterdir())) == 2
+    assert {t: (companion.folder / t).read_text() for t in tables} == ref

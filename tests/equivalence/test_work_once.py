@@ -298,3 +298,27 @@ def test_inverse_measurement_terms_once_per_scan():
     assert np.array_equal(
         scan_inverse_terms(scan, sensor, 1.5)[1], inverse_measurement_terms(Z, scan.ego, sensor, 1.5)[1]
     )
+
+
+def test_families_runs_share_the_main_protocols_trial(intersection):
+    """The families runs of ``soabench results`` (every family in static and static+occ, and the LMB with one
+    Bernoulli per birth component) in one share with the main protocol: SUMO, the sensor and the mode-free births
+    once for all three, each config's results exactly those of running it alone."""
+    scene, scenario = intersection
+    models = ("soa", "pubm", "ubm")
+    main = config(models=models)
+    families = config(models=models, filters=("gmphd", "lmb", "pmbm", "pmb"), probabilities=("static", "static+occ"))
+    ablation = config(models=models, filters=("lmb",), probabilities=("static",))
+    ablation.lmb = dataclasses.replace(ablation.lmb, birth_mapping="components")
+    configs = (main, families, ablation)
+    alone = [run_trial(1, c, scene, scenario) for c in configs]
+    share = TrialShare()
+    shared = [run_trial(1, c, scene, scenario, share=share) for c in configs]
+    for x, y in zip(alone, shared, strict=True):
+        assert results(x) == results(y)
+    c = share.counts
+    assert c["recording"] == 1 and c["recording_reused"] == 2 and c["scans"] == 1 and c["scans_reused"] == 2
+    K = int(round(main.experiment.duration / main.sensor.dt))
+    free = 2  # S-OA and UBM: their candidates once per scan for the three configs
+    assert c["birth_candidates"] == free * K and c["birth_candidates_reused"] == 2 * free * K
+    assert c["runs"] == 6 + 24 + 3  # a family's run is its own filter run, even the GM-PHD's

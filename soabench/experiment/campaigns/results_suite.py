@@ -9,7 +9,9 @@ Parts, in order, under ``OUT`` (default ``results/``):
   ``--filters gmphd,lmb,pmbm,pmb``), in the modes every family runs, ``static`` and ``static+occ``
   (:func:`_filters_part`): does occlusion-aware birth help a labelled filter? Beside it
   ``filters-lmb-components/``: the LMB with its earlier birth mapping (``[lmb] birth_mapping = "components"``,
-  static), the ablation that shows what the mapping changes.
+  static), the ablation that shows what the mapping changes. Both run in the intersection study's trials
+  (:class:`~soabench.experiment.campaigns.study.Companion`): trial n's SUMO recording, scans and births are
+  computed once for the study and them; when the study is already complete they run on their own.
 * ``<scene>/``: the same study on every other shipped scene (``--scene-trials`` trials of its main protocol; no
   comparison with the paper, whose numbers belong to its own protocol on the intersection);
 * ``scenes/density/<scene>.json``: each scene's occlusion density (:mod:`.occlusion_density`);
@@ -34,7 +36,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from soabench.atomic import write_json_atomic
 from soabench.birth import CORE_MODELS
@@ -50,6 +52,10 @@ from soabench.kitti.config import KittiSpec, load_kitti_config
 from soabench.scenario import shipped_nets
 from soabench.scenario.network import read_net
 from soabench.scenario.parking import parking_lanes
+
+if TYPE_CHECKING:
+    from soabench.experiment.campaigns.study import Companion
+    from soabench.experiment.execution.runner import RunOutcome
 
 #: the study's part folders; a study is kept only when each is complete (a part added to the study belongs here)
 STUDY_PARTS = ("main", "clutter", "births")  # and sensitivity/ (two run folders and its table; see study_kept)
@@ -233,6 +239,10 @@ def _base_config(s: Settings, trials: int, **experiment: Any):
     return cfg.validate()
 
 
+def _status(complete: bool) -> str:
+    return "done" if complete else "incomplete"
+
+
 def _study_part(
     root: Path,
     s: Settings,
@@ -240,20 +250,23 @@ def _study_part(
     log: Callable[[str], None],
     net: str = "intersection",
     trials: int | None = None,
-) -> tuple[str, int]:
+    companions: Sequence[Companion] = (),
+) -> tuple[str, int, list[RunOutcome] | None]:
     """The study (:func:`soabench.experiment.campaigns.study.run_study`) of scene ``net`` in ``root``: kept when
-    complete with
-    these settings, else resumed or started; ``trials`` of its main protocol (default ``s.trials``)."""
+    complete with these settings, else resumed or started; ``trials`` of its main protocol (default ``s.trials``).
+    ``companions`` run in the study's trials; their outcomes are returned (None when the study was kept: they did
+    not run)."""
     # imported when called: scipy would slow every start-up
     from soabench.experiment.campaigns.study import run_study
 
     if root.is_dir() and study_kept(root, s, trials):
         log(f"kept {root} (the study is complete)")
-        return "kept", 0
+        return "kept", 0, None
     explicit = {*SIZE_KEYS, "births_trials"}
     cfg = _base_config(s, trials or s.trials)
-    o = run_study(cfg, net, out=root, births_trials=s.births_trials, explicit=explicit, options=exe)
-    return ("done" if o.complete else "incomplete"), o.n_missing
+    o = run_study(cfg, net, out=root, births_trials=s.births_trials, explicit=explicit, options=exe,
+                  companions=tuple(companions))  # fmt: skip
+    return _status(o.complete), o.n_missing, list(o.companions)
 
 
 def _kitti_want(scene: str, s: Settings) -> dict[str, Any]:
@@ -400,6 +413,9 @@ FILTERS_PART = {"filters": FILTER_FAMILIES, "probabilities": ("static", "static+
 #: (docs/method.md "LMB filter", birth)
 ABLATION_PART = {"filters": ("lmb",), "probabilities": ("static",)}
 ABLATION_LMB = {"birth_mapping": "components"}
+#: the two families parts' names in the command's table of parts
+FAMILIES_PART = "intersection filter families"
+ABLATION_PART_NAME = "intersection LMB, one Bernoulli per birth component"
 #: the keys a stored families run must share with the requested one
 FILTERS_KEYS = (*SIZE_KEYS, "experiment.filters", "experiment.probabilities", "lmb.birth_mapping")
 
@@ -417,26 +433,32 @@ def ablation_config(s: Settings) -> Config:
     return cfg.validate()
 
 
+def filters_kept(folder: Path, cfg: Config, log: Callable[[str], None]) -> bool:
+    """A families folder complete with the settings of ``cfg`` (:data:`FILTERS_KEYS`): kept as it is."""
+    if (folder / "run.json").is_file() and same_settings(folder, cfg, FILTERS_KEYS) and run_complete(folder):
+        log(f"kept {folder} (the families run is complete)")
+        return True
+    return False
+
+
 def _filters_part(
     folder: Path, s: Settings, exe: RunOptions, log: Callable[[str], None], cfg: Config | None = None
 ) -> tuple[str, int]:
     """The main protocol on the intersection with every filter family (module docstring) in ``folder`` (``cfg``:
-    the ablation's instead): kept when complete with these settings, else resumed (more trials: extended) or
-    started."""
+    the ablation's instead), on its own: kept when complete with these settings, else resumed (more trials:
+    extended) or started."""
     # imported when called: scipy would slow every start-up
     from soabench.experiment.reports.finished import run_experiment
 
     cfg = cfg if cfg is not None else filters_config(s)
-    keys = FILTERS_KEYS
+    if filters_kept(folder, cfg, log):
+        return "kept", 0
     if (folder / "run.json").is_file():
-        if same_settings(folder, cfg, keys) and run_complete(folder):
-            log(f"kept {folder} (the families run is complete)")
-            return "kept", 0
-        requested = {k: v for k, v in flatten_config(cfg.to_dict()).items() if k in keys}
+        requested = {k: v for k, v in flatten_config(cfg.to_dict()).items() if k in FILTERS_KEYS}
         o = run_experiment(None, "intersection", resume=folder, requested=requested, options=exe)
     else:
         o = run_experiment(cfg, "intersection", out=folder, options=exe)
-    return ("done" if o.complete else "incomplete"), o.n_missing
+    return _status(o.complete), o.n_missing
 
 
 # ------------------------------------------------------------------------------------------------ the command
@@ -481,10 +503,31 @@ def run_results(
         if banner:
             log(f"== {name} ==")
         t0 = time.perf_counter()
+        outcome.parts[name] = "incomplete"  # its place in the table of parts, before those it runs
         status, missing = work()
         outcome.parts[name] = status
         outcome.seconds[name] = time.perf_counter() - t0
         outcome.n_missing += missing
+
+    def intersection() -> tuple[str, int]:
+        """The intersection study with the families runs in its trials (module docstring); a families folder
+        not run there (kept, or the study kept) is kept or run on its own."""
+        folders = {FAMILIES_PART: (root / "filters", filters_config(s)),
+                   ABLATION_PART_NAME: (root / "filters-lmb-components", ablation_config(s))}  # fmt: skip
+        from soabench.experiment.campaigns.study import Companion
+
+        todo = {n: Companion(f, c, FILTERS_KEYS) for n, (f, c) in folders.items() if not filters_kept(f, c, log)}
+        status, missing, done = _study_part(root / "intersection", s, exe, log, companions=tuple(todo.values()))
+        for name, (folder, cfg) in folders.items():
+            if name not in todo:
+                outcome.parts[name], outcome.seconds[name] = "kept", 0.0
+            elif done is not None:  # ran in the study's trials (its time is the study's)
+                o = done[list(todo).index(name)]
+                outcome.parts[name] = _status(o.complete)
+                outcome.n_missing += o.n_missing
+            else:
+                step(name, lambda folder=folder, cfg=cfg: _filters_part(folder, s, exe, log, cfg))
+        return status, missing
 
     with FolderLock(root, "results folder"):
         for scene in s.kitti_scenes:  # cheap checks first: refuse a mismatch before hours of work
@@ -492,16 +535,11 @@ def run_results(
         try:
             mains = {n: root / n / "main" for n in scenes}
             if "intersection" in scenes:
-                step("intersection study", lambda: _study_part(root / "intersection", s, exe, log))
-                step("intersection filter families", lambda: _filters_part(root / "filters", s, exe, log))
-                step(
-                    "intersection LMB, one Bernoulli per birth component",
-                    lambda: _filters_part(root / "filters-lmb-components", s, exe, log, ablation_config(s)),
-                )
+                step("intersection study", intersection)
             for scene in (n for n in scenes if n != "intersection"):
                 step(
                     f"{scene} study",
-                    lambda scene=scene: _study_part(root / scene, s, exe, log, net=scene, trials=s.scene_trials),
+                    lambda scene=scene: _study_part(root / scene, s, exe, log, net=scene, trials=s.scene_trials)[:2],
                 )
             densities: dict[str, dict] = {}
             for scene in scenes:

@@ -20,6 +20,10 @@ clutter rate and every filter run once for all parts (the clutter sweep's λ = 3
 sensitivity runs share the recording and the scans), then writes each part's record into its own folder, so every
 folder is what running the parts one after another gives. The reports of all folders are then drawn on the same
 worker processes, one figure per task (:mod:`soabench.figures.drawing`).
+
+Run folders outside the study whose trials are its main protocol's (same scene, seed and duration; ``soabench
+results`` passes its filter-family runs) join the group as :class:`Companion` folders: their trials reuse the
+study's SUMO recording, scans and births, and they are resumed, checked and reported like any run.
 """
 
 from __future__ import annotations
@@ -73,15 +77,30 @@ class StudyOutcome:
     births: SweepOutcome
     summary_markdown: str
     sensitivity: tuple[RunOutcome, ...] = ()
+    companions: tuple[RunOutcome, ...] = ()  #: one per :attr:`StudyRequest.companions`, in order
 
     @property
     def complete(self) -> bool:
+        """Every part of the study complete (its companions have their own outcomes)."""
         parts = (self.main, self.clutter, self.births, *self.sensitivity)
         return all(p.complete for p in parts)
 
     @property
     def n_missing(self) -> int:
         return sum(p.n_missing for p in (self.main, self.clutter, self.births, *self.sensitivity))
+
+
+@dataclass(frozen=True)
+class Companion:
+    """A run folder outside the study that runs the study's main protocol trials (same scene, seed, duration and
+    trial indices) with another configuration, in the study's group (module docstring).
+
+    ``keys``: the dotted config keys a stored folder must share with ``config`` to be resumed (more trials extend
+    it, :mod:`~soabench.experiment.runs.runmeta`)."""
+
+    folder: Path
+    config: Config
+    keys: tuple[str, ...]
 
 
 def with_plugin_models(config: Config, extra: tuple[str, ...]) -> Config:
@@ -131,7 +150,8 @@ class StudyRequest:
     (:class:`~soabench.experiment.execution.options.RunOptions`; fail_fast and save_estimates are not the study's:
     refused); ``options.figures`` True also draws the figures of every N̂ point and of both sensitivity runs (by
     default ``births/sweep_births.png`` and ``sensitivity/sensitivity.md`` summarise those folders, which get tables
-    and summaries only).
+    and summaries only). ``companions``: run folders outside the study that run its main protocol's trials with
+    other settings, in its group (:class:`Companion`).
     """
 
     config: Config
@@ -141,6 +161,7 @@ class StudyRequest:
     options: RunOptions = RUN_DEFAULTS
     explicit: frozenset[str] = frozenset()
     grouped: bool = True
+    companions: tuple[Companion, ...] = ()
 
 
 def run_study(
@@ -153,7 +174,7 @@ def run_study(
     explicit: set[str] | None = None,
     **fields: Any,
 ) -> StudyOutcome:
-    """:func:`study` of a :class:`StudyRequest` (``fields``: ``out``, ``options``, ``grouped``)."""
+    """:func:`study` of a :class:`StudyRequest` (``fields``: ``out``, ``options``, ``grouped``, ``companions``)."""
     trials = PartTrials(sweep_trials, births_trials, sensitivity_trials)
     return study(StudyRequest(config, net, trials=trials, explicit=frozenset(explicit or ()), **fields))
 
@@ -176,14 +197,20 @@ def study(request: StudyRequest) -> StudyOutcome:
     with FolderLock(root, "study folder"):
         check_own_folder(root, "study folder", STUDY_ENTRIES)  # again, under the lock
         try:
-            main, clutter, births, sensitivity = parts.run_grouped() if request.grouped else parts.run_serial()
+            main, clutter, births, sensitivity, companions = (
+                parts.run_grouped() if request.grouped else parts.run_serial()
+            )
             md = _finish(root, main, sensitivity)
         except KeyboardInterrupt:
             raise Interrupted(
                 f"interrupted: the study in {root} is incomplete (finished trials are on disk); "
                 f"finish with: soabench study --out {root}"
             ) from None
-    return StudyOutcome(root, main, clutter, births, md, tuple(sensitivity))
+    return StudyOutcome(root, main, clutter, births, md, tuple(sensitivity), tuple(companions))
+
+
+#: main, clutter sweep, N̂ sweep, sensitivity runs, companion runs
+_AllParts = tuple[RunOutcome, SweepOutcome, SweepOutcome, list[RunOutcome], list[RunOutcome]]
 
 
 class _Parts:
@@ -246,15 +273,25 @@ class _Parts:
         return run_variants(self.sens_dir, self.main_dir, trials=self.request.trials.sensitivity,
                             follow_main=self.follow, options=self.sens_options, batch=batch)  # fmt: skip
 
-    def all(self, batch: Batch) -> tuple[RunOutcome, SweepOutcome, SweepOutcome, list[RunOutcome]]:
-        main, clutter, births = self.main(batch), self.clutter(batch), self.births(batch)
-        return main, clutter, births, self.sensitivity(batch)
+    def companion(self, c: Companion, batch: Batch) -> RunOutcome:
+        """A :class:`Companion` folder: started, or resumed when it holds a run (``c.keys`` compared)."""
+        net = self.request.net
+        if (c.folder / "run.json").is_file():
+            flat = flatten_config(c.config.to_dict())
+            req = {k: flat[k] for k in c.keys if k in flat}
+            return run(RunRequest(None, net, resume=c.folder, requested=req, options=self.options), batch)
+        return run(RunRequest(c.config, net, out=c.folder, options=self.options), batch)
 
-    def run_serial(self) -> tuple[RunOutcome, SweepOutcome, SweepOutcome, list[RunOutcome]]:
+    def all(self, batch: Batch) -> _AllParts:
+        main, clutter, births = self.main(batch), self.clutter(batch), self.births(batch)
+        sensitivity = self.sensitivity(batch)
+        return main, clutter, births, sensitivity, [self.companion(c, batch) for c in self.request.companions]
+
+    def run_serial(self) -> _AllParts:
         """The parts one after another."""
         return self.all(ALONE)
 
-    def run_grouped(self) -> tuple[RunOutcome, SweepOutcome, SweepOutcome, list[RunOutcome]]:
+    def run_grouped(self) -> _AllParts:
         """The parts' trials together (:mod:`soabench.experiment.execution.grouped`) on one pool, then the reports
         of the parts that attempted every trial, each folder merged by a worker first."""
         deferred: list = []
