@@ -10,9 +10,11 @@ component, static). In one process, one after another, on the same protocol (int
 4. the study with the two families folders in its trials (how ``soabench results`` runs them): the families part
    costs what 4 adds to 3.
 
-Each figure is the CPU seconds of the call: this process and its finished worker processes (unlike wall time,
-hardly changed by other work on a shared machine). The script checks that the families folders of 2 and 4 hold the
-same trials.csv, episodes.csv and steps.csv. Example::
+Each figure is the CPU seconds of the call: this process and its finished worker processes. The families part in
+the study's trials is a difference of two large figures, so it scatters with the machine's speed from one minute to
+the next; the script therefore also prints what the families folders' own records say (``timing.csv``: SUMO, the
+sensor and the births, summed over trials, seconds inside the workers), which does not depend on the neighbours.
+It checks that the families folders of 2 and 4 hold the same trials.csv, episodes.csv and steps.csv. Example::
 
     nice -n 10 python benchmarks/bench_families_part.py --trials 20 --duration 100 --workers 2
 """
@@ -20,6 +22,7 @@ same trials.csv, episodes.csv and steps.csv. Example::
 from __future__ import annotations
 
 import argparse
+import csv
 import dataclasses
 import resource
 import tempfile
@@ -33,6 +36,19 @@ from soabench.experiment.execution.options import RunOptions
 from soabench.experiment.reports.finished import run_experiment
 
 TABLES = ("trials.csv", "episodes.csv", "steps.csv")
+#: the stages a folder no longer computes when its trials are the study's (seconds in timing.csv)
+SHARED_STAGES = ("t_sumo", "t_sensor", "t_birth")
+
+
+def shared_seconds(folder: Path) -> dict[str, float]:
+    """The folder's seconds of SUMO and the sensor (once per trial in timing.csv: the first row of each trial) and
+    of the births (every row), summed over its trials."""
+    with (folder / "timing.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    first = {r["trial"]: r for r in reversed(rows)}
+    out = {k: sum(float(r[k]) for r in first.values()) for k in ("t_sumo", "t_sensor")}
+    out["t_birth"] = sum(float(r["t_birth"]) for r in rows)
+    return out
 
 
 def cpu() -> float:
@@ -84,6 +100,9 @@ def main() -> None:
             for t in TABLES:
                 same = (root / "alone" / name / t).read_bytes() == (root / "grouped" / name / t).read_bytes()
                 assert same, f"{name}/{t} differs between the folder alone and in the study's trials"
+            for way in ("alone", "grouped"):
+                secs = shared_seconds(root / way / name)
+                print(f"{name} {way}: " + ", ".join(f"{k} {v:.1f} s" for k, v in secs.items()))
     part = t_group - t_study
     print(f"families part on its own:           {t_alone:8.1f} CPU s = {t_alone / t_main:.2f}x the main protocol")
     print(f"families part in the study's trials: {part:8.1f} CPU s = {part / t_main:.2f}x the main protocol")
