@@ -127,6 +127,29 @@ def _assignment_cost(C: np.ndarray, cols: np.ndarray) -> float:
 
 
 @njit(cache=True)
+def _finite_cells(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The finite cells of ``C``'s rows as (start (n + 1,), col): row i's columns in increasing order are
+    ``col[start[i]:start[i + 1]]``. A cluster's measurement row reaches its gated tracks and its own new track only,
+    so a subproblem's path search relaxes these instead of every column."""
+    n, m = C.shape
+    start = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        c = 0
+        for j in range(m):
+            if C[i, j] != np.inf:
+                c += 1
+        start[i + 1] = start[i] + c
+    col = np.empty(start[n], dtype=np.int64)
+    q = 0
+    for i in range(n):
+        for j in range(m):
+            if C[i, j] != np.inf:
+                col[q] = j
+                q += 1
+    return start, col
+
+
+@njit(cache=True)
 def _child(
     C: np.ndarray,
     sol: np.ndarray,
@@ -139,17 +162,22 @@ def _child(
     out_v: np.ndarray,
     work: np.ndarray,
     iwork: np.ndarray,
+    cell_start: np.ndarray,
+    cell_col: np.ndarray,
 ) -> float:
     """The subproblem of the square assignment ``sol`` (m,) with duals (u, v) (module docstring) that keeps rows
     0..t-1 and forbids row t the columns ``forbid``: its best assignment and duals into out_*, and its cost (+inf:
     none). One shortest augmenting path (Dijkstra on the reduced costs, all >= 0) from row t to its freed column
-    ``sol[t]``; rows >= C.shape[0] are the dummy rows of cost 0. ``work`` (m,) and ``iwork`` (4, m): scratch."""
+    ``sol[t]``; rows >= C.shape[0] are the dummy rows of cost 0. A real row relaxes its finite cells only
+    (``cell_start``, ``cell_col``: :func:`_finite_cells`); the next column is the one of least path cost among
+    those reached, the freed column first at equal cost, then the lowest index. ``work`` (m,) and ``iwork`` (5, m):
+    scratch."""
     n, m = C.shape
     out_sol[:] = sol
     out_u[:] = u
     out_v[:] = v
     d = work
-    pred, row4col, seen, scanned = iwork[0], iwork[1], iwork[2], iwork[3]
+    pred, row4col, seen, scanned, front = iwork[0], iwork[1], iwork[2], iwork[3], iwork[4]
     for i in range(m):
         row4col[sol[i]] = i
         d[i] = np.inf
@@ -157,19 +185,19 @@ def _child(
         scanned[i] = 0
     for i in range(t):  # the fixed rows' columns are out of the subproblem
         seen[sol[i]] = 1
+    n_front = 0  # the columns reached (finite d) and not yet seen
+    dummy_a = np.inf  # the least dist - u_i of the dummy rows scanned so far
     sink = sol[t]
     i = t
     dist = 0.0
     while True:
         scanned[i] = 1
-        for j in range(m):
-            if seen[j]:
-                continue
-            c = 0.0
-            if i < n:
-                c = C[i, j]
-                if c == np.inf:
+        if i < n:
+            for q in range(cell_start[i], cell_start[i + 1]):
+                j = cell_col[q]
+                if seen[j]:
                     continue
+                c = C[i, j]
                 if i == t:
                     banned = False
                     for f in range(forbid.shape[0]):
@@ -178,23 +206,45 @@ def _child(
                             break
                     if banned:
                         continue
-            r = dist + c - u[i] - v[j]
-            if r < d[j]:
-                d[j] = r
-                pred[j] = i
-        lowest = np.inf
-        nxt = -1
-        for j in range(m):
-            if not seen[j] and (d[j] < lowest or (d[j] == lowest and j == sink)):
-                lowest = d[j]
-                nxt = j
-        if lowest == np.inf:  # row t cannot reach its freed column: no assignment
+                r = dist + c - u[i] - v[j]
+                if r < d[j]:
+                    if d[j] == np.inf:
+                        front[n_front] = j
+                        n_front += 1
+                    d[j] = r
+                    pred[j] = i
+        else:  # a dummy row: r_j = a - v_j with a = dist - u_i, so a row whose a is no lower than an earlier dummy
+            # row's improves no column (subtracting v_j keeps the order) and is skipped
+            c = 0.0
+            a = dist + c - u[i]
+            if a < dummy_a:
+                dummy_a = a
+                for j in range(m):
+                    if seen[j]:
+                        continue
+                    r = a - v[j]
+                    if r < d[j]:
+                        if d[j] == np.inf:
+                            front[n_front] = j
+                            n_front += 1
+                        d[j] = r
+                        pred[j] = i
+        if n_front == 0:  # row t cannot reach its freed column: no assignment
             return np.inf
+        at = 0
+        nxt = front[0]
+        for q in range(1, n_front):
+            j = front[q]
+            if d[j] < d[nxt] or (d[j] == d[nxt] and (j == sink or (nxt != sink and j < nxt))):
+                at = q
+                nxt = j
+        n_front -= 1
+        front[at] = front[n_front]
         seen[nxt] = 1
         if nxt == sink:
             break
         i = row4col[nxt]
-        dist = lowest
+        dist = d[nxt]
     min_val = d[sink]
     for j in range(m):  # the duals stay feasible, 0 reduced cost on the new pairs
         if seen[j] and d[j] < np.inf:
@@ -405,7 +455,8 @@ def murty_from(
     last = n - 1 if n == m else n  # square: with n - 1 rows fixed the last has no choice
     forbid = np.empty(m + 2, dtype=np.int64)  # a row has at most m forbidden columns
     work = np.empty(m)
-    iwork = np.empty((4, m), dtype=np.int64)
+    iwork = np.empty((5, m), dtype=np.int64)
+    cell_start, cell_col = _finite_cells(C)
     while n_heap > 0 and n_out < k:
         node = heap[0]  # pop the smallest key
         n_heap -= 1
@@ -435,7 +486,7 @@ def murty_from(
                 s_sol, s_u, s_v = a1, a2, a3
             ps = slot[par[node]]
             cost = _child(C, s_sol[ps], s_u[ps], s_v[ps], t, forbid[:nf], s_sol[n_slots], s_u[n_slots],
-                          s_v[n_slots], work, iwork)  # fmt: skip
+                          s_v[n_slots], work, iwork, cell_start, cell_col)  # fmt: skip
             if cost < np.inf and cost <= limit:
                 slot[node] = n_slots
                 n_slots += 1
