@@ -448,16 +448,16 @@ def _filters_part(
     the ablation's instead), on its own: kept when complete with these settings, else resumed (more trials:
     extended) or started."""
     # imported when called: scipy would slow every start-up
-    from soabench.experiment.reports.finished import run_experiment
+    from soabench.experiment.campaigns.study import Companion
 
     cfg = cfg if cfg is not None else filters_config(s)
     if filters_kept(folder, cfg, log):
         return "kept", 0
-    if (folder / "run.json").is_file():
-        requested = {k: v for k, v in flatten_config(cfg.to_dict()).items() if k in FILTERS_KEYS}
-        o = run_experiment(None, "intersection", resume=folder, requested=requested, options=exe)
-    else:
-        o = run_experiment(cfg, "intersection", out=folder, options=exe)
+    return _ran(Companion(folder, cfg, FILTERS_KEYS).run("intersection", exe))
+
+
+def _ran(o: RunOutcome) -> tuple[str, int]:
+    """A run's status in the table of parts and its missing trials."""
     return _status(o.complete), o.n_missing
 
 
@@ -512,21 +512,21 @@ def run_results(
     def intersection() -> tuple[str, int]:
         """The intersection study with the families runs in its trials (module docstring); a families folder
         not run there (kept, or the study kept) is kept or run on its own."""
-        folders = {FAMILIES_PART: (root / "filters", filters_config(s)),
-                   ABLATION_PART_NAME: (root / "filters-lmb-components", ablation_config(s))}  # fmt: skip
         from soabench.experiment.campaigns.study import Companion
 
+        folders = {FAMILIES_PART: (root / "filters", filters_config(s)),
+                   ABLATION_PART_NAME: (root / "filters-lmb-components", ablation_config(s))}  # fmt: skip
         todo = {n: Companion(f, c, FILTERS_KEYS) for n, (f, c) in folders.items() if not filters_kept(f, c, log)}
         status, missing, done = _study_part(root / "intersection", s, exe, log, companions=tuple(todo.values()))
-        for name, (folder, cfg) in folders.items():
+        ran = dict(zip(todo, done, strict=True)) if done is not None else {}
+        for name in folders:
             if name not in todo:
                 outcome.parts[name], outcome.seconds[name] = "kept", 0.0
-            elif done is not None:  # ran in the study's trials (its time is the study's)
-                o = done[list(todo).index(name)]
-                outcome.parts[name] = _status(o.complete)
-                outcome.n_missing += o.n_missing
-            else:
-                step(name, lambda folder=folder, cfg=cfg: _filters_part(folder, s, exe, log, cfg))
+            elif name in ran:  # ran in the study's trials (its time is the study's)
+                outcome.parts[name], n_missing = _ran(ran[name])
+                outcome.n_missing += n_missing
+            else:  # the study was kept: the folder runs on its own
+                step(name, lambda c=todo[name]: _ran(c.run("intersection", exe)))
         return status, missing
 
     with FolderLock(root, "results folder"):

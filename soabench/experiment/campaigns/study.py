@@ -102,6 +102,14 @@ class Companion:
     config: Config
     keys: tuple[str, ...]
 
+    def run(self, net: str, options: RunOptions, batch: Batch = ALONE) -> RunOutcome:
+        """Start the folder, or resume it when it holds a run (``keys`` compared); ``batch``: the study's group, or
+        the folder on its own."""
+        if (self.folder / "run.json").is_file():
+            requested = {k: v for k, v in flatten_config(self.config.to_dict()).items() if k in self.keys}
+            return run(RunRequest(None, net, resume=self.folder, requested=requested, options=options), batch)
+        return run(RunRequest(self.config, net, out=self.folder, options=options), batch)
+
 
 def with_plugin_models(config: Config, extra: tuple[str, ...]) -> Config:
     """The study's configuration with plugin birth models ``extra`` beside the six built-in ones (a built-in name
@@ -273,19 +281,11 @@ class _Parts:
         return run_variants(self.sens_dir, self.main_dir, trials=self.request.trials.sensitivity,
                             follow_main=self.follow, options=self.sens_options, batch=batch)  # fmt: skip
 
-    def companion(self, c: Companion, batch: Batch) -> RunOutcome:
-        """A :class:`Companion` folder: started, or resumed when it holds a run (``c.keys`` compared)."""
-        net = self.request.net
-        if (c.folder / "run.json").is_file():
-            flat = flatten_config(c.config.to_dict())
-            req = {k: flat[k] for k in c.keys if k in flat}
-            return run(RunRequest(None, net, resume=c.folder, requested=req, options=self.options), batch)
-        return run(RunRequest(c.config, net, out=c.folder, options=self.options), batch)
-
     def all(self, batch: Batch) -> _AllParts:
         main, clutter, births = self.main(batch), self.clutter(batch), self.births(batch)
         sensitivity = self.sensitivity(batch)
-        return main, clutter, births, sensitivity, [self.companion(c, batch) for c in self.request.companions]
+        companions = [c.run(self.request.net, self.options, batch) for c in self.request.companions]
+        return main, clutter, births, sensitivity, companions
 
     def run_serial(self) -> _AllParts:
         """The parts one after another."""
