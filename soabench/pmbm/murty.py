@@ -149,119 +149,121 @@ def _finite_cells(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return start, col
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _child(
     C: np.ndarray,
-    sol: np.ndarray,
-    u: np.ndarray,
-    v: np.ndarray,
+    s_sol: np.ndarray,
+    s_u: np.ndarray,
+    s_v: np.ndarray,
+    ps: int,
+    ns: int,
     t: int,
     forbid: np.ndarray,
-    out_sol: np.ndarray,
-    out_u: np.ndarray,
-    out_v: np.ndarray,
+    nf: int,
     work: np.ndarray,
     iwork: np.ndarray,
     cell_start: np.ndarray,
     cell_col: np.ndarray,
 ) -> float:
-    """The subproblem of the square assignment ``sol`` (m,) with duals (u, v) (module docstring) that keeps rows
-    0..t-1 and forbids row t the columns ``forbid``: its best assignment and duals into out_*, and its cost (+inf:
-    none). One shortest augmenting path (Dijkstra on the reduced costs, all >= 0) from row t to its freed column
-    ``sol[t]``; rows >= C.shape[0] are the dummy rows of cost 0. A real row relaxes its finite cells only
-    (``cell_start``, ``cell_col``: :func:`_finite_cells`); the next column is the one of least path cost among
-    those reached, the freed column first at equal cost, then the lowest index. ``work`` (m,) and ``iwork`` (5, m):
-    scratch."""
+    """The subproblem of the square assignment ``s_sol[ps]`` (m,) with duals (``s_u[ps]``, ``s_v[ps]``) (module
+    docstring) that keeps rows 0..t-1 and forbids row t the columns ``forbid[:nf]``: its best assignment and duals
+    into row ``ns`` of the stores, and its cost (+inf: none). One shortest augmenting path (Dijkstra on the reduced
+    costs, all >= 0) from row t to its freed column ``s_sol[ps, t]``; rows >= C.shape[0] are the dummy rows of cost
+    0. A real row relaxes its finite cells only (``cell_start``, ``cell_col``: :func:`_finite_cells`); the next
+    column is the one of least path cost among those reached, the freed column first at equal cost, then the lowest
+    index. ``work`` (m,) and ``iwork`` (5, m): scratch (rows: pred, row4col, seen, scanned, front). The stores are
+    indexed in place, not sliced: a view passed to a compiled function costs two atomic reference counts."""
     n, m = C.shape
-    out_sol[:] = sol
-    out_u[:] = u
-    out_v[:] = v
     d = work
-    pred, row4col, seen, scanned, front = iwork[0], iwork[1], iwork[2], iwork[3], iwork[4]
     for i in range(m):
-        row4col[sol[i]] = i
+        s_sol[ns, i] = s_sol[ps, i]
+        s_u[ns, i] = s_u[ps, i]
+        s_v[ns, i] = s_v[ps, i]
+        iwork[1, s_sol[ps, i]] = i  # row4col
         d[i] = np.inf
-        seen[i] = 0
-        scanned[i] = 0
+        iwork[2, i] = 0  # seen
+        iwork[3, i] = 0  # scanned
     for i in range(t):  # the fixed rows' columns are out of the subproblem
-        seen[sol[i]] = 1
-    n_front = 0  # the columns reached (finite d) and not yet seen
+        iwork[2, s_sol[ps, i]] = 1
+    n_front = 0  # the columns reached (finite d) and not yet seen (iwork[4, :n_front])
     dummy_a = np.inf  # the least dist - u_i of the dummy rows scanned so far
-    sink = sol[t]
+    sink = s_sol[ps, t]
     i = t
     dist = 0.0
     while True:
-        scanned[i] = 1
+        iwork[3, i] = 1
         if i < n:
             for q in range(cell_start[i], cell_start[i + 1]):
                 j = cell_col[q]
-                if seen[j]:
+                if iwork[2, j]:
                     continue
                 c = C[i, j]
                 if i == t:
                     banned = False
-                    for f in range(forbid.shape[0]):
+                    for f in range(nf):
                         if forbid[f] == j:
                             banned = True
                             break
                     if banned:
                         continue
-                r = dist + c - u[i] - v[j]
+                r = dist + c - s_u[ps, i] - s_v[ps, j]
                 if r < d[j]:
                     if d[j] == np.inf:
-                        front[n_front] = j
+                        iwork[4, n_front] = j
                         n_front += 1
                     d[j] = r
-                    pred[j] = i
+                    iwork[0, j] = i
         else:  # a dummy row: r_j = a - v_j with a = dist - u_i, so a row whose a is no lower than an earlier dummy
             # row's improves no column (subtracting v_j keeps the order) and is skipped
             c = 0.0
-            a = dist + c - u[i]
+            a = dist + c - s_u[ps, i]
             if a < dummy_a:
                 dummy_a = a
                 for j in range(m):
-                    if seen[j]:
+                    if iwork[2, j]:
                         continue
-                    r = a - v[j]
+                    r = a - s_v[ps, j]
                     if r < d[j]:
                         if d[j] == np.inf:
-                            front[n_front] = j
+                            iwork[4, n_front] = j
                             n_front += 1
                         d[j] = r
-                        pred[j] = i
+                        iwork[0, j] = i
         if n_front == 0:  # row t cannot reach its freed column: no assignment
             return np.inf
         at = 0
-        nxt = front[0]
+        nxt = iwork[4, 0]
         for q in range(1, n_front):
-            j = front[q]
+            j = iwork[4, q]
             if d[j] < d[nxt] or (d[j] == d[nxt] and (j == sink or (nxt != sink and j < nxt))):
                 at = q
                 nxt = j
         n_front -= 1
-        front[at] = front[n_front]
-        seen[nxt] = 1
+        iwork[4, at] = iwork[4, n_front]
+        iwork[2, nxt] = 1
         if nxt == sink:
             break
-        i = row4col[nxt]
+        i = iwork[1, nxt]
         dist = d[nxt]
     min_val = d[sink]
     for j in range(m):  # the duals stay feasible, 0 reduced cost on the new pairs
-        if seen[j] and d[j] < np.inf:
-            out_v[j] -= min_val - d[j]
-    out_u[t] += min_val
+        if iwork[2, j] and d[j] < np.inf:
+            s_v[ns, j] -= min_val - d[j]
+    s_u[ns, t] += min_val
     for i in range(t + 1, m):
-        if scanned[i]:
-            out_u[i] += min_val - d[sol[i]]
+        if iwork[3, i]:
+            s_u[ns, i] += min_val - d[s_sol[ps, i]]
     j = sink
     while True:
-        i = pred[j]
-        prev = out_sol[i]
-        out_sol[i] = j
+        i = iwork[0, j]
+        prev = s_sol[ns, i]
+        s_sol[ns, i] = j
         j = prev
         if i == t:
             break
-    return _assignment_cost(C, out_sol)
+    for r in range(n):  # the cost: its cells in row order, summed in numpy's order (as _assignment_cost)
+        work[r] = C[r, s_sol[ns, r]]
+    return np_sum(work, n)
 
 
 @njit(cache=True)
@@ -474,7 +476,12 @@ def murty_from(
             p = best
         if slot[node] < 0:  # solve it from its parent's assignment and put it back under its cost
             t = row[node]
-            nf = _forbidden(node, t, par, row, fcol, forbid)
+            nf = 0  # the columns forbidden to row t: the node's own and those of its ancestors with the same row
+            x = node
+            while x > 0 and row[x] == t:
+                forbid[nf] = fcol[x]
+                nf += 1
+                x = par[x]
             if n_slots == scap:  # grow the solved store
                 scap *= 2
                 a1 = np.empty((scap, m), dtype=np.int64)
@@ -485,8 +492,7 @@ def murty_from(
                 a3[:n_slots] = s_v[:n_slots]
                 s_sol, s_u, s_v = a1, a2, a3
             ps = slot[par[node]]
-            cost = _child(C, s_sol[ps], s_u[ps], s_v[ps], t, forbid[:nf], s_sol[n_slots], s_u[n_slots],
-                          s_v[n_slots], work, iwork, cell_start, cell_col)  # fmt: skip
+            cost = _child(C, s_sol, s_u, s_v, ps, n_slots, t, forbid, nf, work, iwork, cell_start, cell_col)
             if cost < np.inf and cost <= limit:
                 slot[node] = n_slots
                 n_slots += 1
@@ -495,7 +501,8 @@ def murty_from(
             continue
         sl = slot[node]
         out_cost[n_out] = keys[node]
-        out_cols[n_out] = s_sol[sl, :n]
+        for r in range(n):
+            out_cols[n_out, r] = s_sol[sl, r]
         n_out += 1
         if n_out == k:
             break
@@ -505,7 +512,12 @@ def murty_from(
         for t in range(row[node], last):
             c_t = s_sol[sl, t]
             forbid[0] = c_t
-            nf = 1 + (_forbidden(node, t, par, row, fcol, forbid[1:]) if t == row[node] else 0)
+            nf = 1
+            x = node  # and in the node's own row, the columns forbidden there already
+            while x > 0 and row[x] == t:
+                forbid[nf] = fcol[x]
+                nf += 1
+                x = par[x]
             lo_r = np.inf  # the least reduced cost of row t's cells left in the subproblem
             for j in range(m):
                 if used[j] or C[t, j] == np.inf:
@@ -542,20 +554,7 @@ def murty_from(
     return out_cost[:n_out], out_cols[:n_out]
 
 
-@njit(cache=True)
-def _forbidden(node: int, t: int, par: np.ndarray, row: np.ndarray, fcol: np.ndarray, out: np.ndarray) -> int:
-    """The columns forbidden to row ``t`` in ``node``: its own and those of its ancestors with the same row (the
-    root forbids none); written to ``out``, their number returned."""
-    nf = 0
-    x = node
-    while x > 0 and row[x] == t:
-        out[nf] = fcol[x]
-        nf += 1
-        x = par[x]
-    return nf
-
-
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _push(heap: np.ndarray, n_heap: int, node: int, keys: np.ndarray) -> int:
     """Push ``node`` on the binary heap ``heap[:n_heap]`` ordered by (key, index); returns the new size."""
     q = n_heap
