@@ -24,7 +24,7 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.metrics_kernels import np_sum  # noqa: E402
-from soabench.pmbm.murty import murty_from, repaired_root, square_root  # noqa: E402
+from soabench.pmbm.murty import murty_from, repair, square_root  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
 
@@ -391,6 +391,8 @@ def global_hypotheses(
     changed = np.empty(nT_max, dtype=np.int64)
     miss_terms = np.empty(nT_max)
     all_miss = 0.0
+    root_only = False
+    costs = np.empty(0)
     cols = np.empty((0, 0), dtype=np.int64)
     choice = np.empty((0, 0), dtype=np.int64)
     for g in range(G):
@@ -427,6 +429,7 @@ def global_hypotheses(
         # Murty's best assignment for a choice is repaired from the previous choice's (they differ in a few columns)
         m = nT + nL
         r_sol, r_u, r_v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
+        r_iwork, r_d = np.empty((6, m), dtype=np.int64), np.empty(m)  # the repair's scratch
         C = np.empty((0, 0))
         warm = False
         for u in range(n_u):
@@ -442,7 +445,7 @@ def global_hypotheses(
                             n_ch += 1
                             for ll in range(nL):
                                 C[ll, i] = log_l_miss[hs[i]] - log_l_det[hs[i], L[ll]]
-                    cost0 = repaired_root(C, changed[:n_ch], r_sol, r_u, r_v)
+                    cost0 = repair(C, changed, n_ch, r_sol, r_u, r_v, r_iwork, r_d)
                 else:
                     C = cluster_costs(hs[:nT], L, log_l_miss, log_l_det, log_new)
                     cost0 = square_root(C, r_sol, r_u, r_v)
@@ -451,8 +454,12 @@ def global_hypotheses(
                     prev[i] = hs[i]
                     miss_terms[i] = log_l_miss[hs[i]]
                 all_miss = -np_sum(miss_terms, nT)
-                costs, cols = murty_from(C, k_u[u], max_gap, r_sol, r_u, r_v, cost0)
-                K = costs.shape[0]
+                root_only = k_u[u] == 1 or cost0 == np.inf  # Murty's first assignment is the root (none: +inf)
+                if root_only:
+                    K = 1 if cost0 < np.inf else 0
+                else:
+                    costs, cols = murty_from(C, k_u[u], max_gap, r_sol, r_u, r_v, cost0)
+                    K = costs.shape[0]
             else:
                 costs, choice = cluster_solutions(hs[:nT], L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
                 K = costs.shape[0]
@@ -468,12 +475,13 @@ def global_hypotheses(
                 sol_choice = grown_ch
             if nT > 1 and nL > 1:  # Murty's columns to the tracks' choices (cost: the missed factors added back)
                 for b in range(K):
-                    sol_cost[p + b] = costs[b] - (-all_miss)
+                    sol_cost[p + b] = (cost0 if root_only else costs[b]) - (-all_miss)
                     for i in range(nT):
                         sol_choice[q + b * nT + i] = MISS
                     for row in range(nL):
-                        if cols[b, row] < nT:  # measurement L[row] assigned to a track column
-                            sol_choice[q + b * nT + cols[b, row]] = L[row]
+                        col = r_sol[row] if root_only else cols[b, row]
+                        if col < nT:  # measurement L[row] assigned to a track column
+                            sol_choice[q + b * nT + col] = L[row]
             else:
                 for b in range(K):
                     sol_cost[p + b] = costs[b]

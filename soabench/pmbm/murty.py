@@ -310,13 +310,30 @@ def repaired_root(C: np.ndarray, changed: np.ndarray, sol: np.ndarray, u: np.nda
     >= 0 again; a row whose cell in a changed column is no longer tight gives its column up, and each such row,
     in increasing order, takes one shortest augmenting path to a free column (the first reached; at equal path cost
     the lowest column index)."""
+    m = C.shape[1]
+    return repair(C, changed, changed.shape[0], sol, u, v, np.empty((6, m), dtype=np.int64), np.empty(m))
+
+
+@njit(cache=True)
+def repair(
+    C: np.ndarray,
+    changed: np.ndarray,
+    n_changed: int,
+    sol: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    iwork: np.ndarray,
+    d: np.ndarray,
+) -> float:
+    """:func:`repaired_root` for the columns ``changed[:n_changed]`` on scratch arrays ``iwork`` (6, m) (rows:
+    row4col, free row, free column, pred, seen, scanned) and ``d`` (m,), for a caller that repairs many times."""
     n, m = C.shape
-    row4col = np.empty(m, dtype=np.int64)
+    row4col, free_row, free_col, pred, seen, scanned = 0, 1, 2, 3, 4, 5  # the rows of iwork
     for i in range(m):
-        row4col[sol[i]] = i
-    free_row = np.zeros(m, dtype=np.bool_)
-    free_col = np.zeros(m, dtype=np.bool_)
-    for q in range(changed.shape[0]):
+        iwork[row4col, sol[i]] = i
+        iwork[free_row, i] = 0
+        iwork[free_col, i] = 0
+    for q in range(n_changed):
         j = changed[q]
         lo = np.inf
         for i in range(m):
@@ -326,28 +343,25 @@ def repaired_root(C: np.ndarray, changed: np.ndarray, sol: np.ndarray, u: np.nda
         if lo == np.inf:  # no row can take column j (square: every column is taken)
             return np.inf
         v[j] = lo
-        h = row4col[j]
+        h = iwork[row4col, j]
         c = C[h, j] if h < n else 0.0
         if not (c - u[h] - v[j] <= 0.0):
-            free_row[h] = True
-            free_col[j] = True
-            row4col[j] = -1
+            iwork[free_row, h] = 1
+            iwork[free_col, j] = 1
+            iwork[row4col, j] = -1
             sol[h] = -1
-    d = np.empty(m)
-    pred = np.empty(m, dtype=np.int64)
-    seen = np.zeros(m, dtype=np.bool_)
-    scanned = np.zeros(m, dtype=np.bool_)
     for start in range(m):
-        if not free_row[start]:
+        if not iwork[free_row, start]:
             continue
-        d[:] = np.inf
-        seen[:] = False
-        scanned[:] = False
+        for j in range(m):
+            d[j] = np.inf
+            iwork[seen, j] = 0
+            iwork[scanned, j] = 0
         i, dist, sink = start, 0.0, -1
         while sink < 0:
-            scanned[i] = True
+            iwork[scanned, i] = 1
             for j in range(m):
-                if seen[j]:
+                if iwork[seen, j]:
                     continue
                 c = C[i, j] if i < n else 0.0
                 if c == np.inf:
@@ -355,43 +369,45 @@ def repaired_root(C: np.ndarray, changed: np.ndarray, sol: np.ndarray, u: np.nda
                 r = dist + c - u[i] - v[j]
                 if r < d[j]:
                     d[j] = r
-                    pred[j] = i
+                    iwork[pred, j] = i
             lowest = np.inf
             nxt = -1
             for j in range(m):
-                if seen[j] or d[j] == np.inf:
+                if iwork[seen, j] or d[j] == np.inf:
                     continue
-                if d[j] < lowest or (d[j] == lowest and free_col[j] and not free_col[nxt]):
+                if d[j] < lowest or (d[j] == lowest and iwork[free_col, j] and not iwork[free_col, nxt]):
                     lowest = d[j]
                     nxt = j
             if nxt < 0:
                 return np.inf
-            seen[nxt] = True
-            if free_col[nxt]:
+            iwork[seen, nxt] = 1
+            if iwork[free_col, nxt]:
                 sink = nxt
             else:
-                i = row4col[nxt]
+                i = iwork[row4col, nxt]
                 dist = lowest
         min_val = d[sink]
         for j in range(m):
-            if seen[j]:
+            if iwork[seen, j]:
                 v[j] -= min_val - d[j]
         u[start] += min_val
         for i in range(m):
-            if scanned[i] and i != start:
+            if iwork[scanned, i] and i != start:
                 u[i] += min_val - d[sol[i]]
-        free_col[sink] = False
-        free_row[start] = False
+        iwork[free_col, sink] = 0
+        iwork[free_row, start] = 0
         j = sink
         while True:
-            i = pred[j]
-            row4col[j] = i
+            i = iwork[pred, j]
+            iwork[row4col, j] = i
             prev = sol[i]
             sol[i] = j
             j = prev
             if i == start:
                 break
-    return _assignment_cost(C, sol)
+    for r in range(n):  # the cost: its cells in row order, summed in numpy's order (as _assignment_cost)
+        d[r] = C[r, sol[r]]
+    return np_sum(d, n)
 
 
 @njit(cache=True)
