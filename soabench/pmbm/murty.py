@@ -476,97 +476,100 @@ def murty_from(
     iwork = np.empty((5, m), dtype=np.int64)
     cell_start, cell_col = _finite_cells(C)
     while n_heap > 0 and n_out < k:
-        node = heap[0]  # pop the smallest key
-        n_heap -= 1
-        heap[0] = heap[n_heap]
-        p = 0
-        while True:
-            c1, c2, best = 2 * p + 1, 2 * p + 2, p
-            if c1 < n_heap and _before(keys[heap[c1]], heap[c1], keys[heap[best]], heap[best]):
-                best = c1
-            if c2 < n_heap and _before(keys[heap[c2]], heap[c2], keys[heap[best]], heap[best]):
-                best = c2
-            if best == p:
+        # the stores grow here, outside the inner loop, which has room for one more solved node and the children
+        # of one more assignment (arrays reassigned inside a loop cost reference counts at every iteration)
+        if n_slots == scap:
+            scap *= 2
+            a1 = np.empty((scap, m), dtype=np.int64)
+            a1[:n_slots] = s_sol[:n_slots]
+            a2 = np.empty((scap, m))
+            a2[:n_slots] = s_u[:n_slots]
+            a3 = np.empty((scap, m))
+            a3[:n_slots] = s_v[:n_slots]
+            s_sol, s_u, s_v = a1, a2, a3
+        if n_nodes + last > cap:
+            cap = max(2 * cap, n_nodes + last)
+            keys2 = np.empty(cap)
+            keys2[:n_nodes] = keys[:n_nodes]
+            par2 = np.empty(cap, dtype=np.int64)
+            par2[:n_nodes] = par[:n_nodes]
+            row2 = np.empty(cap, dtype=np.int64)
+            row2[:n_nodes] = row[:n_nodes]
+            fcol2 = np.empty(cap, dtype=np.int64)
+            fcol2[:n_nodes] = fcol[:n_nodes]
+            slot2 = np.empty(cap, dtype=np.int64)
+            slot2[:n_nodes] = slot[:n_nodes]
+            heap2 = np.empty(cap, dtype=np.int64)
+            heap2[:n_heap] = heap[:n_heap]
+            keys, par, row, fcol, slot, heap = keys2, par2, row2, fcol2, slot2, heap2
+        while n_heap > 0 and n_out < k and n_slots < scap and n_nodes + last <= cap:
+            node = heap[0]  # pop the smallest key
+            n_heap -= 1
+            heap[0] = heap[n_heap]
+            p = 0
+            while True:
+                c1, c2, best = 2 * p + 1, 2 * p + 2, p
+                if c1 < n_heap and _before(keys[heap[c1]], heap[c1], keys[heap[best]], heap[best]):
+                    best = c1
+                if c2 < n_heap and _before(keys[heap[c2]], heap[c2], keys[heap[best]], heap[best]):
+                    best = c2
+                if best == p:
+                    break
+                heap[p], heap[best] = heap[best], heap[p]
+                p = best
+            if slot[node] < 0:  # solve it from its parent's assignment and put it back under its cost
+                t = row[node]
+                nf = 0  # the columns forbidden to row t: the node's own and those of its ancestors with the same row
+                x = node
+                while x > 0 and row[x] == t:
+                    forbid[nf] = fcol[x]
+                    nf += 1
+                    x = par[x]
+                ps = slot[par[node]]
+                cost = _child(C, s_sol, s_u, s_v, ps, n_slots, t, forbid, nf, work, iwork, cell_start, cell_col)
+                if cost < np.inf and cost <= limit:
+                    slot[node] = n_slots
+                    n_slots += 1
+                    keys[node] = cost
+                    n_heap = _push(heap, n_heap, node, keys)
+                continue
+            sl = slot[node]
+            out_cost[n_out] = keys[node]
+            for r in range(n):
+                out_cols[n_out, r] = s_sol[sl, r]
+            n_out += 1
+            if n_out == k:
                 break
-            heap[p], heap[best] = heap[best], heap[p]
-            p = best
-        if slot[node] < 0:  # solve it from its parent's assignment and put it back under its cost
-            t = row[node]
-            nf = 0  # the columns forbidden to row t: the node's own and those of its ancestors with the same row
-            x = node
-            while x > 0 and row[x] == t:
-                forbid[nf] = fcol[x]
-                nf += 1
-                x = par[x]
-            if n_slots == scap:  # grow the solved store
-                scap *= 2
-                a1 = np.empty((scap, m), dtype=np.int64)
-                a1[:n_slots] = s_sol[:n_slots]
-                a2 = np.empty((scap, m))
-                a2[:n_slots] = s_u[:n_slots]
-                a3 = np.empty((scap, m))
-                a3[:n_slots] = s_v[:n_slots]
-                s_sol, s_u, s_v = a1, a2, a3
-            ps = slot[par[node]]
-            cost = _child(C, s_sol, s_u, s_v, ps, n_slots, t, forbid, nf, work, iwork, cell_start, cell_col)
-            if cost < np.inf and cost <= limit:
-                slot[node] = n_slots
-                n_slots += 1
-                keys[node] = cost
-                n_heap = _push(heap, n_heap, node, keys)
-            continue
-        sl = slot[node]
-        out_cost[n_out] = keys[node]
-        for r in range(n):
-            out_cols[n_out, r] = s_sol[sl, r]
-        n_out += 1
-        if n_out == k:
-            break
-        used[:] = False
-        for r in range(row[node]):
-            used[s_sol[sl, r]] = True
-        for t in range(row[node], last):
-            c_t = s_sol[sl, t]
-            forbid[0] = c_t
-            nf = 1
-            x = node  # and in the node's own row, the columns forbidden there already
-            while x > 0 and row[x] == t:
-                forbid[nf] = fcol[x]
-                nf += 1
-                x = par[x]
-            lo_r = np.inf  # the least reduced cost of row t's cells left in the subproblem
-            for j in range(m):
-                if used[j] or C[t, j] == np.inf:
-                    continue
-                banned = False
-                for f in range(nf):
-                    if forbid[f] == j:
-                        banned = True
-                        break
-                if not banned:
-                    lo_r = min(lo_r, C[t, j] - s_u[sl, t] - s_v[sl, j])
-            used[c_t] = True  # fixed for the next subproblems
-            bound = keys[node] + max(lo_r, 0.0)
-            bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
-            if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
-                if n_nodes == cap:  # grow the node store
-                    cap *= 2
-                    keys2 = np.empty(cap)
-                    keys2[:n_nodes] = keys[:n_nodes]
-                    par2 = np.empty(cap, dtype=np.int64)
-                    par2[:n_nodes] = par[:n_nodes]
-                    row2 = np.empty(cap, dtype=np.int64)
-                    row2[:n_nodes] = row[:n_nodes]
-                    fcol2 = np.empty(cap, dtype=np.int64)
-                    fcol2[:n_nodes] = fcol[:n_nodes]
-                    slot2 = np.empty(cap, dtype=np.int64)
-                    slot2[:n_nodes] = slot[:n_nodes]
-                    heap2 = np.empty(cap, dtype=np.int64)
-                    heap2[:n_heap] = heap[:n_heap]
-                    keys, par, row, fcol, slot, heap = keys2, par2, row2, fcol2, slot2, heap2
-                keys[n_nodes], par[n_nodes], row[n_nodes], fcol[n_nodes], slot[n_nodes] = bound, node, t, c_t, -1
-                n_heap = _push(heap, n_heap, n_nodes, keys)
-                n_nodes += 1
+            used[:] = False
+            for r in range(row[node]):
+                used[s_sol[sl, r]] = True
+            for t in range(row[node], last):
+                c_t = s_sol[sl, t]
+                forbid[0] = c_t
+                nf = 1
+                x = node  # and in the node's own row, the columns forbidden there already
+                while x > 0 and row[x] == t:
+                    forbid[nf] = fcol[x]
+                    nf += 1
+                    x = par[x]
+                lo_r = np.inf  # the least reduced cost of row t's cells left in the subproblem
+                for j in range(m):
+                    if used[j] or C[t, j] == np.inf:
+                        continue
+                    banned = False
+                    for f in range(nf):
+                        if forbid[f] == j:
+                            banned = True
+                            break
+                    if not banned:
+                        lo_r = min(lo_r, C[t, j] - s_u[sl, t] - s_v[sl, j])
+                used[c_t] = True  # fixed for the next subproblems
+                bound = keys[node] + max(lo_r, 0.0)
+                bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
+                if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
+                    keys[n_nodes], par[n_nodes], row[n_nodes], fcol[n_nodes], slot[n_nodes] = bound, node, t, c_t, -1
+                    n_heap = _push(heap, n_heap, n_nodes, keys)
+                    n_nodes += 1
     return out_cost[:n_out], out_cols[:n_out]
 
 
