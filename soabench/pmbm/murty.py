@@ -16,7 +16,7 @@ solved one's instead (:func:`repaired_root`).
 
 Each subproblem starts from its parent's assignment and dual variables (Miller, Stone & Cox 1997): with pair t
 removed only row t is unassigned, the parent's duals stay feasible, and one shortest augmenting path from row t
-(:func:`_child`) gives the subproblem's best assignment. The rectangular problem is solved as the square one with
+(in :func:`murty_from`) gives the subproblem's best assignment. The rectangular problem is solved as the square one with
 ``cols - rows`` dummy rows of cost 0 (they hold the columns no row takes); Murty's partition runs over the real rows
 only, so each assignment is still listed once. Among the columns at equal path cost the search takes the one that
 ends the path, then the lowest column index; so between assignments of exactly equal cost, a subproblem returns the
@@ -147,123 +147,6 @@ def _finite_cells(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 col[q] = j
                 q += 1
     return start, col
-
-
-@njit(cache=True, inline="always")
-def _child(
-    C: np.ndarray,
-    s_sol: np.ndarray,
-    s_u: np.ndarray,
-    s_v: np.ndarray,
-    ps: int,
-    ns: int,
-    t: int,
-    forbid: np.ndarray,
-    nf: int,
-    work: np.ndarray,
-    iwork: np.ndarray,
-    cell_start: np.ndarray,
-    cell_col: np.ndarray,
-) -> float:
-    """The subproblem of the square assignment ``s_sol[ps]`` (m,) with duals (``s_u[ps]``, ``s_v[ps]``) (module
-    docstring) that keeps rows 0..t-1 and forbids row t the columns ``forbid[:nf]``: its best assignment and duals
-    into row ``ns`` of the stores, and its cost (+inf: none). One shortest augmenting path (Dijkstra on the reduced
-    costs, all >= 0) from row t to its freed column ``s_sol[ps, t]``; rows >= C.shape[0] are the dummy rows of cost
-    0. A real row relaxes its finite cells only (``cell_start``, ``cell_col``: :func:`_finite_cells`); the next
-    column is the one of least path cost among those reached, the freed column first at equal cost, then the lowest
-    index. ``work`` (m,) and ``iwork`` (5, m): scratch (rows: pred, row4col, seen, scanned, front). The stores are
-    indexed in place, not sliced: a view passed to a compiled function costs two atomic reference counts."""
-    n, m = C.shape
-    d = work
-    for i in range(m):
-        s_sol[ns, i] = s_sol[ps, i]
-        s_u[ns, i] = s_u[ps, i]
-        s_v[ns, i] = s_v[ps, i]
-        iwork[1, s_sol[ps, i]] = i  # row4col
-        d[i] = np.inf
-        iwork[2, i] = 0  # seen
-        iwork[3, i] = 0  # scanned
-    for i in range(t):  # the fixed rows' columns are out of the subproblem
-        iwork[2, s_sol[ps, i]] = 1
-    n_front = 0  # the columns reached (finite d) and not yet seen (iwork[4, :n_front])
-    dummy_a = np.inf  # the least dist - u_i of the dummy rows scanned so far
-    sink = s_sol[ps, t]
-    i = t
-    dist = 0.0
-    while True:
-        iwork[3, i] = 1
-        if i < n:
-            for q in range(cell_start[i], cell_start[i + 1]):
-                j = cell_col[q]
-                if iwork[2, j]:
-                    continue
-                c = C[i, j]
-                if i == t:
-                    banned = False
-                    for f in range(nf):
-                        if forbid[f] == j:
-                            banned = True
-                            break
-                    if banned:
-                        continue
-                r = dist + c - s_u[ps, i] - s_v[ps, j]
-                if r < d[j]:
-                    if d[j] == np.inf:
-                        iwork[4, n_front] = j
-                        n_front += 1
-                    d[j] = r
-                    iwork[0, j] = i
-        else:  # a dummy row: r_j = a - v_j with a = dist - u_i, so a row whose a is no lower than an earlier dummy
-            # row's improves no column (subtracting v_j keeps the order) and is skipped
-            c = 0.0
-            a = dist + c - s_u[ps, i]
-            if a < dummy_a:
-                dummy_a = a
-                for j in range(m):
-                    if iwork[2, j]:
-                        continue
-                    r = a - s_v[ps, j]
-                    if r < d[j]:
-                        if d[j] == np.inf:
-                            iwork[4, n_front] = j
-                            n_front += 1
-                        d[j] = r
-                        iwork[0, j] = i
-        if n_front == 0:  # row t cannot reach its freed column: no assignment
-            return np.inf
-        at = 0
-        nxt = iwork[4, 0]
-        for q in range(1, n_front):
-            j = iwork[4, q]
-            if d[j] < d[nxt] or (d[j] == d[nxt] and (j == sink or (nxt != sink and j < nxt))):
-                at = q
-                nxt = j
-        n_front -= 1
-        iwork[4, at] = iwork[4, n_front]
-        iwork[2, nxt] = 1
-        if nxt == sink:
-            break
-        i = iwork[1, nxt]
-        dist = d[nxt]
-    min_val = d[sink]
-    for j in range(m):  # the duals stay feasible, 0 reduced cost on the new pairs
-        if iwork[2, j] and d[j] < np.inf:
-            s_v[ns, j] -= min_val - d[j]
-    s_u[ns, t] += min_val
-    for i in range(t + 1, m):
-        if iwork[3, i]:
-            s_u[ns, i] += min_val - d[s_sol[ps, i]]
-    j = sink
-    while True:
-        i = iwork[0, j]
-        prev = s_sol[ns, i]
-        s_sol[ns, i] = j
-        j = prev
-        if i == t:
-            break
-    for r in range(n):  # the cost: its cells in row order, summed in numpy's order (as _assignment_cost)
-        work[r] = C[r, s_sol[ns, r]]
-    return np_sum(work, n)
 
 
 @njit(cache=True)
@@ -472,8 +355,13 @@ def murty_from(
     n_heap, n_nodes, n_out = 1, 1, 0
     last = n - 1 if n == m else n  # square: with n - 1 rows fixed the last has no choice
     forbid = np.empty(m + 2, dtype=np.int64)  # a row has at most m forbidden columns
-    work = np.empty(m)
-    iwork = np.empty((5, m), dtype=np.int64)
+    # a subproblem's scratch (solved inline: a compiled call costs reference counts on every array it is passed)
+    d = np.empty(m)  # path cost to each column
+    pred = np.empty(m, dtype=np.int64)
+    row4col = np.empty(m, dtype=np.int64)
+    seen = np.empty(m, dtype=np.int64)
+    scanned = np.empty(m, dtype=np.int64)
+    front = np.empty(m, dtype=np.int64)
     cell_start, cell_col = _finite_cells(C)
     while n_heap > 0 and n_out < k:
         # the stores grow here, outside the inner loop, which has room for one more solved node and the children
@@ -525,13 +413,112 @@ def murty_from(
                     forbid[nf] = fcol[x]
                     nf += 1
                     x = par[x]
-                ps = slot[par[node]]
-                cost = _child(C, s_sol, s_u, s_v, ps, n_slots, t, forbid, nf, work, iwork, cell_start, cell_col)
+                # its best assignment (one shortest augmenting path, module docstring) into row ns of the stores
+                ps, ns = slot[par[node]], n_slots
+                for i in range(m):
+                    s_sol[ns, i] = s_sol[ps, i]
+                    s_u[ns, i] = s_u[ps, i]
+                    s_v[ns, i] = s_v[ps, i]
+                    row4col[s_sol[ps, i]] = i
+                    d[i] = np.inf
+                    seen[i] = 0
+                    scanned[i] = 0
+                for i in range(t):  # the fixed rows' columns are out of the subproblem
+                    seen[s_sol[ps, i]] = 1
+                n_front = 0  # the columns reached (finite d) and not yet seen
+                dummy_a = np.inf  # the least dist - u_i of the dummy rows scanned so far
+                sink = s_sol[ps, t]
+                i = t
+                dist = 0.0
+                reached = False
+                while True:  # Dijkstra on the reduced costs (all >= 0) from row t to its freed column
+                    scanned[i] = 1
+                    if i < n:  # a real row relaxes its finite cells only
+                        for q in range(cell_start[i], cell_start[i + 1]):
+                            j = cell_col[q]
+                            if seen[j]:
+                                continue
+                            c_ij = C[i, j]
+                            if i == t:
+                                banned = False
+                                for f in range(nf):
+                                    if forbid[f] == j:
+                                        banned = True
+                                        break
+                                if banned:
+                                    continue
+                            red = dist + c_ij - s_u[ps, i] - s_v[ps, j]
+                            if red < d[j]:
+                                if d[j] == np.inf:
+                                    front[n_front] = j
+                                    n_front += 1
+                                d[j] = red
+                                pred[j] = i
+                    else:  # a dummy row: r_j = a - v_j with a = dist - u_i, so a row whose a is no lower than an
+                        # earlier dummy row's improves no column (subtracting v_j keeps the order) and is skipped
+                        c_ij = 0.0
+                        da = dist + c_ij - s_u[ps, i]
+                        if da < dummy_a:
+                            dummy_a = da
+                            for j in range(m):
+                                if seen[j]:
+                                    continue
+                                red = da - s_v[ps, j]
+                                if red < d[j]:
+                                    if d[j] == np.inf:
+                                        front[n_front] = j
+                                        n_front += 1
+                                    d[j] = red
+                                    pred[j] = i
+                    if n_front == 0:  # row t cannot reach its freed column: no assignment
+                        break
+                    at = 0  # the next column: least path cost, the freed column first at equal cost, then lowest
+                    nxt = front[0]
+                    for q in range(1, n_front):
+                        j = front[q]
+                        if d[j] < d[nxt] or (d[j] == d[nxt] and (j == sink or (nxt != sink and j < nxt))):
+                            at = q
+                            nxt = j
+                    n_front -= 1
+                    front[at] = front[n_front]
+                    seen[nxt] = 1
+                    if nxt == sink:
+                        reached = True
+                        break
+                    i = row4col[nxt]
+                    dist = d[nxt]
+                cost = np.inf
+                if reached:
+                    min_val = d[sink]
+                    for j in range(m):  # the duals stay feasible, 0 reduced cost on the new pairs
+                        if seen[j] and d[j] < np.inf:
+                            s_v[ns, j] -= min_val - d[j]
+                    s_u[ns, t] += min_val
+                    for i in range(t + 1, m):
+                        if scanned[i]:
+                            s_u[ns, i] += min_val - d[s_sol[ps, i]]
+                    j = sink
+                    while True:
+                        i = pred[j]
+                        prev = s_sol[ns, i]
+                        s_sol[ns, i] = j
+                        j = prev
+                        if i == t:
+                            break
+                    for i in range(n):  # its cells in row order, summed in numpy's order (as _assignment_cost)
+                        d[i] = C[i, s_sol[ns, i]]
+                    cost = np_sum(d, n)
                 if cost < np.inf and cost <= limit:
                     slot[node] = n_slots
                     n_slots += 1
                     keys[node] = cost
-                    n_heap = _push(heap, n_heap, node, keys)
+                    q = n_heap  # back into the queue (sift up)
+                    heap[q] = node
+                    while q > 0 and _before(cost, node, keys[heap[(q - 1) // 2]], heap[(q - 1) // 2]):
+                        heap[q] = heap[(q - 1) // 2]
+                        q = (q - 1) // 2
+                        heap[q] = node
+                    n_heap += 1
                 continue
             sl = slot[node]
             out_cost[n_out] = keys[node]
@@ -568,24 +555,15 @@ def murty_from(
                 bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
                 if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
                     keys[n_nodes], par[n_nodes], row[n_nodes], fcol[n_nodes], slot[n_nodes] = bound, node, t, c_t, -1
-                    n_heap = _push(heap, n_heap, n_nodes, keys)
+                    q = n_heap  # into the queue (sift up)
+                    heap[q] = n_nodes
+                    while q > 0 and _before(bound, n_nodes, keys[heap[(q - 1) // 2]], heap[(q - 1) // 2]):
+                        heap[q] = heap[(q - 1) // 2]
+                        q = (q - 1) // 2
+                        heap[q] = n_nodes
+                    n_heap += 1
                     n_nodes += 1
     return out_cost[:n_out], out_cols[:n_out]
-
-
-@njit(cache=True, inline="always")
-def _push(heap: np.ndarray, n_heap: int, node: int, keys: np.ndarray) -> int:
-    """Push ``node`` on the binary heap ``heap[:n_heap]`` ordered by (key, index); returns the new size."""
-    q = n_heap
-    heap[q] = node
-    while q > 0:
-        parent = (q - 1) // 2
-        if _before(keys[heap[q]], heap[q], keys[heap[parent]], heap[parent]):
-            heap[q], heap[parent] = heap[parent], heap[q]
-            q = parent
-        else:
-            break
-    return n_heap + 1
 
 
 def murty(C: np.ndarray, k: int, max_gap: float = np.inf) -> list[tuple[float, np.ndarray]]:
