@@ -39,6 +39,7 @@ from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict as predict_tracks
 from soabench.origins import N_SOURCES, origin_counts
+from soabench.pmbm import cycle as pmbm_cycle
 from soabench.pmbm import kernels
 from soabench.pmbm.density import PMBMDensity
 from soabench.pmbm.pmb import collapse
@@ -51,6 +52,9 @@ EXTRACT_R = 0.5  #: estimator 1 (§10.4): a track is reported when its hypothesi
 _F64, _I8, _I32 = np.dtype(np.float64), np.dtype(np.int8), np.dtype(np.int32)
 
 
+_NO_BIRTHS = (np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)))
+
+
 def _plain(a, dtype: np.dtype, shape: tuple[int, ...]) -> bool:
     """``a`` is a C-contiguous, aligned, writeable array of ``dtype`` and ``shape``: the one type the compiled
     checks and counts below are specialised for (the GM-PHD's and the LMB's calls compile them for it too)."""
@@ -58,6 +62,12 @@ def _plain(a, dtype: np.dtype, shape: tuple[int, ...]) -> bool:
         return False
     flags = a.flags
     return flags.c_contiguous and flags.aligned and flags.writeable
+
+
+def _plain_copy(a, shape: tuple[int, ...]) -> np.ndarray:
+    """``a`` as a plain float64 array of ``shape`` (:func:`_plain`), copied only when it is not one (read only
+    within the step)."""
+    return a if _plain(a, _F64, shape) else np.array(np.asarray(a, dtype=float).reshape(shape), order="C")
 
 
 def _births_finite(births: Births) -> bool:
@@ -159,6 +169,8 @@ class PMBMFilter:
         hypotheses' in one array each (the intensity's are views of them): the GM-PHD's prediction of the
         intensity, then the birth components as :meth:`Mixture.from_arrays` takes them."""
         d, cfg = self.density, self.cfg
+        if self.fused:
+            return self._predict_compiled(births)
         hyps = predict_tracks(d.hyps, self.F, self.Q, cfg.p_S)
         parts = []  # (w, m, P, origin, n_det, age, label) of the predicted intensity, then of the births
         if len(d.ppp):
@@ -184,6 +196,28 @@ class PMBMFilter:
             w, _, _, origin, n_det, age, label = (np.concatenate(x) for x in zip(*parts, strict=True))
             ppp = Mixture(w, m_all[:J], P_all[:J], origin, n_det, age, None, label)
         return PMBMDensity(ppp, hyps, d.track, d.table, d.log_w), m_all, P_all
+
+    def _predict_compiled(self, births: Births) -> tuple[PMBMDensity, np.ndarray, np.ndarray]:
+        """:meth:`_predict` with the moments in one compiled call (:func:`soabench.pmbm.cycle.predict`)."""
+        d, cfg = self.density, self.cfg
+        ppp, h, nb = d.ppp, d.hyps, len(births)
+        if nb:
+            bw, bm, bP = (_plain_copy(x, shape) for x, shape in ((births.w, (nb,)), (births.m, (nb, 4)),
+                                                                  (births.P, (nb, 4, 4))))  # fmt: skip
+        else:
+            bw, bm, bP = _NO_BIRTHS
+        w, m_all, P_all = pmbm_cycle.predict(ppp.w, ppp.m, ppp.P, bw, bm, bP, h.m, h.P, self.F, self.Q, float(cfg.p_S))
+        J = len(w)
+        if nb:
+            origin = np.concatenate([ppp.origin, np.broadcast_to(np.asarray(births.source, dtype=np.int8), (nb,))])
+            n_det = np.concatenate([ppp.n_det, np.zeros(nb, dtype=np.int32)])
+            age = np.concatenate([ppp.age + 1, np.zeros(nb, dtype=np.int32)])
+            label = np.concatenate([ppp.label, np.full(nb, UNLABELLED, dtype=np.int64)])
+        else:
+            origin, n_det, age, label = ppp.origin.copy(), ppp.n_det.copy(), ppp.age + 1, ppp.label.copy()
+        pred_ppp = Mixture(w, m_all[:J], P_all[:J], origin, n_det, age, None, label)
+        hyps = Tracks(h.r * cfg.p_S, h.label, h.origin, h.age + 1, h.start, h.w, m_all[J:], P_all[J:]) if len(h) else h
+        return PMBMDensity(pred_ppp, hyps, d.track, d.table, d.log_w), m_all, P_all
 
     def _reduce_extract(
         self, post: PMBMDensity, ppp: Mixture
