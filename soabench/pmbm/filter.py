@@ -288,9 +288,9 @@ class PMBMFilter:
         ego_ok = checked.ego
         kappa = clutter_intensity(Z, self.sensor)
         J = len(pred.ppp)
-        if self.cfg.occlusion_pd:
+        if self.cfg.occlusion_pd and not self.fused:  # the array path: the intensity's means, then the hypotheses'
             p_D = np.concatenate([self._p_D(pred.ppp.m, ego_ok, scan), self._p_D(pred.hyps.m, ego_ok, scan)])
-        else:  # the FOV gate is decided per mean: one call on all of them
+        else:  # the gate is decided per mean: one call on all of them
             p_D = self._p_D(m_all, ego_ok, scan)
         # the prior's hypothesis probabilities are those of the last posterior (the prediction keeps the table)
         p_hyp = self._p_hyp[1] if self._p_hyp is not None and self._p_hyp[0] is prior else None
