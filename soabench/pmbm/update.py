@@ -141,7 +141,8 @@ def update(
         p_D[~terms.valid] = 0.0  # r -> 0 or det S <= 0: undetectable this step (§2.12)
     if J + C and M:
         logq, nu_r, nu_b = model.log_likelihood(terms, Z)
-        logq = np.where(p_D[:, None] > 0.0, logq, -np.inf)
+        if not fused:  # the compiled terms read log q only where p_D > 0
+            logq = np.where(p_D[:, None] > 0.0, logq, -np.inf)
     else:
         logq = np.full((J + C, M), -np.inf)
     kappa = np.asarray(kappa, dtype=float).reshape(M)
@@ -296,6 +297,11 @@ def update(
     return UpdateResult(density, A, beta, n_pairs, n_new, n_murty, n_global)
 
 
+def _floats(x: np.ndarray) -> np.ndarray:
+    """``x`` as a C-contiguous float64 array (the one layout the compiled calls are specialised for)."""
+    return np.ascontiguousarray(x, dtype=float)
+
+
 def _update_compiled(
     pred: PMBMDensity,
     p_D: np.ndarray,
@@ -319,10 +325,10 @@ def _update_compiled(
     J, H, M = len(ppp), len(hyps), len(kappa)
     if p_hyp is None:
         p_hyp = pred.hypothesis_probabilities() if H and M else np.zeros(H)
-    start, w = hyps.start, np.ascontiguousarray(hyps.w, dtype=float)
+    start = hyps.start
+    w, r, logq, w_ppp, p_hyp = (_floats(x) for x in (hyps.w, hyps.r, logq, ppp.w, p_hyp))
     log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta_det, log_r, log_l_miss_exact, log_l_miss, log_l_det, \
-        A = cycle.detection_terms(p_D, logq, ppp.w, np.ascontiguousarray(hyps.r, dtype=float), start, w,
-                                  np.ascontiguousarray(p_hyp, dtype=float))  # fmt: skip
+        A = cycle.detection_terms(p_D, logq, w_ppp, r, start, w, p_hyp)  # fmt: skip
     beta = np.zeros(M)
     if newborn is not None and M:
         beta = np.asarray(newborn.beta(A, kappa.copy()), dtype=float).reshape(M)
@@ -346,10 +352,11 @@ def _update_compiled(
     if terms is None:  # no component: no Kalman pair is ever built
         Ct, Sinv, S, Hj = np.zeros((0, 4, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), _NO_JACOBIAN
     else:
-        Ct, Sinv, S = terms.C, terms.Sinv, terms.S
-        Hj = terms.H if terms.H is not None else _NO_JACOBIAN
+        Ct, Sinv, S = (_floats(x) for x in (terms.C, terms.Sinv, terms.S))
+        Hj = _floats(terms.H) if terms.H is not None else _NO_JACOBIAN
     if nu_r is None:
         nu_r = nu_b = np.zeros((n_rows, M))
+    nu_r, nu_b = _floats(nu_r), _floats(nu_b)
     r, label, origin, age, start, w, m, P, track_of, table, log_w, n_pairs, n_new = cycle.posterior(
         parent, choice, log_w, int(hyp.M_max), float(hyp.w_floor), table, track, start, w, hyps.label, hyps.origin,
         hyps.age, log_t, log_e, log_new, log_beta, beta, log_miss, log_det, log_eta_miss, log_eta_det, log_r,
