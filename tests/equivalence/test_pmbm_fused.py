@@ -1,10 +1,11 @@
-"""The PMBM update's compiled bookkeeping (soabench/pmbm/kernels.py) against the array path (docs/method.md §10.3).
+"""The PMBM cycle's compiled calls (soabench/pmbm/cycle.py, kernels.py) against the array path (docs/method.md §10.3).
 
-The compiled call is the default; the array path (``fused=False``) is its reference. Both filters run free (each
+The compiled calls are the default; the array path (``fused=False``) is their reference. Both filters run free (each
 from its own previous posterior) on recorded scans of the shipped intersection, fed the same births: every step
 result and the whole posterior density (global table and weights, every hypothesis's existence, label, origin, age
-and Gaussian mixture, the undetected intensity) must be the same bits, since the compiled code does the array
-path's arithmetic in the same order.
+and Gaussian mixture, the undetected intensity) must agree: the discrete outcome exactly, every number to
+:data:`RTOL`. Both paths compute the same formulas in the same order; the compiled code's exponentials and
+logarithms are the C library's, numpy's are its own vectorised ones, and the two can differ in the last bit.
 """
 
 from __future__ import annotations
