@@ -64,6 +64,12 @@ def _plain(a, dtype: np.dtype, shape: tuple[int, ...]) -> bool:
     return flags.c_contiguous and flags.aligned and flags.writeable
 
 
+def _kappa(Z: np.ndarray, sensor: Sensor) -> np.ndarray:
+    """kappa(z_l) of each measurement (:func:`soabench.geometry.clutter_intensity`), as the GM-PHD's filter keeps it
+    for a scan."""
+    return np.ascontiguousarray(clutter_intensity(Z, sensor), dtype=float)
+
+
 def _plain_copy(a, shape: tuple[int, ...]) -> np.ndarray:
     """``a`` as a plain float64 array of ``shape`` (:func:`_plain`), copied only when it is not one (read only
     within the step)."""
@@ -147,6 +153,8 @@ class PMBMFilter:
         self.density = PMBMDensity.empty()
         self.next_label = 1
         self._p_hyp: tuple[PMBMDensity, np.ndarray] | None = None  # the density and its hypothesis probabilities
+        s = sensor_cfg  # the clutter intensities' key, shared with the other families' filters of a scan
+        self._kappa_key = ("filter.kappa", s.clutter_space, s.lambda_c, s.r_min, s.r_max, s.fov_deg)
 
     def reset(self) -> None:
         """Forget the posterior and restart the label counter (next step is k = 0 again)."""
@@ -275,6 +283,7 @@ class PMBMFilter:
     def _step(self, scan: Scan, births: Births) -> StepResult:
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the other filters of the scan
         Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
+        Z_scan = Z
         if finite and _births_finite(births):  # what check_step_inputs returns for finite inputs
             checked = StepInputs(Z, ego, births, 0, 0)
         else:
@@ -286,7 +295,10 @@ class PMBMFilter:
         t1 = time.perf_counter()
 
         ego_ok = checked.ego
-        kappa = clutter_intensity(Z, self.sensor)
+        if Z is Z_scan:  # the scan's own Z, kept alive by its scan_inputs entry: kappa once for every filter
+            kappa = scan_once(scan, (*self._kappa_key, id(Z)), lambda: _kappa(Z, self.sensor))
+        else:
+            kappa = clutter_intensity(Z, self.sensor)
         J = len(pred.ppp)
         if self.cfg.occlusion_pd and not self.fused:  # the array path: the intensity's means, then the hypotheses'
             p_D = np.concatenate([self._p_D(pred.ppp.m, ego_ok, scan), self._p_D(pred.hyps.m, ego_ok, scan)])
