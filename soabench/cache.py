@@ -47,6 +47,7 @@ KERNEL_MODULES = (
     "pmbm/murty.py",
     "pmbm/association.py",
     "pmbm/kernels.py",
+    "pmbm/cycle.py",
 )
 
 PACKAGE_DIR = Path(__file__).resolve().parent

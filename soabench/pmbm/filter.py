@@ -39,6 +39,7 @@ from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
 from soabench.lmb.update import predict as predict_tracks
 from soabench.origins import N_SOURCES, origin_counts
+from soabench.pmbm import cycle as pmbm_cycle
 from soabench.pmbm import kernels
 from soabench.pmbm.density import PMBMDensity
 from soabench.pmbm.pmb import collapse
@@ -51,6 +52,9 @@ EXTRACT_R = 0.5  #: estimator 1 (§10.4): a track is reported when its hypothesi
 _F64, _I8, _I32 = np.dtype(np.float64), np.dtype(np.int8), np.dtype(np.int32)
 
 
+_NO_BIRTHS = (np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)))
+
+
 def _plain(a, dtype: np.dtype, shape: tuple[int, ...]) -> bool:
     """``a`` is a C-contiguous, aligned, writeable array of ``dtype`` and ``shape``: the one type the compiled
     checks and counts below are specialised for (the GM-PHD's and the LMB's calls compile them for it too)."""
@@ -58,6 +62,18 @@ def _plain(a, dtype: np.dtype, shape: tuple[int, ...]) -> bool:
         return False
     flags = a.flags
     return flags.c_contiguous and flags.aligned and flags.writeable
+
+
+def _kappa(Z: np.ndarray, sensor: Sensor) -> np.ndarray:
+    """kappa(z_l) of each measurement (:func:`soabench.geometry.clutter_intensity`), as the GM-PHD's filter keeps it
+    for a scan."""
+    return np.ascontiguousarray(clutter_intensity(Z, sensor), dtype=float)
+
+
+def _plain_copy(a, shape: tuple[int, ...]) -> np.ndarray:
+    """``a`` as a plain float64 array of ``shape`` (:func:`_plain`), copied only when it is not one (read only
+    within the step)."""
+    return a if _plain(a, _F64, shape) else np.array(np.asarray(a, dtype=float).reshape(shape), order="C")
 
 
 def _births_finite(births: Births) -> bool:
@@ -137,6 +153,8 @@ class PMBMFilter:
         self.density = PMBMDensity.empty()
         self.next_label = 1
         self._p_hyp: tuple[PMBMDensity, np.ndarray] | None = None  # the density and its hypothesis probabilities
+        s = sensor_cfg  # the clutter intensities' key, shared with the other families' filters of a scan
+        self._kappa_key = ("filter.kappa", s.clutter_space, s.lambda_c, s.r_min, s.r_max, s.fov_deg)
 
     def reset(self) -> None:
         """Forget the posterior and restart the label counter (next step is k = 0 again)."""
@@ -159,6 +177,8 @@ class PMBMFilter:
         hypotheses' in one array each (the intensity's are views of them): the GM-PHD's prediction of the
         intensity, then the birth components as :meth:`Mixture.from_arrays` takes them."""
         d, cfg = self.density, self.cfg
+        if self.fused:
+            return self._predict_compiled(births)
         hyps = predict_tracks(d.hyps, self.F, self.Q, cfg.p_S)
         parts = []  # (w, m, P, origin, n_det, age, label) of the predicted intensity, then of the births
         if len(d.ppp):
@@ -184,6 +204,28 @@ class PMBMFilter:
             w, _, _, origin, n_det, age, label = (np.concatenate(x) for x in zip(*parts, strict=True))
             ppp = Mixture(w, m_all[:J], P_all[:J], origin, n_det, age, None, label)
         return PMBMDensity(ppp, hyps, d.track, d.table, d.log_w), m_all, P_all
+
+    def _predict_compiled(self, births: Births) -> tuple[PMBMDensity, np.ndarray, np.ndarray]:
+        """:meth:`_predict` with the moments in one compiled call (:func:`soabench.pmbm.cycle.predict`)."""
+        d, cfg = self.density, self.cfg
+        ppp, h, nb = d.ppp, d.hyps, len(births)
+        if nb:
+            bw, bm, bP = (_plain_copy(x, shape) for x, shape in ((births.w, (nb,)), (births.m, (nb, 4)),
+                                                                  (births.P, (nb, 4, 4))))  # fmt: skip
+        else:
+            bw, bm, bP = _NO_BIRTHS
+        w, m_all, P_all = pmbm_cycle.predict(ppp.w, ppp.m, ppp.P, bw, bm, bP, h.m, h.P, self.F, self.Q, float(cfg.p_S))
+        J = len(w)
+        if nb:
+            origin = np.concatenate([ppp.origin, np.broadcast_to(np.asarray(births.source, dtype=np.int8), (nb,))])
+            n_det = np.concatenate([ppp.n_det, np.zeros(nb, dtype=np.int32)])
+            age = np.concatenate([ppp.age + 1, np.zeros(nb, dtype=np.int32)])
+            label = np.concatenate([ppp.label, np.full(nb, UNLABELLED, dtype=np.int64)])
+        else:
+            origin, n_det, age, label = ppp.origin.copy(), ppp.n_det.copy(), ppp.age + 1, ppp.label.copy()
+        pred_ppp = Mixture(w, m_all[:J], P_all[:J], origin, n_det, age, None, label)
+        hyps = Tracks(h.r * cfg.p_S, h.label, h.origin, h.age + 1, h.start, h.w, m_all[J:], P_all[J:]) if len(h) else h
+        return PMBMDensity(pred_ppp, hyps, d.track, d.table, d.log_w), m_all, P_all
 
     def _reduce_extract(
         self, post: PMBMDensity, ppp: Mixture
@@ -241,6 +283,7 @@ class PMBMFilter:
     def _step(self, scan: Scan, births: Births) -> StepResult:
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the other filters of the scan
         Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
+        Z_scan = Z
         if finite and _births_finite(births):  # what check_step_inputs returns for finite inputs
             checked = StepInputs(Z, ego, births, 0, 0)
         else:
@@ -252,11 +295,14 @@ class PMBMFilter:
         t1 = time.perf_counter()
 
         ego_ok = checked.ego
-        kappa = clutter_intensity(Z, self.sensor)
+        if Z is Z_scan:  # the scan's own Z, kept alive by its scan_inputs entry: kappa once for every filter
+            kappa = scan_once(scan, (*self._kappa_key, id(Z)), lambda: _kappa(Z, self.sensor))
+        else:
+            kappa = clutter_intensity(Z, self.sensor)
         J = len(pred.ppp)
-        if self.cfg.occlusion_pd:
+        if self.cfg.occlusion_pd and not self.fused:  # the array path: the intensity's means, then the hypotheses'
             p_D = np.concatenate([self._p_D(pred.ppp.m, ego_ok, scan), self._p_D(pred.hyps.m, ego_ok, scan)])
-        else:  # the FOV gate is decided per mean: one call on all of them
+        else:  # the gate is decided per mean: one call on all of them
             p_D = self._p_D(m_all, ego_ok, scan)
         # the prior's hypothesis probabilities are those of the last posterior (the prediction keeps the table)
         p_hyp = self._p_hyp[1] if self._p_hyp is not None and self._p_hyp[0] is prior else None

@@ -11,11 +11,10 @@
 
 Why: at a trial's sizes the array path of these steps is about eighty small numpy calls per scan, each costing
 microseconds of fixed overhead. The arithmetic is the array path's (:func:`soabench.pmbm.update.update` and
-:class:`soabench.pmbm.filter.PMBMFilter` with ``fused=False``) in the same order; the exponentials are taken by the
-caller with numpy, whose vectorised ``exp`` differs from the C library's in the last bit, so that both paths give
-the same bits. The merge of global hypotheses that became equal, and the normalisation of their log weights, stay
-with the caller (numpy's ``logaddexp``). These kernels call no other large compiled function (numba would compile it
-again inside each caller): the caller chains them with the GM-PHD's and the LMB's kernels.
+:class:`soabench.pmbm.filter.PMBMFilter` with ``fused=False``) in the same order. :func:`children` takes the
+exponentiated weights from its caller (:func:`soabench.pmbm.cycle.posterior`, which also merges the global
+hypotheses that became equal and normalises their log weights). These kernels call no other large compiled function
+(numba would compile it again inside each caller): the callers chain them with the GM-PHD's and the LMB's kernels.
 """
 
 from __future__ import annotations

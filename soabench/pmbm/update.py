@@ -30,12 +30,10 @@ from soabench.gmphd.models import logsumexp0
 from soabench.lmb.measurement import MeasurementModel, kalman_pairs
 from soabench.lmb.tracks import Tracks
 from soabench.lmb.update import KAPPA_FLOOR, association_terms
-from soabench.pmbm import kernels
+from soabench.pmbm import cycle
 from soabench.pmbm.association import (
     MISS,
-    assignments_asked,
     clusters,
-    flat_clusters,
     global_hypotheses,
     new_global_hypotheses,
     unique_rows,
@@ -69,6 +67,7 @@ class UpdateResult:
 
 
 _NO_NEWBORN = (np.zeros((0, 4)), np.zeros((0, 4, 4)))
+_NO_JACOBIAN = np.zeros((0, 2, 4))  #: the UKF form has no H: the Kalman update then uses P - K S K^T
 
 
 def _segments(counts: np.ndarray) -> np.ndarray:
@@ -121,9 +120,8 @@ def update(
         kappa: (M,) clutter intensity of each measurement.
         newborn: the birth model's measurement-driven terms (PUBM, ATBM), or None.
         label0: the new track of z_l gets label label0 + l.
-        fused: build the posterior hypotheses, table and track pruning in one compiled call
-            (:func:`soabench.pmbm.kernels.children`); False: the array path, the reference it is tested against
-            (the same bits).
+        fused: the update's arithmetic in three compiled calls (:mod:`soabench.pmbm.cycle`); False: the array path,
+            its reference (the same formulas with numpy's exponentials and logarithms: equal to rounding).
         stacked: the means (J + C, 4) and covariances (J + C, 4, 4) of the intensity's components followed by the
             hypotheses', when the caller has them stacked; None stacks them here.
         p_hyp: ``pred.hypothesis_probabilities()`` when the caller has them; None computes them here.
@@ -143,10 +141,14 @@ def update(
         p_D[~terms.valid] = 0.0  # r -> 0 or det S <= 0: undetectable this step (§2.12)
     if J + C and M:
         logq, nu_r, nu_b = model.log_likelihood(terms, Z)
-        logq = np.where(p_D[:, None] > 0.0, logq, -np.inf)
+        if not fused:  # the compiled terms read log q only where p_D > 0
+            logq = np.where(p_D[:, None] > 0.0, logq, -np.inf)
     else:
         logq = np.full((J + C, M), -np.inf)
     kappa = np.asarray(kappa, dtype=float).reshape(M)
+    if fused:
+        return _update_compiled(pred, p_D, logq, kappa, terms, nu_r, nu_b, model, m_all, P_all, newborn, label0, hyp,
+                                p_hyp)  # fmt: skip
 
     with np.errstate(divide="ignore", invalid="ignore"):
         # undetected intensity and the new tracks' detection terms
@@ -175,57 +177,16 @@ def update(
 
     # global hypotheses
     max_gap = _max_gap(hyp.w_floor)
-    if fused:  # the clusters as flat arrays straight from the compiled union-find
-        track = np.ascontiguousarray(pred.track, dtype=np.int64)
-        table = np.ascontiguousarray(pred.table, dtype=np.int64)
-        T_flat, T_start, L_flat, L_start, base0 = flat_clusters(track, log_l_det, n, log_new)
-        parent, choice, log_w, n_murty = global_hypotheses(
-            table, np.ascontiguousarray(pred.log_w, dtype=float),
-            assignments_asked(pred.log_w, hyp.M_max), T_flat, T_start, L_flat, L_start, base0, log_l_miss, log_l_det,
-            log_new, float(max_gap),
-        )  # fmt: skip
-    else:
-        groups = clusters(pred.track, np.isfinite(log_l_det), n)
-        parent, choice, log_w, n_murty = new_global_hypotheses(
-            pred.table, pred.log_w, groups, log_l_miss, log_l_det, log_new, hyp.M_max, max_gap
-        )
+    groups = clusters(pred.track, np.isfinite(log_l_det), n)
+    parent, choice, log_w, n_murty = new_global_hypotheses(
+        pred.table, pred.log_w, groups, log_l_miss, log_l_det, log_new, hyp.M_max, max_gap
+    )
     n_global = len(log_w)
     log_w = log_w - np.logaddexp.reduce(log_w)
     order = np.argsort(-log_w, kind="stable")
     keep = order[np.exp(log_w[order]) >= hyp.w_floor]
     keep = (keep if len(keep) else order[:1])[: hyp.M_max]
     parent, choice, log_w = parent[keep], choice[keep], log_w[keep]
-    if fused:
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            lr = log_r + log_eta_miss - log_l_miss_exact
-            E_miss = np.exp(log_miss - log_eta_miss[owner])
-            E_det = np.exp(log_det - log_eta_det[owner])
-            W_all = np.exp(log_t - log_e)
-            w_nb = np.where(beta > 0.0, np.exp(log_beta - log_e), 0.0)
-            r_own = np.exp(log_e - log_new)
-            r_miss = np.where(np.isfinite(lr), np.exp(lr), 0.0)
-        if newborn is not None and M:
-            nb_m = np.ascontiguousarray(np.asarray(newborn.m, dtype=float).reshape(-1, 4))
-            nb_P = np.ascontiguousarray(np.asarray(newborn.P, dtype=float).reshape(-1, 4, 4))
-        else:
-            nb_m, nb_P = _NO_NEWBORN
-        out = kernels.children(
-            table, parent, np.ascontiguousarray(choice, dtype=np.int64), track, hyps.start, hyps.w, hyps.label,
-            hyps.origin, hyps.age,
-            r_miss, ~np.isfinite(log_eta_miss), E_miss, E_det, np.isfinite(log_e), W_all, w_nb, r_own,
-            ppp.origin, m_all, P_all, nb_m, nb_P, int(label0), float(hyp.r_floor), int(SOURCE_MEAS),
-        )  # fmt: skip
-        r, label, origin, age, start, w, m, P, track_of, table, uniq, inv, kal, rows, ells, n_pairs, n_new = out
-        if len(kal):
-            order_p = np.argsort(rows, kind="stable")
-            kal = kal[order_p]
-            m[kal], P[kal] = kalman_pairs(m_all, P_all, terms, model.R, rows[order_p], ells[order_p], nu_r, nu_b)
-        if len(uniq) < len(table):
-            table, log_w = _merged(uniq, inv, log_w)
-        log_w = log_w - np.logaddexp.reduce(log_w)
-        density = PMBMDensity(ppp_missed(ppp, p_D[:J]), Tracks(r, label, origin, age, start, w, m, P), track_of,
-                              table, log_w)  # fmt: skip
-        return UpdateResult(density, A, beta, int(n_pairs), int(n_new), n_murty, n_global)
 
     # single-target hypotheses used: (old hypothesis, choice) for the old tracks, (l, is-its-own) for the new ones
     B = len(log_w)
@@ -334,6 +295,77 @@ def update(
     track_of = np.concatenate([child_track, n + new_t]).astype(np.int64)
     density = _prune_tracks(PMBMDensity(ppp_missed(ppp, p_D[:J]), post_hyps, track_of, table, log_w), hyp.r_floor)
     return UpdateResult(density, A, beta, n_pairs, n_new, n_murty, n_global)
+
+
+def _floats(x: np.ndarray) -> np.ndarray:
+    """``x`` as a C-contiguous float64 array (the one layout the compiled calls are specialised for)."""
+    return np.ascontiguousarray(x, dtype=float)
+
+
+def _update_compiled(
+    pred: PMBMDensity,
+    p_D: np.ndarray,
+    logq: np.ndarray,
+    kappa: np.ndarray,
+    terms,
+    nu_r: np.ndarray | None,
+    nu_b: np.ndarray | None,
+    model: MeasurementModel,
+    m_all: np.ndarray,
+    P_all: np.ndarray,
+    newborn: NewbornTerms | None,
+    label0: int,
+    hyp: Hypotheses,
+    p_hyp: np.ndarray | None,
+) -> UpdateResult:
+    """:func:`update` after the measurement terms, by :mod:`soabench.pmbm.cycle` (its module docstring): the
+    compiled detection terms, the birth model's newborn terms, the compiled association inputs, the global
+    hypotheses, the compiled posterior."""
+    ppp, hyps = pred.ppp, pred.hyps
+    J, H, M = len(ppp), len(hyps), len(kappa)
+    if p_hyp is None:
+        p_hyp = pred.hypothesis_probabilities() if H and M else np.zeros(H)
+    start = hyps.start
+    w, r, logq, w_ppp, p_hyp = (_floats(x) for x in (hyps.w, hyps.r, logq, ppp.w, p_hyp))
+    log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta_det, log_r, log_l_miss_exact, log_l_miss, log_l_det, \
+        A = cycle.detection_terms(p_D, logq, w_ppp, r, start, w, p_hyp)  # fmt: skip
+    beta = np.zeros(M)
+    if newborn is not None and M:
+        beta = np.asarray(newborn.beta(A, kappa.copy()), dtype=float).reshape(M)
+        beta = np.where(beta > 0.0, beta, 0.0)
+    track = np.ascontiguousarray(pred.track, dtype=np.int64)
+    table = np.ascontiguousarray(pred.table, dtype=np.int64)
+    prior_log_w = np.ascontiguousarray(pred.log_w, dtype=float)
+    log_beta, log_e, log_new, T_flat, T_start, L_flat, L_start, base0, ks = cycle.association_inputs(
+        beta, kappa, log_e_ppp, track, log_l_det, pred.n_tracks, prior_log_w, int(hyp.M_max)
+    )
+    parent, choice, log_w, n_murty = global_hypotheses(
+        table, prior_log_w, ks, T_flat, T_start, L_flat, L_start, base0, log_l_miss, log_l_det, log_new,
+        float(_max_gap(hyp.w_floor)),
+    )  # fmt: skip
+    if newborn is not None and M:
+        nb_m = np.ascontiguousarray(np.asarray(newborn.m, dtype=float).reshape(-1, 4))
+        nb_P = np.ascontiguousarray(np.asarray(newborn.P, dtype=float).reshape(-1, 4, 4))
+    else:
+        nb_m, nb_P = _NO_NEWBORN
+    n_rows = len(m_all)
+    if terms is None:  # no component: no Kalman pair is ever built
+        Ct, Sinv, S, Hj = np.zeros((0, 4, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), _NO_JACOBIAN
+    else:
+        Ct, Sinv, S = (_floats(x) for x in (terms.C, terms.Sinv, terms.S))
+        Hj = _floats(terms.H) if terms.H is not None else _NO_JACOBIAN
+    if nu_r is None:
+        nu_r = nu_b = np.zeros((n_rows, M))
+    nu_r, nu_b = _floats(nu_r), _floats(nu_b)
+    r, label, origin, age, start, w, m, P, track_of, table, log_w, n_pairs, n_new = cycle.posterior(
+        parent, choice, log_w, int(hyp.M_max), float(hyp.w_floor), table, track, start, w, hyps.label, hyps.origin,
+        hyps.age, log_t, log_e, log_new, log_beta, beta, log_miss, log_det, log_eta_miss, log_eta_det, log_r,
+        log_l_miss_exact, ppp.origin, m_all, P_all, nb_m, nb_P, int(label0), float(hyp.r_floor), int(SOURCE_MEAS),
+        Ct, Sinv, S, Hj, np.asarray(model.R, dtype=float), nu_r, nu_b,
+    )  # fmt: skip
+    density = PMBMDensity(ppp_missed(ppp, p_D[:J]), Tracks(r, label, origin, age, start, w, m, P), track_of, table,
+                          log_w)  # fmt: skip
+    return UpdateResult(density, A, beta, int(n_pairs), int(n_new), int(n_murty), len(parent))
 
 
 def ppp_missed(ppp: Mixture, p_D: np.ndarray) -> Mixture:
