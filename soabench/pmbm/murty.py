@@ -312,11 +312,13 @@ def murty_from(
     assignment ``sol`` with duals (u, v) and cost ``cost0`` (+inf: there is none), as :func:`square_root` gives them.
 
     A subproblem is solved only when it reaches the top of the queue: until then it waits under a lower bound of
-    its cost, its parent's cost plus the least reduced cost left in its row t (every path from row t starts with
-    one such cell), less a margin far above the rounding of a sum. A solved subproblem leaves the queue only when
-    its cost is at most every waiting bound, so the assignments come out in the order, and with the tie rule, of
-    solving every subproblem as it is made; the subproblems that the k-th assignment makes unnecessary are never
-    solved. A node is its parent, its row t and the column it forbids there (its other forbidden columns are those
+    its cost: its parent's cost plus the least reduced cost left in its row t (every path from row t starts with
+    one such cell) plus the least reduced cost into its freed column from a row after t (row t may not take that
+    column and the fixed rows are out, so the path ends with one such cell; with none, there is no assignment and
+    the subproblem is dropped), less a margin far above the rounding of a sum. A solved subproblem leaves the queue
+    only when its cost is at most every waiting bound, so the assignments come out in the order, and with the tie
+    rule, of solving every subproblem as it is made; the subproblems that the k-th assignment makes unnecessary are
+    never solved. A node is its parent, its row t and the column it forbids there (its other forbidden columns are those
     of its ancestors with the same t); a solved node keeps its square assignment and duals."""
     n, m = C.shape
     out_cost = np.empty(k)
@@ -551,7 +553,12 @@ def murty_from(
                     if not banned:
                         lo_r = min(lo_r, C[t, j] - s_u[sl, t] - s_v[sl, j])
                 used[c_t] = True  # fixed for the next subproblems
-                bound = keys[node] + max(lo_r, 0.0)
+                lo_c = np.inf  # the least reduced cost into the freed column c_t from a row after t
+                for i in range(t + 1, m):
+                    c_ic = C[i, c_t] if i < n else 0.0
+                    if c_ic < np.inf:
+                        lo_c = min(lo_c, c_ic - s_u[sl, i] - s_v[sl, c_t])
+                bound = keys[node] + max(lo_r, 0.0) + max(lo_c, 0.0)
                 bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
                 if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
                     keys[n_nodes], par[n_nodes], row[n_nodes], fcol[n_nodes], slot[n_nodes] = bound, node, t, c_t, -1
