@@ -24,7 +24,7 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.metrics_kernels import np_sum  # noqa: E402
-from soabench.pmbm.murty import murty_from, repaired_root, square_root  # noqa: E402
+from soabench.pmbm.murty import murty_from, repair, square_root  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
 
@@ -269,62 +269,76 @@ def unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
-def _first(s: np.ndarray, a: np.ndarray, b: np.ndarray, x: int, y: int) -> bool:
-    """Entry x comes before entry y: by (sum, a, b)."""
-    if s[x] != s[y]:
-        return s[x] < s[y]
-    if a[x] != a[y]:
-        return a[x] < a[y]
-    return b[x] < b[y]
+def _merge_step(
+    total: np.ndarray,
+    idx: np.ndarray,
+    nt: int,
+    c: np.ndarray,
+    c0: int,
+    nc: int,
+    j: int,
+    K: int,
+    total2: np.ndarray,
+    idx2: np.ndarray,
+    hs: np.ndarray,
+    heap: np.ndarray,
+) -> None:
+    """One term of :func:`best_sums`: the ``K`` smallest of total[a] + c[c0 + b] (a < nt, b < nc; ``total`` sorted)
+    into ``total2`` and ``idx2`` (columns 0..j-1 those of row a of ``idx``, column j set to b), by a merge of the
+    rows a, each increasing in b, through a heap of the rows' next entries ordered by (sum, a, b). Scratch: ``hs``
+    (>= nt) row a's next sum, ``heap`` (2, >= nt) the heap order and row a's next b."""
+    for a in range(nt):  # rows in order: already a heap by (sum, a) when the sums are sorted
+        hs[a] = total[a] + c[c0]
+        heap[1, a] = 0
+        heap[0, a] = a
+    n_heap = nt if nc > 0 else 0
+    for r in range(K):
+        e = heap[0, 0]
+        total2[r] = hs[e]
+        for q in range(j):  # the earlier terms' indices (the later columns are set by their own steps)
+            idx2[r, q] = idx[e, q]
+        idx2[r, j] = heap[1, e]
+        heap[1, e] += 1
+        if heap[1, e] < nc:
+            hs[e] = total[e] + c[c0 + heap[1, e]]
+        else:
+            n_heap -= 1
+            heap[0, 0] = heap[0, n_heap]
+        p = 0  # sift down; x before y by (sum, a): a row's a is its index, and two entries never share a row
+        while True:
+            best = p
+            q = 2 * p + 1
+            if q < n_heap:
+                x, y = heap[0, q], heap[0, best]
+                if hs[x] < hs[y] or (hs[x] == hs[y] and x < y):
+                    best = q
+            q = 2 * p + 2
+            if q < n_heap:
+                x, y = heap[0, q], heap[0, best]
+                if hs[x] < hs[y] or (hs[x] == hs[y] and x < y):
+                    best = q
+            if best == p:
+                break
+            heap[0, p], heap[0, best] = heap[0, best], heap[0, p]
+            p = best
 
 
-@njit(cache=True)
 def best_sums(costs: list, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest sums of one entry of each sorted cost array: (sums (K,), index of each term (K, len)).
 
     The terms are added one array at a time: the k smallest of total[a] + c[b] (total: the sorted sums so far) by
-    a merge of the rows a, each increasing in b, through a heap of the rows' next entries. Equal sums keep the
-    order of the (earlier terms' rank, this term's rank) pairs, i.e. that of a stable sort of every sum."""
-    total = np.zeros(1)
-    idx = np.zeros((1, len(costs)), dtype=np.int64)
-    for j in range(len(costs)):
-        c = costs[j]
-        nc = c.shape[0]
+    a merge of the rows a, each increasing in b, through a heap of the rows' next entries (:func:`_merge_step`,
+    which :func:`global_hypotheses` runs on its own buffers). Equal sums keep the order of the (earlier terms' rank,
+    this term's rank) pairs, i.e. that of a stable sort of every sum."""
+    J = len(costs)
+    total, idx = np.zeros(1), np.zeros((1, J), dtype=np.int64)
+    for j in range(J):
+        c = np.ascontiguousarray(costs[j], dtype=float)
         nt = min(total.shape[0], k)
-        K = min(k, nt * nc)
-        hs = np.empty(nt)  # heap entries: sum, row a, column b (one per row)
-        ha = np.empty(nt, dtype=np.int64)
-        hb = np.zeros(nt, dtype=np.int64)
-        heap = np.empty(nt, dtype=np.int64)
-        for a in range(nt):  # rows in order: already a heap by (sum, a) when the sums are sorted
-            hs[a] = total[a] + c[0]
-            ha[a] = a
-            heap[a] = a
-        n_heap = nt if nc > 0 else 0
-        total2 = np.empty(K)
-        idx2 = np.empty((K, len(costs)), dtype=np.int64)
-        for r in range(K):
-            e = heap[0]
-            total2[r] = hs[e]
-            idx2[r] = idx[ha[e]]
-            idx2[r, j] = hb[e]
-            hb[e] += 1
-            if hb[e] < nc:
-                hs[e] = total[ha[e]] + c[hb[e]]
-            else:
-                n_heap -= 1
-                heap[0] = heap[n_heap]
-            p = 0  # sift down
-            while True:
-                c1, c2, best = 2 * p + 1, 2 * p + 2, p
-                if c1 < n_heap and _first(hs, ha, hb, heap[c1], heap[best]):
-                    best = c1
-                if c2 < n_heap and _first(hs, ha, hb, heap[c2], heap[best]):
-                    best = c2
-                if best == p:
-                    break
-                heap[p], heap[best] = heap[best], heap[p]
-                p = best
+        K = min(k, nt * c.shape[0])
+        total2, idx2 = np.empty(K), np.empty((K, J), dtype=np.int64)
+        hs, heap = np.empty(nt), np.empty((2, nt), dtype=np.int64)
+        _merge_step(total, idx, nt, c, 0, c.shape[0], j, K, total2, idx2, hs, heap)
         total, idx = total2, idx2
     return total, idx
 
@@ -346,27 +360,47 @@ def global_hypotheses(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """:func:`new_global_hypotheses` on the clusters with tracks (T and L of cluster g: ``T_flat[T_start[g]:
     T_start[g + 1]]``, likewise L); ``base0``: minus the log factors of the measurements no track gates. Also
-    returns the number of Murty runs."""
+    returns the number of Murty runs.
+
+    The solution sets (one per cluster and distinct choice of its tracks' hypotheses) are kept flat: set s has the
+    costs ``sol_cost[sol_start[s]:sol_start[s + 1]]`` and the choice of track i of its cluster in its solution b at
+    ``sol_choice[ch_start[s] + b |T| + i]``. The output rows are counted first and written in place; the scratch
+    arrays are allocated once per call."""
     A, n = table.shape
     G = T_start.shape[0] - 1
     base = np.full(A, base0)
     fixed = np.full((A, n), MISS, dtype=np.int64)  # the choices of the single-solution clusters
     feasible = np.ones(A, dtype=np.bool_)
     n_multi = np.zeros(A, dtype=np.int64)
-    multi = np.empty((A, max(G, 1)), dtype=np.int64)  # the solution sets (index into sol_*) combined per a
-    sol_costs = [np.empty(0)]
-    sol_choice = [np.empty((0, 0), dtype=np.int64)]
-    sol_T = [np.empty(0, dtype=np.int64)]
+    multi = np.empty((A, max(G, 1)), dtype=np.int64)  # the solution sets combined per a
+    n_sets = 0
+    set_g = np.empty(A * G + 1, dtype=np.int64)  # each set's cluster
+    sol_start = np.zeros(A * G + 2, dtype=np.int64)  # each set's first solution (costs)
+    ch_start = np.zeros(A * G + 2, dtype=np.int64)  # each set's first choice entry
+    sol_cost = np.empty(64)
+    sol_choice = np.empty(256, dtype=np.int64)
     n_murty = 0
     inv = np.empty(A, dtype=np.int64)
+    reps = np.empty(A, dtype=np.int64)
+    hashes = np.empty(A, dtype=np.int64)
+    nT_max = 0
+    for g in range(G):
+        nT_max = max(nT_max, T_start[g + 1] - T_start[g])
+    hs = np.empty(nT_max, dtype=np.int64)
+    prev = np.empty(nT_max, dtype=np.int64)
+    changed = np.empty(nT_max, dtype=np.int64)
+    miss_terms = np.empty(nT_max)
+    all_miss = 0.0
+    root_only = False
+    costs = np.empty(0)
+    cols = np.empty((0, 0), dtype=np.int64)
+    choice = np.empty((0, 0), dtype=np.int64)
     for g in range(G):
         T = T_flat[T_start[g] : T_start[g + 1]]
         L = L_flat[L_start[g] : L_start[g + 1]]
-        nT = T.shape[0]
+        nT, nL = T.shape[0], L.shape[0]
         # distinct choices of the cluster's tracks' hypotheses among the prior global hypotheses, in order of first
         # appearance (a row is compared in full only with the earlier ones of equal hash)
-        reps = np.empty(A, dtype=np.int64)
-        hashes = np.empty(A, dtype=np.int64)
         n_u = 0
         for a in range(A):
             h = np.int64(nT)
@@ -391,90 +425,139 @@ def global_hypotheses(
         k_u = np.zeros(n_u, dtype=np.int64)
         for a in range(A):
             k_u[inv[a]] = max(k_u[inv[a]], ks[a])
-        first_sol = len(sol_costs)
+        first_set = n_sets
         # Murty's best assignment for a choice is repaired from the previous choice's (they differ in a few columns)
-        m = nT + L.shape[0]
+        m = nT + nL
         r_sol, r_u, r_v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
-        prev = np.empty(nT, dtype=np.int64)
+        r_iwork, r_d = np.empty((6, m), dtype=np.int64), np.empty(m)  # the repair's scratch
         C = np.empty((0, 0))
         warm = False
         for u in range(n_u):
-            hs = np.empty(nT, dtype=np.int64)
             for i in range(nT):
                 hs[i] = table[reps[u], T[i]]
-            if nT > 1 and L.shape[0] > 1:
+            if nT > 1 and nL > 1:
                 n_murty += 1
                 if warm:  # the previous choice's matrix with the changed track columns rewritten
-                    changed = np.flatnonzero(hs != prev)
-                    for i in changed:
-                        for ll in range(L.shape[0]):
-                            C[ll, i] = log_l_miss[hs[i]] - log_l_det[hs[i], L[ll]]
-                    cost0 = repaired_root(C, changed, r_sol, r_u, r_v)
+                    n_ch = 0
+                    for i in range(nT):
+                        if hs[i] != prev[i]:
+                            changed[n_ch] = i
+                            n_ch += 1
+                            for ll in range(nL):
+                                C[ll, i] = log_l_miss[hs[i]] - log_l_det[hs[i], L[ll]]
+                    cost0 = repair(C, changed, n_ch, r_sol, r_u, r_v, r_iwork, r_d)
                 else:
-                    C = cluster_costs(hs, L, log_l_miss, log_l_det, log_new)
+                    C = cluster_costs(hs[:nT], L, log_l_miss, log_l_det, log_new)
                     cost0 = square_root(C, r_sol, r_u, r_v)
                 warm = cost0 < np.inf
-                prev[:] = hs
-                c, ch = _ranked(C, L, nT, k_u[u], max_gap, r_sol, r_u, r_v, cost0, -_sum_at(log_l_miss, hs))
+                for i in range(nT):
+                    prev[i] = hs[i]
+                    miss_terms[i] = log_l_miss[hs[i]]
+                all_miss = -np_sum(miss_terms, nT)
+                root_only = k_u[u] == 1 or cost0 == np.inf  # Murty's first assignment is the root (none: +inf)
+                if root_only:
+                    K = 1 if cost0 < np.inf else 0
+                else:
+                    costs, cols = murty_from(C, k_u[u], max_gap, r_sol, r_u, r_v, cost0)
+                    K = costs.shape[0]
             else:
-                c, ch = cluster_solutions(hs, L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
-            sol_costs.append(c)
-            sol_choice.append(ch)
-            sol_T.append(T)
+                costs, choice = cluster_solutions(hs[:nT], L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
+                K = costs.shape[0]
+            p = sol_start[n_sets]  # append the set
+            q = ch_start[n_sets]
+            if p + K > sol_cost.shape[0]:
+                grown = np.empty(2 * (p + K))
+                grown[:p] = sol_cost[:p]
+                sol_cost = grown
+            if q + K * nT > sol_choice.shape[0]:
+                grown_ch = np.empty(2 * (q + K * nT), dtype=np.int64)
+                grown_ch[:q] = sol_choice[:q]
+                sol_choice = grown_ch
+            if nT > 1 and nL > 1:  # Murty's columns to the tracks' choices (cost: the missed factors added back)
+                for b in range(K):
+                    sol_cost[p + b] = (cost0 if root_only else costs[b]) - (-all_miss)
+                    for i in range(nT):
+                        sol_choice[q + b * nT + i] = MISS
+                    for row in range(nL):
+                        col = r_sol[row] if root_only else cols[b, row]
+                        if col < nT:  # measurement L[row] assigned to a track column
+                            sol_choice[q + b * nT + col] = L[row]
+            else:
+                for b in range(K):
+                    sol_cost[p + b] = costs[b]
+                    for i in range(nT):
+                        sol_choice[q + b * nT + i] = choice[b, i]
+            set_g[n_sets] = g
+            sol_start[n_sets + 1] = p + K
+            ch_start[n_sets + 1] = q + K * nT
+            n_sets += 1
         for a in range(A):
-            s = first_sol + inv[a]
-            K = sol_costs[s].shape[0]
+            s = first_set + inv[a]
+            p = sol_start[s]
+            K = sol_start[s + 1] - p
             if K == 0:
                 feasible[a] = False
                 base[a] += np.inf
             elif K == 1 or ks[a] == 1:
-                base[a] += sol_costs[s][0]
+                base[a] += sol_cost[p]
+                q = ch_start[s]
                 for i in range(nT):
-                    fixed[a, T[i]] = sol_choice[s][0, i]
+                    fixed[a, T[i]] = sol_choice[q + i]
             else:
                 multi[a, n_multi[a]] = s
                 n_multi[a] += 1
-    parents = [np.empty(0, dtype=np.int64)]
-    choices = [np.empty((0, n), dtype=np.int64)]
-    logs = [np.empty(0)]
+    # the number of rows of each prior global hypothesis: min(k, product of its sets' sizes, each cut at k), as
+    # :func:`best_sums` gives them
     n_rows = 0
+    k_max = 1
+    for a in range(A):
+        if not feasible[a]:
+            continue
+        B = 1
+        for j in range(n_multi[a]):
+            s = multi[a, j]
+            B = min(ks[a], B * min(sol_start[s + 1] - sol_start[s], ks[a]))
+        n_rows += B
+        k_max = max(k_max, ks[a])
+    parent = np.empty(n_rows, dtype=np.int64)
+    choice_out = np.empty((n_rows, n), dtype=np.int64)
+    log_out = np.empty(n_rows)
+    G1 = max(G, 1)
+    total, total2 = np.zeros(k_max), np.empty(k_max)
+    idx, idx2 = np.zeros((k_max, G1), dtype=np.int64), np.empty((k_max, G1), dtype=np.int64)
+    h_sum, heap = np.empty(k_max), np.empty((2, k_max), dtype=np.int64)
+    r = 0
     for a in range(A):
         if not feasible[a]:
             continue
         x = log_w[a] - base[a]
-        if n_multi[a] == 0:
-            parents.append(np.full(1, a, dtype=np.int64))
-            choices.append(fixed[a : a + 1].copy())
-            logs.append(np.full(1, x))
-            n_rows += 1
-            continue
         k = ks[a]
-        terms = [sol_costs[multi[a, j]][:k] for j in range(n_multi[a])]
-        sums, idx = best_sums(terms, k)
-        B = sums.shape[0]
-        ch = np.empty((B, n), dtype=np.int64)
+        B = 1
+        total[0] = 0.0
+        for j in range(n_multi[a]):  # the k best sums of one solution of each multi-solution set
+            s = multi[a, j]
+            p = sol_start[s]
+            nc = min(sol_start[s + 1] - p, k)
+            nt = min(B, k)
+            K = min(k, nt * nc)
+            _merge_step(total, idx, nt, sol_cost, p, nc, j, K, total2, idx2, h_sum, heap)
+            total, total2 = total2, total
+            idx, idx2 = idx2, idx
+            B = K
         for b in range(B):
-            ch[b] = fixed[a]
+            parent[r] = a
+            for i in range(n):
+                choice_out[r, i] = fixed[a, i]
             for j in range(n_multi[a]):
                 s = multi[a, j]
-                T = sol_T[s]
-                for i in range(T.shape[0]):
-                    ch[b, T[i]] = sol_choice[s][idx[b, j], i]
-        parents.append(np.full(B, a, dtype=np.int64))
-        choices.append(ch)
-        logs.append(x - sums)
-        n_rows += B
-    parent = np.empty(n_rows, dtype=np.int64)
-    choice = np.empty((n_rows, n), dtype=np.int64)
-    log_out = np.empty(n_rows)
-    r = 0
-    for j in range(1, len(parents)):
-        B = parents[j].shape[0]
-        parent[r : r + B] = parents[j]
-        choice[r : r + B] = choices[j]
-        log_out[r : r + B] = logs[j]
-        r += B
-    return parent, choice, log_out, n_murty
+                g = set_g[s]
+                nT = T_start[g + 1] - T_start[g]
+                q = ch_start[s] + idx[b, j] * nT
+                for i in range(nT):
+                    choice_out[r, T_flat[T_start[g] + i]] = sol_choice[q + i]
+            log_out[r] = x - total[b] if n_multi[a] else x
+            r += 1
+    return parent, choice_out, log_out, n_murty
 
 
 def new_global_hypotheses(

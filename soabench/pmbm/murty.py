@@ -16,7 +16,7 @@ solved one's instead (:func:`repaired_root`).
 
 Each subproblem starts from its parent's assignment and dual variables (Miller, Stone & Cox 1997): with pair t
 removed only row t is unassigned, the parent's duals stay feasible, and one shortest augmenting path from row t
-(:func:`_child`) gives the subproblem's best assignment. The rectangular problem is solved as the square one with
+(in :func:`murty_from`) gives the subproblem's best assignment. The rectangular problem is solved as the square one with
 ``cols - rows`` dummy rows of cost 0 (they hold the columns no row takes); Murty's partition runs over the real rows
 only, so each assignment is still listed once. Among the columns at equal path cost the search takes the one that
 ends the path, then the lowest column index; so between assignments of exactly equal cost, a subproblem returns the
@@ -150,121 +150,6 @@ def _finite_cells(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
-def _child(
-    C: np.ndarray,
-    sol: np.ndarray,
-    u: np.ndarray,
-    v: np.ndarray,
-    t: int,
-    forbid: np.ndarray,
-    out_sol: np.ndarray,
-    out_u: np.ndarray,
-    out_v: np.ndarray,
-    work: np.ndarray,
-    iwork: np.ndarray,
-    cell_start: np.ndarray,
-    cell_col: np.ndarray,
-) -> float:
-    """The subproblem of the square assignment ``sol`` (m,) with duals (u, v) (module docstring) that keeps rows
-    0..t-1 and forbids row t the columns ``forbid``: its best assignment and duals into out_*, and its cost (+inf:
-    none). One shortest augmenting path (Dijkstra on the reduced costs, all >= 0) from row t to its freed column
-    ``sol[t]``; rows >= C.shape[0] are the dummy rows of cost 0. A real row relaxes its finite cells only
-    (``cell_start``, ``cell_col``: :func:`_finite_cells`); the next column is the one of least path cost among
-    those reached, the freed column first at equal cost, then the lowest index. ``work`` (m,) and ``iwork`` (5, m):
-    scratch."""
-    n, m = C.shape
-    out_sol[:] = sol
-    out_u[:] = u
-    out_v[:] = v
-    d = work
-    pred, row4col, seen, scanned, front = iwork[0], iwork[1], iwork[2], iwork[3], iwork[4]
-    for i in range(m):
-        row4col[sol[i]] = i
-        d[i] = np.inf
-        seen[i] = 0
-        scanned[i] = 0
-    for i in range(t):  # the fixed rows' columns are out of the subproblem
-        seen[sol[i]] = 1
-    n_front = 0  # the columns reached (finite d) and not yet seen
-    dummy_a = np.inf  # the least dist - u_i of the dummy rows scanned so far
-    sink = sol[t]
-    i = t
-    dist = 0.0
-    while True:
-        scanned[i] = 1
-        if i < n:
-            for q in range(cell_start[i], cell_start[i + 1]):
-                j = cell_col[q]
-                if seen[j]:
-                    continue
-                c = C[i, j]
-                if i == t:
-                    banned = False
-                    for f in range(forbid.shape[0]):
-                        if forbid[f] == j:
-                            banned = True
-                            break
-                    if banned:
-                        continue
-                r = dist + c - u[i] - v[j]
-                if r < d[j]:
-                    if d[j] == np.inf:
-                        front[n_front] = j
-                        n_front += 1
-                    d[j] = r
-                    pred[j] = i
-        else:  # a dummy row: r_j = a - v_j with a = dist - u_i, so a row whose a is no lower than an earlier dummy
-            # row's improves no column (subtracting v_j keeps the order) and is skipped
-            c = 0.0
-            a = dist + c - u[i]
-            if a < dummy_a:
-                dummy_a = a
-                for j in range(m):
-                    if seen[j]:
-                        continue
-                    r = a - v[j]
-                    if r < d[j]:
-                        if d[j] == np.inf:
-                            front[n_front] = j
-                            n_front += 1
-                        d[j] = r
-                        pred[j] = i
-        if n_front == 0:  # row t cannot reach its freed column: no assignment
-            return np.inf
-        at = 0
-        nxt = front[0]
-        for q in range(1, n_front):
-            j = front[q]
-            if d[j] < d[nxt] or (d[j] == d[nxt] and (j == sink or (nxt != sink and j < nxt))):
-                at = q
-                nxt = j
-        n_front -= 1
-        front[at] = front[n_front]
-        seen[nxt] = 1
-        if nxt == sink:
-            break
-        i = row4col[nxt]
-        dist = d[nxt]
-    min_val = d[sink]
-    for j in range(m):  # the duals stay feasible, 0 reduced cost on the new pairs
-        if seen[j] and d[j] < np.inf:
-            out_v[j] -= min_val - d[j]
-    out_u[t] += min_val
-    for i in range(t + 1, m):
-        if scanned[i]:
-            out_u[i] += min_val - d[sol[i]]
-    j = sink
-    while True:
-        i = pred[j]
-        prev = out_sol[i]
-        out_sol[i] = j
-        j = prev
-        if i == t:
-            break
-    return _assignment_cost(C, out_sol)
-
-
-@njit(cache=True)
 def _before(cost_a: float, a: int, cost_b: float, b: int) -> bool:
     return cost_a < cost_b or (cost_a == cost_b and a < b)
 
@@ -308,13 +193,30 @@ def repaired_root(C: np.ndarray, changed: np.ndarray, sol: np.ndarray, u: np.nda
     >= 0 again; a row whose cell in a changed column is no longer tight gives its column up, and each such row,
     in increasing order, takes one shortest augmenting path to a free column (the first reached; at equal path cost
     the lowest column index)."""
+    m = C.shape[1]
+    return repair(C, changed, changed.shape[0], sol, u, v, np.empty((6, m), dtype=np.int64), np.empty(m))
+
+
+@njit(cache=True)
+def repair(
+    C: np.ndarray,
+    changed: np.ndarray,
+    n_changed: int,
+    sol: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    iwork: np.ndarray,
+    d: np.ndarray,
+) -> float:
+    """:func:`repaired_root` for the columns ``changed[:n_changed]`` on scratch arrays ``iwork`` (6, m) (rows:
+    row4col, free row, free column, pred, seen, scanned) and ``d`` (m,), for a caller that repairs many times."""
     n, m = C.shape
-    row4col = np.empty(m, dtype=np.int64)
+    row4col, free_row, free_col, pred, seen, scanned = 0, 1, 2, 3, 4, 5  # the rows of iwork
     for i in range(m):
-        row4col[sol[i]] = i
-    free_row = np.zeros(m, dtype=np.bool_)
-    free_col = np.zeros(m, dtype=np.bool_)
-    for q in range(changed.shape[0]):
+        iwork[row4col, sol[i]] = i
+        iwork[free_row, i] = 0
+        iwork[free_col, i] = 0
+    for q in range(n_changed):
         j = changed[q]
         lo = np.inf
         for i in range(m):
@@ -324,28 +226,25 @@ def repaired_root(C: np.ndarray, changed: np.ndarray, sol: np.ndarray, u: np.nda
         if lo == np.inf:  # no row can take column j (square: every column is taken)
             return np.inf
         v[j] = lo
-        h = row4col[j]
+        h = iwork[row4col, j]
         c = C[h, j] if h < n else 0.0
         if not (c - u[h] - v[j] <= 0.0):
-            free_row[h] = True
-            free_col[j] = True
-            row4col[j] = -1
+            iwork[free_row, h] = 1
+            iwork[free_col, j] = 1
+            iwork[row4col, j] = -1
             sol[h] = -1
-    d = np.empty(m)
-    pred = np.empty(m, dtype=np.int64)
-    seen = np.zeros(m, dtype=np.bool_)
-    scanned = np.zeros(m, dtype=np.bool_)
     for start in range(m):
-        if not free_row[start]:
+        if not iwork[free_row, start]:
             continue
-        d[:] = np.inf
-        seen[:] = False
-        scanned[:] = False
+        for j in range(m):
+            d[j] = np.inf
+            iwork[seen, j] = 0
+            iwork[scanned, j] = 0
         i, dist, sink = start, 0.0, -1
         while sink < 0:
-            scanned[i] = True
+            iwork[scanned, i] = 1
             for j in range(m):
-                if seen[j]:
+                if iwork[seen, j]:
                     continue
                 c = C[i, j] if i < n else 0.0
                 if c == np.inf:
@@ -353,43 +252,45 @@ def repaired_root(C: np.ndarray, changed: np.ndarray, sol: np.ndarray, u: np.nda
                 r = dist + c - u[i] - v[j]
                 if r < d[j]:
                     d[j] = r
-                    pred[j] = i
+                    iwork[pred, j] = i
             lowest = np.inf
             nxt = -1
             for j in range(m):
-                if seen[j] or d[j] == np.inf:
+                if iwork[seen, j] or d[j] == np.inf:
                     continue
-                if d[j] < lowest or (d[j] == lowest and free_col[j] and not free_col[nxt]):
+                if d[j] < lowest or (d[j] == lowest and iwork[free_col, j] and not iwork[free_col, nxt]):
                     lowest = d[j]
                     nxt = j
             if nxt < 0:
                 return np.inf
-            seen[nxt] = True
-            if free_col[nxt]:
+            iwork[seen, nxt] = 1
+            if iwork[free_col, nxt]:
                 sink = nxt
             else:
-                i = row4col[nxt]
+                i = iwork[row4col, nxt]
                 dist = lowest
         min_val = d[sink]
         for j in range(m):
-            if seen[j]:
+            if iwork[seen, j]:
                 v[j] -= min_val - d[j]
         u[start] += min_val
         for i in range(m):
-            if scanned[i] and i != start:
+            if iwork[scanned, i] and i != start:
                 u[i] += min_val - d[sol[i]]
-        free_col[sink] = False
-        free_row[start] = False
+        iwork[free_col, sink] = 0
+        iwork[free_row, start] = 0
         j = sink
         while True:
-            i = pred[j]
-            row4col[j] = i
+            i = iwork[pred, j]
+            iwork[row4col, j] = i
             prev = sol[i]
             sol[i] = j
             j = prev
             if i == start:
                 break
-    return _assignment_cost(C, sol)
+    for r in range(n):  # the cost: its cells in row order, summed in numpy's order (as _assignment_cost)
+        d[r] = C[r, sol[r]]
+    return np_sum(d, n)
 
 
 @njit(cache=True)
@@ -411,11 +312,13 @@ def murty_from(
     assignment ``sol`` with duals (u, v) and cost ``cost0`` (+inf: there is none), as :func:`square_root` gives them.
 
     A subproblem is solved only when it reaches the top of the queue: until then it waits under a lower bound of
-    its cost, its parent's cost plus the least reduced cost left in its row t (every path from row t starts with
-    one such cell), less a margin far above the rounding of a sum. A solved subproblem leaves the queue only when
-    its cost is at most every waiting bound, so the assignments come out in the order, and with the tie rule, of
-    solving every subproblem as it is made; the subproblems that the k-th assignment makes unnecessary are never
-    solved. A node is its parent, its row t and the column it forbids there (its other forbidden columns are those
+    its cost: its parent's cost plus the least reduced cost left in its row t (every path from row t starts with
+    one such cell) plus the least reduced cost into its freed column from a row after t (row t may not take that
+    column and the fixed rows are out, so the path ends with one such cell; with none, there is no assignment and
+    the subproblem is dropped), less a margin far above the rounding of a sum. A solved subproblem leaves the queue
+    only when its cost is at most every waiting bound, so the assignments come out in the order, and with the tie
+    rule, of solving every subproblem as it is made; the subproblems that the k-th assignment makes unnecessary are
+    never solved. A node is its parent, its row t and the column it forbids there (its other forbidden columns are those
     of its ancestors with the same t); a solved node keeps its square assignment and duals."""
     n, m = C.shape
     out_cost = np.empty(k)
@@ -454,120 +357,220 @@ def murty_from(
     n_heap, n_nodes, n_out = 1, 1, 0
     last = n - 1 if n == m else n  # square: with n - 1 rows fixed the last has no choice
     forbid = np.empty(m + 2, dtype=np.int64)  # a row has at most m forbidden columns
-    work = np.empty(m)
-    iwork = np.empty((5, m), dtype=np.int64)
+    # a subproblem's scratch (solved inline: a compiled call costs reference counts on every array it is passed)
+    d = np.empty(m)  # path cost to each column
+    pred = np.empty(m, dtype=np.int64)
+    row4col = np.empty(m, dtype=np.int64)
+    seen = np.empty(m, dtype=np.int64)
+    scanned = np.empty(m, dtype=np.int64)
+    front = np.empty(m, dtype=np.int64)
     cell_start, cell_col = _finite_cells(C)
     while n_heap > 0 and n_out < k:
-        node = heap[0]  # pop the smallest key
-        n_heap -= 1
-        heap[0] = heap[n_heap]
-        p = 0
-        while True:
-            c1, c2, best = 2 * p + 1, 2 * p + 2, p
-            if c1 < n_heap and _before(keys[heap[c1]], heap[c1], keys[heap[best]], heap[best]):
-                best = c1
-            if c2 < n_heap and _before(keys[heap[c2]], heap[c2], keys[heap[best]], heap[best]):
-                best = c2
-            if best == p:
-                break
-            heap[p], heap[best] = heap[best], heap[p]
-            p = best
-        if slot[node] < 0:  # solve it from its parent's assignment and put it back under its cost
-            t = row[node]
-            nf = _forbidden(node, t, par, row, fcol, forbid)
-            if n_slots == scap:  # grow the solved store
-                scap *= 2
-                a1 = np.empty((scap, m), dtype=np.int64)
-                a1[:n_slots] = s_sol[:n_slots]
-                a2 = np.empty((scap, m))
-                a2[:n_slots] = s_u[:n_slots]
-                a3 = np.empty((scap, m))
-                a3[:n_slots] = s_v[:n_slots]
-                s_sol, s_u, s_v = a1, a2, a3
-            ps = slot[par[node]]
-            cost = _child(C, s_sol[ps], s_u[ps], s_v[ps], t, forbid[:nf], s_sol[n_slots], s_u[n_slots],
-                          s_v[n_slots], work, iwork, cell_start, cell_col)  # fmt: skip
-            if cost < np.inf and cost <= limit:
-                slot[node] = n_slots
-                n_slots += 1
-                keys[node] = cost
-                n_heap = _push(heap, n_heap, node, keys)
-            continue
-        sl = slot[node]
-        out_cost[n_out] = keys[node]
-        out_cols[n_out] = s_sol[sl, :n]
-        n_out += 1
-        if n_out == k:
-            break
-        used[:] = False
-        for r in range(row[node]):
-            used[s_sol[sl, r]] = True
-        for t in range(row[node], last):
-            c_t = s_sol[sl, t]
-            forbid[0] = c_t
-            nf = 1 + (_forbidden(node, t, par, row, fcol, forbid[1:]) if t == row[node] else 0)
-            lo_r = np.inf  # the least reduced cost of row t's cells left in the subproblem
-            for j in range(m):
-                if used[j] or C[t, j] == np.inf:
-                    continue
-                banned = False
-                for f in range(nf):
-                    if forbid[f] == j:
-                        banned = True
+        # the stores grow here, outside the inner loop, which has room for one more solved node and the children
+        # of one more assignment (arrays reassigned inside a loop cost reference counts at every iteration)
+        if n_slots == scap:
+            scap *= 2
+            a1 = np.empty((scap, m), dtype=np.int64)
+            a1[:n_slots] = s_sol[:n_slots]
+            a2 = np.empty((scap, m))
+            a2[:n_slots] = s_u[:n_slots]
+            a3 = np.empty((scap, m))
+            a3[:n_slots] = s_v[:n_slots]
+            s_sol, s_u, s_v = a1, a2, a3
+        if n_nodes + last > cap:
+            cap = max(2 * cap, n_nodes + last)
+            keys2 = np.empty(cap)
+            keys2[:n_nodes] = keys[:n_nodes]
+            par2 = np.empty(cap, dtype=np.int64)
+            par2[:n_nodes] = par[:n_nodes]
+            row2 = np.empty(cap, dtype=np.int64)
+            row2[:n_nodes] = row[:n_nodes]
+            fcol2 = np.empty(cap, dtype=np.int64)
+            fcol2[:n_nodes] = fcol[:n_nodes]
+            slot2 = np.empty(cap, dtype=np.int64)
+            slot2[:n_nodes] = slot[:n_nodes]
+            heap2 = np.empty(cap, dtype=np.int64)
+            heap2[:n_heap] = heap[:n_heap]
+            keys, par, row, fcol, slot, heap = keys2, par2, row2, fcol2, slot2, heap2
+        while n_heap > 0 and n_out < k and n_slots < scap and n_nodes + last <= cap:
+            node = heap[0]  # pop the smallest key
+            n_heap -= 1
+            heap[0] = heap[n_heap]
+            p = 0
+            while True:
+                c1, c2, best = 2 * p + 1, 2 * p + 2, p
+                if c1 < n_heap and _before(keys[heap[c1]], heap[c1], keys[heap[best]], heap[best]):
+                    best = c1
+                if c2 < n_heap and _before(keys[heap[c2]], heap[c2], keys[heap[best]], heap[best]):
+                    best = c2
+                if best == p:
+                    break
+                heap[p], heap[best] = heap[best], heap[p]
+                p = best
+            if slot[node] < 0:  # solve it from its parent's assignment and put it back under its cost
+                t = row[node]
+                nf = 0  # the columns forbidden to row t: the node's own and those of its ancestors with the same row
+                x = node
+                while x > 0 and row[x] == t:
+                    forbid[nf] = fcol[x]
+                    nf += 1
+                    x = par[x]
+                # its best assignment (one shortest augmenting path, module docstring) into row ns of the stores
+                ps, ns = slot[par[node]], n_slots
+                for i in range(m):
+                    s_sol[ns, i] = s_sol[ps, i]
+                    s_u[ns, i] = s_u[ps, i]
+                    s_v[ns, i] = s_v[ps, i]
+                    row4col[s_sol[ps, i]] = i
+                    d[i] = np.inf
+                    seen[i] = 0
+                    scanned[i] = 0
+                for i in range(t):  # the fixed rows' columns are out of the subproblem
+                    seen[s_sol[ps, i]] = 1
+                n_front = 0  # the columns reached (finite d) and not yet seen
+                dummy_a = np.inf  # the least dist - u_i of the dummy rows scanned so far
+                sink = s_sol[ps, t]
+                i = t
+                dist = 0.0
+                reached = False
+                while True:  # Dijkstra on the reduced costs (all >= 0) from row t to its freed column
+                    scanned[i] = 1
+                    if i < n:  # a real row relaxes its finite cells only
+                        for q in range(cell_start[i], cell_start[i + 1]):
+                            j = cell_col[q]
+                            if seen[j]:
+                                continue
+                            c_ij = C[i, j]
+                            if i == t:
+                                banned = False
+                                for f in range(nf):
+                                    if forbid[f] == j:
+                                        banned = True
+                                        break
+                                if banned:
+                                    continue
+                            red = dist + c_ij - s_u[ps, i] - s_v[ps, j]
+                            if red < d[j]:
+                                if d[j] == np.inf:
+                                    front[n_front] = j
+                                    n_front += 1
+                                d[j] = red
+                                pred[j] = i
+                    else:  # a dummy row: r_j = a - v_j with a = dist - u_i, so a row whose a is no lower than an
+                        # earlier dummy row's improves no column (subtracting v_j keeps the order) and is skipped
+                        c_ij = 0.0
+                        da = dist + c_ij - s_u[ps, i]
+                        if da < dummy_a:
+                            dummy_a = da
+                            for j in range(m):
+                                if seen[j]:
+                                    continue
+                                red = da - s_v[ps, j]
+                                if red < d[j]:
+                                    if d[j] == np.inf:
+                                        front[n_front] = j
+                                        n_front += 1
+                                    d[j] = red
+                                    pred[j] = i
+                    if n_front == 0:  # row t cannot reach its freed column: no assignment
                         break
-                if not banned:
-                    lo_r = min(lo_r, C[t, j] - s_u[sl, t] - s_v[sl, j])
-            used[c_t] = True  # fixed for the next subproblems
-            bound = keys[node] + max(lo_r, 0.0)
-            bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
-            if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
-                if n_nodes == cap:  # grow the node store
-                    cap *= 2
-                    keys2 = np.empty(cap)
-                    keys2[:n_nodes] = keys[:n_nodes]
-                    par2 = np.empty(cap, dtype=np.int64)
-                    par2[:n_nodes] = par[:n_nodes]
-                    row2 = np.empty(cap, dtype=np.int64)
-                    row2[:n_nodes] = row[:n_nodes]
-                    fcol2 = np.empty(cap, dtype=np.int64)
-                    fcol2[:n_nodes] = fcol[:n_nodes]
-                    slot2 = np.empty(cap, dtype=np.int64)
-                    slot2[:n_nodes] = slot[:n_nodes]
-                    heap2 = np.empty(cap, dtype=np.int64)
-                    heap2[:n_heap] = heap[:n_heap]
-                    keys, par, row, fcol, slot, heap = keys2, par2, row2, fcol2, slot2, heap2
-                keys[n_nodes], par[n_nodes], row[n_nodes], fcol[n_nodes], slot[n_nodes] = bound, node, t, c_t, -1
-                n_heap = _push(heap, n_heap, n_nodes, keys)
-                n_nodes += 1
+                    at = 0  # the next column: least path cost, the freed column first at equal cost, then lowest
+                    nxt = front[0]
+                    for q in range(1, n_front):
+                        j = front[q]
+                        if d[j] < d[nxt] or (d[j] == d[nxt] and (j == sink or (nxt != sink and j < nxt))):
+                            at = q
+                            nxt = j
+                    n_front -= 1
+                    front[at] = front[n_front]
+                    seen[nxt] = 1
+                    if nxt == sink:
+                        reached = True
+                        break
+                    i = row4col[nxt]
+                    dist = d[nxt]
+                cost = np.inf
+                if reached:
+                    min_val = d[sink]
+                    for j in range(m):  # the duals stay feasible, 0 reduced cost on the new pairs
+                        if seen[j] and d[j] < np.inf:
+                            s_v[ns, j] -= min_val - d[j]
+                    s_u[ns, t] += min_val
+                    for i in range(t + 1, m):
+                        if scanned[i]:
+                            s_u[ns, i] += min_val - d[s_sol[ps, i]]
+                    j = sink
+                    while True:
+                        i = pred[j]
+                        prev = s_sol[ns, i]
+                        s_sol[ns, i] = j
+                        j = prev
+                        if i == t:
+                            break
+                    for i in range(n):  # its cells in row order, summed in numpy's order (as _assignment_cost)
+                        d[i] = C[i, s_sol[ns, i]]
+                    cost = np_sum(d, n)
+                if cost < np.inf and cost <= limit:
+                    slot[node] = n_slots
+                    n_slots += 1
+                    keys[node] = cost
+                    q = n_heap  # back into the queue (sift up)
+                    heap[q] = node
+                    while q > 0 and _before(cost, node, keys[heap[(q - 1) // 2]], heap[(q - 1) // 2]):
+                        heap[q] = heap[(q - 1) // 2]
+                        q = (q - 1) // 2
+                        heap[q] = node
+                    n_heap += 1
+                continue
+            sl = slot[node]
+            out_cost[n_out] = keys[node]
+            for r in range(n):
+                out_cols[n_out, r] = s_sol[sl, r]
+            n_out += 1
+            if n_out == k:
+                break
+            used[:] = False
+            for r in range(row[node]):
+                used[s_sol[sl, r]] = True
+            for t in range(row[node], last):
+                c_t = s_sol[sl, t]
+                forbid[0] = c_t
+                nf = 1
+                x = node  # and in the node's own row, the columns forbidden there already
+                while x > 0 and row[x] == t:
+                    forbid[nf] = fcol[x]
+                    nf += 1
+                    x = par[x]
+                lo_r = np.inf  # the least reduced cost of row t's cells left in the subproblem
+                for j in range(m):
+                    if used[j] or C[t, j] == np.inf:
+                        continue
+                    banned = False
+                    for f in range(nf):
+                        if forbid[f] == j:
+                            banned = True
+                            break
+                    if not banned:
+                        lo_r = min(lo_r, C[t, j] - s_u[sl, t] - s_v[sl, j])
+                used[c_t] = True  # fixed for the next subproblems
+                lo_c = np.inf  # the least reduced cost into the freed column c_t from a row after t
+                for i in range(t + 1, m):
+                    c_ic = C[i, c_t] if i < n else 0.0
+                    if c_ic < np.inf:
+                        lo_c = min(lo_c, c_ic - s_u[sl, i] - s_v[sl, c_t])
+                bound = keys[node] + max(lo_r, 0.0) + max(lo_c, 0.0)
+                bound -= 1e-9 * (1.0 + abs(bound))  # margin for rounding
+                if bound < np.inf and bound <= limit:  # may be in the ranking: wait in the queue under the bound
+                    keys[n_nodes], par[n_nodes], row[n_nodes], fcol[n_nodes], slot[n_nodes] = bound, node, t, c_t, -1
+                    q = n_heap  # into the queue (sift up)
+                    heap[q] = n_nodes
+                    while q > 0 and _before(bound, n_nodes, keys[heap[(q - 1) // 2]], heap[(q - 1) // 2]):
+                        heap[q] = heap[(q - 1) // 2]
+                        q = (q - 1) // 2
+                        heap[q] = n_nodes
+                    n_heap += 1
+                    n_nodes += 1
     return out_cost[:n_out], out_cols[:n_out]
-
-
-@njit(cache=True)
-def _forbidden(node: int, t: int, par: np.ndarray, row: np.ndarray, fcol: np.ndarray, out: np.ndarray) -> int:
-    """The columns forbidden to row ``t`` in ``node``: its own and those of its ancestors with the same row (the
-    root forbids none); written to ``out``, their number returned."""
-    nf = 0
-    x = node
-    while x > 0 and row[x] == t:
-        out[nf] = fcol[x]
-        nf += 1
-        x = par[x]
-    return nf
-
-
-@njit(cache=True)
-def _push(heap: np.ndarray, n_heap: int, node: int, keys: np.ndarray) -> int:
-    """Push ``node`` on the binary heap ``heap[:n_heap]`` ordered by (key, index); returns the new size."""
-    q = n_heap
-    heap[q] = node
-    while q > 0:
-        parent = (q - 1) // 2
-        if _before(keys[heap[q]], heap[q], keys[heap[parent]], heap[parent]):
-            heap[q], heap[parent] = heap[parent], heap[q]
-            q = parent
-        else:
-            break
-    return n_heap + 1
 
 
 def murty(C: np.ndarray, k: int, max_gap: float = np.inf) -> list[tuple[float, np.ndarray]]:
