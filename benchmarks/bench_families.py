@@ -1,9 +1,9 @@
 """Every filter family's step against the GM-PHD's step at trial sizes, in one run (plain script, not a test).
 
     python benchmarks/bench_families.py [--peds 6,50] [--duration 100] [--clutter 3] [--seed 0] [--repeat 1]
-                                        [--families gmphd,lmb,pmbm,pmb] [--clock wall|cpu]
+                                        [--families gmphd,lmb,pmbm,pmb] [--clock wall|cpu] [--mode static|static+occ]
 
-For each pedestrian count: one SUMO trial of the shipped intersection (static mode, the paper's sensor), its scans
+For each pedestrian count: one SUMO trial of the shipped intersection (the paper's sensor), its scans
 observed once; for each of the six built-in birth models the births of every scan are computed once with the
 GM-PHD in the loop (so the birth model's own time is outside every timing; ATBM prev_scan is not among the six),
 then the same scans and births go through each family's filter as a run builds it
@@ -12,6 +12,8 @@ runs the sequence once to warm up (compiling or loading kernels) and then ``--re
 total step time is kept. The table gives the mean step time per scan (ms) over the six models and the ratio of each
 family's summed time to the GM-PHD's, measured in the same run. ``--clock cpu`` times the process's CPU time
 instead of the wall clock: on a shared machine the wall clock also counts the time other processes hold the cores.
+``--mode static+occ`` runs every family with the line-of-sight p_D (the births stay those computed with the static
+GM-PHD in the loop): the mode that costs the families part of ``soabench results`` most.
 """
 
 from __future__ import annotations
@@ -44,9 +46,9 @@ def run_cpu(make_filter, scans, births, repeat: int) -> tuple[float, float]:
     return best, kept
 
 
-def _maker(build_filter, cfg, sensor, seeds, family: str):
-    """``make()`` -> a fresh filter of ``family`` in static mode, as a run builds it."""
-    return lambda: build_filter(family, cfg, sensor, "static", seeds.association_rng())[0]
+def _maker(build_filter, cfg, sensor, seeds, family: str, mode: str = "static"):
+    """``make()`` -> a fresh filter of ``family`` in probability ``mode``, as a run builds it."""
+    return lambda: build_filter(family, cfg, sensor, mode, seeds.association_rng())[0]
 
 
 def main() -> int:
@@ -58,6 +60,8 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=1, help="timed runs per filter (best kept)")
     ap.add_argument("--families", default="gmphd,lmb,pmbm,pmb", help="families, comma-separated; gmphd first")
     ap.add_argument("--clock", choices=("wall", "cpu"), default="wall", help="wall clock or the process's CPU time")
+    ap.add_argument("--mode", choices=("static", "static+occ"), default="static",
+                    help="every family's probability mode (static+occ: the line-of-sight p_D)")  # fmt: skip
     args = ap.parse_args()
     run = run_cpu if args.clock == "cpu" else run_wall
 
@@ -68,7 +72,8 @@ def main() -> int:
         ap.error("--families must start with gmphd (the reference of every ratio)")
     now = f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC"
     load = " ".join(f"{x:.1f}" for x in os.getloadavg())
-    print(f"# bench_families {now}, python {sys.version.split()[0]}, {args.clock} clock, load average {load}")
+    head = f"# bench_families {now}, python {sys.version.split()[0]}, {args.clock} clock, {args.mode}"
+    print(f"{head}, load average {load}")
     print("peds  M/scan  model   " + "".join(f"{f:>10s} ms {'kept':>6s}" for f in families))
     for peds in (int(p) for p in args.peds.split(",")):
         cfg, scene, sensor, seeds, scans = scans_of(peds, args.duration, args.clutter, args.seed)
@@ -82,7 +87,7 @@ def main() -> int:
             births = births_of(name, cfg, scene, sensor, seeds, scans, maker("gmphd"))
             cells = []
             for fam in families:
-                t, kept = run(maker(fam), scans, births, args.repeat)
+                t, kept = run(maker(fam, args.mode), scans, births, args.repeat)
                 total[fam] += t
                 cells.append(f"{1e3 * t / K:13.2f} {kept:6.1f}")
             print(f"{peds:4d}  {M:6.1f}  {name:7s}" + "".join(cells))
