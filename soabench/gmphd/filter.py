@@ -30,7 +30,7 @@ from soabench.config import PROBABILITY_MODES, FilterConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle, reduction
-from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, clutter_kappa, newborn_finite, scan_inputs, scan_kappa
 from soabench.gmphd.mixture import Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict, update
 from soabench.gmphd.probabilities import beta_mean, beta_predict, beta_prior, detection_gate, scan_line_of_sight
@@ -98,8 +98,8 @@ class GMPHDFilter:
     def _init_fused(self) -> None:
         """What every fused step passes to :mod:`soabench.gmphd.cycle` and needs no recomputing per step: the
         scalars of the prediction and of the reduction packed as the compiled calls take them (their ``PRED_*`` and
-        ``RED_*`` indices), empty birth arrays, and the clutter settings that key kappa's per-scan value. Like R and
-        the gate threshold they are read from the configurations once, here."""
+        ``RED_*`` indices) and empty birth arrays. Like R and the gate threshold they are read from the configurations
+        once, here."""
         c, s = self.cfg, self.sensor
         pred = np.empty(8)
         pred[cycle.PRED_P_S] = c.p_S
@@ -124,7 +124,6 @@ class GMPHDFilter:
         self._no_births = (np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int8))
         self._beta0 = self.beta0 if self.dynamic else np.empty(0)
         self._nb_beta = self.beta_newborn if self.dynamic else np.empty(0)
-        self._kappa_key = ("filter.kappa", s.clutter_space, s.lambda_c, s.r_min, s.r_max, s.fov_deg)
 
     def reset(self) -> None:
         """Forget the posterior and restart the label counter (next step is k = 0 again)."""
@@ -280,7 +279,7 @@ class GMPHDFilter:
         ``kappa_once``: ``Z`` is the scan's own (not a subset left by dropping inputs), so kappa is computed once per
         scan for every filter with the same clutter settings."""
         if kappa_once:  # the scan's Z is kept alive by its scan_inputs entry, so its id is a sound key
-            kappa = scan_once(scan, (*self._kappa_key, id(Z)), lambda: self._kappa(Z))
+            kappa = scan_kappa(scan, Z, self.sensor)
         else:
             kappa = self._kappa(Z)
         if births.newborn is not None or (self.occlusion and scan.occluders):
@@ -411,8 +410,8 @@ class GMPHDFilter:
         )
 
     def _kappa(self, Z: np.ndarray) -> np.ndarray:
-        """kappa(z_l) of each measurement (§2.3, :func:`soabench.geometry.clutter_intensity`) as a contiguous array."""
-        return np.ascontiguousarray(clutter_intensity(Z, self.sensor), dtype=float)
+        """kappa(z_l) of each measurement (:func:`soabench.gmphd.inputs.clutter_kappa`)."""
+        return clutter_kappa(Z, self.sensor)
 
 
 def _scan_inputs_of(scan: Scan) -> Callable[[], tuple]:

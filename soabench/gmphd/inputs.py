@@ -19,8 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from soabench.config import Sensor
 from soabench.errors import SoabenchError
-from soabench.types import Births, NewbornTerms
+from soabench.geometry import clutter_intensity
+from soabench.types import Births, NewbornTerms, Scan, scan_once
 
 NONFINITE_POLICIES = ("raise", "drop")
 
@@ -68,6 +70,20 @@ def scan_inputs(k: int, Z_in: np.ndarray, ego_in: np.ndarray) -> tuple[np.ndarra
         raise SoabenchError(f"scan {k}: the ego pose has shape {ego.shape}; expected (x, y, theta)")
     ego = np.ascontiguousarray(ego)
     return Z, ego, _finite(Z) and _finite(ego)
+
+
+def clutter_kappa(Z: np.ndarray, sensor: Sensor) -> np.ndarray:
+    """kappa(z_l) of each measurement (§2.3, :func:`soabench.geometry.clutter_intensity`) as a contiguous array."""
+    return np.ascontiguousarray(clutter_intensity(Z, sensor), dtype=float)
+
+
+def scan_kappa(scan: Scan, Z: np.ndarray, sensor: Sensor) -> np.ndarray:
+    """:func:`clutter_kappa` of the scan's own ``Z`` (the one :func:`scan_inputs` returned for it, kept alive by that
+    entry of the scan's cache, so its id is a sound key), computed once per scan for every filter, of any family,
+    with the same clutter settings. The array is shared: read it, never write it."""
+    s = sensor
+    key = ("filter.kappa", s.clutter_space, s.lambda_c, s.r_min, s.r_max, s.fov_deg, id(Z))
+    return scan_once(scan, key, lambda: clutter_kappa(Z, sensor))
 
 
 def newborn_finite(nb: NewbornTerms | None) -> bool:

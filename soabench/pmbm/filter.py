@@ -30,7 +30,7 @@ from soabench.config import FilterConfig, PMBMConfig, Sensor
 from soabench.errors import SoabenchError, require
 from soabench.geometry import clutter_intensity
 from soabench.gmphd import cycle
-from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs
+from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs, scan_kappa
 from soabench.gmphd.mixture import UNLABELLED, Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict_moments
 from soabench.gmphd.probabilities import detection_gate
@@ -62,12 +62,6 @@ def _plain(a, dtype: np.dtype, shape: tuple[int, ...]) -> bool:
         return False
     flags = a.flags
     return flags.c_contiguous and flags.aligned and flags.writeable
-
-
-def _kappa(Z: np.ndarray, sensor: Sensor) -> np.ndarray:
-    """kappa(z_l) of each measurement (:func:`soabench.geometry.clutter_intensity`), as the GM-PHD's filter keeps it
-    for a scan."""
-    return np.ascontiguousarray(clutter_intensity(Z, sensor), dtype=float)
 
 
 def _plain_copy(a, shape: tuple[int, ...]) -> np.ndarray:
@@ -153,8 +147,6 @@ class PMBMFilter:
         self.density = PMBMDensity.empty()
         self.next_label = 1
         self._p_hyp: tuple[PMBMDensity, np.ndarray] | None = None  # the density and its hypothesis probabilities
-        s = sensor_cfg  # the clutter intensities' key, shared with the other families' filters of a scan
-        self._kappa_key = ("filter.kappa", s.clutter_space, s.lambda_c, s.r_min, s.r_max, s.fov_deg)
 
     def reset(self) -> None:
         """Forget the posterior and restart the label counter (next step is k = 0 again)."""
@@ -296,7 +288,7 @@ class PMBMFilter:
 
         ego_ok = checked.ego
         if Z is Z_scan:  # the scan's own Z, kept alive by its scan_inputs entry: kappa once for every filter
-            kappa = scan_once(scan, (*self._kappa_key, id(Z)), lambda: _kappa(Z, self.sensor))
+            kappa = scan_kappa(scan, Z, self.sensor)
         else:
             kappa = clutter_intensity(Z, self.sensor)
         J = len(pred.ppp)
