@@ -48,6 +48,7 @@ KERNEL_MODULES = (
     "pmbm/association.py",
     "pmbm/kernels.py",
     "pmbm/cycle.py",
+    "pmbm/step.py",
 )
 
 PACKAGE_DIR = Path(__file__).resolve().parent

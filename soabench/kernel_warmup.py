@@ -24,6 +24,8 @@ they need) and is never fatal.
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import os
 import sys
 import time
@@ -189,12 +191,15 @@ def _pmbm_steps(modes: tuple[str, ...]) -> None:
 
     cfg = Config()
     Z, ego = _scan_arrays()
-    for pmb in (False, True):
-        f = PMBMFilter(cfg.filter, cfg.sensor_at(), pmb=pmb)
+    # the whole cycle (soabench.pmbm.step), its split around the line of sight, and the three-call path (UKF)
+    for pmb, occ, whole in itertools.product((False, True), (False, True), (True, False)):
+        f = PMBMFilter(dataclasses.replace(cfg.filter, occlusion_pd=occ), cfg.sensor_at(), pmb=pmb)
+        f.whole = f.whole and whole
+        occluders = [shapely.box(-1.0, -1.0, 0.0, 0.0)] if occ else []
         for k in range(3):
             b = _births()
             b.newborn = NewbornTerms(np.zeros((2, 4)), np.repeat(np.eye(4)[None], 2, axis=0), lambda A, kappa: 0 * A)
-            f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), [], shapely.box(0, 0, 1, 1)), b)
+            f.step(Scan(k, 0.1 * k, ego, Z, _no_obstacles(), occluders, shapely.box(0, 0, 1, 1)), b)
 
 
 def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:

@@ -36,6 +36,7 @@ class RangeBearingEKF:
         self.R = np.asarray(R, dtype=float)
         self.r_min = float(r_min)
         self.gate_thr = float(gate_thr)
+        self.form = form
         self._terms = ekf_terms if form == "ekf" else ukf_terms
 
     def terms(self, m: np.ndarray, P: np.ndarray, ego: np.ndarray) -> MeasurementTerms:

@@ -21,6 +21,7 @@ times line of sight with ``filter.occlusion_pd`` (§4.4); the Beta (dynamic) mod
 
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
@@ -33,7 +34,7 @@ from soabench.gmphd import cycle
 from soabench.gmphd.inputs import StepInputs, check_step_inputs, newborn_finite, scan_inputs, scan_kappa
 from soabench.gmphd.mixture import UNLABELLED, Mixture
 from soabench.gmphd.models import cv_model, gate_threshold, measurement_noise, predict_moments
-from soabench.gmphd.probabilities import detection_gate
+from soabench.gmphd.probabilities import detection_gate, scan_line_of_sight
 from soabench.gmphd.reduction import prune_merge_cap
 from soabench.lmb.measurement import MeasurementModel, RangeBearingEKF
 from soabench.lmb.tracks import Tracks, reduce_components
@@ -41,10 +42,11 @@ from soabench.lmb.update import predict as predict_tracks
 from soabench.origins import N_SOURCES, origin_counts
 from soabench.pmbm import cycle as pmbm_cycle
 from soabench.pmbm import kernels
+from soabench.pmbm import step as pmbm_step
 from soabench.pmbm.density import PMBMDensity
 from soabench.pmbm.pmb import collapse
-from soabench.pmbm.update import Hypotheses, update
-from soabench.types import Births, Scan, StepResult, scan_once
+from soabench.pmbm.update import Hypotheses, _max_gap, update
+from soabench.types import SOURCE_MEAS, Births, Scan, StepResult, scan_once
 
 #: the probability modes the PMBM family runs (docs/method.md §10.6): static, with or without ``occlusion_pd``
 PMBM_MODES = ("static",)
@@ -53,6 +55,10 @@ _F64, _I8, _I32 = np.dtype(np.float64), np.dtype(np.int8), np.dtype(np.int32)
 
 
 _NO_BIRTHS = (np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)))
+_NO_NEWBORN = (np.zeros((0, 4)), np.zeros((0, 4, 4)))
+_NO_SOURCE = np.zeros(0, dtype=np.int8)
+_NO_EGO = np.zeros(3)  #: the pose the measurement terms take on a dropped scan (every p_D is 0 there)
+log = logging.getLogger(__name__)
 
 
 def _plain(a, dtype: np.dtype, shape: tuple[int, ...]) -> bool:
@@ -147,6 +153,31 @@ class PMBMFilter:
         self.density = PMBMDensity.empty()
         self.next_label = 1
         self._p_hyp: tuple[PMBMDensity, np.ndarray] | None = None  # the density and its hypothesis probabilities
+        # the whole cycle in one or two compiled calls (soabench.pmbm.step) for the built-in EKF sensor model
+        self.whole = self.fused and type(self.model) is RangeBearingEKF and self.model.form == "ekf"
+        if self.whole:
+            self._pack_settings()
+
+    def _pack_settings(self) -> None:
+        """The scalars of :mod:`soabench.pmbm.step`'s calls as float arrays, packed once per filter: the FOV gate
+        (``FOV_*``), the intensity's reduction (the GM-PHD's ``RED_*``, no extraction) and the update's settings."""
+        c, s, h = self.cfg, self.sensor, self.hyp
+        fov = np.zeros(5)
+        fov[pmbm_step.FOV_R_MIN], fov[pmbm_step.FOV_R_MAX] = s.r_min, s.r_max
+        fov[pmbm_step.FOV_HALF], fov[pmbm_step.FOV_LIMITED] = 0.5 * s.fov + 1e-12, float(s.fov_deg < 360.0)
+        self._fov_off = fov.copy()
+        fov[pmbm_step.FOV_EGO] = 1.0
+        self._fov_on = fov
+        red = np.zeros(8)
+        red[cycle.RED_MAX_AGE] = -1 if c.max_undetected_birth_age is None else int(c.max_undetected_birth_age)
+        red[cycle.RED_T], red[cycle.RED_U], red[cycle.RED_J_MAX] = c.prune_T, c.merge_U, int(c.J_max)
+        red[cycle.RED_THETA_MIN], red[cycle.RED_N_SOURCES] = c.theta_min, N_SOURCES  # RED_VO_MA 0: no extraction
+        self._red_pars = red
+        self._pars = np.array([h.M_max, _max_gap(h.w_floor), h.w_floor, h.r_floor, SOURCE_MEAS, c.prune_T, c.merge_U,
+                               self.pmbm.J_h, EXTRACT_R], dtype=float)  # fmt: skip
+        m = self.model
+        self._R, self._r_min, self._gate_thr = _plain_copy(m.R, (2, 2)), float(m.r_min), float(m.gate_thr)
+        self._F, self._Q = _plain_copy(self.F, (4, 4)), _plain_copy(self.Q, (4, 4))
 
     def reset(self) -> None:
         """Forget the posterior and restart the label counter (next step is k = 0 again)."""
@@ -280,6 +311,8 @@ class PMBMFilter:
             checked = StepInputs(Z, ego, births, 0, 0)
         else:
             checked = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
+        if self.whole:
+            return self._step_whole(scan, checked, Z_scan)
         Z, births, cfg = checked.Z, checked.births, self.cfg
         t0 = time.perf_counter()
         prior = self.density
@@ -351,5 +384,121 @@ class PMBMFilter:
             n_dropped=checked.n_dropped,
             n_dropped_births=checked.n_dropped_births,
             origin_counts=_origin_counts(post.ppp, post.hyps),
+            labels=labels,
+        )
+
+    def _step_whole(self, scan: Scan, checked: StepInputs, Z_scan: np.ndarray) -> StepResult:
+        """:meth:`_step` by :mod:`soabench.pmbm.step` (its module docstring): the same cycle, the same numbers, in
+        two compiled calls (three with the line of sight, one more for the PMB's collapse). ``t_predict`` times
+        the first call (prediction, gate, measurement and detection terms), ``t_update`` the newborn terms and the
+        second (global hypotheses, posterior, reductions), ``t_reduce`` the PMB's collapse and the bookkeeping."""
+        Z, births, cfg = checked.Z, checked.births, self.cfg
+        t0 = time.perf_counter()
+        d = self.density
+        ppp, h = d.ppp, d.hyps
+        nb, M, H = len(births), len(Z), len(h)
+        if nb:
+            bw, bm, bP = (_plain_copy(x, shape) for x, shape in ((births.w, (nb,)), (births.m, (nb, 4)),
+                                                                  (births.P, (nb, 4, 4))))  # fmt: skip
+        else:
+            bw, bm, bP = _NO_BIRTHS
+        ego = checked.ego
+        kappa = scan_kappa(scan, Z, self.sensor) if Z is Z_scan else clutter_intensity(Z, self.sensor)
+        kappa = _plain_copy(kappa, (M,))
+        Z = _plain_copy(Z, (M, 2))
+        # the prior's hypothesis probabilities are those of the last posterior (the prediction keeps the table)
+        p_hyp = self._p_hyp[1] if self._p_hyp is not None and self._p_hyp[0] is d else None
+        if p_hyp is None:
+            p_hyp = d.hypothesis_probabilities() if H and M else np.zeros(H)
+        fov, ego_arr = (self._fov_on, _plain_copy(ego, (3,))) if ego is not None else (self._fov_off, _NO_EGO)
+        p_S, p_D0 = float(cfg.p_S), float(cfg.p_D)
+        r_pred = h.r * p_S
+        if cfg.occlusion_pd and ego is not None and scan.occluders:  # the line of sight (§4.4) between the calls
+            w_pred, m_all, P_all, g = pmbm_step.predict_gate(ppp.w, ppp.m, ppp.P, bw, bm, bP, h.m, h.P, self._F,
+                                                             self._Q, p_S, ego_arr, fov)  # fmt: skip
+            idx = np.flatnonzero(g)
+            if len(idx):
+                g[idx] = scan_line_of_sight(scan, ego, m_all[idx, :2])
+            terms = pmbm_step.update_terms(m_all, P_all, g, p_D0, ego_arr, self._R, self._r_min, self._gate_thr, Z,
+                                           w_pred, r_pred, h.start, h.w, p_hyp)  # fmt: skip
+        else:
+            w_pred, m_all, P_all, terms = pmbm_step.front(ppp.w, ppp.m, ppp.P, bw, bm, bP, h.m, h.P, self._F, self._Q,
+                                                          p_S, ego_arr, fov, p_D0, self._R, self._r_min,
+                                                          self._gate_thr, Z, r_pred, h.start, h.w, p_hyp)  # fmt: skip
+        p_D, Ct, Sinv, S, Hj, nu_r, nu_b, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta_det, log_r, \
+            log_l_miss_exact, log_l_miss, log_l_det, A = terms  # fmt: skip
+        t1 = time.perf_counter()
+
+        newborn = births.newborn
+        if newborn is not None and M:
+            beta = np.asarray(newborn.beta(A, kappa.copy()), dtype=float).reshape(M)
+            beta = np.where(beta > 0.0, beta, 0.0)
+            nb_m = np.ascontiguousarray(np.asarray(newborn.m, dtype=float).reshape(-1, 4))
+            nb_P = np.ascontiguousarray(np.asarray(newborn.P, dtype=float).reshape(-1, 4, 4))
+        else:
+            beta = np.zeros(M)
+            nb_m, nb_P = _NO_NEWBORN
+        source = np.array(births.source, dtype=np.int8) if nb else _NO_SOURCE  # a copy: plain, writeable
+        if source.shape != (nb,):
+            source = np.array(np.broadcast_to(source, (nb,)))
+        out = pmbm_step.back(
+            beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta_det, log_r, log_l_miss_exact,
+            log_l_miss, log_l_det, p_D, w_pred, m_all, P_all, ppp.origin, ppp.n_det, ppp.age, ppp.label, source,
+            d.track, d.table, d.log_w, h.start, h.w, h.label, h.origin, h.age + 1, nb_m, nb_P, Ct, Sinv, S, Hj,
+            self._R, nu_r, nu_b, self._red_pars, self._pars, self.next_label, not self.pmb,
+        )  # fmt: skip
+        w_miss, rw, rm, rP, r_origin, r_n_det, r_age, r_label, n_pruned, n_merged, cap_hit = out[:11]
+        r, h_label, h_origin, h_age, start, w, m, P, track, table, log_w, X, X_r, labels = out[11:25]
+        n_hyp_comp, n_pairs, n_new, counts, finite = out[25:]
+        self.next_label += M
+        t2 = time.perf_counter()
+
+        red_ppp = Mixture(rw, rm, rP, r_origin, r_n_det, r_age, None, r_label)
+        post_hyps = Tracks(r, h_label, h_origin, h_age, start, w, m, P)
+        ew = np.exp(log_w)
+        p_post = pmbm_step.marginals(table, ew, len(r))  # PMBMDensity.hypothesis_probabilities()
+        sum_w = float(w_miss.sum() + p_post @ r)
+        if cap_hit:
+            log.info("J_max = %d hit: the undetected intensity reduced to %d components", cfg.J_max, cfg.J_max)
+        if self.pmb:
+            c = pmbm_step.pmb_tail(track, table, ew, r, h_label, h_origin, h_age, start, w, m, P,
+                                   float(cfg.prune_T), float(cfg.merge_U), int(self.pmbm.J_h), EXTRACT_R,
+                                   N_SOURCES)  # fmt: skip
+            X, X_r, labels = c[8:11]
+            counts, finite = counts + c[11], finite and c[12]
+            one = np.arange(len(c[0]), dtype=np.int64)
+            post = PMBMDensity(red_ppp, Tracks(*c[:8]), one, one[None, :], np.zeros(1))
+            p_reduced = np.ones(len(one))  # hypothesis_probabilities() of the one global hypothesis, of weight e^0
+        else:
+            post, p_reduced = PMBMDensity(red_ppp, post_hyps, track, table, log_w), p_post
+        self.density = post
+        self._p_hyp = (post, p_reduced)
+        t3 = time.perf_counter()
+        if not finite:
+            raise SoabenchError(f"scan {scan.k}: the {self.name.upper()} filter produced a non-finite posterior from "
+                                "finite inputs")  # fmt: skip
+        return StepResult(
+            k=scan.k,
+            X=X,
+            X_w=X_r,
+            sum_w=sum_w,
+            sum_w_reduced=post.phd_mass(p_reduced),
+            n_predicted=len(m_all),
+            n_updated=len(w_miss) + int(n_hyp_comp),
+            n_reduced=len(rw) + len(post.hyps.w),
+            cap_hit=bool(cap_hit),
+            t_predict=t1 - t0,
+            t_update=t2 - t1,
+            t_reduce=t3 - t2,
+            mean_pD=float(cfg.p_D),
+            A=A,
+            kappa=kappa,
+            n_pruned=int(n_pruned),
+            n_merged=int(n_merged),
+            n_pairs=int(n_pairs),
+            n_newborn=int(n_new),
+            n_dropped=checked.n_dropped,
+            n_dropped_births=checked.n_dropped_births,
+            origin_counts=counts,
             labels=labels,
         )

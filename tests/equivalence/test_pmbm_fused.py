@@ -102,3 +102,35 @@ def test_compiled_unique_rows_and_codes_are_numpys():
         u_np, inv_np = np.unique(code, return_inverse=True)
         np.testing.assert_array_equal(u, u_np)
         np.testing.assert_array_equal(inv, inv_np.reshape(code.shape))
+
+
+@pytest.mark.parametrize(
+    "pmb,model,variant",
+    [(False, "soa", "static"), (False, "pubm", "static"), (True, "atbm", "static"), (True, "ubm", "occ"),
+     (False, "soa", "occ"), (False, "ubm-ws", "drop")],
+)  # fmt: skip
+def test_whole_cycle_equals_three_calls_bit_for_bit(recorded_intersection, pmb, model, variant):
+    """The whole cycle in one or two compiled calls (soabench/pmbm/step.py, the default for the EKF sensor) runs the
+    three-call path's functions in its order: every step result and the whole posterior the same bytes, free
+    running, with newborn terms (PUBM, ATBM), the line of sight and dropped scans (a pose that is not finite)."""
+    cfg, scene, scans_by_lam, seeds = recorded_intersection
+    sensor, scans = scans_by_lam[3.0]
+    filter_cfg = dataclasses.replace(cfg.filter, occlusion_pd=variant == "occ", nonfinite="drop")
+    whole = PMBMFilter(filter_cfg, sensor, pmbm_cfg=cfg.pmbm, pmb=pmb)
+    calls = PMBMFilter(filter_cfg, sensor, pmbm_cfg=cfg.pmbm, pmb=pmb)
+    calls.whole = False
+    assert whole.whole
+    assert not PMBMFilter(dataclasses.replace(cfg.filter, form="ukf"), sensor).whole  # the UKF takes three calls
+    birth = get_birth_model(model)(cfg.birth, sensor, scene, seeds.placement_rng())
+    prev, n_tracks = None, 0
+    for scan in scans.scans:
+        births = birth(BirthContext(scan, prev, cfg.filter.p_D))
+        if variant == "drop" and scan.k % 7 == 3:
+            scan = dataclasses.replace(scan, ego=np.full(3, np.nan))
+        a, prev = whole.step(scan, births), calls.step(scan, births)
+        for f in STEP_FIELDS:
+            _same_bits(getattr(a, f), getattr(prev, f), f"scan {scan.k}: {f}")
+        for (k, x), y in zip(_density_arrays(whole).items(), _density_arrays(calls).values(), strict=True):
+            _same_bits(x, y, f"scan {scan.k}: {k}")
+        n_tracks = max(n_tracks, calls.density.n_tracks)
+    assert n_tracks > 5 and len(prev.labels) > 0
