@@ -389,9 +389,10 @@ class PMBMFilter:
 
     def _step_whole(self, scan: Scan, checked: StepInputs, Z_scan: np.ndarray) -> StepResult:
         """:meth:`_step` by :mod:`soabench.pmbm.step` (its module docstring): the same cycle, the same numbers, in
-        two compiled calls (three with the line of sight, one more for the PMB's collapse). ``t_predict`` times
-        the first call (prediction, gate, measurement and detection terms), ``t_update`` the newborn terms and the
-        second (global hypotheses, posterior, reductions), ``t_reduce`` the PMB's collapse and the bookkeeping."""
+        two compiled calls (three with the line of sight, one more for the PMB's collapse). The compiled calls read
+        the clock between their stages: ``t_predict`` is the prediction with the FOV gate, ``t_update`` the rest up to
+        the posterior (line of sight, measurement and detection terms, newborn terms, global hypotheses, posterior),
+        ``t_reduce`` the reductions, estimates, the PMB's collapse and the step's bookkeeping."""
         Z, births, cfg = checked.Z, checked.births, self.cfg
         t0 = time.perf_counter()
         d = self.density
@@ -416,18 +417,19 @@ class PMBMFilter:
         if cfg.occlusion_pd and ego is not None and scan.occluders:  # the line of sight (§4.4) between the calls
             w_pred, m_all, P_all, g = pmbm_step.predict_gate(ppp.w, ppp.m, ppp.P, bw, bm, bP, h.m, h.P, self._F,
                                                              self._Q, p_S, ego_arr, fov)  # fmt: skip
+            t_pred = time.perf_counter() - t0
             idx = np.flatnonzero(g)
             if len(idx):
                 g[idx] = scan_line_of_sight(scan, ego, m_all[idx, :2])
             terms = pmbm_step.update_terms(m_all, P_all, g, p_D0, ego_arr, self._R, self._r_min, self._gate_thr, Z,
                                            w_pred, r_pred, h.start, h.w, p_hyp)  # fmt: skip
         else:
-            w_pred, m_all, P_all, terms = pmbm_step.front(ppp.w, ppp.m, ppp.P, bw, bm, bP, h.m, h.P, self._F, self._Q,
-                                                          p_S, ego_arr, fov, p_D0, self._R, self._r_min,
-                                                          self._gate_thr, Z, r_pred, h.start, h.w, p_hyp)  # fmt: skip
+            w_pred, m_all, P_all, terms, (t_pred, _) = pmbm_step.front(
+                ppp.w, ppp.m, ppp.P, bw, bm, bP, h.m, h.P, self._F, self._Q, p_S, ego_arr, fov, p_D0, self._R,
+                self._r_min, self._gate_thr, Z, r_pred, h.start, h.w, p_hyp,
+            )  # fmt: skip
         p_D, Ct, Sinv, S, Hj, nu_r, nu_b, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta_det, log_r, \
             log_l_miss_exact, log_l_miss, log_l_det, A = terms  # fmt: skip
-        t1 = time.perf_counter()
 
         newborn = births.newborn
         if newborn is not None and M:
@@ -449,7 +451,7 @@ class PMBMFilter:
         )  # fmt: skip
         w_miss, rw, rm, rP, r_origin, r_n_det, r_age, r_label, n_pruned, n_merged, cap_hit = out[:11]
         r, h_label, h_origin, h_age, start, w, m, P, track, table, log_w, X, X_r, labels = out[11:25]
-        n_hyp_comp, n_pairs, n_new, counts, finite = out[25:]
+        n_hyp_comp, n_pairs, n_new, counts, finite, (_, t_back_reduce) = out[25:]
         self.next_label += M
         t2 = time.perf_counter()
 
@@ -487,9 +489,9 @@ class PMBMFilter:
             n_updated=len(w_miss) + int(n_hyp_comp),
             n_reduced=len(rw) + len(post.hyps.w),
             cap_hit=bool(cap_hit),
-            t_predict=t1 - t0,
-            t_update=t2 - t1,
-            t_reduce=t3 - t2,
+            t_predict=t_pred,
+            t_update=t2 - t0 - t_pred - t_back_reduce,
+            t_reduce=t_back_reduce + (t3 - t2),
             mean_pD=float(cfg.p_D),
             A=A,
             kappa=kappa,

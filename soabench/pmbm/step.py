@@ -34,6 +34,7 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.gmphd import cycle as gmphd_cycle  # noqa: E402
+from soabench.gmphd.clock import monotonic  # noqa: E402
 from soabench.gmphd.kernels import ekf_terms, log_likelihood, wrap  # noqa: E402
 from soabench.gmphd.mixture import UNLABELLED  # noqa: E402
 from soabench.lmb.tracks import reduce_components  # noqa: E402
@@ -103,11 +104,13 @@ def update_terms(m_all, P_all, g, p_D0, ego, R, r_min, gate_thr, Z, w_ppp, r, st
 @njit(cache=True)
 def front(ppp_w, ppp_m, ppp_P, b_w, b_m, b_P, hyp_m, hyp_P, F, Q, p_S, ego, fov, p_D0, R, r_min, gate_thr, Z, r,
           start, w, p_hyp):  # fmt: skip
-    """:func:`predict_gate` then :func:`update_terms` (no line-of-sight gate): (w, m_all, P_all) of the prediction
-    followed by :func:`update_terms`'s values."""
+    """:func:`predict_gate` then :func:`update_terms` (no line-of-sight gate): (w, m_all, P_all) of the prediction,
+    :func:`update_terms`'s values and the seconds of the two (the clock of ``time.perf_counter``)."""
+    t0 = monotonic()
     w_pred, m_all, P_all, g = predict_gate(ppp_w, ppp_m, ppp_P, b_w, b_m, b_P, hyp_m, hyp_P, F, Q, p_S, ego, fov)
+    t1 = monotonic()
     t = update_terms(m_all, P_all, g, p_D0, ego, R, r_min, gate_thr, Z, w_pred, r, start, w, p_hyp)
-    return w_pred, m_all, P_all, t
+    return w_pred, m_all, P_all, t, (t1 - t0, monotonic() - t1)
 
 
 @njit(cache=True)
@@ -124,11 +127,13 @@ def back(beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta
     Returns (the updated intensity's weights (J,), the reduced intensity (w, m, P, origin, n_det, age, label), its
     (n_pruned, n_merged, cap_hit), the posterior's hypotheses reduced (r, label, origin, age, start, w, m, P), their
     track, table and log weights, the estimates (X, X_r, labels), the number of updated hypothesis components,
-    n_pairs, n_new, the origin counts (§5.7) of the reduced intensity plus, with ``estimate``, of the hypotheses, and
-    whether the reduced weights, existences and estimates are finite)."""
+    n_pairs, n_new, the origin counts (§5.7) of the reduced intensity plus, with ``estimate``, of the hypotheses,
+    whether the reduced weights, existences and estimates are finite, and the seconds of the update (association
+    to posterior) and of the rest (the clock of ``time.perf_counter``))."""
     M_max, max_gap, w_floor, r_floor = np.int64(pars[0]), pars[1], pars[2], pars[3]
     source_meas, T, U, J_h, thr = np.int64(pars[4]), pars[5], pars[6], np.int64(pars[7]), pars[8]
     n_sources = np.int64(red_pars[gmphd_cycle.RED_N_SOURCES])
+    t0 = monotonic()
     n = table.shape[1]
     J0, nb = prior_origin.shape[0], source.shape[0]
     ppp_origin = np.empty(J0 + nb, dtype=np.int8)
@@ -150,6 +155,7 @@ def back(beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta
                      ppp_origin, m_all, P_all, nb_m, nb_P, label0, r_floor, source_meas, Ct, Sinv, S, Hj, R, nu_r,
                      nu_b)  # fmt: skip
     o_r, o_label, o_origin, o_age, o_start, o_w, o_m, o_P, o_track, o_table, o_log_w, n_pairs, n_new = post
+    t1 = monotonic()
     # the undetected intensity: missed (w (1 - p_D)), then the GM-PHD's reduction
     J = w_pred.shape[0]
     w_miss = np.empty(J)
@@ -174,7 +180,7 @@ def back(beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta
         counts, finite = red[4], _all_finite(mix[0])
     return (w_miss, mix[0], mix[1], mix[2], mix[3], mix[4], mix[5], mix[7], stats[1], stats[2], stats[3], o_r,
             o_label, o_origin, o_age, h_start, h_w, h_m, h_P, o_track, o_table, o_log_w, X, X_r, X_label,
-            o_w.shape[0], n_pairs, n_new, counts, finite)  # fmt: skip
+            o_w.shape[0], n_pairs, n_new, counts, finite, (t1 - t0, monotonic() - t1))  # fmt: skip
 
 
 @njit(cache=True)

@@ -130,6 +130,7 @@ def test_whole_cycle_equals_three_calls_bit_for_bit(recorded_intersection, pmb, 
         a, prev = whole.step(scan, births), calls.step(scan, births)
         for f in STEP_FIELDS:
             _same_bits(getattr(a, f), getattr(prev, f), f"scan {scan.k}: {f}")
+        assert min(a.t_predict, a.t_update, a.t_reduce) > 0.0  # the stages' clock readings, nested in the step
         for (k, x), y in zip(_density_arrays(whole).items(), _density_arrays(calls).values(), strict=True):
             _same_bits(x, y, f"scan {scan.k}: {k}")
         n_tracks = max(n_tracks, calls.density.n_tracks)
