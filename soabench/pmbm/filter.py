@@ -120,6 +120,9 @@ class PMBMFilter:
     Attributes:
         density: the posterior PMBM after the last step.
         next_label: the next fresh track label of this run.
+        whole: the cycle runs as one or two compiled calls per scan (:mod:`soabench.pmbm.step`): True with ``fused``
+            and the built-in EKF sensor; otherwise (UKF, another model) the update's three compiled calls. Both give
+            the same bytes.
     """
 
     def __init__(
