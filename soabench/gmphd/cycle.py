@@ -234,16 +234,25 @@ def predict_append(w, m, P, origin, n_det, age, beta, label, F, Q, pars, bw, bm,
         label2[j] = label0 + k
         if dyn:
             set_row(beta2, j, beta0)
+    g = fov_gate(m2, ego, r_min, r_max, half_fov, limited)
+    return w2, m2, P2, origin2, n_det2, age2, beta2, label2, g, True
+
+
+@njit(cache=True, inline="always")
+def fov_gate(m, ego, r_min, r_max, half_fov, limited):
+    """g_j = 1[m_j in FOV_k] (§4.1) for the means m (J, 4) seen from ``ego``: r_min <= r <= r_max and, with a
+    ``limited`` field of view, |bearing| <= ``half_fov`` (Θ/2 + 1e-12), as :func:`soabench.geometry.fov_mask`."""
+    J = m.shape[0]
     g = np.empty(J)
     for j in range(J):
-        dx = m2[j, 0] - ego[0]
-        dy = m2[j, 1] - ego[1]
+        dx = m[j, 0] - ego[0]
+        dy = m[j, 1] - ego[1]
         r = math.hypot(dx, dy)
         ok = r >= r_min and r <= r_max
         if ok and limited:
             ok = abs(wrap(math.atan2(dy, dx) - ego[2])) <= half_fov
         g[j] = 1.0 if ok else 0.0
-    return w2, m2, P2, origin2, n_det2, age2, beta2, label2, g, True
+    return g
 
 
 @njit(cache=True)

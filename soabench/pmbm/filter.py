@@ -361,8 +361,7 @@ class PMBMFilter:
         self._p_hyp = (post, p_reduced)
         t3 = time.perf_counter()
         if not (np.isfinite(post.hyps.r).all() and np.isfinite(X).all() and np.isfinite(post.ppp.w).all()):
-            raise SoabenchError(f"scan {scan.k}: the {self.name.upper()} filter produced a non-finite posterior from "
-                                "finite inputs")  # fmt: skip
+            raise self._non_finite(scan)
         n_comp = len(post.ppp) + len(post.hyps.w)
         return StepResult(
             k=scan.k,
@@ -389,6 +388,11 @@ class PMBMFilter:
             origin_counts=_origin_counts(post.ppp, post.hyps),
             labels=labels,
         )
+
+    def _non_finite(self, scan: Scan) -> SoabenchError:
+        """The error of a step whose posterior or estimates are not finite although its inputs were."""
+        return SoabenchError(f"scan {scan.k}: the {self.name.upper()} filter produced a non-finite posterior from "
+                             "finite inputs")  # fmt: skip
 
     def _step_whole(self, scan: Scan, checked: StepInputs, Z_scan: np.ndarray) -> StepResult:
         """:meth:`_step` by :mod:`soabench.pmbm.step` (its module docstring): the same cycle, the same numbers, in
@@ -461,7 +465,7 @@ class PMBMFilter:
         red_ppp = Mixture(rw, rm, rP, r_origin, r_n_det, r_age, None, r_label)
         post_hyps = Tracks(r, h_label, h_origin, h_age, start, w, m, P)
         ew = np.exp(log_w)
-        p_post = pmbm_step.marginals(table, ew, len(r))  # PMBMDensity.hypothesis_probabilities()
+        p_post = kernels.marginals(table, ew, len(r))  # PMBMDensity.hypothesis_probabilities()
         sum_w = float(w_miss.sum() + p_post @ r)
         if cap_hit:
             log.info("J_max = %d hit: the undetected intensity reduced to %d components", cfg.J_max, cfg.J_max)
@@ -480,8 +484,7 @@ class PMBMFilter:
         self._p_hyp = (post, p_reduced)
         t3 = time.perf_counter()
         if not finite:
-            raise SoabenchError(f"scan {scan.k}: the {self.name.upper()} filter produced a non-finite posterior from "
-                                "finite inputs")  # fmt: skip
+            raise self._non_finite(scan)
         return StepResult(
             k=scan.k,
             X=X,

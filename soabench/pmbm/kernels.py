@@ -374,16 +374,26 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
 
 
 @njit(cache=True)
+def marginals(table, ew, n_hyp):
+    """(n_hyp,) the marginal probability P(h) of each single-target hypothesis: the weights ``ew`` (A,) of the
+    global hypotheses that pick it (table (A, n)) added in the table's row order, as
+    :meth:`soabench.pmbm.density.PMBMDensity.hypothesis_probabilities` adds them (``np.bincount``)."""
+    p = np.zeros(n_hyp)
+    A, n = table.shape
+    for a in range(A):
+        for i in range(n):
+            p[table[a, i]] += ew[a]
+    return p
+
+
+@njit(cache=True)
 def collapse(track, table, ew, r, label, origin, age, start, w, m, P):
     """The track-oriented PMB (docs/method.md §10.5) of the hypotheses with global table ``table`` (A, n) and
     weights ``ew`` (A,) (exponentiated by the caller), as :func:`soabench.pmbm.pmb.collapse` computes it (the same
     sums in the same order): (r, label, origin, age, start, w, m, P) of one Bernoulli per track with r > 0."""
-    A, n = table.shape
+    n = table.shape[1]
     n_hyp = r.shape[0]
-    p = np.zeros(n_hyp)  # P(h): the weights of the global hypotheses that pick h, in the table's row order
-    for a in range(A):
-        for i in range(n):
-            p[table[a, i]] += ew[a]
+    p = marginals(table, ew, n_hyp)  # P(h)
     pr = np.empty(n_hyp)
     rt = np.zeros(n)
     for h in range(n_hyp):

@@ -35,7 +35,8 @@ from numba import njit  # noqa: E402
 
 from soabench.gmphd import cycle as gmphd_cycle  # noqa: E402
 from soabench.gmphd.clock import monotonic  # noqa: E402
-from soabench.gmphd.kernels import ekf_terms, log_likelihood, wrap  # noqa: E402
+from soabench.gmphd.cycle import fov_gate  # noqa: E402
+from soabench.gmphd.kernels import ekf_terms, log_likelihood  # noqa: E402
 from soabench.gmphd.mixture import UNLABELLED  # noqa: E402
 from soabench.lmb.tracks import reduce_components  # noqa: E402
 from soabench.pmbm.association import global_hypotheses  # noqa: E402
@@ -61,18 +62,10 @@ def predict_gate(ppp_w, ppp_m, ppp_P, b_w, b_m, b_P, hyp_m, hyp_P, F, Q, p_S, eg
     """:func:`soabench.pmbm.cycle.predict` and g = 1[mean in FOV_k] at each stacked mean (§4.1, the test of
     :func:`soabench.geometry.fov_mask`; 0 everywhere for a dropped scan). Returns (w, m_all, P_all, g)."""
     w, m_all, P_all = predict(ppp_w, ppp_m, ppp_P, b_w, b_m, b_P, hyp_m, hyp_P, F, Q, p_S)
-    N = m_all.shape[0]
-    g = np.zeros(N)
     if fov[FOV_EGO] > 0.0:
-        r_min, r_max, half, limited = fov[FOV_R_MIN], fov[FOV_R_MAX], fov[FOV_HALF], fov[FOV_LIMITED] > 0.0
-        for j in range(N):
-            dx = m_all[j, 0] - ego[0]
-            dy = m_all[j, 1] - ego[1]
-            r = math.hypot(dx, dy)
-            ok = r >= r_min and r <= r_max
-            if ok and limited:
-                ok = abs(wrap(math.atan2(dy, dx) - ego[2])) <= half
-            g[j] = 1.0 if ok else 0.0
+        g = fov_gate(m_all, ego, fov[FOV_R_MIN], fov[FOV_R_MAX], fov[FOV_HALF], fov[FOV_LIMITED] > 0.0)
+    else:
+        g = np.zeros(m_all.shape[0])
     return w, m_all, P_all, g
 
 
@@ -181,19 +174,6 @@ def back(beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta
     return (w_miss, mix[0], mix[1], mix[2], mix[3], mix[4], mix[5], mix[7], stats[1], stats[2], stats[3], o_r,
             o_label, o_origin, o_age, h_start, h_w, h_m, h_P, o_track, o_table, o_log_w, X, X_r, X_label,
             o_w.shape[0], n_pairs, n_new, counts, finite, (t1 - t0, monotonic() - t1))  # fmt: skip
-
-
-@njit(cache=True)
-def marginals(table, ew, n_hyp):
-    """(n_hyp,) the marginal probability of each single-target hypothesis: the weights ``ew`` (A,) of the global
-    hypotheses that pick it (table (A, n)) added in the table's row order, as
-    :meth:`soabench.pmbm.density.PMBMDensity.hypothesis_probabilities` adds them (``np.bincount``)."""
-    p = np.zeros(n_hyp)
-    A, n = table.shape
-    for a in range(A):
-        for i in range(n):
-            p[table[a, i]] += ew[a]
-    return p
 
 
 @njit(cache=True)
