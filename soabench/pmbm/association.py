@@ -24,9 +24,14 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.metrics_kernels import np_sum  # noqa: E402
-from soabench.pmbm.murty import murty_from, repair, square_root  # noqa: E402
+from soabench.pmbm.murty import murty_from, ranked_by_search, repair, square_root  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
+#: :func:`soabench.pmbm.murty.ranked_by_search`'s limits, beyond which Murty's algorithm ranks instead: the branches
+#: it may visit, SEARCH_VISITS (k |L| + 16) (about Murty's own work, which grows as k |L|), and the product of its
+#: rows' numbers of finite cells
+SEARCH_VISITS = 16
+SEARCH_MAX_PRODUCT = 1e6
 
 
 @njit(cache=True)
@@ -426,7 +431,8 @@ def global_hypotheses(
         for a in range(A):
             k_u[inv[a]] = max(k_u[inv[a]], ks[a])
         first_set = n_sets
-        # Murty's best assignment for a choice is repaired from the previous choice's (they differ in a few columns)
+        # Murty's best assignment for a choice is repaired from the previous choice's (they differ in a few columns);
+        # its ranking comes from a search (:func:`soabench.pmbm.murty.ranked_by_search`) where that is sure to agree
         m = nT + nL
         r_sol, r_u, r_v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
         r_iwork, r_d = np.empty((6, m), dtype=np.int64), np.empty(m)  # the repair's scratch
@@ -458,7 +464,10 @@ def global_hypotheses(
                 if root_only:
                     K = 1 if cost0 < np.inf else 0
                 else:
-                    costs, cols = murty_from(C, k_u[u], max_gap, r_sol, r_u, r_v, cost0)
+                    budget = SEARCH_VISITS * (k_u[u] * nL + 16)
+                    found, costs, cols = ranked_by_search(C, k_u[u], max_gap, budget, SEARCH_MAX_PRODUCT)
+                    if not found:
+                        costs, cols = murty_from(C, k_u[u], max_gap, r_sol, r_u, r_v, cost0)
                     K = costs.shape[0]
             else:
                 costs, choice = cluster_solutions(hs[:nT], L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)

@@ -232,6 +232,62 @@ def test_repaired_best_assignment_is_the_best():
     assert n_infeasible > 3
 
 
+def _cluster_matrix(rng, nL, nT, integer):
+    """A cluster's cost matrix (measurement rows; track columns, then each row's own new track): gated track cells
+    drawn continuous or as small integers (exact ties), the other new-track cells forbidden."""
+    C = np.full((nL, nT + nL), np.inf)
+    draw = rng.integers(-2, 3, (nL, nT)).astype(float) if integer else rng.normal(0, 3, (nL, nT))
+    C[:, :nT] = np.where(rng.random((nL, nT)) < 0.6, draw, np.inf)
+    C[np.arange(nL), nT + np.arange(nL)] = rng.integers(-1, 2, nL) if integer else rng.normal(1, 1, nL)
+    return C
+
+
+@pytest.mark.parametrize("integer", [False, True])
+def test_ranking_by_search_is_murtys_or_declines(integer):
+    """Where the search answers, its k best assignments are Murty's, cost bits and columns; with small-integer costs
+    (exact ties) it declines wherever a tie falls among them, and Murty's ranking is kept."""
+    from soabench.pmbm.murty import murty_from, ranked_by_search, square_root
+
+    rng = np.random.default_rng(21 + integer)
+    n_found = n_declined = 0
+    for t in range(400):
+        nL, nT = int(rng.integers(2, 6)), int(rng.integers(2, 9))
+        C = _cluster_matrix(rng, nL, nT, integer)
+        k, max_gap = (2, 5, 40, 1000)[t % 4], (np.inf, 3.0)[t % 2]
+        m = C.shape[1]
+        sol, u, v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
+        want_cost, want_cols = murty_from(C, k, max_gap, sol, u, v, square_root(C, sol, u, v))
+        found, cost, cols = ranked_by_search(C, k, max_gap, 10**6, 1e12)
+        if not found:
+            n_declined += 1
+            continue
+        n_found += 1
+        assert cost.tobytes() == want_cost.tobytes() and cols.tobytes() == want_cols.tobytes()
+        ranked = np.sort(want_cost[: min(k, len(want_cost))])
+        assert (np.diff(ranked) > 0).all()  # it answered only where no two listed costs tie
+    if integer:
+        assert n_declined > 100 and n_found > 20
+    else:
+        assert n_declined == 0
+
+
+def test_ranking_by_search_declines_beyond_its_limits():
+    """A tie between the k-th best and the next, too many branches, or too large a product of the rows' finite
+    cells: no answer (Murty's algorithm ranks instead)."""
+    from soabench.pmbm.murty import ranked_by_search
+
+    C = np.array([[1.0, 2.0, np.inf], [2.0, 1.0, 3.0]])  # assignments: 2, 4, 4, 5, ...
+    assert ranked_by_search(C, 1, np.inf, 10**6, 1e12)[0]
+    assert not ranked_by_search(C, 2, np.inf, 10**6, 1e12)[0]  # the second and third tie at 4
+    found, cost, _ = ranked_by_search(C, 2, 1.5, 10**6, 1e12)  # at most 1.5 above the best: one assignment
+    assert found and cost.tolist() == [2.0]
+    rng = np.random.default_rng(5)
+    C = _cluster_matrix(rng, 5, 8, False)
+    assert ranked_by_search(C, 50, np.inf, 10**6, 1e12)[0]
+    assert not ranked_by_search(C, 50, np.inf, 10, 1e12)[0]
+    assert not ranked_by_search(C, 50, np.inf, 10**6, 2.0)[0]
+
+
 def test_best_sums_is_a_stable_sort_of_every_sum():
     """The k best sums of one entry per sorted array (a heap merge) are the first k of a stable sort of every
     sum, term indices included, also with exact ties."""
