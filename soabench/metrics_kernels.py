@@ -40,6 +40,11 @@ def np_sum(a, n):  # pragma: no cover - compiled
     at a multiple of 8, each summed the same way). 0.0 for n = 0."""
     if n == 0:
         return 0.0
+    if n < 8:  # _block's short case, here so that a short sum makes no call (and takes no reference count)
+        res = -0.0
+        for i in range(n):
+            res += a[i]
+        return res
     return _pairwise(a, np.int64(0), n)  # an int64 start, not the literal 0: one specialisation of _pairwise
 
 

@@ -308,8 +308,10 @@ def posterior(parent, choice, log_w, M_max, w_floor, table, track, start, w, lab
         mk, Pk = posterior_pairs(m_all, P_all, Ct, Sinv, S, Hj, R, rows[order_p], ells[order_p], nu_r, nu_b)
         for p in range(order_p.shape[0]):
             q = kal[order_p[p]]
-            o_m[q] = mk[p]
-            o_P[q] = Pk[p]
+            for a in range(4):  # element by element: a row view would take reference counts
+                o_m[q, a] = mk[p, a]
+                for b in range(4):
+                    o_P[q, a, b] = Pk[p, a, b]
     if uniq.shape[0] < o_table.shape[0]:
         merged = np.full(uniq.shape[0], NEG_INF)
         for b in range(B):

@@ -651,37 +651,8 @@ def ranked_by_search(
     visits = 0
     r = 0
     while r >= 0:
-        if pos[r] == n_opt[r]:  # row r exhausted: back to the previous row's next cell
-            r -= 1
-            if r >= 0:
-                taken[opt[r, pos[r]]] = False
-                pos[r] += 1
-            continue
-        visits += 1
-        if visits > budget:
-            return False, out_cost, out_cols
-        j = opt[r, pos[r]]
-        if taken[j]:
-            pos[r] += 1
-            continue
-        thr = lowest + max_gap
-        if n_best == k:
-            thr = min(thr, best[0])
-        bound = partial[r] + C[r, j] + rest[r + 1]
-        if bound > thr + SEARCH_SLACK * (1.0 + abs(thr)):  # this cell and every dearer one of row r are cut
-            pos[r] = n_opt[r]
-            continue
-        if r < n - 1:
-            taken[j] = True
-            partial[r + 1] = partial[r] + C[r, j]
-            r += 1
-            pos[r] = 0
-            continue
-        # a complete assignment: rows 0..n-2 at their current cells, row n-1 at j
-        for i in range(n - 1):
-            cells[i] = C[i, opt[i, pos[i]]]
-        cells[n - 1] = C[n - 1, j]
-        cost = np_sum(cells, n)
+        # the candidates' store grows here, outside the inner loop (arrays reassigned inside a loop cost reference
+        # counts at every iteration)
         if n_cand == cap:
             cap *= 2
             grown = np.empty(cap)
@@ -689,33 +660,71 @@ def ranked_by_search(
             grown_cols = np.empty((cap, n), dtype=np.int64)
             grown_cols[:n_cand] = cand_cols[:n_cand]
             cand_cost, cand_cols = grown, grown_cols
-        cand_cost[n_cand] = cost
-        for i in range(n - 1):
-            cand_cols[n_cand, i] = opt[i, pos[i]]
-        cand_cols[n_cand, n - 1] = j
-        n_cand += 1
-        lowest = min(lowest, cost)
-        if n_best < k:  # into the heap of the k least: sift up
-            q = n_best
-            best[q] = cost
-            n_best += 1
-            while q > 0 and best[(q - 1) // 2] < best[q]:
-                best[q], best[(q - 1) // 2] = best[(q - 1) // 2], best[q]
-                q = (q - 1) // 2
-        elif cost < best[0]:  # replace the largest: sift down
-            best[0] = cost
-            q = 0
-            while True:
-                c1, c2, big = 2 * q + 1, 2 * q + 2, q
-                if c1 < k and best[c1] > best[big]:
-                    big = c1
-                if c2 < k and best[c2] > best[big]:
-                    big = c2
-                if big == q:
-                    break
-                best[q], best[big] = best[big], best[q]
-                q = big
-        pos[r] += 1
+        while r >= 0 and n_cand < cap:
+            if pos[r] == n_opt[r]:  # row r exhausted: back to the previous row's next cell
+                r -= 1
+                if r >= 0:
+                    taken[opt[r, pos[r]]] = False
+                    pos[r] += 1
+                continue
+            visits += 1
+            if visits > budget:
+                return False, out_cost, out_cols
+            j = opt[r, pos[r]]
+            if taken[j]:
+                pos[r] += 1
+                continue
+            thr = lowest + max_gap
+            if n_best == k:
+                thr = min(thr, best[0])
+            bound = partial[r] + C[r, j] + rest[r + 1]
+            if bound > thr + SEARCH_SLACK * (1.0 + abs(thr)):  # this cell and every dearer one of row r are cut
+                pos[r] = n_opt[r]
+                continue
+            if r < n - 1:
+                taken[j] = True
+                partial[r + 1] = partial[r] + C[r, j]
+                r += 1
+                pos[r] = 0
+                continue
+            # a complete assignment: rows 0..n-2 at their current cells, row n-1 at j; its cost in row order,
+            # numpy's sum (one after another below 8 terms, as np_sum, written out to make no call)
+            for i in range(n - 1):
+                cells[i] = C[i, opt[i, pos[i]]]
+            cells[n - 1] = C[n - 1, j]
+            if n < 8:
+                cost = -0.0
+                for i in range(n):
+                    cost += cells[i]
+            else:
+                cost = np_sum(cells, n)
+            cand_cost[n_cand] = cost
+            for i in range(n - 1):
+                cand_cols[n_cand, i] = opt[i, pos[i]]
+            cand_cols[n_cand, n - 1] = j
+            n_cand += 1
+            lowest = min(lowest, cost)
+            if n_best < k:  # into the heap of the k least: sift up
+                q = n_best
+                best[q] = cost
+                n_best += 1
+                while q > 0 and best[(q - 1) // 2] < best[q]:
+                    best[q], best[(q - 1) // 2] = best[(q - 1) // 2], best[q]
+                    q = (q - 1) // 2
+            elif cost < best[0]:  # replace the largest: sift down
+                best[0] = cost
+                q = 0
+                while True:
+                    c1, c2, big = 2 * q + 1, 2 * q + 2, q
+                    if c1 < k and best[c1] > best[big]:
+                        big = c1
+                    if c2 < k and best[c2] > best[big]:
+                        big = c2
+                    if big == q:
+                        break
+                    best[q], best[big] = best[big], best[q]
+                    q = big
+            pos[r] += 1
     if n_cand == 0:
         return False, out_cost, out_cols
     order = np.argsort(cand_cost[:n_cand], kind="mergesort")
