@@ -431,6 +431,28 @@ def global_hypotheses(
         for a in range(A):
             k_u[inv[a]] = max(k_u[inv[a]], ks[a])
         first_set = n_sets
+        # room for every choice's solutions, made here (arrays reassigned in the loop below would take reference
+        # counts at each of its iterations): at most k_u each, and at most the associations of a small cluster
+        n_room = 0
+        for u in range(n_u):
+            if nT == 1:
+                n_room += min(k_u[u], nL + 1)
+            elif nL == 0:
+                n_room += min(k_u[u], 1)
+            elif nL == 1:
+                n_room += min(k_u[u], nT + 1)
+            else:
+                n_room += k_u[u]
+        p = sol_start[n_sets]
+        q = ch_start[n_sets]
+        if p + n_room > sol_cost.shape[0]:
+            grown = np.empty(2 * (p + n_room))
+            grown[:p] = sol_cost[:p]
+            sol_cost = grown
+        if q + n_room * nT > sol_choice.shape[0]:
+            grown_ch = np.empty(2 * (q + n_room * nT), dtype=np.int64)
+            grown_ch[:q] = sol_choice[:q]
+            sol_choice = grown_ch
         # Murty's best assignment for a choice is repaired from the previous choice's (they differ in a few columns);
         # its ranking comes from a search (:func:`soabench.pmbm.murty.ranked_by_search`) where that is sure to agree
         m = nT + nL
@@ -472,16 +494,8 @@ def global_hypotheses(
             else:
                 costs, choice = cluster_solutions(hs[:nT], L, log_l_miss, log_l_det, log_new, k_u[u], max_gap)
                 K = costs.shape[0]
-            p = sol_start[n_sets]  # append the set
+            p = sol_start[n_sets]  # append the set (room made above)
             q = ch_start[n_sets]
-            if p + K > sol_cost.shape[0]:
-                grown = np.empty(2 * (p + K))
-                grown[:p] = sol_cost[:p]
-                sol_cost = grown
-            if q + K * nT > sol_choice.shape[0]:
-                grown_ch = np.empty(2 * (q + K * nT), dtype=np.int64)
-                grown_ch[:q] = sol_choice[:q]
-                sol_choice = grown_ch
             if nT > 1 and nL > 1:  # Murty's columns to the tracks' choices (cost: the missed factors added back)
                 for b in range(K):
                     sol_cost[p + b] = (cost0 if root_only else costs[b]) - (-all_miss)
@@ -550,8 +564,10 @@ def global_hypotheses(
             nt = min(B, k)
             K = min(k, nt * nc)
             _merge_step(total, idx, nt, sol_cost, p, nc, j, K, total2, idx2, h_sum, heap)
-            total, total2 = total2, total
-            idx, idx2 = idx2, idx
+            for b in range(K):  # copied back (swapping the arrays would take reference counts at every a)
+                total[b] = total2[b]
+                for e in range(j + 1):
+                    idx[b, e] = idx2[b, e]
             B = K
         for b in range(B):
             parent[r] = a

@@ -143,9 +143,11 @@ def detection_terms(p_D, logq, w_ppp, r, start, w, p_hyp):
     log_det = np.empty((C, M))
     log_eta_miss = np.empty(H)
     log_eta_det = np.empty((H, M))
+    md = np.empty(M)  # per hypothesis: the detected terms' maxima and shifted sums (reset, not allocated, each time)
+    sd = np.empty(M)
     for h in range(H):
         mm = NEG_INF
-        md = np.full(M, NEG_INF)
+        md[:] = NEG_INF
         for c in range(start[h], start[h + 1]):
             pd = p_D[J + c]
             lw = _log(w[c])
@@ -159,7 +161,7 @@ def detection_terms(p_D, logq, w_ppp, r, start, w, p_hyp):
                 if x > md[ll]:
                     md[ll] = x
         sm = 0.0
-        sd = np.zeros(M)
+        sd[:] = 0.0
         for c in range(start[h], start[h + 1]):
             if log_miss[c] > NEG_INF:
                 sm += math.exp(log_miss[c] - mm)
