@@ -22,7 +22,9 @@ only, so each assignment is still listed once. Among the columns at equal path c
 ends the path, then the lowest column index; so between assignments of exactly equal cost, a subproblem returns the
 one its parent's assignment leads to. An assignment's cost is the sum of its cells in row order, summed as numpy sums
 an array (pairwise in blocks of 8: :func:`soabench.metrics_kernels.np_sum`): the same bits for the same assignment
-however it was found.
+however it was found. That lets a small problem's ranking come from a depth-first search instead
+(:func:`ranked_by_search`), which answers only where its sorted list must be Murty's (no near-tie among the ranked
+assignments).
 """
 
 from __future__ import annotations
