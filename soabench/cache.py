@@ -45,6 +45,7 @@ KERNEL_MODULES = (
     "lmb/cycle.py",
     "kitti/lidar_raster.py",
     "pmbm/murty.py",
+    "pmbm/search.py",
     "pmbm/association.py",
     "pmbm/kernels.py",
     "pmbm/cycle.py",

@@ -24,10 +24,11 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.metrics_kernels import np_sum  # noqa: E402
-from soabench.pmbm.murty import murty_from, ranked_by_search, repair, square_root  # noqa: E402
+from soabench.pmbm.murty import murty_from, repair, square_root  # noqa: E402
+from soabench.pmbm.search import ranked_by_search  # noqa: E402
 
 MISS = -1  #: a track's choice when no measurement is assigned to it
-#: :func:`soabench.pmbm.murty.ranked_by_search`'s limits, beyond which Murty's algorithm ranks instead: the branches
+#: :func:`soabench.pmbm.search.ranked_by_search`'s limits, beyond which Murty's algorithm ranks instead: the branches
 #: it may visit, SEARCH_VISITS (k |L| + 16) (about Murty's own work, which grows as k |L|), and the product of its
 #: rows' numbers of finite cells
 SEARCH_VISITS = 16
@@ -454,7 +455,7 @@ def global_hypotheses(
             grown_ch[:q] = sol_choice[:q]
             sol_choice = grown_ch
         # Murty's best assignment for a choice is repaired from the previous choice's (they differ in a few columns);
-        # its ranking comes from a search (:func:`soabench.pmbm.murty.ranked_by_search`) where that is sure to agree
+        # its ranking comes from a search (:func:`soabench.pmbm.search.ranked_by_search`) where that is sure to agree
         m = nT + nL
         r_sol, r_u, r_v = np.empty(m, dtype=np.int64), np.empty(m), np.empty(m)
         r_iwork, r_d = np.empty((6, m), dtype=np.int64), np.empty(m)  # the repair's scratch

@@ -246,7 +246,8 @@ def _cluster_matrix(rng, nL, nT, integer):
 def test_ranking_by_search_is_murtys_or_declines(integer):
     """Where the search answers, its k best assignments are Murty's, cost bits and columns; with small-integer costs
     (exact ties) it declines wherever a tie falls among them, and Murty's ranking is kept."""
-    from soabench.pmbm.murty import murty_from, ranked_by_search, square_root
+    from soabench.pmbm.murty import murty_from, square_root
+    from soabench.pmbm.search import ranked_by_search
 
     rng = np.random.default_rng(21 + integer)
     n_found = n_declined = 0
@@ -274,7 +275,7 @@ def test_ranking_by_search_is_murtys_or_declines(integer):
 def test_ranking_by_search_declines_beyond_its_limits():
     """A tie between the k-th best and the next, too many branches, or too large a product of the rows' finite
     cells: no answer (Murty's algorithm ranks instead)."""
-    from soabench.pmbm.murty import ranked_by_search
+    from soabench.pmbm.search import ranked_by_search
 
     C = np.array([[1.0, 2.0, np.inf], [2.0, 1.0, 3.0]])  # assignments: 2, 4, 4, 5, ...
     assert ranked_by_search(C, 1, np.inf, 10**6, 1e12)[0]
