@@ -432,18 +432,11 @@ def global_hypotheses(
         for a in range(A):
             k_u[inv[a]] = max(k_u[inv[a]], ks[a])
         first_set = n_sets
-        # room for every choice's solutions, made here (arrays reassigned in the loop below would take reference
-        # counts at each of its iterations): at most k_u each, and at most the associations of a small cluster
+        # room for every choice's solutions (at most k_u each), made here: arrays reassigned in the loop below would
+        # take reference counts at each of its iterations
         n_room = 0
         for u in range(n_u):
-            if nT == 1:
-                n_room += min(k_u[u], nL + 1)
-            elif nL == 0:
-                n_room += min(k_u[u], 1)
-            elif nL == 1:
-                n_room += min(k_u[u], nT + 1)
-            else:
-                n_room += k_u[u]
+            n_room += k_u[u]
         p = sol_start[n_sets]
         q = ch_start[n_sets]
         if p + n_room > sol_cost.shape[0]:

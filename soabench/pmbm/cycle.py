@@ -32,7 +32,7 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.gmphd.cycle import _logaddexp  # noqa: E402
-from soabench.gmphd.kernels import posterior_pairs  # noqa: E402
+from soabench.gmphd.kernels import copy_state, posterior_pairs  # noqa: E402
 from soabench.pmbm.association import flat_clusters  # noqa: E402
 from soabench.pmbm.kernels import children  # noqa: E402
 
@@ -310,10 +310,7 @@ def posterior(parent, choice, log_w, M_max, w_floor, table, track, start, w, lab
         mk, Pk = posterior_pairs(m_all, P_all, Ct, Sinv, S, Hj, R, rows[order_p], ells[order_p], nu_r, nu_b)
         for p in range(order_p.shape[0]):
             q = kal[order_p[p]]
-            for a in range(4):  # element by element: a row view would take reference counts
-                o_m[q, a] = mk[p, a]
-                for b in range(4):
-                    o_P[q, a, b] = Pk[p, a, b]
+            copy_state(o_m, o_P, q, mk, Pk, p)  # element by element: a row view would take reference counts
     if uniq.shape[0] < o_table.shape[0]:
         merged = np.full(uniq.shape[0], NEG_INF)
         for b in range(B):

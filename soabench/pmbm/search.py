@@ -25,6 +25,12 @@ SEARCH_SLACK = 1e-9
 
 
 @njit(cache=True)
+def _declined(n: int) -> tuple[bool, np.ndarray, np.ndarray]:
+    """:func:`ranked_by_search`'s answer when it gives up (empty costs and columns for ``n`` rows)."""
+    return False, np.empty(0), np.empty((0, n), dtype=np.int64)
+
+
+@njit(cache=True)
 def ranked_by_search(
     C: np.ndarray, k: int, max_gap: float, budget: int, max_product: float
 ) -> tuple[bool, np.ndarray, np.ndarray]:
@@ -43,10 +49,8 @@ def ranked_by_search(
     the product of the rows' numbers of finite cells exceeds ``max_product`` (many rows contending for the same
     columns, where the least cells bound the cost poorly), it gives up."""
     n, m = C.shape
-    out_cost = np.empty(0)
-    out_cols = np.empty((0, n), dtype=np.int64)
     if n == 0 or k <= 0:
-        return False, out_cost, out_cols
+        return _declined(n)
     product = 1.0  # of the rows' numbers of finite cells (a row without one: no assignment)
     for r in range(n):
         n_fin = 0
@@ -55,7 +59,7 @@ def ranked_by_search(
                 n_fin += 1
         product *= n_fin
         if product == 0.0 or product > max_product:
-            return False, out_cost, out_cols
+            return _declined(n)
     # each row's finite cells by increasing cost, and the least cost of the rows from r on
     opt = np.empty((n, m), dtype=np.int64)
     n_opt = np.zeros(n, dtype=np.int64)
@@ -104,7 +108,7 @@ def ranked_by_search(
                 continue
             visits += 1
             if visits > budget:
-                return False, out_cost, out_cols
+                return _declined(n)
             j = opt[r, pos[r]]
             if taken[j]:
                 pos[r] += 1
@@ -161,7 +165,7 @@ def ranked_by_search(
                     q = big
             pos[r] += 1
     if n_cand == 0:
-        return False, out_cost, out_cols
+        return _declined(n)
     order = np.argsort(cand_cost[:n_cand], kind="mergesort")
     limit = cand_cost[order[0]] + max_gap  # as murty_from's cost0 + max_gap
     K = 0
@@ -170,7 +174,7 @@ def ranked_by_search(
     for p in range(min(K, n_cand - 1)):  # ties among the k best, or between the k-th and the next
         a, b = cand_cost[order[p]], cand_cost[order[p + 1]]
         if b - a <= SEARCH_TIE * (1.0 + abs(b)):
-            return False, out_cost, out_cols
+            return _declined(n)
     out_cost = np.empty(K)
     out_cols = np.empty((K, n), dtype=np.int64)
     for s in range(K):
