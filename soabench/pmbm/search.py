@@ -127,16 +127,11 @@ def ranked_by_search(
                 pos[r] = 0
                 continue
             # a complete assignment: rows 0..n-2 at their current cells, row n-1 at j; its cost in row order,
-            # numpy's sum (one after another below 8 terms, as np_sum, written out to make no call)
+            # numpy's sum
             for i in range(n - 1):
                 cells[i] = C[i, opt[i, pos[i]]]
             cells[n - 1] = C[n - 1, j]
-            if n < 8:
-                cost = -0.0
-                for i in range(n):
-                    cost += cells[i]
-            else:
-                cost = np_sum(cells, n)
+            cost = np_sum(cells, n)
             cand_cost[n_cand] = cost
             for i in range(n - 1):
                 cand_cols[n_cand, i] = opt[i, pos[i]]
