@@ -62,3 +62,29 @@ def test_markdown_has_every_baseline_and_sigma_bar():
     assert "| without dyn. p | UBM (FOV) | - | " in md and "n/a / " not in md  # no paper number: "-" everywhere
     assert "1.65 / 1.00" in md  # paper sigma-bar of S-OA vs ours (delay_std = 1.0 in every trial)
     assert paper.component_ratios(_rows())[("static", "gmbm")] == 4.0
+
+
+def test_resampled_sums_are_the_gathered_sums_bit_for_bit():
+    """Whole numbers go through the resamples' draw counts (one product) and must equal the gather-and-sum of the
+    draws bit for bit; other values (fractions, NaN, -0.0) are gathered, so they equal it trivially."""
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 7, 20, 100, 137):
+        idx = paper.resample_indices(n)
+        assert idx.shape == (paper.N_BOOT, n) and not idx.flags.writeable
+        assert paper.resample_counts(n).sum(axis=1).tolist() == [float(n)] * paper.N_BOOT
+        cases = [
+            rng.integers(0, 4, n).astype(float),  # counts of episodes
+            rng.integers(0, 3000, n).astype(float) * (rng.random(n) < 0.2),  # mostly empty trials
+            np.zeros(n),
+            rng.random(n) * 7.3,  # delays (s): not whole, gathered
+            np.where(rng.random(n) < 0.5, np.nan, 1.0),
+            np.full(n, -0.0),
+        ]
+        for values in cases:
+            want = values[idx].sum(axis=-1)
+            got = paper.resampled_sums(values)
+            assert got.tobytes() == want.tobytes(), (n, values[:5])
+    # the product is what makes it fast: whole numbers must not be gathered
+    whole = rng.integers(0, 5, 100).astype(float)
+    assert np.shares_memory(paper.resample_counts(100), paper.resample_counts(100))
+    assert paper.resampled_sums(whole).tobytes() == (paper.resample_counts(100) @ whole).tobytes()

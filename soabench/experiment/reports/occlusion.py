@@ -59,9 +59,19 @@ def _per_trial(
 
 def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
     """num.sum(-1) / den.sum(-1), NaN where the denominator is 0."""
-    n, d = num.sum(axis=-1), den.sum(axis=-1)
+    return _ratio_of(num.sum(axis=-1), den.sum(axis=-1))
+
+
+def _ratio_of(n: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """n / d of sums, NaN where the denominator is 0."""
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(d > 0, n / np.where(d > 0, d, 1.0), np.nan)
+
+
+def _boot_ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    """The pooled ratio of every bootstrap resample of the trials (:func:`paper.resampled_sums`):
+    ``_ratio(num[draws], den[draws])`` with the draws of :func:`paper.resample_indices`."""
+    return _ratio_of(paper.resampled_sums(num), paper.resampled_sums(den))
 
 
 def _interval(values: np.ndarray) -> tuple[float, float]:
@@ -124,7 +134,6 @@ def identity_curves(tables: RunTables, clutter: float, bins: Sequence[int]) -> d
                 sel = select(e, clutter=clutter, model=model, mode=mode) & kind_mask
                 if not len(trials) or not np.isfinite(_floats(e["gap_id_kept"][sel])).any():
                     continue
-                draws = paper.resample_indices(len(trials))
                 arr = np.full((len(bins), 4), np.nan)
                 for i, bm in enumerate(bin_masks):
                     num, den = _cells(e, sel & bm)["id_kept"]
@@ -132,7 +141,7 @@ def identity_curves(tables: RunTables, clutter: float, bins: Sequence[int]) -> d
                     if s_den.sum() > 0:
                         arr[i] = (
                             s_num.sum() / s_den.sum(),
-                            *_interval(_ratio(s_num[draws], s_den[draws])),
+                            *_interval(_boot_ratio(s_num, s_den)),
                             s_den.sum(),
                         )
                     else:
@@ -153,7 +162,6 @@ def breakdown(tables: RunTables, clutter: float, bins: Sequence[int], baselines:
     if not _has_gaps(e):
         return {"bins": list(bins), "bin_labels": bin_labels(bins), "rows": [], "vs_soa": []}
     groups = _groups(e, bins)
-    idx = paper.resample_indices  # the paired statistics' resampling: same seed, same resample count
     per: dict[tuple[str, str], tuple[np.ndarray, dict]] = {}
     rows = []
     for model in tables.models:
@@ -162,7 +170,6 @@ def breakdown(tables: RunTables, clutter: float, bins: Sequence[int], baselines:
             if not len(trials):
                 continue
             sel = select(e, clutter=clutter, model=model, mode=mode)
-            draws = idx(len(trials))
             sums = {}
             for by, group, mask in groups:
                 m = sel & mask
@@ -172,7 +179,7 @@ def breakdown(tables: RunTables, clutter: float, bins: Sequence[int], baselines:
                     s_num, s_den = _per_trial(trials, e["trial"][m], num, den)
                     sums[(by, group, measure)] = (s_num, s_den)
                     row[measure] = float(_ratio(s_num, s_den)) if s_den.sum() > 0 else math.nan
-                    row[f"{measure}_lo"], row[f"{measure}_hi"] = _interval(_ratio(s_num[draws], s_den[draws]))
+                    row[f"{measure}_lo"], row[f"{measure}_hi"] = _interval(_boot_ratio(s_num, s_den))
                     row[f"n_{measure}"] = int(s_den.sum())
                 rows.append(row)
             per[(model, mode)] = (trials, sums)
@@ -186,14 +193,13 @@ def breakdown(tables: RunTables, clutter: float, bins: Sequence[int], baselines:
             (t_a, s_a), (t_b, s_b) = per[("soa", mode)], per[(b, mode)]
             common = np.intersect1d(t_a, t_b)
             ia, ib = np.searchsorted(t_a, common), np.searchsorted(t_b, common)
-            draws = idx(len(common))
             for by, group, _ in groups:
                 c: dict[str, Any] = {"mode": mode, "baseline": b, "by": by, "group": group, "n_trials": len(common)}
                 for measure in MEASURES:
                     (na, da), (nb, db) = s_a[(by, group, measure)], s_b[(by, group, measure)]
                     na, da, nb, db = na[ia], da[ia], nb[ib], db[ib]
                     c[f"{measure}_diff"] = float(_ratio(na, da) - _ratio(nb, db))
-                    boot = _ratio(na[draws], da[draws]) - _ratio(nb[draws], db[draws])
+                    boot = _boot_ratio(na, da) - _boot_ratio(nb, db)  # the same resamples for both
                     c[f"{measure}_diff_lo"], c[f"{measure}_diff_hi"] = _interval(boot)
                 versus.append(c)
     return {"bins": list(bins), "bin_labels": bin_labels(bins), "rows": rows, "vs_soa": versus}

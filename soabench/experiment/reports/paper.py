@@ -9,6 +9,7 @@ re-made from committed results alone.
 from __future__ import annotations
 
 import csv
+import functools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -111,9 +112,37 @@ def wilcoxon_p(x: np.ndarray, y: np.ndarray) -> float:
     return _wilcoxon(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
 
 
+@functools.lru_cache(maxsize=8)
 def resample_indices(n: int) -> np.ndarray:
-    """(N_BOOT, n) trial indices drawn with replacement from the fixed seed: every bootstrap of this package."""
-    return np.random.default_rng(BOOT_SEED).integers(0, n, size=(N_BOOT, n))
+    """(N_BOOT, n) trial indices drawn with replacement from the fixed seed: every bootstrap of this package (drawn
+    once per n in a process; read-only)."""
+    idx = np.random.default_rng(BOOT_SEED).integers(0, n, size=(N_BOOT, n))
+    idx.flags.writeable = False
+    return idx
+
+
+@functools.lru_cache(maxsize=8)
+def resample_counts(n: int) -> np.ndarray:
+    """(N_BOOT, n): how often each trial is drawn in each resample of :func:`resample_indices` (float; read-only)."""
+    rows = np.arange(N_BOOT, dtype=np.int64)[:, None] * n
+    counts = np.bincount((rows + resample_indices(n)).ravel(), minlength=N_BOOT * n).reshape(N_BOOT, n)
+    out = counts.astype(float)
+    out.flags.writeable = False
+    return out
+
+
+def resampled_sums(values: np.ndarray) -> np.ndarray:
+    """(N_BOOT,): each resample's sum of the drawn trials' ``values`` (n,), ``values[resample_indices(n)].sum(-1)``.
+
+    Non-negative whole numbers (counts of episodes) below 2^53 in all add up exactly in any order, so their sums
+    are taken as one product with :func:`resample_counts`, which gives the same numbers as the gather; any other
+    values are gathered and summed as numpy sums them."""
+    values = np.asarray(values, dtype=float)
+    n = len(values)
+    whole = n and not np.signbit(values).any() and (values == np.round(values)).all()  # NaN is not whole
+    if whole and values.sum() < 2.0**53:
+        return resample_counts(n) @ values
+    return values[resample_indices(n)].sum(axis=-1)
 
 
 def paired_interval(statistic, x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
