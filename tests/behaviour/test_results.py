@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import warnings
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,12 @@ from soabench.scenario import load
 pytestmark = pytest.mark.slow  # re-runs parts of the committed study
 
 RESULTS = ROOT / "results" / "intersection"
+#: columns read from the labels the §5.4 matching hands each target. Where two identical estimates (copies of one
+#: component, docs/method.md §2.13) are the nearest to two targets, the two ways of matching them cost exactly the
+#: same and the assignment solver's path decides which target gets which copy's label. On a CPU other than the one
+#: that wrote results/ (numpy's AVX-512 and AVX2 kernels round some values differently in the last bit) that path,
+#: and with it this column of a single trial, can differ; every other column is held to the tolerance
+TIE_DECIDED = ("id_kept",)
 
 
 def _committed(run_dir: Path) -> dict[tuple, dict]:
@@ -69,18 +76,25 @@ def stale_message(run_dir: Path, diffs: list[str]) -> str:
 def _assert_reproduced(run_dir: Path, trials, models, modes) -> None:
     committed = _committed(run_dir)
     rows = _rerun(run_dir, trials, models, modes)
-    assert len(rows) == len(trials) * len(models) * len(modes) * len(
-        json.loads((run_dir / "run.json").read_text())["config"]["experiment"]["clutter"]
-    )
-    diffs = []
+    meta = json.loads((run_dir / "run.json").read_text())
+    assert len(rows) == len(trials) * len(models) * len(modes) * len(meta["config"]["experiment"]["clutter"])
+    other_cpu = meta.get("platform", {}).get("cpu") != cpu_model()
+    diffs, tied = [], []
     for row in rows:
         key = tuple(format_value(row[k]) for k in ("trial", "clutter", "model", "mode"))
         assert key in committed, f"row {key} is not in the committed {run_dir / 'trials.csv'}"
         for col in TRIAL_COLUMNS:
             new, old = format_value(row[col]), committed[key][col]
             if not within_tolerance(new, old):
-                diffs.append(f"{'/'.join(key)} {col}: committed {old}, now {new}")
-    assert not diffs, stale_message(run_dir, diffs)
+                (tied if other_cpu and col in TIE_DECIDED else diffs).append(
+                    f"{'/'.join(key)} {col}: committed {old}, now {new}"
+                )
+    assert not diffs, stale_message(run_dir, diffs + tied)
+    if tied:  # allowed on another CPU only (TIE_DECIDED), and said
+        warnings.warn(
+            f"decided at a matching tie, differs on this CPU ({cpu_model()}): {'; '.join(tied)}",
+            stacklevel=2,
+        )
 
 
 def test_committed_study_is_complete():
