@@ -38,8 +38,9 @@ RESULTS = ROOT / "results" / "intersection"
 #: columns read from the labels the §5.4 matching hands each target. Where two identical estimates (copies of one
 #: component, docs/method.md §2.13) are the nearest to two targets, the two ways of matching them cost exactly the
 #: same and the assignment solver's path decides which target gets which copy's label. On a CPU other than the one
-#: that wrote results/ (numpy's AVX-512 and AVX2 kernels round some values differently in the last bit) that path,
-#: and with it this column of a single trial, can differ; every other column is held to the tolerance
+#: that wrote results/ the estimates differ in their last bits (vectorised kernels differ between CPUs: AVX-512 and
+#: AVX2, say), which can steer that path, and with it this column of a single trial; every other column is held to
+#: the tolerance
 TIE_DECIDED = ("id_kept",)
 
 
