@@ -86,5 +86,11 @@ def test_resampled_sums_are_the_gathered_sums_bit_for_bit():
             assert got.tobytes() == want.tobytes(), (n, values[:5])
     # the product is what makes it fast: whole numbers must not be gathered
     whole = rng.integers(0, 5, 100).astype(float)
-    assert np.shares_memory(paper.resample_counts(100), paper.resample_counts(100))
+    assert paper.resample_counts(100) is paper.resample_counts(100)  # kept for the process
     assert paper.resampled_sums(whole).tobytes() == (paper.resample_counts(100) @ whole).tobytes()
+    # beyond KEPT_TRIALS the resamples are drawn again, the same ones
+    big = paper.KEPT_TRIALS + 1
+    assert paper.resample_indices(big) is not paper.resample_indices(big)
+    assert np.array_equal(paper.resample_indices(big), paper.resample_indices(big))
+    values = rng.integers(0, 3, big).astype(float)
+    assert paper.resampled_sums(values).tobytes() == values[paper.resample_indices(big)].sum(axis=-1).tobytes()

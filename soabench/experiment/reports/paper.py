@@ -112,23 +112,38 @@ def wilcoxon_p(x: np.ndarray, y: np.ndarray) -> float:
     return _wilcoxon(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
 
 
-@functools.lru_cache(maxsize=8)
+#: trial counts up to which the resamples are kept for the process (4,000 x 1,000 indices: 32 MB, and as much for
+#: their counts); larger ones are drawn again at each call
+KEPT_TRIALS = 1000
+
+
 def resample_indices(n: int) -> np.ndarray:
     """(N_BOOT, n) trial indices drawn with replacement from the fixed seed: every bootstrap of this package (drawn
-    once per n in a process; read-only)."""
+    once per n up to :data:`KEPT_TRIALS` in a process; read-only)."""
+    return _kept_indices(n) if n <= KEPT_TRIALS else _indices(n)
+
+
+def resample_counts(n: int) -> np.ndarray:
+    """(N_BOOT, n): how often each trial is drawn in each resample of :func:`resample_indices` (float; read-only)."""
+    return _kept_counts(n) if n <= KEPT_TRIALS else _counts(n)
+
+
+def _indices(n: int) -> np.ndarray:
     idx = np.random.default_rng(BOOT_SEED).integers(0, n, size=(N_BOOT, n))
     idx.flags.writeable = False
     return idx
 
 
-@functools.lru_cache(maxsize=8)
-def resample_counts(n: int) -> np.ndarray:
-    """(N_BOOT, n): how often each trial is drawn in each resample of :func:`resample_indices` (float; read-only)."""
+def _counts(n: int) -> np.ndarray:
     rows = np.arange(N_BOOT, dtype=np.int64)[:, None] * n
     counts = np.bincount((rows + resample_indices(n)).ravel(), minlength=N_BOOT * n).reshape(N_BOOT, n)
     out = counts.astype(float)
     out.flags.writeable = False
     return out
+
+
+_kept_indices = functools.lru_cache(maxsize=4)(_indices)
+_kept_counts = functools.lru_cache(maxsize=4)(_counts)
 
 
 def resampled_sums(values: np.ndarray) -> np.ndarray:
