@@ -79,6 +79,7 @@ def test_resampled_sums_are_the_gathered_sums_bit_for_bit():
             rng.random(n) * 7.3,  # delays (s): not whole, gathered
             np.where(rng.random(n) < 0.5, np.nan, 1.0),
             np.full(n, -0.0),
+            np.where(np.arange(n) == 0, 2.0**52, 1.0),  # whole, but a resample's sum may pass 2^53: gathered
         ]
         for values in cases:
             want = values[idx].sum(axis=-1)

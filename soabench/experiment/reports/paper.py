@@ -149,13 +149,14 @@ _kept_counts = functools.lru_cache(maxsize=4)(_counts)
 def resampled_sums(values: np.ndarray) -> np.ndarray:
     """(N_BOOT,): each resample's sum of the drawn trials' ``values`` (n,), ``values[resample_indices(n)].sum(-1)``.
 
-    Non-negative whole numbers (counts of episodes) below 2^53 in all add up exactly in any order, so their sums
-    are taken as one product with :func:`resample_counts`, which gives the same numbers as the gather; any other
-    values are gathered and summed as numpy sums them."""
+    Non-negative whole numbers (counts of episodes) add up exactly in any order while every sum stays below 2^53
+    (a resample may draw the largest value n times), so their sums are taken as one product with
+    :func:`resample_counts`, which gives the same numbers as the gather; any other values are gathered and summed
+    as numpy sums them."""
     values = np.asarray(values, dtype=float)
     n = len(values)
     whole = n and not np.signbit(values).any() and (values == np.round(values)).all()  # NaN is not whole
-    if whole and values.sum() < 2.0**53:
+    if whole and n * values.max() < 2.0**53:
         return resample_counts(n) @ values
     return values[resample_indices(n)].sum(axis=-1)
 

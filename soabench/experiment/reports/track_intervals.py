@@ -43,8 +43,7 @@ def _pooled_interval(frac: np.ndarray, count: np.ndarray) -> tuple[float, float]
     num, den = np.where(ok & np.isfinite(frac), frac * count, 0.0), np.where(ok & np.isfinite(frac), count, 0.0)
     if len(num) < 2 or den.sum() == 0:
         return math.nan, math.nan
-    idx = paper.resample_indices(len(num))
-    n, d = num[idx].sum(axis=1), den[idx].sum(axis=1)
+    n, d = paper.resampled_sums(num), paper.resampled_sums(den)
     vals = n[d > 0] / d[d > 0]
     lo, hi = np.quantile(vals, [(1 - paper.CI_LEVEL) / 2, (1 + paper.CI_LEVEL) / 2])
     return float(lo), float(hi)
