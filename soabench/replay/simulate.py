@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from soabench import plugins
+from soabench import scenario as scenarios  # by attribute: a test may stand in for its simulate
 from soabench.birth import LABEL
 from soabench.config import FAMILIES, FILTER_FAMILIES, Config, family_label
 from soabench.errors import SoabenchError, require
@@ -29,7 +30,6 @@ from soabench.experiment.trial import guard, registry
 from soabench.experiment.trial.registry import load_scene_cached
 from soabench.folders import check_existing_folder, resolve
 from soabench.protocols import TrackerSetup
-from soabench.scenario import simulate
 from soabench.seeding import trial_seeds
 from soabench.sensor import observe
 from soabench.trackers import FilterTracker, ScanFailure, build_filter, run_tracker
@@ -135,7 +135,7 @@ def replay_trial(
     lam = float(_choose(None if clutter is None else float(clutter), [float(c) for c in exp.clutter], "--clutter"))
     scene, scenario = load_scene_cached(meta.net, meta.polys, meta.scenario)
     seeds = trial_seeds(exp.seed, trial)
-    recording = simulate(scene, scenario, seeds, duration=exp.duration)
+    recording = scenarios.simulate(scene, scenario, seeds, duration=exp.duration)
     sensor_cfg = cfg.sensor_at(lam)
     scans = observe(recording, scene, sensor_cfg, seeds.sensor_rngs())
     runs: list[ModelReplay] = []

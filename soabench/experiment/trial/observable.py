@@ -16,11 +16,11 @@ import math
 
 import numpy as np
 
+from soabench import scenario as scenarios  # by attribute: a test may stand in for its simulate
 from soabench.config import Config
 from soabench.errors import SoabenchError
 from soabench.experiment.trial import registry
 from soabench.experiment.trial.registry import load_scene_cached
-from soabench.scenario import simulate
 from soabench.scenario.derive import said_by_the_driver
 from soabench.seeding import trial_seeds
 from soabench.sensor import observe
@@ -48,7 +48,7 @@ def first_observable(meta: dict, trials: int = PROBE_TRIALS) -> tuple[list[float
     for trial in range(min(trials, int(exp.trials))):
         seeds = trial_seeds(exp.seed, trial)
         scans = observe(
-            simulate(scene, scenario, seeds, duration=probe), scene, config.sensor_at(), seeds.sensor_rngs()
+            scenarios.simulate(scene, scenario, seeds, duration=probe), scene, config.sensor_at(), seeds.sensor_rngs()
         )
         seen = np.flatnonzero(np.asarray(scans.visible).any(axis=1))
         firsts.append(float(seen[0] * scans.dt) if len(seen) else None)

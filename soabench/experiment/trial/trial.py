@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from soabench import plugins
+from soabench import scenario as scenarios  # by attribute: a test may stand in for its simulate
 from soabench.config import FAMILY_MODES, FILTER_FAMILIES, filter_config_for_mode
 from soabench.errors import require
 from soabench.experiment.trial import guard, isolate
@@ -42,7 +43,6 @@ from soabench.experiment.trial.isolate import PluginFailed, private_scan
 from soabench.metrics import SERIES_KEYS, SUMMARY_KEYS, TrialMetrics, evaluate
 from soabench.origins import ORIGIN_KEYS
 from soabench.protocols import TrackerSetup
-from soabench.scenario import simulate
 from soabench.seeding import TrialSeeds, trial_seeds
 from soabench.sensor import observe
 from soabench.trackers import FilterTracker, ScanFailure, build_filter, run_tracker
@@ -360,8 +360,7 @@ def estimate_rows(key: RunKey, results: Sequence[StepResult]) -> list[dict[str, 
 
 
 def _default_simulate() -> Callable[..., Recording]:
-
-    return simulate
+    return scenarios.simulate
 
 
 def _default_observe() -> Callable[..., Scans]:
