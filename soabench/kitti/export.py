@@ -53,7 +53,6 @@ from soabench.kitti.formats import (
 from soabench.kitti.raycast import export_lidar
 from soabench.kitti.reader import CALIB_DIR, DETECTION_DIR, LABEL_DIR, OXTS_DIR, SEMANTICS_DIR
 from soabench.kitti.velodyne import CAR_H, GROUND_Z, PED_HWL, ego_frame, hole_free
-from soabench.scenario import load
 from soabench.seeding import trial_seeds
 from soabench.sensor import _static_occluder_arrays, observe, scan_steps
 
@@ -297,7 +296,7 @@ def export_kitti(
     require(0.0 < fov < 180.0, f"--fov-deg {fov!r} must be in (0, 180): a camera's horizontal field of view")
     sensor = dataclasses.replace(cfg.sensor_at(), fov_deg=fov)
     calib = export_calib(sensor)
-    scene, scen = load(net, polys, scenario)
+    scene, scen = sumo_scenario.load(net, polys, scenario)
     sensor.validate(scen.step_length)
     dur = float(scen.duration) if duration is None else float(duration)
     require(dur > 0, f"--duration {dur!r} must be > 0")

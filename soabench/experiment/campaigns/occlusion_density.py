@@ -25,12 +25,11 @@ from typing import Any
 import numpy as np
 import shapely
 
-from soabench import scenario as scenarios  # by attribute: a test may stand in for its simulate
+from soabench import scenario as scenarios  # by attribute: a test may stand in for load, simulate
 from soabench.atomic import to_jsonable, write_json_atomic
 from soabench.config import Config
 from soabench.errors import require
 from soabench.experiment.runs.files import read_json
-from soabench.scenario import load
 from soabench.seeding import trial_seeds
 from soabench.sensor import fov_polygon, observe
 
@@ -65,7 +64,11 @@ def scene_density(
     """The occlusion density of ``net`` over trials 0..trials-1 of ``config`` (seed, duration, sensor)."""
 
     require(isinstance(trials, int) and trials >= 1, f"density trials {trials!r} must be an integer >= 1")
-    load_fn, simulate_fn, observe_fn = load_fn or load, simulate_fn or scenarios.simulate, observe_fn or observe
+    load_fn, simulate_fn, observe_fn = (
+        load_fn or scenarios.load,
+        simulate_fn or scenarios.simulate,
+        observe_fn or observe,
+    )
     scene, scenario = load_fn(net, (), None)
     exp = config.experiment
     sensor = config.sensor_at()
