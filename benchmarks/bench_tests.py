@@ -34,8 +34,8 @@ def run(label: str, extra: list[str], select: list[str]) -> float:
     c0, t0 = children_cpu(), time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     wall, cpu = time.perf_counter() - t0, children_cpu() - c0
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("=")]
-    outcome = lines[-1].strip("= ") if lines else f"exit {proc.returncode}"
+    lines = [ln.strip("= ") for ln in proc.stdout.splitlines() if " passed" in ln or " failed" in ln]
+    outcome = lines[-1] if lines else f"exit {proc.returncode}"  # pytest's last line: the counts and its time
     print(f"{label:<10} {wall:8.1f} wall s {cpu:8.1f} CPU s   {outcome}", flush=True)
     if proc.returncode != 0:
         sys.exit(f"{shlex.join(cmd)} failed (exit {proc.returncode}): the timing would not be the suite's")
