@@ -13,6 +13,22 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Before the workers start (pytest-xdist, the whole suite on two or more of them): every kernel group compiled
+    once into the cache, one process per group (soabench.kernel_warmup.ensure_compiled; nothing to do when the
+    cache already holds them, as on a second run). Left to the tests on a fresh machine, each worker compiled the
+    same kernels at the same time. A subset of the tests (files named on the command line, -n 0) compiles only what
+    it calls, as before."""
+    config = session.config
+    workers = len(getattr(config.option, "tx", None) or ())
+    whole_suite = getattr(config, "args_source", None) == pytest.Config.ArgsSource.TESTPATHS
+    if hasattr(config, "workerinput") or workers < 2 or not whole_suite or config.option.collectonly:
+        return
+    from soabench.kernel_warmup import ensure_compiled
+
+    ensure_compiled()
+
+
 @pytest.fixture
 def typed_plugins_cleared():
     """The test starts with no typed import paths (soabench.plugins keeps them per process) and leaves none."""
