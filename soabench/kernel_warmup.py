@@ -213,7 +213,7 @@ def _gate_free(modes: tuple[str, ...]) -> tuple[str, ...]:
 #: order), so that on two cores the short ones run beside the longest instead of after it.
 ROUNDS: tuple[tuple[Callable[[tuple[str, ...]], None], ...], ...] = (
     (_reduction, _predict_update, _metrics_geometry),
-    (_track_metrics, _lmb_steps, _pmbm_steps, _fused_steps, _newborn_steps),
+    (_pmbm_steps, _lmb_steps, _track_metrics, _fused_steps, _newborn_steps),
 )
 
 #: the groups whose kernels take no probability mode (compiled once for all)
