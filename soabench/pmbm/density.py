@@ -20,6 +20,7 @@ import numpy as np
 
 from soabench.gmphd.mixture import Mixture
 from soabench.lmb.tracks import Tracks
+from soabench.pmbm.kernels import global_weights
 
 
 @dataclass
@@ -56,7 +57,8 @@ class PMBMDensity:
             return np.zeros(len(self.hyps))
         n = self.table.shape[1]
         # summed in the table's row order (as np.add.at(p, table, w[:, None]) would)
-        return np.bincount(self.table.ravel(), weights=np.repeat(np.exp(self.log_w), n), minlength=len(self.hyps))
+        ew = global_weights(self.log_w)
+        return np.bincount(self.table.ravel(), weights=np.repeat(ew, n), minlength=len(self.hyps))
 
     def phd_mass(self, p_hyp: np.ndarray | None = None) -> float:
         """The expected number of targets: the intensity's mass plus sum_a w_a sum_i r_i (``p_hyp``: the

@@ -76,20 +76,26 @@ def _plain_copy(a, shape: tuple[int, ...]) -> np.ndarray:
     return a if _plain(a, _F64, shape) else np.array(np.asarray(a, dtype=float).reshape(shape), order="C")
 
 
-def _births_finite(births: Births) -> bool:
-    """:func:`soabench.gmphd.inputs.births_finite` (every birth weight, mean and covariance finite, every weight
-    >= 0, every newborn term finite), the birth components by one compiled call
-    (:func:`soabench.gmphd.cycle.births_ok`, the same test) when they are plain arrays (:func:`_plain`). False also
-    when they are not: :func:`~soabench.gmphd.inputs.check_step_inputs` then decides."""
-    if not newborn_finite(births.newborn):
-        return False
+def _plain_births(births: Births) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The birth components (w, m, P) when they are plain arrays (:func:`_plain`), as the compiled calls take them
+    (no copy); ``_NO_BIRTHS`` without births; None when they are not plain."""
     J = len(births)
     if J == 0:
-        return True
+        return _NO_BIRTHS
     w, m, P = births.w, births.m, births.P
     if _plain(w, _F64, (J,)) and _plain(m, _F64, (J, 4)) and _plain(P, _F64, (J, 4, 4)):
-        return cycle.births_ok(w, m, P)
-    return False
+        return w, m, P
+    return None
+
+
+def _births_finite(births: Births, plain: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> bool:
+    """:func:`soabench.gmphd.inputs.births_finite` (every birth weight, mean and covariance finite, every weight
+    >= 0, every newborn term finite), the birth components ``plain`` (:func:`_plain_births` of ``births``) by one
+    compiled call (:func:`soabench.gmphd.cycle.births_ok`, the same test). False also when they are not plain:
+    :func:`~soabench.gmphd.inputs.check_step_inputs` then decides."""
+    if plain is None or not newborn_finite(births.newborn):
+        return False
+    return plain is _NO_BIRTHS or cycle.births_ok(*plain)
 
 
 def _origin_counts(ppp: Mixture, hyps: Tracks) -> np.ndarray:
@@ -263,8 +269,8 @@ class PMBMFilter:
         T, U, J_h = float(cfg.prune_T), float(cfg.merge_U), int(self.pmbm.J_h)
         start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, T, U, J_h)
         if self.pmb:
-            parts = kernels.collapse(post.track, post.table, np.exp(post.log_w), h.r, h.label, h.origin, h.age, start,
-                                     w, m, P)  # fmt: skip
+            parts = kernels.collapse(post.track, post.table, kernels.global_weights(post.log_w), h.r, h.label,
+                                     h.origin, h.age, start, w, m, P)  # fmt: skip
             r, label, origin, age = parts[:4]
             start, w, m, P = reduce_components(*parts[4:], T, U, J_h)
             track = np.arange(len(r), dtype=np.int64)
@@ -310,12 +316,13 @@ class PMBMFilter:
         key = ("filter.scan_inputs", id(scan.Z), id(scan.ego))  # shared with the other filters of the scan
         Z, ego, finite = scan_once(scan, key, lambda: (*scan_inputs(scan.k, scan.Z, scan.ego), (scan.Z, scan.ego)))[:3]
         Z_scan = Z
-        if finite and _births_finite(births):  # what check_step_inputs returns for finite inputs
+        plain = _plain_births(births)
+        if finite and _births_finite(births, plain):  # what check_step_inputs returns for finite inputs
             checked = StepInputs(Z, ego, births, 0, 0)
         else:
-            checked = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite)
+            checked, plain = check_step_inputs(scan.k, Z, ego, births, self.cfg.nonfinite, finite), None
         if self.whole:
-            return self._step_whole(scan, checked, Z_scan)
+            return self._step_whole(scan, checked, Z_scan, plain)
         Z, births, cfg = checked.Z, checked.births, self.cfg
         t0 = time.perf_counter()
         prior = self.density
@@ -394,18 +401,23 @@ class PMBMFilter:
         return SoabenchError(f"scan {scan.k}: the {self.name.upper()} filter produced a non-finite posterior from "
                              "finite inputs")  # fmt: skip
 
-    def _step_whole(self, scan: Scan, checked: StepInputs, Z_scan: np.ndarray) -> StepResult:
+    def _step_whole(
+        self, scan: Scan, checked: StepInputs, Z_scan: np.ndarray, plain: tuple[np.ndarray, ...] | None
+    ) -> StepResult:
         """:meth:`_step` by :mod:`soabench.pmbm.step` (its module docstring): the same cycle, the same numbers, in
-        two compiled calls (three with the line of sight, one more for the PMB's collapse). The compiled calls read
+        two compiled calls (three with the line of sight). The compiled calls read
         the clock between their stages: ``t_predict`` is the prediction with the FOV gate, ``t_update`` the rest up to
         the posterior (line of sight, measurement and detection terms, newborn terms, global hypotheses, posterior),
-        ``t_reduce`` the reductions, estimates, the PMB's collapse and the step's bookkeeping."""
+        ``t_reduce`` the reductions, estimates, the PMB's collapse and the step's bookkeeping. ``plain``: the birth
+        components as :func:`_plain_births` found them (None: copied here)."""
         Z, births, cfg = checked.Z, checked.births, self.cfg
         t0 = time.perf_counter()
         d = self.density
         ppp, h = d.ppp, d.hyps
         nb, M, H = len(births), len(Z), len(h)
-        if nb:
+        if plain is not None:
+            bw, bm, bP = plain
+        elif nb:
             bw, bm, bP = (_plain_copy(x, shape) for x, shape in ((births.w, (nb,)), (births.m, (nb, 4)),
                                                                   (births.P, (nb, 4, 4))))  # fmt: skip
         else:
@@ -454,32 +466,21 @@ class PMBMFilter:
             beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta_det, log_r, log_l_miss_exact,
             log_l_miss, log_l_det, p_D, w_pred, m_all, P_all, ppp.origin, ppp.n_det, ppp.age, ppp.label, source,
             d.track, d.table, d.log_w, h.start, h.w, h.label, h.origin, h.age + 1, nb_m, nb_P, Ct, Sinv, S, Hj,
-            self._R, nu_r, nu_b, self._red_pars, self._pars, self.next_label, not self.pmb,
+            self._R, nu_r, nu_b, self._red_pars, self._pars, self.next_label, self.pmb,
         )  # fmt: skip
         w_miss, rw, rm, rP, r_origin, r_n_det, r_age, r_label, n_pruned, n_merged, cap_hit = out[:11]
         r, h_label, h_origin, h_age, start, w, m, P, track, table, log_w, X, X_r, labels = out[11:25]
-        n_hyp_comp, n_pairs, n_new, counts, finite, (_, t_back_reduce) = out[25:]
+        n_hyp_comp, n_pairs, n_new, counts, finite, p_post, r_post, (_, t_back_reduce) = out[25:]
         self.next_label += M
         t2 = time.perf_counter()
 
-        red_ppp = Mixture(rw, rm, rP, r_origin, r_n_det, r_age, None, r_label)
-        post_hyps = Tracks(r, h_label, h_origin, h_age, start, w, m, P)
-        ew = np.exp(log_w)
-        p_post = kernels.marginals(table, ew, len(r))  # PMBMDensity.hypothesis_probabilities()
-        sum_w = float(w_miss.sum() + p_post @ r)
+        sum_w = float(w_miss.sum() + p_post @ r_post)
         if cap_hit:
             log.info("J_max = %d hit: the undetected intensity reduced to %d components", cfg.J_max, cfg.J_max)
-        if self.pmb:
-            c = pmbm_step.pmb_tail(track, table, ew, r, h_label, h_origin, h_age, start, w, m, P,
-                                   float(cfg.prune_T), float(cfg.merge_U), int(self.pmbm.J_h), EXTRACT_R,
-                                   N_SOURCES)  # fmt: skip
-            X, X_r, labels = c[8:11]
-            counts, finite = counts + c[11], finite and c[12]
-            one = np.arange(len(c[0]), dtype=np.int64)
-            post = PMBMDensity(red_ppp, Tracks(*c[:8]), one, one[None, :], np.zeros(1))
-            p_reduced = np.ones(len(one))  # hypothesis_probabilities() of the one global hypothesis, of weight e^0
-        else:
-            post, p_reduced = PMBMDensity(red_ppp, post_hyps, track, table, log_w), p_post
+        post = PMBMDensity(Mixture(rw, rm, rP, r_origin, r_n_det, r_age, None, r_label),
+                           Tracks(r, h_label, h_origin, h_age, start, w, m, P), track, table, log_w)  # fmt: skip
+        # the PMB keeps one global hypothesis, of weight e^0: each track's hypothesis has probability 1
+        p_reduced = np.ones(len(track)) if self.pmb else p_post
         self.density = post
         self._p_hyp = (post, p_reduced)
         t3 = time.perf_counter()

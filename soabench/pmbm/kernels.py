@@ -7,7 +7,8 @@
   pruning of the update (a track whose every hypothesis has r < ``r_floor`` is dropped with the hypotheses no global
   hypothesis uses any more);
 * :func:`collapse`: the PMB's track-oriented collapse (§10.5);
-* :func:`estimates`: the estimates of one global hypothesis (§10.4).
+* :func:`estimates`: the estimates of one global hypothesis (§10.4);
+* :func:`global_weights`: the global hypotheses' weights from their logarithms, for every path alike.
 
 Why: at a trial's sizes the array path of these steps is about eighty small numpy calls per scan, each costing
 microseconds of fixed overhead. The arithmetic is the array path's (:func:`soabench.pmbm.update.update` and
@@ -18,6 +19,8 @@ hypotheses that became equal and normalises their log weights). These kernels ca
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -371,6 +374,17 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
         uniq, inv = out_table, np.arange(B)
     return (o_r, o_label, o_origin, o_age, out_start, out_w, out_m, out_P, o_track, out_table, uniq, inv, kal,
             rec_row[kal], rec_ell[kal], n_pairs, n_new)  # fmt: skip
+
+
+@njit(cache=True)
+def global_weights(log_w):
+    """(A,) the weights e^(log w_a) of the global hypotheses, by the C library's exp: every path of the PMBM and the
+    PMB exponentiates them here (numpy's vectorised exp can differ from it in the last bit on some CPUs), so the
+    whole-cycle path, which exponentiates them inside its compiled call, and the others agree bit for bit."""
+    ew = np.empty(log_w.shape[0])
+    for a in range(log_w.shape[0]):
+        ew[a] = math.exp(log_w[a])
+    return ew
 
 
 @njit(cache=True)

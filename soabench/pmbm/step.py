@@ -12,13 +12,14 @@ they hand back to Python is as large as the arithmetic. Here the same compiled f
    two calls), :func:`~soabench.pmbm.cycle.association_inputs`, the global hypotheses
    (:func:`soabench.pmbm.association.global_hypotheses`), :func:`~soabench.pmbm.cycle.posterior`, the undetected
    intensity's miss factor and reduction (:func:`soabench.gmphd.cycle.reduce`, the GM-PHD's prune, merge and cap),
-   each hypothesis's reduction (:func:`soabench.lmb.tracks.reduce_components`) and, in the PMBM, the estimates of
-   §10.4 (:func:`soabench.pmbm.kernels.estimates`).
+   each hypothesis's reduction (:func:`soabench.lmb.tracks.reduce_components`), the hypotheses' marginal
+   probabilities and then, in the PMBM, the estimates of §10.4 (:func:`soabench.pmbm.kernels.estimates`), in the PMB
+   the collapse of §10.5 (:func:`soabench.pmbm.kernels.collapse`), its second reduction and its estimates.
 
 With ``occlusion_pd`` the line of sight (shapely) splits the first call: :func:`predict_gate`, the line of sight in
-Python, :func:`update_terms`. The PMB's collapse (:func:`pmb_tail`) is a third call, after the global weights are
-exponentiated by numpy as in the other paths. The formulas, their order and the exponentials are those of the
-three-call path, so the two give the same numbers bit for bit (tests/equivalence/test_pmbm_fused.py).
+Python, :func:`update_terms`. The formulas, their order and the exponentials are those of the three-call path (the
+global weights by :func:`soabench.pmbm.kernels.global_weights` on both), so the two give the same numbers bit for bit
+(tests/equivalence/test_pmbm_fused.py).
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from soabench.gmphd.mixture import UNLABELLED  # noqa: E402
 from soabench.lmb.tracks import reduce_components  # noqa: E402
 from soabench.pmbm.association import global_hypotheses  # noqa: E402
 from soabench.pmbm.cycle import association_inputs, detection_terms, posterior, predict  # noqa: E402
-from soabench.pmbm.kernels import collapse, estimates  # noqa: E402
+from soabench.pmbm.kernels import collapse, estimates, global_weights, marginals  # noqa: E402
 
 #: indices of :func:`predict_gate`'s ``fov``: r_min, r_max, Θ/2 + 1e-12, 1.0 for a limited field of view (< 360°),
 #: 1.0 when the scan has an ego pose (0.0: a dropped scan, every p_D is 0)
@@ -110,19 +111,21 @@ def front(ppp_w, ppp_m, ppp_P, b_w, b_m, b_P, hyp_m, hyp_P, F, Q, p_S, ego, fov,
 def back(beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta_det, log_r, log_l_miss_exact,
          log_l_miss, log_l_det, p_D, w_pred, m_all, P_all, prior_origin, prior_n_det, prior_age, prior_label, source,
          track, table, prior_log_w, start, w, label, origin, age, nb_m, nb_P, Ct, Sinv, S, Hj, R, nu_r, nu_b,
-         red_pars, pars, label0, estimate):  # fmt: skip
+         red_pars, pars, label0, pmb):  # fmt: skip
     """Step 2 (module docstring). ``pars``: M_max, max_gap, w_floor, r_floor, SOURCE_MEAS, T, U, J_h, EXTRACT_R;
-    ``red_pars``: :func:`soabench.gmphd.cycle.reduce`'s (no extraction). ``estimate``: the PMBM's estimates of the
-    best global hypothesis (False for the PMB, whose estimates :func:`pmb_tail` makes). The predicted intensity's
-    metadata are the prior's (``prior_*``, one prediction older) followed by the births' (``source``, never
-    detected, age 0, unlabelled), as :meth:`soabench.pmbm.filter.PMBMFilter.predict` appends them.
+    ``red_pars``: :func:`soabench.gmphd.cycle.reduce`'s (no extraction). ``pmb``: collapse the posterior to one
+    multi-Bernoulli (§10.5) and estimate from it; False: the PMBM's estimates of the best global hypothesis (§10.4).
+    The predicted intensity's metadata are the prior's (``prior_*``, one prediction older) followed by the births'
+    (``source``, never detected, age 0, unlabelled), as :meth:`soabench.pmbm.filter.PMBMFilter.predict` appends them.
 
     Returns (the updated intensity's weights (J,), the reduced intensity (w, m, P, origin, n_det, age, label), its
     (n_pruned, n_merged, cap_hit), the posterior's hypotheses reduced (r, label, origin, age, start, w, m, P), their
-    track, table and log weights, the estimates (X, X_r, labels), the number of updated hypothesis components,
-    n_pairs, n_new, the origin counts (§5.7) of the reduced intensity plus, with ``estimate``, of the hypotheses,
-    whether the reduced weights, existences and estimates are finite, and the seconds of the update (association
-    to posterior) and of the rest (the clock of ``time.perf_counter``))."""
+    track, table and log weights (in the PMB: the collapsed tracks, one global hypothesis of log weight 0), the
+    estimates (X, X_r, labels), the number of updated hypothesis components, n_pairs, n_new, the origin counts (§5.7)
+    of the reduced intensity and of the hypotheses, whether the reduced weights, existences and estimates are finite,
+    the updated hypotheses' marginal probabilities P(h) and existences r_h (before the PMB's collapse: the terms of
+    the posterior's expected number of targets), and the seconds of the update (association to posterior) and of the
+    rest (the clock of ``time.perf_counter``))."""
     M_max, max_gap, w_floor, r_floor = np.int64(pars[0]), pars[1], pars[2], pars[3]
     source_meas, T, U, J_h, thr = np.int64(pars[4]), pars[5], pars[6], np.int64(pars[7]), pars[8]
     n_sources = np.int64(red_pars[gmphd_cycle.RED_N_SOURCES])
@@ -160,33 +163,27 @@ def back(beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta
                              red_pars, np.int64(0))  # fmt: skip
     mix, stats = red[0], red[5]
     h_start, h_w, h_m, h_P = reduce_components(o_start, o_w, o_m, o_P, T, U, J_h)
-    if estimate:
+    ew = global_weights(o_log_w)
+    p_post = marginals(o_table, ew, o_r.shape[0])
+    if pmb:
+        c_r, c_label, c_origin, c_age, c_start, c_w, c_m, c_P = collapse(o_track, o_table, ew, o_r, o_label, o_origin,
+                                                                         o_age, h_start, h_w, h_m, h_P)  # fmt: skip
+        f_start, f_w, f_m, f_P = reduce_components(c_start, c_w, c_m, c_P, T, U, J_h)
+        f_track = np.arange(c_r.shape[0])
+        f_table = f_track.reshape((1, f_track.shape[0]))
+        f_log_w = np.zeros(1)
+        X, X_r, X_label = estimates(f_track, c_r, c_label, f_start, f_w, f_m, thr)
+        f_r, f_label, f_origin, f_age = c_r, c_label, c_origin, c_age
+    else:
         best = 0
         for a in range(1, o_log_w.shape[0]):
             if o_log_w[a] > o_log_w[best]:
                 best = a
         X, X_r, X_label = estimates(o_table[best], o_r, o_label, h_start, h_w, h_m, thr)
-        counts = red[4] + gmphd_cycle.origin_counts(o_origin, o_age, n_sources)
-        finite = _all_finite(mix[0]) and _all_finite(o_r) and _all_finite(X)
-    else:
-        X, X_r, X_label = np.empty((0, 4)), np.empty(0), np.empty(0, dtype=np.int64)
-        counts, finite = red[4], _all_finite(mix[0])
-    return (w_miss, mix[0], mix[1], mix[2], mix[3], mix[4], mix[5], mix[7], stats[1], stats[2], stats[3], o_r,
-            o_label, o_origin, o_age, h_start, h_w, h_m, h_P, o_track, o_table, o_log_w, X, X_r, X_label,
-            o_w.shape[0], n_pairs, n_new, counts, finite, (t1 - t0, monotonic() - t1))  # fmt: skip
-
-
-@njit(cache=True)
-def pmb_tail(track, table, ew, r, label, origin, age, start, w, m, P, T, U, J_h, thr, n_sources):
-    """The PMB's collapse (:func:`soabench.pmbm.kernels.collapse`, with the global weights ``ew`` exponentiated by
-    the caller), its densities reduced again and its estimates (every track is in the one global hypothesis).
-    Returns (r, label, origin, age, start, w, m, P, X, X_r, labels, the tracks' origin counts, whether r and the
-    estimates are finite)."""
-    c_r, c_label, c_origin, c_age, c_start, c_w, c_m, c_P = collapse(track, table, ew, r, label, origin, age, start, w,
-                                                                     m, P)  # fmt: skip
-    h_start, h_w, h_m, h_P = reduce_components(c_start, c_w, c_m, c_P, T, U, J_h)
-    row = np.arange(c_r.shape[0])
-    X, X_r, X_label = estimates(row, c_r, c_label, h_start, h_w, h_m, thr)
-    counts = gmphd_cycle.origin_counts(c_origin, c_age, n_sources)
-    finite = _all_finite(c_r) and _all_finite(X)
-    return c_r, c_label, c_origin, c_age, h_start, h_w, h_m, h_P, X, X_r, X_label, counts, finite
+        f_r, f_label, f_origin, f_age, f_start, f_w, f_m, f_P = o_r, o_label, o_origin, o_age, h_start, h_w, h_m, h_P
+        f_track, f_table, f_log_w = o_track, o_table, o_log_w
+    counts = red[4] + gmphd_cycle.origin_counts(f_origin, f_age, n_sources)
+    finite = _all_finite(mix[0]) and _all_finite(f_r) and _all_finite(X)
+    return (w_miss, mix[0], mix[1], mix[2], mix[3], mix[4], mix[5], mix[7], stats[1], stats[2], stats[3], f_r,
+            f_label, f_origin, f_age, f_start, f_w, f_m, f_P, f_track, f_table, f_log_w, X, X_r, X_label,
+            o_w.shape[0], n_pairs, n_new, counts, finite, p_post, o_r, (t1 - t0, monotonic() - t1))  # fmt: skip
