@@ -24,6 +24,7 @@ configure_numba_cache()
 from numba import njit  # noqa: E402
 
 from soabench.metrics_kernels import np_sum  # noqa: E402
+from soabench.pmbm.kernels import global_weights  # noqa: E402
 from soabench.pmbm.murty import murty_from, repair, square_root  # noqa: E402
 from soabench.pmbm.search import ranked_by_search  # noqa: E402
 
@@ -617,8 +618,11 @@ def new_global_hypotheses(
 
 
 def assignments_asked(log_w: np.ndarray, M_max: int) -> np.ndarray:
-    """(A,) int64: ceil(M_max w_a) for each prior global hypothesis, at least 1, at most M_max."""
-    return np.maximum(1, np.minimum(M_max, np.ceil(M_max * np.exp(log_w) - 1e-9))).astype(np.int64)
+    """(A,) int64: ceil(M_max w_a) for each prior global hypothesis, at least 1, at most M_max (w_a by
+    :func:`soabench.pmbm.kernels.global_weights`, the exp of the compiled twin in
+    :func:`soabench.pmbm.cycle.association_inputs`)."""
+    w = global_weights(np.ascontiguousarray(log_w, dtype=float))
+    return np.maximum(1, np.minimum(M_max, np.ceil(M_max * w - 1e-9))).astype(np.int64)
 
 
 def _segments(counts: list[int]) -> np.ndarray:

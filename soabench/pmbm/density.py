@@ -81,12 +81,13 @@ class PMBMDensity:
 
         out = np.zeros(n_max + 1)
         r = self.hyps.r
+        ew = global_weights(self.log_w)
         for a in range(self.table.shape[0]):
             pmf = np.zeros(n_max + 1)
             pmf[0] = 1.0
             for h in self.table[a]:
                 pmf[1:] = pmf[1:] * (1.0 - r[h]) + pmf[:-1] * r[h]
                 pmf[0] *= 1.0 - r[h]
-            out += np.exp(self.log_w[a]) * pmf
+            out += ew[a] * pmf
         pois = poisson.pmf(np.arange(n_max + 1), self.ppp.mass)
         return np.convolve(out, pois)[: n_max + 1]

@@ -380,7 +380,8 @@ def children(table, parent, choice, track, start, w, label, origin, age, r_miss,
 def global_weights(log_w):
     """(A,) the weights e^(log w_a) of the global hypotheses, by the C library's exp: every path of the PMBM and the
     PMB exponentiates them here (numpy's vectorised exp can differ from it in the last bit on some CPUs), so the
-    whole-cycle path, which exponentiates them inside its compiled call, and the others agree bit for bit."""
+    whole-cycle path, which exponentiates them inside its compiled calls, and the others agree bit for bit (the
+    marginals P(h), the PMB's collapse, the assignments asked of each cluster, the cardinality distribution)."""
     ew = np.empty(log_w.shape[0])
     for a in range(log_w.shape[0]):
         ew[a] = math.exp(log_w[a])
