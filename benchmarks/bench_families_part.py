@@ -14,9 +14,18 @@ Each figure is the CPU seconds of the call: this process and its finished worker
 the study's trials is a difference of two large figures, so it scatters with the machine's speed from one minute to
 the next; the script therefore also prints what the families folders' own records say (``timing.csv``: SUMO, the
 sensor and the births, summed over trials, seconds inside the workers), which does not depend on the neighbours.
-It checks that the families folders of 2 and 4 hold the same trials.csv, episodes.csv and steps.csv. Example::
+It checks that the families folders of 2 and 4 hold the same trials.csv, episodes.csv and steps.csv.
+``--rounds N`` repeats 1-4 N times and prints each round's ratio and their median; ``--no-alone`` leaves out 2 (and
+the check).
+
+Last, what the part would cost with other step speeds (:func:`counterfactual`): the families folders' filter
+steps (``t_filter_total - t_birth`` of ``timing.csv``: every step of a run, the Python around the compiled calls
+included, per family and mode) of the LMB, PMBM and PMB replaced by the GM-PHD's steps in the same mode times a
+factor: 1 (every family as fast as the GM-PHD: a floor the families' speed cannot beat) and their step targets (LMB
+2x, PMBM 3x, PMB 2x). Example::
 
     nice -n 10 python benchmarks/bench_families_part.py --trials 20 --duration 100 --workers 2
+    python benchmarks/bench_families_part.py --rounds 3 --no-alone
 """
 
 from __future__ import annotations
@@ -24,7 +33,9 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import functools
 import resource
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -51,6 +62,32 @@ def shared_seconds(folder: Path) -> dict[str, float]:
     return out
 
 
+def step_seconds(folder: Path) -> dict[tuple[str, str], float]:
+    """The folder's filter steps (t_filter_total - t_birth, seconds inside the workers) summed over its trials and
+    birth models, per (family, probability mode)."""
+    out: dict[tuple[str, str], float] = {}
+    with (folder / "timing.csv").open(newline="") as f:
+        for r in csv.DictReader(f):
+            key = (r.get("filter") or "gmphd", r["mode"])
+            out[key] = out.get(key, 0.0) + float(r["t_filter_total"]) - float(r["t_birth"])
+    return out
+
+
+#: the step targets of the families against the GM-PHD (docs/user-guide/speed.md)
+STEP_TARGETS = {"lmb": 2.0, "pmbm": 3.0, "pmb": 2.0}
+
+
+def counterfactual(part: float, folders: dict[str, dict[tuple[str, str], float]], factor: dict[str, float]) -> float:
+    """``part`` (CPU s) with every non-GM-PHD family's steps replaced by ``factor[family]`` times the GM-PHD's
+    steps in the same mode (the ``filters`` folder's GM-PHD: the same trials and birth models)."""
+    gmphd = {mode: t for (fam, mode), t in folders["filters"].items() if fam == "gmphd"}
+    for steps in folders.values():
+        for (fam, mode), t in steps.items():
+            if fam != "gmphd":
+                part += factor[fam] * gmphd[mode] - t
+    return part
+
+
 def cpu() -> float:
     """CPU seconds of this process and of its finished children."""
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -71,6 +108,11 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=100.0)
     ap.add_argument("--births-trials", type=int, default=1, help="trials per N̂ point of the study")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=1,
+                    help="rounds of the main protocol, the study alone and the study with the folders (the part's "
+                         "ratio of each round and their median)")  # fmt: skip
+    ap.add_argument("--no-alone", action="store_true",
+                    help="skip the families folders on their own (and the check of their tables)")  # fmt: skip
     a = ap.parse_args()
     s = Settings(trials=a.trials, duration=a.duration)
     main_cfg = Config()
@@ -78,35 +120,53 @@ def main() -> None:
     main_cfg.validate()
     options = RunOptions(workers=a.workers, progress=False)
     study = dict(births_trials=a.births_trials, options=options)
-    with tempfile.TemporaryDirectory(prefix="bench_families_part_") as tmp:
-        root = Path(tmp)
-        alone = {"filters": filters_config(s), "ablation": ablation_config(s)}
-        t_main = timed("main protocol", lambda: run_experiment(main_cfg, "intersection", out=root / "main",
-                                                                options=options))  # fmt: skip
-        t_alone = sum(
-            timed(
-                f"{name} alone",
-                lambda name=name, c=c: run_experiment(c, "intersection", out=root / "alone" / name, options=options),
-            )  # fmt: skip
-            for name, c in alone.items()
-        )
-        t_study = timed("study alone", lambda: run_study(main_cfg, "intersection", out=root / "study", **study))
-        companions = tuple(Companion(root / "grouped" / name, c, FILTERS_KEYS) for name, c in alone.items())
-        t_group = timed(
-            "study with the families folders in its trials",
-            lambda: run_study(main_cfg, "intersection", out=root / "study2", companions=companions, **study),
-        )
-        for name in alone:
+    folders = {"filters": filters_config(s), "ablation": ablation_config(s)}
+    ratios = [one_round(root, folders, main_cfg, options, study, a.no_alone) for root in rounds(a.rounds)]
+    print("the part in the study's trials / main protocol, by round: " + ", ".join(f"{x:.2f}x" for x in ratios)
+          + f" (median {statistics.median(ratios):.2f}x)")  # fmt: skip
+
+
+def rounds(n: int):
+    """``n`` fresh temporary folders, one after the other (each deleted before the next)."""
+    for r in range(n):
+        print(f"round {r + 1}", flush=True)
+        with tempfile.TemporaryDirectory(prefix="bench_families_part_") as tmp:
+            yield Path(tmp)
+
+
+def one_round(here: Path, folders: dict, main_cfg: Config, options: RunOptions, study: dict, no_alone: bool) -> float:
+    """One round in ``here``: the main protocol, the families folders alone (unless ``no_alone``), the study alone
+    and with the folders in its trials; prints what it measured and returns the part's ratio to the main protocol."""
+    run = functools.partial(run_experiment, net="intersection", options=options)
+    t_main = timed("main protocol", functools.partial(run, main_cfg, out=here / "main"))
+    if not no_alone:
+        t_alone = sum(timed(f"{name} alone", functools.partial(run, c, out=here / "alone" / name))
+                      for name, c in folders.items())  # fmt: skip
+    t_study = timed("study alone", functools.partial(run_study, main_cfg, "intersection", out=here / "study", **study))
+    companions = tuple(Companion(here / "grouped" / name, c, FILTERS_KEYS) for name, c in folders.items())
+    t_group = timed("study with the families folders in its trials",
+                    functools.partial(run_study, main_cfg, "intersection", out=here / "study2", companions=companions,
+                                      **study))  # fmt: skip
+    if not no_alone:
+        for name in folders:
             for t in TABLES:
-                same = (root / "alone" / name / t).read_bytes() == (root / "grouped" / name / t).read_bytes()
-                assert same, f"{name}/{t} differs between the folder alone and in the study's trials"
+                alone, grouped = (here / way / name / t for way in ("alone", "grouped"))
+                assert alone.read_bytes() == grouped.read_bytes(), f"{name}/{t} differs between the two ways"
             for way in ("alone", "grouped"):
-                secs = shared_seconds(root / way / name)
+                secs = shared_seconds(here / way / name)
                 print(f"{name} {way}: " + ", ".join(f"{k} {v:.1f} s" for k, v in secs.items()))
+        print("tables identical between the two ways")
+        print(f"families part on its own:           {t_alone:8.1f} CPU s = {t_alone / t_main:.2f}x the main protocol")
+    steps = {name: step_seconds(here / "grouped" / name) for name in folders}
+    for name, st in steps.items():
+        print(f"{name} filter steps: " + ", ".join(f"{f} {m} {t:.1f} s" for (f, m), t in sorted(st.items())))
     part = t_group - t_study
-    print(f"families part on its own:           {t_alone:8.1f} CPU s = {t_alone / t_main:.2f}x the main protocol")
     print(f"families part in the study's trials: {part:8.1f} CPU s = {part / t_main:.2f}x the main protocol")
-    print("tables identical between the two ways")
+    for what, factor in (("every family at the GM-PHD's speed", dict.fromkeys(STEP_TARGETS, 1.0)),
+                         ("every family at its step target", STEP_TARGETS)):  # fmt: skip
+        t = counterfactual(part, steps, factor)
+        print(f"families part in the study's trials, {what}: {t:8.1f} CPU s = {t / t_main:.2f}x")
+    return part / t_main
 
 
 if __name__ == "__main__":
