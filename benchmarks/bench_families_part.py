@@ -10,7 +10,8 @@ component, static). In one process, one after another, on the same protocol (int
 4. the study with the two families folders in its trials (how ``soabench results`` runs them): the families part
    costs what 4 adds to 3.
 
-Each figure is the CPU seconds of the call: this process and its finished worker processes. The families part in
+Each figure is the CPU seconds of the call: this process and its finished worker processes, printed also apart
+(this process: merges, summaries, pages; its children: the trials and the reports' figures). The families part in
 the study's trials is a difference of two large figures, so it scatters with the machine's speed from one minute to
 the next; the script therefore also prints what the families folders' own records say (``timing.csv``: SUMO, the
 sensor and the births, summed over trials, seconds inside the workers), which does not depend on the neighbours.
@@ -88,18 +89,21 @@ def counterfactual(part: float, folders: dict[str, dict[tuple[str, str], float]]
     return part
 
 
-def cpu() -> float:
-    """CPU seconds of this process and of its finished children."""
+def cpu() -> tuple[float, float]:
+    """CPU seconds of this process and of its finished children (the trials' workers, the figures' processes)."""
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+    return own.ru_utime + own.ru_stime, kids.ru_utime + kids.ru_stime
 
 
-def timed(label: str, work) -> float:
-    c0, t0 = cpu(), time.perf_counter()
+def timed(label: str, work) -> tuple[float, float]:
+    """CPU seconds of ``work()``: in all, and in this process alone (the rest: its child processes)."""
+    (o0, k0), t0 = cpu(), time.perf_counter()
     work()
-    c, t = cpu() - c0, time.perf_counter() - t0
-    print(f"{label:<44} {c:8.1f} CPU s {t:8.1f} wall s", flush=True)
-    return c
+    (o1, k1), t = cpu(), time.perf_counter() - t0
+    own, kids = o1 - o0, k1 - k0
+    print(f"{label:<44} {own + kids:8.1f} CPU s {t:8.1f} wall s (this process {own:.1f}, children {kids:.1f})",
+          flush=True)  # fmt: skip
+    return own + kids, own
 
 
 def main() -> None:
@@ -138,15 +142,15 @@ def one_round(here: Path, folders: dict, main_cfg: Config, options: RunOptions, 
     """One round in ``here``: the main protocol, the families folders alone (unless ``no_alone``), the study alone
     and with the folders in its trials; prints what it measured and returns the part's ratio to the main protocol."""
     run = functools.partial(run_experiment, net="intersection", options=options)
-    t_main = timed("main protocol", functools.partial(run, main_cfg, out=here / "main"))
+    t_main = timed("main protocol", functools.partial(run, main_cfg, out=here / "main"))[0]
     if not no_alone:
-        t_alone = sum(timed(f"{name} alone", functools.partial(run, c, out=here / "alone" / name))
+        t_alone = sum(timed(f"{name} alone", functools.partial(run, c, out=here / "alone" / name))[0]
                       for name, c in folders.items())  # fmt: skip
-    t_study = timed("study alone", functools.partial(run_study, main_cfg, "intersection", out=here / "study", **study))
+    study_run = functools.partial(run_study, main_cfg, "intersection", **study)
+    t_study, own_study = timed("study alone", functools.partial(study_run, out=here / "study"))
     companions = tuple(Companion(here / "grouped" / name, c, FILTERS_KEYS) for name, c in folders.items())
-    t_group = timed("study with the families folders in its trials",
-                    functools.partial(run_study, main_cfg, "intersection", out=here / "study2", companions=companions,
-                                      **study))  # fmt: skip
+    t_group, own_group = timed("study with the families folders in its trials",
+                               functools.partial(study_run, out=here / "study2", companions=companions))  # fmt: skip
     if not no_alone:
         for name in folders:
             for t in TABLES:
@@ -161,7 +165,9 @@ def one_round(here: Path, folders: dict, main_cfg: Config, options: RunOptions, 
     for name, st in steps.items():
         print(f"{name} filter steps: " + ", ".join(f"{f} {m} {t:.1f} s" for (f, m), t in sorted(st.items())))
     part = t_group - t_study
-    print(f"families part in the study's trials: {part:8.1f} CPU s = {part / t_main:.2f}x the main protocol")
+    own = own_group - own_study
+    print(f"families part in the study's trials: {part:8.1f} CPU s = {part / t_main:.2f}x the main protocol (this "
+          f"process {own:.1f}: merges, summaries, pages; children {part - own:.1f}: trials, figures)")  # fmt: skip
     for what, factor in (("every family at the GM-PHD's speed", dict.fromkeys(STEP_TARGETS, 1.0)),
                          ("every family at its step target", STEP_TARGETS)):  # fmt: skip
         t = counterfactual(part, steps, factor)
