@@ -262,24 +262,22 @@ class PMBMFilter:
     def _reduce_extract(
         self, post: PMBMDensity, ppp: Mixture
     ) -> tuple[PMBMDensity, np.ndarray, np.ndarray, np.ndarray]:
-        """Step 3's reduction of every hypothesis's density (with ``pmb``: the collapse, compiled, and a second
-        reduction) and step 4's estimates (compiled: :func:`soabench.pmbm.kernels.estimates`); the intensity ``ppp``
-        is already reduced. Returns (posterior, X, X_r, labels)."""
+        """Step 3's reduction of every hypothesis's density and step 4's estimates, compiled (with ``pmb``:
+        :func:`soabench.pmbm.step.pmb_posterior`, the collapse, a second reduction and the estimates, as the whole
+        cycle runs them; else :func:`soabench.pmbm.kernels.estimates` of the best global hypothesis); the intensity
+        ``ppp`` is already reduced. Returns (posterior, X, X_r, labels)."""
         cfg, h = self.cfg, post.hyps
         T, U, J_h = float(cfg.prune_T), float(cfg.merge_U), int(self.pmbm.J_h)
         start, w, m, P = reduce_components(h.start, h.w, h.m, h.P, T, U, J_h)
         if self.pmb:
-            parts = kernels.collapse(post.track, post.table, kernels.global_weights(post.log_w), h.r, h.label,
-                                     h.origin, h.age, start, w, m, P)  # fmt: skip
-            r, label, origin, age = parts[:4]
-            start, w, m, P = reduce_components(*parts[4:], T, U, J_h)
-            track = np.arange(len(r), dtype=np.int64)
-            post = PMBMDensity(ppp, Tracks(r, label, origin, age, start, w, m, P), track, track[None, :], np.zeros(1))
-            row = track
-        else:
-            post = PMBMDensity(ppp, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track, post.table,
-                               post.log_w)  # fmt: skip
-            row = post.table[int(np.argmax(post.log_w))]
+            *tracks, track, X, X_r, labels = pmbm_step.pmb_posterior(
+                post.track, post.table, kernels.global_weights(post.log_w), h.r, h.label, h.origin, h.age, start, w,
+                m, P, T, U, J_h, EXTRACT_R,
+            )  # fmt: skip
+            return PMBMDensity(ppp, Tracks(*tracks), track, track[None, :], np.zeros(1)), X, X_r, labels
+        post = PMBMDensity(ppp, Tracks(h.r, h.label, h.origin, h.age, start, w, m, P), post.track, post.table,
+                           post.log_w)  # fmt: skip
+        row = post.table[int(np.argmax(post.log_w))]
         hyps = post.hyps
         return (post, *kernels.estimates(row, hyps.r, hyps.label, hyps.start, hyps.w, hyps.m, EXTRACT_R))
 

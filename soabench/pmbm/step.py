@@ -14,7 +14,8 @@ they hand back to Python is as large as the arithmetic. Here the same compiled f
    intensity's miss factor and reduction (:func:`soabench.gmphd.cycle.reduce`, the GM-PHD's prune, merge and cap),
    each hypothesis's reduction (:func:`soabench.lmb.tracks.reduce_components`), the hypotheses' marginal
    probabilities and then, in the PMBM, the estimates of §10.4 (:func:`soabench.pmbm.kernels.estimates`), in the PMB
-   the collapse of §10.5 (:func:`soabench.pmbm.kernels.collapse`), its second reduction and its estimates.
+   the collapse of §10.5, its second reduction and its estimates (:func:`pmb_posterior`, which the three-call path
+   calls too).
 
 With ``occlusion_pd`` the line of sight (shapely) splits the first call: :func:`predict_gate`, the line of sight in
 Python, :func:`update_terms`. The formulas, their order and the exponentials are those of the three-call path (the
@@ -108,6 +109,20 @@ def front(ppp_w, ppp_m, ppp_P, b_w, b_m, b_P, hyp_m, hyp_P, F, Q, p_S, ego, fov,
 
 
 @njit(cache=True)
+def pmb_posterior(track, table, ew, r, label, origin, age, start, w, m, P, T, U, J_h, thr):
+    """The PMB's posterior from the PMBM's reduced one: the collapse of §10.5
+    (:func:`soabench.pmbm.kernels.collapse`, ``ew`` the global weights), each track's density reduced again
+    (:func:`soabench.lmb.tracks.reduce_components`) and the estimates of its one global hypothesis, which holds
+    every track (§10.4). Returns (r, label, origin, age, start, w, m, P, the tracks 0..n-1, X, X_r, labels)."""
+    c_r, c_label, c_origin, c_age, c_start, c_w, c_m, c_P = collapse(track, table, ew, r, label, origin, age, start, w,
+                                                                     m, P)  # fmt: skip
+    f_start, f_w, f_m, f_P = reduce_components(c_start, c_w, c_m, c_P, T, U, J_h)
+    f_track = np.arange(c_r.shape[0])
+    X, X_r, X_label = estimates(f_track, c_r, c_label, f_start, f_w, f_m, thr)
+    return c_r, c_label, c_origin, c_age, f_start, f_w, f_m, f_P, f_track, X, X_r, X_label
+
+
+@njit(cache=True)
 def back(beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta_det, log_r, log_l_miss_exact,
          log_l_miss, log_l_det, p_D, w_pred, m_all, P_all, prior_origin, prior_n_det, prior_age, prior_label, source,
          track, table, prior_log_w, start, w, label, origin, age, nb_m, nb_P, Ct, Sinv, S, Hj, R, nu_r, nu_b,
@@ -166,14 +181,11 @@ def back(beta, kappa, log_t, log_e_ppp, log_miss, log_det, log_eta_miss, log_eta
     ew = global_weights(o_log_w)
     p_post = marginals(o_table, ew, o_r.shape[0])
     if pmb:
-        c_r, c_label, c_origin, c_age, c_start, c_w, c_m, c_P = collapse(o_track, o_table, ew, o_r, o_label, o_origin,
-                                                                         o_age, h_start, h_w, h_m, h_P)  # fmt: skip
-        f_start, f_w, f_m, f_P = reduce_components(c_start, c_w, c_m, c_P, T, U, J_h)
-        f_track = np.arange(c_r.shape[0])
+        f_r, f_label, f_origin, f_age, f_start, f_w, f_m, f_P, f_track, X, X_r, X_label = pmb_posterior(
+            o_track, o_table, ew, o_r, o_label, o_origin, o_age, h_start, h_w, h_m, h_P, T, U, J_h, thr
+        )
         f_table = f_track.reshape((1, f_track.shape[0]))
         f_log_w = np.zeros(1)
-        X, X_r, X_label = estimates(f_track, c_r, c_label, f_start, f_w, f_m, thr)
-        f_r, f_label, f_origin, f_age = c_r, c_label, c_origin, c_age
     else:
         best = 0
         for a in range(1, o_log_w.shape[0]):
