@@ -141,6 +141,33 @@ def test_sensitivity_variants_share_the_recording_and_rescore_the_filter_runs(in
     assert c["runs"] == 4 + 4 and c["runs_rescored"] == 4  # main and gate-off run the filters, visible scores
 
 
+def test_a_families_folder_scores_the_default_folders_gmphd_runs(intersection):
+    """A folder that names the GM-PHD among several families (``soabench results``'s ``filters/``) beside a
+    default-family folder of the same filter config (the study's main run): its GM-PHD runs are the default folder's
+    filter runs, scored again under its own key (rows with the ``filter`` column), with exactly the results of
+    running it alone; a folder with another filter config runs its own."""
+    from soabench.experiment.execution.grouped import rescored
+    from soabench.experiment.execution.runner import TaskSpec
+    from soabench.experiment.runs.runmeta import RunMeta
+
+    scene, scenario = intersection
+    main = config(models=("soa", "pubm"), probabilities=("static",))
+    families = config(models=("soa", "pubm"), probabilities=("static",), filters=("gmphd", "lmb"))
+    lmb_only = config(models=("soa", "pubm"), probabilities=("static",), filters=("lmb",))
+    gate_off = dataclasses.replace(families, filter=dataclasses.replace(families.filter, gate=False))
+    spec = lambda c: TaskSpec(RunMeta(c, "intersection", (), None, False, 1, "soabench", "sumo"))  # noqa: E731
+    assert rescored([spec(main), spec(families)])
+    assert not rescored([spec(main), spec(lmb_only)]) and not rescored([spec(main), spec(gate_off)])
+    alone = [run_trial(1, c, scene, scenario) for c in (main, families)]
+    share = TrialShare(keep_filter_runs=True)
+    shared = [run_trial(1, c, scene, scenario, share=share) for c in (main, families)]
+    for x, y in zip(alone, shared, strict=True):
+        assert results(x) == results(y)
+    assert all(r["filter"] in ("gmphd", "lmb") for r in shared[1].rows)
+    c = share.counts
+    assert c["runs"] == 2 + 2 and c["runs_rescored"] == 2  # the families folder runs its LMB, scores the GM-PHD
+
+
 def _csvs(run_dir: Path) -> dict[str, str]:
     """The result files as text (they hold no wall-clock column: those are in timing.csv)."""
     out = {name: (run_dir / name).read_text() for name in ("trials.csv", "episodes.csv", "steps.csv")}

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from soabench.config import FILTER_FAMILIES
 from soabench.experiment.execution.progress import Progress
 from soabench.experiment.execution.runner import (
     DeferredRun,
@@ -35,7 +36,7 @@ from soabench.experiment.execution.runner import (
 from soabench.experiment.runs.provenance import package_versions
 from soabench.experiment.trial import registry
 from soabench.experiment.trial import trial as trial_module
-from soabench.experiment.trial.trial import TrialShare, _config_key
+from soabench.experiment.trial.trial import TrialShare, _config_key, filter_config_key
 from soabench.folders import FolderLock
 from soabench.kernel_warmup import ensure_compiled
 
@@ -77,12 +78,21 @@ def run_group_task(trial: int, group: GroupSpec) -> dict:
 
 
 def rescored(members: Sequence[TaskSpec]) -> bool:
-    """True when two folders' configs differ only in ``metrics`` (the study's visible-truth run and its main run):
-    their filter runs are then kept and scored per folder instead of run twice (memory only where it pays)."""
+    """True when two folders hold the same filter run under different run keys: configs that differ only in
+    ``metrics`` (the study's visible-truth run and its main run), or a folder that names the GM-PHD among several
+    families beside a default-family folder of the same filter config (the families folders of ``soabench results``
+    and the study's main run). Their filter runs are then kept and scored per folder instead of run twice (memory
+    only where it pays)."""
 
-    full = {_config_key(m.config) for m in members}
-    filters = {_config_key(m.config, without=("metrics",)) for m in members}
-    return len(full) > len(filters)
+    run_keys: dict[tuple[str, str], set[tuple[str, bool]]] = {}
+    for m in members:
+        config = m.config  # plain data: a default-family run leaves experiment.filters out
+        families = tuple(config["experiment"].get("filters", FILTER_FAMILIES[:1]))
+        named = families != FILTER_FAMILIES[:1]
+        for family in families:
+            key = (family, filter_config_key(config, family))
+            run_keys.setdefault(key, set()).add((_config_key(config), named))
+    return any(len(keys) > 1 for keys in run_keys.values())
 
 
 def group_trials(deferred: Sequence[DeferredRun]) -> list[int]:

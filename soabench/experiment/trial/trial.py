@@ -35,7 +35,7 @@ import numpy as np
 
 from soabench import plugins
 from soabench import scenario as scenarios  # by attribute: a test may stand in for its simulate
-from soabench.config import FAMILY_MODES, FILTER_FAMILIES, filter_config_for_mode
+from soabench.config import FAMILIES, FAMILY_MODES, FILTER_FAMILIES, filter_config_for_mode
 from soabench.errors import require
 from soabench.experiment.trial import guard, isolate
 from soabench.experiment.trial.activity import OWN_CODE, note_activity
@@ -175,10 +175,12 @@ class TrialShare:
     geometry: dict[tuple, dict] = field(default_factory=dict)
     #: run key -> (row, episodes, steps, estimates) of a finished built-in (model x mode) run
     runs: dict[tuple, RunRecords] = field(default_factory=dict)
-    #: keep every finished filter run (its step results) so a config that differs only in ``metrics`` scores it
-    #: again instead of re-running the filter (set by a group whose folders differ only there)
+    #: keep every finished filter run (its step results) so a config with the same filter run (one that differs
+    #: only in ``metrics`` or in the families it names) scores it again instead of re-running the filter (set by a
+    #: group with such folders, :func:`soabench.experiment.execution.grouped.rescored`)
     keep_filter_runs: bool = False
-    #: filter key (the run key without the metrics config) -> the finished filter run (``keep_filter_runs``)
+    #: filter key (the run key with the config of :func:`filter_config_key`) -> the finished filter run
+    #: (``keep_filter_runs``)
     filter_runs: dict[tuple, Any] = field(default_factory=dict)
     #: births key (the scans' geometry, the birth config but N_hat, the model) -> scan index -> the weight-free birth
     #: candidates of a mode-free model (``candidates``/``weigh``): one set for every clutter rate and N_hat
@@ -249,6 +251,15 @@ def _config_key(config: Config | dict, without: tuple[str, ...] = ()) -> str:
     for section in ("experiment", *without):
         d.pop(section, None)
     return json.dumps(d, sort_keys=True, default=repr)
+
+
+def filter_config_key(config: Config | dict, family: str) -> str:
+    """The config sections a filter run of ``family`` reads, as canonical text: all but ``experiment``, ``metrics``
+    and the other families' sections (:data:`soabench.config.FAMILIES`). A GM-PHD run of a folder that names
+    several families and one of a default-family folder (whose config leaves the families' sections out) get the
+    same key when their shared sections agree: they are the same filter run."""
+    others = {f.section for f in FAMILIES.values() if f.section is not None} - {FAMILIES[family].section}
+    return _config_key(config, without=("metrics", *sorted(others)))
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -474,7 +485,7 @@ class _TrialSteps:
 
     def __post_init__(self) -> None:
         self.cfg_key = _config_key(self.config)
-        self.filter_cfg_key = _config_key(self.config, without=("metrics",))
+        self.filter_cfg_keys = {f: filter_config_key(self.config, f) for f in self.config.experiment.filters}
         self.birth_key = _birth_key(self.config)
 
     def record(self) -> _Recorded:
@@ -538,8 +549,9 @@ class _TrialSteps:
             self.run_filter(RunKey(self.trial, observed.lam, model, mode, family), observed, births)
 
     def run_filter(self, key: RunKey, observed: _Observed, births: _BirthsOnce | None) -> None:
-        """One (model, mode, family) filter run: replayed from the share, scored again from a kept filter run (a
-        config that differs only in ``metrics``), or run; a finished built-in run is kept for reuse."""
+        """One (model, mode, family) filter run: replayed from the share, scored again from a kept filter run (the
+        same filter run in a config that differs in ``metrics`` or in the families it names,
+        :func:`filter_config_key`), or run; a finished built-in run is kept for reuse."""
         share, out, fn_key = self.share, self.out, self.fns.key
         run_key = (observed.key, self.cfg_key, key.model, key.mode, key.family, self.save_estimates, *fn_key[2:])
         cached = share.runs.get(run_key)
@@ -548,7 +560,8 @@ class _TrialSteps:
             share.count("runs_reused")
             return
         before = TableSizes.of(out)
-        filter_key = (observed.key, self.filter_cfg_key, key.model, key.mode, key.family, *fn_key[2:])
+        family = key.family or FILTER_FAMILIES[0]  # named or not, the default family's run is the same filter run
+        filter_key = (observed.key, self.filter_cfg_keys[family], key.model, key.mode, family, *fn_key[2:])
         kept = share.filter_runs.get(filter_key)
         if kept is not None:  # the same filter run under another metrics config: score it only
             _record(key, self.config, observed.sensor_cfg, observed.scans, self.seeds, kept, out)
