@@ -88,10 +88,9 @@ def rescored(members: Sequence[TaskSpec]) -> bool:
     for m in members:
         config = m.config  # plain data: a default-family run leaves experiment.filters out
         families = tuple(config["experiment"].get("filters", FILTER_FAMILIES[:1]))
-        named = families != FILTER_FAMILIES[:1]
+        run_key = (_config_key(config), families != FILTER_FAMILIES[:1])  # what a run key holds besides the run
         for family in families:
-            key = (family, filter_config_key(config, family))
-            run_keys.setdefault(key, set()).add((_config_key(config), named))
+            run_keys.setdefault((family, filter_config_key(config, family)), set()).add(run_key)
     return any(len(keys) > 1 for keys in run_keys.values())
 
 

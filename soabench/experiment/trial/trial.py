@@ -563,7 +563,7 @@ class _TrialSteps:
         family = key.family or FILTER_FAMILIES[0]  # named or not, the default family's run is the same filter run
         filter_key = (observed.key, self.filter_cfg_keys[family], key.model, key.mode, family, *fn_key[2:])
         kept = share.filter_runs.get(filter_key)
-        if kept is not None:  # the same filter run under another metrics config: score it only
+        if kept is not None:  # the same filter run under another run key (metrics, families named): score it only
             _record(key, self.config, observed.sensor_cfg, observed.scans, self.seeds, kept, out)
             share.count("runs_rescored")
         else:
